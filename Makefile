@@ -1,0 +1,54 @@
+# Pitlane: two commands set up everything.
+#   make run   serve the console on http://127.0.0.1:8000 (Redis, a Celery worker and Daphne included)
+#   make test  lint and run the whole test suite against real Redis, Celery, Channels and Chromium
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+
+.PHONY: run test lint format bench lock clean help
+
+help:
+	@sed -n 's/^#   //p' $(firstword $(MAKEFILE_LIST))
+
+run: $(VENV)/.run-installed
+	@scripts/ensure-system-package.sh redis-server redis-server
+	$(BIN)/python manage.py runconsole
+
+test: $(VENV)/.test-installed
+	@scripts/ensure-system-package.sh redis-server redis-server
+	@scripts/ensure-system-package.sh chromium chromium
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+lint: $(VENV)/.test-installed
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+format: $(VENV)/.test-installed
+	$(BIN)/ruff check --fix .
+	$(BIN)/ruff format .
+
+bench: $(VENV)/.run-installed
+	@scripts/ensure-system-package.sh redis-server redis-server
+	@for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+
+lock:
+	scripts/lock.sh
+
+$(VENV)/bin/python:
+	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
+		{ echo "Pitlane needs Python 3.11 or newer; $(PYTHON) is $$($(PYTHON) --version)." >&2; exit 1; }
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+
+$(VENV)/.run-installed: requirements/run.txt | $(VENV)/bin/python
+	$(BIN)/python -m pip install --quiet -r requirements/run.txt
+	@touch $@
+
+$(VENV)/.test-installed: requirements/test.txt | $(VENV)/bin/python
+	$(BIN)/python -m pip install --quiet -r requirements/test.txt
+	@touch $@ $(VENV)/.run-installed
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache

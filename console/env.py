@@ -1,0 +1,125 @@
+"""The one place where Pitlane reads its configuration from environment variables.
+
+Every setting that can change between machines is read through an ``Env``; a value that cannot be
+understood raises ``ImproperlyConfigured`` naming the variable, what it holds and what was expected,
+so a typo in a deployment stops the process at start-up instead of surfacing later.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from django.core.exceptions import ImproperlyConfigured
+
+_TRUE = {"1", "true", "yes", "on"}
+_FALSE = {"0", "false", "no", "off"}
+_MISSING = object()
+
+
+class Env:
+    """Typed access to environment variables, with defaults for a single machine."""
+
+    def __init__(self, environ: Mapping[str, str] | None = None) -> None:
+        self._environ = os.environ if environ is None else environ
+
+    def _raw(self, name: str, default: object) -> str | object:
+        value = self._environ.get(name)
+        if value is None or value.strip() == "":
+            if default is _MISSING:
+                raise ImproperlyConfigured(f"The environment variable {name} must be set.")
+            return default
+        return value.strip()
+
+    def str(self, name: str, default: object = _MISSING) -> str:
+        return self._raw(name, default)  # type: ignore[return-value]
+
+    def bool(self, name: str, default: bool | object = _MISSING) -> bool:
+        value = self._raw(name, default)
+        if not isinstance(value, str):
+            return value  # type: ignore[return-value]
+        if value.lower() in _TRUE:
+            return True
+        if value.lower() in _FALSE:
+            return False
+        raise ImproperlyConfigured(
+            f"The environment variable {name} must be true or false (or 1/0, yes/no, on/off), "
+            f"not {value!r}."
+        )
+
+    def int(
+        self,
+        name: str,
+        default: int | object = _MISSING,
+        *,
+        minimum: int | None = None,
+        maximum: int | None = None,
+    ) -> int:
+        value = self._raw(name, default)
+        if isinstance(value, str):
+            try:
+                value = int(value)
+            except ValueError:
+                raise ImproperlyConfigured(
+                    f"The environment variable {name} must be a whole number, not {value!r}."
+                ) from None
+        if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+            raise ImproperlyConfigured(
+                f"The environment variable {name} must be between {minimum} and {maximum}, "
+                f"not {value}."
+            )
+        return value  # type: ignore[return-value]
+
+    def list(self, name: str, default: list[str] | object = _MISSING) -> list[str]:
+        """A comma-separated list; empty items are dropped."""
+        value = self._raw(name, default)
+        if not isinstance(value, str):
+            return list(value)  # type: ignore[call-overload]
+        return [item.strip() for item in value.split(",") if item.strip()]
+
+    def url(self, name: str, default: str | object = _MISSING, *, schemes: tuple[str, ...]) -> str:
+        """A URL whose scheme is one of ``schemes`` and that names a host (or a file path)."""
+        value = self._raw(name, default)
+        if not isinstance(value, str):
+            return value  # type: ignore[return-value]
+        parts = urlsplit(value)
+        if parts.scheme not in schemes:
+            raise ImproperlyConfigured(
+                f"The environment variable {name} must be a URL starting with "
+                f"{' or '.join(s + '://' for s in schemes)}, not {_redact(value)!r}."
+            )
+        if not (parts.netloc or parts.path):
+            raise ImproperlyConfigured(
+                f"The environment variable {name} must name a host, not {_redact(value)!r}."
+            )
+        return value
+
+    def path(self, name: str, default: Path | object = _MISSING) -> Path:
+        value = self._raw(name, default)
+        return Path(value).expanduser().resolve()  # type: ignore[arg-type]
+
+    def secret_key(self, name: str, default: str | object = _MISSING) -> str:
+        """A Django secret key strong enough for ``check --deploy``."""
+        value = self._raw(name, default)
+        if value is default:
+            return value  # type: ignore[return-value]
+        if len(value) < 50 or len(set(value)) < 5 or value.startswith("django-insecure-"):
+            raise ImproperlyConfigured(
+                f"The environment variable {name} must be a random string of at least 50 "
+                'characters; generate one with: python -c "import secrets; '
+                'print(secrets.token_urlsafe(50))"'
+            )
+        return value
+
+
+def _redact(url: str) -> str:
+    """The URL without its password, for error messages."""
+    parts = urlsplit(url)
+    if parts.password:
+        return url.replace(f":{parts.password}@", ":***@", 1)
+    return url
+
+
+env = Env()

@@ -1,0 +1,1 @@
+"""Settings per environment: ``dev`` (one machine, the default), ``prod`` and ``test``."""

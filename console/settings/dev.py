@@ -1,0 +1,29 @@
+"""One machine: what ``make run`` serves. Needs no environment variables at all.
+
+The secret key is generated on first start and kept in ``var/secret_key`` (never in the repository).
+Debug pages stay off unless DJANGO_DEBUG=true, so racers see readable error pages, not tracebacks.
+"""
+
+import secrets
+
+from console.settings.base import *  # noqa: F403
+from console.settings.base import VAR_DIR, env
+
+
+def _local_secret_key() -> str:
+    path = VAR_DIR / "secret_key"
+    if not path.exists():
+        VAR_DIR.mkdir(parents=True, exist_ok=True)
+        path.touch(mode=0o600)
+        path.write_text(secrets.token_urlsafe(50))
+    return path.read_text().strip()
+
+
+SECRET_KEY = env.secret_key("DJANGO_SECRET_KEY", "") or _local_secret_key()
+
+# Static files straight from the source tree, no collectstatic step; changes show on reload.
+STORAGES["staticfiles"] = {  # noqa: F405
+    "BACKEND": "django.contrib.staticfiles.storage.StaticFilesStorage"
+}
+WHITENOISE_USE_FINDERS = True
+WHITENOISE_AUTOREFRESH = True

@@ -1,0 +1,16 @@
+"""The test suite. REDIS_URL points at the throwaway Redis that tests/services.py starts."""
+
+from console.settings.base import *  # noqa: F403
+from console.settings.base import DATABASES, VAR_DIR, env
+
+SECRET_KEY = "test-only-secret-key-that-is-long-enough-to-be-realistic-0123456789"  # noqa: S105
+DEBUG = False
+# The suite's database is a file, so that the Celery worker and Daphne processes it starts see it.
+DATABASES["default"]["TEST"] = {"NAME": str(env.path("PITLANE_TEST_DB", VAR_DIR / "test.sqlite3"))}
+PASSWORD_HASHERS = ["django.contrib.auth.hashers.MD5PasswordHasher"]
+STORAGES["staticfiles"] = {  # noqa: F405
+    "BACKEND": "django.contrib.staticfiles.storage.StaticFilesStorage"
+}
+WHITENOISE_USE_FINDERS = True
+MEDIA_ROOT = env.path("PITLANE_TEST_MEDIA", VAR_DIR / "test-media")
+STORAGES["default"]["OPTIONS"]["location"] = MEDIA_ROOT  # noqa: F405

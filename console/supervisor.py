@@ -1,0 +1,271 @@
+"""What ``make run`` runs: a private Redis, the database set-up, one Celery worker and Daphne.
+
+The supervisor starts each process in its own session, so Ctrl-C in the terminal reaches only the
+supervisor, which then stops what it started in reverse order (web server, worker, Redis), each with
+SIGTERM and, past a grace period, SIGKILL. Children are also asked by the kernel to stop should the
+supervisor itself be killed. A lock file under var/ keeps a second supervisor from starting over
+the first, and ports are checked before anything starts, so neither case ends in a traceback.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import fcntl
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO
+
+import redis
+from django.conf import settings
+from django.core.management import call_command
+
+from console.env import env
+
+STOP_GRACE = 15.0  # [s] between SIGTERM and SIGKILL
+START_TIMEOUT = 60.0  # [s] for Redis and the web server to answer
+_PR_SET_PDEATHSIG = 1
+
+
+class StartError(Exception):
+    """Pitlane cannot start; the message says why and what to do."""
+
+
+@dataclass
+class Child:
+    name: str
+    process: subprocess.Popen
+
+
+@dataclass
+class Supervisor:
+    host: str
+    port: int
+    var_dir: Path
+    local_redis_port: int | None  # None: REDIS_URL names a Redis that someone else runs
+    concurrency: int
+    out: IO[str] = field(default_factory=lambda: sys.stdout)
+    children: list[Child] = field(default_factory=list)
+    _stopping: bool = False
+
+    @classmethod
+    def from_environment(cls) -> Supervisor:
+        return cls(
+            host=env.str("PITLANE_HOST", "127.0.0.1"),
+            port=env.int("PITLANE_PORT", 8000, minimum=1, maximum=65535),
+            var_dir=settings.VAR_DIR,
+            local_redis_port=None if "REDIS_URL" in os.environ else settings.REDIS_PORT,
+            concurrency=env.int(
+                "PITLANE_WORKER_CONCURRENCY", max(2, os.cpu_count() or 1), minimum=1
+            ),
+        )
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}"
+
+    def run(self) -> int:
+        """Start everything, serve until Ctrl-C or a child dies, then stop everything."""
+        self.var_dir.mkdir(parents=True, exist_ok=True)
+        with self._single_instance():
+            _check_port(self.host, self.port, "the web server", "PITLANE_PORT")
+            if self.local_redis_port is not None:
+                _check_port("127.0.0.1", self.local_redis_port, "Redis", "PITLANE_REDIS_PORT")
+            for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+                signal.signal(signum, self._request_stop)
+            try:
+                self._start()
+                return self._watch()
+            finally:
+                self._stop_children()
+
+    # Start-up
+
+    def _start(self) -> None:
+        if self.local_redis_port is not None:
+            self._start_redis(self.local_redis_port)
+        self._wait_for_redis()
+        self._say("Preparing the database...")
+        call_command("migrate", interactive=False, verbosity=0)
+        call_command("loadtracks", stdout=self.out)
+        call_command("loaddemoseason", stdout=self.out)
+        self._spawn(
+            "Celery worker",
+            [sys.executable, "-m", "celery", "-A", "console", "worker",
+             "-Q", ",".join(settings.PITLANE_QUEUES), "--hostname", "pitlane@%h",
+             "--concurrency", str(self.concurrency), "--loglevel", "INFO"],
+        )  # fmt: skip
+        self._spawn(
+            "web server",
+            [sys.executable, "-m", "daphne", "-b", self.host, "-p", str(self.port),
+             "--proxy-headers", "console.asgi:application"],
+        )  # fmt: skip
+        self._wait_until(self._web_answers, "the web server to answer")
+        self._say(f"\nPitlane is running: {self.url}  (Ctrl-C stops it)\n")
+
+    def _start_redis(self, port: int) -> None:
+        executable = shutil.which("redis-server")
+        if executable is None:
+            raise StartError(
+                "redis-server is not installed. `make run` installs it with apt where it can; "
+                "elsewhere install Redis 6 or newer, or set REDIS_URL to a Redis you run."
+            )
+        data = self.var_dir / "redis"
+        data.mkdir(parents=True, exist_ok=True)
+        self._say(f"Starting Redis on 127.0.0.1:{port} (data in {data})...")
+        self._spawn(
+            "Redis",
+            [executable, "--bind", "127.0.0.1", "--port", str(port), "--dir", str(data),
+             "--appendonly", "yes", "--protected-mode", "yes", "--daemonize", "no",
+             "--logfile", str(data / "redis.log")],
+        )  # fmt: skip
+
+    def _wait_for_redis(self) -> None:
+        client = redis.Redis.from_url(settings.REDIS_URL, socket_connect_timeout=1)
+
+        def answers() -> bool:
+            try:
+                return bool(client.ping())
+            except redis.BusyLoadingError:
+                return False  # replaying the append-only file
+            except redis.RedisError:
+                return False
+
+        self._wait_until(answers, f"Redis at {settings.REDIS_URL}")
+
+    def _web_answers(self) -> bool:
+        try:
+            with urllib.request.urlopen(f"{self.url}/healthz", timeout=2):  # noqa: S310
+                return True
+        except urllib.error.HTTPError:
+            return True  # it answered; /healthz says 503 until the worker has reported in
+        except OSError:
+            return False
+
+    def _wait_until(self, ready: Callable[[], bool], what: str) -> None:
+        deadline = time.monotonic() + START_TIMEOUT
+        while not ready():
+            self._check_children()
+            if self._stopping:
+                raise StartError("Stopped before start-up finished.")
+            if time.monotonic() > deadline:
+                raise StartError(f"Gave up waiting for {what} after {START_TIMEOUT:.0f} s.")
+            time.sleep(0.2)
+
+    def _spawn(self, name: str, command: list[str]) -> None:
+        process = subprocess.Popen(
+            command,
+            cwd=settings.BASE_DIR,
+            start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops us in order
+            preexec_fn=_stop_with_parent,
+        )
+        self.children.append(Child(name, process))
+
+    # Serving and stopping
+
+    def _watch(self) -> int:
+        while not self._stopping:
+            try:
+                self._check_children()
+            except StartError as error:
+                self._say(str(error))
+                return 1
+            time.sleep(0.5)
+        return 0
+
+    def _check_children(self) -> None:
+        for child in self.children:
+            code = child.process.poll()
+            if code is not None and not self._stopping:
+                raise StartError(
+                    f"The {child.name} stopped unexpectedly (exit status {code}); its output is "
+                    "above. Stopping Pitlane."
+                )
+
+    def _request_stop(self, signum: int, frame: object) -> None:
+        if not self._stopping:
+            self._say("\nStopping Pitlane...")
+        self._stopping = True
+
+    def _stop_children(self) -> None:
+        self._stopping = True
+        for child in reversed(self.children):
+            if child.process.poll() is None:
+                child.process.terminate()
+                try:
+                    child.process.wait(STOP_GRACE)
+                except subprocess.TimeoutExpired:
+                    self._say(f"The {child.name} did not stop in {STOP_GRACE:.0f} s; killing it.")
+                    child.process.kill()
+                    child.process.wait()
+        self.children.clear()
+
+    # Guards
+
+    def _single_instance(self):
+        return _InstanceLock(self.var_dir / "run.lock", self.var_dir)
+
+    def _say(self, text: str) -> None:
+        self.out.write(text + "\n")
+        self.out.flush()
+
+
+class _InstanceLock:
+    """An exclusive lock on var/run.lock for as long as the supervisor runs."""
+
+    def __init__(self, path: Path, var_dir: Path) -> None:
+        self.path = path
+        self.var_dir = var_dir
+        self.file: IO[str] | None = None
+
+    def __enter__(self) -> _InstanceLock:
+        self.file = open(self.path, "a+")
+        try:
+            fcntl.flock(self.file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.file.seek(0)
+            pid = self.file.read().strip() or "unknown"
+            self.file.close()
+            raise StartError(
+                f"Pitlane is already running with its data in {self.var_dir} (process {pid}). "
+                "Use that one at its URL, or stop it with Ctrl-C in its terminal first."
+            ) from None
+        self.file.seek(0)
+        self.file.truncate()
+        self.file.write(str(os.getpid()))
+        self.file.flush()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        assert self.file is not None
+        self.file.truncate(0)
+        fcntl.flock(self.file, fcntl.LOCK_UN)
+        self.file.close()
+
+
+def _check_port(host: str, port: int, what: str, variable: str) -> None:
+    """Raise ``StartError`` when something already listens on ``host:port``."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError:
+            raise StartError(
+                f"Port {port} is already in use by another program, so {what} cannot start. "
+                f"Stop that program, or choose another port: {variable}={port + 1} make run"
+            ) from None
+
+
+def _stop_with_parent() -> None:
+    """In the child, before exec: have the kernel send SIGTERM when the supervisor dies."""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)

@@ -1,0 +1,72 @@
+"""Celery workers announce themselves in Redis, so /healthz can say which queues are served.
+
+Each worker refreshes a key with a time-to-live every few seconds while it runs and removes it
+when it stops; a worker that dies without stopping disappears when its key expires. Reading these
+keys is a single round-trip to Redis, where asking workers over the broker would wait out a
+timeout on every health check.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import threading
+import time
+
+import redis
+from celery import signals
+from django.conf import settings
+
+logger = logging.getLogger(__name__)
+
+KEY_PREFIX = "pitlane:worker:"
+HEARTBEAT_INTERVAL = 5.0  # [s]
+HEARTBEAT_TTL = 15  # [s] a worker silent this long is gone
+
+_stop = threading.Event()
+
+
+def redis_client(**kwargs) -> redis.Redis:
+    """A Redis client for Pitlane's own keys, failing fast when Redis is unreachable."""
+    return redis.Redis.from_url(
+        settings.REDIS_URL, socket_connect_timeout=1.0, socket_timeout=1.0, **kwargs
+    )
+
+
+def live_workers(client: redis.Redis) -> list[dict]:
+    """The workers whose heartbeat has not expired: hostname, pid, queues, started_at."""
+    keys = sorted(client.scan_iter(match=f"{KEY_PREFIX}*", count=100))
+    return [json.loads(value) for value in client.mget(keys) if value] if keys else []
+
+
+@signals.worker_ready.connect
+def _start_heartbeat(sender, **kwargs) -> None:
+    record = {
+        "hostname": sender.hostname,
+        "pid": os.getpid(),
+        "queues": sorted(queue.name for queue in sender.task_consumer.queues),
+        "started_at": time.time(),
+    }
+    _stop.clear()
+    threading.Thread(target=_beat, args=(record,), name="pitlane-heartbeat", daemon=True).start()
+
+
+@signals.worker_shutdown.connect
+def _stop_heartbeat(sender, **kwargs) -> None:
+    _stop.set()
+    try:
+        redis_client().delete(KEY_PREFIX + sender.hostname)
+    except redis.RedisError:
+        logger.warning("Could not remove this worker's heartbeat; it expires in %ss", HEARTBEAT_TTL)
+
+
+def _beat(record: dict) -> None:
+    client = redis_client()
+    key, value = KEY_PREFIX + record["hostname"], json.dumps(record)
+    while not _stop.is_set():
+        try:
+            client.set(key, value, ex=HEARTBEAT_TTL)
+        except redis.RedisError as error:
+            logger.warning("Worker heartbeat failed: %s", error)
+        _stop.wait(HEARTBEAT_INTERVAL)

@@ -1,0 +1,9 @@
+from django.urls import path
+
+from training import views
+
+app_name = "training"
+urlpatterns = [
+    path("models/", views.model_list, name="model-list"),
+    path("garage/", views.garage, name="garage"),
+]
