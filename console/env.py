@@ -82,7 +82,7 @@ class Env:
     def url(self, name: str, default: str | object = _MISSING, *, schemes: tuple[str, ...]) -> str:
         """A URL whose scheme is one of ``schemes`` and that names a host (or a file path)."""
         value = self._raw(name, default)
-        if not isinstance(value, str):
+        if value is default:
             return value  # type: ignore[return-value]
         parts = urlsplit(value)
         if parts.scheme not in schemes:

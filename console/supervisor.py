@@ -30,6 +30,7 @@ from django.conf import settings
 from django.core.management import call_command
 
 from console.env import env
+from console.workers import live_workers, redis_client
 
 STOP_GRACE = 15.0  # [s] between SIGTERM and SIGKILL
 START_TIMEOUT = 60.0  # [s] for Redis and the web server to answer
@@ -109,6 +110,7 @@ class Supervisor:
             [sys.executable, "-m", "daphne", "-b", self.host, "-p", str(self.port),
              "--proxy-headers", "console.asgi:application"],
         )  # fmt: skip
+        self._wait_until(self._worker_reported, "the Celery worker to report in")
         self._wait_until(self._web_answers, "the web server to answer")
         self._say(f"\nPitlane is running: {self.url}  (Ctrl-C stops it)\n")
 
@@ -130,7 +132,7 @@ class Supervisor:
         )  # fmt: skip
 
     def _wait_for_redis(self) -> None:
-        client = redis.Redis.from_url(settings.REDIS_URL, socket_connect_timeout=1)
+        client = redis_client()
 
         def answers() -> bool:
             try:
@@ -142,12 +144,22 @@ class Supervisor:
 
         self._wait_until(answers, f"Redis at {settings.REDIS_URL}")
 
+    def _worker_reported(self) -> bool:
+        worker = self._child("Celery worker")
+        try:
+            return any(w["pid"] == worker.pid for w in live_workers(redis_client()))
+        except redis.RedisError:
+            return False
+
+    def _child(self, name: str) -> subprocess.Popen:
+        return next(child.process for child in self.children if child.name == name)
+
     def _web_answers(self) -> bool:
         try:
             with urllib.request.urlopen(f"{self.url}/healthz", timeout=2):  # noqa: S310
                 return True
         except urllib.error.HTTPError:
-            return True  # it answered; /healthz says 503 until the worker has reported in
+            return True  # it answered; what /healthz says is for the operator to read
         except OSError:
             return False
 

@@ -12,5 +12,6 @@ STORAGES["staticfiles"] = {  # noqa: F405
     "BACKEND": "django.contrib.staticfiles.storage.StaticFilesStorage"
 }
 WHITENOISE_USE_FINDERS = True
+STATIC_ROOT = None  # nothing is collected; WhiteNoise serves from the finders
 MEDIA_ROOT = env.path("PITLANE_TEST_MEDIA", VAR_DIR / "test-media")
 STORAGES["default"]["OPTIONS"]["location"] = MEDIA_ROOT  # noqa: F405

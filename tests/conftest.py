@@ -1,0 +1,102 @@
+"""Shared fixtures: a couple of named racers, a staff member, and the real processes of the stack."""
+
+from __future__ import annotations
+
+import socket
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from django.conf import settings
+from django.contrib.auth.models import User
+
+from console.workers import live_workers, redis_client
+from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
+
+PASSWORD = "correct-horse-battery-staple"
+
+
+def _racer(username: str, **extra) -> User:
+    return User.objects.create_user(username=username, password=PASSWORD, **extra)
+
+
+@pytest.fixture
+def alice(db) -> User:
+    return _racer("alice")
+
+
+@pytest.fixture
+def bob(db) -> User:
+    return _racer("bob")
+
+
+@pytest.fixture
+def stella(db) -> User:
+    """League staff."""
+    return _racer("stella", is_staff=True)
+
+
+@pytest.fixture
+def tracks(db):
+    from training.services import tracks_sync
+
+    return tracks_sync()
+
+
+@pytest.fixture(scope="session")
+def test_database(django_db_setup, django_db_blocker) -> str:
+    return settings.DATABASES["default"]["NAME"]
+
+
+@pytest.fixture(scope="session")
+def logs_dir(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("logs")
+
+
+@pytest.fixture(scope="session")
+def celery_worker_process(test_database, logs_dir) -> Iterator[ServiceProcess]:
+    """A real Celery worker process serving both queues, as `make run` starts one."""
+    worker = ServiceProcess(
+        python_module(
+            "celery", "-A", "console", "worker", "-Q", ",".join(settings.PITLANE_QUEUES),
+            "--hostname", "test-worker@%h", "--concurrency", "1", "--loglevel", "INFO",
+            "--without-mingle", "--without-gossip",
+        ),
+        env=service_env(test_database),
+        log=logs_dir / "celery-worker.log",
+    )  # fmt: skip
+
+    def reported() -> bool:
+        worker.ensure_running()
+        return any(w["pid"] == worker.pid for w in live_workers(redis_client()))
+
+    try:
+        wait_for(reported, "the Celery worker to report in")
+        yield worker
+    finally:
+        worker.stop()
+
+
+@pytest.fixture(scope="session")
+def daphne_server(test_database, logs_dir) -> Iterator[str]:
+    """Daphne serving console.asgi on a free port; the base URL."""
+    port = free_port()
+    server = ServiceProcess(
+        python_module("daphne", "-b", "127.0.0.1", "-p", str(port), "console.asgi:application"),
+        env=service_env(test_database),
+        log=logs_dir / "daphne.log",
+    )
+
+    def listening() -> bool:
+        server.ensure_running()
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+            return True
+        except OSError:
+            return False
+
+    try:
+        wait_for(listening, "Daphne to listen")
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        server.stop()

@@ -1,0 +1,48 @@
+import pytest
+from django.urls import reverse
+
+from tests.services import RedisServer
+
+pytestmark = pytest.mark.django_db
+
+
+def test_healthz_is_200_when_the_database_redis_and_a_worker_are_up(client, celery_worker_process):
+    response = client.get(reverse("healthz"))
+    assert response.status_code == 200
+    body = response.json()
+    assert body["status"] == "ok"
+    assert body["down"] == []
+    assert set(body["checks"]) == {"database", "redis", "workers"}
+    workers = body["checks"]["workers"]["workers"]
+    assert {"simulation", "training"} <= {q for worker in workers for q in worker["queues"]}
+
+
+def test_healthz_is_503_naming_redis_when_redis_is_stopped(client, settings, tmp_path):
+    redis_server = RedisServer(tmp_path / "redis")
+    settings.REDIS_URL = redis_server.url
+    assert client.get(reverse("healthz")).json()["checks"]["redis"]["ok"] is True
+
+    redis_server.stop()
+    response = client.get(reverse("healthz"))
+    assert response.status_code == 503
+    body = response.json()
+    assert body["status"] == "down"
+    assert "redis" in body["down"]
+    assert body["checks"]["redis"]["error"].startswith("cannot reach Redis")
+    assert body["checks"]["database"]["ok"] is True
+
+
+def test_healthz_is_503_naming_the_workers_when_none_runs(client, settings, tmp_path):
+    redis_server = RedisServer(tmp_path / "redis")
+    settings.REDIS_URL = redis_server.url  # a Redis no worker reports to
+    try:
+        response = client.get(reverse("healthz"))
+    finally:
+        redis_server.stop()
+    assert response.status_code == 503
+    assert response.json()["down"] == ["workers"]
+    assert response.json()["checks"]["workers"]["error"] == "no Celery worker is running"
+
+
+def test_healthz_is_never_cached(client):
+    assert "no-cache" in client.get(reverse("healthz"))["Cache-Control"]

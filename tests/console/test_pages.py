@@ -1,0 +1,71 @@
+import re
+
+import pytest
+from django.test import Client
+from django.urls import reverse
+
+pytestmark = pytest.mark.django_db
+
+
+def nav_labels(response) -> list[str]:
+    nav = re.search(r'<ul class="nav-links">(.*?)</ul>', response.text, re.S).group(1)
+    return re.findall(r">([^<]+)</a>", nav)
+
+
+def test_a_visitor_sees_the_public_sections_and_how_to_start(client):
+    response = client.get(reverse("home"))
+    assert nav_labels(response) == ["Races", "Leaderboards"]
+    assert "Create your racer account" in response.text
+
+
+def test_a_racer_sees_their_sections_and_next_steps(client, alice):
+    client.force_login(alice)
+    response = client.get(reverse("home"))
+    assert nav_labels(response) == ["Models", "Garage", "Races", "Leaderboards"]
+    assert "Your next steps" in response.text
+    assert "Build a vehicle" in response.text
+
+
+def test_staff_also_see_system_and_admin(client, stella):
+    client.force_login(stella)
+    assert nav_labels(client.get(reverse("home"))) == [
+        "Models", "Garage", "Races", "Leaderboards", "System", "Admin",
+    ]  # fmt: skip
+
+
+def test_the_current_section_is_marked(client, alice):
+    client.force_login(alice)
+    response = client.get(reverse("training:garage"))
+    assert '<a href="/garage/" aria-current="page">Garage</a>' in response.text
+
+
+def test_the_system_page_is_for_staff_only(client, alice, stella):
+    client.force_login(alice)
+    assert client.get(reverse("system")).status_code == 302
+    client.force_login(stella)
+    response = client.get(reverse("system"))
+    assert response.status_code == 200
+    assert "Worker probe" in response.text
+
+
+def test_an_unknown_page_gets_a_readable_404(client):
+    response = client.get("/no-such-page/")
+    assert response.status_code == 404
+    assert "This page is not on the track" in response.text
+
+
+@pytest.mark.urls("tests.console.broken_urls")
+def test_a_server_error_gets_a_readable_500_without_a_traceback():
+    client = Client(raise_request_exception=False)
+    response = client.get("/broken/")
+    assert response.status_code == 500
+    assert "Something broke on our side" in response.text
+    assert "Traceback" not in response.text
+    assert "ZeroDivisionError" not in response.text
+
+
+def test_an_expired_form_gets_a_readable_403(alice):
+    client = Client(enforce_csrf_checks=True)
+    response = client.post(reverse("login"), {"username": "alice", "password": "x"})
+    assert response.status_code == 403
+    assert "That form has expired" in response.text

@@ -1,0 +1,62 @@
+"""The real parts, wired: web process → Redis broker → Celery worker → channel layer → websocket."""
+
+from pathlib import Path
+
+import pytest
+from channels.testing import WebsocketCommunicator
+from django.contrib.auth.models import AnonymousUser
+
+from console.consumers import WorkerProbeConsumer
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+
+def parent_of(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+
+
+def communicator_for(user) -> WebsocketCommunicator:
+    communicator = WebsocketCommunicator(WorkerProbeConsumer.as_asgi(), "/ws/system/probe/")
+    communicator.scope["user"] = user
+    return communicator
+
+
+async def test_a_task_enqueued_by_the_web_process_runs_on_a_worker_and_answers_over_the_layer(
+    stella, celery_worker_process
+):
+    communicator = communicator_for(stella)
+    connected, _ = await communicator.connect()
+    assert connected
+    await communicator.send_json_to({"action": "probe"})
+
+    sent = await communicator.receive_json_from(timeout=10)
+    assert sent == {"type": "probe.sent", "queues": ["training", "simulation"]}
+    answers = [await communicator.receive_json_from(timeout=20) for _ in sent["queues"]]
+    await communicator.disconnect()
+
+    assert {answer["queue"] for answer in answers} == {"training", "simulation"}
+    for answer in answers:
+        assert answer["type"] == "probe.result"
+        assert parent_of(answer["pid"]) == celery_worker_process.pid  # one of its pool processes
+        assert answer["worker"].startswith("test-worker@")
+        assert answer["waited_ms"] >= 0
+
+
+@pytest.mark.parametrize("who", ["anonymous", "racer"])
+async def test_only_staff_may_open_the_probe_socket(who, alice):
+    user = AnonymousUser() if who == "anonymous" else alice
+    communicator = communicator_for(user)
+    connected, code = await communicator.connect()
+    assert not connected
+    assert code == 4403
+
+
+async def test_an_unknown_action_gets_an_error_not_a_crash(stella):
+    communicator = communicator_for(stella)
+    await communicator.connect()
+    await communicator.send_json_to({"action": "reboot"})
+    assert await communicator.receive_json_from() == {
+        "type": "error",
+        "message": "Unknown action.",
+    }
+    await communicator.disconnect()

@@ -1,0 +1,92 @@
+from datetime import date, timedelta
+
+import pytest
+from django.core.management import call_command
+from django.urls import reverse
+from django.utils import timezone
+
+from console.templatetags.pitlane import gap, laptime
+from racing.models import Event, Ranking, Season
+from racing.services import demo_season_load
+
+pytestmark = pytest.mark.django_db
+
+
+def test_the_demo_season_has_an_open_event_per_division_and_one_upcoming(tracks):
+    season = demo_season_load(today=date(2026, 11, 21))
+    events = {event.slug: event for event in season.events.all()}
+    assert set(events) == {
+        "open-time-trial-2026-11", "pro-object-avoidance-2026-11", "open-time-trial-2026-12",
+    }  # fmt: skip
+    november = events["open-time-trial-2026-11"]
+    assert (november.division, november.race_type) == ("OPEN", "TIME_TRIAL")
+    assert events["pro-object-avoidance-2026-11"].division == "PRO"
+    assert november.closes_at == events["open-time-trial-2026-12"].opens_at
+
+
+def test_loading_the_demo_season_twice_changes_nothing(tracks):
+    call_command("loaddemoseason")
+    call_command("loaddemoseason")
+    assert Season.objects.count() == 1
+    assert Event.objects.count() == 3
+
+
+def test_the_demo_season_asks_for_the_tracks_first():
+    with pytest.raises(Exception, match="run: manage.py loadtracks"):
+        call_command("loaddemoseason")
+
+
+def test_the_races_page_lists_the_seasons_events_with_their_state(client, tracks):
+    demo_season_load()
+    response = client.get(reverse("racing:race-list"))
+    assert response.status_code == 200
+    assert response.text.count('<span class="badge badge-open">Open</span>') == 2
+    assert response.text.count('<span class="badge badge-upcoming">Upcoming</span>') == 1
+
+
+@pytest.fixture
+def ranked_event(tracks, alice, bob):
+    event = demo_season_load().events.get(division="OPEN", opens_at__lte=timezone.now())
+    now = timezone.now()
+    Ranking.objects.create(event=event, racer=alice, model_name="a1", score_ms=31_002,
+                           submitted_at=now)  # fmt: skip
+    Ranking.objects.create(event=event, racer=bob, model_name="b1", score_ms=29_450,
+                           submitted_at=now - timedelta(hours=1))  # fmt: skip
+    return event
+
+
+def test_a_leaderboard_ranks_by_time_with_the_gap_to_first(client, ranked_event):
+    response = client.get(ranked_event.get_absolute_url())
+    rows = response.context["rankings"]
+    assert [(r.position, r.racer.username, r.gap_ms) for r in rows] == [
+        (1, "bob", 0), (2, "alice", 1552),
+    ]  # fmt: skip
+    assert "0:29.450" in response.text
+    assert "+1.552" in response.text
+
+
+def test_a_racer_sees_their_own_row_highlighted(client, alice, ranked_event):
+    client.force_login(alice)
+    response = client.get(ranked_event.get_absolute_url())
+    assert '<tr class="mine">' in response.text
+    assert response.text.index('class="mine"') > response.text.index("bob")
+
+
+def test_the_leaderboards_page_shows_each_events_best_time(client, ranked_event):
+    response = client.get(reverse("racing:leaderboard-list"))
+    assert "0:29.450" in response.text
+
+
+def test_an_unknown_event_is_a_404(client):
+    assert client.get(reverse("racing:leaderboard", args=["nope"])).status_code == 404
+
+
+@pytest.mark.parametrize(
+    ("ms", "shown"), [(0, "0:00.000"), (29_450, "0:29.450"), (61_005, "1:01.005"), (None, "—")]
+)
+def test_times_show_as_minutes_seconds_and_milliseconds(ms, shown):
+    assert laptime(ms) == shown
+
+
+def test_gaps_show_as_seconds_and_first_place_as_a_dash():
+    assert (gap(0), gap(1552), gap(75_000)) == ("—", "+1.552", "+1:15.000")

@@ -1,0 +1,125 @@
+"""Real services for the test suite, loaded as a pytest plugin (``-p tests.services``).
+
+Before Django's settings are read, it starts a throwaway Redis on a free port and points the suite
+at it, with a scratch ``var/`` directory; fixtures then start real Celery worker and Daphne
+processes on demand.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def wait_for(condition: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"gave up waiting for {what} after {timeout:.0f} s")
+        time.sleep(0.1)
+
+
+class RedisServer:
+    """A private ``redis-server`` on a free port, with no persistence, for as long as it is needed."""
+
+    def __init__(self, directory: Path) -> None:
+        executable = shutil.which("redis-server")
+        if executable is None:
+            raise RuntimeError("redis-server is not installed; `make test` installs it with apt.")
+        self.port = free_port()
+        self.url = f"redis://127.0.0.1:{self.port}/0"
+        directory.mkdir(parents=True, exist_ok=True)
+        self.process = subprocess.Popen(
+            [executable, "--bind", "127.0.0.1", "--port", str(self.port), "--dir", str(directory),
+             "--save", "", "--appendonly", "no", "--daemonize", "no", "--loglevel", "warning"],
+            stdout=subprocess.DEVNULL,
+        )  # fmt: skip
+        wait_for(self.answers, f"Redis on port {self.port}", timeout=15)
+
+    def answers(self) -> bool:
+        try:
+            with socket.create_connection(("127.0.0.1", self.port), timeout=0.5) as connection:
+                connection.sendall(b"PING\r\n")
+                return connection.recv(16).startswith(b"+PONG")
+        except OSError:
+            return False
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            self.process.wait(10)
+
+
+class ServiceProcess:
+    """A process of ours (Celery worker, Daphne) running against the test settings and database."""
+
+    def __init__(self, command: list[str], env: dict[str, str], log: Path) -> None:
+        self.log = log
+        with open(log, "wb") as output:
+            self.process = subprocess.Popen(
+                command, cwd=ROOT, env=env, stdout=output, stderr=subprocess.STDOUT
+            )
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    def ensure_running(self) -> None:
+        if self.process.poll() is not None:
+            raise RuntimeError(
+                f"{self.process.args[:4]} exited with {self.process.returncode}:\n"
+                + self.log.read_text()[-4000:]
+            )
+
+    def stop(self) -> None:
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(20)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+
+
+def service_env(database: str) -> dict[str, str]:
+    """The environment for a process that must share the suite's Redis and test database."""
+    env = dict(os.environ)
+    env.update(
+        DJANGO_SETTINGS_MODULE="console.settings.test",
+        DATABASE_URL=f"sqlite:///{database}",
+        PYTHONUNBUFFERED="1",
+    )
+    return env
+
+
+def python_module(*args: str) -> list[str]:
+    return [sys.executable, "-m", *args]
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_load_initial_conftests(early_config, parser, args):
+    scratch = Path(tempfile.mkdtemp(prefix="pitlane-tests-"))
+    os.environ["PITLANE_VAR_DIR"] = str(scratch / "var")
+    os.environ["PITLANE_TEST_DB"] = str(scratch / "test.sqlite3")
+    redis_server = RedisServer(scratch / "redis")
+    os.environ["REDIS_URL"] = redis_server.url
+    early_config.add_cleanup(lambda: shutil.rmtree(scratch, ignore_errors=True))
+    early_config.add_cleanup(redis_server.stop)
+    return (yield)

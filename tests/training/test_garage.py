@@ -1,0 +1,62 @@
+import pytest
+from django.core.management import call_command
+from django.urls import reverse
+
+from training.models import Track, Vehicle
+
+pytestmark = pytest.mark.django_db
+
+
+def test_loadtracks_mirrors_the_simulator_catalogue_and_can_run_again(capsys):
+    call_command("loadtracks")
+    call_command("loadtracks")
+    assert list(Track.objects.values_list("name", flat=True)) == [
+        "pitlane-oval", "kidney-bean", "clover-loop",
+    ]  # fmt: skip
+    oval = Track.objects.get(name="pitlane-oval")
+    assert oval.length_m == 16.5
+    assert oval.directions == ["Counter-clockwise", "Clockwise"]
+    assert "3 built-in tracks loaded" in capsys.readouterr().out
+
+
+def test_a_racer_builds_a_vehicle(client, alice):
+    client.force_login(alice)
+    response = client.post(
+        reverse("training:garage"),
+        {"name": "Blue Thunder", "shell_colour": "#0969da", "camera": "STEREO_CAMERAS",
+         "lidar": "SECTOR_LIDAR"},
+        follow=True,
+    )  # fmt: skip
+    assert "Blue Thunder is in your garage." in response.text
+    vehicle = Vehicle.objects.get(owner=alice)
+    assert vehicle.sensors == ["STEREO_CAMERAS", "SECTOR_LIDAR"]
+
+
+def test_a_vehicle_name_is_unique_per_racer_and_the_form_keeps_its_input(client, alice, bob):
+    Vehicle.objects.create(owner=bob, name="Rocket")
+    Vehicle.objects.create(owner=alice, name="Rocket")
+    client.force_login(alice)
+    response = client.post(
+        reverse("training:garage"),
+        {"name": "rocket", "shell_colour": "#d1242f", "camera": "FRONT_FACING_CAMERA"},
+    )
+    assert response.status_code == 400
+    assert "You already have a vehicle named “rocket”" in response.text
+    assert 'value="rocket"' in response.text
+    assert Vehicle.objects.filter(owner=alice).count() == 1
+
+
+def test_a_racer_sees_only_their_own_vehicles(client, alice, bob):
+    Vehicle.objects.create(owner=bob, name="Bobs-car")
+    client.force_login(alice)
+    response = client.get(reverse("training:garage"))
+    assert "Bobs-car" not in response.text
+    assert "Your garage is empty." in response.text
+
+
+def test_the_models_page_lists_the_tracks_to_train_on(client, alice, tracks):
+    client.force_login(alice)
+    response = client.get(reverse("training:model-list"))
+    assert "You have no models yet." in response.text
+    assert "Clover Loop" in response.text
+    assert "24.00 m long" in response.text
