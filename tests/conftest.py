@@ -1,4 +1,4 @@
-"""Shared fixtures: a couple of named racers, a staff member, and the real processes of the stack."""
+"""Shared fixtures: named racers, a staff member, and the real processes of the stack."""
 
 from __future__ import annotations
 
@@ -14,6 +14,15 @@ from console.workers import live_workers, redis_client
 from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
 
 PASSWORD = "correct-horse-battery-staple"
+BROWSER_TESTS = Path(__file__).parent / "browser"
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Browser tests are marked, and run last: the slowest, and the ones that need everything."""
+    for item in items:
+        if item.path.is_relative_to(BROWSER_TESTS):
+            item.add_marker(pytest.mark.browser)
+    items.sort(key=lambda item: item.path.is_relative_to(BROWSER_TESTS))
 
 
 def _racer(username: str, **extra) -> User:

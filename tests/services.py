@@ -28,6 +28,11 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+def parent_of(pid: int) -> int:
+    """The parent's process id, from /proc (the command name may hold spaces and parentheses)."""
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+
+
 def wait_for(condition: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
     deadline = time.monotonic() + timeout
     while not condition():
@@ -37,7 +42,7 @@ def wait_for(condition: Callable[[], bool], what: str, timeout: float = 60.0) ->
 
 
 class RedisServer:
-    """A private ``redis-server`` on a free port, with no persistence, for as long as it is needed."""
+    """A private ``redis-server`` on a free port, with no persistence."""
 
     def __init__(self, directory: Path) -> None:
         executable = shutil.which("redis-server")

@@ -33,7 +33,7 @@ def test_sign_up_says_when_the_passwords_differ(client):
         reverse("signup"), {"username": "carol", "password1": PASSWORD, "password2": "other"}
     )
     assert response.status_code == 400
-    assert "The two password fields didn’t match." in response.text
+    assert "The two password fields didn\u2019t match." in response.text
     assert not User.objects.filter(username="carol").exists()
 
 
@@ -73,7 +73,11 @@ def test_changing_the_password_needs_the_old_one(client, alice):
     client.force_login(alice)
     response = client.post(
         reverse("password_change"),
-        {"old_password": "wrong", "new_password1": "x-y-z-1-2-3-4", "new_password2": "x-y-z-1-2-3-4"},
+        {
+            "old_password": "wrong",
+            "new_password1": "x-y-z-1-2-3-4",
+            "new_password2": "x-y-z-1-2-3-4",
+        },
     )
     assert "Your old password was entered incorrectly" in response.text
     alice.refresh_from_db()

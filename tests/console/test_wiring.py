@@ -1,18 +1,13 @@
 """The real parts, wired: web process → Redis broker → Celery worker → channel layer → websocket."""
 
-from pathlib import Path
-
 import pytest
 from channels.testing import WebsocketCommunicator
 from django.contrib.auth.models import AnonymousUser
 
 from console.consumers import WorkerProbeConsumer
+from tests.services import parent_of
 
 pytestmark = pytest.mark.django_db(transaction=True)
-
-
-def parent_of(pid: int) -> int:
-    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
 
 
 def communicator_for(user) -> WebsocketCommunicator:

@@ -32,7 +32,7 @@ def test_loading_the_demo_season_twice_changes_nothing(tracks):
 
 
 def test_the_demo_season_asks_for_the_tracks_first():
-    with pytest.raises(Exception, match="run: manage.py loadtracks"):
+    with pytest.raises(Exception, match=r"run: manage\.py loadtracks"):
         call_command("loaddemoseason")
 
 

@@ -76,5 +76,5 @@ def test_a_file_that_is_not_numpy_is_rejected(tmp_path):
 
 
 def test_an_unknown_track_name_lists_the_built_in_ones():
-    with pytest.raises(TrackError, match="No track named 'monza'. Built-in tracks: pitlane-oval"):
+    with pytest.raises(TrackError, match=r"No track named 'monza'\. Built-in tracks: pitlane-oval"):
         tracks.load("monza")
