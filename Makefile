@@ -11,12 +11,12 @@ help:
 	@sed -n 's/^#   //p' $(firstword $(MAKEFILE_LIST))
 
 run: $(VENV)/.run-installed
-	@scripts/ensure-system-package.sh redis-server redis-server
+	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	$(BIN)/python manage.py runconsole
 
 test: $(VENV)/.test-installed
-	@scripts/ensure-system-package.sh redis-server redis-server
-	@scripts/ensure-system-package.sh chromium chromium
+	@scripts/ensure-system-package.sh redis-server command -v redis-server
+	@scripts/ensure-system-package.sh chromium command -v chromium
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
@@ -30,7 +30,7 @@ format: $(VENV)/.test-installed
 	$(BIN)/ruff format .
 
 bench: $(VENV)/.run-installed
-	@scripts/ensure-system-package.sh redis-server redis-server
+	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	@for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
 
 lock:
@@ -39,6 +39,7 @@ lock:
 $(VENV)/bin/python:
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \
 		{ echo "Pitlane needs Python 3.11 or newer; $(PYTHON) is $$($(PYTHON) --version)." >&2; exit 1; }
+	@scripts/ensure-system-package.sh python3-venv $(PYTHON) -c 'import ensurepip, venv'
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
