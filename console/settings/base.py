@@ -135,7 +135,13 @@ CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
 CELERY_WORKER_HIJACK_ROOT_LOGGER = False
 CELERY_BROKER_CONNECTION_RETRY_ON_STARTUP = True
-CELERY_BROKER_TRANSPORT_OPTIONS = {"global_keyprefix": "pitlane:celery:"}
+CELERY_BROKER_TRANSPORT_OPTIONS = {
+    "global_keyprefix": "pitlane:celery:",
+    # With late acknowledgement, Redis hands an unacknowledged task to another worker after this
+    # long: it must outlast the longest training job (1440 min), so a running job is never
+    # delivered twice. A trainer that dies is noticed sooner, by its job's lease.
+    "visibility_timeout": 25 * 3600,  # [s]
+}
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
 # The queues a complete deployment serves; /healthz reports any that no worker consumes.

@@ -55,3 +55,25 @@ async def test_an_unknown_action_gets_an_error_not_a_crash(stella):
         "message": "Unknown action.",
     }
     await communicator.disconnect()
+
+
+async def test_a_websocket_from_another_site_is_refused_before_anything_else(stella):
+    from console.asgi import application
+
+    communicator = WebsocketCommunicator(
+        application, "/ws/system/probe/", headers=[(b"origin", b"https://evil.example")]
+    )
+    connected, code = await communicator.connect()
+    assert not connected
+    assert code != 4403  # the origin check answered; the consumer never saw it
+
+
+async def test_a_websocket_from_the_site_itself_reaches_the_consumer():
+    from console.asgi import application
+
+    communicator = WebsocketCommunicator(
+        application, "/ws/system/probe/", headers=[(b"origin", b"http://127.0.0.1:8000")]
+    )
+    connected, code = await communicator.connect()
+    assert not connected
+    assert code == 4403  # refused by the consumer (anonymous), not by the origin check
