@@ -77,7 +77,7 @@ class Supervisor:
     def run(self) -> int:
         """Start everything, serve until Ctrl-C or a child dies, then stop everything."""
         self.var_dir.mkdir(parents=True, exist_ok=True)
-        with self._single_instance():
+        with _InstanceLock(self.var_dir):
             _check_port(self.host, self.port, "the web server", "PITLANE_PORT")
             if self.local_redis_port is not None:
                 _check_port("127.0.0.1", self.local_redis_port, "Redis", "PITLANE_REDIS_PORT")
@@ -108,7 +108,7 @@ class Supervisor:
         self._spawn(
             "web server",
             [sys.executable, "-m", "daphne", "-b", self.host, "-p", str(self.port),
-             "--proxy-headers", "console.asgi:application"],
+             "console.asgi:application"],
         )  # fmt: skip
         self._wait_until(self._worker_reported, "the Celery worker to report in")
         self._wait_until(self._web_answers, "the web server to answer")
@@ -221,11 +221,6 @@ class Supervisor:
                     child.process.wait()
         self.children.clear()
 
-    # Guards
-
-    def _single_instance(self):
-        return _InstanceLock(self.var_dir / "run.lock", self.var_dir)
-
     def _say(self, text: str) -> None:
         self.out.write(text + "\n")
         self.out.flush()
@@ -234,8 +229,8 @@ class Supervisor:
 class _InstanceLock:
     """An exclusive lock on var/run.lock for as long as the supervisor runs."""
 
-    def __init__(self, path: Path, var_dir: Path) -> None:
-        self.path = path
+    def __init__(self, var_dir: Path) -> None:
+        self.path = var_dir / "run.lock"
         self.var_dir = var_dir
         self.file: IO[str] | None = None
 

@@ -44,26 +44,25 @@ def test_production_settings_name_a_missing_secret_key():
     assert "The environment variable DJANGO_SECRET_KEY must be set." in result.stderr
 
 
-def test_production_settings_switch_artifacts_to_the_s3_bucket():
-    result = manage(
-        "shell", "--no-imports", "-c",
-        "from django.core.files.storage import storages; s = storages['default']; "
-        "print(type(s).__name__, s.bucket_name, s.region_name)",
-        **PRODUCTION,
-    )  # fmt: skip
+def printed_in_production(code: str) -> list[str]:
+    """The words ``code`` prints in a shell under the production settings."""
+    result = manage("shell", "--no-imports", "-c", code, **PRODUCTION)
     assert result.returncode == 0, result.stderr
-    assert result.stdout.split() == ["S3Storage", "pitlane-artifacts", "eu-west-1"]
+    return result.stdout.split()
+
+
+def test_production_settings_switch_artifacts_to_the_s3_bucket():
+    assert printed_in_production(
+        "from django.core.files.storage import storages; s = storages['default']; "
+        "print(type(s).__name__, s.bucket_name, s.region_name)"
+    ) == ["S3Storage", "pitlane-artifacts", "eu-west-1"]
 
 
 def test_production_settings_use_the_database_url():
-    result = manage(
-        "shell", "--no-imports", "-c",
+    assert printed_in_production(
         "from django.conf import settings as s; d = s.DATABASES['default']; "
-        "print(d['ENGINE'], d['HOST'], d['NAME'])",
-        **PRODUCTION,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.split() == ["django.db.backends.postgresql", "db.internal", "pitlane"]
+        "print(d['ENGINE'], d['HOST'], d['NAME'])"
+    ) == ["django.db.backends.postgresql", "db.internal", "pitlane"]
 
 
 def test_a_bad_value_stops_start_up_with_a_clear_message():
