@@ -1,0 +1,176 @@
+"""Cameras that see the flat track by projecting its top-down image, and solids drawn on top.
+
+A camera mounted on the car sees the ground plane through a homography: one OpenCV perspective
+warp of the pre-drawn track image gives the whole picture, thousands of times a second, where
+rendering 3D geometry would manage a few hundred. Above the horizon there is only the sky (the
+room, for a DeepRacer track). Boxes and cars are solids: their faces are projected and filled,
+farthest first.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from simulator.texture import TrackTexture
+
+NEAR = 0.01  # [m] faces nearer than this to the camera plane are clipped
+
+
+@dataclass(frozen=True)
+class Lens:
+    width: int  # [px]
+    height: int  # [px]
+    horizontal_fov: float  # [deg]
+
+    @property
+    def focal(self) -> float:
+        """[px] for square pixels."""
+        return (self.width / 2) / math.tan(math.radians(self.horizontal_fov) / 2)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        f = self.focal
+        return np.array([[f, 0.0, self.width / 2], [0.0, f, self.height / 2], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class Mount:
+    """Where a camera sits relative to a pose (x, y, yaw): ``forward`` along the heading,
+    ``left`` across it, ``height`` above the ground, pitched down by ``pitch``."""
+
+    forward: float  # [m]
+    height: float  # [m]
+    pitch: float  # [deg] down from horizontal
+    left: float = 0.0  # [m]
+
+
+@dataclass(frozen=True)
+class Solid:
+    """A box standing on the ground: a box obstacle, a bot car, or the agent's car for spectators."""
+
+    x: float  # [m] middle of the footprint
+    y: float  # [m]
+    yaw: float  # [rad]
+    length: float  # [m]
+    width: float  # [m]
+    height: float  # [m]
+    shade: int | tuple[int, int, int]  # gray level, or BGR colour
+
+
+# Faces of a box by corner index (0-3 bottom, 4-7 top; counter-clockwise seen from outside).
+_FACES = ((4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
+_FACE_LIGHT = (1.0, 0.78, 0.62, 0.7, 0.86)  # top, then the four sides: a fixed light from above
+
+
+class PerspectiveView:
+    """A camera's picture of the track and the solids on it."""
+
+    def __init__(
+        self, texture: TrackTexture, lens: Lens, mount: Mount, sky: int | tuple[int, int, int]
+    ) -> None:
+        self.texture = texture
+        self.lens = lens
+        self.mount = mount
+        self._k = lens.matrix
+        self._texture_from_world = texture.world_to_pixel
+        pitch = math.radians(mount.pitch)
+        self._sin_pitch, self._cos_pitch = math.sin(pitch), math.cos(pitch)
+        horizon = lens.height / 2 - lens.focal * math.tan(pitch)
+        self._sky_rows = int(np.clip(math.ceil(horizon) + 1, 0, lens.height))
+        channels = () if isinstance(sky, int) else (3,)
+        self._sky = np.empty((self._sky_rows, lens.width, *channels), dtype=np.uint8)
+        self._sky[:] = sky
+        self._border = sky if isinstance(sky, int) else tuple(int(c) for c in sky)
+
+    def pose(self, x: float, y: float, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+        """The world-to-camera rotation (rows: right, down, forward) and the camera's position."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        m = self.mount
+        position = np.array(
+            [x + m.forward * c - m.left * s, y + m.forward * s + m.left * c, m.height]
+        )
+        forward = np.array([c * self._cos_pitch, s * self._cos_pitch, -self._sin_pitch])
+        right = np.array([s, -c, 0.0])
+        down = np.cross(forward, right)
+        return np.vstack([right, down, forward]), position
+
+    def render(self, x: float, y: float, yaw: float, solids: list[Solid] = ()) -> np.ndarray:
+        """The picture from the car at pose (x, y, yaw)."""
+        rotation, position = self.pose(x, y, yaw)
+        t = -rotation @ position
+        image_from_ground = self._k @ np.column_stack([rotation[:, 0], rotation[:, 1], t])
+        texture_from_image = self._texture_from_world @ np.linalg.inv(image_from_ground)
+        image = cv2.warpPerspective(
+            self.texture.image,
+            texture_from_image,
+            (self.lens.width, self.lens.height),
+            flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+            borderMode=cv2.BORDER_CONSTANT,
+            borderValue=self._border,
+        )
+        image[: self._sky_rows] = self._sky
+        if solids:
+            self.draw_solids(image, solids, rotation, position)
+        return image
+
+    def draw_solids(
+        self, image: np.ndarray, solids: list[Solid], rotation: np.ndarray, position: np.ndarray
+    ) -> None:
+        visible = []
+        for solid in solids:
+            corners = _corners(solid) - position
+            camera = corners @ rotation.T
+            if (camera[:, 2] < NEAR).all():
+                continue  # behind the camera
+            visible.append((float(np.linalg.norm(corners[:, :2].mean(axis=0))), solid, camera))
+        for _, solid, camera in sorted(visible, key=lambda item: -item[0]):
+            self._fill_faces(image, solid, camera)
+
+    def _fill_faces(self, image: np.ndarray, solid: Solid, camera: np.ndarray) -> None:
+        for face, light in zip(_FACES, _FACE_LIGHT, strict=True):
+            polygon = camera[list(face)]
+            normal = np.cross(polygon[1] - polygon[0], polygon[2] - polygon[0])
+            if normal @ polygon[0] >= 0:
+                continue  # facing away from the camera
+            polygon = _clip_near(polygon)
+            if len(polygon) < 3:
+                continue
+            pixels = polygon[:, :2] / polygon[:, 2:3] * self._k[0, 0] + self._k[:2, 2]
+            cv2.fillConvexPoly(image, np.round(pixels * 16).astype(np.int32),
+                               _lit(solid.shade, light), cv2.LINE_AA, 4)  # fmt: skip
+
+
+def _corners(solid: Solid) -> np.ndarray:
+    c, s = math.cos(solid.yaw), math.sin(solid.yaw)
+    hl, hw = solid.length / 2, solid.width / 2
+    footprint = np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw]])
+    xy = footprint @ np.array([[c, s], [-s, c]]) + (solid.x, solid.y)
+    bottom = np.column_stack([xy, np.zeros(4)])
+    top = np.column_stack([xy, np.full(4, solid.height)])
+    return np.vstack([bottom, top])
+
+
+def _clip_near(polygon: np.ndarray) -> np.ndarray:
+    """The part of a convex polygon (camera coordinates) in front of the near plane."""
+    depth = polygon[:, 2]
+    if (depth >= NEAR).all():
+        return polygon
+    kept = []
+    for i in range(len(polygon)):
+        a, b = polygon[i], polygon[(i + 1) % len(polygon)]
+        if a[2] >= NEAR:
+            kept.append(a)
+        if (a[2] >= NEAR) != (b[2] >= NEAR):
+            t = (NEAR - a[2]) / (b[2] - a[2])
+            kept.append(a + t * (b - a))
+    return np.array(kept)
+
+
+def _lit(shade: int | tuple[int, int, int], light: float):
+    if isinstance(shade, int):
+        return int(shade * light)
+    return tuple(int(c * light) for c in shade)

@@ -1,0 +1,104 @@
+"""DeepRacer's simulation trace: one row per step, as log lines and per-iteration CSV files.
+
+The 19 fields, in DeepRacer's order, are what deepracer-utils and Log Guru read. A continuous
+action is written ``[steer speed]``; booleans as True/False, as DeepRacer writes them.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import NamedTuple, TextIO
+
+LOG_PREFIX = "SIM_TRACE_LOG:"
+
+
+class SimTraceRow(NamedTuple):
+    episode: int
+    steps: int
+    X: float
+    Y: float
+    yaw: float  # [deg]
+    steer: float  # [deg]
+    throttle: float  # [m/s]
+    action: int | str  # index, or "[steer speed]" for a continuous action
+    reward: float
+    done: bool
+    all_wheels_on_track: bool
+    progress: float
+    closest_waypoint: int
+    track_len: float
+    tstamp: float  # [s] simulated time
+    episode_status: str
+    pause_duration: float  # [s]
+    obstacle_crash_counter: int
+    wall_clock: float  # [s] since the epoch
+
+
+FIELDS = SimTraceRow._fields
+
+
+def _cells(row: SimTraceRow) -> list[str]:
+    return [
+        str(row.episode),
+        str(row.steps),
+        f"{row.X:.4f}",
+        f"{row.Y:.4f}",
+        f"{row.yaw:.4f}",
+        f"{row.steer:.2f}",
+        f"{row.throttle:.2f}",
+        str(row.action),
+        f"{row.reward:.4f}",
+        str(row.done),
+        str(row.all_wheels_on_track),
+        f"{row.progress:.4f}",
+        str(row.closest_waypoint),
+        f"{row.track_len:.2f}",
+        f"{row.tstamp:.3f}",
+        row.episode_status,
+        f"{row.pause_duration:.3f}",
+        str(row.obstacle_crash_counter),
+        f"{row.wall_clock:.3f}",
+    ]
+
+
+def log_line(row: SimTraceRow) -> str:
+    """``SIM_TRACE_LOG:`` followed by the 19 fields, comma-separated."""
+    return LOG_PREFIX + ",".join(_cells(row))
+
+
+class TraceWriter:
+    """Writes rows as CSV with DeepRacer's header, to ``<directory>/<iteration>-iteration.csv``
+    (``training-simtrace/`` during training, ``evaluation-simtrace/0-iteration.csv`` after)."""
+
+    def __init__(self, file: TextIO) -> None:
+        self._file = file
+        self._writer = csv.writer(file, lineterminator="\n")
+        self._writer.writerow(FIELDS)
+
+    @classmethod
+    def for_iteration(cls, directory: Path, iteration: int) -> TraceWriter:
+        directory.mkdir(parents=True, exist_ok=True)
+        return cls(open(directory / f"{iteration}-iteration.csv", "w", newline=""))  # noqa: SIM115
+
+    def write(self, row: SimTraceRow) -> None:
+        self._writer.writerow(_cells(row))
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> TraceWriter:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+
+def to_csv(rows: list[SimTraceRow]) -> str:
+    """Rows as one CSV document with the header: for storage, downloads and tests."""
+    buffer = io.StringIO()
+    writer = TraceWriter(buffer)
+    for row in rows:
+        writer.write(row)
+    return buffer.getvalue()

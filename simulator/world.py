@@ -1,0 +1,79 @@
+"""The PyBullet world of one environment: collision bodies for the car, boxes and bot cars.
+
+One ``BulletClient`` per world, never the global ``pybullet`` connection, so environments in one
+process stay independent. Bodies are posed each control step by the simulator (the car and bots
+move kinematically); the world answers which bodies the car touches and what the lidar's rays hit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import pybullet
+from pybullet_utils.bullet_client import BulletClient
+
+
+class World:
+    def __init__(self) -> None:
+        self._client = BulletClient(connection_mode=pybullet.DIRECT)
+        self._client.setGravity(0, 0, 0)
+        self._heights: dict[int, float] = {}
+        self._obstacles: list[int] = []
+        self.car: int | None = None
+
+    def add_car(self, length: float, width: float, height: float) -> int:
+        """The agent's car: a dynamic body, so Bullet reports its contacts with static ones."""
+        self.car = self._add_box(length, width, height, mass=1.0)
+        return self.car
+
+    def add_obstacle(self, length: float, width: float, height: float) -> int:
+        """A box or a bot car: something the car can hit and the lidar can see."""
+        body = self._add_box(length, width, height, mass=0.0)
+        self._obstacles.append(body)
+        return body
+
+    def _add_box(self, length: float, width: float, height: float, *, mass: float) -> int:
+        shape = self._client.createCollisionShape(
+            pybullet.GEOM_BOX, halfExtents=[length / 2, width / 2, height / 2]
+        )
+        body = self._client.createMultiBody(baseMass=mass, baseCollisionShapeIndex=shape)
+        self._heights[body] = height
+        return body
+
+    def place(self, body: int, x: float, y: float, yaw: float) -> None:
+        """Pose a body by the middle of its footprint and its heading [rad]."""
+        self._client.resetBasePositionAndOrientation(
+            body,
+            [x, y, self._heights[body] / 2],
+            [0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)],
+        )
+
+    def car_touches(self) -> list[int]:
+        """The obstacles the car's body overlaps now."""
+        if not self._obstacles:
+            return []
+        self._client.performCollisionDetection()
+        return sorted({contact[2] for contact in self._client.getContactPoints(bodyA=self.car)})
+
+    def cast_rays(
+        self, origin: Sequence[float], directions: np.ndarray, max_range: float
+    ) -> np.ndarray:
+        """Distances [m] along horizontal rays from ``origin`` (x, y, z) to the first obstacle,
+        ``max_range`` where a ray hits nothing; the car itself is not seen."""
+        if not self._obstacles:
+            return np.full(len(directions), max_range)
+        starts = np.tile(origin, (len(directions), 1))
+        ends = starts.copy()
+        ends[:, :2] += directions * max_range
+        hits = self._client.rayTestBatch(starts.tolist(), ends.tolist())
+        fractions = np.array(
+            [hit[2] if hit[0] not in (-1, self.car) else 1.0 for hit in hits], dtype=np.float64
+        )
+        return fractions * max_range
+
+    def close(self) -> None:
+        if self._client is not None:
+            self._client.disconnect()
+            self._client = None
