@@ -66,7 +66,9 @@ class Traffic:
             box_length, box_width, box_height = BOX_SIZE
             for distance, side in zip(distances, sides, strict=True):
                 self.actors.append(
-                    Actor("box", float(distance), side * self.lane, box_length, box_width, box_height)
+                    Actor(
+                        "box", float(distance), side * self.lane, box_length, box_width, box_height
+                    )
                 )
             car_distance = self._clear_start(car_distance)
         if self.bots is not None:
@@ -107,8 +109,15 @@ class Traffic:
     def solids(self, colour: bool = False) -> list[Solid]:
         pick = 1 if colour else 0
         return [
-            Solid(a.x, a.y, a.yaw, a.length, a.width, a.height,
-                  (BOX_SHADE if a.kind == "box" else BOT_SHADE)[pick])  # fmt: skip
+            Solid(
+                a.x,
+                a.y,
+                a.yaw,
+                a.length,
+                a.width,
+                a.height,
+                (BOX_SHADE if a.kind == "box" else BOT_SHADE)[pick],
+            )
             for a in self.actors
         ]
 
@@ -126,10 +135,12 @@ class Traffic:
         length = self.track.length
         before, after = START_CLEARANCE
         for _ in range(len(self.actors) + 1):
+            half = length / 2
             blocking = [
-                a for a in self.actors
-                if before <= ((a.distance - car_distance + length / 2) % length) - length / 2 <= after
-            ]  # fmt: skip
+                a
+                for a in self.actors
+                if before <= (a.distance - car_distance + half) % length - half <= after
+            ]
             if not blocking:
                 break
             last = max(blocking, key=lambda a: (a.distance - car_distance) % length)

@@ -50,7 +50,7 @@ class Mount:
 
 @dataclass(frozen=True)
 class Solid:
-    """A box standing on the ground: a box obstacle, a bot car, or the agent's car for spectators."""
+    """A box standing on the ground: an obstacle, a bot car, or the agent's car for spectators."""
 
     x: float  # [m] middle of the footprint
     y: float  # [m]

@@ -87,7 +87,7 @@ class Car:
         return self.point_ahead(self.spec.position_offset)
 
     def wheels(self) -> np.ndarray:
-        """The four wheels' contact points, (4, 2): rear left, rear right, front left, front right."""
+        """The wheels' contact points, (4, 2): rear left, rear right, front left, front right."""
         c, s = math.cos(self.yaw), math.sin(self.yaw)
         half = self.spec.wheel_track / 2
         local = np.array(

@@ -1,7 +1,7 @@
 """The settings an environment accepts, checked and normalised, with errors a racer understands.
 
-The forms follow DeepRacer's ``model_metadata.json``: sensors by their DeepRacer names, and the action
-space as a list of ``{"steering_angle", "speed"}`` (discrete) or as ranges (continuous).
+The forms follow DeepRacer's ``model_metadata.json``: sensors by their DeepRacer names, and the
+action space as a list of ``{"steering_angle", "speed"}`` (discrete) or as ranges (continuous).
 """
 
 from __future__ import annotations
@@ -102,7 +102,10 @@ def action_space(value) -> DiscreteActions | ContinuousActions:
         value = DEFAULT_ACTION_SPACE
     if isinstance(value, Mapping):
         try:
-            steering = (float(value["steering_angle"]["low"]), float(value["steering_angle"]["high"]))
+            steering = (
+                float(value["steering_angle"]["low"]),
+                float(value["steering_angle"]["high"]),
+            )
             speed = (float(value["speed"]["low"]), float(value["speed"]["high"]))
         except (KeyError, TypeError, ValueError):
             raise ConfigError(
@@ -168,7 +171,9 @@ def penalties(value) -> Penalties:
     for name in ("off_track", "crash"):
         seconds = getattr(settings, name)
         if not (isinstance(seconds, int | float) and 0 <= seconds <= 60):
-            raise ConfigError(f"The {name.replace('_', '-')} penalty is 0-60 seconds, not {seconds}.")
+            raise ConfigError(
+                f"The {name.replace('_', '-')} penalty is 0-60 seconds, not {seconds}."
+            )
     return settings
 
 
@@ -206,7 +211,8 @@ def _check_steering(*angles: float, where: str = "the action space") -> None:
     for angle in angles:
         if not -MAX_STEERING <= angle <= MAX_STEERING:
             raise ConfigError(
-                f"Steering in {where} is {-MAX_STEERING:g} to {MAX_STEERING:g} degrees, not {angle:g}."
+                f"Steering in {where} is {-MAX_STEERING:g} to {MAX_STEERING:g} degrees, "
+                f"not {angle:g}."
             )
 
 

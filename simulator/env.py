@@ -35,7 +35,7 @@ def default_config() -> dict[str, Any]:
         "immobilized_distance": 0.0003,  # [m] moved per step under which the car is stuck
         "camera_size": (160, 120),  # [px] width, height
         "camera_fov": 120.0,  # [deg] horizontal
-        "camera_mount": (0.12, 0.12, 15.0),  # forward [m], height [m], pitch down [deg]
+        "camera_mount": (0.12, 0.12, 25.0),  # forward [m], height [m], pitch down [deg]
         "stereo_baseline": 0.06,  # [m] between the stereo cameras
         "camera_texture_ppm": 64,  # [px/m] of the track image the camera projects
         "camera_sky": 150,  # gray level above the horizon
@@ -171,7 +171,9 @@ class DeepRacerEnv(gym.Env):
         self._pause_left = 0
         self._pause_duration = 0.0
         self._resume_at, self._resume_travelled = self._distance, 0.0
-        self.counts = dict.fromkeys(("off_tracks", "crashes", "reversed", "immobilized", "resets"), 0)
+        self.counts = dict.fromkeys(
+            ("off_tracks", "crashes", "reversed", "immobilized", "resets"), 0
+        )
         self._trail = [self.car.position]
         self._last_params: dict | None = None
         return self._observe(), self._info("prepare", None, 0.0, False)
@@ -350,7 +352,9 @@ class DeepRacerEnv(gym.Env):
             PerspectiveView(texture, lens, Mount(forward, height, pitch, left), cfg["camera_sky"])
             for left in lefts
         ]
-        angles = np.radians(np.linspace(-cfg["lidar_fov"] / 2, cfg["lidar_fov"] / 2, cfg["lidar_rays"]))
+        angles = np.radians(
+            np.linspace(-cfg["lidar_fov"] / 2, cfg["lidar_fov"] / 2, cfg["lidar_rays"])
+        )
         self._lidar_angles = angles
 
     def _observe(self) -> dict[str, np.ndarray]:

@@ -80,7 +80,7 @@ class TraceWriter:
     @classmethod
     def for_iteration(cls, directory: Path, iteration: int) -> TraceWriter:
         directory.mkdir(parents=True, exist_ok=True)
-        return cls(open(directory / f"{iteration}-iteration.csv", "w", newline=""))  # noqa: SIM115
+        return cls(open(directory / f"{iteration}-iteration.csv", "w", newline=""))
 
     def write(self, row: SimTraceRow) -> None:
         self._writer.writerow(_cells(row))

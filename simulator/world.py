@@ -7,17 +7,42 @@ move kinematically); the world answers which bodies the car touches and what the
 
 from __future__ import annotations
 
+import contextlib
 import math
-from collections.abc import Sequence
+import os
+import sys
+from collections.abc import Iterator, Sequence
 
 import numpy as np
-import pybullet
-from pybullet_utils.bullet_client import BulletClient
+
+
+@contextlib.contextmanager
+def _quiet_stdout() -> Iterator[None]:
+    """Silence what PyBullet's C code prints on import and on connecting,
+    which would otherwise land in every worker's log for every environment."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = {fd: os.dup(fd) for fd in (1, 2)}
+    try:
+        with open(os.devnull, "wb") as devnull:
+            for fd in saved:
+                os.dup2(devnull.fileno(), fd)
+        yield
+    finally:
+        for fd, copy in saved.items():
+            os.dup2(copy, fd)
+            os.close(copy)
+
+
+with _quiet_stdout():
+    import pybullet
+    from pybullet_utils.bullet_client import BulletClient
 
 
 class World:
     def __init__(self) -> None:
-        self._client = BulletClient(connection_mode=pybullet.DIRECT)
+        with _quiet_stdout():
+            self._client = BulletClient(connection_mode=pybullet.DIRECT)
         self._client.setGravity(0, 0, 0)
         self._heights: dict[int, float] = {}
         self._obstacles: list[int] = []

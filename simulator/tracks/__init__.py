@@ -157,7 +157,9 @@ class Track:
         """(x, y, heading [rad]) at ``distance`` along the centre line, ``offset`` to the left."""
         starts, vectors, lengths_sq, cumulative = self._segments
         distance = np.mod(distance, self.length)
-        segment = np.clip(np.searchsorted(cumulative, distance, side="right") - 1, 0, len(starts) - 1)
+        segment = np.clip(
+            np.searchsorted(cumulative, distance, side="right") - 1, 0, len(starts) - 1
+        )
         t = (distance - cumulative[segment]) / np.sqrt(lengths_sq[segment])
         d = vectors[segment]
         heading = np.arctan2(d[..., 1], d[..., 0])

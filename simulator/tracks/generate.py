@@ -42,9 +42,13 @@ def _stadium(straight: float, radius: float) -> Callable[[], np.ndarray]:
     def outline() -> np.ndarray:
         half = straight / 2
         bottom = [(x, -radius) for x in np.linspace(0, half, 4)]
-        right = [(half + radius * np.sin(a), -radius * np.cos(a)) for a in np.linspace(0, np.pi, 9)[1:-1]]
+        right = [
+            (half + radius * np.sin(a), -radius * np.cos(a)) for a in np.linspace(0, np.pi, 9)[1:-1]
+        ]
         top = [(x, radius) for x in np.linspace(half, -half, 7)]
-        left = [(-half - radius * np.sin(a), radius * np.cos(a)) for a in np.linspace(0, np.pi, 9)[1:-1]]
+        left = [
+            (-half - radius * np.sin(a), radius * np.cos(a)) for a in np.linspace(0, np.pi, 9)[1:-1]
+        ]
         back = [(x, -radius) for x in np.linspace(-half, 0, 4)[:-1]]
         return np.array(bottom + right + top + left + back, dtype=float)
 
@@ -97,10 +101,22 @@ SPECS = (
         difficulty="beginner",
         length=17.6,
         width=0.76,
-        outline=_points((0, 0), (3, 0), (5, 0.4), (6.2, 1.8), (5.8, 3.4), (4.4, 4.0), (3.3, 3.3),
-                        (2.1, 3.3), (1.0, 4.0), (-0.6, 3.6), (-1.2, 2.0), (-0.9, 0.6)),
+        outline=_points(
+            (0, 0),
+            (3, 0),
+            (5, 0.4),
+            (6.2, 1.8),
+            (5.8, 3.4),
+            (4.4, 4.0),
+            (3.3, 3.3),
+            (2.1, 3.3),
+            (1.0, 4.0),
+            (-0.6, 3.6),
+            (-1.2, 2.0),
+            (-0.9, 0.6),
+        ),
         min_bend_radius=0.6,
-    ),  # fmt: skip
+    ),
     TrackSpec(
         name="pitlane-oval",
         display_name="Pitlane Oval",
@@ -128,7 +144,7 @@ SPECS = (
         length=26.0,
         width=STANDARD_WIDTH,
         outline=_wavy_stadium(straight=10.0, radius=1.6, amplitude=0.45, period=5.0),
-    ),  # fmt: skip
+    ),
     TrackSpec(
         name="speedway",
         display_name="Speedway",
@@ -139,7 +155,7 @@ SPECS = (
         outline=_polar((2, 0.32, 0.0), (3, 0.07, np.pi)),
         start_at=0.75,
         min_bend_radius=1.5,
-    ),  # fmt: skip
+    ),
     TrackSpec(
         name="clover-loop",
         display_name="Clover Loop",
@@ -157,13 +173,35 @@ SPECS = (
         difficulty="advanced",
         length=48.0,
         width=STANDARD_WIDTH,
-        outline=_points((0, 0), (2.2, 0), (3.0, 0.8), (3.1, 2.6), (3.9, 3.5), (4.9, 3.5),
-                        (5.6, 2.6), (5.7, 0.8), (6.5, 0), (10.5, 0), (11.6, 0.9), (11.6, 6.4),
-                        (10.8, 7.2), (10, 7.0), (9.5, 6.2), (9.4, 4.4), (8.6, 3.6), (7.6, 3.8),
-                        (7.1, 4.8), (7.0, 6.4), (6.2, 7.2), (0, 7.2), (-1.0, 6.3), (-1.0, 0.9)),
+        outline=_points(
+            (0, 0),
+            (2.2, 0),
+            (3.0, 0.8),
+            (3.1, 2.6),
+            (3.9, 3.5),
+            (4.9, 3.5),
+            (5.6, 2.6),
+            (5.7, 0.8),
+            (6.5, 0),
+            (10.5, 0),
+            (11.6, 0.9),
+            (11.6, 6.4),
+            (10.8, 7.2),
+            (10, 7.0),
+            (9.5, 6.2),
+            (9.4, 4.4),
+            (8.6, 3.6),
+            (7.6, 3.8),
+            (7.1, 4.8),
+            (7.0, 6.4),
+            (6.2, 7.2),
+            (0, 7.2),
+            (-1.0, 6.3),
+            (-1.0, 0.9),
+        ),
         min_bend_radius=0.7,
         smoothing=0.7,
-    ),  # fmt: skip
+    ),
     TrackSpec(
         name="championship-circuit",
         display_name="Championship Circuit",
@@ -172,14 +210,36 @@ SPECS = (
         difficulty="expert",
         length=60.0,
         width=STANDARD_WIDTH,
-        outline=_points((0.6, 0), (10, 0), (13, 0.5), (14.6, 2.2), (14.2, 4.2), (12.4, 4.8),
-                        (10.8, 4.3), (9.6, 4.5), (9.0, 5.6), (9.4, 6.6), (11.6, 7.2),
-                        (13.8, 8.2), (13.6, 10.2), (10, 10.8), (6.2, 10.5), (4.6, 10.0),
-                        (3.9, 8.8), (4.6, 7.4), (4.4, 5.6), (2.6, 5.4), (0.8, 6.6), (-1.4, 6.2),
-                        (-2.0, 3.6), (-1.8, 1.4), (-0.9, 0.25)),
+        outline=_points(
+            (0.6, 0),
+            (10, 0),
+            (13, 0.5),
+            (14.6, 2.2),
+            (14.2, 4.2),
+            (12.4, 4.8),
+            (10.8, 4.3),
+            (9.6, 4.5),
+            (9.0, 5.6),
+            (9.4, 6.6),
+            (11.6, 7.2),
+            (13.8, 8.2),
+            (13.6, 10.2),
+            (10, 10.8),
+            (6.2, 10.5),
+            (4.6, 10.0),
+            (3.9, 8.8),
+            (4.6, 7.4),
+            (4.4, 5.6),
+            (2.6, 5.4),
+            (0.8, 6.6),
+            (-1.4, 6.2),
+            (-2.0, 3.6),
+            (-1.8, 1.4),
+            (-0.9, 0.25),
+        ),
         directions=("counterclockwise",),
         min_bend_radius=0.7,
-    ),  # fmt: skip
+    ),
 )
 
 
