@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -151,7 +150,8 @@ class DeepRacerEnv(gym.Env):
         if seed is None and self._episode < 0:
             seed = self._seed
         super().reset(seed=seed)
-        self._episode += 1
+        # A seed starts the run over: the same seed gives the same episodes, starts included.
+        self._episode = 0 if seed is not None else self._episode + 1
         length = self.track.length
         if self.mode == "training":
             fraction = (self.start + self._episode * self.config["start_advance"]) % 1.0
@@ -163,6 +163,7 @@ class DeepRacerEnv(gym.Env):
         self.steps = 0
         self.sim_time = 0.0
         self.lap = 1
+        self._lap_finished = False
         self.lap_times: list[float] = []
         self._lap_started = 0.0
         self._travelled = 0.0
@@ -181,6 +182,9 @@ class DeepRacerEnv(gym.Env):
     def step(self, action):
         self.steps += 1
         self.sim_time = self.steps * self.dt
+        if self._lap_finished:
+            self.lap += 1
+            self._lap_finished = False
         if self._pause_left > 0:
             return self._paused_step()
         steering, speed = self._command(action)
@@ -285,7 +289,7 @@ class DeepRacerEnv(gym.Env):
             self._travelled -= self.track.length
             if len(self.lap_times) >= self.laps:
                 return True, False
-            self.lap += 1
+            self._lap_finished = True
         elif status in ("off_track", "crashed"):
             self.counts["off_tracks" if status == "off_track" else "crashes"] += 1
             seconds = self.penalties.off_track if status == "off_track" else self.penalties.crash
@@ -467,7 +471,7 @@ class DeepRacerEnv(gym.Env):
                 all_wheels_on_track=bool(params["all_wheels_on_track"]) if params else False,
                 progress=self.progress, closest_waypoint=segment, track_len=self.track.length,
                 tstamp=self.sim_time, episode_status=status, pause_duration=self._pause_duration,
-                obstacle_crash_counter=self.counts["crashes"], wall_clock=time.time(),
+                obstacle_crash_counter=self.counts["crashes"], wall_clock=None,
             ),
         }  # fmt: skip
         if self.mode == "evaluation":

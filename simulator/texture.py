@@ -102,7 +102,7 @@ def preview(track: Track, *, width: int = 480) -> np.ndarray:
     low, high = track.bounds
     texture = render(track, pixels_per_metre=width / float(high[0] - low[0] + 2 * MARGIN),
                      colour=True)  # fmt: skip
-    image = texture.image.copy()
+    image = texture.image[:, :width].copy()  # ceil() may have added a column
     x, y, heading = track.point_at(0.0)
     start = texture.to_pixels(np.array([[x, y]]))[0]
     tip = texture.to_pixels(np.array([[x + 0.9 * np.cos(heading), y + 0.9 * np.sin(heading)]]))[0]

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import io
+import time
 from pathlib import Path
 from typing import NamedTuple, TextIO
 
@@ -33,13 +34,14 @@ class SimTraceRow(NamedTuple):
     episode_status: str
     pause_duration: float  # [s]
     obstacle_crash_counter: int
-    wall_clock: float  # [s] since the epoch
+    wall_clock: float | None  # [s] since the epoch; None: stamped when the row is written
 
 
 FIELDS = SimTraceRow._fields
 
 
 def _cells(row: SimTraceRow) -> list[str]:
+    wall_clock = time.time() if row.wall_clock is None else row.wall_clock
     return [
         str(row.episode),
         str(row.steps),
@@ -59,7 +61,7 @@ def _cells(row: SimTraceRow) -> list[str]:
         row.episode_status,
         f"{row.pause_duration:.3f}",
         str(row.obstacle_crash_counter),
-        f"{row.wall_clock:.3f}",
+        f"{wall_clock:.3f}",
     ]
 
 
