@@ -1,3 +1,4 @@
+import itertools
 import math
 
 import numpy as np
@@ -101,7 +102,7 @@ def test_progress_rises_then_wraps_at_the_start_line(environments):
     assert progress[wrap - 1] == 100.0
     assert progress[wrap] < 2.0
     for lap in (progress[:wrap], progress[wrap:]):
-        assert all(b >= a for a, b in zip(lap, lap[1:], strict=False))
+        assert all(b >= a for a, b in itertools.pairwise(lap))
     assert infos[-1]["status"] == "lap_complete"
     assert len(infos[-1]["lap_times"]) == 2
 
@@ -281,8 +282,12 @@ def test_the_training_start_advances_five_percent_each_episode(environments):
 
 def test_lidar_sees_a_box_ahead_and_sector_lidar_marks_its_sector(environments):
     for lidar in ("LIDAR", "SECTOR_LIDAR"):
-        env = environments(track="pitlane-oval", race_type="OBJECT_AVOIDANCE",
-                           objects={"count": 1}, sensors=["FRONT_FACING_CAMERA", lidar])  # fmt: skip
+        env = environments(
+            track="pitlane-oval",
+            race_type="OBJECT_AVOIDANCE",
+            objects={"count": 1},
+            sensors=["FRONT_FACING_CAMERA", lidar],
+        )
         env.reset(seed=0)
         car = env.unwrapped
         (box,) = car.traffic.actors
