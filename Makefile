@@ -31,7 +31,8 @@ format: $(VENV)/.test-installed
 
 bench: $(VENV)/.run-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
-	@for b in bench/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
+	@for b in bench/bench_*.py; do m=$$(basename $$b .py); echo "== bench.$$m"; \
+		$(BIN)/python -m bench.$$m || exit 1; done
 
 lock:
 	scripts/lock.sh

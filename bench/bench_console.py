@@ -1,4 +1,4 @@
-"""Console start-up and page latency: `python bench/bench_console.py` (or `make bench`).
+"""Console start-up and page latency: `python -m bench.bench_console` (or `make bench`).
 
 Starts the whole console the way `make run` does (its own Redis, one Celery worker, Daphne) in a
 scratch directory on free ports, times how long it takes to serve, then requests each page

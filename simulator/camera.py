@@ -18,6 +18,7 @@ import numpy as np
 from simulator.texture import TrackTexture
 
 NEAR = 0.01  # [m] faces nearer than this to the camera plane are clipped
+DRAW_DISTANCE = 12.0  # [m] beyond which a solid is smaller than a pixel
 
 
 @dataclass(frozen=True)
@@ -120,38 +121,66 @@ class PerspectiveView:
     def draw_solids(
         self, image: np.ndarray, solids: list[Solid], rotation: np.ndarray, position: np.ndarray
     ) -> None:
-        visible = []
+        forward = rotation[2]
+        near = []
         for solid in solids:
-            corners = _corners(solid) - position
-            camera = corners @ rotation.T
-            if (camera[:, 2] < NEAR).all():
-                continue  # behind the camera
-            visible.append((float(np.linalg.norm(corners[:, :2].mean(axis=0))), solid, camera))
-        for _, solid, camera in sorted(visible, key=lambda item: -item[0]):
-            self._fill_faces(image, solid, camera)
-
-    def _fill_faces(self, image: np.ndarray, solid: Solid, camera: np.ndarray) -> None:
-        for face, light in zip(_FACES, _FACE_LIGHT, strict=True):
-            polygon = camera[list(face)]
-            normal = np.cross(polygon[1] - polygon[0], polygon[2] - polygon[0])
-            if normal @ polygon[0] >= 0:
-                continue  # facing away from the camera
-            polygon = _clip_near(polygon)
-            if len(polygon) < 3:
+            dx, dy = solid.x - position[0], solid.y - position[1]
+            reach = math.hypot(dx, dy)
+            # Out of sight: far enough to be under a pixel, or wholly behind the camera.
+            if reach > DRAW_DISTANCE or (dx * forward[0] + dy * forward[1]) < -solid.length:
                 continue
-            pixels = polygon[:, :2] / polygon[:, 2:3] * self._k[0, 0] + self._k[:2, 2]
-            cv2.fillConvexPoly(image, np.round(pixels * 16).astype(np.int32),
-                               _lit(solid.shade, light), cv2.LINE_AA, 4)  # fmt: skip
+            near.append((reach, solid))
+        for _, solid in sorted(near, key=lambda item: -item[0]):
+            self._fill_faces(image, solid, rotation, position)
+
+    def _fill_faces(
+        self, image: np.ndarray, solid: Solid, rotation: np.ndarray, position: np.ndarray
+    ) -> None:
+        c, s = math.cos(solid.yaw), math.sin(solid.yaw)
+        hl, hw = solid.length / 2, solid.width / 2
+        # Which faces look at the camera: the top when the camera is above it, and each side
+        # whose outward normal points toward the camera.
+        along = (position[0] - solid.x) * c + (position[1] - solid.y) * s
+        across = -(position[0] - solid.x) * s + (position[1] - solid.y) * c
+        facing = (position[2] > solid.height, across < -hw, along > hl, across > hw, along < -hl)
+        corners = (_UNIT_BOX * (hl, hw, solid.height)) @ np.array(
+            [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]
+        ) + (solid.x, solid.y, 0.0)
+        camera = (corners - position) @ rotation.T
+        in_front = camera[:, 2] >= NEAR
+        if in_front.all():
+            pixels = np.round(
+                (camera[:, :2] / camera[:, 2:3] * self._k[0, 0] + self._k[:2, 2]) * 16
+            ).astype(np.int32)
+        for face, light, visible in zip(_FACES, _FACE_LIGHT, facing, strict=True):
+            if not visible:
+                continue
+            if in_front.all():
+                polygon = pixels[list(face)]
+            else:
+                clipped = _clip_near(camera[list(face)])
+                if len(clipped) < 3:
+                    continue
+                polygon = np.round(
+                    (clipped[:, :2] / clipped[:, 2:3] * self._k[0, 0] + self._k[:2, 2]) * 16
+                ).astype(np.int32)
+            cv2.fillConvexPoly(image, polygon, _lit(solid.shade, light), cv2.LINE_AA, 4)
 
 
-def _corners(solid: Solid) -> np.ndarray:
-    c, s = math.cos(solid.yaw), math.sin(solid.yaw)
-    hl, hw = solid.length / 2, solid.width / 2
-    footprint = np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw]])
-    xy = footprint @ np.array([[c, s], [-s, c]]) + (solid.x, solid.y)
-    bottom = np.column_stack([xy, np.zeros(4)])
-    top = np.column_stack([xy, np.full(4, solid.height)])
-    return np.vstack([bottom, top])
+# A box's corners in its own frame, before scaling by (half length, half width, height).
+_UNIT_BOX = np.array(
+    [
+        [-1, -1, 0],
+        [1, -1, 0],
+        [1, 1, 0],
+        [-1, 1, 0],
+        [-1, -1, 1],
+        [1, -1, 1],
+        [1, 1, 1],
+        [-1, 1, 1],
+    ],
+    dtype=np.float64,
+)
 
 
 def _clip_near(polygon: np.ndarray) -> np.ndarray:
