@@ -20,6 +20,7 @@ class Track(models.Model):
         BEGINNER = "beginner"
         INTERMEDIATE = "intermediate"
         ADVANCED = "advanced"
+        EXPERT = "expert"
 
     name = models.SlugField(max_length=64, unique=True, help_text="The simulator's track name.")
     display_name = models.CharField(max_length=100)
@@ -29,9 +30,12 @@ class Track(models.Model):
     width_m = models.FloatField("width [m]")
     counterclockwise = models.BooleanField(default=True)
     clockwise = models.BooleanField(default=True)
+    position = models.PositiveSmallIntegerField(
+        default=0, help_text="Where the track comes in the simulator's catalogue."
+    )
 
     class Meta:
-        ordering = ["length_m", "name"]
+        ordering = ["position", "name"]
 
     def __str__(self) -> str:
         return self.display_name

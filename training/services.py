@@ -16,7 +16,7 @@ def tracks_sync() -> list[Track]:
     A track that has left the catalogue stays (models may still refer to it).
     """
     synced = []
-    for name in simulator_tracks.names():
+    for position, name in enumerate(simulator_tracks.names()):
         track = simulator_tracks.load(name)
         row, _ = Track.objects.update_or_create(
             name=name,
@@ -28,6 +28,7 @@ def tracks_sync() -> list[Track]:
                 "width_m": round(track.width, 3),
                 "counterclockwise": Direction.COUNTERCLOCKWISE in track.directions,
                 "clockwise": Direction.CLOCKWISE in track.directions,
+                "position": position,
             },
         )
         synced.append(row)

@@ -6,4 +6,5 @@ app_name = "training"
 urlpatterns = [
     path("models/", views.model_list, name="model-list"),
     path("garage/", views.garage, name="garage"),
+    path("tracks/<slug:name>.png", views.track_preview, name="track-preview"),
 ]

@@ -1,8 +1,11 @@
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
-from django.http import HttpRequest, HttpResponse
+from django.http import FileResponse, Http404, HttpRequest, HttpResponse
 from django.shortcuts import redirect, render
+from django.views.decorators.cache import cache_control
+from django.views.decorators.http import require_safe
 
+from simulator import tracks as simulator_tracks
 from training import selectors, services
 from training.forms import VehicleForm
 
@@ -17,6 +20,17 @@ def model_list(request: HttpRequest) -> HttpResponse:
             "tracks": selectors.tracks_available(),
         },
     )
+
+
+@require_safe
+@cache_control(public=True, max_age=86_400)
+def track_preview(request: HttpRequest, name: str) -> FileResponse:
+    """The top-down picture of a built-in track."""
+    try:
+        path = simulator_tracks.preview_path(name)
+    except simulator_tracks.TrackError:
+        raise Http404(f"No track named {name}") from None
+    return FileResponse(open(path, "rb"), content_type="image/png")
 
 
 @login_required

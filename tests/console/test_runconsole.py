@@ -74,7 +74,7 @@ def test_it_serves_the_console_with_redis_and_a_worker(console_running):
     _, env, output = console_running
     port = env["PITLANE_PORT"]
     assert f"Pitlane is running: http://127.0.0.1:{port}" in output
-    assert "3 built-in tracks loaded" in output
+    assert "8 built-in tracks loaded" in output
     assert (Path(env["PITLANE_VAR_DIR"]) / "secret_key").stat().st_mode & 0o777 == 0o600
     assert (Path(env["PITLANE_VAR_DIR"]) / "redis" / "appendonlydir").is_dir()
     with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=10) as response:

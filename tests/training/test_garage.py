@@ -2,6 +2,7 @@ import pytest
 from django.core.management import call_command
 from django.urls import reverse
 
+from simulator import tracks as simulator_tracks
 from training.models import Track, Vehicle
 
 pytestmark = pytest.mark.django_db
@@ -10,13 +11,12 @@ pytestmark = pytest.mark.django_db
 def test_loadtracks_mirrors_the_simulator_catalogue_and_can_run_again(capsys):
     call_command("loadtracks")
     call_command("loadtracks")
-    assert list(Track.objects.values_list("name", flat=True)) == [
-        "pitlane-oval", "kidney-bean", "clover-loop",
-    ]  # fmt: skip
+    assert list(Track.objects.values_list("name", flat=True)) == simulator_tracks.names()
     oval = Track.objects.get(name="pitlane-oval")
     assert oval.length_m == 16.5
     assert oval.directions == ["Counter-clockwise", "Clockwise"]
-    assert "3 built-in tracks loaded" in capsys.readouterr().out
+    assert Track.objects.get(name="championship-circuit").directions == ["Counter-clockwise"]
+    assert "8 built-in tracks loaded" in capsys.readouterr().out
 
 
 def test_a_racer_builds_a_vehicle(client, alice):
@@ -60,3 +60,16 @@ def test_the_models_page_lists_the_tracks_to_train_on(client, alice, tracks):
     assert "You have no models yet." in response.text
     assert "Clover Loop" in response.text
     assert "24.00 m long" in response.text
+    assert response.text.count('src="/tracks/') == 8
+
+
+def test_a_track_preview_is_a_cacheable_png(client):
+    response = client.get(reverse("training:track-preview", args=["hairpin-alley"]))
+    assert response.status_code == 200
+    assert response["Content-Type"] == "image/png"
+    assert "max-age=86400" in response["Cache-Control"]
+    assert b"".join(response.streaming_content).startswith(b"\x89PNG")
+
+
+def test_an_unknown_track_preview_is_a_404(client):
+    assert client.get(reverse("training:track-preview", args=["monza"])).status_code == 404
