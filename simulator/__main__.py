@@ -35,11 +35,12 @@ def demo(track: str, direction: str, speed: float, out: Path) -> str:
     if not writer.isOpened():
         raise OSError(f"cannot write a video to {out}")
     try:
-        writer.write(env.render()[..., ::-1])
+        spectator = car.spectator
+        writer.write(spectator.render(car))
         info, done = {}, False
         while not done:
             _, _, terminated, truncated, info = env.step(driver.act())
-            writer.write(env.render()[..., ::-1])
+            writer.write(spectator.render(car))
             done = terminated or truncated
     finally:
         writer.release()

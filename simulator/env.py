@@ -7,6 +7,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+import cv2
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -229,13 +230,19 @@ class DeepRacerEnv(gym.Env):
         return self._observe(), reward, terminated, truncated, info
 
     def render(self):
+        """The spectator view as RGB, per Gymnasium; ``spectator.render(env)`` gives OpenCV's BGR."""
         if self.render_mode != "rgb_array":
             return None
+        return cv2.cvtColor(self.spectator.render(self), cv2.COLOR_BGR2RGB)
+
+    @property
+    def spectator(self):
+        """The renderer of what people watch, made on first use."""
         if self._spectator is None:
             from simulator.spectator import Spectator
 
             self._spectator = Spectator(self.track)
-        return self._spectator.render(self)
+        return self._spectator
 
     def close(self) -> None:
         self._world.close()
