@@ -401,7 +401,7 @@ class DeepRacerEnv(gym.Env):
             "all_wheels_on_track": bool(on_track.all()),
             "x": x,
             "y": y,
-            "heading": math.degrees(c.yaw),
+            "heading": math.degrees(c.yaw) if c.yaw > -math.pi else 180.0,
             "distance_from_center": float(projection.offset[4]),
             "is_left_of_center": bool(projection.is_left[4]),
             "is_offtrack": status == "off_track",
