@@ -230,7 +230,7 @@ class DeepRacerEnv(gym.Env):
         return self._observe(), reward, terminated, truncated, info
 
     def render(self):
-        """The spectator view as RGB, per Gymnasium; ``spectator.render(env)`` gives OpenCV's BGR."""
+        """The spectator view in RGB, as Gymnasium asks; ``spectator.render`` gives BGR."""
         if self.render_mode != "rgb_array":
             return None
         return cv2.cvtColor(self.spectator.render(self), cv2.COLOR_BGR2RGB)
