@@ -17,7 +17,7 @@ from simulator.actors import Traffic
 from simulator.camera import Lens, Mount, PerspectiveView
 from simulator.car import Car, CarSpec
 from simulator.config import ContinuousActions, DiscreteActions
-from simulator.rewards import follow_centre_line
+from simulator.rewards import checked_reward, follow_centre_line
 from simulator.texture import render
 from simulator.trace import SimTraceRow
 from simulator.tracks import Track, load
@@ -48,11 +48,6 @@ def default_config() -> dict[str, Any]:
 
 
 TERMINAL = ("off_track", "crashed", "reversed", "immobilized", "lap_complete")
-MAX_REWARD = 1e5
-
-
-class RewardError(ValueError):
-    """The reward function returned something that is not a usable reward."""
 
 
 class DeepRacerEnv(gym.Env):
@@ -439,19 +434,7 @@ class DeepRacerEnv(gym.Env):
         }
 
     def _reward(self, params: dict) -> float:
-        value = self.reward_fn(params)
-        try:
-            reward = float(value)
-        except (TypeError, ValueError):
-            raise RewardError(
-                f"The reward function returned {type(value).__name__} {value!r}, not a number."
-            ) from None
-        if isinstance(value, complex) or not math.isfinite(reward) or abs(reward) > MAX_REWARD:
-            raise RewardError(
-                f"The reward function returned {value!r}; a reward is a finite number "
-                f"within ±{MAX_REWARD:g}."
-            )
-        return reward
+        return checked_reward(self.reward_fn(params))
 
     def _info(self, status: str, params, reward: float, done: bool, action=None) -> dict:
         c = self.car

@@ -8,7 +8,7 @@ from gymnasium.utils.env_checker import check_env
 from simulator import tracks
 from simulator.config import ConfigError
 from simulator.controller import CentreLineDriver
-from simulator.env import RewardError
+from simulator.rewards import RewardError
 from simulator.tracks import TrackError
 from tests.simulator.conftest import CONTINUOUS, drive
 

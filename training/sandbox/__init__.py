@@ -1,0 +1,297 @@
+"""Running racers' code: a sandbox child per use, and the worker's self-test of the sandbox.
+
+``Sandbox`` starts ``training.sandbox.child`` as a fresh interpreter (fork and exec, not a fork of
+the worker) with an empty environment and only its three standard pipes, waits until it has sealed
+itself, then sends it the racer's code and requests. Each wait has a deadline; a child that misses
+one is killed, so no reward function can hang or take down a worker. This package imports no
+Django: the child imports it too.
+"""
+
+from __future__ import annotations
+
+import queue
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from training.sandbox.protocol import ProtocolError, pack, read_frame
+
+ROOT = Path(__file__).resolve().parents[2]
+MiB = 1024 * 1024
+GRACE = 2.0  # [s] past a call's own time limit before the child is killed
+CHILD_ENVIRONMENT = {
+    # Nothing of the worker's: no secrets, no paths. Only one thread per numerical library.
+    "OPENBLAS_NUM_THREADS": "1",
+    "OMP_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "PYTHONDONTWRITEBYTECODE": "1",
+}
+
+
+class SandboxFailure(Exception):
+    """The racer's code failed, misbehaved or was stopped; says where, in a racer's words."""
+
+    def __init__(
+        self,
+        kind: str,
+        message: str,
+        line: int | None = None,
+        step: int | None = None,
+        status: str | None = None,
+    ) -> None:
+        super().__init__(message)
+        self.kind, self.message, self.line, self.step, self.status = (
+            kind,
+            message,
+            line,
+            step,
+            status,
+        )
+
+    def __str__(self) -> str:
+        where = []
+        if self.step is not None:
+            where.append(f"at step {self.step}" + (f" ({self.status})" if self.status else ""))
+        if self.line is not None:
+            where.append(f"line {self.line}")
+        return (", ".join(where) + ": " if where else "") + self.message
+
+
+class SandboxUnavailable(Exception):
+    """This machine cannot hold racers' code safely; the message says what got through."""
+
+
+@dataclass
+class Sandbox:
+    """One sandbox child. ``env``: settings for a simulator the child builds before sealing."""
+
+    env: dict | None = None
+    call_timeout: float = 1.0  # [s] per call of the reward function
+    memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing
+    start_timeout: float = 60.0  # [s]
+    logs: deque = field(default_factory=lambda: deque(maxlen=1000))
+    report: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self._process: subprocess.Popen | None = None
+        self._frames: queue.Queue = queue.Queue()
+        self._stderr: deque = deque(maxlen=20)
+
+    def __enter__(self) -> Sandbox:
+        self.start()
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def start(self) -> dict:
+        """Start the child and wait until it is sealed; what it reports of its seals."""
+        self._process = subprocess.Popen(
+            [sys.executable, "-s", "-m", "training.sandbox.child"],
+            cwd=ROOT,
+            env=CHILD_ENVIRONMENT,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            close_fds=True,
+            start_new_session=True,
+        )
+        threading.Thread(target=self._read_frames, daemon=True).start()
+        threading.Thread(target=self._read_stderr, daemon=True).start()
+        self._send({
+            "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
+            "env": self.env,
+        })  # fmt: skip
+        self.report = self._wait({"ready"}, self.start_timeout, "start")
+        return self.report
+
+    def load(self, source: str) -> None:
+        """Run the racer's module; ``SandboxFailure`` if it does not define a reward function."""
+        self._request({"op": "load", "source": source}, {"loaded"})
+
+    def call(self, params: dict, timeout: float | None = None) -> float:
+        """The reward for ``params``, checked: a finite number within ±1e5."""
+        reply = self._request({"op": "call", "params": params}, {"reward"}, timeout)
+        value = reply.get("value")
+        if not isinstance(value, float | int) or isinstance(value, bool):
+            raise SandboxFailure("protocol", "The sandbox answered with something not a reward.")
+        return float(value)
+
+    def rollout(
+        self, steps: int, *, driver: str = "centre", seed: int = 0,
+        on_progress: Callable[[int], None] | None = None,
+    ) -> dict:  # fmt: skip
+        """Drive the child's simulator for ``steps`` steps with the loaded reward function."""
+        return self._request(
+            {"op": "rollout", "steps": steps, "driver": driver, "seed": seed}, {"rollout"},
+            on_progress=on_progress,
+        )  # fmt: skip
+
+    def probe(self, secret_path: str, port: int) -> list[str]:
+        """What the sealed child managed to do of the forbidden things; [] when it held."""
+        reply = self._request({"op": "probe", "secret_path": secret_path, "port": port}, {"probe"})
+        return [str(item) for item in reply.get("escaped", [])]
+
+    def close(self) -> None:
+        process = self._process
+        if process is None:
+            return
+        if process.poll() is None:
+            try:
+                self._send({"op": "exit"})
+                process.wait(1.0)
+            except (OSError, subprocess.TimeoutExpired):
+                self._kill()
+        for stream in (process.stdin, process.stdout, process.stderr):
+            if stream is not None:
+                stream.close()
+        self._process = None
+
+    # Talking to the child
+
+    def _request(
+        self, message: dict, expected: set[str], timeout: float | None = None,
+        on_progress: Callable[[int], None] | None = None,
+    ) -> dict:  # fmt: skip
+        self._send(message)
+        return self._wait(expected, (timeout or self.call_timeout) + GRACE, message["op"],
+                          on_progress)  # fmt: skip
+
+    def _send(self, message: dict) -> None:
+        if self._process is None:
+            raise SandboxFailure("stopped", "The sandbox is not running.")
+        try:
+            self._process.stdin.write(pack(message))
+            self._process.stdin.flush()
+        except (BrokenPipeError, OSError):
+            raise self._died() from None
+
+    def _wait(
+        self, expected: set[str], deadline: float, what: str,
+        on_progress: Callable[[int], None] | None = None,
+    ) -> dict:  # fmt: skip
+        while True:
+            try:
+                frame = self._frames.get(timeout=deadline)
+            except queue.Empty:
+                self._kill()
+                if what == "start":
+                    raise SandboxFailure(
+                        "timeout", f"The sandbox did not start in {deadline:g} s."
+                    ) from None
+                limit = f"{self.call_timeout:g} s"
+                message = f"The reward function took longer than {limit}; it was stopped."
+                raise SandboxFailure("timeout", message) from None
+            if frame is None:
+                raise self._died()
+            if isinstance(frame, ProtocolError):
+                self._kill()
+                raise SandboxFailure("protocol", f"The sandbox sent something unreadable: {frame}")
+            self.logs.extend(str(line)[:200] for line in frame.get("log") or [])
+            kind = frame.get("type")
+            if kind == "progress":
+                if on_progress is not None:
+                    on_progress(int(frame.get("steps", 0)))
+                continue
+            if kind in expected:
+                return frame
+            if kind == "error":
+                raise SandboxFailure(
+                    str(frame.get("kind", "error")), str(frame.get("message", ""))[:500],
+                    _int_or_none(frame.get("line")), _int_or_none(frame.get("step")),
+                    str(frame["status"])[:20] if frame.get("status") else None,
+                )  # fmt: skip
+            self._kill()
+            raise SandboxFailure("protocol", f"The sandbox answered {kind!r} to {what!r}.")
+
+    def _died(self) -> SandboxFailure:
+        process = self._process
+        code = process.wait(5) if process is not None else None
+        if code is not None and code < 0:
+            name = signal.Signals(-code).name
+            reason = f"it was killed by {name}"
+            if name == "SIGSEGV":
+                reason += " (a crash, for example from ctypes)"
+        else:
+            reason = f"it exited with status {code}; a reward function must return, not exit"
+        return SandboxFailure("crashed", f"The reward function's process stopped: {reason}.")
+
+    def _kill(self) -> None:
+        if self._process is not None and self._process.poll() is None:
+            self._process.kill()
+            self._process.wait()
+
+    def _read_frames(self) -> None:
+        stream = self._process.stdout
+        try:
+            while (frame := read_frame(stream)) is not None:
+                self._frames.put(frame)
+        except ProtocolError as error:
+            self._frames.put(error)
+            return
+        except (OSError, ValueError):
+            pass
+        self._frames.put(None)
+
+    def _read_stderr(self) -> None:
+        try:
+            for line in self._process.stderr:
+                self._stderr.append(line[:500].decode("utf-8", "replace").rstrip())
+        except (OSError, ValueError):
+            pass
+
+
+def _int_or_none(value: Any) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
+
+
+@dataclass(frozen=True)
+class SelfTest:
+    ok: bool
+    escaped: tuple[str, ...]
+    namespaces: bool
+    detail: str
+
+
+def self_test() -> SelfTest:
+    """Start a sealed child and have it try to read a secret file, connect to a listening socket,
+    fork, exec and write a file: all must fail."""
+    with tempfile.TemporaryDirectory(prefix="pitlane-sandbox-test-") as directory:
+        secret = Path(directory) / "secret"
+        secret.write_text("do not read me")
+        secret.chmod(0o600)
+        with socket.socket() as listener:
+            listener.bind(("127.0.0.1", 0))
+            listener.listen()
+            try:
+                with Sandbox(start_timeout=120) as sandbox:
+                    escaped = sandbox.probe(str(secret), listener.getsockname()[1])
+                    namespaces = bool(sandbox.report.get("namespaces"))
+            except (SandboxFailure, OSError) as error:
+                return SelfTest(False, (), False, f"the sandbox could not start: {error}")
+    if escaped:
+        detail = "sealed code could " + ", ".join(escaped)
+    else:
+        detail = "held: files, network, processes and writes are refused" + (
+            "; in its own user and network namespaces" if namespaces else
+            "; namespaces are not available here, seccomp alone holds"
+        )  # fmt: skip
+    return SelfTest(not escaped, tuple(escaped), namespaces, detail)
+
+
+@cache
+def verified() -> SelfTest:
+    """This process's self-test, run once; ``SandboxUnavailable`` if the sandbox does not hold."""
+    result = self_test()
+    if not result.ok:
+        raise SandboxUnavailable(f"Racers' code cannot run on this machine: {result.detail}.")
+    return result

@@ -1,0 +1,269 @@
+"""The sandbox child: ``python -s -m training.sandbox.child``, started by ``Sandbox``.
+
+It reads requests on standard input and answers on standard output, in protocol frames. It first
+loads everything user code may use (the allowed libraries, and the simulator when it is to drive
+a rollout), then seals itself (``seal.py``), and only then receives the racer's code. What the
+code prints becomes log messages; what it raises, returns or takes too long over becomes an error
+message naming the line. This module never imports Django.
+"""
+
+from __future__ import annotations
+
+import importlib
+import io
+import linecache
+import os
+import signal
+import sys
+import time
+import traceback
+from collections import Counter
+from typing import Any
+
+from simulator.controller import CentreLineDriver
+from simulator.rewards import RewardError, checked_reward
+from training.sandbox import seal
+from training.sandbox.protocol import pack, read_frame
+
+FILENAME = "<reward_function>"
+PRELOADED = (
+    "math", "random", "numpy", "scipy", "scipy.spatial", "scipy.interpolate", "scipy.signal",
+    "scipy.stats", "scipy.optimize", "scipy.linalg", "scipy.special", "shapely",
+    "shapely.geometry", "shapely.ops", "shapely.affinity",
+)  # fmt: skip
+PROGRESS_EVERY = 0.25  # [s] between progress messages during a rollout
+MAX_LOG = 200  # characters per printed line kept, and lines per rollout step batch
+
+
+class CallTimeout(BaseException):
+    """A call ran past its time limit; a BaseException, which ``except Exception`` lets by."""
+
+
+class Child:
+    def __init__(self) -> None:
+        self.requests = os.fdopen(0, "rb")
+        self.reply_fd = 1
+        self.reward_function = None
+        self.env = None
+        self.call_timeout = 1.0
+        self.logs: list[str] = []
+        sys.stdout = _Printed(self.logs)
+        signal.signal(signal.SIGALRM, _alarm)
+
+    def send(self, message: dict[str, Any]) -> None:
+        data = pack(message)
+        while data:
+            data = data[os.write(self.reply_fd, data) :]
+
+    def run(self) -> None:
+        init = read_frame(self.requests)
+        if init is None:
+            return
+        self.call_timeout = float(init.get("call_timeout", 1.0))
+        for name in PRELOADED:
+            importlib.import_module(name)
+        if init.get("env") is not None:
+            self.env = self._build_env(init["env"])
+        address_space = seal.current_address_space() + int(init["memory_allowance"])
+        namespaces = seal.enter_namespaces()
+        seal.limit_resources(address_space)
+        seal.install_seccomp(read_fd=0, write_fds=(self.reply_fd, 2))
+        self.send({"type": "ready", "namespaces": namespaces, "address_space": address_space})
+        while (request := read_frame(self.requests)) is not None:
+            handler = getattr(self, f"op_{request.get('op')}", None)
+            if handler is None:
+                self.send({"type": "error", "kind": "protocol", "message": "unknown request"})
+                continue
+            handler(request)
+
+    def _build_env(self, settings: dict):
+        import cv2
+        import gymnasium
+
+        import simulator
+
+        cv2.setNumThreads(0)  # no worker threads: the sealed process cannot start any
+        env = gymnasium.make(simulator.ENV_ID, reward_fn=self._call_reward, **settings)
+        env.reset(seed=0)
+        return env
+
+    # Requests
+
+    def op_load(self, request: dict) -> None:
+        source = request["source"]
+        linecache.cache[FILENAME] = (len(source), None, source.splitlines(True), FILENAME)
+        namespace = {"__name__": "reward_function_module", "__builtins__": __builtins__}
+        try:
+            code = compile(source, FILENAME, "exec")
+        except SyntaxError as error:
+            self.send(_error("syntax", f"{error.msg}", error.lineno))
+            return
+        try:
+            self._limited(exec, code, namespace)
+        except BaseException as error:  # whatever the module did is reported
+            kind = "import" if isinstance(error, ImportError) else "exception"
+            self.send(_exception(kind, error, self.call_timeout))
+            return
+        function = namespace.get("reward_function")
+        if not callable(function):
+            self.send(_error("definition", "The code must define reward_function(params).", None))
+            return
+        self.reward_function = function
+        self.send({"type": "loaded"})
+
+    def op_call(self, request: dict) -> None:
+        params = _params(request["params"])
+        try:
+            reward = self._call_reward(params)
+        except RewardError as error:
+            self.send(_error("value", str(error), None))
+        except BaseException as error:  # user code may raise anything
+            self.send(_exception("exception", error, self.call_timeout))
+        else:
+            self.send({"type": "reward", "value": reward, "log": self._take_logs()})
+
+    def op_rollout(self, request: dict) -> None:
+        """Drive ``steps`` steps of the environment with the reward function, reporting progress."""
+        env = self.env
+        driver = CentreLineDriver(env.unwrapped, speed=1.0)
+        random_actions = request.get("driver") == "random"
+        env.action_space.seed(int(request.get("seed", 0)))
+        steps, episodes, total = 0, 0, 0.0
+        statuses: Counter[str] = Counter()
+        started = last_report = time.perf_counter()
+        status = "prepare"
+        try:
+            while steps < int(request["steps"]):
+                action = env.action_space.sample() if random_actions else driver.act()
+                _, reward, terminated, truncated, info = env.step(action)
+                steps += 1
+                total += reward
+                status = info["status"]
+                if terminated or truncated:
+                    statuses[status] += 1
+                    episodes += 1
+                    env.reset()
+                now = time.perf_counter()
+                if now - last_report >= PROGRESS_EVERY:
+                    self.send({"type": "progress", "steps": steps, "log": self._take_logs()})
+                    last_report = now
+        except RewardError as error:
+            self.send(_error("value", str(error), None, step=steps + 1, status=status))
+            return
+        except BaseException as error:  # user code may raise anything
+            where = {"step": steps + 1, "status": status}
+            self.send(_exception("exception", error, self.call_timeout, **where))
+            return
+        self.send({
+            "type": "rollout", "steps": steps, "episodes": episodes, "reward": total,
+            "statuses": dict(statuses), "elapsed": time.perf_counter() - started,
+            "log": self._take_logs(),
+        })  # fmt: skip
+
+    def op_probe(self, request: dict) -> None:
+        """Try what sealed code must not be able to do; report what got through."""
+        escaped = []
+        attempts = {
+            "read a file": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
+            "connect to the network": lambda: __import__("socket").create_connection(
+                ("127.0.0.1", int(request["port"])), timeout=1
+            ),
+            "start a process": lambda: os.fork() == 0 and os._exit(0),
+            "run a program": lambda: os.execv("/bin/true", ["true"]),  # noqa: S606
+            "write a file": lambda: open("/tmp/pitlane-sandbox-probe", "w").write("x"),  # noqa: S108, SIM115
+        }
+        for name, attempt in attempts.items():
+            try:
+                attempt()
+            except OSError:
+                continue
+            escaped.append(name)
+        self.send({"type": "probe", "escaped": escaped})
+
+    def op_exit(self, request: dict) -> None:
+        os._exit(0)
+
+    # Calling user code
+
+    def _call_reward(self, params: dict) -> float:
+        return checked_reward(self._limited(self.reward_function, params))
+
+    def _limited(self, function, *args):
+        """``function(*args)`` within the per-call time limit."""
+        signal.setitimer(signal.ITIMER_REAL, self.call_timeout)
+        try:
+            return function(*args)
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+
+    def _take_logs(self) -> list[str]:
+        logs, self.logs[:] = self.logs[:MAX_LOG], []
+        return logs
+
+
+class _Printed(io.TextIOBase):
+    """Standard output for user code: each printed line becomes a log message."""
+
+    def __init__(self, lines: list[str]) -> None:
+        self.lines = lines
+        self.partial = ""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        *complete, self.partial = (self.partial + text).split("\n")
+        if len(self.lines) < 10 * MAX_LOG:
+            self.lines.extend(line[:MAX_LOG] for line in complete)
+        self.partial = self.partial[: 10 * MAX_LOG]
+        return len(text)
+
+
+def _alarm(signum, frame) -> None:
+    raise CallTimeout
+
+
+def _params(params: dict) -> dict:
+    """Params as the simulator makes them: waypoints and locations as tuples."""
+    for key in ("waypoints", "objects_location"):
+        if key in params:
+            params[key] = [tuple(point) for point in params[key]]
+    return params
+
+
+def _error(kind: str, message: str, line: int | None, **where: Any) -> dict[str, Any]:
+    return {"type": "error", "kind": kind, "message": message[:500], "line": line, **where}
+
+
+def _exception(kind: str, error: BaseException, timeout: float, **where: Any) -> dict[str, Any]:
+    """An error message for what user code raised, with the line in the racer's code."""
+    line = None
+    for frame in traceback.extract_tb(error.__traceback__):
+        if frame.filename == FILENAME:
+            line = frame.lineno
+    if isinstance(error, CallTimeout):
+        return _error("timeout", f"The reward function took longer than {timeout:g} s.", line,
+                      **where)  # fmt: skip
+    if isinstance(error, MemoryError):
+        return _error("memory", "The reward function ran out of memory.", line, **where)
+    if isinstance(error, SystemExit):
+        return _error(kind, "The reward function called exit(); it must return a reward.", line,
+                      **where)  # fmt: skip
+    try:
+        text = f"{type(error).__name__}: {error}"
+    except BaseException:  # a message that cannot be printed is still an error
+        text = type(error).__name__
+    return _error(kind, text, line, **where)
+
+
+def main() -> None:
+    try:
+        Child().run()
+    except BaseException:  # the child's own failure: say it on stderr, then go
+        traceback.print_exc(file=sys.stderr)
+        os._exit(70)
+    os._exit(0)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,80 @@
+"""The kernel's locks on a sandbox child, applied by the child to itself before it runs user code.
+
+In order: user and network namespaces where the machine allows them (a network with no interfaces
+up, so nothing can be reached even by a syscall that slipped through); resource limits (address
+space, file size 0, no core dumps); then a seccomp allow-list with no_new_privs, after which the
+process can read its request pipe, write its reply pipe and standard error, manage its memory and
+time, and exit. Everything else (open, socket, fork, clone, execve, kill, ptrace, ...) fails with
+EPERM, which Python raises as PermissionError, so misbehaving code gets an ordinary exception.
+
+Nothing here runs in the worker: it imports no Django and is only called in the child.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import errno
+import os
+import resource
+
+CLONE_NEWUSER = 0x10000000
+CLONE_NEWNET = 0x40000000
+
+# What the sealed child may do. Memory, time, signals for itself, and reading and writing the two
+# pipes (checked by file descriptor in install_seccomp); nothing that reaches a file, another
+# process or the network.
+ALWAYS_ALLOWED = (
+    "brk", "mmap", "munmap", "mremap", "mprotect", "madvise", "membarrier",
+    "futex", "sched_yield", "sched_getaffinity", "getrandom",
+    "clock_gettime", "clock_getres", "clock_nanosleep", "gettimeofday", "nanosleep", "time",
+    "rt_sigaction", "rt_sigprocmask", "rt_sigreturn", "sigaltstack", "setitimer", "getitimer",
+    "getpid", "gettid", "getppid", "getuid", "geteuid", "getgid", "getegid",
+    "fstat", "newfstatat", "lseek", "close", "ioctl", "fcntl", "poll", "ppoll",
+    "exit", "exit_group", "restart_syscall", "getrusage", "sysinfo", "uname",
+    "set_robust_list", "rseq",
+)  # fmt: skip
+
+
+def enter_namespaces() -> bool:
+    """Move into new user and network namespaces; False where the machine does not allow it."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    return libc.unshare(CLONE_NEWUSER | CLONE_NEWNET) == 0
+
+
+def limit_resources(address_space: int) -> None:
+    """Cap the address space at ``address_space`` bytes; forbid file growth and core dumps."""
+    resource.setrlimit(resource.RLIMIT_AS, (address_space, address_space))
+    resource.setrlimit(resource.RLIMIT_FSIZE, (0, 0))
+    resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+    resource.setrlimit(resource.RLIMIT_NPROC, (0, 0))
+
+
+def install_seccomp(*, read_fd: int, write_fds: tuple[int, ...]) -> None:
+    """Allow only ``ALWAYS_ALLOWED`` syscalls, reads from ``read_fd`` and writes to ``write_fds``;
+    anything else fails with EPERM. Sets no_new_privs, so the filter cannot be shed."""
+    import pyseccomp as seccomp
+
+    rules = seccomp.SyscallFilter(defaction=seccomp.ERRNO(errno.EPERM))
+    for name in ALWAYS_ALLOWED:
+        try:
+            rules.add_rule(seccomp.ALLOW, name)
+        except (OSError, ValueError):
+            continue  # a syscall this architecture does not have
+    rules.add_rule(seccomp.ALLOW, "read", seccomp.Arg(0, seccomp.EQ, read_fd))
+    for fd in write_fds:
+        rules.add_rule(seccomp.ALLOW, "write", seccomp.Arg(0, seccomp.EQ, fd))
+    # Its own limits only, and signals only to itself (abort() and faulthandler use them).
+    rules.add_rule(seccomp.ALLOW, "prlimit64", seccomp.Arg(0, seccomp.EQ, 0))
+    pid = os.getpid()
+    rules.add_rule(seccomp.ALLOW, "kill", seccomp.Arg(0, seccomp.EQ, pid))
+    rules.add_rule(seccomp.ALLOW, "tgkill", seccomp.Arg(0, seccomp.EQ, pid))
+    rules.load()
+
+
+def current_address_space() -> int:
+    """The bytes of address space this process maps now (its VmSize)."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    raise RuntimeError("cannot read VmSize from /proc/self/status")
