@@ -188,10 +188,7 @@ class DeepRacerEnv(gym.Env):
         self.traffic.step(self.dt, self.sim_time, self.np_random)
         self._sync_actor_bodies()
 
-        wheels_and_point = np.vstack([self.car.wheels(), [self.car.position]])
-        projection = self.track.project_points(wheels_and_point)
-        on_track = projection.offset[:4] <= projection.half_width[:4]
-        crashed = self._crashed()
+        projection, on_track, crashed = self._where()
 
         previous = self._distance
         self._distance = float(projection.distance[4])
@@ -387,6 +384,21 @@ class DeepRacerEnv(gym.Env):
         directions = np.column_stack([np.cos(angles), np.sin(angles)])
         origin = (*c.point_ahead(c.spec.centre_offset), self.config["lidar_height"])
         return np.clip(self._world.cast_rays(origin, directions, high), low, high)
+
+    def _where(self):
+        """The projection of the wheels and the reported position, which wheels are on the track,
+        and whether the car touches an obstacle."""
+        wheels_and_point = np.vstack([self.car.wheels(), [self.car.position]])
+        projection = self.track.project_points(wheels_and_point)
+        on_track = projection.offset[:4] <= projection.half_width[:4]
+        return projection, on_track, self._crashed()
+
+    def current_params(self, *, steering: float = 0.0, speed: float = 0.0) -> dict:
+        """The reward params for the car where it is now, as a step would give them: for showing a
+        racer what their reward function returns in a given situation."""
+        projection, on_track, crashed = self._where()
+        status = "off_track" if not on_track.any() else "in_progress"
+        return self._params(projection, on_track, crashed, steering, speed, status)
 
     def _params(self, projection, on_track, crashed, steering, speed, status) -> dict:
         track, c = self.track, self.car

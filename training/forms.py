@@ -1,6 +1,7 @@
 from django import forms
 
-from training.models import Vehicle
+from training.models import Track, Vehicle
+from training.rewards import MAX_SOURCE_SIZE
 
 
 class VehicleForm(forms.ModelForm):
@@ -26,3 +27,24 @@ class VehicleForm(forms.ModelForm):
                 f"You already have a vehicle named “{name}”; choose another name."
             )
         return name
+
+
+class RewardValidationForm(forms.Form):
+    """What the editor's Validate button sends: the code and the track to try it on."""
+
+    source = forms.CharField(
+        strip=False,
+        max_length=MAX_SOURCE_SIZE,
+        error_messages={
+            "required": "Write a reward function first.",
+            "max_length": f"A reward function is at most {MAX_SOURCE_SIZE:,} characters long.",
+        },
+    )
+    track = forms.ModelChoiceField(
+        queryset=Track.objects.all(),
+        to_field_name="name",
+        error_messages={"required": "Choose a track.", "invalid_choice": "Choose a listed track."},
+    )
+
+    def first_error(self) -> str:
+        return next(iter(self.errors.values()))[0]

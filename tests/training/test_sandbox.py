@@ -1,0 +1,225 @@
+"""The hostile suite: racers' code trying what it must not. Each attempt is stopped, reported in
+words a racer understands, and leaves this process (standing in for the worker) alive, with
+nothing written and nothing sent. These tests run the sandbox directly; the static checks of
+validation are feedback, not the boundary, so they are not in the way here."""
+
+import os
+import socket
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from training.sandbox import CHILD_ENVIRONMENT, Sandbox, SandboxFailure, self_test
+
+PARAMS = {"x": 1.0, "y": 2.0, "track_width": 0.76, "distance_from_center": 0.1}
+
+
+def reward(body: str) -> str:
+    """A reward function whose body is ``body``."""
+    return "def reward_function(params):\n" + textwrap.indent(textwrap.dedent(body), "    ")
+
+
+def outcome(source: str, params: dict = PARAMS, **settings) -> float | SandboxFailure:
+    """What a call of ``source``'s reward function comes to: its reward, or how it failed."""
+    with Sandbox(**settings) as sandbox:
+        try:
+            sandbox.load(source)
+            return sandbox.call(params)
+        except SandboxFailure as failure:
+            return failure
+
+
+def assert_stopped(result, kind: str, *fragments: str) -> None:
+    assert isinstance(result, SandboxFailure), f"the code ran and returned {result!r}"
+    assert result.kind == kind, (result.kind, str(result))
+    for fragment in fragments:
+        assert fragment in str(result)
+
+
+def test_the_sandbox_holds_on_this_machine():
+    result = self_test()
+    assert result.ok, result.detail
+    assert result.escaped == ()
+
+
+def test_a_good_reward_function_runs_and_its_prints_become_log_lines():
+    with Sandbox() as sandbox:
+        sandbox.load(reward("print('width', params['track_width'])\nreturn params['x'] * 2"))
+        assert sandbox.call(PARAMS) == 2.0
+        assert list(sandbox.logs) == ["width 0.76"]
+
+
+def test_reading_etc_passwd_is_refused():
+    result = outcome(reward("return len(open('/etc/passwd').read())"))
+    assert_stopped(result, "exception", "line 2", "PermissionError", "Operation not permitted")
+
+
+def test_reading_a_secret_file_is_refused(tmp_path):
+    secret = tmp_path / "secret_key"
+    secret.write_text("s3cr3t")
+    result = outcome(reward(f"return len(open({str(secret)!r}).read())"))
+    assert_stopped(result, "exception", "PermissionError")
+
+
+def test_the_workers_environment_is_not_there(monkeypatch):
+    monkeypatch.setenv("PITLANE_TEST_SECRET", "s3cr3t")
+    ours = sorted(set(os.environ) - set(CHILD_ENVIRONMENT))  # REDIS_URL, PATH, HOME, ...
+    assert "PITLANE_TEST_SECRET" in ours and "REDIS_URL" in ours
+    source = "import os\n" + reward(f"return float(len(set(os.environ) & set({ours!r})))")
+    assert outcome(source) == 0.0
+    result = outcome(
+        "import os\n" + reward("return len(open(f'/proc/{os.getppid()}/environ').read())")
+    )
+    assert_stopped(result, "exception", "PermissionError")
+
+
+def test_writing_a_file_is_refused(tmp_path):
+    target = tmp_path / "written.txt"
+    result = outcome(reward(f"open({str(target)!r}, 'w').write('x')\nreturn 1.0"))
+    assert_stopped(result, "exception", "PermissionError")
+    assert not target.exists()
+
+
+def test_connecting_to_a_listening_socket_is_refused():
+    with socket.socket() as listener:
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        listener.settimeout(0.5)
+        port = listener.getsockname()[1]
+        result = outcome("import socket\n" + reward(
+            f"socket.create_connection(('127.0.0.1', {port}), timeout=1)\nreturn 1.0"
+        ))  # fmt: skip
+        assert_stopped(result, "exception", "PermissionError")
+        with pytest.raises(TimeoutError):
+            listener.accept()  # nothing came in
+
+
+@pytest.mark.parametrize(
+    "attack",
+    [
+        "import subprocess\nsubprocess.run(['touch', MARKER])",
+        "import os\nos.system('touch ' + MARKER)\nif os.path.exists(MARKER): return 1e9",
+        "import os\nwhile True:\n    os.fork()",
+        "import os\nos.execv('/usr/bin/touch', ['touch', MARKER])",
+        "import ctypes\nctypes.CDLL(None).system(('touch ' + MARKER).encode())",
+    ],
+    ids=["subprocess", "os.system", "fork-bomb", "exec", "ctypes-system"],
+)
+def test_starting_processes_is_refused(tmp_path, attack):
+    marker = tmp_path / "marker"
+    result = outcome(reward(f"MARKER = {str(marker)!r}\n{attack}\nreturn 1.0"))
+    assert not marker.exists()
+    if not isinstance(result, SandboxFailure):
+        assert result == 1.0  # os.system and ctypes' system() report failure, not raise
+    else:
+        assert result.kind in ("exception", "import"), str(result)
+
+
+def test_walking_object_subclasses_to_popen_is_refused(tmp_path):
+    marker = tmp_path / "marker"
+    source = reward(f"""
+        for cls in ().__class__.__base__.__subclasses__():
+            if cls.__name__ == 'Popen':
+                cls(['touch', {str(marker)!r}])
+                return 1e9
+        return 0.5
+    """)
+    result = outcome(source)
+    assert not marker.exists()
+    if isinstance(result, SandboxFailure):
+        assert_stopped(result, "exception", "PermissionError")
+    else:
+        assert result == 0.5  # Popen was not reachable at all
+
+
+def test_allocating_10_gb_is_stopped_by_the_memory_limit():
+    assert_stopped(outcome(reward("x = bytearray(10 * 1024 ** 3)\nreturn 1.0")), "memory",
+                   "ran out of memory")  # fmt: skip
+    numpy_attack = "import numpy as np\n" + reward("return float(np.ones(1_250_000_000).sum())")
+    assert_stopped(outcome(numpy_attack), "memory")
+
+
+def test_an_infinite_loop_is_stopped_at_the_time_limit():
+    result = outcome(reward("while True:\n    pass"), call_timeout=0.5)
+    assert_stopped(result, "timeout", "took longer than 0.5 s", "line 2")
+
+
+def test_a_loop_that_blocks_the_alarm_is_killed_from_outside():
+    source = "import signal\n" + reward(
+        "signal.signal(signal.SIGALRM, signal.SIG_IGN)\nwhile True:\n    pass"
+    )
+    result = outcome(source, call_timeout=0.5)
+    assert_stopped(result, "timeout", "took longer than 0.5 s", "stopped")
+
+
+def test_numpy_file_loading_and_ctypes_libraries_are_refused(tmp_path):
+    (tmp_path / "libevil.so").write_bytes(b"\x7fELF not really")
+    for body in (
+        "return float(np.fromfile('/etc/passwd', dtype=np.uint8).sum())",
+        "return float(np.loadtxt('/etc/hostname').sum())",
+        f"np.ctypeslib.load_library('libevil', {str(tmp_path)!r})\nreturn 1.0",
+    ):
+        result = outcome("import numpy as np\n" + reward(body))
+        assert isinstance(result, SandboxFailure), body
+        assert result.kind == "exception", (body, str(result))
+
+
+def test_a_ctypes_crash_is_reported_and_this_process_carries_on():
+    crash = "ctypes.cast(ctypes.c_void_p(8), ctypes.POINTER(ctypes.c_long)).contents.value"
+    result = outcome("import ctypes\n" + reward(f"return float({crash})"))
+    assert_stopped(result, "crashed", "killed by SIGSEGV")
+    assert outcome(reward("return 1.0")) == 1.0  # the next sandbox works as ever
+
+
+def test_exiting_is_reported():
+    assert_stopped(outcome("import sys\n" + reward("sys.exit(3)")), "exception", "called exit()")
+    assert_stopped(outcome("import os\n" + reward("os._exit(3)")), "crashed", "status 3")
+
+
+def test_an_exception_is_reported_with_its_line():
+    result = outcome(reward("a = 1\nreturn a / 0"))
+    assert_stopped(result, "exception", "line 3", "ZeroDivisionError: division by zero")
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [("float('nan')", "finite number"), ("'fast'", "str 'fast', not a number"),
+     ("1e9", "within ±100000"), ("None", "NoneType None, not a number")],
+)  # fmt: skip
+def test_a_bad_return_value_is_reported(value, message):
+    assert_stopped(outcome(reward(f"return {value}")), "value", message)
+
+
+def test_a_module_that_fails_on_import_is_reported_as_an_import_error():
+    result = outcome("import os\nimport definitely_not_a_module\n" + reward("return 1.0"))
+    assert_stopped(result, "import", "line 2", "No module named 'definitely_not_a_module'")
+
+
+def test_code_without_a_reward_function_is_reported():
+    assert_stopped(outcome("def reward(params):\n    return 1.0\n"), "definition",
+                   "must define reward_function(params)")  # fmt: skip
+
+
+def test_a_rollout_runs_the_simulator_and_the_reward_inside_the_sandbox():
+    with Sandbox(env={"track": "pitlane-oval"}) as sandbox:
+        sandbox.load(reward("return 1.0 if params['all_wheels_on_track'] else 0.0"))
+        result = sandbox.rollout(300)
+    assert result["steps"] == 300
+    assert result["reward"] == pytest.approx(300.0, abs=20)
+    assert result["elapsed"] > 0
+
+
+def test_a_rollout_names_the_step_and_status_where_the_reward_function_failed():
+    with Sandbox(env={"track": "pitlane-oval"}) as sandbox:
+        sandbox.load(reward("if params['steps'] == 40:\n    return {}['missing']\nreturn 1.0"))
+        with pytest.raises(SandboxFailure) as failed:
+            sandbox.rollout(100)
+    failure = failed.value
+    assert (failure.step, failure.status, failure.line) == (40, "in_progress", 3)
+    assert str(failure) == "at step 40 (in_progress), line 3: KeyError: 'missing'"
+
+
+def test_nothing_was_left_behind_in_tmp():
+    assert not Path("/tmp/pitlane-sandbox-probe").exists()
+    assert os.getpid() > 0  # still here

@@ -1,0 +1,261 @@
+"""Racers' reward functions: the examples we offer, the params they read, and validation.
+
+Validation is what the console's "Validate" button and ``manage.py validate_reward`` run: static
+checks that give feedback with line numbers (size, syntax, imports, the function's signature),
+then the function itself, in the sandbox, on sample situations from the chosen track. The static
+checks are for feedback only; the sandbox is what keeps the code in its box.
+"""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from simulator.samples import situations
+from training.sandbox import Sandbox, SandboxFailure
+
+ALLOWED_IMPORTS = ("math", "random", "numpy", "scipy", "shapely")
+MAX_SOURCE_SIZE = 140_000  # [characters]
+SAMPLE_TIMEOUT = 5.0  # [s] per sample call
+EXAMPLES_DIR = Path(__file__).resolve().parent / "reward_examples"
+
+
+@dataclass(frozen=True)
+class Example:
+    slug: str
+    title: str
+    explanation: str
+
+    @property
+    def source(self) -> str:
+        return (EXAMPLES_DIR / f"{self.slug}.py").read_text()
+
+
+EXAMPLES = (
+    Example(
+        "follow_centre_line",
+        "Follow the centre line",
+        "Rewards the car for staying near the centre line: three bands, each worth less than "
+        "the one inside it. The default, and the place to start.",
+    ),
+    Example(
+        "stay_inside_borders",
+        "Stay inside the borders",
+        "Rewards every step on which all four wheels are inside the borders, whatever the "
+        "line. The car finds its own racing line.",
+    ),
+    Example(
+        "prevent_zig_zag",
+        "Prevent zig-zag",
+        "Follows the centre line, and takes reward away when the steering is above a "
+        "threshold, for a smoother drive.",
+    ),
+    Example(
+        "avoid_objects",
+        "Avoid objects",
+        "For object avoidance and head-to-bot races: stay on the track, and keep out of the "
+        "lane of the next object ahead, the more so the closer it is.",
+    ),
+)
+
+# The input parameters, as DeepRacer documents them.
+PARAMS = (
+    ("all_wheels_on_track", "bool", "All four wheels are inside the track borders."),
+    ("x", "float", "Position in metres (x), the point 0.14 m ahead of the car's rear axle."),
+    ("y", "float", "Position in metres (y)."),
+    ("heading", "float", "Yaw in degrees, -180 to 180, in the track's frame."),
+    ("distance_from_center", "float", "Metres from the car's position to the centre line."),
+    ("is_left_of_center", "bool", "Left of the centre line in the direction of travel."),
+    ("is_offtrack", "bool", "No wheel is on the track; the episode ends."),
+    ("is_crashed", "bool", "The car hit an object or a bot car."),
+    ("is_reversed", "bool", "The track is driven clockwise (not: the car drives backwards)."),
+    ("progress", "float", "Per cent of the lap completed, 0 to 100."),
+    ("steps", "int", "Steps taken in this episode; 15 steps are one second."),
+    ("speed", "float", "The commanded speed of the chosen action, in m/s."),
+    (
+        "steering_angle",
+        "float",
+        "The commanded steering of the chosen action, in degrees; positive is left.",
+    ),
+    ("track_width", "float", "Track width in metres, measured across the nearest centre point."),
+    ("track_length", "float", "Length of the centre line in metres."),
+    ("waypoints", "list[(x, y)]", "Centre-line points; a loop repeats its first at the end."),
+    ("closest_waypoints", "[int, int]", "Indices of the waypoints behind and ahead of the car."),
+    ("projection_distance", "float", "Metres along the centre line from the start line."),
+    ("sim_time", "float", "Simulated seconds since the episode began."),
+    (
+        "closest_objects",
+        "[int, int]",
+        "Indices of the objects behind and ahead (races with objects or bot cars only).",
+    ),
+    ("objects_location", "list[(x, y)]", "Positions of the objects and bot cars."),
+    (
+        "objects_distance",
+        "list[float]",
+        "Each object's distance along the centre line from the start line.",
+    ),
+    ("objects_distance_from_center", "list[float]", "Each object's distance from the centre line."),
+    ("objects_heading", "list[float]", "Bot cars' heading in degrees; 0 for boxes."),
+    ("objects_left_of_center", "list[bool]", "Whether each object is left of the centre line."),
+    ("objects_speed", "list[float]", "Bot cars' speed in m/s; 0 for boxes."),
+)
+
+
+@dataclass
+class Problem:
+    type: str  # "syntax", "import" or "test failure" (errors); "style" (warnings)
+    message: str
+    line: int | None = None
+
+
+@dataclass
+class Sample:
+    situation: str
+    description: str
+    reward: float | None
+    error: str | None = None
+
+
+@dataclass
+class Validation:
+    errors: list[Problem] = field(default_factory=list)
+    warnings: list[Problem] = field(default_factory=list)
+    samples: list[Sample] = field(default_factory=list)
+    log: list[str] = field(default_factory=list)
+
+    @property
+    def valid(self) -> bool:
+        return not self.errors
+
+    def as_dict(self) -> dict:
+        return {
+            "valid": self.valid,
+            "errors": [asdict(problem) for problem in self.errors],
+            "warnings": [asdict(problem) for problem in self.warnings],
+            "samples": [asdict(sample) for sample in self.samples],
+            "log": self.log,
+        }
+
+
+def reward_validate(*, source: str, track: str, direction: str = "counterclockwise") -> Validation:
+    """Check ``source`` statically, then run it in the sandbox on sample situations of ``track``."""
+    result = Validation()
+    result.errors, result.warnings = static_problems(source)
+    if result.errors:
+        return result
+    with Sandbox(call_timeout=SAMPLE_TIMEOUT) as sandbox:
+        try:
+            sandbox.load(source)
+        except SandboxFailure as failure:
+            result.errors.append(_problem_for(failure))
+            return result
+        for situation in situations(track, direction):
+            try:
+                reward = sandbox.call(situation.params)
+            except SandboxFailure as failure:
+                problem = _problem_for(failure)
+                problem.message = f"In the {situation.name} sample: {problem.message}"
+                result.errors.append(problem)
+                result.samples.append(
+                    Sample(situation.name, situation.description, None, failure.message)
+                )
+                if failure.kind in ("crashed", "timeout", "protocol"):
+                    break  # the sandbox is gone; the remaining samples cannot run
+                continue
+            result.samples.append(Sample(situation.name, situation.description, reward))
+        result.log = list(sandbox.logs)
+    return result
+
+
+def static_problems(source: str) -> tuple[list[Problem], list[Problem]]:
+    """(errors, warnings) that can be told without running the code."""
+    if len(source) > MAX_SOURCE_SIZE:
+        return [
+            Problem(
+                "syntax",
+                f"The reward function is {len(source):,} characters long; "
+                f"the limit is {MAX_SOURCE_SIZE:,}.",
+            )
+        ], []
+    try:
+        tree = ast.parse(source, filename="<reward_function>")
+    except SyntaxError as error:
+        return [Problem("syntax", _syntax_message(error), error.lineno)], []
+    errors: list[Problem] = []
+    warnings: list[Problem] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            errors.extend(_import_problems(node))
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+            if node.func.id == "__import__":
+                errors.append(
+                    Problem("import", "Use an import statement, not __import__().", node.lineno)
+                )
+            elif node.func.id == "print":
+                warnings.append(
+                    Problem(
+                        "style",
+                        "print() runs on every step and slows training; "
+                        "its output goes to the training log.",
+                        node.lineno,
+                    )
+                )
+    errors.extend(_signature_problems(tree))
+    return errors, warnings
+
+
+def _import_problems(node: ast.Import | ast.ImportFrom) -> list[Problem]:
+    allowed = ", ".join(ALLOWED_IMPORTS[:-1]) + " and " + ALLOWED_IMPORTS[-1]
+    if isinstance(node, ast.ImportFrom) and (node.level or not node.module):
+        return [
+            Problem(
+                "import", f"Relative imports are not allowed; import from {allowed}.", node.lineno
+            )
+        ]
+    names = [node.module] if isinstance(node, ast.ImportFrom) else [a.name for a in node.names]
+    return [
+        Problem("import", f"Only {allowed} may be imported, not {name.split('.')[0]}.", node.lineno)
+        for name in names
+        if name.split(".")[0] not in ALLOWED_IMPORTS
+    ]
+
+
+def _signature_problems(tree: ast.Module) -> list[Problem]:
+    functions = [
+        node
+        for node in tree.body
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.name == "reward_function"
+    ]
+    if not functions:
+        return [Problem("syntax", "Define reward_function(params) at the top level of the code.")]
+    function = functions[-1]
+    arguments = function.args
+    positional = arguments.posonlyargs + arguments.args
+    required = len(positional) - len(arguments.defaults)
+    if isinstance(function, ast.AsyncFunctionDef):
+        return [
+            Problem(
+                "syntax", "reward_function must be a plain def, not async def.", function.lineno
+            )
+        ]
+    if not positional or required > 1 or arguments.vararg or arguments.kwonlyargs:
+        return [
+            Problem(
+                "syntax", "reward_function must take exactly one argument: params.", function.lineno
+            )
+        ]
+    return []
+
+
+def _syntax_message(error: SyntaxError) -> str:
+    message = error.msg[0].upper() + error.msg[1:] if error.msg else "Invalid syntax"
+    if error.text and error.text.strip():
+        message += f": {error.text.strip()[:80]}"
+    return message
+
+
+def _problem_for(failure: SandboxFailure) -> Problem:
+    kind = {"syntax": "syntax", "import": "import"}.get(failure.kind, "test failure")
+    return Problem(kind, failure.message, failure.line)
