@@ -46,8 +46,17 @@ def check_workers() -> dict[str, Any]:
         raise Down("no Celery worker is running")
     if missing:
         raise Down(f"no Celery worker serves the {', '.join(missing)} queue")
+    sandboxes = [w.get("sandbox", {}) for w in workers if "simulation" in w["queues"]]
+    if all(sandbox.get("ok") is False for sandbox in sandboxes):
+        detail = sandboxes[0].get("detail", "unknown")
+        raise Down(
+            f"no worker can run racers' code safely: its sandbox self-test failed ({detail})"
+        )
     return {
-        "workers": [{"hostname": w["hostname"], "queues": w["queues"]} for w in workers],
+        "workers": [
+            {"hostname": w["hostname"], "queues": w["queues"], "sandbox": w.get("sandbox")}
+            for w in workers
+        ],
     }
 
 

@@ -47,6 +47,7 @@ def _start_heartbeat(sender, **kwargs) -> None:
         "pid": os.getpid(),
         "queues": sorted(queue.name for queue in sender.task_consumer.queues),
         "started_at": time.time(),
+        "sandbox": {"ok": None, "detail": "checking"},
     }
     _stop.clear()
     threading.Thread(target=_beat, args=(record,), name="pitlane-heartbeat", daemon=True).start()
@@ -63,10 +64,27 @@ def _stop_heartbeat(sender, **kwargs) -> None:
 
 def _beat(record: dict) -> None:
     client = redis_client()
-    key, value = KEY_PREFIX + record["hostname"], json.dumps(record)
+    key = KEY_PREFIX + record["hostname"]
+    checked = False
     while not _stop.is_set():
         try:
-            client.set(key, value, ex=HEARTBEAT_TTL)
+            client.set(key, json.dumps(record), ex=HEARTBEAT_TTL)
         except redis.RedisError as error:
             logger.warning("Worker heartbeat failed: %s", error)
+        if not checked:
+            record["sandbox"] = _check_sandbox()
+            checked = True
+            continue  # report the result at once
         _stop.wait(HEARTBEAT_INTERVAL)
+
+
+def _check_sandbox() -> dict:
+    """The sandbox self-test, logged: a worker whose sandbox does not hold refuses racers' code."""
+    from training.sandbox import self_test
+
+    result = self_test()
+    if result.ok:
+        logger.info("Sandbox self-test: %s", result.detail)
+    else:
+        logger.error("Sandbox self-test FAILED, racers' code will be refused: %s", result.detail)
+    return {"ok": result.ok, "detail": result.detail}

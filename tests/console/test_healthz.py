@@ -1,7 +1,10 @@
+import json
+
 import pytest
 from django.urls import reverse
 
-from tests.services import RedisServer
+from console.workers import KEY_PREFIX, redis_client
+from tests.services import RedisServer, wait_for
 
 pytestmark = pytest.mark.django_db
 
@@ -46,3 +49,32 @@ def test_healthz_is_503_naming_the_workers_when_none_runs(client, settings, tmp_
 
 def test_healthz_is_never_cached(client):
     assert "no-cache" in client.get(reverse("healthz"))["Cache-Control"]
+
+
+def test_a_worker_reports_that_its_sandbox_holds(client, celery_worker_process):
+    def sandbox_reported() -> bool:
+        workers = client.get(reverse("healthz")).json()["checks"]["workers"]["workers"]
+        return any((w.get("sandbox") or {}).get("ok") for w in workers)
+
+    wait_for(sandbox_reported, "the worker's sandbox self-test", timeout=30)
+    workers = client.get(reverse("healthz")).json()["checks"]["workers"]["workers"]
+    assert "held" in workers[0]["sandbox"]["detail"]
+
+
+def test_healthz_is_503_when_no_workers_sandbox_holds(client, settings, tmp_path):
+    redis_server = RedisServer(tmp_path / "redis")
+    settings.REDIS_URL = redis_server.url
+    record = {
+        "hostname": "unsafe@box", "pid": 1, "queues": ["simulation", "training"],
+        "started_at": 0, "sandbox": {"ok": False, "detail": "sealed code could read a file"},
+    }  # fmt: skip
+    try:
+        redis_client().set(KEY_PREFIX + "unsafe@box", json.dumps(record), ex=60)
+        response = client.get(reverse("healthz"))
+    finally:
+        redis_server.stop()
+    assert response.status_code == 503
+    assert response.json()["checks"]["workers"]["error"] == (
+        "no worker can run racers' code safely: its sandbox self-test failed "
+        "(sealed code could read a file)"
+    )

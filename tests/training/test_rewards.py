@@ -1,0 +1,199 @@
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from django.urls import reverse
+
+from tests.services import ROOT
+from training.rewards import EXAMPLES, MAX_SOURCE_SIZE, reward_validate, static_problems
+from training.sandbox import Sandbox
+
+CORPUS = sorted((Path(__file__).parent / "reward_corpus").glob("*.py"))
+SITUATIONS = ["start", "mid-lap", "off-track", "finish", "near-object"]
+
+
+def test_the_corpus_has_fifteen_deepracer_style_functions():
+    assert len(CORPUS) == 15
+
+
+@pytest.mark.parametrize("path", CORPUS, ids=lambda path: path.stem)
+def test_a_corpus_function_validates(path):
+    result = reward_validate(source=path.read_text(), track="rookie-loop")
+    assert result.errors == [], result.errors
+    assert [sample.situation for sample in result.samples] == SITUATIONS
+    assert all(isinstance(sample.reward, float) for sample in result.samples)
+
+
+def test_the_corpus_runs_in_the_simulator_inside_the_sandbox():
+    with Sandbox(env={"track": "s-bend", "race_type": "OBJECT_AVOIDANCE"}) as sandbox:
+        for path in CORPUS:
+            sandbox.load(path.read_text())
+            result = sandbox.rollout(150, driver="random", seed=1)
+            assert result["steps"] == 150, path.stem
+
+
+@pytest.mark.parametrize("example", EXAMPLES, ids=lambda example: example.slug)
+def test_our_examples_validate(example):
+    assert reward_validate(source=example.source, track="clover-loop").valid
+
+
+def test_the_samples_show_what_the_function_returns():
+    source = EXAMPLES[0].source  # follow the centre line
+    rewards = {
+        s.situation: s.reward for s in reward_validate(source=source, track="speedway").samples
+    }
+    assert rewards["start"] == 1.0
+    assert rewards["off-track"] == 1e-3
+
+
+@pytest.mark.parametrize(
+    ("source", "kind", "message", "line"),
+    [
+        ("def reward_function(params)\n    return 1.0\n", "syntax", "Expected ':'", 1),
+        ("import os\n\ndef reward_function(params):\n    return 1.0\n", "import",
+         "Only math, random, numpy, scipy and shapely may be imported, not os.", 1),
+        ("from subprocess import run\ndef reward_function(params):\n    return 1.0\n", "import",
+         "not subprocess", 1),
+        ("from . import helpers\ndef reward_function(params):\n    return 1.0\n", "import",
+         "Relative imports are not allowed", 1),
+        ("def reward_function(params):\n    return __import__('os').getpid()\n", "import",
+         "not __import__()", 2),
+        ("def reward(params):\n    return 1.0\n", "syntax", "Define reward_function(params)", None),
+        ("def reward_function(params, extra):\n    return 1.0\n", "syntax",
+         "exactly one argument", 1),
+        ("def reward_function():\n    return 1.0\n", "syntax", "exactly one argument", 1),
+        ("async def reward_function(params):\n    return 1.0\n", "syntax", "not async def", 1),
+    ],
+)  # fmt: skip
+def test_static_problems_have_a_type_a_message_and_a_line(source, kind, message, line):
+    errors, _ = static_problems(source)
+    assert len(errors) == 1
+    assert (errors[0].type, errors[0].line) == (kind, line)
+    assert message in errors[0].message
+
+
+def test_a_function_over_the_size_limit_is_refused():
+    source = "def reward_function(params):\n    return 1.0\n" + "#" * MAX_SOURCE_SIZE
+    errors, _ = static_problems(source)
+    assert "the limit is 140,000" in errors[0].message
+
+
+def test_what_deepracers_validator_rejected_is_fine_here():
+    source = (
+        "# Download the track's waypoints from the console first.\n"
+        "import math\n"
+        "def reward_function(params):\n"
+        "    x=params['x'];y=params['y']\n"
+        "    return 1.0\n"
+        "\n\n\n\n"
+    )
+    result = reward_validate(source=source, track="rookie-loop")
+    assert result.valid, result.errors
+
+
+def test_print_is_a_warning_not_an_error():
+    source = "def reward_function(params):\n    print(params['progress'])\n    return 1.0\n"
+    result = reward_validate(source=source, track="rookie-loop")
+    assert result.valid
+    assert [(w.type, w.line) for w in result.warnings] == [("style", 2)]
+    assert len(result.log) == 5  # one printed line per sample
+
+
+def test_a_failing_sample_is_a_test_failure_with_its_line():
+    source = (
+        "def reward_function(params):\n"
+        "    if params['is_offtrack']:\n"
+        "        return params['objects_location'][0]\n"
+        "    return 1.0\n"
+    )
+    result = reward_validate(source=source, track="rookie-loop")
+    (error,) = result.errors
+    assert (error.type, error.line) == ("test failure", 3)
+    assert error.message == "In the off-track sample: KeyError: 'objects_location'"
+    off_track = next(s for s in result.samples if s.situation == "off-track")
+    assert off_track.reward is None and "KeyError" in off_track.error
+
+
+def test_a_nan_reward_is_a_test_failure():
+    result = reward_validate(
+        source="def reward_function(params):\n    return float('nan')\n", track="rookie-loop"
+    )
+    assert {error.type for error in result.errors} == {"test failure"}
+    assert "finite number" in result.errors[0].message
+
+
+def run_command(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "manage.py", "validate_reward", *args],
+        cwd=ROOT, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+
+
+def test_the_command_prints_json_and_exits_0_when_valid(tmp_path):
+    path = tmp_path / "reward.py"
+    path.write_text(EXAMPLES[2].source)
+    result = run_command(str(path), "--track", "hairpin-alley")
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout)
+    assert report["valid"] is True and report["errors"] == []
+    assert [sample["situation"] for sample in report["samples"]] == SITUATIONS
+
+
+def test_the_command_exits_1_with_the_errors_when_invalid(tmp_path):
+    path = tmp_path / "reward.py"
+    path.write_text("import os\ndef reward_function(params):\n    return 1.0\n")
+    result = run_command(str(path))
+    assert result.returncode == 1
+    report = json.loads(result.stdout)
+    assert report["errors"] == [
+        {"type": "import", "line": 1,
+         "message": "Only math, random, numpy, scipy and shapely may be imported, not os."},
+    ]  # fmt: skip
+
+
+def test_the_command_names_an_unknown_track(tmp_path):
+    path = tmp_path / "reward.py"
+    path.write_text(EXAMPLES[0].source)
+    result = run_command(str(path), "--track", "monza")
+    assert result.returncode == 1
+    assert "No track named 'monza'" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+@pytest.mark.django_db
+class TestTheEditorPage:
+    def test_it_shows_the_editor_the_examples_and_the_params(self, client, alice, tracks):
+        client.force_login(alice)
+        response = client.get(reverse("training:reward-editor"))
+        assert response.status_code == 200
+        for example in EXAMPLES:
+            assert example.title in response.text
+        assert "objects_left_of_center" in response.text
+        assert "codemirror-5.65.21/codemirror.js" in response.text
+
+    def test_validate_answers_json(self, client, alice, tracks):
+        client.force_login(alice)
+        response = client.post(
+            reverse("training:reward-validation"),
+            {"source": EXAMPLES[1].source, "track": "pitlane-oval"},
+        )
+        assert response.status_code == 200
+        assert response.json()["valid"] is True
+
+    @pytest.mark.parametrize(
+        ("data", "message"),
+        [({"source": "", "track": "pitlane-oval"}, "Write a reward function first."),
+         ({"source": "x", "track": "monza"}, "Choose a listed track.")],
+    )  # fmt: skip
+    def test_bad_input_gets_a_clear_message(self, client, alice, tracks, data, message):
+        client.force_login(alice)
+        response = client.post(reverse("training:reward-validation"), data)
+        assert response.status_code == 400
+        assert response.json() == {"message": message}
+
+    def test_it_is_for_racers_only(self, client):
+        assert client.get(reverse("training:reward-editor")).status_code == 302
+        response = client.post(reverse("training:reward-validation"), {})
+        assert response.status_code == 302
