@@ -160,6 +160,7 @@ class DeepRacerEnv(gym.Env):
         self.sim_time = 0.0
         self.lap = 1
         self._lap_finished = False
+        self.status = "prepare"
         self.lap_times: list[float] = []
         self._lap_started = 0.0
         self._travelled = 0.0
@@ -214,6 +215,7 @@ class DeepRacerEnv(gym.Env):
         if status == "in_progress":
             self._resume_at, self._resume_travelled = self._distance, self._travelled
 
+        self.status = status  # known before the reward function runs, for reporting its failures
         params = self._params(projection, on_track, crashed, steering, speed, status)
         reward = self._reward(params)
         terminated, truncated = self._outcome(status)

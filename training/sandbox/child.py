@@ -17,10 +17,9 @@ import signal
 import sys
 import time
 import traceback
-from collections import Counter
 from typing import Any
 
-from simulator.controller import CentreLineDriver
+from simulator.controller import RolloutStats, drive
 from simulator.rewards import RewardError, checked_reward
 from training.sandbox import seal
 from training.sandbox.protocol import pack, read_frame
@@ -124,40 +123,30 @@ class Child:
 
     def op_rollout(self, request: dict) -> None:
         """Drive ``steps`` steps of the environment with the reward function, reporting progress."""
-        env = self.env
-        driver = CentreLineDriver(env.unwrapped, speed=1.0)
-        random_actions = request.get("driver") == "random"
-        env.action_space.seed(int(request.get("seed", 0)))
-        steps, episodes, total = 0, 0, 0.0
-        statuses: Counter[str] = Counter()
-        started = last_report = time.perf_counter()
-        status = "prepare"
+
+        def report(stats: RolloutStats) -> None:
+            self.send({"type": "progress", "steps": stats.steps, "log": self._take_logs()})
+
+        started = time.perf_counter()
         try:
-            while steps < int(request["steps"]):
-                action = env.action_space.sample() if random_actions else driver.act()
-                _, reward, terminated, truncated, info = env.step(action)
-                steps += 1
-                total += reward
-                status = info["status"]
-                if terminated or truncated:
-                    statuses[status] += 1
-                    episodes += 1
-                    env.reset()
-                now = time.perf_counter()
-                if now - last_report >= PROGRESS_EVERY:
-                    self.send({"type": "progress", "steps": steps, "log": self._take_logs()})
-                    last_report = now
-        except RewardError as error:
-            self.send(_error("value", str(error), None, step=steps + 1, status=status))
-            return
+            stats = drive(
+                self.env,
+                int(request["steps"]),
+                random_actions=request.get("driver") == "random",
+                seed=int(request.get("seed", 0)),
+                report=report,
+            )
         except BaseException as error:  # user code may raise anything
-            where = {"step": steps + 1, "status": status}
-            self.send(_exception("exception", error, self.call_timeout, **where))
+            where = {"step": self.env.unwrapped.steps, "status": self.env.unwrapped.status}
+            if isinstance(error, RewardError):
+                self.send(_error("value", str(error), None, **where))
+            else:
+                self.send(_exception("exception", error, self.call_timeout, **where))
             return
         self.send({
-            "type": "rollout", "steps": steps, "episodes": episodes, "reward": total,
-            "statuses": dict(statuses), "elapsed": time.perf_counter() - started,
-            "log": self._take_logs(),
+            "type": "rollout", "steps": stats.steps, "episodes": stats.episodes,
+            "reward": stats.reward, "statuses": dict(stats.statuses),
+            "elapsed": time.perf_counter() - started, "log": self._take_logs(),
         })  # fmt: skip
 
     def op_probe(self, request: dict) -> None:
