@@ -27,10 +27,11 @@ HEARTBEAT_TTL = 15  # [s] a worker silent this long is gone
 _stop = threading.Event()
 
 
-def redis_client(**kwargs) -> redis.Redis:
-    """A Redis client for Pitlane's own keys, failing fast when Redis is unreachable."""
+def redis_client(timeout: float = 1.0) -> redis.Redis:
+    """A Redis client for Pitlane's own keys, failing fast when Redis is unreachable; commands
+    that block (such as BLPOP) need a ``timeout`` longer than they wait."""
     return redis.Redis.from_url(
-        settings.REDIS_URL, socket_connect_timeout=1.0, socket_timeout=1.0, **kwargs
+        settings.REDIS_URL, socket_connect_timeout=2.0, socket_timeout=timeout
     )
 
 

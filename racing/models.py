@@ -6,13 +6,7 @@ from django.db import models
 from django.urls import reverse
 from django.utils import timezone
 
-from training.models import Direction, Track
-
-
-class RaceType(models.TextChoices):
-    TIME_TRIAL = "TIME_TRIAL", "Time trial"
-    OBJECT_AVOIDANCE = "OBJECT_AVOIDANCE", "Object avoidance"
-    HEAD_TO_BOT = "HEAD_TO_BOT", "Head-to-bot"
+from training.models import Direction, RaceType, Track
 
 
 class Division(models.TextChoices):

@@ -68,7 +68,7 @@ def celery_worker_process(test_database, logs_dir) -> Iterator[ServiceProcess]:
     worker = ServiceProcess(
         python_module(
             "celery", "-A", "console", "worker", "-Q", ",".join(settings.PITLANE_QUEUES),
-            "--hostname", "test-worker@%h", "--concurrency", "1", "--loglevel", "INFO",
+            "--hostname", "test-worker@%h", "--concurrency", "3", "--loglevel", "INFO",
             "--without-mingle", "--without-gossip",
         ),
         env=service_env(test_database),

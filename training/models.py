@@ -1,5 +1,7 @@
 """A racer's models, and the tracks they train on."""
 
+from __future__ import annotations
+
 from django.conf import settings
 from django.core.validators import RegexValidator
 from django.db import models
@@ -8,6 +10,22 @@ from django.db import models
 class Direction(models.TextChoices):
     COUNTERCLOCKWISE = "counterclockwise", "Counter-clockwise"
     CLOCKWISE = "clockwise", "Clockwise"
+
+
+class RaceType(models.TextChoices):
+    TIME_TRIAL = "TIME_TRIAL", "Time trial"
+    OBJECT_AVOIDANCE = "OBJECT_AVOIDANCE", "Object avoidance"
+    HEAD_TO_BOT = "HEAD_TO_BOT", "Head-to-bot"
+
+
+class Network(models.TextChoices):
+    SHALLOW = "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW", "3-layer CNN"
+    DEEP = "DEEP_CONVOLUTIONAL_NETWORK", "5-layer CNN"
+
+
+class Algorithm(models.TextChoices):
+    PPO = "clipped_ppo", "PPO"
+    SAC = "sac", "SAC"
 
 
 class Track(models.Model):
@@ -76,6 +94,35 @@ class RLModel(models.Model):
     created_at = models.DateTimeField(auto_now_add=True)
     updated_at = models.DateTimeField(auto_now=True)
 
+    # The training configuration, in the vocabulary of DeepRacer's model_metadata.json.
+    direction = models.CharField(
+        max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE
+    )
+    race_type = models.CharField(
+        max_length=16, choices=RaceType.choices, default=RaceType.TIME_TRIAL
+    )
+    boxes = models.JSONField(null=True, blank=True, help_text="{count, randomize}.")
+    bots = models.JSONField(null=True, blank=True, help_text="{count, speed, lane_changes}.")
+    sensors = models.JSONField(default=list)
+    network = models.CharField(max_length=40, choices=Network.choices, default=Network.SHALLOW)
+    action_space_type = models.CharField(
+        max_length=10, choices=[("discrete", "Discrete"), ("continuous", "Continuous")],
+        default="discrete",
+    )  # fmt: skip
+    action_space = models.JSONField(default=list)
+    algorithm = models.CharField(max_length=16, choices=Algorithm.choices, default=Algorithm.PPO)
+    hyperparameters = models.JSONField(default=dict)
+    max_minutes = models.PositiveIntegerField("maximum training time [min]", default=60)
+    reward_function = models.TextField(blank=True)
+    workers = models.PositiveSmallIntegerField("simulation workers", default=1)
+    extra_tracks = models.JSONField(
+        default=list, blank=True, help_text="More tracks to train on, one per extra worker."
+    )
+    seed = models.IntegerField(default=0)
+    cloned_from = models.ForeignKey(
+        "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="clones"
+    )
+
     class Meta:
         verbose_name = "model"
         ordering = ["-created_at"]
@@ -85,6 +132,33 @@ class RLModel(models.Model):
 
     def __str__(self) -> str:
         return self.name
+
+    def environment_settings(self, track: str | None = None) -> dict:
+        """The keyword arguments of ``gymnasium.make("Pitlane/DeepRacer-v0", ...)``."""
+        return {
+            "track": track or self.track.name,
+            "direction": self.direction,
+            "sensors": list(self.sensors),
+            "action_space": self.action_space,
+            "race_type": self.race_type,
+            "objects": self.boxes,
+            "bots": self.bots,
+        }
+
+    def metadata(self) -> dict:
+        """DeepRacer's model_metadata.json."""
+        return {
+            "action_space": self.action_space,
+            "action_space_type": self.action_space_type,
+            "sensor": list(self.sensors),
+            "neural_network": self.network,
+            "training_algorithm": self.algorithm,
+            "version": "5",
+        }
+
+    @property
+    def latest_job(self) -> TrainingJob | None:
+        return self.jobs.order_by("-created_at").first()
 
 
 class Vehicle(models.Model):
@@ -135,3 +209,89 @@ class Vehicle(models.Model):
     def sensors(self) -> list[str]:
         """The ``sensor`` list of ``model_metadata.json``."""
         return [self.camera, self.lidar] if self.lidar else [self.camera]
+
+
+class TrainingJob(models.Model):
+    """One training run of a model: DeepRacer's job states, and the lease that keeps it single."""
+
+    class Status(models.TextChoices):
+        QUEUED = "QUEUED", "Queued"
+        INITIALIZING = "INITIALIZING", "Initializing"
+        IN_PROGRESS = "IN_PROGRESS", "In progress"
+        STOPPING = "STOPPING", "Stopping"
+        COMPLETED = "COMPLETED", "Completed"
+        FAILED = "FAILED", "Failed"
+        CANCELED = "CANCELED", "Canceled"
+
+    ACTIVE = (Status.QUEUED, Status.INITIALIZING, Status.IN_PROGRESS, Status.STOPPING)
+
+    model = models.ForeignKey(RLModel, on_delete=models.CASCADE, related_name="jobs")
+    status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
+    created_at = models.DateTimeField(auto_now_add=True)
+    started_at = models.DateTimeField(null=True, blank=True)
+    finished_at = models.DateTimeField(null=True, blank=True)
+    stop_requested = models.BooleanField(default=False)
+    failure_reason = models.TextField(blank=True)
+    message = models.CharField(max_length=255, blank=True, help_text="What the racer sees now.")
+    # The lease: the trainer run that holds it renews it; only the holder (by attempt) may write.
+    attempt = models.PositiveIntegerField(default=0)
+    lease_owner = models.CharField(max_length=255, blank=True)
+    lease_expires = models.DateTimeField(null=True, blank=True)
+    # Progress
+    weights_version = models.PositiveIntegerField(default=0)
+    iterations = models.PositiveIntegerField(default=0)
+    episodes = models.PositiveIntegerField(default=0)
+    steps = models.PositiveBigIntegerField(default=0)
+    training_seconds = models.FloatField(default=0.0)
+    last_checkpoint = models.CharField(max_length=255, blank=True)
+    best_checkpoint = models.CharField(max_length=255, blank=True)
+
+    class Meta:
+        ordering = ["created_at"]
+        indexes = [models.Index(fields=["status", "created_at"])]
+
+    def __str__(self) -> str:
+        return f"{self.model} training #{self.pk}"
+
+    @property
+    def is_active(self) -> bool:
+        return self.status in self.ACTIVE
+
+
+class Iteration(models.Model):
+    """One policy update and what it was learnt from, with the evaluation that followed it."""
+
+    job = models.ForeignKey(TrainingJob, on_delete=models.CASCADE, related_name="iteration_rows")
+    number = models.PositiveIntegerField()
+    reward = models.FloatField(help_text="Average reward per training episode.")
+    completion = models.FloatField(help_text="Average progress [%] of the training episodes.")
+    evaluation_completion = models.FloatField(null=True, blank=True)
+    best_lap_time = models.FloatField(null=True, blank=True, help_text="[s], when a lap was done.")
+    episodes = models.PositiveIntegerField()
+    steps = models.PositiveIntegerField()
+    wall_seconds = models.FloatField()
+    created_at = models.DateTimeField(auto_now_add=True)
+
+    class Meta:
+        ordering = ["job", "number"]
+        constraints = [
+            models.UniqueConstraint(fields=["job", "number"], name="one_row_per_iteration")
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.job}, iteration {self.number}"
+
+
+class JobLogLine(models.Model):
+    """The job's log, as the racer reads it on the model page."""
+
+    job = models.ForeignKey(TrainingJob, on_delete=models.CASCADE, related_name="log_lines")
+    at = models.DateTimeField(auto_now_add=True)
+    level = models.CharField(max_length=8, default="info")
+    text = models.CharField(max_length=500)
+
+    class Meta:
+        ordering = ["at", "pk"]
+
+    def __str__(self) -> str:
+        return self.text

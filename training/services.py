@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import transaction
+from django.utils import timezone
 
 from simulator import tracks as simulator_tracks
-from training.models import Direction, Track, Vehicle
+from training import configuration, tasks
+from training.models import Direction, RLModel, Track, TrainingJob, Vehicle
 
 
 @transaction.atomic
@@ -42,3 +44,35 @@ def vehicle_create(
     vehicle.full_clean()
     vehicle.save()
     return vehicle
+
+
+@transaction.atomic
+def model_create(
+    *, owner: AbstractBaseUser, settings: dict, validate_reward: bool = True
+) -> RLModel:
+    """Check every setting (``configuration.Invalid`` lists the problems), then save the model and
+    its training job, QUEUED; the trainer task is enqueued once both are committed."""
+    clean = configuration.check(settings, owner=owner, validate_reward=validate_reward)
+    model = RLModel.objects.create(owner=owner, status=RLModel.Status.QUEUED, **clean)
+    job = TrainingJob.objects.create(model=model)
+    transaction.on_commit(lambda: tasks.train.delay(job.pk))
+    return model
+
+
+def training_stop(*, job: TrainingJob) -> TrainingJob:
+    """The racer's "Stop training": a running job moves through STOPPING to COMPLETED with a model;
+    a job still waiting in the queue is canceled."""
+    with transaction.atomic():
+        job = TrainingJob.objects.select_for_update().get(pk=job.pk)
+        if job.status == TrainingJob.Status.QUEUED and job.attempt == 0:
+            job.status = TrainingJob.Status.CANCELED
+            job.finished_at = timezone.now()
+            job.failure_reason = "Stopped before training began."
+            job.save(update_fields=["status", "finished_at", "failure_reason"])
+            RLModel.objects.filter(pk=job.model_id).update(status=RLModel.Status.ERROR)
+        elif job.is_active:
+            job.stop_requested = True
+            job.status = TrainingJob.Status.STOPPING
+            job.save(update_fields=["stop_requested", "status"])
+            RLModel.objects.filter(pk=job.model_id).update(status=RLModel.Status.STOPPING)
+    return job

@@ -146,6 +146,10 @@ CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
 # The queues a complete deployment serves; /healthz reports any that no worker consumes.
 PITLANE_QUEUES = ("training", "simulation")
+CELERY_TASK_ROUTES = {
+    "training.train": {"queue": "training"},  # the trainer: a GPU machine, where there is one
+    "training.rollout": {"queue": "simulation"},  # rollouts: any CPU machine
+}
 
 # Files: static assets are served by WhiteNoise; artifacts go through Django's storage API, to local
 # disk under var/media/ by default or to an S3 bucket (or an S3-compatible store) when one is named.

@@ -75,6 +75,7 @@ class Sandbox:
     """One sandbox child. ``env``: settings for a simulator the child builds before sealing."""
 
     env: dict | None = None
+    policy: dict | None = None  # {"algorithm", "network", "seed"}: a policy to act with
     call_timeout: float = 1.0  # [s] per call of the reward function
     memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing
     start_timeout: float = 60.0  # [s]
@@ -109,7 +110,7 @@ class Sandbox:
         threading.Thread(target=self._read_stderr, daemon=True).start()
         self._send({
             "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
-            "env": self.env,
+            "env": self.env, "policy": self.policy,
         })  # fmt: skip
         self.report = self._wait({"ready"}, self.start_timeout, "start")
         return self.report
@@ -135,6 +136,18 @@ class Sandbox:
             {"op": "rollout", "steps": steps, "driver": driver, "seed": seed}, {"rollout"},
             on_progress=on_progress,
         )  # fmt: skip
+
+    def set_weights(self, version: int, data: bytes) -> None:
+        """Act with the policy weights of ``version`` from now on."""
+        self._request({"op": "weights", "version": version, "data": data}, {"weights"}, 30.0)
+
+    def episode(self, mode: str = "explore", worker: int = 0) -> dict:
+        """Drive one episode: ``summary`` (steps, reward, progress, status, lap_time) and, unless
+        evaluating, ``payload``: the episode's experience, encoded for the experience buffer."""
+        reply = self._request({"op": "episode", "mode": mode, "worker": worker}, {"episode"})
+        if not isinstance(reply.get("summary"), dict):
+            raise SandboxFailure("protocol", "The sandbox sent an episode without a summary.")
+        return reply
 
     def probe(self, secret_path: str, port: int) -> list[str]:
         """What the sealed child managed to do of the forbidden things; [] when it held."""

@@ -19,8 +19,12 @@ import time
 import traceback
 from typing import Any
 
+import msgpack
+import numpy as np
+
 from simulator.controller import RolloutStats, drive
 from simulator.rewards import RewardError, checked_reward
+from training.experience import encode_arrays
 from training.sandbox import seal
 from training.sandbox.protocol import pack, read_frame
 
@@ -44,6 +48,8 @@ class Child:
         self.reply_fd = 1
         self.reward_function = None
         self.env = None
+        self.policy = None
+        self.ppo = True
         self.call_timeout = 1.0
         self.logs: list[str] = []
         sys.stdout = _Printed(self.logs)
@@ -63,6 +69,8 @@ class Child:
             importlib.import_module(name)
         if init.get("env") is not None:
             self.env = self._build_env(init["env"])
+        if init.get("policy") is not None:
+            self._build_policy(init["policy"])
         address_space = seal.current_address_space() + int(init["memory_allowance"])
         namespaces = seal.enter_namespaces()
         seal.limit_resources(address_space)
@@ -86,7 +94,115 @@ class Child:
         env.reset(seed=0)
         return env
 
+    def _build_policy(self, settings: dict) -> None:
+        """The policy network the rollout acts with, built and run once before sealing."""
+        import torch
+
+        from training.learner import load_weights
+        from training.networks import policy_kwargs
+
+        torch.set_num_threads(1)
+        kwargs = policy_kwargs(settings["network"])
+        spaces = (self.env.observation_space, self.env.action_space)
+        self.ppo = settings["algorithm"] == "clipped_ppo"
+        if self.ppo:
+            from stable_baselines3.common.policies import MultiInputActorCriticPolicy
+
+            self.policy = MultiInputActorCriticPolicy(*spaces, lambda _: 0.0, **kwargs)
+            self._weights_module = self.policy
+        else:
+            from stable_baselines3.sac.policies import MultiInputPolicy
+
+            kwargs["net_arch"] = {"pi": [64], "qf": [64]}
+            self.policy = MultiInputPolicy(*spaces, lambda _: 0.0, **kwargs)
+            self._weights_module = self.policy.actor
+        self.policy.set_training_mode(False)
+        self._load_weights = load_weights
+        self._torch = torch
+        observation, _ = self.env.reset(seed=int(settings.get("seed", 0)))
+        self._act(observation, deterministic=False)
+        self.version = -1
+
+    def _act(self, observation, deterministic: bool):
+        """(action, value, log-probability) from the policy; value and log-probability for PPO."""
+        tensor, _ = self.policy.obs_to_tensor(observation)
+        with self._torch.no_grad():
+            if self.ppo:
+                actions, values, log_probs = self.policy(tensor, deterministic=deterministic)
+                return actions[0].numpy(), float(values[0]), float(log_probs[0])
+            return self.policy.actor(tensor, deterministic=deterministic)[0].numpy(), None, None
+
     # Requests
+
+    def op_weights(self, request: dict) -> None:
+        self._load_weights(self._weights_module, request["data"])
+        self.version = int(request["version"])
+        self.send({"type": "weights", "version": self.version})
+
+    def op_episode(self, request: dict) -> None:
+        """One episode: ``mode`` "explore" (the policy, sampling), "random" (uniform actions) or
+        "evaluate" (the policy, deterministic: only a summary comes back)."""
+        env, mode = self.env, request.get("mode", "explore")
+        discrete = hasattr(env.action_space, "n")
+        observation, _ = env.reset()
+        observations = {name: [value] for name, value in observation.items()}
+        actions, rewards, values, log_probs, trace = [], [], [], [], []
+        last_report = time.perf_counter()
+        try:
+            while True:
+                if mode == "random":
+                    action, value, log_prob = env.action_space.sample(), 0.0, 0.0
+                else:
+                    action, value, log_prob = self._act(observation, mode == "evaluate")
+                command = int(action) if discrete else np.clip(action, -1.0, 1.0)
+                observation, reward, terminated, truncated, info = env.step(command)
+                actions.append(action)
+                rewards.append(reward)
+                values.append(value or 0.0)
+                log_probs.append(log_prob or 0.0)
+                if mode != "evaluate":
+                    for name, value_now in observation.items():
+                        observations[name].append(value_now)
+                    trace.append(list(info["trace"]))
+                if terminated or truncated:
+                    break
+                if time.perf_counter() - last_report >= PROGRESS_EVERY:
+                    self.send({"type": "progress", "steps": len(rewards), "log": self._take_logs()})
+                    last_report = time.perf_counter()
+        except BaseException as error:  # user code may raise anything
+            where = {"step": env.unwrapped.steps, "status": env.unwrapped.status}
+            if isinstance(error, RewardError):
+                self.send(_error("value", str(error), None, **where))
+            else:
+                self.send(_exception("exception", error, self.call_timeout, **where))
+            return
+        summary = {
+            "worker": int(request.get("worker", 0)), "version": self.version,
+            "steps": len(rewards), "reward": float(sum(rewards)), "progress": info["progress"],
+            "status": info["status"], "terminated": bool(terminated),
+            "lap_time": env.unwrapped.sim_time if info["status"] == "lap_complete" else None,
+        }  # fmt: skip
+        if mode == "evaluate":
+            self.send({"type": "episode", "summary": summary, "log": self._take_logs()})
+            return
+        final_value = 0.0
+        if self.ppo and mode != "random" and not terminated:
+            final_value = self._act(observation, deterministic=True)[1]
+        arrays = {f"obs:{name}": np.stack(frames) for name, frames in observations.items()}
+        if discrete:
+            arrays["actions"] = np.array(actions, dtype=np.int64)
+        else:
+            arrays["actions"] = np.array(actions, dtype=np.float32).reshape(len(actions), -1)
+        arrays["rewards"] = np.array(rewards, dtype=np.float32)
+        if self.ppo:
+            arrays["values"] = np.array(values, dtype=np.float32)
+            arrays["log_probs"] = np.array(log_probs, dtype=np.float32)
+        payload = msgpack.packb(
+            {**summary, "final_value": final_value, "arrays": encode_arrays(arrays),
+             "trace": trace}, use_bin_type=True,
+        )  # fmt: skip
+        self.send({"type": "episode", "summary": summary, "payload": payload,
+                   "log": self._take_logs()})  # fmt: skip
 
     def op_load(self, request: dict) -> None:
         source = request["source"]

@@ -13,7 +13,7 @@ from typing import Any, BinaryIO
 import msgpack
 
 HEADER = struct.Struct("!I")
-MAX_FRAME = 64 * 1024 * 1024  # [bytes]
+MAX_FRAME = 256 * 1024 * 1024  # [bytes]: the 5-layer network's weights are about 55 MB
 
 
 class ProtocolError(Exception):

@@ -1,0 +1,211 @@
+"""Training end to end on the real parts: a Celery worker, Redis, the sandbox, SB3."""
+
+import csv
+import io
+import json
+
+import pytest
+from django.core.files.storage import default_storage
+from django.core.management import call_command
+
+from tests.services import wait_for
+from training import configuration, hyperparameters, jobs, trainer
+from training.models import Iteration, RLModel, TrainingJob
+from training.rewards import EXAMPLES
+from training.services import model_create, training_stop
+
+TINY_PPO = {"batch_size": 32, "num_epochs": 3, "num_episodes_between_training": 5}
+
+
+def settings(**changes) -> dict:
+    base = {
+        "name": "tiny-oval",
+        "track": "pitlane-oval",
+        "sensors": ["FRONT_FACING_CAMERA"],
+        "algorithm": "clipped_ppo",
+        "hyperparameters": {**hyperparameters.defaults("clipped_ppo"), **TINY_PPO},
+        "max_minutes": 10,
+        "reward_function": EXAMPLES[0].source,
+    }
+    return {**base, **changes}
+
+
+def reload(job: TrainingJob) -> TrainingJob:
+    return TrainingJob.objects.select_related("model").get(pk=job.pk)
+
+
+def wait_for_job(job: TrainingJob, condition, what: str, timeout: float = 240) -> TrainingJob:
+    """Wait until ``condition(job)``; a job that fails meanwhile fails the test with its log."""
+
+    def reached() -> bool:
+        current = reload(job)
+        if current.status == TrainingJob.Status.FAILED:
+            lines = "\n".join(line.text for line in current.log_lines.all())
+            pytest.fail(f"the job failed: {current.failure_reason}\n{lines}")
+        return condition(current)
+
+    wait_for(reached, what, timeout=timeout)
+    return reload(job)
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
+    alice, tracks, celery_worker_process
+):
+    model = model_create(owner=alice, settings=settings())
+    job = model.jobs.get()
+    assert job.status == TrainingJob.Status.QUEUED
+
+    job = wait_for_job(job, lambda j: j.iterations >= 2, "two policy updates")
+    assert job.status == TrainingJob.Status.IN_PROGRESS
+    assert job.weights_version >= 2
+    assert job.episodes >= 10 and job.steps > 0  # experience came through the Redis buffer
+    rows = list(Iteration.objects.filter(job=job).order_by("number"))
+    assert [row.number for row in rows[:2]] == [1, 2]
+    assert all(row.episodes >= 5 and row.steps > 0 for row in rows)
+    wait_for(lambda: Iteration.objects.filter(job=job, evaluation_completion__isnull=False)
+             .exists(), "an evaluation after an update", timeout=120)  # fmt: skip
+
+    training_stop(job=job)
+    job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
+    assert job.model.status == RLModel.Status.READY
+    assert default_storage.exists(job.last_checkpoint)
+    assert default_storage.exists(job.best_checkpoint)
+    prefix = f"models/{model.pk}/"
+    metadata = json.loads(default_storage.open(prefix + "model_metadata.json").read())
+    assert metadata["training_algorithm"] == "clipped_ppo"
+    assert metadata["action_space_type"] == "discrete"
+    assert len(metadata["action_space"]) == 10
+    metrics = json.loads(default_storage.open(prefix + "metrics/training_metrics.json").read())
+    assert metrics["best_model_metric"] == "progress"
+    phases = {entry["phase"] for entry in metrics["metrics"]}
+    assert phases == {"training", "evaluation"}
+    trace = default_storage.open(prefix + "training-simtrace/1-iteration.csv").read().decode()
+    table = list(csv.DictReader(io.StringIO(trace)))
+    assert len(table) == rows[0].steps
+    assert table[0]["episode_status"] and table[0]["track_len"]
+    assert job.log_lines.filter(text__startswith="Training started").exists()
+    assert job.log_lines.filter(text="Stopped by the racer.").exists()
+    assert job.log_lines.filter(text__startswith="Iteration 1: ").exists()
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_second_delivery_of_the_trainer_task_does_not_train_twice(alice, tracks):
+    model = model_create(owner=alice, settings=settings(), validate_reward=False)
+    job = model.jobs.get()
+    held = jobs.lease_acquire(job_id=job.pk, owner="first-run")
+    assert held is not None and held.attempt == 1
+
+    started = []
+    trainer.run(job.pk, owner="second-run", start_rollouts=lambda *a: started.append(a))
+    job = reload(job)
+    assert (job.attempt, job.lease_owner, started) == (1, "first-run", [])
+
+    # The first run's lease lapses (its worker died): the next delivery takes over, and the old
+    # run can no longer write.
+    TrainingJob.objects.filter(pk=job.pk).update(lease_expires=None, lease_owner="")
+    taken = jobs.lease_acquire(job_id=job.pk, owner="second-run")
+    assert taken.attempt == 2
+    with pytest.raises(jobs.LeaseLost):
+        jobs.write(held, message="a stale run writing")
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_queued_job_that_is_stopped_is_canceled(alice, tracks):
+    model = model_create(owner=alice, settings=settings(), validate_reward=False)
+    job = training_stop(job=model.jobs.get())
+    assert job.status == TrainingJob.Status.CANCELED
+    assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.ERROR
+
+
+@pytest.mark.django_db
+class TestSettings:
+    def errors(self, owner, **changes) -> dict:
+        with pytest.raises(configuration.Invalid) as invalid:
+            configuration.check(settings(**changes), owner=owner, validate_reward=False)
+        return invalid.value.errors
+
+    def test_valid_settings_are_completed_with_defaults(self, alice, tracks):
+        clean = configuration.check(
+            settings(hyperparameters={}), owner=alice, validate_reward=False
+        )
+        assert clean["hyperparameters"] == hyperparameters.defaults("clipped_ppo")
+        assert clean["action_space_type"] == "discrete"
+        assert clean["action_space"][0] == {"steering_angle": -30.0, "speed": 0.5, "index": 0}
+        assert clean["direction"] == "counterclockwise" and clean["workers"] == 1
+
+    @pytest.mark.parametrize(
+        ("changes", "field", "message"),
+        [
+            ({"name": "my model!"}, "name", "1-64 letters, digits and hyphens"),
+            ({"description": "x" * 256}, "description", "at most 255"),
+            ({"track": "monza"}, "track", "Choose one of the listed tracks"),
+            ({"track": "championship-circuit", "direction": "clockwise"}, "direction",
+             "cannot be driven clockwise"),
+            ({"race_type": "OBJECT_AVOIDANCE", "boxes": {"count": 9}}, "race_type",
+             "number of boxes must be a whole number from 1 to 6"),
+            ({"race_type": "HEAD_TO_BOT", "bots": {"speed": 9}}, "race_type", "0.2-6.0 m/s"),
+            ({"sensors": ["LIDAR"]}, "sensors", "exactly one camera"),
+            ({"network": "RESNET"}, "network", "3-layer or the 5-layer"),
+            ({"action_space": [{"steering_angle": 40, "speed": 1}] * 2}, "action_space",
+             "-30 to 30 degrees"),
+            ({"algorithm": "sac"}, "algorithm", "SAC needs a continuous action space"),
+            ({"hyperparameters": {"batch_size": 100}}, "hyperparameters.batch_size",
+             "one of 32, 64, 128, 256, 512"),
+            ({"hyperparameters": {"lr": 0.1}}, "hyperparameters.lr", "between 1e-08 and 0.001"),
+            ({"hyperparameters": {"num_epochs": 2}}, "hyperparameters.num_epochs", "3 and 10"),
+            ({"hyperparameters": {"loss_type": "l1"}}, "hyperparameters.loss_type", "huber, mse"),
+            ({"max_minutes": 5}, "max_minutes", "10 to 1440 minutes"),
+            ({"workers": 9}, "workers", "1 to 4"),
+            ({"extra_tracks": ["speedway"]}, "extra_tracks", "needs a simulation worker"),
+            ({"reward_function": "  "}, "reward_function", "Write a reward function"),
+        ],
+    )  # fmt: skip
+    def test_each_bad_setting_gets_its_own_message(self, alice, tracks, changes, field, message):
+        errors = self.errors(alice, **changes)
+        assert message in errors[field], errors
+
+    def test_sac_with_a_continuous_action_space_is_fine(self, alice, tracks):
+        continuous = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 1, "high": 2}}
+        clean = configuration.check(
+            settings(algorithm="sac", action_space=continuous, hyperparameters={}),
+            owner=alice, validate_reward=False,
+        )  # fmt: skip
+        assert clean["hyperparameters"]["sac_alpha"] == 0.2
+        assert clean["action_space_type"] == "continuous"
+
+    def test_a_name_already_used_by_the_racer_is_refused_but_not_another_racers(
+        self, alice, bob, tracks
+    ):
+        model_create(owner=bob, settings=settings(), validate_reward=False)
+        configuration.check(settings(), owner=alice, validate_reward=False)
+        model_create(owner=alice, settings=settings(), validate_reward=False)
+        assert "already have a model named “tiny-oval”" in self.errors(alice)["name"]
+
+    def test_a_clone_that_changes_sensors_is_refused(self, alice, tracks):
+        source = model_create(owner=alice, settings=settings(), validate_reward=False)
+        RLModel.objects.filter(pk=source.pk).update(status=RLModel.Status.READY)
+        source.refresh_from_db()
+        errors = self.errors(alice, name="clone", cloned_from=source,
+                             sensors=["STEREO_CAMERAS"])  # fmt: skip
+        assert "A clone keeps its source's sensors (FRONT_FACING_CAMERA)" in errors["sensors"]
+
+    def test_a_reward_function_that_fails_validation_is_refused_with_its_line(self, alice, tracks):
+        with pytest.raises(configuration.Invalid) as invalid:
+            configuration.check(
+                settings(reward_function="import os\ndef reward_function(params):\n    return 1\n"),
+                owner=alice,
+            )
+        assert invalid.value.errors["reward_function"].startswith("import (line 1): Only math")
+        assert not RLModel.objects.exists()
+
+
+@pytest.mark.django_db
+def test_the_createmodel_command_creates_a_queued_model(alice, tracks, tmp_path, capsys):
+    (tmp_path / "model.yaml").write_text("name: from-yaml\ntrack: rookie-loop\nmax_minutes: 30\n")
+    (tmp_path / "reward.py").write_text(EXAMPLES[1].source)
+    call_command("createmodel", config=tmp_path / "model.yaml", reward=tmp_path / "reward.py",
+                 owner="alice")  # fmt: skip
+    model = RLModel.objects.get(name="from-yaml")
+    assert (model.max_minutes, model.jobs.get().status) == (30, "QUEUED")
+    assert "its training is queued" in capsys.readouterr().out

@@ -1,0 +1,163 @@
+"""A model's settings, checked as a whole: the create-model page and ``manage.py createmodel``
+both come through here, and a model is saved only when everything is valid.
+
+Settings use DeepRacer's vocabulary: sensors and action space as in ``model_metadata.json``,
+hyperparameters under the names of ``hyperparameters.json``.
+"""
+
+from __future__ import annotations
+
+import re
+
+from simulator import config as sim
+from training import hyperparameters as hp
+from training.models import Algorithm, Network, RLModel, Track
+from training.rewards import reward_validate
+
+NAME = re.compile(r"^[A-Za-z0-9-]{1,64}$")
+MINUTES = (10, 1440)
+MAX_WORKERS = 4
+
+
+class Invalid(Exception):
+    """Settings with problems: ``errors`` maps each setting to what is wrong with it."""
+
+    def __init__(self, errors: dict[str, str]) -> None:
+        super().__init__("; ".join(f"{name}: {message}" for name, message in errors.items()))
+        self.errors = errors
+
+
+def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
+    """The settings, complete and typed, ready for ``RLModel(**...)``; ``Invalid`` otherwise."""
+    errors: dict[str, str] = {}
+    clean: dict = {}
+
+    name = str(settings.get("name", "")).strip()
+    if not NAME.match(name):
+        errors["name"] = "A model's name is 1-64 letters, digits and hyphens."
+    elif RLModel.objects.filter(owner=owner, name__iexact=name).exists():
+        errors["name"] = f"You already have a model named “{name}”; choose another name."
+    clean["name"] = name
+    description = str(settings.get("description") or "")
+    if len(description) > 255:
+        errors["description"] = "The description is at most 255 characters."
+    clean["description"] = description
+
+    track = Track.objects.filter(name=settings.get("track")).first()
+    if track is None:
+        errors["track"] = "Choose one of the listed tracks."
+    clean["track"] = track
+    direction = settings.get("direction") or "counterclockwise"
+    if track is not None and direction not in _directions(track):
+        errors["direction"] = f"{track} cannot be driven {direction}."
+    clean["direction"] = direction
+
+    _check_race(settings, clean, errors)
+    _check_car(settings, clean, errors)
+
+    algorithm = settings.get("algorithm") or Algorithm.PPO
+    if algorithm not in Algorithm.values:
+        errors["algorithm"] = "The algorithm is PPO or SAC."
+    elif algorithm == Algorithm.SAC and clean.get("action_space_type") == "discrete":
+        errors["algorithm"] = "SAC needs a continuous action space; choose PPO for a discrete one."
+    else:
+        values, problems = hp.check(algorithm, settings.get("hyperparameters") or {})
+        errors.update({f"hyperparameters.{key}": message for key, message in problems.items()})
+        clean["hyperparameters"] = values
+    clean["algorithm"] = algorithm
+
+    minutes = _integer(settings.get("max_minutes", 60))
+    if minutes is None or not MINUTES[0] <= minutes <= MINUTES[1]:
+        errors["max_minutes"] = (
+            f"The maximum training time is {MINUTES[0]} to {MINUTES[1]} minutes."
+        )
+    clean["max_minutes"] = minutes
+    workers = _integer(settings.get("workers", 1))
+    if workers is None or not 1 <= workers <= MAX_WORKERS:
+        errors["workers"] = f"A job has 1 to {MAX_WORKERS} simulation workers."
+    clean["workers"] = workers
+    extra = [str(name) for name in settings.get("extra_tracks") or []]
+    if workers and len(extra) > workers - 1:
+        errors["extra_tracks"] = "Each extra track needs a simulation worker of its own."
+    known = set(Track.objects.filter(name__in=extra).values_list("name", flat=True))
+    if set(extra) - known:
+        errors["extra_tracks"] = "Choose extra tracks from the listed ones."
+    clean["extra_tracks"] = extra
+    clean["seed"] = _integer(settings.get("seed", 0)) or 0
+
+    source = settings.get("reward_function") or ""
+    if not source.strip():
+        errors["reward_function"] = "Write a reward function (or start from an example)."
+    elif validate_reward and track is not None and "direction" not in errors:
+        result = reward_validate(source=source, track=track.name, direction=direction)
+        if not result.valid:
+            first = result.errors[0]
+            line = f" (line {first.line})" if first.line else ""
+            errors["reward_function"] = f"{first.type}{line}: {first.message}"
+    clean["reward_function"] = source
+
+    source_model = settings.get("cloned_from")
+    if isinstance(source_model, RLModel):
+        if source_model.status != RLModel.Status.READY:
+            errors["cloned_from"] = "Only a ready model can be cloned."
+        elif sorted(source_model.sensors) != sorted(clean.get("sensors") or []):
+            errors["sensors"] = (
+                "A clone keeps its source's sensors ("
+                + ", ".join(source_model.sensors) + "); it learns from the same inputs."
+            )  # fmt: skip
+        clean["cloned_from"] = source_model
+
+    if errors:
+        raise Invalid(errors)
+    return clean
+
+
+def _check_race(settings: dict, clean: dict, errors: dict) -> None:
+    race_type = settings.get("race_type") or "TIME_TRIAL"
+    try:
+        sim.choice("The race type", race_type, sim.RACE_TYPES)
+        boxes = sim.objects(settings.get("boxes") if race_type == "OBJECT_AVOIDANCE" else None,
+                            race_type)  # fmt: skip
+        bots = sim.bots(settings.get("bots") if race_type == "HEAD_TO_BOT" else None, race_type)
+    except sim.ConfigError as error:
+        errors["race_type"] = str(error)
+        boxes = bots = None
+    clean["race_type"] = race_type
+    clean["boxes"] = vars(boxes) if boxes else None
+    clean["bots"] = vars(bots) if bots else None
+
+
+def _check_car(settings: dict, clean: dict, errors: dict) -> None:
+    sensors = settings.get("sensors") or ["FRONT_FACING_CAMERA"]
+    try:
+        camera, lidar = sim.sensors(sensors)
+        clean["sensors"] = [camera, lidar] if lidar else [camera]
+    except sim.ConfigError as error:
+        errors["sensors"] = str(error)
+        clean["sensors"] = []
+    network = settings.get("network") or Network.SHALLOW
+    if network not in Network.values:
+        errors["network"] = "The network is the 3-layer or the 5-layer CNN."
+    clean["network"] = network
+    try:
+        actions = sim.action_space(settings.get("action_space") or None)
+    except sim.ConfigError as error:
+        errors["action_space"] = str(error)
+        clean["action_space_type"], clean["action_space"] = "discrete", []
+        return
+    if isinstance(actions, sim.ContinuousActions):
+        clean["action_space_type"], clean["action_space"] = "continuous", actions.metadata()
+    else:
+        clean["action_space_type"], clean["action_space"] = "discrete", actions.metadata()
+
+
+def _directions(track: Track) -> list[str]:
+    return [name for name in ("counterclockwise", "clockwise") if getattr(track, name)]
+
+
+def _integer(value) -> int | None:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return int(number) if number == int(number) else None

@@ -1,0 +1,235 @@
+"""The Redis side of a training job: the experience buffer, the published policy and control.
+
+Keys belong to one job and expire after it ends:
+``pitlane:job:<id>:experience`` (a list of episodes), ``pitlane:job:<id>:evaluation`` (a list of
+evaluation results), ``pitlane:job:<id>:policy`` (a hash: version, weights) and
+``pitlane:job:<id>:control`` (a hash: stop, attempt, and each rollout worker's heartbeat).
+Episodes travel as msgpack with their arrays as raw bytes: they come from a sandbox that ran a
+racer's code, so the trainer checks every field before it learns from one (``decode_episode``).
+"""
+
+from __future__ import annotations
+
+import time
+import zlib
+from dataclasses import dataclass
+
+import msgpack
+import numpy as np
+import redis
+
+from simulator.rewards import MAX_REWARD
+
+EXPIRE_AFTER = 3600  # [s] the keys live after the job ends
+MAX_QUEUED_EPISODES = 2000  # the buffer is trimmed beyond this, oldest first
+MAX_LOG_LINES = 500  # printed lines waiting for the trainer to file them
+
+
+def key(job_id: int, part: str) -> str:
+    return f"pitlane:job:{job_id}:{part}"
+
+
+class JobChannel:
+    """One job's keys in Redis."""
+
+    def __init__(self, client: redis.Redis, job_id: int) -> None:
+        self.client = client
+        self.job_id = job_id
+        self.experience = key(job_id, "experience")
+        self.evaluation = key(job_id, "evaluation")
+        self.policy = key(job_id, "policy")
+        self.control = key(job_id, "control")
+        self.log = key(job_id, "log")
+
+    # Policy
+
+    def publish(self, version: int, weights: bytes, evaluate: int = 0) -> None:
+        self.client.hset(
+            self.policy, mapping={"version": version, "weights": weights, "evaluate": evaluate}
+        )
+
+    def policy_version(self) -> int:
+        value = self.client.hget(self.policy, "version")
+        return int(value) if value is not None else -1
+
+    def fetch_policy(self) -> tuple[int, bytes, int]:
+        version, weights, evaluate = self.client.hmget(
+            self.policy, "version", "weights", "evaluate"
+        )
+        if version is None:
+            return -1, b"", 0
+        return int(version), weights, int(evaluate or 0)
+
+    # Experience
+
+    def push_episode(self, payload: bytes) -> None:
+        pipe = self.client.pipeline()
+        pipe.rpush(self.experience, payload)
+        pipe.ltrim(self.experience, -MAX_QUEUED_EPISODES, -1)
+        pipe.execute()
+
+    def pop_episodes(self, limit: int, wait: float) -> list[bytes]:
+        """Up to ``limit`` episodes, waiting at most ``wait`` seconds for the first."""
+        first = self.client.blpop([self.experience], timeout=wait)
+        if first is None:
+            return []
+        episodes = [first[1]]
+        more = self.client.lpop(self.experience, limit - 1) if limit > 1 else None
+        return episodes + list(more or [])
+
+    def push_evaluation(self, payload: bytes) -> None:
+        self.client.rpush(self.evaluation, payload)
+
+    def pop_evaluations(self) -> list[bytes]:
+        return list(self.client.lpop(self.evaluation, 100) or [])
+
+    # Control
+
+    def start(self, attempt: int) -> None:
+        self.client.delete(self.experience, self.evaluation, self.control, self.log)
+        self.client.hset(self.control, mapping={"stop": 0, "attempt": attempt})
+
+    def request_stop(self) -> None:
+        self.client.hset(self.control, "stop", 1)
+
+    def should_stop(self, attempt: int) -> bool:
+        stop, current = self.client.hmget(self.control, "stop", "attempt")
+        return stop == b"1" or current is None or int(current) != attempt
+
+    def beat(self, worker: int) -> None:
+        self.client.hset(self.control, f"worker:{worker}", time.time())
+
+    def heartbeats(self) -> dict[int, float]:
+        return {
+            int(name.split(b":")[1]): float(value)
+            for name, value in self.client.hgetall(self.control).items()
+            if name.startswith(b"worker:")
+        }
+
+    def report_failure(self, message: str) -> None:
+        """A rollout worker's word that the racer's code failed; the trainer fails the job."""
+        self.client.hsetnx(self.control, "failure", message[:1000])
+
+    def failure(self) -> str | None:
+        value = self.client.hget(self.control, "failure")
+        return value.decode("utf-8", "replace") if value else None
+
+    def push_log(self, lines: list[str]) -> None:
+        if lines:
+            pipe = self.client.pipeline()
+            pipe.rpush(self.log, *[line[:300] for line in lines])
+            pipe.ltrim(self.log, -MAX_LOG_LINES, -1)
+            pipe.execute()
+
+    def pop_log(self) -> list[str]:
+        return [line.decode("utf-8", "replace") for line in self.client.lpop(self.log, 100) or []]
+
+    def expire(self) -> None:
+        for name in (self.experience, self.evaluation, self.policy, self.control, self.log):
+            self.client.expire(name, EXPIRE_AFTER)
+
+
+# Episodes
+
+
+def encode_arrays(arrays: dict[str, np.ndarray]) -> dict:
+    return {
+        name: {"dtype": str(a.dtype), "shape": list(a.shape),
+               "data": zlib.compress(np.ascontiguousarray(a).tobytes(), 1)}
+        for name, a in arrays.items()
+    }  # fmt: skip
+
+
+def decode_array(encoded, dtype: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    """An array that must have ``dtype`` and ``shape`` (None: any length); ValueError otherwise."""
+    if not isinstance(encoded, dict) or encoded.get("dtype") != dtype:
+        raise ValueError(f"expected {dtype} data")
+    declared = tuple(encoded.get("shape") or ())
+    if len(declared) != len(shape) or any(
+        want is not None and want != got for want, got in zip(shape, declared, strict=True)
+    ):
+        raise ValueError(f"expected shape {shape}, got {declared}")
+    count = int(np.prod(declared)) if declared else 1
+    raw = zlib.decompress(encoded["data"], bufsize=count * np.dtype(dtype).itemsize + 1)
+    return np.frombuffer(raw, dtype=dtype, count=count).reshape(declared)
+
+
+@dataclass
+class Episode:
+    """One episode of experience, checked."""
+
+    worker: int
+    version: int
+    observations: dict[str, np.ndarray]  # each (steps + 1, ...): the last is the final state
+    actions: np.ndarray
+    rewards: np.ndarray
+    values: np.ndarray | None  # PPO's value estimates, (steps,)
+    log_probs: np.ndarray | None  # PPO's, (steps,)
+    terminated: bool  # ended by the environment (off track, lap complete, ...)
+    final_value: float  # the value of the final state, for a truncated episode
+    progress: float
+    status: str
+    lap_time: float | None
+    trace: list
+
+    @property
+    def steps(self) -> int:
+        return len(self.rewards)
+
+
+def decode_episode(payload: bytes, observation_space, action_space, ppo: bool) -> Episode:
+    """An episode from a rollout worker, every field checked; ValueError for anything amiss."""
+    try:
+        message = msgpack.unpackb(payload, raw=False, strict_map_key=True)
+    except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError) as error:
+        raise ValueError(f"not an episode: {error}") from None
+    if not isinstance(message, dict):
+        raise ValueError("not an episode")
+    arrays = message.get("arrays") or {}
+    rewards = decode_array(arrays.get("rewards"), "float32", (None,))
+    steps = len(rewards)
+    if not 1 <= steps <= 10_000:
+        raise ValueError(f"an episode of {steps} steps")
+    if not np.isfinite(rewards).all() or np.abs(rewards).max() > MAX_REWARD:
+        raise ValueError("rewards out of range")
+    observations = {}
+    for name, space in observation_space.spaces.items():
+        observation = decode_array(arrays.get(f"obs:{name}"), str(space.dtype),
+                                   (steps + 1, *space.shape))  # fmt: skip
+        if observation.dtype.kind == "f" and not np.isfinite(observation).all():
+            raise ValueError(f"{name} observations out of range")
+        observations[name] = observation
+    if hasattr(action_space, "n"):
+        actions = decode_array(arrays.get("actions"), "int64", (steps,))
+        if actions.min() < 0 or actions.max() >= action_space.n:
+            raise ValueError("actions out of range")
+    else:
+        actions = decode_array(arrays.get("actions"), "float32", (steps, *action_space.shape))
+        if not np.isfinite(actions).all():
+            raise ValueError("actions out of range")
+    values = log_probs = None
+    if ppo:
+        values = decode_array(arrays.get("values"), "float32", (steps,))
+        log_probs = decode_array(arrays.get("log_probs"), "float32", (steps,))
+        if not (np.isfinite(values).all() and np.isfinite(log_probs).all()):
+            raise ValueError("values out of range")
+    final_value = float(message.get("final_value", 0.0))
+    progress = float(message.get("progress", 0.0))
+    if not (np.isfinite(final_value) and 0.0 <= progress <= 100.0):
+        raise ValueError("summary out of range")
+    lap_time = message.get("lap_time")
+    return Episode(
+        worker=int(message.get("worker", 0)),
+        version=int(message.get("version", -1)),
+        observations=observations,
+        actions=actions,
+        rewards=rewards,
+        values=values,
+        log_probs=log_probs,
+        terminated=bool(message.get("terminated")),
+        final_value=final_value,
+        progress=progress,
+        status=str(message.get("status", ""))[:20],
+        lap_time=float(lap_time) if isinstance(lap_time, int | float) and lap_time > 0 else None,
+        trace=list(message.get("trace") or [])[:10_001],
+    )

@@ -1,0 +1,81 @@
+"""A training job's lease: one trainer run at a time, and only the current one may write.
+
+A trainer run takes the lease by raising the job's attempt counter, and renews it while it works;
+every write it makes is conditional on that attempt. A second delivery of the same task finds the
+lease held and returns; a run whose worker died leaves the lease to expire, and the next delivery
+takes the job over with a higher attempt (and resumes from its last checkpoint), after which the
+old run, were it still alive, can no longer write.
+"""
+
+from __future__ import annotations
+
+from datetime import timedelta
+
+from django.db import transaction
+from django.utils import timezone
+
+from training.models import JobLogLine, TrainingJob
+
+LEASE = timedelta(seconds=45)
+
+
+class LeaseLost(Exception):
+    """Another run holds the job now; this one must stop without writing."""
+
+
+def lease_acquire(*, job_id: int, owner: str) -> TrainingJob | None:
+    """The job with its lease taken by ``owner`` (attempt raised), or None when the job has ended,
+    vanished, or another run holds a live lease."""
+    now = timezone.now()
+    with transaction.atomic():
+        job = (
+            TrainingJob.objects.select_for_update()
+            .select_related("model")
+            .filter(pk=job_id)
+            .first()
+        )
+        if job is None or not job.is_active:
+            return None
+        if job.lease_owner and job.lease_expires and job.lease_expires > now:
+            return None
+        job.attempt += 1
+        job.lease_owner = owner
+        job.lease_expires = now + LEASE
+        job.save(update_fields=["attempt", "lease_owner", "lease_expires"])
+    return job
+
+
+def lease_renew(job: TrainingJob) -> None:
+    """Extend the lease; ``LeaseLost`` if another run has taken the job."""
+    write(job, lease_expires=timezone.now() + LEASE)
+
+
+def write(job: TrainingJob, **fields) -> None:
+    """Update the job's row, only while ``job``'s attempt holds the lease; mirror on ``job``."""
+    updated = TrainingJob.objects.filter(
+        pk=job.pk, attempt=job.attempt, lease_owner=job.lease_owner
+    ).update(**fields)
+    if updated != 1:
+        raise LeaseLost(f"training job {job.pk} is held by another run")
+    for name, value in fields.items():
+        setattr(job, name, value)
+
+
+def release(job: TrainingJob) -> None:
+    TrainingJob.objects.filter(pk=job.pk, attempt=job.attempt).update(lease_expires=None)
+
+
+def log(job: TrainingJob, text: str, level: str = "info") -> None:
+    JobLogLine.objects.create(job=job, text=text[:500], level=level)
+
+
+def queue_position(job: TrainingJob) -> int | None:
+    """1 for the next job to start; None when the job is not waiting."""
+    if job.status != TrainingJob.Status.QUEUED:
+        return None
+    return (
+        TrainingJob.objects.filter(
+            status=TrainingJob.Status.QUEUED, created_at__lt=job.created_at
+        ).count()
+        + 1
+    )

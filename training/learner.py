@@ -1,0 +1,247 @@
+"""The trainer's side of learning: a stable-baselines3 PPO or SAC fed from the experience buffer.
+
+SB3 builds the policy (our DeepRacer networks as its features extractor), the optimiser and the
+buffers; experience does not come from SB3's own rollout collection but from the rollout workers,
+through Redis, one checked episode at a time. PPO's update is ours so that DeepRacer's choice of
+value loss (Huber or MSE) is honoured; SAC's is SB3's. Weights go out as safetensors, never pickle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium
+import numpy as np
+import torch
+from safetensors.torch import load as load_tensors
+from safetensors.torch import save as save_tensors
+from stable_baselines3 import PPO, SAC
+from stable_baselines3.common.buffers import DictRolloutBuffer
+from stable_baselines3.common.logger import configure as configure_logger
+from stable_baselines3.common.vec_env import DummyVecEnv
+from torch.nn import functional
+
+from training import hyperparameters as hp
+from training.experience import Episode
+from training.networks import policy_kwargs
+
+GAE_LAMBDA = 0.95
+CLIP_RANGE = 0.2
+REPLAY_SIZE = 10_000  # [transitions] SAC's replay buffer
+
+
+class SpacesOnly(gymnasium.Env):
+    """An environment that only has spaces: what SB3 needs to build a model that learns from
+    experience collected elsewhere."""
+
+    def __init__(self, observation_space, action_space) -> None:
+        self.observation_space, self.action_space = observation_space, action_space
+
+    def reset(self, *, seed=None, options=None):
+        raise RuntimeError("experience comes from the rollout workers")
+
+    def step(self, action):
+        raise RuntimeError("experience comes from the rollout workers")
+
+
+class DeepRacerPPO(PPO):
+    """SB3's PPO with DeepRacer's choice of value loss."""
+
+    def __init__(self, *args, value_loss: str = "huber", **kwargs) -> None:
+        self.value_loss = value_loss
+        super().__init__(*args, **kwargs)
+
+    def train(self) -> None:
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        clip = self.clip_range(self._current_progress_remaining)
+        value_loss_of = (
+            functional.smooth_l1_loss if self.value_loss == "huber" else functional.mse_loss
+        )
+        discrete = isinstance(self.action_space, gymnasium.spaces.Discrete)
+        losses = []
+        for _ in range(self.n_epochs):
+            for batch in self.rollout_buffer.get(self.batch_size):
+                actions = batch.actions.long().flatten() if discrete else batch.actions
+                values, log_prob, entropy = self.policy.evaluate_actions(
+                    batch.observations, actions
+                )
+                advantages = batch.advantages
+                if len(advantages) > 1:
+                    advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+                ratio = torch.exp(log_prob - batch.old_log_prob)
+                policy_loss = -torch.min(
+                    advantages * ratio, advantages * torch.clamp(ratio, 1 - clip, 1 + clip)
+                ).mean()
+                value_loss = value_loss_of(values.flatten(), batch.returns)
+                entropy_loss = -(entropy if entropy is not None else -log_prob).mean()
+                loss = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+                self.policy.optimizer.step()
+                losses.append((policy_loss.item(), value_loss.item(), entropy_loss.item()))
+        self._n_updates += self.n_epochs
+        self.last_losses = dict(zip(("policy", "value", "entropy"), np.mean(losses, axis=0),
+                                    strict=True)) if losses else {}  # fmt: skip
+
+
+@dataclass
+class Update:
+    episodes: int
+    steps: int
+    reward: float  # average per episode
+    completion: float  # average progress
+    best_lap_time: float | None
+
+
+class Learner:
+    """One job's model: built from its settings, trained on episodes, saved as safetensors."""
+
+    def __init__(
+        self, *, algorithm: str, hyperparameters: dict, network: str,
+        observation_space, action_space, seed: int = 0, device: str = "auto",
+    ) -> None:  # fmt: skip
+        self.algorithm = algorithm
+        self.hyperparameters = hyperparameters
+        env = DummyVecEnv([lambda: SpacesOnly(observation_space, action_space)])
+        kwargs = policy_kwargs(network)
+        h = hyperparameters
+        if algorithm == hp.PPO:
+            self.model = DeepRacerPPO(
+                "MultiInputPolicy", env, n_steps=h["batch_size"], batch_size=h["batch_size"],
+                n_epochs=h["num_epochs"], learning_rate=h["lr"], ent_coef=h["beta_entropy"],
+                gamma=h["discount_factor"], gae_lambda=GAE_LAMBDA, clip_range=CLIP_RANGE,
+                value_loss=h["loss_type"], policy_kwargs=kwargs, seed=seed, device=device,
+            )  # fmt: skip
+        else:
+            kwargs["net_arch"] = {"pi": [64], "qf": [64]}
+            self.model = SAC(
+                "MultiInputPolicy", env, learning_rate=h["lr"], buffer_size=REPLAY_SIZE,
+                learning_starts=0, batch_size=h["batch_size"], ent_coef=h["sac_alpha"],
+                gamma=h["discount_factor"], policy_kwargs=kwargs, seed=seed, device=device,
+            )  # fmt: skip
+        self.model.set_logger(configure_logger(None, []))  # the job's metrics are ours
+        self.observation_space, self.action_space = observation_space, action_space
+
+    @property
+    def device(self) -> str:
+        return str(self.model.device)
+
+    # Weights
+
+    def policy_weights(self) -> bytes:
+        """What the rollout workers need to act: the whole policy (PPO) or the actor (SAC)."""
+        module = self.model.policy if self.algorithm == hp.PPO else self.model.policy.actor
+        return _to_bytes(module.state_dict())
+
+    def checkpoint(self) -> bytes:
+        """Everything needed to go on learning: the policy with its critics."""
+        return _to_bytes(self.model.policy.state_dict())
+
+    def restore(self, checkpoint: bytes) -> None:
+        load_weights(self.model.policy, checkpoint)
+
+    # Learning
+
+    def learn(self, episodes: list[Episode]) -> Update:
+        if self.algorithm == hp.PPO:
+            self._learn_ppo(episodes)
+        else:
+            self._learn_sac(episodes)
+        laps = [e.lap_time for e in episodes if e.lap_time]
+        return Update(
+            episodes=len(episodes),
+            steps=sum(e.steps for e in episodes),
+            reward=float(np.mean([e.rewards.sum() for e in episodes])),
+            completion=float(np.mean([e.progress for e in episodes])),
+            best_lap_time=min(laps) if laps else None,
+        )
+
+    def _learn_ppo(self, episodes: list[Episode]) -> None:
+        gamma = self.hyperparameters["discount_factor"]
+        advantages, returns = [], []
+        for episode in episodes:
+            a = _gae(episode, gamma, GAE_LAMBDA)
+            advantages.append(a)
+            returns.append(a + episode.values)
+        steps = sum(e.steps for e in episodes)
+        model = self.model
+        buffer = DictRolloutBuffer(
+            steps, self.observation_space, self.action_space, device=model.device,
+            gamma=gamma, gae_lambda=GAE_LAMBDA, n_envs=1,
+        )  # fmt: skip
+        for name in buffer.observations:
+            buffer.observations[name][:, 0] = np.concatenate(
+                [e.observations[name][:-1] for e in episodes]
+            ).reshape(steps, *buffer.obs_shape[name])
+        buffer.actions[:, 0] = np.concatenate([e.actions for e in episodes]).reshape(steps, -1)
+        buffer.rewards[:, 0] = np.concatenate([e.rewards for e in episodes])
+        buffer.values[:, 0] = np.concatenate([e.values for e in episodes])
+        buffer.log_probs[:, 0] = np.concatenate([e.log_probs for e in episodes])
+        buffer.advantages[:, 0] = np.concatenate(advantages)
+        buffer.returns[:, 0] = np.concatenate(returns)
+        starts = np.zeros(steps, dtype=np.float32)
+        starts[np.cumsum([0] + [e.steps for e in episodes[:-1]])] = 1.0
+        buffer.episode_starts[:, 0] = starts
+        buffer.pos, buffer.full = steps, True
+        model.rollout_buffer = buffer
+        model._current_progress_remaining = 1.0
+        model.train()
+
+    def _learn_sac(self, episodes: list[Episode]) -> None:
+        model = self.model
+        for episode in episodes:
+            for t in range(episode.steps):
+                done = t == episode.steps - 1 and episode.terminated
+                model.replay_buffer.add(
+                    {k: v[t][None] for k, v in episode.observations.items()},
+                    {k: v[t + 1][None] for k, v in episode.observations.items()},
+                    episode.actions[t][None],
+                    episode.rewards[t : t + 1],
+                    np.array([done]),
+                    [{}],
+                )
+        gradient_steps = sum(e.steps for e in episodes)
+        model.train(gradient_steps=gradient_steps, batch_size=self.hyperparameters["batch_size"])
+
+
+def _gae(episode: Episode, gamma: float, lam: float) -> np.ndarray:
+    """Generalised advantage estimates of one episode, bootstrapped when it was truncated."""
+    values, rewards = episode.values, episode.rewards
+    next_values = np.append(values[1:], 0.0 if episode.terminated else episode.final_value)
+    deltas = rewards + gamma * next_values - values
+    advantages = np.zeros_like(rewards)
+    running = 0.0
+    for t in range(len(rewards) - 1, -1, -1):
+        running = deltas[t] + gamma * lam * running
+        advantages[t] = running
+    return advantages
+
+
+def _to_bytes(state: dict) -> bytes:
+    """A state dict as safetensors; names that alias a tensor already saved are left out (PPO's
+    policy reaches one features extractor by three names)."""
+    seen, unique = set(), {}
+    for name, tensor in state.items():
+        pointer = (tensor.data_ptr(), tensor.dtype, tuple(tensor.shape))
+        if pointer not in seen:
+            seen.add(pointer)
+            unique[name] = tensor.detach().cpu().contiguous()
+    return save_tensors(unique)
+
+
+def load_weights(module: torch.nn.Module, data: bytes) -> None:
+    """Load safetensors ``data`` saved by ``_to_bytes`` into ``module``; every parameter must be
+    there, under its own name or an alias of one."""
+    tensors = load_tensors(data)
+    missing, unexpected = module.load_state_dict(tensors, strict=False)
+    if unexpected:
+        raise ValueError(f"weights for another network: {unexpected[:3]}")
+    state = module.state_dict()
+    loaded = {(state[name].data_ptr(), state[name].dtype) for name in tensors if name in state}
+    orphans = [
+        name for name in missing if (state[name].data_ptr(), state[name].dtype) not in loaded
+    ]
+    if orphans:
+        raise ValueError(f"weights missing for {orphans[:3]}")

@@ -1,0 +1,88 @@
+"""A rollout worker: the loop of the ``training.rollout`` task, one per simulation slot of a job.
+
+It starts a sandbox child that holds the simulator, the policy network and the racer's reward
+function, keeps the child's weights at the newest published version, and relays what the child
+drives: training episodes to the experience buffer, evaluation results after each update, and
+what the reward function printed. It never writes the job's rows; a failure of the racer's code
+is reported to the trainer, which fails the job.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import msgpack
+import redis
+
+from console.workers import redis_client
+from training import hyperparameters as hp
+from training.experience import JobChannel
+from training.models import TrainingJob
+from training.sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
+
+logger = logging.getLogger(__name__)
+
+REWARD_CALL_LIMIT = 1.0  # [s]
+MEMORY_ALLOWANCE = 1024 * MiB  # beyond the child's size with torch and the simulator loaded
+
+
+def run(job_id: int, worker: int, attempt: int, track: str) -> None:
+    job = TrainingJob.objects.select_related("model").filter(pk=job_id).first()
+    if job is None or not job.is_active or job.attempt != attempt:
+        logger.info("Rollout %s/%s is stale or its job ended; nothing to do", job_id, worker)
+        return
+    model = job.model
+    channel = JobChannel(redis_client(timeout=30.0), job_id)
+    try:
+        verified()
+    except SandboxUnavailable as error:
+        channel.report_failure(str(error))
+        return
+    policy = {"algorithm": model.algorithm, "network": model.network, "seed": model.seed + worker}
+    try:
+        with Sandbox(
+            env=model.environment_settings(track), policy=policy,
+            call_timeout=REWARD_CALL_LIMIT, memory_allowance=MEMORY_ALLOWANCE,
+        ) as sandbox:  # fmt: skip
+            sandbox.load(model.reward_function)
+            _drive(sandbox, channel, model.algorithm, worker, attempt)
+    except SandboxFailure as failure:
+        channel.report_failure(f"Your reward function failed {_where(failure, worker)}: {failure}")
+    except redis.RedisError as error:
+        logger.warning("Rollout %s/%s lost Redis: %s", job_id, worker, error)
+
+
+def _drive(
+    sandbox: Sandbox, channel: JobChannel, algorithm: str, worker: int, attempt: int
+) -> None:
+    version = -1
+    evaluated = -1
+    while not channel.should_stop(attempt):
+        channel.beat(worker)
+        published = channel.policy_version()
+        if published > version:
+            published, weights, _ = channel.fetch_policy()
+            sandbox.set_weights(published, weights)
+            version = published
+        if worker == 0 and version > 0 and evaluated < version:
+            for _ in range(_evaluations(channel)):
+                summary = sandbox.episode("evaluate", worker)["summary"]
+                channel.push_evaluation(msgpack.packb({**summary, "version": version}))
+                channel.beat(worker)
+            evaluated = version
+            continue
+        mode = "random" if version == 0 and algorithm == hp.SAC else "explore"
+        reply = sandbox.episode(mode, worker)
+        channel.push_episode(reply["payload"])
+        channel.push_log(list(sandbox.logs))
+        sandbox.logs.clear()
+
+
+def _evaluations(channel: JobChannel) -> int:
+    return channel.fetch_policy()[2]
+
+
+def _where(failure: SandboxFailure, worker: int) -> str:
+    return (
+        f"in simulation worker {worker + 1}" if failure.step is None else f"(worker {worker + 1})"
+    )

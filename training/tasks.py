@@ -1,0 +1,46 @@
+"""Celery tasks of training: adapters that load ids and call the trainer or a rollout worker.
+
+The trainer and rollout modules (torch, the simulator) are imported when a task runs, so the web
+process, which only enqueues, never loads them.
+"""
+
+from __future__ import annotations
+
+import os
+
+from celery import shared_task
+
+LONGEST_JOB = 24 * 3600  # [s] the longest training time a racer may ask for
+
+
+@shared_task(
+    name="training.train",
+    bind=True,
+    acks_late=True,
+    ignore_result=True,
+    soft_time_limit=LONGEST_JOB + 900,
+    time_limit=LONGEST_JOB + 1200,
+)
+def train(self, job_id: int) -> None:
+    from training import trainer
+
+    owner = f"{self.request.hostname}:{os.getpid()}"
+    trainer.run(job_id, owner=owner, start_rollouts=start_rollout)
+
+
+@shared_task(
+    name="training.rollout",
+    acks_late=True,
+    ignore_result=True,
+    soft_time_limit=LONGEST_JOB + 900,
+    time_limit=LONGEST_JOB + 1200,
+)
+def rollout(job_id: int, worker: int, attempt: int, track: str) -> None:
+    from training import rollouts
+
+    rollouts.run(job_id, worker, attempt, track)
+
+
+def start_rollout(job, slot) -> None:
+    """Enqueue the rollout worker for ``slot`` of ``job`` (a ``trainer.Slot``)."""
+    rollout.delay(job.pk, slot.index, job.attempt, slot.track)

@@ -1,0 +1,395 @@
+"""The trainer: the loop of one training job, run by the ``training.train`` task.
+
+It holds the job's lease, builds the learner, publishes weights, starts the rollout workers, and
+then learns from the episodes they push to Redis, one policy update at a time, recording each
+iteration, checkpointing and watching its workers, until the racer stops it, the time limit
+comes, or something fails. It is the only writer of the job's rows while it holds the lease.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+
+import gymnasium
+import msgpack
+import redis
+from django.db import transaction
+from django.utils import timezone
+
+import simulator
+from console.workers import redis_client
+from simulator.trace import SimTraceRow, to_csv
+from training import artifacts, jobs
+from training import hyperparameters as hp
+from training.experience import Episode, JobChannel, decode_episode
+from training.jobs import LeaseLost
+from training.learner import Learner
+from training.models import Iteration, RLModel, TrainingJob
+
+logger = logging.getLogger(__name__)
+
+EVALUATION_EPISODES = 5
+CHECK_EVERY = 3.0  # [s] between lease renewals, stop checks and worker checks
+WORKER_SILENCE = 30.0  # [s] after which a rollout worker is taken for dead
+WORKER_STARTUP = 90.0  # [s] a new rollout worker may take to send its first heartbeat
+REPLACEMENTS = 2  # per worker slot, before the job carries on without it
+
+
+class JobFailed(Exception):
+    """The job cannot go on; the message is for the racer."""
+
+
+@dataclass
+class Slot:
+    """A rollout worker the job wants: its track, when it was (re)started, how often."""
+
+    index: int
+    track: str
+    started: float = field(default_factory=time.monotonic)
+    replacements: int = 0
+    gone: bool = False
+
+
+def run(job_id: int, owner: str, start_rollouts) -> None:
+    """Train job ``job_id`` while this run holds its lease. ``start_rollouts(job, slot)`` enqueues a
+    rollout worker (the task module passes it, so this module stays free of Celery)."""
+    job = jobs.lease_acquire(job_id=job_id, owner=owner)
+    if job is None:
+        logger.info("Training job %s is finished or held by another run; nothing to do", job_id)
+        return
+    trainer = Trainer(job, start_rollouts)
+    try:
+        trainer.train()
+    except LeaseLost:
+        logger.warning("Training job %s was taken over by another run; this one stops", job_id)
+    except JobFailed as failure:
+        trainer.finish(TrainingJob.Status.FAILED, reason=str(failure))
+    except redis.RedisError as error:
+        trainer.finish(
+            TrainingJob.Status.FAILED, reason=f"Redis was lost during training ({error})."
+        )
+    except Exception:
+        logger.exception("Training job %s failed", job_id)
+        trainer.finish(
+            TrainingJob.Status.FAILED,
+            reason="The trainer failed unexpectedly; the "
+            "error is in the worker's log. Your last checkpoint is kept.",
+        )
+
+
+class Trainer:
+    def __init__(self, job: TrainingJob, start_rollouts) -> None:
+        self.job = job
+        self.model: RLModel = job.model
+        self.start_rollouts = start_rollouts
+        self.channel = JobChannel(redis_client(timeout=30.0), job.pk)
+        self.ppo = self.model.algorithm == hp.PPO
+        self.slots = [Slot(0, self.model.track.name)] + [
+            Slot(i, name) for i, name in enumerate(self.model.extra_tracks, start=1)
+        ]
+        self.slots += [
+            Slot(i, self.model.track.name) for i in range(len(self.slots), self.model.workers)
+        ]
+        self.metrics: list[dict] = []
+        self.best: tuple[float, float] | None = None  # (evaluation completion, -lap time)
+
+    # The loop
+
+    def train(self) -> None:
+        job, model = self.job, self.model
+        first_run = job.started_at is None
+        jobs.write(
+            job,
+            status=TrainingJob.Status.INITIALIZING,
+            started_at=job.started_at or timezone.now(),
+            message="Preparing the trainer",
+        )
+        RLModel.objects.filter(pk=model.pk).update(status=RLModel.Status.TRAINING)
+        env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+        spaces = env.observation_space, env.action_space
+        env.close()
+        self.learner = Learner(
+            algorithm=model.algorithm,
+            hyperparameters=model.hyperparameters,
+            network=model.network,
+            observation_space=spaces[0],
+            action_space=spaces[1],
+            seed=model.seed,
+        )
+        self.spaces = spaces
+        if job.last_checkpoint:
+            self.learner.restore(artifacts.read(job.last_checkpoint))
+            jobs.log(
+                job,
+                f"Resumed from the checkpoint of iteration {job.iterations} "
+                f"(attempt {job.attempt}).",
+            )
+        else:
+            artifacts.write_model_files(model)
+            self._checkpoint(0)
+        self.version = job.weights_version
+        self.channel.start(job.attempt)
+        self.channel.publish(self.version, self.learner.policy_weights())
+        for slot in self.slots:
+            self.start_rollouts(job, slot)
+        tracks = ", ".join(sorted({slot.track for slot in self.slots}))
+        jobs.write(
+            job,
+            status=TrainingJob.Status.IN_PROGRESS,
+            message=f"Training with {len(self.slots)} simulation worker(s) on {tracks}",
+        )
+        if first_run:
+            jobs.log(
+                job,
+                f"Training started: {model.get_algorithm_display()}, "
+                f"{len(self.slots)} simulation worker(s), on {self.learner.device}.",
+            )
+        self._loop()
+        self.finish(TrainingJob.Status.COMPLETED)
+
+    def _loop(self) -> None:
+        job, model = self.job, self.model
+        between = model.hyperparameters["num_episodes_between_training"]
+        collected: list[Episode] = []
+        session_started = time.monotonic()
+        base_seconds = job.training_seconds
+        last_check = 0.0
+        while True:
+            now = time.monotonic()
+            if now - last_check >= CHECK_EVERY:
+                last_check = now
+                spent = base_seconds + now - session_started
+                jobs.write(job, training_seconds=spent, lease_expires=timezone.now() + jobs.LEASE)
+                if self._stop_requested():
+                    jobs.log(job, "Stopped by the racer.")
+                    return
+                if spent >= model.max_minutes * 60:
+                    jobs.log(job, f"Reached the maximum training time of {model.max_minutes} min.")
+                    return
+                failure = self.channel.failure()
+                if failure:
+                    raise JobFailed(failure)
+                self._watch_workers()
+                self._file_logs()
+                self._take_evaluations()
+            for payload in self.channel.pop_episodes(limit=50, wait=1.0):
+                episode = self._decode(payload)
+                if episode is None or (self.ppo and episode.version != self.version):
+                    continue  # PPO learns on-policy: episodes of older weights are dropped
+                collected.append(episode)
+            if len(collected) >= between:
+                self._update(collected)
+                collected = []
+
+    def _update(self, episodes: list[Episode]) -> None:
+        started = time.monotonic()
+        update = self.learner.learn(episodes)
+        self.version += 1
+        number = self.version
+        self.channel.publish(self.version, self.learner.policy_weights(), EVALUATION_EPISODES)
+        wall = time.monotonic() - started
+        with transaction.atomic():
+            Iteration.objects.create(
+                job=self.job,
+                number=number,
+                reward=update.reward,
+                completion=update.completion,
+                best_lap_time=update.best_lap_time,
+                episodes=update.episodes,
+                steps=update.steps,
+                wall_seconds=wall,
+            )
+            checkpoint = self._checkpoint(number)
+            jobs.write(
+                self.job,
+                weights_version=self.version,
+                iterations=number,
+                episodes=self.job.episodes + update.episodes,
+                steps=self.job.steps + update.steps,
+                last_checkpoint=checkpoint,
+            )
+        self._record_training(number, episodes)
+        jobs.log(
+            self.job,
+            f"Iteration {number}: {update.episodes} episodes, {update.steps} steps, "
+            f"average progress {update.completion:.1f}%, learnt in {wall:.1f} s.",
+        )
+
+    # Checkpoints, metrics, traces
+
+    def _checkpoint(self, number: int) -> str:
+        name = artifacts.save(
+            self.model, f"checkpoints/iteration-{number}.safetensors", self.learner.checkpoint()
+        )
+        if number == 0:
+            jobs.write(
+                self.job, last_checkpoint=name, best_checkpoint=self.job.best_checkpoint or name
+            )
+        return name
+
+    def _record_training(self, number: int, episodes: list[Episode]) -> None:
+        now = time.time()
+        episode_base = self.job.episodes - len(episodes)
+        for offset, episode in enumerate(episodes):
+            self.metrics.append(
+                {
+                    "reward_score": round(float(episode.rewards.sum()), 4),
+                    "metric_time": int(now * 1000),
+                    "start_time": int((now - episode.steps / 15) * 1000),
+                    "elapsed_time_in_milliseconds": int(episode.steps / 15 * 1000),
+                    "episode": episode_base + offset + 1,
+                    "trial": offset + 1,
+                    "phase": "training",
+                    "completion_percentage": round(episode.progress),
+                    "episode_status": episode.status,
+                }
+            )
+        self._save_metrics()
+        rows = [
+            SimTraceRow(*row) for episode in episodes for row in episode.trace if len(row) == 19
+        ]
+        artifacts.save(self.model, f"training-simtrace/{number}-iteration.csv", to_csv(rows))
+
+    def _save_metrics(self) -> None:
+        document = {"metrics": self.metrics, "best_model_metric": "progress"}
+        artifacts.save(self.model, "metrics/training_metrics.json", json.dumps(document))
+
+    def _take_evaluations(self) -> None:
+        by_version: dict[int, list[dict]] = {}
+        for payload in self.channel.pop_evaluations():
+            try:
+                result = msgpack.unpackb(payload, raw=False)
+                version = int(result["version"])
+                progress = min(max(float(result["progress"]), 0.0), 100.0)
+            except (ValueError, KeyError, TypeError, msgpack.ExtraData, msgpack.FormatError):
+                continue
+            lap = result.get("lap_time")
+            by_version.setdefault(version, []).append(
+                {
+                    "progress": progress,
+                    "lap_time": float(lap) if isinstance(lap, int | float) else None,
+                    "status": str(result.get("status", ""))[:20],
+                    "steps": int(result.get("steps", 0)),
+                }
+            )
+        for version, results in by_version.items():
+            self._record_evaluation(version, results)
+
+    def _record_evaluation(self, version: int, results: list[dict]) -> None:
+        completion = sum(r["progress"] for r in results) / len(results)
+        laps = [r["lap_time"] for r in results if r["lap_time"]]
+        row = Iteration.objects.filter(job=self.job, number=version).first()
+        if row is None:
+            return
+        Iteration.objects.filter(pk=row.pk).update(evaluation_completion=completion)
+        now = time.time()
+        for trial, result in enumerate(results, start=1):
+            self.metrics.append(
+                {
+                    "reward_score": 0,
+                    "metric_time": int(now * 1000),
+                    "start_time": int((now - result["steps"] / 15) * 1000),
+                    "elapsed_time_in_milliseconds": int(result["steps"] / 15 * 1000),
+                    "episode": self.job.episodes,
+                    "trial": trial,
+                    "phase": "evaluation",
+                    "completion_percentage": round(result["progress"]),
+                    "episode_status": result["status"],
+                }
+            )
+        self._save_metrics()
+        score = (completion, -min(laps) if laps else float("-inf"))
+        if self.best is None or score > self.best:
+            self.best = score
+            jobs.write(
+                self.job,
+                best_checkpoint=artifacts.path(
+                    self.model, f"checkpoints/iteration-{version}.safetensors"
+                ),
+            )
+
+    # Workers and the racer
+
+    def _watch_workers(self) -> None:
+        beats = self.channel.heartbeats()
+        now, wall = time.monotonic(), time.time()
+        for slot in self.slots:
+            if slot.gone:
+                continue
+            last = beats.get(slot.index)
+            silent = (
+                (now - slot.started > WORKER_STARTUP)
+                if last is None
+                else (wall - last > WORKER_SILENCE)
+            )
+            if not silent:
+                continue
+            if slot.replacements < REPLACEMENTS:
+                slot.replacements += 1
+                slot.started = now
+                jobs.log(
+                    self.job,
+                    f"Simulation worker {slot.index + 1} stopped answering; "
+                    "starting a replacement.",
+                    "warning",
+                )
+                self.start_rollouts(self.job, slot)
+            else:
+                slot.gone = True
+                left = sum(not s.gone for s in self.slots)
+                if left == 0:
+                    raise JobFailed(
+                        "Every simulation worker stopped answering; check that a "
+                        "worker serves the simulation queue."
+                    )
+                message = f"Carrying on with {left} of {len(self.slots)} simulation workers"
+                jobs.log(self.job, message + ".", "warning")
+                jobs.write(self.job, message=message)
+
+    def _stop_requested(self) -> bool:
+        return TrainingJob.objects.filter(pk=self.job.pk, stop_requested=True).exists()
+
+    def _file_logs(self) -> None:
+        for line in self.channel.pop_log():
+            jobs.log(self.job, line, "reward")
+
+    def _decode(self, payload: bytes) -> Episode | None:
+        try:
+            return decode_episode(payload, *self.spaces, ppo=self.ppo)
+        except ValueError as error:
+            jobs.log(self.job, f"An episode was malformed and was dropped: {error}", "warning")
+            return None
+
+    # The end
+
+    def finish(self, status: str, reason: str = "") -> None:
+        job = self.job
+        try:
+            self.channel.request_stop()
+            self.channel.expire()
+        except redis.RedisError:
+            pass
+        try:
+            jobs.write(job, status=TrainingJob.Status.STOPPING, message="Saving the model")
+            if status == TrainingJob.Status.COMPLETED:
+                artifacts.write_model_files(self.model)
+            jobs.write(
+                job,
+                status=status,
+                finished_at=timezone.now(),
+                failure_reason=reason,
+                message="",
+                lease_expires=None,
+            )
+        except LeaseLost:
+            return
+        if reason:
+            jobs.log(job, reason, "error")
+        has_checkpoint = bool(job.last_checkpoint)
+        ready = status == TrainingJob.Status.COMPLETED or has_checkpoint
+        RLModel.objects.filter(pk=self.model.pk).update(
+            status=RLModel.Status.READY if ready else RLModel.Status.ERROR
+        )
