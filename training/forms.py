@@ -1,6 +1,9 @@
+import json
+
 from django import forms
 
-from training.models import Track, Vehicle
+from training import hyperparameters
+from training.models import Algorithm, Network, RaceType, Track, Vehicle
 from training.rewards import MAX_SOURCE_SIZE
 
 
@@ -48,3 +51,168 @@ class RewardValidationForm(forms.Form):
 
     def first_error(self) -> str:
         return next(iter(self.errors.values()))[0]
+
+
+class ModelCreateForm(forms.Form):
+    """The create-model page: each field as a racer fills it in. The settings are checked as a
+    whole by ``training.configuration``; its errors come back onto these fields."""
+
+    name = forms.CharField(max_length=64, help_text="Letters, digits and hyphens.")
+    description = forms.CharField(
+        max_length=255, required=False, widget=forms.Textarea(attrs={"rows": 2})
+    )
+    track = forms.ModelChoiceField(
+        queryset=Track.objects.all(),
+        to_field_name="name",
+        empty_label=None,
+        widget=forms.RadioSelect,
+    )
+    direction = forms.ChoiceField(
+        choices=[("counterclockwise", "Counter-clockwise"), ("clockwise", "Clockwise")]
+    )
+    race_type = forms.ChoiceField(
+        choices=RaceType.choices, widget=forms.RadioSelect, initial=RaceType.TIME_TRIAL
+    )
+    box_count = forms.IntegerField(
+        label="Boxes", min_value=1, max_value=6, initial=3, required=False
+    )
+    box_randomize = forms.BooleanField(label="New box positions every episode", required=False)
+    bot_count = forms.IntegerField(
+        label="Bot cars", min_value=1, max_value=6, initial=3, required=False
+    )
+    bot_speed = forms.FloatField(
+        label="Bot speed [m/s]", min_value=0.2, max_value=6, initial=0.5, required=False
+    )
+    bot_lane_changes = forms.BooleanField(label="Bots change lanes", required=False)
+    vehicle = forms.ModelChoiceField(
+        queryset=Vehicle.objects.none(),
+        required=False,
+        empty_label="No vehicle: choose sensors below",
+        help_text="A vehicle from your garage brings its sensors.",
+    )
+    camera = forms.ChoiceField(
+        choices=Vehicle.Camera.choices,
+        widget=forms.RadioSelect,
+        initial=Vehicle.Camera.FRONT_FACING_CAMERA,
+    )
+    lidar = forms.ChoiceField(
+        choices=Vehicle.Lidar.choices, required=False, widget=forms.RadioSelect, initial=""
+    )
+    network = forms.ChoiceField(
+        choices=Network.choices, widget=forms.RadioSelect, initial=Network.SHALLOW
+    )
+    action_space_type = forms.ChoiceField(
+        choices=[("discrete", "Discrete"), ("continuous", "Continuous")],
+        widget=forms.RadioSelect,
+        initial="discrete",
+    )
+    actions = forms.CharField(
+        required=False, widget=forms.HiddenInput, help_text="The discrete actions, as JSON."
+    )
+    steering_low = forms.FloatField(initial=-30, required=False)
+    steering_high = forms.FloatField(initial=30, required=False)
+    speed_low = forms.FloatField(initial=1.0, required=False)
+    speed_high = forms.FloatField(initial=2.0, required=False)
+    algorithm = forms.ChoiceField(
+        choices=Algorithm.choices, widget=forms.RadioSelect, initial=Algorithm.PPO
+    )
+    max_minutes = forms.IntegerField(label="Maximum training time [min]", initial=60)
+    workers = forms.IntegerField(label="Simulation workers", initial=1)
+    extra_tracks = forms.ModelMultipleChoiceField(
+        queryset=Track.objects.all(),
+        to_field_name="name",
+        required=False,
+        help_text="Train on more tracks at once: one extra simulation worker each.",
+    )
+    reward_function = forms.CharField(strip=False, widget=forms.Textarea)
+
+    def __init__(self, *args, owner, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.owner = owner
+        self.fields["vehicle"].queryset = Vehicle.objects.filter(owner=owner)
+        for algorithm, settings in hyperparameters.SETTINGS.items():
+            for setting in settings:
+                name = f"{algorithm}__{setting.name}"
+                if setting.choices:
+                    field = forms.TypedChoiceField(
+                        choices=[(c, c) for c in setting.choices],
+                        coerce=type(setting.default),
+                        initial=setting.default,
+                    )
+                else:
+                    field = forms.FloatField(initial=setting.default)
+                field.label = setting.label
+                field.required = False
+                self.fields[name] = field
+
+    def hyperparameter_fields(self, algorithm: str) -> list:
+        return [self[f"{algorithm}__{s.name}"] for s in hyperparameters.SETTINGS[algorithm]]
+
+    def settings(self) -> dict:
+        """The model's settings, in ``training.configuration``'s vocabulary."""
+        data = self.cleaned_data
+        vehicle = data.get("vehicle")
+        sensors = (
+            vehicle.sensors
+            if vehicle
+            else [data["camera"]] + ([data["lidar"]] if data.get("lidar") else [])
+        )
+        if data["action_space_type"] == "continuous":
+            action_space = {
+                "steering_angle": {
+                    "low": data.get("steering_low"),
+                    "high": data.get("steering_high"),
+                },
+                "speed": {"low": data.get("speed_low"), "high": data.get("speed_high")},
+            }
+        else:
+            try:
+                action_space = json.loads(data.get("actions") or "null")
+            except json.JSONDecodeError:
+                action_space = "unreadable"
+        algorithm = data["algorithm"]
+        return {
+            "name": data["name"],
+            "description": data.get("description", ""),
+            "track": data["track"].name,
+            "direction": data["direction"],
+            "race_type": data["race_type"],
+            "boxes": {"count": data.get("box_count") or 3, "randomize": data.get("box_randomize")},
+            "bots": {
+                "count": data.get("bot_count") or 3,
+                "speed": data.get("bot_speed") or 0.5,
+                "lane_changes": data.get("bot_lane_changes"),
+            },
+            "sensors": sensors,
+            "network": data["network"],
+            "action_space": action_space,
+            "algorithm": algorithm,
+            "hyperparameters": {
+                s.name: data.get(f"{algorithm}__{s.name}")
+                for s in hyperparameters.SETTINGS.get(algorithm, ())
+                if data.get(f"{algorithm}__{s.name}") not in (None, "")
+            },
+            "max_minutes": data["max_minutes"],
+            "workers": data["workers"],
+            "extra_tracks": [track.name for track in data.get("extra_tracks") or []],
+            "reward_function": data["reward_function"],
+        }
+
+    def add_setting_errors(self, errors: dict[str, str]) -> None:
+        """Put ``configuration.Invalid`` errors on the fields they concern."""
+        algorithm = self.cleaned_data.get("algorithm", "")
+        places = {
+            "sensors": "camera",
+            "boxes": "box_count",
+            "bots": "bot_count",
+            "action_space": "actions",
+            "cloned_from": None,
+        }
+        for setting, message in errors.items():
+            if setting.startswith("hyperparameters."):
+                field = f"{algorithm}__{setting.split('.', 1)[1]}"
+            else:
+                field = places.get(setting, setting)
+            if field == "actions" and self.cleaned_data.get("action_space_type") == "continuous":
+                field = "steering_low"
+            self.add_error(field if field in self.fields else None, message)

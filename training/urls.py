@@ -5,6 +5,10 @@ from training import views
 app_name = "training"
 urlpatterns = [
     path("models/", views.model_list, name="model-list"),
+    path("models/create/", views.model_create, name="model-create"),
+    path("models/<int:pk>/", views.model_detail, name="model-detail"),
+    path("models/<int:pk>/stop/", views.model_stop, name="model-stop"),
+    path("models/<int:pk>/files/<path:relative>", views.model_file, name="model-file"),
     path("garage/", views.garage, name="garage"),
     path("models/reward-function/", views.reward_editor, name="reward-editor"),
     path("models/reward-function/validate/", views.reward_validation, name="reward-validation"),

@@ -1,13 +1,19 @@
+import json
+
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
+from django.core.files.storage import default_storage
 from django.http import FileResponse, Http404, HttpRequest, HttpResponse, JsonResponse
-from django.shortcuts import redirect, render
+from django.shortcuts import get_object_or_404, redirect, render
 from django.views.decorators.cache import cache_control
 from django.views.decorators.http import require_POST, require_safe
 
+from simulator import config as sim_config
 from simulator import tracks as simulator_tracks
-from training import rewards, selectors, services
-from training.forms import RewardValidationForm, VehicleForm
+from training import artifacts, configuration, jobs, rewards, selectors, services
+from training.charts import iteration_chart
+from training.forms import ModelCreateForm, RewardValidationForm, VehicleForm
+from training.models import RLModel
 from training.sandbox import SandboxFailure, SandboxUnavailable, verified
 
 
@@ -82,3 +88,89 @@ def reward_validation(request: HttpRequest) -> JsonResponse:
     except SandboxFailure as error:
         return JsonResponse({"message": f"Validation could not run: {error}"}, status=503)
     return JsonResponse(result.as_dict())
+
+
+def _get_model_for_user(request: HttpRequest, pk: int) -> RLModel:
+    """The racer's own model, or 404: no view can forget whose model it is."""
+    return get_object_or_404(RLModel.objects.select_related("track"), pk=pk, owner=request.user)
+
+
+@login_required
+def model_create(request: HttpRequest) -> HttpResponse:
+    initial = {
+        "reward_function": rewards.EXAMPLES[0].source,
+        "actions": json.dumps(sim_config.DiscreteActions(
+            tuple((a["steering_angle"], a["speed"]) for a in sim_config.DEFAULT_ACTION_SPACE)
+        ).metadata()),
+        "track": "rookie-loop",
+    }  # fmt: skip
+    form = ModelCreateForm(request.POST or None, owner=request.user, initial=initial)
+    if request.method == "POST" and form.is_valid():
+        try:
+            model = services.model_create(owner=request.user, settings=form.settings())
+        except configuration.Invalid as invalid:
+            form.add_setting_errors(invalid.errors)
+        except SandboxUnavailable as error:
+            form.add_error("reward_function", str(error))
+        else:
+            messages.success(request, f"{model.name} is created; its training is queued.")
+            return redirect("training:model-detail", pk=model.pk)
+    return render(
+        request,
+        "training/model_create.html",
+        {
+            "form": form,
+            "ppo_fields": form.hyperparameter_fields("clipped_ppo"),
+            "sac_fields": form.hyperparameter_fields("sac"),
+            "tracks": selectors.tracks_available(),
+            "examples": rewards.EXAMPLES,
+            "example_sources": {example.slug: example.source for example in rewards.EXAMPLES},
+            "params": rewards.PARAMS,
+        },
+        status=400 if form.errors else 200,
+    )
+
+
+@login_required
+def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
+    model = _get_model_for_user(request, pk)
+    job = model.latest_job
+    iterations = list(job.iteration_rows.all()) if job else []
+    return render(
+        request,
+        "training/model_detail.html",
+        {
+            "model": model,
+            "job": job,
+            "queue_position": jobs.queue_position(job) if job else None,
+            "iterations": iterations,
+            "chart": iteration_chart(iterations),
+            "log_lines": list(job.log_lines.all().order_by("-at", "-pk")[:200]) if job else [],
+            "files": selectors.model_files(model=model),
+        },
+    )
+
+
+@login_required
+@require_POST
+def model_stop(request: HttpRequest, pk: int) -> HttpResponse:
+    model = _get_model_for_user(request, pk)
+    job = model.latest_job
+    if job is None or not job.is_active:
+        messages.error(request, "This model is not training.")
+    else:
+        services.training_stop(job=job)
+        messages.success(request, "Stopping: the model is saved from its last checkpoint.")
+    return redirect("training:model-detail", pk=model.pk)
+
+
+@login_required
+@require_safe
+def model_file(request: HttpRequest, pk: int, relative: str) -> FileResponse:
+    """One of the model's files (metrics, simulation traces), after the ownership check."""
+    model = _get_model_for_user(request, pk)
+    if relative not in {f.relative for f in selectors.model_files(model=model)}:
+        raise Http404("No such file")
+    name = artifacts.path(model, relative)
+    return FileResponse(default_storage.open(name, "rb"), as_attachment=True,
+                        filename=relative.replace("/", "-"))  # fmt: skip

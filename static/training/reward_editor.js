@@ -87,12 +87,12 @@ async function validate() {
   status.textContent = "Validating…";
   const body = new FormData();
   body.append("source", editor.getValue());
-  body.append("track", document.getElementById("reward-track").value);
+  body.append("track", document.querySelector(root.dataset.trackInput)?.value || "");
   try {
     const response = await fetch(root.dataset.validateUrl, {
       method: "POST",
       body,
-      headers: { "X-CSRFToken": root.querySelector("[name=csrfmiddlewaretoken]").value },
+      headers: { "X-CSRFToken": document.querySelector("[name=csrfmiddlewaretoken]").value },
       credentials: "same-origin",
     });
     const result = await response.json();

@@ -1,0 +1,93 @@
+import json
+
+import pytest
+from django.urls import reverse
+
+from training import hyperparameters
+from training.models import RLModel, TrainingJob
+from training.rewards import EXAMPLES
+from training.services import model_create
+
+pytestmark = pytest.mark.django_db
+
+
+def form_data(**changes) -> dict:
+    data = {
+        "name": "first-model", "description": "", "track": "rookie-loop",
+        "direction": "counterclockwise", "race_type": "TIME_TRIAL", "camera": "FRONT_FACING_CAMERA",
+        "lidar": "", "network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+        "action_space_type": "discrete",
+        "actions": json.dumps([{"steering_angle": a, "speed": 1} for a in (-20, 0, 20)]),
+        "steering_low": -30, "steering_high": 30, "speed_low": 1, "speed_high": 2,
+        "algorithm": "clipped_ppo", "max_minutes": 60, "workers": 1,
+        "reward_function": EXAMPLES[0].source,
+    }  # fmt: skip
+    for algorithm, values in (("clipped_ppo", hyperparameters.defaults("clipped_ppo")),
+                              ("sac", hyperparameters.defaults("sac"))):  # fmt: skip
+        data.update({f"{algorithm}__{name}": value for name, value in values.items()})
+    return {**data, **changes}
+
+
+def test_the_create_page_offers_every_setting_with_its_default(client, alice, tracks):
+    client.force_login(alice)
+    response = client.get(reverse("training:model-create"))
+    assert response.status_code == 200
+    for text in ("Rookie Loop", "Object avoidance", "Stereo cameras", "5-layer CNN",
+                 "Generate the table", "Entropy", "SAC alpha (entropy)", "Maximum training time",
+                 "Simulation workers", "Use this example"):  # fmt: skip
+        assert text in response.text, text
+    assert 'value="rookie-loop" checked' in response.text
+
+
+def test_a_racer_creates_a_model_and_its_training_is_queued(client, alice, tracks):
+    client.force_login(alice)
+    response = client.post(reverse("training:model-create"), form_data())
+    model = RLModel.objects.get(owner=alice)
+    assert response.status_code == 302
+    assert response["Location"] == reverse("training:model-detail", args=[model.pk])
+    assert [a["steering_angle"] for a in model.action_space] == [-20, 0, 20]
+    assert model.jobs.get().status == TrainingJob.Status.QUEUED
+    page = client.get(response["Location"])
+    assert "number 1 in the queue" in page.text
+    assert "Stop training" in page.text
+
+
+def test_sac_with_discrete_actions_is_refused_and_the_form_keeps_what_was_typed(
+    client, alice, tracks
+):
+    client.force_login(alice)
+    response = client.post(
+        reverse("training:model-create"), form_data(algorithm="sac", name="my-sac-car")
+    )
+    assert response.status_code == 400
+    assert "SAC needs a continuous action space" in response.text
+    assert 'value="my-sac-car"' in response.text
+    assert not RLModel.objects.exists()
+
+
+def test_a_bad_hyperparameter_is_reported_on_its_field(client, alice, tracks):
+    client.force_login(alice)
+    response = client.post(reverse("training:model-create"), form_data(**{"clipped_ppo__lr": 1}))
+    assert response.status_code == 400
+    assert "Learning rate must be between 1e-08 and 0.001." in response.text
+
+
+def test_another_racers_model_is_not_found(client, alice, bob, tracks):
+    model = model_create(owner=bob, settings={
+        "name": "bobs", "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
+    }, validate_reward=False)  # fmt: skip
+    client.force_login(alice)
+    assert client.get(reverse("training:model-detail", args=[model.pk])).status_code == 404
+    assert client.post(reverse("training:model-stop", args=[model.pk])).status_code == 404
+    url = reverse("training:model-file", args=[model.pk, "metrics/training_metrics.json"])
+    assert client.get(url).status_code == 404
+
+
+def test_stop_on_a_queued_model_cancels_it(client, alice, tracks):
+    model = model_create(owner=alice, settings={
+        "name": "mine", "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
+    }, validate_reward=False)  # fmt: skip
+    client.force_login(alice)
+    response = client.post(reverse("training:model-stop", args=[model.pk]), follow=True)
+    assert "Stopping" in response.text
+    assert model.jobs.get().status == TrainingJob.Status.CANCELED
