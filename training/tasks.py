@@ -11,6 +11,7 @@ import os
 from celery import shared_task
 
 LONGEST_JOB = 24 * 3600  # [s] the longest training time a racer may ask for
+LEASE_CHECK = 50  # [s] a little longer than a trainer's lease
 
 
 @shared_task(
@@ -25,7 +26,10 @@ def train(self, job_id: int) -> None:
     from training import trainer
 
     owner = f"{self.request.hostname}:{os.getpid()}"
-    trainer.run(job_id, owner=owner, start_rollouts=start_rollout)
+    if not trainer.run(job_id, owner=owner, start_rollouts=start_rollout):
+        # Another run holds the job: a duplicate delivery, or a redelivery after that run's
+        # worker died. Look again when its lease would have lapsed; never train twice.
+        raise self.retry(countdown=LEASE_CHECK, max_retries=None)
 
 
 @shared_task(

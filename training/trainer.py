@@ -53,13 +53,16 @@ class Slot:
     gone: bool = False
 
 
-def run(job_id: int, owner: str, start_rollouts) -> None:
+def run(job_id: int, owner: str, start_rollouts) -> bool:
     """Train job ``job_id`` while this run holds its lease. ``start_rollouts(job, slot)`` enqueues a
-    rollout worker (the task module passes it, so this module stays free of Celery)."""
+    rollout worker (the task module passes it, so this module stays free of Celery). False when
+    another run holds a live lease: the caller tries again later, and takes the job over if that
+    run has died (its lease expired)."""
     job = jobs.lease_acquire(job_id=job_id, owner=owner)
     if job is None:
-        logger.info("Training job %s is finished or held by another run; nothing to do", job_id)
-        return
+        held = TrainingJob.objects.filter(pk=job_id, status__in=TrainingJob.ACTIVE).exists()
+        logger.info("Training job %s is %s", job_id, "held by another run" if held else "over")
+        return not held
     trainer = Trainer(job, start_rollouts)
     try:
         trainer.train()
@@ -78,6 +81,7 @@ def run(job_id: int, owner: str, start_rollouts) -> None:
             reason="The trainer failed unexpectedly; the "
             "error is in the worker's log. Your last checkpoint is kept.",
         )
+    return True
 
 
 class Trainer:

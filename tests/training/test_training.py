@@ -3,13 +3,18 @@
 import csv
 import io
 import json
+from datetime import timedelta
 
+import gymnasium
 import pytest
 from django.core.files.storage import default_storage
 from django.core.management import call_command
+from django.utils import timezone
 
+import simulator
 from tests.services import wait_for
-from training import configuration, hyperparameters, jobs, trainer
+from training import artifacts, configuration, hyperparameters, jobs, tasks, trainer
+from training.learner import Learner
 from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
 from training.services import model_create, training_stop
@@ -97,7 +102,10 @@ def test_a_second_delivery_of_the_trainer_task_does_not_train_twice(alice, track
     assert held is not None and held.attempt == 1
 
     started = []
-    trainer.run(job.pk, owner="second-run", start_rollouts=lambda *a: started.append(a))
+    assert (
+        trainer.run(job.pk, owner="second-run", start_rollouts=lambda *a: started.append(a))
+        is False
+    )
     job = reload(job)
     assert (job.attempt, job.lease_owner, started) == (1, "first-run", [])
 
@@ -209,3 +217,37 @@ def test_the_createmodel_command_creates_a_queued_model(alice, tracks, tmp_path,
     model = RLModel.objects.get(name="from-yaml")
     assert (model.max_minutes, model.jobs.get().status) == (30, "QUEUED")
     assert "its training is queued" in capsys.readouterr().out
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
+    alice, tracks, celery_worker_process
+):
+    # The state a dead trainer leaves: in progress, a lapsed lease, a checkpoint of iteration 1.
+    clean = configuration.check(settings(name="resumed"), owner=alice, validate_reward=False)
+    model = RLModel.objects.create(owner=alice, status=RLModel.Status.TRAINING, **clean)
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+    learner = Learner(algorithm=model.algorithm, hyperparameters=model.hyperparameters,
+                      network=model.network, observation_space=env.observation_space,
+                      action_space=env.action_space)  # fmt: skip
+    checkpoint = artifacts.save(model, "checkpoints/iteration-1.safetensors", learner.checkpoint())
+    now = timezone.now()
+    job = TrainingJob.objects.create(
+        model=model, status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="dead:1",
+        lease_expires=now - timedelta(seconds=1), started_at=now - timedelta(minutes=1),
+        training_seconds=30, weights_version=1, iterations=1, episodes=5, steps=100,
+        last_checkpoint=checkpoint, best_checkpoint=checkpoint,
+    )  # fmt: skip
+    Iteration.objects.create(job=job, number=1, reward=1, completion=5, episodes=5, steps=100,
+                             wall_seconds=1)  # fmt: skip
+
+    tasks.train.delay(job.pk)  # the redelivered task
+    job = wait_for_job(job, lambda j: j.iterations >= 2, "an update after resuming")
+    assert job.attempt == 2
+    assert job.log_lines.filter(
+        text="Resumed from the checkpoint of iteration 1 (attempt 2)."
+    ).exists()
+    assert job.training_seconds > 30  # the time used before counts
+    training_stop(job=job)
+    job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
+    assert job.model.status == RLModel.Status.READY
