@@ -3,7 +3,10 @@
 import csv
 import io
 import json
+import os
+import signal
 from datetime import timedelta
+from pathlib import Path
 
 import gymnasium
 import pytest
@@ -12,7 +15,7 @@ from django.core.management import call_command
 from django.utils import timezone
 
 import simulator
-from tests.services import wait_for
+from tests.services import parent_of, wait_for
 from training import artifacts, configuration, hyperparameters, jobs, tasks, trainer
 from training.learner import Learner
 from training.models import Iteration, RLModel, TrainingJob
@@ -251,3 +254,32 @@ def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
     training_stop(job=job)
     job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
     assert job.model.status == RLModel.Status.READY
+
+
+def sandbox_children() -> dict[int, int]:
+    """The running sandbox children: {pid: parent pid}."""
+    found = {}
+    for entry in Path("/proc").glob("[0-9]*"):
+        try:
+            if b"training.sandbox.child" in (entry / "cmdline").read_bytes():
+                found[int(entry.name)] = parent_of(int(entry.name))
+        except OSError:
+            continue
+    return found
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
+    alice, tracks, celery_worker_process
+):
+    model = model_create(owner=alice, settings=settings(name="survivor"), validate_reward=False)
+    job = wait_for_job(model.jobs.get(), lambda j: j.iterations >= 1, "a first update")
+    (rollout_process,) = set(sandbox_children().values())  # the pool process running the rollout
+    os.kill(rollout_process, signal.SIGKILL)
+
+    after = job.iterations
+    job = wait_for_job(job, lambda j: j.iterations >= after + 2, "updates after the worker died")
+    assert job.status == TrainingJob.Status.IN_PROGRESS
+    assert rollout_process not in set(sandbox_children().values())
+    training_stop(job=job)
+    wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
