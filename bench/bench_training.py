@@ -1,0 +1,153 @@
+"""Training throughput and time to qualify: `python -m bench.bench_training [--qualify]`.
+
+Starts the whole console as `make run` does (its Redis, a Celery worker with enough processes for
+a trainer and two rollout workers, the database in a scratch directory), creates models with all
+of DeepRacer's defaults (the beginner track, the follow-the-centre-line reward function, PPO
+defaults, the default discrete action space, the camera) and lets them train.
+
+- Throughput: environment steps per second over a fixed training time, policy updates included,
+  with 1 and with 2 rollout workers.
+- Time to qualify (--qualify): for each seed, train; every time a new checkpoint appears, drive
+  it (deterministically, outside training) in an evaluation of 3 laps; the figure is the training
+  minutes until a checkpoint drives 3 consecutive laps without leaving the track.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+from bench.stack import running_console
+
+THROUGHPUT_MINUTES = 4.0
+QUALIFY_LIMIT_MINUTES = 30.0
+
+
+def default_model(owner, name: str, *, workers: int = 1, seed: int = 0):
+    from training.rewards import EXAMPLES
+    from training.services import model_create
+
+    return model_create(
+        owner=owner,
+        settings={
+            "name": name,
+            "track": "rookie-loop",
+            "reward_function": EXAMPLES[0].source,
+            "workers": workers,
+            "seed": seed,
+            "max_minutes": 1440,
+        },
+    )
+
+
+def job_of(model):
+    from training.models import TrainingJob
+
+    return TrainingJob.objects.get(model=model)
+
+
+def throughput(owner, workers: int) -> tuple[float, int]:
+    from training.services import training_stop
+
+    model = default_model(owner, f"throughput-{workers}", workers=workers)
+    while job_of(model).status != "IN_PROGRESS":
+        time.sleep(1)
+    time.sleep(THROUGHPUT_MINUTES * 60)
+    job = job_of(model)
+    training_stop(job=job)
+    while job_of(model).status != "COMPLETED":
+        time.sleep(1)
+    job = job_of(model)
+    return job.steps / max(job.training_seconds, 1e-9), job.iterations
+
+
+def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
+    """Drive ``checkpoint`` for 3 laps in an evaluation; (no off-track or crash, the lap times)."""
+    import gymnasium
+
+    import simulator
+    from training import artifacts
+    from training.learner import Learner
+
+    env = gymnasium.make(
+        simulator.ENV_ID, mode="evaluation", laps=3, **model.environment_settings()
+    )
+    learner = Learner(
+        algorithm=model.algorithm,
+        hyperparameters=model.hyperparameters,
+        network=model.network,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+    )
+    learner.restore(artifacts.read(checkpoint))
+    observation, _ = env.reset(seed=0)
+    while True:
+        action, _ = learner.model.policy.predict(observation, deterministic=True)
+        observation, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    clean = info["off_tracks"] == 0 and info["crashes"] == 0 and info["resets"] == 0
+    return clean and len(info["lap_times"]) == 3, info["lap_times"]
+
+
+def time_to_qualify(owner, seed: int) -> float | None:
+    from training.services import training_stop
+
+    model = default_model(owner, f"qualify-{seed}", seed=seed)
+    tried = set()
+    while True:
+        job = job_of(model)
+        minutes = job.training_seconds / 60
+        if job.last_checkpoint and job.last_checkpoint not in tried and job.iterations > 0:
+            tried.add(job.last_checkpoint)
+            ok, laps = qualifies(model, job.last_checkpoint)
+            print(
+                f"  seed {seed}: iteration {job.iterations} after {minutes:.1f} min: "
+                + (
+                    "qualified, laps " + ", ".join(f"{t:.2f}" for t in laps)
+                    if ok
+                    else f"not yet ({len(laps)} clean laps)"
+                ),
+                flush=True,
+            )
+            if ok:
+                training_stop(job=job)
+                return minutes
+        if minutes > QUALIFY_LIMIT_MINUTES:
+            training_stop(job=job)
+            return None
+        time.sleep(5)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--qualify", action="store_true", help="measure the time to qualify")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    arguments = parser.parse_args()
+    with running_console(concurrency=3) as console:
+        os.environ.update(console["env"])
+        import django
+
+        django.setup()
+        from django.contrib.auth.models import User
+
+        owner = User.objects.create_user("bench", password="bench-password-1")  # noqa: S106
+        if arguments.qualify:
+            print("Time to qualify (3 clean consecutive laps), training minutes:")
+            for seed in arguments.seeds:
+                minutes = time_to_qualify(owner, seed)
+                shown = f"{minutes:.1f}" if minutes is not None else f"> {QUALIFY_LIMIT_MINUTES:g}"
+                print(f"seed {seed}: {shown}", flush=True)
+        else:
+            print(f"Training throughput over {THROUGHPUT_MINUTES:g} min, PPO defaults, camera:")
+            for workers in (1, 2):
+                rate, iterations = throughput(owner, workers)
+                print(
+                    f"{workers} rollout worker(s): {rate:,.0f} steps/s ({iterations} updates)",
+                    flush=True,
+                )
+
+
+if __name__ == "__main__":
+    main()
