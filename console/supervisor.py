@@ -66,7 +66,7 @@ class Supervisor:
             var_dir=settings.VAR_DIR,
             local_redis_port=None if "REDIS_URL" in os.environ else settings.REDIS_PORT,
             concurrency=env.int(
-                "PITLANE_WORKER_CONCURRENCY", max(2, os.cpu_count() or 1), minimum=1
+                "PITLANE_WORKER_CONCURRENCY", max(3, os.cpu_count() or 1), minimum=1
             ),
         )
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
+SESSION_REDIS: RedisServer | None = None  # the suite's Redis, once started
 
 
 def free_port() -> int:
@@ -45,18 +46,27 @@ class RedisServer:
     """A private ``redis-server`` on a free port, with no persistence."""
 
     def __init__(self, directory: Path) -> None:
-        executable = shutil.which("redis-server")
-        if executable is None:
+        if shutil.which("redis-server") is None:
             raise RuntimeError("redis-server is not installed; `make test` installs it with apt.")
         self.port = free_port()
         self.url = f"redis://127.0.0.1:{self.port}/0"
+        self.directory = directory
         directory.mkdir(parents=True, exist_ok=True)
+        self.start()
+
+    def start(self) -> None:
         self.process = subprocess.Popen(
-            [executable, "--bind", "127.0.0.1", "--port", str(self.port), "--dir", str(directory),
-             "--save", "", "--appendonly", "no", "--daemonize", "no", "--loglevel", "warning"],
+            ["redis-server", "--bind", "127.0.0.1", "--port", str(self.port), "--dir",
+             str(self.directory), "--save", "", "--appendonly", "no", "--daemonize", "no",
+             "--loglevel", "warning"],
             stdout=subprocess.DEVNULL,
         )  # fmt: skip
         wait_for(self.answers, f"Redis on port {self.port}", timeout=15)
+
+    def restart(self) -> None:
+        """Stop and start again on the same port, with nothing kept: a Redis restart."""
+        self.stop()
+        self.start()
 
     def answers(self) -> bool:
         try:
@@ -124,6 +134,8 @@ def pytest_load_initial_conftests(early_config, parser, args):
     os.environ["PITLANE_VAR_DIR"] = str(scratch / "var")
     os.environ["PITLANE_TEST_DB"] = str(scratch / "test.sqlite3")
     redis_server = RedisServer(scratch / "redis")
+    global SESSION_REDIS  # the suite's one Redis, for the test that restarts it
+    SESSION_REDIS = redis_server
     os.environ["REDIS_URL"] = redis_server.url
     early_config.add_cleanup(lambda: shutil.rmtree(scratch, ignore_errors=True))
     early_config.add_cleanup(redis_server.stop)

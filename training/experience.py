@@ -43,10 +43,25 @@ class JobChannel:
 
     # Policy
 
-    def publish(self, version: int, weights: bytes, evaluate: int = 0) -> None:
+    def publish(self, version: int, weights: bytes, *, episodes: int, evaluate: int = 0) -> None:
+        """Weights ``version``, and how many training episodes the trainer wants with it."""
         self.client.hset(
-            self.policy, mapping={"version": version, "weights": weights, "evaluate": evaluate}
-        )
+            self.policy,
+            mapping={"version": version, "weights": weights, "evaluate": evaluate,
+                     "episodes": episodes},
+        )  # fmt: skip
+
+    def episodes_wanted(self) -> int:
+        value = self.client.hget(self.policy, "episodes")
+        return int(value) if value is not None else 1
+
+    def count_episode(self, version: int) -> int:
+        """Count one more training episode driven with ``version``; the count so far."""
+        name = key(self.job_id, f"count:{version}")
+        pipe = self.client.pipeline()
+        pipe.incr(name)
+        pipe.expire(name, EXPIRE_AFTER)
+        return pipe.execute()[0]
 
     def policy_version(self) -> int:
         value = self.client.hget(self.policy, "version")

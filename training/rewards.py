@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from simulator.samples import situations
-from training.sandbox import Sandbox, SandboxFailure
+from training.sandbox import Sandbox, SandboxFailure, verified
 
 ALLOWED_IMPORTS = ("math", "random", "numpy", "scipy", "shapely")
 MAX_SOURCE_SIZE = 140_000  # [characters]
@@ -144,6 +144,7 @@ def reward_validate(*, source: str, track: str, direction: str = "counterclockwi
     result.errors, result.warnings = static_problems(source)
     if result.errors:
         return result
+    verified()  # SandboxUnavailable where racers' code cannot be held safely
     with Sandbox(call_timeout=SAMPLE_TIMEOUT) as sandbox:
         try:
             sandbox.load(source)

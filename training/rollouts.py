@@ -10,6 +10,7 @@ is reported to the trainer, which fails the job.
 from __future__ import annotations
 
 import logging
+import time
 
 import msgpack
 import redis
@@ -23,6 +24,7 @@ from training.sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, v
 logger = logging.getLogger(__name__)
 
 REWARD_CALL_LIMIT = 1.0  # [s]
+WAIT_POLL = 0.2  # [s] between looks for new weights while the trainer learns
 MEMORY_ALLOWANCE = 1024 * MiB  # beyond the child's size with torch and the simulator loaded
 
 
@@ -76,6 +78,16 @@ def _drive(
         channel.push_episode(reply["payload"])
         channel.push_log(list(sandbox.logs))
         sandbox.logs.clear()
+        if channel.count_episode(version) >= channel.episodes_wanted():
+            _await_next_version(channel, version, worker, attempt)
+
+
+def _await_next_version(channel: JobChannel, version: int, worker: int, attempt: int) -> None:
+    """The trainer has the episodes it wants of this version: wait while it learns, rather than
+    drive episodes it would drop (and take the CPU it learns with)."""
+    while channel.policy_version() <= version and not channel.should_stop(attempt):
+        channel.beat(worker)
+        time.sleep(WAIT_POLL)
 
 
 def _evaluations(channel: JobChannel) -> int:

@@ -25,6 +25,7 @@ LEASE_CHECK = 50  # [s] a little longer than a trainer's lease
 def train(self, job_id: int) -> None:
     from training import trainer
 
+    torch_threads()
     owner = f"{self.request.hostname}:{os.getpid()}"
     if not trainer.run(job_id, owner=owner, start_rollouts=start_rollout):
         # Another run holds the job: a duplicate delivery, or a redelivery after that run's
@@ -43,6 +44,15 @@ def rollout(job_id: int, worker: int, attempt: int, track: str) -> None:
     from training import rollouts
 
     rollouts.run(job_id, worker, attempt, track)
+
+
+def torch_threads() -> None:
+    """The trainer's share of the CPU: on a machine that also simulates, half of the cores, so that
+    PyTorch's threads do not fight the rollout workers for them."""
+    import torch
+    from django.conf import settings
+
+    torch.set_num_threads(settings.PITLANE_TRAINER_THREADS)
 
 
 def start_rollout(job, slot) -> None:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import gymnasium
 import msgpack
 import redis
+from django.core.files.storage import default_storage
 from django.db import transaction
 from django.utils import timezone
 
@@ -36,6 +37,8 @@ CHECK_EVERY = 3.0  # [s] between lease renewals, stop checks and worker checks
 WORKER_SILENCE = 30.0  # [s] after which a rollout worker is taken for dead
 WORKER_STARTUP = 90.0  # [s] a new rollout worker may take to send its first heartbeat
 REPLACEMENTS = 2  # per worker slot, before the job carries on without it
+REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
+METRICS = "metrics/training_metrics.json"
 
 
 class JobFailed(Exception):
@@ -126,6 +129,7 @@ class Trainer:
         self.spaces = spaces
         if job.last_checkpoint:
             self.learner.restore(artifacts.read(job.last_checkpoint))
+            self._recall_progress()
             jobs.log(
                 job,
                 f"Resumed from the checkpoint of iteration {job.iterations} "
@@ -136,7 +140,7 @@ class Trainer:
             self._checkpoint(0)
         self.version = job.weights_version
         self.channel.start(job.attempt)
-        self.channel.publish(self.version, self.learner.policy_weights())
+        self._publish()
         for slot in self.slots:
             self.start_rollouts(job, slot)
         tracks = ", ".join(sorted({slot.track for slot in self.slots}))
@@ -155,45 +159,80 @@ class Trainer:
         self.finish(TrainingJob.Status.COMPLETED)
 
     def _loop(self) -> None:
-        job, model = self.job, self.model
-        between = model.hyperparameters["num_episodes_between_training"]
-        collected: list[Episode] = []
-        session_started = time.monotonic()
-        base_seconds = job.training_seconds
-        last_check = 0.0
+        self.collected: list[Episode] = []
+        self.session_started = time.monotonic()
+        self.base_seconds = self.job.training_seconds
+        self.last_check = 0.0
         while True:
-            now = time.monotonic()
-            if now - last_check >= CHECK_EVERY:
-                last_check = now
-                spent = base_seconds + now - session_started
-                jobs.write(job, training_seconds=spent, lease_expires=timezone.now() + jobs.LEASE)
-                if self._stop_requested():
-                    jobs.log(job, "Stopped by the racer.")
+            try:
+                if self._turn():
                     return
-                if spent >= model.max_minutes * 60:
-                    jobs.log(job, f"Reached the maximum training time of {model.max_minutes} min.")
-                    return
-                failure = self.channel.failure()
-                if failure:
-                    raise JobFailed(failure)
-                self._watch_workers()
-                self._file_logs()
-                self._take_evaluations()
-            for payload in self.channel.pop_episodes(limit=50, wait=1.0):
-                episode = self._decode(payload)
-                if episode is None or (self.ppo and episode.version != self.version):
-                    continue  # PPO learns on-policy: episodes of older weights are dropped
-                collected.append(episode)
-            if len(collected) >= between:
-                self._update(collected)
-                collected = []
+            except redis.RedisError as error:
+                self._recover_redis(error)
+
+    def _turn(self) -> bool:
+        """One turn of the loop: the periodic checks, the episodes that came, and an update when
+        enough have; True when training should end."""
+        job, model = self.job, self.model
+        now = time.monotonic()
+        if now - self.last_check >= CHECK_EVERY:
+            self.last_check = now
+            spent = self.base_seconds + now - self.session_started
+            jobs.write(job, training_seconds=spent, lease_expires=timezone.now() + jobs.LEASE)
+            if self._stop_requested():
+                jobs.log(job, "Stopped by the racer.")
+                return True
+            if spent >= model.max_minutes * 60:
+                jobs.log(job, f"Reached the maximum training time of {model.max_minutes} min.")
+                return True
+            failure = self.channel.failure()
+            if failure:
+                raise JobFailed(failure)
+            self._watch_workers()
+            self._file_logs()
+            self._take_evaluations()
+        for payload in self.channel.pop_episodes(limit=50, wait=1.0):
+            episode = self._decode(payload)
+            if episode is None or (self.ppo and episode.version != self.version):
+                continue  # PPO learns on-policy: episodes of older weights are dropped
+            self.collected.append(episode)
+        if len(self.collected) >= model.hyperparameters["num_episodes_between_training"]:
+            self._update(self.collected)
+            self.collected = []
+        return False
+
+    def _recover_redis(self, error: redis.RedisError) -> None:
+        """Wait for Redis to come back, then set the job's keys up again and restart the rollout
+        workers (who stop when Redis goes); ``JobFailed`` if it stays away."""
+        jobs.log(self.job, f"Lost Redis ({error}); waiting for it to come back.", "warning")
+        deadline = time.monotonic() + REDIS_PATIENCE
+        while True:
+            try:
+                self.channel.client.ping()
+                break
+            except redis.RedisError:
+                if time.monotonic() > deadline:
+                    raise JobFailed(
+                        f"Redis stayed unreachable for {REDIS_PATIENCE:.0f} s; training stopped. "
+                        "Your last checkpoint is kept."
+                    ) from None
+                time.sleep(1.0)
+        self.channel.start(self.job.attempt)
+        self._publish()
+        for slot in self.slots:
+            if not slot.gone:
+                slot.started = time.monotonic()
+                self.start_rollouts(self.job, slot)
+        jobs.log(
+            self.job, "Redis is back: the experience buffer starts again from the newest weights."
+        )
 
     def _update(self, episodes: list[Episode]) -> None:
         started = time.monotonic()
         update = self.learner.learn(episodes)
         self.version += 1
         number = self.version
-        self.channel.publish(self.version, self.learner.policy_weights(), EVALUATION_EPISODES)
+        self._publish(evaluate=EVALUATION_EPISODES)
         wall = time.monotonic() - started
         with transaction.atomic():
             Iteration.objects.create(
@@ -221,6 +260,22 @@ class Trainer:
             f"Iteration {number}: {update.episodes} episodes, {update.steps} steps, "
             f"average progress {update.completion:.1f}%, learnt in {wall:.1f} s.",
         )
+
+    def _publish(self, evaluate: int = 0) -> None:
+        self.channel.publish(
+            self.version, self.learner.policy_weights(), evaluate=evaluate,
+            episodes=self.model.hyperparameters["num_episodes_between_training"],
+        )  # fmt: skip
+
+    def _recall_progress(self) -> None:
+        """On resuming: the metrics written so far, and the best evaluation so far."""
+        metrics = artifacts.path(self.model, METRICS)
+        if default_storage.exists(metrics):
+            self.metrics = json.loads(artifacts.read(metrics))["metrics"]
+        evaluated = Iteration.objects.filter(job=self.job, evaluation_completion__isnull=False)
+        best = evaluated.order_by("-evaluation_completion").first()
+        if best is not None:
+            self.best = (best.evaluation_completion, float("-inf"))
 
     # Checkpoints, metrics, traces
 
@@ -259,7 +314,7 @@ class Trainer:
 
     def _save_metrics(self) -> None:
         document = {"metrics": self.metrics, "best_model_metric": "progress"}
-        artifacts.save(self.model, "metrics/training_metrics.json", json.dumps(document))
+        artifacts.save(self.model, METRICS, json.dumps(document))
 
     def _take_evaluations(self) -> None:
         by_version: dict[int, list[dict]] = {}

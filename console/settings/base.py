@@ -5,6 +5,7 @@ machine (SQLite, a local Redis started by ``make run``, files under ``var/``). S
 "Running on several machines" for the variables that switch to PostgreSQL, S3 and a shared Redis.
 """
 
+import os
 from pathlib import Path
 
 import dj_database_url
@@ -146,6 +147,9 @@ CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
 # The queues a complete deployment serves; /healthz reports any that no worker consumes.
 PITLANE_QUEUES = ("training", "simulation")
+PITLANE_TRAINER_THREADS = env.int(
+    "PITLANE_TRAINER_THREADS", max(1, (os.cpu_count() or 2) // 2), minimum=1
+)
 CELERY_TASK_ROUTES = {
     "training.train": {"queue": "training"},  # the trainer: a GPU machine, where there is one
     "training.rollout": {"queue": "simulation"},  # rollouts: any CPU machine

@@ -15,6 +15,7 @@ from django.core.management import call_command
 from django.utils import timezone
 
 import simulator
+from tests import services
 from tests.services import parent_of, wait_for
 from training import artifacts, configuration, hyperparameters, jobs, tasks, trainer
 from training.learner import Learner
@@ -283,3 +284,18 @@ def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
     assert rollout_process not in set(sandbox_children().values())
     training_stop(job=job)
     wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_redis_restart_mid_job_is_recovered(alice, tracks, celery_worker_process):
+    model = model_create(owner=alice, settings=settings(name="restarted"), validate_reward=False)
+    job = wait_for_job(model.jobs.get(), lambda j: j.iterations >= 1, "a first update")
+    services.SESSION_REDIS.restart()  # everything in Redis is gone: buffer, policy, queues
+
+    after = job.iterations
+    job = wait_for_job(job, lambda j: j.iterations >= after + 1, "an update after the restart")
+    assert job.log_lines.filter(text__startswith="Redis is back").exists()
+    assert default_storage.exists(job.last_checkpoint)
+    training_stop(job=job)
+    job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
+    assert job.model.status == RLModel.Status.READY

@@ -5,7 +5,7 @@ from django.core.management.base import BaseCommand, CommandError
 
 from simulator import tracks
 from training.rewards import reward_validate
-from training.sandbox import SandboxFailure
+from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
 class Command(BaseCommand):
@@ -28,7 +28,7 @@ class Command(BaseCommand):
         try:
             tracks.load(track).with_direction(direction)
             result = reward_validate(source=source, track=track, direction=direction)
-        except (tracks.TrackError, SandboxFailure) as error:
+        except (tracks.TrackError, SandboxFailure, SandboxUnavailable) as error:
             raise CommandError(str(error)) from None
         self.stdout.write(json.dumps(result.as_dict(), indent=2))
         if not result.valid:
