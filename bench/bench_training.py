@@ -91,7 +91,7 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
     return clean and len(info["lap_times"]) == 3, info["lap_times"]
 
 
-def time_to_qualify(owner, seed: int) -> float | None:
+def time_to_qualify(owner, seed: int, limit: float) -> float | None:
     from training.services import training_stop
 
     model = default_model(owner, f"qualify-{seed}", seed=seed)
@@ -114,7 +114,7 @@ def time_to_qualify(owner, seed: int) -> float | None:
             if ok:
                 training_stop(job=job)
                 return minutes
-        if minutes > QUALIFY_LIMIT_MINUTES:
+        if minutes > limit:
             training_stop(job=job)
             return None
         time.sleep(5)
@@ -124,6 +124,12 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--qualify", action="store_true", help="measure the time to qualify")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument(
+        "--limit",
+        type=float,
+        default=QUALIFY_LIMIT_MINUTES,
+        help="[min] of training after which a seed is given up",
+    )
     arguments = parser.parse_args()
     with running_console(concurrency=3) as console:
         os.environ.update(console["env"])
@@ -136,8 +142,8 @@ def main() -> None:
         if arguments.qualify:
             print("Time to qualify (3 clean consecutive laps), training minutes:")
             for seed in arguments.seeds:
-                minutes = time_to_qualify(owner, seed)
-                shown = f"{minutes:.1f}" if minutes is not None else f"> {QUALIFY_LIMIT_MINUTES:g}"
+                minutes = time_to_qualify(owner, seed, arguments.limit)
+                shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
                 print(f"seed {seed}: {shown}", flush=True)
         else:
             print(f"Training throughput over {THROUGHPUT_MINUTES:g} min, PPO defaults, camera:")
