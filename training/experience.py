@@ -14,11 +14,11 @@ import time
 import zlib
 from dataclasses import dataclass
 
-import msgpack
 import numpy as np
 import redis
 
 from simulator.rewards import MAX_REWARD
+from training.sandbox.protocol import unpack
 
 EXPIRE_AFTER = 3600  # [s] the keys live after the job ends
 MAX_QUEUED_EPISODES = 2000  # the buffer is trimmed beyond this, oldest first
@@ -194,12 +194,7 @@ class Episode:
 
 def decode_episode(payload: bytes, observation_space, action_space, ppo: bool) -> Episode:
     """An episode from a rollout worker, every field checked; ValueError for anything amiss."""
-    try:
-        message = msgpack.unpackb(payload, raw=False, strict_map_key=True)
-    except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError) as error:
-        raise ValueError(f"not an episode: {error}") from None
-    if not isinstance(message, dict):
-        raise ValueError("not an episode")
+    message = unpack(payload)  # ProtocolError, a ValueError, when it is no message
     arrays = message.get("arrays") or {}
     rewards = decode_array(arrays.get("rewards"), "float32", (None,))
     steps = len(rewards)

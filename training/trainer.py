@@ -14,7 +14,6 @@ import time
 from dataclasses import dataclass, field
 
 import gymnasium
-import msgpack
 import redis
 from django.core.files.storage import default_storage
 from django.db import transaction
@@ -29,6 +28,7 @@ from training.experience import Episode, JobChannel, decode_episode
 from training.jobs import LeaseLost
 from training.learner import Learner
 from training.models import Iteration, RLModel, TrainingJob
+from training.sandbox.protocol import unpack
 
 logger = logging.getLogger(__name__)
 
@@ -320,10 +320,10 @@ class Trainer:
         by_version: dict[int, list[dict]] = {}
         for payload in self.channel.pop_evaluations():
             try:
-                result = msgpack.unpackb(payload, raw=False)
+                result = unpack(payload)
                 version = int(result["version"])
                 progress = min(max(float(result["progress"]), 0.0), 100.0)
-            except (ValueError, KeyError, TypeError, msgpack.ExtraData, msgpack.FormatError):
+            except (ValueError, KeyError, TypeError):
                 continue
             lap = result.get("lap_time")
             by_version.setdefault(version, []).append(

@@ -16,7 +16,7 @@ HEADER = struct.Struct("!I")
 MAX_FRAME = 256 * 1024 * 1024  # [bytes]: the 5-layer network's weights are about 55 MB
 
 
-class ProtocolError(Exception):
+class ProtocolError(ValueError):
     """The other side sent something that is not a frame of ours."""
 
 
