@@ -85,10 +85,9 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
     while True:
         action, _ = learner.model.policy.predict(observation, deterministic=True)
         observation, _, terminated, truncated, info = env.step(action)
-        if terminated or truncated:
-            break
-    clean = info["off_tracks"] == 0 and info["crashes"] == 0 and info["resets"] == 0
-    return clean and len(info["lap_times"]) == 3, info["lap_times"]
+        if info["resets"] or terminated or truncated:
+            break  # a reset (off track, crash, reversed, stuck) ends the consecutive laps
+    return len(info["lap_times"]) == 3 and not info["resets"], info["lap_times"]
 
 
 def time_to_qualify(owner, seed: int, limit: float) -> float | None:
