@@ -18,9 +18,11 @@ import simulator
 from tests import services
 from tests.services import parent_of, wait_for
 from training import artifacts, configuration, hyperparameters, jobs, tasks, trainer
+from training.experience import decode_episode
 from training.learner import Learner
 from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
+from training.sandbox import MiB, Sandbox
 from training.services import model_create, training_stop
 
 TINY_PPO = {"batch_size": 32, "num_epochs": 3, "num_episodes_between_training": 5}
@@ -299,3 +301,37 @@ def test_a_redis_restart_mid_job_is_recovered(alice, tracks, celery_worker_proce
     training_stop(job=job)
     job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
     assert job.model.status == RLModel.Status.READY
+
+
+def test_sac_learns_from_random_episodes_driven_in_the_sandbox():
+    continuous = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}}
+    env = gymnasium.make(simulator.ENV_ID, track="pitlane-oval", action_space=continuous)
+    sac = {**hyperparameters.defaults("sac"), "batch_size": 32}
+    learner = Learner(
+        algorithm="sac",
+        hyperparameters=sac,
+        network=model_network(),
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+    )
+    before = learner.policy_weights()
+    policy = {"algorithm": "sac", "network": model_network()}
+    with Sandbox(
+        env={"track": "pitlane-oval", "action_space": continuous},
+        policy=policy,
+        memory_allowance=1024 * MiB,
+    ) as sandbox:
+        sandbox.load(EXAMPLES[0].source)
+        sandbox.set_weights(0, before)
+        payload = sandbox.episode("random")["payload"]
+        episode = decode_episode(payload, env.observation_space, env.action_space, ppo=False)
+        update = learner.learn([episode])
+        assert (update.episodes, update.steps) == (1, episode.steps)
+        assert learner.policy_weights() != before  # the actor learnt
+        sandbox.set_weights(1, learner.policy_weights())
+        summary = sandbox.episode("evaluate")["summary"]
+    assert summary["version"] == 1 and summary["steps"] > 0
+
+
+def model_network() -> str:
+    return "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"
