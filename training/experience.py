@@ -67,13 +67,15 @@ class JobChannel:
         value = self.client.hget(self.policy, "version")
         return int(value) if value is not None else -1
 
-    def fetch_policy(self) -> tuple[int, bytes, int]:
-        version, weights, evaluate = self.client.hmget(
-            self.policy, "version", "weights", "evaluate"
-        )
+    def fetch_policy(self) -> tuple[int, bytes]:
+        version, weights = self.client.hmget(self.policy, "version", "weights")
         if version is None:
-            return -1, b"", 0
-        return int(version), weights, int(evaluate or 0)
+            return -1, b""
+        return int(version), weights
+
+    def evaluations_wanted(self) -> int:
+        """How many evaluation episodes the trainer asks for with the current version."""
+        return int(self.client.hget(self.policy, "evaluate") or 0)
 
     # Experience
 
@@ -103,6 +105,10 @@ class JobChannel:
     def start(self, attempt: int) -> None:
         self.client.delete(self.experience, self.evaluation, self.control, self.log)
         self.client.hset(self.control, mapping={"stop": 0, "attempt": attempt})
+
+    def is_set_up(self, attempt: int) -> bool:
+        """Whether the job's control keys are there (a restarted Redis has lost them)."""
+        return self.client.hget(self.control, "attempt") == str(attempt).encode()
 
     def request_stop(self) -> None:
         self.client.hset(self.control, "stop", 1)

@@ -25,6 +25,7 @@ logger = logging.getLogger(__name__)
 
 REWARD_CALL_LIMIT = 1.0  # [s]
 WAIT_POLL = 0.2  # [s] between looks for new weights while the trainer learns
+JOB_CHECK = 15.0  # [s] between looks at the job's row
 MEMORY_ALLOWANCE = 1024 * MiB  # beyond the child's size with torch and the simulator loaded
 
 
@@ -47,27 +48,31 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             call_timeout=REWARD_CALL_LIMIT, memory_allowance=MEMORY_ALLOWANCE,
         ) as sandbox:  # fmt: skip
             sandbox.load(model.reward_function)
-            _drive(sandbox, channel, model.algorithm, worker, attempt)
+            _drive(sandbox, channel, job, worker)
     except SandboxFailure as failure:
         channel.report_failure(f"Your reward function failed {_where(failure, worker)}: {failure}")
     except redis.RedisError as error:
         logger.warning("Rollout %s/%s lost Redis: %s", job_id, worker, error)
 
 
-def _drive(
-    sandbox: Sandbox, channel: JobChannel, algorithm: str, worker: int, attempt: int
-) -> None:
+def _drive(sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int) -> None:
+    algorithm, attempt = job.model.algorithm, job.attempt
     version = -1
     evaluated = -1
+    checked = time.monotonic()
     while not channel.should_stop(attempt):
         channel.beat(worker)
+        if time.monotonic() - checked > JOB_CHECK:
+            checked = time.monotonic()
+            if not _still_wanted(job):
+                return
         published = channel.policy_version()
         if published > version:
-            published, weights, _ = channel.fetch_policy()
+            published, weights = channel.fetch_policy()
             sandbox.set_weights(published, weights)
             version = published
         if worker == 0 and version > 0 and evaluated < version:
-            for _ in range(_evaluations(channel)):
+            for _ in range(channel.evaluations_wanted()):
                 summary = sandbox.episode("evaluate", worker)["summary"]
                 channel.push_evaluation(msgpack.packb({**summary, "version": version}))
                 channel.beat(worker)
@@ -82,16 +87,20 @@ def _drive(
             _await_next_version(channel, version, worker, attempt)
 
 
+def _still_wanted(job: TrainingJob) -> bool:
+    """Whether the job is still running under this attempt (its trainer may have died, or the job
+    been deleted, without a word to Redis)."""
+    return TrainingJob.objects.filter(
+        pk=job.pk, attempt=job.attempt, status__in=TrainingJob.ACTIVE
+    ).exists()
+
+
 def _await_next_version(channel: JobChannel, version: int, worker: int, attempt: int) -> None:
     """The trainer has the episodes it wants of this version: wait while it learns, rather than
     drive episodes it would drop (and take the CPU it learns with)."""
     while channel.policy_version() <= version and not channel.should_stop(attempt):
         channel.beat(worker)
         time.sleep(WAIT_POLL)
-
-
-def _evaluations(channel: JobChannel) -> int:
-    return channel.fetch_policy()[2]
 
 
 def _where(failure: SandboxFailure, worker: int) -> str:

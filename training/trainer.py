@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import gymnasium
 import redis
+from django.conf import settings
 from django.core.files.storage import default_storage
 from django.db import transaction
 from django.utils import timezone
@@ -34,8 +35,6 @@ logger = logging.getLogger(__name__)
 
 EVALUATION_EPISODES = 5
 CHECK_EVERY = 3.0  # [s] between lease renewals, stop checks and worker checks
-WORKER_SILENCE = 30.0  # [s] after which a rollout worker is taken for dead
-WORKER_STARTUP = 90.0  # [s] a new rollout worker may take to send its first heartbeat
 REPLACEMENTS = 2  # per worker slot, before the job carries on without it
 REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
 METRICS = "metrics/training_metrics.json"
@@ -168,7 +167,7 @@ class Trainer:
                 if self._turn():
                     return
             except redis.RedisError as error:
-                self._recover_redis(error)
+                self._recover_redis(f"Lost Redis ({error})")
 
     def _turn(self) -> bool:
         """One turn of the loop: the periodic checks, the episodes that came, and an update when
@@ -185,6 +184,9 @@ class Trainer:
             if spent >= model.max_minutes * 60:
                 jobs.log(job, f"Reached the maximum training time of {model.max_minutes} min.")
                 return True
+            if not self.channel.is_set_up(job.attempt):
+                self._recover_redis("Redis restarted and lost the job's keys")
+                return False
             failure = self.channel.failure()
             if failure:
                 raise JobFailed(failure)
@@ -201,10 +203,10 @@ class Trainer:
             self.collected = []
         return False
 
-    def _recover_redis(self, error: redis.RedisError) -> None:
+    def _recover_redis(self, what: str) -> None:
         """Wait for Redis to come back, then set the job's keys up again and restart the rollout
         workers (who stop when Redis goes); ``JobFailed`` if it stays away."""
-        jobs.log(self.job, f"Lost Redis ({error}); waiting for it to come back.", "warning")
+        jobs.log(self.job, f"{what}; waiting for it.", "warning")
         deadline = time.monotonic() + REDIS_PATIENCE
         while True:
             try:
@@ -380,9 +382,9 @@ class Trainer:
                 continue
             last = beats.get(slot.index)
             silent = (
-                (now - slot.started > WORKER_STARTUP)
+                (now - slot.started > settings.PITLANE_ROLLOUT_STARTUP)
                 if last is None
-                else (wall - last > WORKER_SILENCE)
+                else (wall - last > settings.PITLANE_ROLLOUT_SILENCE)
             )
             if not silent:
                 continue

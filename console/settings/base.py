@@ -150,6 +150,10 @@ PITLANE_QUEUES = ("training", "simulation")
 PITLANE_TRAINER_THREADS = env.int(
     "PITLANE_TRAINER_THREADS", max(1, (os.cpu_count() or 2) // 2), minimum=1
 )
+# A rollout worker silent this long is taken for dead and replaced; a new one may take longer to
+# start (torch, the simulator and the sandbox load first).
+PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [s]
+PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # [s]
 CELERY_TASK_ROUTES = {
     "training.train": {"queue": "training"},  # the trainer: a GPU machine, where there is one
     "training.rollout": {"queue": "simulation"},  # rollouts: any CPU machine

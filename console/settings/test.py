@@ -15,3 +15,6 @@ WHITENOISE_USE_FINDERS = True
 STATIC_ROOT = None  # nothing is collected; WhiteNoise serves from the finders
 MEDIA_ROOT = env.path("PITLANE_TEST_MEDIA", VAR_DIR / "test-media")
 STORAGES["default"]["OPTIONS"]["location"] = MEDIA_ROOT  # noqa: F405
+# Dead rollout workers are given up on sooner, so that the tests that kill them stay short.
+PITLANE_ROLLOUT_SILENCE = 10
+PITLANE_ROLLOUT_STARTUP = 40
