@@ -60,6 +60,10 @@ def _drive(sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int)
     version = -1
     evaluated = -1
     checked = time.monotonic()
+
+    def beat(steps: int) -> None:  # a long episode still shows the trainer this worker lives
+        channel.beat(worker)
+
     while not channel.should_stop(attempt):
         channel.beat(worker)
         if time.monotonic() - checked > JOB_CHECK:
@@ -73,13 +77,13 @@ def _drive(sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int)
             version = published
         if worker == 0 and version > 0 and evaluated < version:
             for _ in range(channel.evaluations_wanted()):
-                summary = sandbox.episode("evaluate", worker)["summary"]
+                summary = sandbox.episode("evaluate", worker, beat)["summary"]
                 channel.push_evaluation(msgpack.packb({**summary, "version": version}))
                 channel.beat(worker)
             evaluated = version
             continue
         mode = "random" if version == 0 and algorithm == hp.SAC else "explore"
-        reply = sandbox.episode(mode, worker)
+        reply = sandbox.episode(mode, worker, beat)
         channel.push_episode(reply["payload"])
         channel.push_log(list(sandbox.logs))
         sandbox.logs.clear()

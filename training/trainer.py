@@ -51,6 +51,7 @@ class Slot:
     index: int
     track: str
     started: float = field(default_factory=time.monotonic)
+    started_wall: float = field(default_factory=time.time)
     replacements: int = 0
     gone: bool = False
 
@@ -223,7 +224,7 @@ class Trainer:
         self._publish()
         for slot in self.slots:
             if not slot.gone:
-                slot.started = time.monotonic()
+                slot.started, slot.started_wall = time.monotonic(), time.time()
                 self.start_rollouts(self.job, slot)
         jobs.log(
             self.job, "Redis is back: the experience buffer starts again from the newest weights."
@@ -381,16 +382,17 @@ class Trainer:
             if slot.gone:
                 continue
             last = beats.get(slot.index)
+            starting = last is None or last < slot.started_wall  # no beat since it was started
             silent = (
                 (now - slot.started > settings.PITLANE_ROLLOUT_STARTUP)
-                if last is None
+                if starting
                 else (wall - last > settings.PITLANE_ROLLOUT_SILENCE)
             )
             if not silent:
                 continue
             if slot.replacements < REPLACEMENTS:
                 slot.replacements += 1
-                slot.started = now
+                slot.started, slot.started_wall = now, wall
                 jobs.log(
                     self.job,
                     f"Simulation worker {slot.index + 1} stopped answering; "

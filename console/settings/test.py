@@ -16,5 +16,5 @@ STATIC_ROOT = None  # nothing is collected; WhiteNoise serves from the finders
 MEDIA_ROOT = env.path("PITLANE_TEST_MEDIA", VAR_DIR / "test-media")
 STORAGES["default"]["OPTIONS"]["location"] = MEDIA_ROOT  # noqa: F405
 # Dead rollout workers are given up on sooner, so that the tests that kill them stay short.
-PITLANE_ROLLOUT_SILENCE = 10
-PITLANE_ROLLOUT_STARTUP = 40
+PITLANE_ROLLOUT_SILENCE = 20
+PITLANE_ROLLOUT_STARTUP = 60

@@ -107,8 +107,7 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
 
 @pytest.mark.django_db(transaction=True)
 def test_a_second_delivery_of_the_trainer_task_does_not_train_twice(alice, tracks):
-    model = model_create(owner=alice, settings=settings(), validate_reward=False)
-    job = model.jobs.get()
+    job = queued_job(alice)
     held = jobs.lease_acquire(job_id=job.pk, owner="first-run")
     assert held is not None and held.attempt == 1
 
@@ -129,12 +128,16 @@ def test_a_second_delivery_of_the_trainer_task_does_not_train_twice(alice, track
         jobs.write(held, message="a stale run writing")
 
 
+def queued_job(owner) -> TrainingJob:
+    """A job saved without enqueueing its trainer: one still waiting for a free worker."""
+    clean = configuration.check(settings(), owner=owner, validate_reward=False)
+    return TrainingJob.objects.create(model=RLModel.objects.create(owner=owner, **clean))
+
+
 @pytest.mark.django_db(transaction=True)
 def test_a_queued_job_that_is_stopped_is_canceled(alice, tracks):
-    # Saved without enqueueing its trainer: a job still waiting for a free worker.
-    clean = configuration.check(settings(), owner=alice, validate_reward=False)
-    model = RLModel.objects.create(owner=alice, **clean)
-    job = training_stop(job=TrainingJob.objects.create(model=model))
+    job = training_stop(job=queued_job(alice))
+    model = job.model
     assert job.status == TrainingJob.Status.CANCELED
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.ERROR
 
@@ -297,6 +300,7 @@ def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
     wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
 
 
+@pytest.mark.restarts_redis
 @pytest.mark.django_db(transaction=True)
 def test_a_redis_restart_mid_job_is_recovered_or_fails_cleanly(
     alice, tracks, celery_worker_process

@@ -141,10 +141,14 @@ class Sandbox:
         """Act with the policy weights of ``version`` from now on."""
         self._request({"op": "weights", "version": version, "data": data}, {"weights"}, 30.0)
 
-    def episode(self, mode: str = "explore", worker: int = 0) -> dict:
+    def episode(
+        self, mode: str = "explore", worker: int = 0,
+        on_progress: Callable[[int], None] | None = None,
+    ) -> dict:  # fmt: skip
         """Drive one episode: ``summary`` (steps, reward, progress, status, lap_time) and, unless
         evaluating, ``payload``: the episode's experience, encoded for the experience buffer."""
-        reply = self._request({"op": "episode", "mode": mode, "worker": worker}, {"episode"})
+        reply = self._request({"op": "episode", "mode": mode, "worker": worker}, {"episode"},
+                              on_progress=on_progress)  # fmt: skip
         if not isinstance(reply.get("summary"), dict):
             raise SandboxFailure("protocol", "The sandbox sent an episode without a summary.")
         return reply
