@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 
 from simulator.camera import Lens, Mount, PerspectiveView, Solid
-from simulator.texture import preview, render
+from simulator.texture import preview_texture, render
 from simulator.tracks import Track
 
 if TYPE_CHECKING:
@@ -36,14 +36,9 @@ class Spectator:
             CHASE_MOUNT,
             SKY,
         )
-        picture = preview(track, width=MAP_WIDTH)
-        self._map = picture
-        low, high = track.bounds
-        self._map_texture = render(track, pixels_per_metre=1.0, colour=False)  # for its transform
-        scale = MAP_WIDTH / float(high[0] - low[0] + 2.0)
-        self._map_origin = low - 1.0
-        self._map_scale = scale
-        self._map_at = (SIZE[0] - picture.shape[1] - 10, 10)
+        self._map_texture = preview_texture(track, width=MAP_WIDTH)
+        self._map = self._map_texture.image
+        self._map_at = (SIZE[0] - self._map.shape[1] - 10, 10)
 
     def render(self, env: DeepRacerEnv) -> np.ndarray:
         car = env.car
@@ -58,10 +53,7 @@ class Spectator:
 
     def _to_map(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        height = self._map.shape[0]
-        column = (points[:, 0] - self._map_origin[0]) * self._map_scale
-        row = height - (points[:, 1] - self._map_origin[1]) * self._map_scale
-        return np.round(np.column_stack([column, row]) * 16).astype(np.int32)
+        return np.round(self._map_texture.to_pixels(points) * 16).astype(np.int32)
 
     def _draw_map(self, frame: np.ndarray, env: DeepRacerEnv) -> None:
         left, top = self._map_at

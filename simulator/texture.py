@@ -99,6 +99,11 @@ def render(track: Track, *, pixels_per_metre: float, colour: bool = False) -> Tr
 def preview(track: Track, *, width: int = 480) -> np.ndarray:
     """A colour top-down picture of the track, ``width`` pixels wide, with an arrow at the start
     showing the direction of travel."""
+    return preview_texture(track, width=width).image
+
+
+def preview_texture(track: Track, *, width: int = 480) -> TrackTexture:
+    """``preview``'s picture with its world-to-pixel transform, for drawing on it."""
     low, high = track.bounds
     texture = render(track, pixels_per_metre=width / float(high[0] - low[0] + 2 * MARGIN),
                      colour=True)  # fmt: skip
@@ -108,4 +113,5 @@ def preview(track: Track, *, width: int = 480) -> np.ndarray:
     tip = texture.to_pixels(np.array([[x + 0.9 * np.cos(heading), y + 0.9 * np.sin(heading)]]))[0]
     cv2.arrowedLine(image, tuple(np.round(start).astype(int)), tuple(np.round(tip).astype(int)),
                     (30, 110, 235), 3, cv2.LINE_AA, tipLength=0.35)  # fmt: skip
-    return image
+    return TrackTexture(image=image, pixels_per_metre=texture.pixels_per_metre,
+                        origin=texture.origin)  # fmt: skip
