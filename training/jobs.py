@@ -45,11 +45,6 @@ def lease_acquire(*, job_id: int, owner: str) -> TrainingJob | None:
     return job
 
 
-def lease_renew(job: TrainingJob) -> None:
-    """Extend the lease; ``LeaseLost`` if another run has taken the job."""
-    write(job, lease_expires=timezone.now() + LEASE)
-
-
 def write(job: TrainingJob, **fields) -> None:
     """Update the job's row, only while ``job``'s attempt holds the lease; mirror on ``job``."""
     updated = TrainingJob.objects.filter(
@@ -59,10 +54,6 @@ def write(job: TrainingJob, **fields) -> None:
         raise LeaseLost(f"training job {job.pk} is held by another run")
     for name, value in fields.items():
         setattr(job, name, value)
-
-
-def release(job: TrainingJob) -> None:
-    TrainingJob.objects.filter(pk=job.pk, attempt=job.attempt).update(lease_expires=None)
 
 
 def log(job: TrainingJob, text: str, level: str = "info") -> None:

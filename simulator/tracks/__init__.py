@@ -82,11 +82,6 @@ class Track:
         return float(self._segments[3][-1])
 
     @property
-    def waypoint_distances(self) -> np.ndarray:
-        """[m] along the centre line at each waypoint."""
-        return self._segments[3]
-
-    @property
     def widths(self) -> np.ndarray:
         """Inner-to-outer border distance at each waypoint [m]."""
         left, right = self._half_widths
