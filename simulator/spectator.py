@@ -81,3 +81,23 @@ class Spectator:
         cv2.rectangle(frame, (0, SIZE[1] - 30), (SIZE[0], SIZE[1]), (30, 30, 30), -1)
         cv2.putText(frame, text, (10, SIZE[1] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55,
                     TEXT_COLOUR, 1, cv2.LINE_AA)  # fmt: skip
+
+
+def view_image(env: DeepRacerEnv, view: str, observation: dict | None = None) -> np.ndarray:
+    """What a viewer sees of ``env``: ``"spectator"`` (the chase view with its map, BGR) or
+    ``"camera"`` (what the policy sees: the 160 x 120 grayscale camera, the left one of a stereo
+    pair), from ``observation`` when given, else rendered now."""
+    if view == "spectator":
+        return env.spectator.render(env)
+    if view != "camera":
+        raise ValueError(f"no view named {view!r}")
+    if observation is None:
+        observation = env._observe()
+    return observation[env.camera_name][0]
+
+
+def jpeg(image: np.ndarray, quality: int = 80) -> bytes:
+    ok, data = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise ValueError("the image could not be encoded as JPEG")
+    return data.tobytes()

@@ -7,6 +7,7 @@ hyperparameters under the names of ``hyperparameters.json``.
 
 from __future__ import annotations
 
+import math
 import re
 
 from simulator import config as sim
@@ -17,6 +18,8 @@ from training.rewards import reward_validate
 NAME = re.compile(r"^[A-Za-z0-9-]{1,64}$")
 MINUTES = (10, 1440)
 MAX_WORKERS = 4
+TRIALS = (3, 5)
+PENALTY_MAX = 10.0  # [s]
 
 
 class Invalid(Exception):
@@ -43,15 +46,8 @@ def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
         errors["description"] = "The description is at most 255 characters."
     clean["description"] = description
 
-    track = Track.objects.filter(name=settings.get("track")).first()
-    if track is None:
-        errors["track"] = "Choose one of the listed tracks."
-    clean["track"] = track
-    direction = settings.get("direction") or "counterclockwise"
-    if track is not None and direction not in _directions(track):
-        errors["direction"] = f"{track} cannot be driven {direction}."
-    clean["direction"] = direction
-
+    track = _check_track(settings, clean, errors)
+    direction = clean["direction"]
     _check_race(settings, clean, errors)
     _check_car(settings, clean, errors)
 
@@ -112,6 +108,46 @@ def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
     return clean
 
 
+def check_evaluation(settings: dict, *, model: RLModel) -> dict:
+    """An evaluation's settings, complete and typed, ready for ``EvaluationJob(**...)``;
+    ``Invalid`` otherwise. Unset settings take DeepRacer's defaults and the model's track."""
+    errors: dict[str, str] = {}
+    clean: dict = {}
+    settings = {"track": model.track.name, "direction": model.direction, **settings}
+    _check_track(settings, clean, errors)
+    _check_race(settings, clean, errors)
+    trials = _integer(settings.get("trials", 3))
+    if trials is None or not TRIALS[0] <= trials <= TRIALS[1]:
+        errors["trials"] = f"An evaluation has {TRIALS[0]} to {TRIALS[1]} trials."
+    clean["trials"] = trials
+    clean["continuous_laps"] = bool(settings.get("continuous_laps", False))
+    for name, default in (("off_track_penalty", 2.0), ("crash_penalty", 5.0)):
+        value = _number(settings.get(name, default))
+        if value is None or not 0 <= value <= PENALTY_MAX:
+            what = name.replace("_", " ").capitalize()
+            errors[name] = f"{what} is 0 to {PENALTY_MAX:g} seconds."
+        clean[name] = value
+    checkpoint = settings.get("checkpoint") or "best"
+    if checkpoint not in ("best", "last"):
+        errors["checkpoint"] = "Evaluate the best or the last checkpoint."
+    clean["checkpoint"] = checkpoint
+    if errors:
+        raise Invalid(errors)
+    return clean
+
+
+def _check_track(settings: dict, clean: dict, errors: dict) -> Track | None:
+    track = Track.objects.filter(name=settings.get("track")).first()
+    if track is None:
+        errors["track"] = "Choose one of the listed tracks."
+    clean["track"] = track
+    direction = settings.get("direction") or "counterclockwise"
+    if track is not None and direction not in _directions(track):
+        errors["direction"] = f"{track} cannot be driven {direction}."
+    clean["direction"] = direction
+    return track
+
+
 def _check_race(settings: dict, clean: dict, errors: dict) -> None:
     race_type = settings.get("race_type") or "TIME_TRIAL"
     try:
@@ -155,9 +191,14 @@ def _directions(track: Track) -> list[str]:
     return [name for name in ("counterclockwise", "clockwise") if getattr(track, name)]
 
 
-def _integer(value) -> int | None:
+def _number(value) -> float | None:
     try:
         number = float(value)
     except (TypeError, ValueError):
         return None
-    return int(number) if number == int(number) else None
+    return number if math.isfinite(number) else None
+
+
+def _integer(value) -> int | None:
+    number = _number(value)
+    return int(number) if number is not None and number == int(number) else None

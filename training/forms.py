@@ -3,7 +3,7 @@ import json
 from django import forms
 
 from training import hyperparameters
-from training.models import Algorithm, Network, RaceType, Track, Vehicle
+from training.models import Algorithm, EvaluationJob, Network, RaceType, Track, Vehicle
 from training.rewards import MAX_SOURCE_SIZE
 
 
@@ -53,14 +53,9 @@ class RewardValidationForm(forms.Form):
         return next(iter(self.errors.values()))[0]
 
 
-class ModelCreateForm(forms.Form):
-    """The create-model page: each field as a racer fills it in. The settings are checked as a
-    whole by ``training.configuration``; its errors come back onto these fields."""
+class TrackAndRaceFields(forms.Form):
+    """Where and how the car races: the fields the create-model and evaluation pages share."""
 
-    name = forms.CharField(max_length=64, help_text="Letters, digits and hyphens.")
-    description = forms.CharField(
-        max_length=255, required=False, widget=forms.Textarea(attrs={"rows": 2})
-    )
     track = forms.ModelChoiceField(
         queryset=Track.objects.all(),
         to_field_name="name",
@@ -84,6 +79,42 @@ class ModelCreateForm(forms.Form):
         label="Bot speed [m/s]", min_value=0.2, max_value=6, initial=0.5, required=False
     )
     bot_lane_changes = forms.BooleanField(label="Bots change lanes", required=False)
+
+    PLACES = {"boxes": "box_count", "bots": "bot_count"}  # where a setting's error shows
+
+    def race_settings(self) -> dict:
+        data = self.cleaned_data
+        return {
+            "track": data["track"].name,
+            "direction": data["direction"],
+            "race_type": data["race_type"],
+            "boxes": {"count": data.get("box_count") or 3, "randomize": data.get("box_randomize")},
+            "bots": {
+                "count": data.get("bot_count") or 3,
+                "speed": data.get("bot_speed") or 0.5,
+                "lane_changes": data.get("bot_lane_changes"),
+            },
+        }
+
+    def add_setting_errors(self, errors: dict[str, str]) -> None:
+        """Put ``configuration.Invalid`` errors on the fields they concern."""
+        for setting, message in errors.items():
+            field = self.field_for(setting)
+            self.add_error(field if field in self.fields else None, message)
+
+    def field_for(self, setting: str) -> str | None:
+        return self.PLACES.get(setting, setting)
+
+
+class ModelCreateForm(TrackAndRaceFields):
+    """The create-model page: each field as a racer fills it in. The settings are checked as a
+    whole by ``training.configuration``; its errors come back onto these fields."""
+
+    name = forms.CharField(max_length=64, help_text="Letters, digits and hyphens.")
+    description = forms.CharField(
+        max_length=255, required=False, widget=forms.Textarea(attrs={"rows": 2})
+    )
+    field_order = ["name", "description", "track", "direction", "race_type"]
     vehicle = forms.ModelChoiceField(
         queryset=Vehicle.objects.none(),
         required=False,
@@ -174,15 +205,7 @@ class ModelCreateForm(forms.Form):
         return {
             "name": data["name"],
             "description": data.get("description", ""),
-            "track": data["track"].name,
-            "direction": data["direction"],
-            "race_type": data["race_type"],
-            "boxes": {"count": data.get("box_count") or 3, "randomize": data.get("box_randomize")},
-            "bots": {
-                "count": data.get("bot_count") or 3,
-                "speed": data.get("bot_speed") or 0.5,
-                "lane_changes": data.get("bot_lane_changes"),
-            },
+            **self.race_settings(),
             "sensors": sensors,
             "network": data["network"],
             "action_space": action_space,
@@ -198,21 +221,51 @@ class ModelCreateForm(forms.Form):
             "reward_function": data["reward_function"],
         }
 
-    def add_setting_errors(self, errors: dict[str, str]) -> None:
-        """Put ``configuration.Invalid`` errors on the fields they concern."""
-        algorithm = self.cleaned_data.get("algorithm", "")
-        places = {
-            "sensors": "camera",
-            "boxes": "box_count",
-            "bots": "bot_count",
-            "action_space": "actions",
-            "cloned_from": None,
-        }
-        for setting, message in errors.items():
-            if setting.startswith("hyperparameters."):
-                field = f"{algorithm}__{setting.split('.', 1)[1]}"
-            else:
-                field = places.get(setting, setting)
-            if field == "actions" and self.cleaned_data.get("action_space_type") == "continuous":
-                field = "steering_low"
-            self.add_error(field if field in self.fields else None, message)
+    PLACES = {
+        **TrackAndRaceFields.PLACES,
+        "sensors": "camera",
+        "action_space": "actions",
+        "cloned_from": None,
+    }
+
+    def field_for(self, setting: str) -> str | None:
+        if setting.startswith("hyperparameters."):
+            return f"{self.cleaned_data.get('algorithm', '')}__{setting.split('.', 1)[1]}"
+        field = super().field_for(setting)
+        if field == "actions" and self.cleaned_data.get("action_space_type") == "continuous":
+            return "steering_low"
+        return field
+
+
+class EvaluationForm(TrackAndRaceFields):
+    """The Evaluate page: the track and race rules; checked by
+    ``configuration.check_evaluation``."""
+
+    trials = forms.TypedChoiceField(
+        choices=[(n, f"{n} trials") for n in (3, 4, 5)], coerce=int, initial=3,
+        help_text="Each trial is one lap.",
+    )  # fmt: skip
+    continuous_laps = forms.BooleanField(
+        label="Continuous laps", required=False,
+        help_text="The car drives its trials lap after lap without stopping, as in a race.",
+    )  # fmt: skip
+    off_track_penalty = forms.FloatField(
+        label="Off-track penalty [s]", min_value=0, max_value=10, initial=2.0,
+        help_text="The car waits this long after leaving the track, then goes back on it.",
+    )  # fmt: skip
+    crash_penalty = forms.FloatField(
+        label="Crash penalty [s]", min_value=0, max_value=10, initial=5.0,
+        help_text="The same, after hitting a box or a bot car.",
+    )  # fmt: skip
+    checkpoint = forms.ChoiceField(
+        choices=EvaluationJob.Checkpoint.choices, initial=EvaluationJob.Checkpoint.BEST,
+        widget=forms.RadioSelect,
+    )  # fmt: skip
+
+    def settings(self) -> dict:
+        data = self.cleaned_data
+        return {
+            **self.race_settings(),
+            **{name: data[name] for name in ("trials", "continuous_laps", "off_track_penalty",
+                                             "crash_penalty", "checkpoint")},
+        }  # fmt: skip

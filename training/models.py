@@ -270,6 +270,12 @@ class Iteration(models.Model):
     episodes = models.PositiveIntegerField()
     steps = models.PositiveIntegerField()
     wall_seconds = models.FloatField()
+    training_points = models.JSONField(
+        default=list, help_text="[reward, progress %] of each training episode, for the graph."
+    )
+    evaluation_points = models.JSONField(
+        default=list, help_text="Progress [%] of each evaluation episode, for the graph."
+    )
     created_at = models.DateTimeField(auto_now_add=True)
 
     class Meta:
@@ -295,3 +301,108 @@ class JobLogLine(models.Model):
 
     def __str__(self) -> str:
         return self.text
+
+
+class EvaluationJob(models.Model):
+    """An evaluation of a ready model (DeepRacer's "Evaluate"): the policy drives the chosen
+    track deterministically for a number of trials, under race rules. No racer code runs: the
+    policy is loaded from its weights only, and the reward function is not used."""
+
+    Status = TrainingJob.Status
+    ACTIVE = TrainingJob.ACTIVE
+
+    class Checkpoint(models.TextChoices):
+        BEST = "best", "Best (highest evaluation completion)"
+        LAST = "last", "Last"
+
+    model = models.ForeignKey(RLModel, on_delete=models.CASCADE, related_name="evaluations")
+    track = models.ForeignKey(Track, on_delete=models.PROTECT, related_name="evaluations")
+    direction = models.CharField(
+        max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE
+    )
+    race_type = models.CharField(
+        max_length=16, choices=RaceType.choices, default=RaceType.TIME_TRIAL
+    )
+    boxes = models.JSONField(null=True, blank=True, help_text="{count, randomize}.")
+    bots = models.JSONField(null=True, blank=True, help_text="{count, speed, lane_changes}.")
+    trials = models.PositiveSmallIntegerField(default=3)
+    continuous_laps = models.BooleanField(
+        default=False, help_text="Drive the trials as consecutive laps, without stopping."
+    )
+    off_track_penalty = models.FloatField("off-track penalty [s]", default=2.0)
+    crash_penalty = models.FloatField("crash penalty [s]", default=5.0)
+    checkpoint = models.CharField(max_length=8, choices=Checkpoint.choices, default=Checkpoint.BEST)
+    checkpoint_name = models.CharField(max_length=255, blank=True, help_text="The weights used.")
+    status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
+    message = models.CharField(max_length=255, blank=True)
+    failure_reason = models.TextField(blank=True)
+    video = models.CharField(max_length=255, blank=True, help_text="Storage name of the video.")
+    created_at = models.DateTimeField(auto_now_add=True)
+    started_at = models.DateTimeField(null=True, blank=True)
+    finished_at = models.DateTimeField(null=True, blank=True)
+
+    class Meta:
+        ordering = ["-created_at"]
+
+    def __str__(self) -> str:
+        return f"{self.model} evaluation #{self.pk}"
+
+    @property
+    def is_active(self) -> bool:
+        return self.status in self.ACTIVE
+
+    @property
+    def completed_trials(self) -> int:
+        return sum(trial.completed for trial in self.trial_rows.all())
+
+    @property
+    def best_lap_ms(self) -> int | None:
+        laps = [trial.time_ms for trial in self.trial_rows.all() if trial.completed]
+        return min(laps) if laps else None
+
+    @property
+    def laps(self) -> int:
+        """Laps per episode: all the trials in one with continuous laps, else one."""
+        return self.trials if self.continuous_laps else 1
+
+    def environment_settings(self) -> dict:
+        """The evaluation's ``gymnasium.make`` keyword arguments."""
+        return {
+            **self.model.environment_settings(self.track.name),
+            "direction": self.direction,
+            "race_type": self.race_type,
+            "objects": self.boxes,
+            "bots": self.bots,
+            "mode": "evaluation",
+            "laps": self.laps,
+            "penalties": {"off_track": self.off_track_penalty, "crash": self.crash_penalty},
+        }
+
+
+class EvaluationTrial(models.Model):
+    """One trial of an evaluation: a lap, or as much of one as the car drove."""
+
+    evaluation = models.ForeignKey(
+        EvaluationJob, on_delete=models.CASCADE, related_name="trial_rows"
+    )
+    number = models.PositiveSmallIntegerField()
+    time_ms = models.PositiveIntegerField(help_text="Simulated time, penalties included.")
+    progress = models.FloatField(help_text="[%] of the lap.")
+    status = models.CharField(max_length=20)
+    off_tracks = models.PositiveIntegerField(default=0)
+    crashes = models.PositiveIntegerField(default=0)
+    resets = models.PositiveIntegerField(default=0)
+    penalty_ms = models.PositiveIntegerField(default=0)
+
+    class Meta:
+        ordering = ["evaluation", "number"]
+        constraints = [
+            models.UniqueConstraint(fields=["evaluation", "number"], name="one_row_per_trial")
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.evaluation}, trial {self.number}"
+
+    @property
+    def completed(self) -> bool:
+        return self.status == "lap_complete"

@@ -17,6 +17,7 @@ import redis
 
 from console.workers import redis_client
 from training import hyperparameters as hp
+from training import live
 from training.experience import JobChannel
 from training.models import TrainingJob
 from training.sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
@@ -48,14 +49,52 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             call_timeout=REWARD_CALL_LIMIT, memory_allowance=MEMORY_ALLOWANCE,
         ) as sandbox:  # fmt: skip
             sandbox.load(model.reward_function)
-            _drive(sandbox, channel, job, worker)
+            with live.FramePublisher(channel.client, live.training_group(job_id)) as publisher:
+                _drive(sandbox, channel, job, worker, Viewing(sandbox, publisher, worker))
     except SandboxFailure as failure:
         channel.report_failure(f"Your reward function failed {_where(failure, worker)}: {failure}")
     except redis.RedisError as error:
         logger.warning("Rollout %s/%s lost Redis: %s", job_id, worker, error)
 
 
-def _drive(sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int) -> None:
+class Viewing:
+    """A rollout worker's side of live viewing: it tells its sandbox which views someone watches,
+    relays the frames the sandbox sends, and shows the car waiting while the trainer learns."""
+
+    def __init__(self, sandbox: Sandbox, publisher: live.FramePublisher, worker: int) -> None:
+        self.sandbox, self.publisher, self.worker = sandbox, publisher, worker
+        self.views: set[str] = set()
+        self.last: dict[str, dict] = {}
+        self.held = 0.0
+        sandbox.on_frame = self.relay
+
+    def update(self) -> None:
+        views = self.publisher.watched(self.worker)
+        if views != self.views:
+            self.sandbox.watch(views)
+            self.views = views
+
+    def relay(self, raw: dict) -> None:
+        frame = live.frame_from_child(raw, self.worker)
+        if frame is not None:
+            self.last[frame["view"]] = frame
+            self.publisher.offer(frame)
+
+    def hold(self) -> None:
+        """The last frames again, marked paused, at the live frame rate: the viewer sees the
+        car wait for the new policy, not a stream that stalled."""
+        if time.monotonic() - self.held < live.FRAME_INTERVAL:
+            return
+        self.held = time.monotonic()
+        for view in self.views:
+            if view in self.last:
+                self.publisher.offer({**self.last[view], "paused": True,
+                                      "rendered_at": time.time()})  # fmt: skip
+
+
+def _drive(
+    sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int, viewing: Viewing
+) -> None:
     algorithm, attempt = job.model.algorithm, job.attempt
     version = -1
     evaluated = -1
@@ -63,9 +102,11 @@ def _drive(sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int)
 
     def beat(steps: int) -> None:  # a long episode still shows the trainer this worker lives
         channel.beat(worker)
+        viewing.update()
 
     while not channel.should_stop(attempt):
         channel.beat(worker)
+        viewing.update()
         if time.monotonic() - checked > JOB_CHECK:
             checked = time.monotonic()
             if not _still_wanted(job):
@@ -88,7 +129,7 @@ def _drive(sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int)
         channel.push_log(list(sandbox.logs))
         sandbox.logs.clear()
         if channel.count_episode(version) >= channel.episodes_wanted():
-            _await_next_version(channel, version, worker, attempt)
+            _await_next_version(channel, version, worker, attempt, viewing)
 
 
 def _still_wanted(job: TrainingJob) -> bool:
@@ -99,12 +140,16 @@ def _still_wanted(job: TrainingJob) -> bool:
     ).exists()
 
 
-def _await_next_version(channel: JobChannel, version: int, worker: int, attempt: int) -> None:
+def _await_next_version(
+    channel: JobChannel, version: int, worker: int, attempt: int, viewing: Viewing
+) -> None:
     """The trainer has the episodes it wants of this version: wait while it learns, rather than
     drive episodes it would drop (and take the CPU it learns with)."""
     while channel.policy_version() <= version and not channel.should_stop(attempt):
         channel.beat(worker)
-        time.sleep(WAIT_POLL)
+        viewing.update()
+        viewing.hold()
+        time.sleep(live.FRAME_INTERVAL if viewing.views else WAIT_POLL)
 
 
 def _where(failure: SandboxFailure, worker: int) -> str:

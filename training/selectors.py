@@ -8,8 +8,16 @@ from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
 from django.db.models import QuerySet
 
-from training import artifacts
-from training.models import RLModel, Track, Vehicle
+from training import artifacts, jobs
+from training.models import (
+    EvaluationJob,
+    EvaluationTrial,
+    Iteration,
+    RLModel,
+    Track,
+    TrainingJob,
+    Vehicle,
+)
 
 
 def models_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:
@@ -45,3 +53,105 @@ def model_files(*, model: RLModel) -> list[ModelFile]:
         relative = f"training-simtrace/{number}-iteration.csv"
         files.append(ModelFile(relative, f"Simulation trace, iteration {number}"))
     return files
+
+
+def training_status(*, job: TrainingJob) -> dict:
+    """A training job's state as the live page shows it (a ``status`` message)."""
+    model = job.model
+    return {
+        "type": "status",
+        "status": job.status,
+        "status_display": job.get_status_display(),
+        "active": job.is_active,
+        "message": job.message,
+        "failure_reason": job.failure_reason,
+        "queue_position": jobs.queue_position(job),
+        "training_seconds": round(job.training_seconds, 1),
+        "max_seconds": model.max_minutes * 60,
+        "iterations": job.iterations,
+        "episodes": job.episodes,
+        "steps": job.steps,
+        "model_status": model.status,
+        "model_status_display": model.get_status_display(),
+        "workers": model.workers,
+    }
+
+
+def iteration_point(*, row: Iteration) -> dict:
+    """One iteration for the live graph (an ``iteration`` message)."""
+    return {
+        "type": "iteration",
+        "number": row.number,
+        "reward": row.reward,
+        "completion": row.completion,
+        "evaluation_completion": row.evaluation_completion,
+        "best_lap_time": row.best_lap_time,
+        "episodes": row.episodes,
+        "steps": row.steps,
+        "training_points": row.training_points,
+        "evaluation_points": row.evaluation_points,
+    }
+
+
+def training_snapshot(*, job: TrainingJob) -> dict:
+    """Everything a viewer who connects needs at once: the status and every iteration so far."""
+    return {
+        **training_status(job=job),
+        "type": "state",
+        "history": [iteration_point(row=row) for row in job.iteration_rows.all()],
+    }
+
+
+def model_checkpoint(*, model: RLModel, which: str = "best") -> str | None:
+    """The storage name of the model's ``best`` or ``last`` checkpoint, from its newest training
+    that saved one; None when it has none."""
+    job = (
+        TrainingJob.objects.filter(model=model)
+        .exclude(last_checkpoint="")
+        .order_by("-created_at")
+        .first()
+    )
+    if job is None:
+        return None
+    return (job.best_checkpoint if which == "best" else "") or job.last_checkpoint
+
+
+def trial_row(*, trial: EvaluationTrial) -> dict:
+    """One trial of an evaluation, for its results table (a ``trial`` message)."""
+    return {
+        "type": "trial",
+        "number": trial.number,
+        "time_ms": trial.time_ms,
+        "progress": trial.progress,
+        "status": trial.status,
+        "off_tracks": trial.off_tracks,
+        "crashes": trial.crashes,
+        "resets": trial.resets,
+        "penalty_ms": trial.penalty_ms,
+    }
+
+
+def evaluation_status(*, evaluation: EvaluationJob) -> dict:
+    return {
+        "type": "status",
+        "status": evaluation.status,
+        "status_display": evaluation.get_status_display(),
+        "active": evaluation.is_active,
+        "message": evaluation.message,
+        "failure_reason": evaluation.failure_reason,
+        "trials": evaluation.trials,
+        "has_video": bool(evaluation.video),
+        "workers": 1,
+    }
+
+
+def evaluation_snapshot(*, evaluation: EvaluationJob) -> dict:
+    return {
+        **evaluation_status(evaluation=evaluation),
+        "type": "state",
+        "history": [trial_row(trial=trial) for trial in evaluation.trial_rows.all()],
+    }
+
+
+def evaluations_for_model(*, model: RLModel) -> QuerySet[EvaluationJob]:
+    return model.evaluations.select_related("track").prefetch_related("trial_rows")

@@ -7,8 +7,8 @@ from django.db import transaction
 from django.utils import timezone
 
 from simulator import tracks as simulator_tracks
-from training import configuration, tasks
-from training.models import Direction, RLModel, Track, TrainingJob, Vehicle
+from training import configuration, live, selectors, tasks
+from training.models import Direction, EvaluationJob, RLModel, Track, TrainingJob, Vehicle
 
 
 @transaction.atomic
@@ -75,4 +75,33 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
             job.status = TrainingJob.Status.STOPPING
             job.save(update_fields=["stop_requested", "status"])
             RLModel.objects.filter(pk=job.model_id).update(status=RLModel.Status.STOPPING)
+    live.announce_training(job.pk)
+    if job.status == TrainingJob.Status.CANCELED:
+        live.announce_queue()
     return job
+
+
+class EvaluationRefused(Exception):
+    """The model cannot be evaluated now; the message says why."""
+
+
+def evaluation_start(*, model: RLModel, settings: dict, enqueue: bool = True) -> EvaluationJob:
+    """Check the settings (``configuration.Invalid``), then queue an evaluation of a ready model
+    and mark the model EVALUATING; the task is enqueued once committed (unless ``enqueue`` is
+    False: ``manage.py evaluate`` runs it in its own process)."""
+    clean = configuration.check_evaluation(settings, model=model)
+    with transaction.atomic():
+        model = RLModel.objects.select_for_update().get(pk=model.pk)
+        if model.status != RLModel.Status.READY:
+            raise EvaluationRefused(
+                f"The model is {model.get_status_display().lower()}; "
+                "it can be evaluated once it is ready."
+            )
+        if selectors.model_checkpoint(model=model) is None:
+            raise EvaluationRefused("The model has no trained weights yet; train it first.")
+        evaluation = EvaluationJob.objects.create(model=model, **clean)
+        model.status = RLModel.Status.EVALUATING
+        model.save(update_fields=["status", "updated_at"])
+        if enqueue:
+            transaction.on_commit(lambda: tasks.evaluate.delay(evaluation.pk))
+    return evaluation

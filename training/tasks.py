@@ -12,6 +12,7 @@ from celery import shared_task
 
 LONGEST_JOB = 24 * 3600  # [s] the longest training time a racer may ask for
 LEASE_CHECK = 50  # [s] a little longer than a trainer's lease
+EVALUATION_LIMIT = 3600  # [s] five trials of at most 10,000 steps each, in real time at worst
 
 
 @shared_task(
@@ -44,6 +45,22 @@ def rollout(job_id: int, worker: int, attempt: int, track: str) -> None:
     from training import rollouts
 
     rollouts.run(job_id, worker, attempt, track)
+
+
+@shared_task(
+    name="training.evaluate",
+    acks_late=True,
+    ignore_result=True,
+    soft_time_limit=EVALUATION_LIMIT,
+    time_limit=EVALUATION_LIMIT + 60,
+)
+def evaluate(evaluation_id: int) -> None:
+    import torch
+
+    from training import evaluation
+
+    torch.set_num_threads(1)
+    evaluation.run(evaluation_id)
 
 
 def torch_threads() -> None:

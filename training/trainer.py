@@ -23,7 +23,7 @@ from django.utils import timezone
 import simulator
 from console.workers import redis_client
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, jobs
+from training import artifacts, jobs, live
 from training import hyperparameters as hp
 from training.experience import Episode, JobChannel, decode_episode
 from training.jobs import LeaseLost
@@ -115,6 +115,8 @@ class Trainer:
             message="Preparing the trainer",
         )
         RLModel.objects.filter(pk=model.pk).update(status=RLModel.Status.TRAINING)
+        live.announce_training(job.pk)
+        live.announce_queue()
         env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
         spaces = env.observation_space, env.action_space
         env.close()
@@ -149,6 +151,7 @@ class Trainer:
             status=TrainingJob.Status.IN_PROGRESS,
             message=f"Training with {len(self.slots)} simulation worker(s) on {tracks}",
         )
+        live.announce_training(job.pk)
         if first_run:
             jobs.log(
                 job,
@@ -179,6 +182,7 @@ class Trainer:
             self.last_check = now
             spent = self.base_seconds + now - self.session_started
             jobs.write(job, training_seconds=spent, lease_expires=timezone.now() + jobs.LEASE)
+            live.announce_training(job.pk)
             if self._stop_requested():
                 jobs.log(job, "Stopped by the racer.")
                 return True
@@ -247,6 +251,10 @@ class Trainer:
                 episodes=update.episodes,
                 steps=update.steps,
                 wall_seconds=wall,
+                training_points=[
+                    [round(float(e.rewards.sum()), 3), round(float(e.progress), 2)]
+                    for e in episodes
+                ],
             )
             checkpoint = self._checkpoint(number)
             jobs.write(
@@ -258,6 +266,7 @@ class Trainer:
                 last_checkpoint=checkpoint,
             )
         self._record_training(number, episodes)
+        live.announce_iteration(self.job.pk, number)
         jobs.log(
             self.job,
             f"Iteration {number}: {update.episodes} episodes, {update.steps} steps, "
@@ -346,7 +355,11 @@ class Trainer:
         row = Iteration.objects.filter(job=self.job, number=version).first()
         if row is None:
             return
-        Iteration.objects.filter(pk=row.pk).update(evaluation_completion=completion)
+        Iteration.objects.filter(pk=row.pk).update(
+            evaluation_completion=completion,
+            evaluation_points=[round(r["progress"], 2) for r in results],
+        )
+        live.announce_iteration(self.job.pk, version)
         now = time.time()
         for trial, result in enumerate(results, start=1):
             self.metrics.append(
@@ -456,3 +469,4 @@ class Trainer:
         RLModel.objects.filter(pk=self.model.pk).update(
             status=RLModel.Status.READY if ready else RLModel.Status.ERROR
         )
+        live.announce_training(job.pk)

@@ -9,6 +9,17 @@ urlpatterns = [
     path("models/<int:pk>/", views.model_detail, name="model-detail"),
     path("models/<int:pk>/stop/", views.model_stop, name="model-stop"),
     path("models/<int:pk>/files/<path:relative>", views.model_file, name="model-file"),
+    path("models/<int:pk>/evaluate/", views.evaluation_create, name="evaluation-create"),
+    path(
+        "models/<int:pk>/evaluations/<int:evaluation>/",
+        views.evaluation_detail,
+        name="evaluation-detail",
+    ),
+    path(
+        "models/<int:pk>/evaluations/<int:evaluation>/files/<path:name>",
+        views.evaluation_file,
+        name="evaluation-file",
+    ),
     path("garage/", views.garage, name="garage"),
     path("models/reward-function/", views.reward_editor, name="reward-editor"),
     path("models/reward-function/validate/", views.reward_validation, name="reward-validation"),

@@ -11,9 +11,12 @@ from django.views.decorators.http import require_POST, require_safe
 from simulator import config as sim_config
 from simulator import tracks as simulator_tracks
 from training import artifacts, configuration, jobs, rewards, selectors, services
-from training.charts import iteration_chart
-from training.forms import ModelCreateForm, RewardValidationForm, VehicleForm
-from training.models import RLModel
+from training.evaluation import METRICS as EVALUATION_METRICS
+from training.evaluation import TRACE as EVALUATION_TRACE
+from training.evaluation import VIDEO as EVALUATION_VIDEO
+from training.evaluation import files_prefix
+from training.forms import EvaluationForm, ModelCreateForm, RewardValidationForm, VehicleForm
+from training.models import EvaluationJob, RLModel
 from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
@@ -143,7 +146,9 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "job": job,
             "queue_position": jobs.queue_position(job) if job else None,
             "iterations": iterations,
-            "chart": iteration_chart(iterations),
+            "evaluations": selectors.evaluations_for_model(model=model)[:20],
+            "can_evaluate": model.status == RLModel.Status.READY,
+            "workers_range": range(model.workers),
             "log_lines": list(job.log_lines.all().order_by("-at", "-pk")[:200]) if job else [],
             "files": selectors.model_files(model=model),
         },
@@ -173,3 +178,84 @@ def model_file(request: HttpRequest, pk: int, relative: str) -> FileResponse:
     name = artifacts.path(model, relative)
     return FileResponse(default_storage.open(name, "rb"), as_attachment=True,
                         filename=relative.replace("/", "-"))  # fmt: skip
+
+
+@login_required
+def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
+    model = _get_model_for_user(request, pk)
+    initial = {"track": model.track.name, "direction": model.direction,
+               "race_type": model.race_type}  # fmt: skip
+    form = EvaluationForm(request.POST or None, initial=initial)
+    refusal = None
+    if model.status != RLModel.Status.READY:
+        refusal = (
+            f"{model.name} is {model.get_status_display().lower()}; "
+            "it can be evaluated once it is ready."
+        )
+    elif request.method == "POST" and form.is_valid():
+        try:
+            evaluation = services.evaluation_start(model=model, settings=form.settings())
+        except configuration.Invalid as invalid:
+            form.add_setting_errors(invalid.errors)
+        except services.EvaluationRefused as refused:
+            refusal = str(refused)
+        else:
+            messages.success(request, "The evaluation is queued.")
+            return redirect("training:evaluation-detail", pk=model.pk, evaluation=evaluation.pk)
+    return render(
+        request,
+        "training/evaluation_create.html",
+        {"model": model, "form": form, "refusal": refusal,
+         "tracks": selectors.tracks_available()},
+        status=400 if form.errors or (refusal and request.method == "POST") else 200,
+    )  # fmt: skip
+
+
+def _get_evaluation_for_user(request: HttpRequest, pk: int, evaluation: int) -> EvaluationJob:
+    model = _get_model_for_user(request, pk)
+    return get_object_or_404(
+        EvaluationJob.objects.select_related("model", "track"), pk=evaluation, model=model
+    )
+
+
+EVALUATION_FILES = {
+    EVALUATION_VIDEO: "Video (WebM)",
+    EVALUATION_TRACE: "Simulation trace (CSV)",
+    EVALUATION_METRICS: "Evaluation metrics (JSON)",
+}
+
+
+@login_required
+def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpResponse:
+    job = _get_evaluation_for_user(request, pk, evaluation)
+    prefix = artifacts.path(job.model, files_prefix(job))
+    files = [
+        (name, label) for name, label in EVALUATION_FILES.items()
+        if job.status == EvaluationJob.Status.COMPLETED and default_storage.exists(prefix + name)
+    ]  # fmt: skip
+    return render(
+        request,
+        "training/evaluation_detail.html",
+        {"model": job.model, "evaluation": job, "trials": list(job.trial_rows.all()),
+         "files": files},
+    )  # fmt: skip
+
+
+@login_required
+@require_safe
+def evaluation_file(request: HttpRequest, pk: int, evaluation: int, name: str) -> FileResponse:
+    """The evaluation's video (played in the page), trace or metrics, after the ownership
+    check."""
+    job = _get_evaluation_for_user(request, pk, evaluation)
+    if name not in EVALUATION_FILES:
+        raise Http404("No such file")
+    stored = artifacts.path(job.model, files_prefix(job) + name)
+    if not default_storage.exists(stored):
+        raise Http404("No such file")
+    video = name == EVALUATION_VIDEO
+    filename = f"{job.model.name}-evaluation-{job.pk}-{name.replace('/', '-')}"
+    response = FileResponse(default_storage.open(stored, "rb"), as_attachment=not video,
+                            filename=filename)  # fmt: skip
+    if video:
+        response["Content-Type"] = "video/webm"
+    return response

@@ -157,6 +157,7 @@ PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # 
 CELERY_TASK_ROUTES = {
     "training.train": {"queue": "training"},  # the trainer: a GPU machine, where there is one
     "training.rollout": {"queue": "simulation"},  # rollouts: any CPU machine
+    "training.evaluate": {"queue": "simulation"},  # evaluations and races: no racer code
 }
 
 # Files: static assets are served by WhiteNoise; artifacts go through Django's storage API, to local

@@ -81,6 +81,7 @@ class Sandbox:
     start_timeout: float = 60.0  # [s]
     logs: deque = field(default_factory=lambda: deque(maxlen=1000))
     report: dict = field(default_factory=dict)
+    on_frame: Callable[[dict], None] | None = None  # given each frame the child sends (unchecked)
 
     def __post_init__(self) -> None:
         self._process: subprocess.Popen | None = None
@@ -153,6 +154,11 @@ class Sandbox:
             raise SandboxFailure("protocol", "The sandbox sent an episode without a summary.")
         return reply
 
+    def watch(self, views: set[str]) -> None:
+        """Have the child send these views (``"spectator"``, ``"camera"``) at 15 frames/s while
+        it drives, to ``on_frame``; an empty set stops them. Takes effect within an episode."""
+        self._send({"op": "watch", "views": sorted(views)})
+
     def probe(self, secret_path: str, port: int) -> list[str]:
         """What the sealed child managed to do of the forbidden things; [] when it held."""
         reply = self._request({"op": "probe", "secret_path": secret_path, "port": port}, {"probe"})
@@ -218,6 +224,10 @@ class Sandbox:
             if kind == "progress":
                 if on_progress is not None:
                     on_progress(int(frame.get("steps", 0)))
+                continue
+            if kind == "frame":
+                if self.on_frame is not None:
+                    self.on_frame(frame)
                 continue
             if kind in expected:
                 return frame

@@ -13,6 +13,7 @@ import importlib
 import io
 import linecache
 import os
+import select
 import signal
 import sys
 import time
@@ -24,6 +25,7 @@ import numpy as np
 
 from simulator.controller import RolloutStats, drive
 from simulator.rewards import RewardError, checked_reward
+from simulator.spectator import jpeg, view_image
 from training.experience import encode_arrays
 from training.sandbox import seal
 from training.sandbox.protocol import pack, read_frame
@@ -35,6 +37,9 @@ PRELOADED = (
     "shapely.geometry", "shapely.ops", "shapely.affinity",
 )  # fmt: skip
 PROGRESS_EVERY = 0.25  # [s] between progress messages during a rollout
+FRAME_INTERVAL = 1 / 15  # [s] between frames of a watched view
+LOOK_EVERY = 0.05  # [s] between looks for a watch request during an episode
+VIEWS = ("spectator", "camera")
 MAX_LOG = 200  # characters per printed line kept, and lines per rollout step batch
 
 
@@ -44,7 +49,13 @@ class CallTimeout(BaseException):
 
 class Child:
     def __init__(self) -> None:
-        self.requests = os.fdopen(0, "rb")
+        # Unbuffered: a watch request that comes during an episode must be seen by poll(), not
+        # sit in a buffer read ahead of it.
+        self.requests = os.fdopen(0, "rb", buffering=0)
+        self._requests_ready = select.poll()
+        self._requests_ready.register(0, select.POLLIN)
+        self.views: set[str] = set()
+        self._last_look = self._last_frame = 0.0
         self.reply_fd = 1
         self.reward_function = None
         self.env = None
@@ -91,51 +102,31 @@ class Child:
 
         cv2.setNumThreads(0)  # no worker threads: the sealed process cannot start any
         env = gymnasium.make(simulator.ENV_ID, reward_fn=self._call_reward, **settings)
-        env.reset(seed=0)
+        observation, _ = env.reset(seed=0)
+        for view in VIEWS:  # the spectator's textures and the JPEG codec, before sealing
+            jpeg(view_image(env.unwrapped, view, observation))
         return env
 
     def _build_policy(self, settings: dict) -> None:
         """The policy network the rollout acts with, built and run once before sealing."""
         import torch
 
-        from training.learner import load_weights
-        from training.networks import policy_kwargs
+        from training.policies import Policy
 
         torch.set_num_threads(1)
-        kwargs = policy_kwargs(settings["network"])
-        spaces = (self.env.observation_space, self.env.action_space)
-        self.ppo = settings["algorithm"] == "clipped_ppo"
-        if self.ppo:
-            from stable_baselines3.common.policies import MultiInputActorCriticPolicy
-
-            self.policy = MultiInputActorCriticPolicy(*spaces, lambda _: 0.0, **kwargs)
-            self._weights_module = self.policy
-        else:
-            from stable_baselines3.sac.policies import MultiInputPolicy
-
-            kwargs["net_arch"] = {"pi": [64], "qf": [64]}
-            self.policy = MultiInputPolicy(*spaces, lambda _: 0.0, **kwargs)
-            self._weights_module = self.policy.actor
-        self.policy.set_training_mode(False)
-        self._load_weights = load_weights
-        self._torch = torch
+        self.policy = Policy.build(
+            settings["algorithm"], settings["network"],
+            self.env.observation_space, self.env.action_space,
+        )  # fmt: skip
+        self.ppo = self.policy.ppo
         observation, _ = self.env.reset(seed=int(settings.get("seed", 0)))
-        self._act(observation, deterministic=False)
+        self.policy.act(observation, deterministic=False)
         self.version = -1
-
-    def _act(self, observation, deterministic: bool):
-        """(action, value, log-probability) from the policy; value and log-probability for PPO."""
-        tensor, _ = self.policy.obs_to_tensor(observation)
-        with self._torch.no_grad():
-            if self.ppo:
-                actions, values, log_probs = self.policy(tensor, deterministic=deterministic)
-                return actions[0].numpy(), float(values[0]), float(log_probs[0])
-            return self.policy.actor(tensor, deterministic=deterministic)[0].numpy(), None, None
 
     # Requests
 
     def op_weights(self, request: dict) -> None:
-        self._load_weights(self._weights_module, request["data"])
+        self.policy.load_published(request["data"])
         self.version = int(request["version"])
         self.send({"type": "weights", "version": self.version})
 
@@ -153,9 +144,10 @@ class Child:
                 if mode == "random":
                     action, value, log_prob = env.action_space.sample(), 0.0, 0.0
                 else:
-                    action, value, log_prob = self._act(observation, mode == "evaluate")
-                command = int(action) if discrete else np.clip(action, -1.0, 1.0)
-                observation, reward, terminated, truncated, info = env.step(command)
+                    action, value, log_prob = self.policy.act(observation, mode == "evaluate")
+                observation, reward, terminated, truncated, info = env.step(
+                    self.policy.command(action, discrete)
+                )
                 actions.append(action)
                 rewards.append(reward)
                 values.append(value or 0.0)
@@ -166,6 +158,7 @@ class Child:
                     trace.append(list(info["trace"]))
                 if terminated or truncated:
                     break
+                self._live(observation, request)
                 if time.perf_counter() - last_report >= PROGRESS_EVERY:
                     self.send({"type": "progress", "steps": len(rewards), "log": self._take_logs()})
                     last_report = time.perf_counter()
@@ -187,7 +180,7 @@ class Child:
             return
         final_value = 0.0
         if self.ppo and mode != "random" and not terminated:
-            final_value = self._act(observation, deterministic=True)[1]
+            final_value = self.policy.act(observation, deterministic=True)[1]
         arrays = {f"obs:{name}": np.stack(frames) for name, frames in observations.items()}
         if discrete:
             arrays["actions"] = np.array(actions, dtype=np.int64)
@@ -203,6 +196,34 @@ class Child:
         )  # fmt: skip
         self.send({"type": "episode", "summary": summary, "payload": payload,
                    "log": self._take_logs()})  # fmt: skip
+
+    def op_watch(self, request: dict) -> None:
+        """Which views to send while driving; no answer."""
+        self.views = {view for view in request.get("views", []) if view in VIEWS}
+
+    def _live(self, observation: dict, episode_request: dict) -> None:
+        """Between two steps: take a watch request that came, and send each watched view at
+        15 frames/s (wall clock)."""
+        now = time.perf_counter()
+        if now - self._last_look >= LOOK_EVERY:
+            self._last_look = now
+            while self._requests_ready.poll(0):
+                request = read_frame(self.requests)
+                if request is None:  # the worker is gone
+                    os._exit(0)
+                if request.get("op") == "watch":
+                    self.op_watch(request)
+        if not self.views or now - self._last_frame < FRAME_INTERVAL:
+            return
+        self._last_frame = now
+        env = self.env.unwrapped
+        for view in sorted(self.views):
+            self.send({
+                "type": "frame", "view": view, "rendered_at": time.time(),
+                "jpeg": jpeg(view_image(env, view, observation)),
+                "worker": int(episode_request.get("worker", 0)), "episode": env._episode,
+                "step": env.steps, "status": env.status, "progress": env.progress,
+            })  # fmt: skip
 
     def op_load(self, request: dict) -> None:
         source = request["source"]

@@ -50,14 +50,15 @@ def read_frame(stream: BinaryIO) -> dict[str, Any] | None:
 
 
 def _read_exactly(stream: BinaryIO, size: int) -> bytes | None:
-    """``size`` bytes; None at the end of the stream before the first byte."""
-    chunks, left = [], size
-    while left:
-        chunk = stream.read(left)
-        if not chunk:
-            if left == size:
+    """``size`` bytes; None at the end of the stream before the first byte. Reads into one
+    buffer, so an unbuffered stream (which returns what the pipe holds) costs no copies."""
+    buffer = bytearray(size)
+    view, done = memoryview(buffer), 0
+    while done < size:
+        count = stream.readinto(view[done:])
+        if not count:
+            if done == 0:
                 return None
             raise ProtocolError("the stream ended inside a frame")
-        chunks.append(chunk)
-        left -= len(chunk)
-    return b"".join(chunks)
+        done += count
+    return bytes(buffer)

@@ -1,0 +1,261 @@
+// A live job on the page: its video, its status and its graph (training) or results (evaluation),
+// over one websocket. Frames come as binary messages: a 4-byte length, a JSON header, the JPEG.
+// Each drawn frame is acknowledged, and the server sends the next one only then: a slow page
+// gets the newest frame, never a backlog. The server sends the whole state on connecting, so a
+// page that reconnects is up to date at once.
+
+const section = document.querySelector("[data-live-url]");
+const kind = section.dataset.liveKind;
+const find = (name) => document.querySelector(`[data-live-${name}]`);
+const frame = find("frame");
+const overlay = find("overlay");
+const rate = find("rate");
+const decoder = new TextDecoder();
+const REFUSED = new Set([4401, 4403]);
+
+let socket = null;
+let retryDelay = 1000;
+let state = null;
+let stateAt = 0;
+let frameUrl = null;
+let framesShown = 0;
+let frameTimes = [];
+
+function laptime(milliseconds) {
+  if (milliseconds === null || milliseconds === undefined) return "—";
+  const total = Math.round(milliseconds);
+  const minutes = Math.floor(total / 60000);
+  const seconds = Math.floor((total % 60000) / 1000);
+  const millis = total % 1000;
+  return `${minutes}:${String(seconds).padStart(2, "0")}.${String(millis).padStart(3, "0")}`;
+}
+
+function clock(seconds) {
+  const whole = Math.max(0, Math.round(seconds));
+  return `${Math.floor(whole / 60)}:${String(whole % 60).padStart(2, "0")}`;
+}
+
+// The connection
+
+function connect() {
+  const scheme = window.location.protocol === "https:" ? "wss" : "ws";
+  socket = new WebSocket(`${scheme}://${window.location.host}${section.dataset.liveUrl}`);
+  socket.binaryType = "arraybuffer";
+  socket.addEventListener("open", () => {
+    retryDelay = 1000;
+    watch();
+  });
+  socket.addEventListener("message", (event) => {
+    if (event.data instanceof ArrayBuffer) showFrame(event.data);
+    else receive(JSON.parse(event.data));
+  });
+  socket.addEventListener("close", (event) => {
+    if (REFUSED.has(event.code)) {
+      say("You may not watch this job.");
+      return;
+    }
+    if (state && !state.active) return;
+    say("The connection was lost; reconnecting…");
+    setTimeout(connect, retryDelay);
+    retryDelay = Math.min(retryDelay * 2, 10000);
+  });
+}
+
+function send(message) {
+  if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(message));
+}
+
+function watch() {
+  const worker = find("worker");
+  send({
+    type: "watch",
+    view: find("view")?.value ?? "spectator",
+    worker: worker ? Number(worker.value) : 0,
+  });
+}
+
+find("view")?.addEventListener("change", watch);
+find("worker")?.addEventListener("change", watch);
+
+function say(text) {
+  if (!overlay) return;
+  overlay.textContent = text;
+  overlay.hidden = !text;
+}
+
+// Frames
+
+function showFrame(data) {
+  const length = new DataView(data).getUint32(0);
+  const header = JSON.parse(decoder.decode(new Uint8Array(data, 4, length)));
+  const url = URL.createObjectURL(new Blob([new Uint8Array(data, 4 + length)], { type: "image/jpeg" }));
+  const image = new Image();
+  image.src = url;
+  image.decode().then(() => {
+    if (!frame) return;
+    frame.src = url;
+    frame.hidden = false;
+    frame.dataset.view = header.view;
+    frame.dataset.seq = header.seq;
+    frame.dataset.frames = ++framesShown;
+    if (frameUrl) URL.revokeObjectURL(frameUrl);
+    frameUrl = url;
+    const now = performance.now();
+    frameTimes = frameTimes.filter((time) => now - time < 1000);
+    frameTimes.push(now);
+    if (rate) rate.textContent = `${frameTimes.length} frames/s`;
+    if (header.paused) say("The car waits while the policy is updated.");
+    else if (state && state.active) say("");
+  }).catch(() => URL.revokeObjectURL(url)).finally(() => send({ type: "ack", seq: header.seq }));
+}
+
+// Messages
+
+function receive(message) {
+  if (message.type === "state") {
+    setStatus(message);
+    for (const row of message.history) (kind === "training" ? addIteration : addTrial)(row);
+    if (kind === "training") drawChart();
+  } else if (message.type === "status") {
+    setStatus(message);
+  } else if (message.type === "iteration") {
+    addIteration(message);
+    drawChart();
+  } else if (message.type === "trial") {
+    addTrial(message);
+  }
+}
+
+function setStatus(message) {
+  const wasActive = state ? state.active : null;
+  state = message;
+  stateAt = performance.now();
+  section.dataset.jobStatus = message.status;
+  let text = message.status_display;
+  if (message.queue_position) {
+    text += `: number ${message.queue_position} in the queue, waiting for a free worker`;
+  }
+  if (message.message) text += ` · ${message.message}`;
+  find("status").textContent = text;
+  const failure = find("failure");
+  if (failure) {
+    failure.hidden = !message.failure_reason;
+    failure.querySelector("dd").textContent = message.failure_reason;
+  }
+  const badge = find("model-status");
+  if (badge && message.model_status_display) badge.textContent = message.model_status_display;
+  for (const element of document.querySelectorAll("[data-live-when-active]")) element.hidden = !message.active;
+  for (const element of document.querySelectorAll("[data-live-when-ready]")) {
+    element.hidden = message.model_status !== "READY";
+  }
+  const progress = find("progress");
+  if (progress && message.iterations !== undefined) {
+    progress.textContent = `${message.iterations} iteration${message.iterations === 1 ? "" : "s"}, `
+      + `${message.episodes} episode${message.episodes === 1 ? "" : "s"}, ${message.steps} steps`;
+  }
+  if (!message.active) {
+    say(message.status === "COMPLETED" ? "Finished: no more live video." : `${message.status_display}.`);
+    if (kind === "evaluation" && wasActive && message.status === "COMPLETED") window.location.reload();
+  } else if (message.status === "QUEUED" || message.status === "INITIALIZING") {
+    say("The simulation starts when a worker takes the job.");
+  }
+  tick();
+}
+
+function tick() {
+  const time = find("time");
+  if (!time || !state || state.training_seconds === undefined) return;
+  const running = state.status === "IN_PROGRESS";
+  const used = state.training_seconds + (running ? (performance.now() - stateAt) / 1000 : 0);
+  const left = Math.max(0, state.max_seconds - used);
+  time.textContent = `${clock(used)} used of ${state.max_seconds / 60} min` + (state.active ? ` · ${clock(left)} left` : "");
+}
+
+setInterval(tick, 1000);
+
+// Training: the graph and the iteration table
+
+const iterations = new Map();
+const chartCanvas = find("chart");
+let chart = null;
+
+function addIteration(row) {
+  iterations.set(row.number, row);
+  const body = find("iterations");
+  if (!body) return;
+  const cells = [
+    row.number, row.reward.toFixed(2), `${row.completion.toFixed(1)}%`,
+    row.evaluation_completion === null ? "—" : `${row.evaluation_completion.toFixed(1)}%`,
+    row.best_lap_time === null ? "—" : row.best_lap_time.toFixed(3),
+    row.episodes, row.steps,
+  ];
+  let line = body.querySelector(`tr[data-number="${row.number}"]`);
+  if (!line) {
+    line = document.createElement("tr");
+    line.dataset.number = row.number;
+    for (let i = 0; i < 7; i++) line.append(Object.assign(document.createElement("td"), { className: "num" }));
+    body.prepend(line);
+  }
+  cells.forEach((value, index) => { line.children[index].textContent = value; });
+}
+
+function drawChart() {
+  if (!chartCanvas || !window.Chart) return;
+  const rows = [...iterations.values()].sort((a, b) => a.number - b.number);
+  const line = (key) => rows.filter((row) => row[key] !== null).map((row) => ({ x: row.number, y: row[key] }));
+  const points = (pick) => rows.flatMap((row) => pick(row).map((y) => ({ x: row.number, y })));
+  const datasets = [
+    { type: "line", label: "Average reward (training)", data: line("reward"), yAxisID: "reward", borderColor: "#0969da", backgroundColor: "#0969da" },
+    { type: "line", label: "Average completion (training)", data: line("completion"), yAxisID: "completion", borderColor: "#2da44e", backgroundColor: "#2da44e" },
+    { type: "line", label: "Average completion (evaluation)", data: line("evaluation_completion"), yAxisID: "completion", borderColor: "#d1242f", backgroundColor: "#d1242f" },
+    { type: "scatter", label: "Reward per episode", data: points((row) => row.training_points.map((p) => p[0])), yAxisID: "reward", backgroundColor: "rgb(9 105 218 / 0.25)", pointRadius: 2 },
+    { type: "scatter", label: "Completion per episode (training)", data: points((row) => row.training_points.map((p) => p[1])), yAxisID: "completion", backgroundColor: "rgb(45 164 78 / 0.25)", pointRadius: 2 },
+    { type: "scatter", label: "Completion per episode (evaluation)", data: points((row) => row.evaluation_points), yAxisID: "completion", backgroundColor: "rgb(209 36 47 / 0.3)", pointRadius: 2 },
+  ];
+  chartCanvas.dataset.iterations = rows.length;
+  chartCanvas.dataset.points = datasets.reduce((sum, set) => sum + set.data.length, 0);
+  if (chart) {
+    chart.data.datasets.forEach((set, index) => { set.data = datasets[index].data; });
+    chart.update("none");
+    return;
+  }
+  chart = new window.Chart(chartCanvas, {
+    data: { datasets },
+    options: {
+      animation: false,
+      maintainAspectRatio: false,
+      interaction: { mode: "nearest", intersect: false },
+      scales: {
+        x: { type: "linear", title: { display: true, text: "Iteration" }, ticks: { precision: 0 } },
+        reward: { position: "left", title: { display: true, text: "Reward" } },
+        completion: { position: "right", min: 0, max: 100, title: { display: true, text: "Completion [%]" }, grid: { drawOnChartArea: false } },
+      },
+      plugins: { legend: { labels: { boxWidth: 12 } } },
+    },
+  });
+}
+
+// Evaluation: the results table
+
+function addTrial(row) {
+  const table = find("trials");
+  if (!table) return;
+  const body = table.tBodies[0];
+  let line = body.querySelector(`tr[data-number="${row.number}"]`);
+  if (!line) {
+    line = document.createElement("tr");
+    line.dataset.number = row.number;
+    body.append(line);
+  }
+  const cells = [
+    row.number, laptime(row.time_ms), `${row.progress.toFixed(1)}%`, row.status,
+    row.off_tracks, row.crashes, laptime(row.penalty_ms), row.resets,
+  ];
+  line.replaceChildren(...cells.map((value, index) => Object.assign(document.createElement("td"), {
+    className: index === 3 ? "" : "num", textContent: value,
+  })));
+  const empty = find("no-trials");
+  if (empty) empty.hidden = true;
+}
+
+connect();

@@ -1,0 +1,53 @@
+"""Models in the states tests need, made directly rather than through a training run."""
+
+from __future__ import annotations
+
+import gymnasium
+import torch
+
+import simulator
+from training import artifacts, configuration, hyperparameters
+from training.learner import Learner
+from training.models import RLModel, TrainingJob
+from training.rewards import EXAMPLES
+
+STRAIGHT_AHEAD = [
+    {"steering_angle": -20.0, "speed": 1.0},
+    {"steering_angle": 0.0, "speed": 1.0},
+    {"steering_angle": 20.0, "speed": 1.0},
+]
+
+
+def ready_model(owner, name: str = "straight-ahead", track: str = "pitlane-oval") -> RLModel:
+    """A READY model with one checkpoint whose policy always chooses to drive straight at 1 m/s:
+    on a loop it leaves the track at each bend and is put back, so it finishes its laps, with
+    penalties, in a predictable number of steps."""
+    clean = configuration.check(
+        {
+            "name": name,
+            "track": track,
+            "action_space": STRAIGHT_AHEAD,
+            "hyperparameters": hyperparameters.defaults("clipped_ppo"),
+            "reward_function": EXAMPLES[0].source,
+        },
+        owner=owner,
+        validate_reward=False,
+    )
+    model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean)
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+    learner = Learner(
+        algorithm=model.algorithm, hyperparameters=model.hyperparameters, network=model.network,
+        observation_space=env.observation_space, action_space=env.action_space,
+    )  # fmt: skip
+    env.close()
+    head = learner.model.policy.action_net
+    with torch.no_grad():
+        head.weight.zero_()
+        head.bias.copy_(torch.tensor([0.0, 10.0, 0.0]))
+    name = artifacts.save(model, "checkpoints/iteration-1.safetensors", learner.checkpoint())
+    TrainingJob.objects.create(
+        model=model, status=TrainingJob.Status.COMPLETED, iterations=1, weights_version=1,
+        last_checkpoint=name, best_checkpoint=name,
+    )  # fmt: skip
+    artifacts.write_model_files(model)
+    return model

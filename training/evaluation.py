@@ -1,0 +1,263 @@
+"""An evaluation: the loop of the ``training.evaluate`` task (and of ``manage.py evaluate``).
+
+The model's policy, loaded from its checkpoint's weights (safetensors, into our own network),
+drives the evaluation's track deterministically, trial after trial, under its rules: off-track
+and crash penalties, resets, continuous laps or one lap per trial. No racer code runs. Every
+simulated 1/15 s becomes a frame of the recorded video (VP8 in WebM: Chromium and Firefox both
+play it); the frames someone watches live go to the ``evaluation_<id>`` group, and while someone
+watches, the simulation keeps to real time so that they see the race at its speed.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import gymnasium
+from django.core.files import File
+from django.core.files.storage import default_storage
+from django.utils import timezone
+
+import simulator
+from console.workers import redis_client
+from simulator.spectator import SIZE, jpeg, view_image
+from simulator.trace import SimTraceRow, to_csv
+from training import artifacts, live, selectors
+from training.models import EvaluationJob, EvaluationTrial, RLModel
+from training.policies import Policy
+
+logger = logging.getLogger(__name__)
+
+VIDEO = "video.webm"
+VIDEO_CODEC = "VP80"
+TRACE = "evaluation-simtrace/0-iteration.csv"
+METRICS = "metrics/evaluation_metrics.json"
+
+
+class EvaluationFailed(Exception):
+    """The evaluation cannot run; the message is for the racer."""
+
+
+def files_prefix(evaluation: EvaluationJob) -> str:
+    """Where an evaluation's files live: under its model's prefix."""
+    return f"evaluations/{evaluation.pk}/"
+
+
+def run(evaluation_id: int) -> EvaluationJob | None:
+    """Run evaluation ``evaluation_id`` if it is still queued (a second delivery finds it taken
+    and returns None); the evaluation as it ended."""
+    claimed = EvaluationJob.objects.filter(
+        pk=evaluation_id, status=EvaluationJob.Status.QUEUED
+    ).update(
+        status=EvaluationJob.Status.INITIALIZING,
+        started_at=timezone.now(),
+        message="Loading the model",
+    )
+    if not claimed:
+        logger.info("Evaluation %s is not queued; nothing to do", evaluation_id)
+        return None
+    evaluation = EvaluationJob.objects.select_related("model", "track").get(pk=evaluation_id)
+    _announce(evaluation)
+    try:
+        Evaluator(evaluation).run()
+    except EvaluationFailed as failure:
+        _finish(evaluation, EvaluationJob.Status.FAILED, str(failure))
+    except Exception:
+        logger.exception("Evaluation %s failed", evaluation_id)
+        _finish(
+            evaluation,
+            EvaluationJob.Status.FAILED,
+            "The evaluation stopped on an internal error; the model is unchanged. "
+            "Try again, and tell the league staff if it happens again.",
+        )
+    else:
+        _finish(evaluation, EvaluationJob.Status.COMPLETED)
+    return evaluation
+
+
+@dataclass
+class LapCounts:
+    """The environment's counts when a trial began, to tell what happened during it."""
+
+    off_tracks: int = 0
+    crashes: int = 0
+    resets: int = 0
+    reversed: int = 0
+    immobilized: int = 0
+    started: float = 0.0  # [s] simulated time
+
+
+class Evaluator:
+    def __init__(self, evaluation: EvaluationJob) -> None:
+        self.evaluation = evaluation
+        self.model: RLModel = evaluation.model
+        self.trace: list[SimTraceRow] = []
+        self.metrics: list[dict] = []
+        self.results: list[EvaluationTrial] = []
+
+    def run(self) -> None:
+        evaluation = self.evaluation
+        checkpoint = selectors.model_checkpoint(model=self.model, which=evaluation.checkpoint)
+        if checkpoint is None:
+            raise EvaluationFailed("This model has no trained weights to evaluate.")
+        env = gymnasium.make(simulator.ENV_ID, **evaluation.environment_settings())
+        policy = Policy.build(
+            self.model.algorithm, self.model.network, env.observation_space, env.action_space
+        )
+        try:
+            policy.load_checkpoint(artifacts.read(checkpoint))
+        except (ValueError, OSError) as error:
+            raise EvaluationFailed(f"The model's weights could not be loaded: {error}") from None
+        _update(evaluation, checkpoint_name=checkpoint)
+        _update(evaluation, status=EvaluationJob.Status.IN_PROGRESS, message="Racing")
+        _announce(evaluation)
+        with tempfile.TemporaryDirectory(prefix="pitlane-evaluation-") as directory:
+            video_path = Path(directory) / VIDEO
+            writer = cv2.VideoWriter(
+                str(video_path), cv2.VideoWriter_fourcc(*VIDEO_CODEC), 15, SIZE
+            )
+            if not writer.isOpened():
+                raise EvaluationFailed("This worker cannot record video (no VP8 encoder).")
+            group = live.evaluation_group(evaluation.pk)
+            try:
+                with live.FramePublisher(redis_client(timeout=5.0), group) as publisher:
+                    self._drive(env, policy, writer, publisher)
+            finally:
+                writer.release()
+                env.close()
+            self._save(video_path)
+
+    # Driving
+
+    def _drive(self, env, policy: Policy, writer, publisher: live.FramePublisher) -> None:
+        evaluation = self.evaluation
+        discrete = hasattr(env.action_space, "n")
+        unwrapped = env.unwrapped
+        episodes = 1 if evaluation.continuous_laps else evaluation.trials
+        last_live = last_step = 0.0
+        for episode in range(episodes):
+            observation, info = env.reset(seed=episode)
+            counts = LapCounts()
+            laps_done = 0
+            while True:
+                action, _, _ = policy.act(observation, deterministic=True)
+                observation, _, terminated, truncated, info = env.step(
+                    policy.command(action, discrete)
+                )
+                self.trace.append(info["trace"]._replace(wall_clock=time.time()))
+                frame = unwrapped.spectator.render(unwrapped)
+                writer.write(frame)
+                watched = publisher.watched(0)
+                now = time.monotonic()
+                if watched and now - last_live >= live.FRAME_INTERVAL:
+                    last_live = now
+                    for view in watched:
+                        image = (
+                            frame
+                            if view == "spectator"
+                            else view_image(unwrapped, view, observation)
+                        )
+                        publisher.offer(live.frame_event(
+                            0, view, jpeg(image), step=unwrapped.steps,
+                            status=unwrapped.status, progress=unwrapped.progress,
+                            episode=len(self.results) + 1,
+                        ))  # fmt: skip
+                if watched:  # keep to real time for those who watch
+                    time.sleep(max(0.0, unwrapped.dt - (time.monotonic() - last_step)))
+                last_step = time.monotonic()
+                while len(info["lap_times"]) > laps_done:
+                    laps_done += 1
+                    lap_time = info["lap_times"][laps_done - 1]
+                    counts = self._record(unwrapped, info, counts, lap_time, completed=True)
+                if terminated or truncated:
+                    break
+            if truncated and len(self.results) < evaluation.trials:
+                seconds = unwrapped.sim_time - counts.started
+                self._record(unwrapped, info, counts, seconds, completed=False)
+
+    def _record(
+        self, env, info: dict, before: LapCounts, seconds: float, *, completed: bool
+    ) -> LapCounts:
+        """The trial that just ended (a lap, or the part of one driven before time ran out);
+        the counts the next trial starts from."""
+        evaluation = self.evaluation
+        now = env.counts
+        status = "lap_complete" if completed else "time_up"
+        off_tracks = now["off_tracks"] - before.off_tracks
+        crashes = now["crashes"] - before.crashes
+        trial = EvaluationTrial.objects.create(
+            evaluation=evaluation,
+            number=len(self.results) + 1,
+            time_ms=round(seconds * 1000),
+            progress=100.0 if status == "lap_complete" else round(info["progress"], 2),
+            status=status,
+            off_tracks=off_tracks,
+            crashes=crashes,
+            resets=now["resets"] - before.resets,
+            penalty_ms=round(
+                1000
+                * (off_tracks * evaluation.off_track_penalty + crashes * evaluation.crash_penalty)
+            ),
+        )
+        self.results.append(trial)
+        wall = time.time()
+        self.metrics.append(
+            {
+                "completion_percentage": round(trial.progress),
+                "metric_time": int(wall * 1000),
+                "start_time": int((wall - seconds) * 1000),
+                "elapsed_time_in_milliseconds": trial.time_ms,
+                "episode_status": "Lap complete" if trial.completed else "Time up",
+                "crash_count": crashes,
+                "immobilized_count": now["immobilized"] - before.immobilized,
+                "off_track_count": off_tracks,
+                "reversed_count": now["reversed"] - before.reversed,
+                "reset_count": trial.resets,
+                "trial": trial.number,
+            }
+        )
+        live.announce(live.evaluation_group(evaluation.pk), selectors.trial_row(trial=trial))
+        return LapCounts(
+            now["off_tracks"], now["crashes"], now["resets"], now["reversed"],
+            now["immobilized"], env.sim_time,
+        )  # fmt: skip
+
+    # Files
+
+    def _save(self, video_path: Path) -> None:
+        prefix = files_prefix(self.evaluation)
+        artifacts.save(self.model, prefix + TRACE, to_csv(self.trace))
+        artifacts.save(self.model, prefix + METRICS, json.dumps({"metrics": self.metrics}))
+        name = artifacts.path(self.model, prefix + VIDEO)
+        if default_storage.exists(name):
+            default_storage.delete(name)
+        with video_path.open("rb") as handle:
+            saved = default_storage.save(name, File(handle))
+        _update(self.evaluation, video=saved)
+
+
+def _update(evaluation: EvaluationJob, **fields) -> None:
+    EvaluationJob.objects.filter(pk=evaluation.pk).update(**fields)
+    for name, value in fields.items():
+        setattr(evaluation, name, value)
+
+
+def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
+    _update(
+        evaluation, status=status, failure_reason=reason, message="", finished_at=timezone.now()
+    )
+    RLModel.objects.filter(pk=evaluation.model_id, status=RLModel.Status.EVALUATING).update(
+        status=RLModel.Status.READY
+    )
+    _announce(evaluation)
+
+
+def _announce(evaluation: EvaluationJob) -> None:
+    live.announce(
+        live.evaluation_group(evaluation.pk), selectors.evaluation_status(evaluation=evaluation)
+    )

@@ -1,0 +1,96 @@
+from django.contrib.auth import get_user_model
+from django.core.management.base import BaseCommand, CommandError
+
+from console.templatetags.pitlane import laptime
+from training import configuration, evaluation, services
+from training.models import EvaluationJob, RLModel
+
+
+class Command(BaseCommand):
+    help = (
+        "Evaluate a ready model in this process, as the Evaluate button does on a worker, and "
+        "print the results per trial. MODEL is the model's name (with --owner when two racers "
+        "use it) or its number."
+    )
+
+    def add_arguments(self, parser) -> None:
+        parser.add_argument("model", help="the model's name or number")
+        parser.add_argument("--owner", help="the racer who owns the model")
+        parser.add_argument("--track", help="a built-in track (default: the model's own)")
+        parser.add_argument("--direction", choices=["counterclockwise", "clockwise"])
+        parser.add_argument(
+            "--race-type", choices=["TIME_TRIAL", "OBJECT_AVOIDANCE", "HEAD_TO_BOT"],
+            default="TIME_TRIAL",
+        )  # fmt: skip
+        parser.add_argument("--boxes", type=int, help="boxes, for OBJECT_AVOIDANCE")
+        parser.add_argument("--bots", type=int, help="bot cars, for HEAD_TO_BOT")
+        parser.add_argument("--trials", type=int, default=3, help="3 to 5 (default 3)")
+        parser.add_argument("--continuous", action="store_true", help="consecutive laps")
+        parser.add_argument("--off-track-penalty", type=float, default=2.0, help="[s]")
+        parser.add_argument("--crash-penalty", type=float, default=5.0, help="[s]")
+        parser.add_argument("--checkpoint", choices=["best", "last"], default="best")
+
+    def handle(self, *args, **options) -> None:
+        model = self._model(options["model"], options["owner"])
+        settings = {
+            "race_type": options["race_type"],
+            "trials": options["trials"],
+            "continuous_laps": options["continuous"],
+            "off_track_penalty": options["off_track_penalty"],
+            "crash_penalty": options["crash_penalty"],
+            "checkpoint": options["checkpoint"],
+        }
+        if options["track"]:
+            settings["track"] = options["track"]
+        if options["direction"]:
+            settings["direction"] = options["direction"]
+        if options["boxes"] is not None:
+            settings["boxes"] = {"count": options["boxes"]}
+        if options["bots"] is not None:
+            settings["bots"] = {"count": options["bots"]}
+        try:
+            job = services.evaluation_start(model=model, settings=settings, enqueue=False)
+        except configuration.Invalid as invalid:
+            lines = "\n".join(f"  {name}: {message}" for name, message in invalid.errors.items())
+            raise CommandError(f"The evaluation was not started:\n{lines}") from None
+        except services.EvaluationRefused as refused:
+            raise CommandError(str(refused)) from None
+        self.stdout.write(
+            f"Evaluating {model.name} on {job.track} ({job.direction}), {job.trials} trials…"
+        )
+        evaluation.run(job.pk)
+        job.refresh_from_db()
+        if job.status != EvaluationJob.Status.COMPLETED:
+            raise CommandError(f"The evaluation failed: {job.failure_reason}")
+        self.stdout.write(self._table(job))
+
+    def _model(self, name: str, owner: str | None) -> RLModel:
+        models = RLModel.objects.all()
+        if owner:
+            racer = get_user_model().objects.filter(username=owner).first()
+            if racer is None:
+                raise CommandError(f"No racer named {owner!r}.")
+            models = models.filter(owner=racer)
+        found = list(models.filter(pk=int(name)) if name.isdigit() else models.filter(name=name))
+        if not found:
+            raise CommandError(f"No model named {name!r}" + (f" of {owner}." if owner else "."))
+        if len(found) > 1:
+            raise CommandError(f"Several racers have a model named {name!r}; add --owner.")
+        return found[0]
+
+    def _table(self, job: EvaluationJob) -> str:
+        header = ("Trial", "Time", "Completed", "Status", "Off-tracks", "Crashes", "Penalty",
+                  "Resets")  # fmt: skip
+        rows = [_row(trial) for trial in job.trial_rows.all()]
+        widths = [max(len(row[i]) for row in [header, *rows]) for i in range(len(header))]
+        lines = ["  ".join(cell.rjust(width) for cell, width in zip(row, widths, strict=True))
+                 for row in [header, *rows]]  # fmt: skip
+        lines.append(f"Video, trace and metrics: {job.video.rsplit('/', 1)[0]}/")
+        return "\n".join(lines)
+
+
+def _row(trial) -> tuple[str, ...]:
+    return (
+        str(trial.number), laptime(trial.time_ms), f"{trial.progress:.1f}%", trial.status,
+        str(trial.off_tracks), str(trial.crashes), laptime(trial.penalty_ms), str(trial.resets),
+    )  # fmt: skip

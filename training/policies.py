@@ -1,0 +1,74 @@
+"""A policy that acts: the network the rollout workers and evaluations drive with.
+
+Built from the model's settings and the environment's spaces, as the learner builds it, so the
+learner's weights (safetensors) load into it by name. This module imports no Django: the sandbox
+child imports it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from training.learner import load_weights
+from training.networks import policy_kwargs
+
+PPO = "clipped_ppo"
+
+
+@dataclass
+class Policy:
+    """SB3's policy for ``algorithm`` with our network; ``weights_module`` is what the trainer
+    publishes (PPO: the whole policy; SAC: the actor)."""
+
+    algorithm: str
+    network: torch.nn.Module
+    weights_module: torch.nn.Module
+
+    @classmethod
+    def build(cls, algorithm: str, network: str, observation_space, action_space) -> Policy:
+        kwargs = policy_kwargs(network)
+        spaces = (observation_space, action_space)
+        if algorithm == PPO:
+            from stable_baselines3.common.policies import MultiInputActorCriticPolicy
+
+            policy = MultiInputActorCriticPolicy(*spaces, lambda _: 0.0, **kwargs)
+            module = policy
+        else:
+            from stable_baselines3.sac.policies import MultiInputPolicy
+
+            kwargs["net_arch"] = {"pi": [64], "qf": [64]}
+            policy = MultiInputPolicy(*spaces, lambda _: 0.0, **kwargs)
+            module = policy.actor
+        policy.set_training_mode(False)
+        return cls(algorithm, policy, module)
+
+    @property
+    def ppo(self) -> bool:
+        return self.algorithm == PPO
+
+    def load_published(self, data: bytes) -> None:
+        """Weights as the trainer publishes them to the rollout workers."""
+        load_weights(self.weights_module, data)
+
+    def load_checkpoint(self, data: bytes) -> None:
+        """A checkpoint (the policy with its critics), as the trainer stores it."""
+        load_weights(self.network, data)
+
+    def act(
+        self, observation: dict, deterministic: bool
+    ) -> tuple[np.ndarray, float | None, float | None]:
+        """(action, value, log-probability); value and log-probability only for PPO."""
+        tensor, _ = self.network.obs_to_tensor(observation)
+        with torch.no_grad():
+            if self.ppo:
+                actions, values, log_probs = self.network(tensor, deterministic=deterministic)
+                return actions[0].numpy(), float(values[0]), float(log_probs[0])
+            return self.network.actor(tensor, deterministic=deterministic)[0].numpy(), None, None
+
+    @staticmethod
+    def command(action: np.ndarray, discrete: bool):
+        """What the environment takes for an action: an index, or the clipped vector."""
+        return int(action) if discrete else np.clip(action, -1.0, 1.0)
