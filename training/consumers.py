@@ -54,9 +54,10 @@ class LiveConsumer(AsyncWebsocketConsumer):
         self.worker, self.view = 0, "spectator"
         self.in_flight, self.pending = 0, None
         await self.channel_layer.group_add(self.group, self.channel_name)
+        await self._redis(self.stream.watch, self.channel_name, self.worker, self.view)
         await self.accept()
         await self.send(text_data=json.dumps(snapshot))
-        await self._watch()
+        await self._show_latest()
         self.renewer = asyncio.create_task(self._renew())
 
     async def disconnect(self, code: int) -> None:
@@ -81,7 +82,8 @@ class LiveConsumer(AsyncWebsocketConsumer):
             worker, view = message.get("worker"), message.get("view")
             if isinstance(worker, int) and 0 <= worker < self.workers and view in live.VIEWS:
                 self.worker, self.view, self.pending = worker, view, None
-                await self._watch()
+                await self._redis(self.stream.watch, self.channel_name, worker, view)
+                await self._show_latest()
 
     # Events from the channel layer
 
@@ -108,9 +110,8 @@ class LiveConsumer(AsyncWebsocketConsumer):
         ).encode()
         await self.send(bytes_data=HEADER.pack(len(header)) + header + frame["jpeg"])
 
-    async def _watch(self) -> None:
-        """Register what this viewer watches, and show the newest frame of it at once."""
-        await self._redis(self.stream.watch, self.channel_name, self.worker, self.view)
+    async def _show_latest(self) -> None:
+        """The newest frame of what this viewer watches, at once, rather than at the next."""
         frame = await self._redis(self.stream.latest_frame, self.worker, self.view)
         if frame is not None and self.pending is None:
             self.pending = frame

@@ -22,7 +22,8 @@ from typing import Any
 import msgpack
 import redis
 from asgiref.sync import async_to_sync
-from channels.layers import get_channel_layer
+from channels import DEFAULT_CHANNEL_LAYER
+from channels.layers import channel_layers, get_channel_layer
 
 logger = logging.getLogger(__name__)
 
@@ -190,7 +191,9 @@ class FramePublisher:
 
     def _run(self) -> None:
         loop = asyncio.new_event_loop()
-        layer = get_channel_layer()
+        # A layer of its own: the process's shared one may serve other event loops, and closing
+        # its connections here would close theirs.
+        layer = channel_layers.make_backend(DEFAULT_CHANNEL_LAYER)
         try:
             while True:
                 with self._condition:

@@ -1,0 +1,206 @@
+"""Evaluations: the command, the task on a real worker, the pages, the files and the video."""
+
+import csv
+import io
+import json
+import tempfile
+
+import cv2
+import pytest
+from asgiref.sync import sync_to_async
+from django.core.files.storage import default_storage
+from django.core.management import CommandError, call_command
+from django.urls import reverse
+
+from tests.services import wait_for
+from tests.training.factories import ready_model
+from tests.training.test_live import frame_header, viewer
+from training import artifacts, configuration, services
+from training.evaluation import METRICS, TRACE, VIDEO, files_prefix
+from training.models import EvaluationJob, RLModel
+
+pytestmark = pytest.mark.usefixtures("tracks")
+
+STEP_MS = 1000 / 15
+
+
+def stored(evaluation: EvaluationJob, name: str) -> bytes:
+    return artifacts.read(artifacts.path(evaluation.model, files_prefix(evaluation) + name))
+
+
+def decoded_frames(data: bytes) -> tuple[int, tuple[int, int]]:
+    with tempfile.NamedTemporaryFile(suffix=".webm") as handle:
+        handle.write(data)
+        handle.flush()
+        capture = cv2.VideoCapture(handle.name)
+        count, size = 0, None
+        while True:
+            ok, image = capture.read()
+            if not ok:
+                break
+            count, size = count + 1, (image.shape[1], image.shape[0])
+        capture.release()
+    return count, size
+
+
+@pytest.mark.django_db
+def test_the_evaluate_command_prints_the_results_and_records_every_step(alice, capsys):
+    model = ready_model(alice)
+    call_command("evaluate", model.name, "--track", "pitlane-oval", "--trials", "3")
+    printed = capsys.readouterr().out
+
+    evaluation = EvaluationJob.objects.get(model=model)
+    assert evaluation.status == EvaluationJob.Status.COMPLETED
+    trials = list(evaluation.trial_rows.all())
+    assert [t.number for t in trials] == [1, 2, 3]
+    for trial in trials:  # straight ahead: off at each bend, put back, and round it goes
+        assert trial.status == "lap_complete" and trial.progress == 100.0
+        assert trial.off_tracks > 0 and trial.resets == trial.off_tracks
+        assert trial.penalty_ms == trial.off_tracks * 2000
+        assert f"{trial.time_ms // 60000}:{trial.time_ms % 60000 / 1000:06.3f}" in printed
+    assert "Off-tracks" in printed and "lap_complete" in printed
+
+    rows = list(csv.DictReader(io.StringIO(stored(evaluation, TRACE).decode())))
+    frames, size = decoded_frames(stored(evaluation, VIDEO))
+    assert size == (640, 480)
+    assert frames == len(rows)  # one frame per step, that is per simulated 1/15 s
+    assert frames == round(sum(t.time_ms for t in trials) / STEP_MS)
+    assert list(rows[0])[:3] == ["episode", "steps", "X"]
+
+    metrics = json.loads(stored(evaluation, METRICS))["metrics"]
+    assert [m["trial"] for m in metrics] == [1, 2, 3]
+    assert set(metrics[0]) == {
+        "completion_percentage", "metric_time", "start_time", "elapsed_time_in_milliseconds",
+        "episode_status", "crash_count", "immobilized_count", "off_track_count",
+        "reversed_count", "reset_count", "trial",
+    }  # fmt: skip
+    assert metrics[0]["off_track_count"] == trials[0].off_tracks
+    assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
+
+
+@pytest.mark.django_db
+def test_the_evaluate_command_says_what_is_wrong(alice):
+    model = ready_model(alice)
+    with pytest.raises(CommandError, match="3 to 5 trials"):
+        call_command("evaluate", model.name, "--trials", "7")
+    with pytest.raises(CommandError, match="No model named 'nope'"):
+        call_command("evaluate", "nope")
+    RLModel.objects.filter(pk=model.pk).update(status=RLModel.Status.TRAINING)
+    with pytest.raises(CommandError, match="once it is ready"):
+        call_command("evaluate", model.name)
+    assert not EvaluationJob.objects.exists()
+
+
+@pytest.mark.django_db
+def test_evaluation_settings_are_checked_as_a_whole(alice):
+    model = ready_model(alice)
+    with pytest.raises(configuration.Invalid) as invalid:
+        services.evaluation_start(
+            model=model,
+            settings={
+                "track": "nowhere", "trials": 2, "off_track_penalty": -1,
+                "crash_penalty": "a lot", "checkpoint": "first", "race_type": "DRAG_RACE",
+            },
+        )  # fmt: skip
+    assert set(invalid.value.errors) == {
+        "track", "trials", "off_track_penalty", "crash_penalty", "checkpoint", "race_type",
+    }  # fmt: skip
+    assert not EvaluationJob.objects.exists()
+    assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
+
+
+@pytest.mark.django_db(transaction=True)
+async def test_an_evaluation_runs_on_a_worker_with_live_video_and_its_page_shows_it(
+    alice, bob, celery_worker_process
+):
+    model = await sync_to_async(ready_model)(alice)
+    evaluation = await sync_to_async(services.evaluation_start)(
+        model=model, settings={"trials": 3, "continuous_laps": True, "off_track_penalty": 1}
+    )
+    communicator = await viewer(f"/ws/evaluations/{evaluation.pk}/", alice)
+    connected, _ = await communicator.connect()
+    assert connected
+    assert (await communicator.receive_json_from(timeout=5))["type"] == "state"
+    seen = []
+    while len(seen) < 3:
+        message = await communicator.receive_from(timeout=60)
+        if isinstance(message, bytes):
+            header, jpeg = frame_header(message)
+            assert jpeg.startswith(b"\xff\xd8\xff") and header["view"] == "spectator"
+            seen.append(header["step"])
+            await communicator.send_json_to({"type": "ack"})
+    await communicator.disconnect()  # nobody watches: the race goes on at full speed
+    assert seen == sorted(seen) and seen[-1] > seen[0]
+
+    def finished() -> bool:
+        return EvaluationJob.objects.get(pk=evaluation.pk).status in ("COMPLETED", "FAILED")
+
+    await sync_to_async(wait_for)(finished, "the evaluation to finish", timeout=180)
+    await sync_to_async(check_finished_evaluation)(evaluation.pk, alice, bob)
+
+
+def check_finished_evaluation(pk: int, owner, stranger) -> None:
+    from django.test import Client
+
+    evaluation = EvaluationJob.objects.select_related("model").get(pk=pk)
+    assert evaluation.status == EvaluationJob.Status.COMPLETED, evaluation.failure_reason
+    assert evaluation.model.status == RLModel.Status.READY
+    trials = list(evaluation.trial_rows.all())
+    assert len(trials) == 3 and all(t.completed for t in trials)  # three consecutive laps
+    assert all(t.penalty_ms == t.off_tracks * 1000 for t in trials)
+    assert default_storage.exists(evaluation.video)
+
+    client = Client()
+    client.force_login(owner)
+    page = client.get(reverse("training:evaluation-detail", args=[evaluation.model.pk, pk]))
+    assert page.status_code == 200
+    content = page.content.decode()
+    assert content.count('<tr data-number="') == 3
+    assert "data-evaluation-video" in content
+    video_url = reverse("training:evaluation-file", args=[evaluation.model.pk, pk, VIDEO])
+    video = client.get(video_url)
+    assert video.status_code == 200 and video["Content-Type"] == "video/webm"
+    assert b"".join(video.streaming_content)[:4] == b"\x1a\x45\xdf\xa3"  # a Matroska/WebM file
+    model_page = client.get(reverse("training:model-detail", args=[evaluation.model.pk]))
+    assert "3 of 3" in model_page.content.decode()
+
+    other = Client()
+    other.force_login(stranger)
+    assert other.get(page.request["PATH_INFO"]).status_code == 404
+    assert other.get(video_url).status_code == 404
+
+
+@pytest.mark.django_db
+def test_the_evaluate_page_keeps_what_was_typed_and_says_what_to_change(client, alice):
+    model = ready_model(alice)
+    client.force_login(alice)
+    url = reverse("training:evaluation-create", args=[model.pk])
+    assert client.get(url).status_code == 200
+    response = client.post(
+        url,
+        {"track": "pitlane-oval", "direction": "counterclockwise", "race_type": "TIME_TRIAL",
+         "trials": "4", "off_track_penalty": "12", "crash_penalty": "5", "checkpoint": "last"},
+    )  # fmt: skip
+    assert response.status_code == 400
+    content = response.content.decode()
+    assert "Ensure this value is less than or equal to 10" in content
+    assert 'value="4" selected' in content  # what was typed is kept
+    assert not EvaluationJob.objects.exists()
+
+    response = client.post(
+        url,
+        {"track": "pitlane-oval", "direction": "counterclockwise", "race_type": "TIME_TRIAL",
+         "trials": "4", "off_track_penalty": "1.5", "crash_penalty": "3", "checkpoint": "last"},
+    )  # fmt: skip
+    evaluation = EvaluationJob.objects.get()
+    assert response.status_code == 302
+    assert response["Location"] == reverse(
+        "training:evaluation-detail", args=[model.pk, evaluation.pk]
+    )
+    assert (evaluation.trials, evaluation.off_track_penalty, evaluation.checkpoint) == (
+        4, 1.5, "last",
+    )  # fmt: skip
+    assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.EVALUATING
+    again = client.post(url, {"track": "pitlane-oval", "trials": "3"})
+    assert again.status_code == 400
+    assert "once it is ready" in again.content.decode()

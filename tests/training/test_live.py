@@ -1,0 +1,265 @@
+"""Live streams over the real ASGI application (origin check, sessions, the Redis channel layer)."""
+
+import asyncio
+import json
+import struct
+import time
+import tracemalloc
+
+import pytest
+from asgiref.sync import sync_to_async
+from channels.layers import get_channel_layer
+from channels.testing import WebsocketCommunicator
+from django.conf import settings
+from django.test import Client
+
+from console.workers import redis_client
+from tests.training.factories import ready_model
+from training import live, selectors
+from training.consumers import WINDOW
+from training.models import TrainingJob
+
+pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.usefixtures("tracks")]
+
+ORIGIN = (b"origin", b"http://127.0.0.1:8000")
+JPEG = b"\xff\xd8\xff\xe0" + bytes(2000)
+
+
+@pytest.fixture(autouse=True)
+def no_live_keys_of_earlier_tests():
+    """Job numbers come back after the database is flushed; the live keys must not."""
+    client = redis_client()
+    for name in client.scan_iter("pitlane:live:*"):
+        client.delete(name)
+
+
+def login_cookie(user) -> bytes:
+    client = Client()
+    client.force_login(user)
+    return f"{settings.SESSION_COOKIE_NAME}={client.cookies[settings.SESSION_COOKIE_NAME].value}"
+
+
+def queued_job(owner) -> TrainingJob:
+    model = ready_model(owner, name=f"live-{owner.username}")
+    return TrainingJob.objects.create(model=model)
+
+
+async def viewer(path: str, user=None, origin=ORIGIN) -> WebsocketCommunicator:
+    from console.asgi import application
+
+    headers = [origin]
+    if user is not None:
+        headers.append((b"cookie", (await sync_to_async(login_cookie)(user)).encode()))
+    return WebsocketCommunicator(application, path, headers=headers)
+
+
+def frame_header(message: bytes) -> tuple[dict, bytes]:
+    (length,) = struct.unpack("!I", message[:4])
+    return json.loads(message[4 : 4 + length]), message[4 + length :]
+
+
+async def send_frames(group: str, count: int, size: int = len(JPEG), first: int = 1) -> None:
+    layer = get_channel_layer()
+    for seq in range(first, first + count):
+        event = live.frame_event(0, "spectator", JPEG[:4] + bytes(size - 4), seq=seq)
+        await layer.group_send(group, event)
+
+
+async def test_the_owner_connects_and_gets_the_whole_state_at_once(alice):
+    job = await sync_to_async(queued_job)(alice)
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
+    connected, _ = await communicator.connect()
+    assert connected
+    state = await communicator.receive_json_from(timeout=5)
+    await communicator.disconnect()
+    assert state["type"] == "state"
+    assert state["status"] == "QUEUED"
+    assert state["queue_position"] == 1
+    assert state["max_seconds"] == 60 * 60
+    assert state["history"] == []
+
+
+async def test_staff_may_watch_any_job(alice, stella):
+    job = await sync_to_async(queued_job)(alice)
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", stella)
+    connected, _ = await communicator.connect()
+    assert connected
+    await communicator.disconnect()
+
+
+@pytest.mark.parametrize(("who", "code"), [("another racer", 4403), ("anonymous", 4401)])
+async def test_another_racer_and_anonymous_are_refused(who, code, alice, bob):
+    job = await sync_to_async(queued_job)(alice)
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", bob if who == "another racer" else None)
+    connected, refused_with = await communicator.connect()
+    assert not connected
+    assert refused_with == code
+
+
+async def test_a_job_that_does_not_exist_is_refused_like_one_of_another_racer(alice):
+    communicator = await viewer("/ws/jobs/999999/", alice)
+    connected, code = await communicator.connect()
+    assert (connected, code) == (False, 4403)
+
+
+async def test_a_bad_origin_is_refused_even_for_the_owner(alice):
+    job = await sync_to_async(queued_job)(alice)
+    communicator = await viewer(
+        f"/ws/jobs/{job.pk}/", alice, origin=(b"origin", b"https://evil.example")
+    )
+    connected, code = await communicator.connect()
+    assert not connected
+    assert code not in (4401, 4403)  # the origin check answered before the consumer
+
+
+async def test_updates_arrive_in_the_order_they_were_sent(alice):
+    job = await sync_to_async(queued_job)(alice)
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
+    await communicator.connect()
+    await communicator.receive_json_from(timeout=5)
+    group = live.training_group(job.pk)
+    layer = get_channel_layer()
+    for number in range(1, 51):
+        await layer.group_send(
+            group, {"type": "job.update", "message": {"type": "iteration", "number": number}}
+        )
+    numbers = [(await communicator.receive_json_from(timeout=5))["number"] for _ in range(50)]
+    await communicator.disconnect()
+    assert numbers == list(range(1, 51))
+
+
+async def test_frames_are_binary_with_a_header_and_each_is_released_by_an_ack(alice):
+    job = await sync_to_async(queued_job)(alice)
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
+    await communicator.connect()
+    await communicator.receive_json_from(timeout=5)
+    group = live.training_group(job.pk)
+
+    await send_frames(group, 1)
+    header, jpeg = frame_header(await communicator.receive_from(timeout=5))
+    assert header["seq"] == 1 and header["view"] == "spectator" and header["worker"] == 0
+    assert jpeg.startswith(b"\xff\xd8\xff")
+    assert header["rendered_at"] <= time.time()
+
+    # Another worker's frames, or another view, are not this viewer's.
+    await get_channel_layer().group_send(group, live.frame_event(1, "spectator", JPEG, seq=50))
+    await get_channel_layer().group_send(group, live.frame_event(0, "camera", JPEG, seq=51))
+    assert await communicator.receive_nothing(timeout=0.3)
+    await communicator.disconnect()
+
+
+async def test_a_slow_viewer_gets_the_newest_frame_and_never_a_backlog(alice):
+    job = await sync_to_async(queued_job)(alice)
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
+    await communicator.connect()
+    await communicator.receive_json_from(timeout=5)
+    group = live.training_group(job.pk)
+
+    await send_frames(group, 10)  # the viewer acknowledges nothing
+    first = [frame_header(await communicator.receive_from(timeout=5))[0]["seq"]
+             for _ in range(WINDOW)]  # fmt: skip
+    assert first == [1, 2]
+    assert await communicator.receive_nothing(timeout=0.3)  # no more until an ack
+
+    tracemalloc.start()
+    before, _ = tracemalloc.get_traced_memory()
+    await send_frames(group, 300, size=50_000, first=11)  # 15 MB the viewer does not take
+    await asyncio.sleep(0.5)
+    after, _ = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert after - before < 2_000_000  # at most a frame or two held, not 300
+    assert await communicator.receive_nothing(timeout=0.3)
+
+    await communicator.send_json_to({"type": "ack"})
+    newest, _ = frame_header(await communicator.receive_from(timeout=5))
+    assert newest["seq"] == 310  # straight to the newest: everything between was dropped
+    await communicator.send_json_to({"type": "ack"})
+    assert await communicator.receive_nothing(timeout=0.3)
+    await communicator.disconnect()
+
+
+async def test_viewers_register_what_they_watch_and_leave_no_registration_behind(alice):
+    job = await sync_to_async(queued_job)(alice)
+    stream = live.Stream(redis_client(), live.training_group(job.pk))
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
+    await communicator.connect()
+    await communicator.receive_json_from(timeout=5)
+    assert await sync_to_async(stream.wanted)(0) == {"spectator"}
+
+    await communicator.send_json_to({"type": "watch", "worker": 0, "view": "camera"})
+    await asyncio.sleep(0.3)
+    assert await sync_to_async(stream.wanted)(0) == {"camera"}
+    await communicator.send_json_to({"type": "watch", "worker": 7, "view": "camera"})
+    await communicator.send_json_to({"type": "watch", "worker": 0, "view": "x-ray"})
+    await asyncio.sleep(0.3)
+    assert await sync_to_async(stream.wanted)(0) == {"camera"}  # a worker the job lacks, a view
+
+    await communicator.disconnect()
+    await asyncio.sleep(0.3)
+    assert await sync_to_async(stream.wanted)(0) == set()  # nobody watches: no frames are made
+
+
+async def test_a_viewer_who_reconnects_gets_the_newest_frame_at_once(alice):
+    job = await sync_to_async(queued_job)(alice)
+    group = live.training_group(job.pk)
+    stream = live.Stream(redis_client(), group)
+    await sync_to_async(stream.keep_frame)(live.frame_event(0, "spectator", JPEG, seq=42))
+
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
+    await communicator.connect()
+    assert (await communicator.receive_json_from(timeout=5))["type"] == "state"
+    header, _ = frame_header(await communicator.receive_from(timeout=5))
+    await communicator.disconnect()
+    assert header["seq"] == 42
+
+
+async def test_the_publisher_sends_the_newest_frame_and_never_blocks_the_simulation(alice):
+    job = await sync_to_async(queued_job)(alice)
+    group = live.training_group(job.pk)
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
+    await communicator.connect()
+    await communicator.receive_json_from(timeout=5)
+
+    def simulate() -> float:
+        with live.FramePublisher(redis_client(), group) as publisher:
+            started = time.perf_counter()
+            for _ in range(1000):
+                publisher.offer(live.frame_event(0, "spectator", JPEG))
+            return time.perf_counter() - started
+
+    offering = await sync_to_async(simulate, thread_sensitive=False)()
+    received = []
+    while not await communicator.receive_nothing(timeout=0.5):
+        received.append(frame_header(await communicator.receive_from())[0]["seq"])
+        await communicator.send_json_to({"type": "ack"})
+    await communicator.disconnect()
+    assert received and received[-1] == 1000  # the last offered frame always goes out
+    assert received == sorted(received)
+    assert offering < 1.0  # a thousand offers queue nothing behind the channel layer
+
+
+async def test_status_and_iterations_from_the_trainer_reach_the_page(alice):
+    job = await sync_to_async(queued_job)(alice)
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
+    await communicator.connect()
+    await communicator.receive_json_from(timeout=5)
+
+    def trainer_side() -> None:
+        TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.IN_PROGRESS)
+        job.iteration_rows.create(
+            number=1, reward=12.5, completion=40.0, episodes=2, steps=90, wall_seconds=1.0,
+            training_points=[[10.0, 30.0], [15.0, 50.0]], evaluation_points=[45.0],
+        )  # fmt: skip
+        live.announce_training(job.pk)
+        live.announce_iteration(job.pk, 1)
+
+    await sync_to_async(trainer_side)()
+    status = await communicator.receive_json_from(timeout=5)
+    iteration = await communicator.receive_json_from(timeout=5)
+    await communicator.disconnect()
+    assert status["type"] == "status" and status["status"] == "IN_PROGRESS"
+    assert iteration == {
+        **await sync_to_async(lambda: selectors.iteration_point(row=job.iteration_rows.get()))(),
+        "type": "iteration",
+    }
+    assert iteration["training_points"] == [[10.0, 30.0], [15.0, 50.0]]
