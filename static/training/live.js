@@ -183,6 +183,8 @@ function addIteration(row) {
   iterations.set(row.number, row);
   const body = find("iterations");
   if (!body) return;
+  find("iteration-table").hidden = false;
+  find("no-iterations").hidden = true;
   const cells = [
     row.number, row.reward.toFixed(2), `${row.completion.toFixed(1)}%`,
     row.evaluation_completion === null ? "—" : `${row.evaluation_completion.toFixed(1)}%`,
