@@ -29,7 +29,7 @@ format: $(VENV)/.test-installed
 	$(BIN)/ruff check --fix .
 	$(BIN)/ruff format .
 
-bench: $(VENV)/.run-installed
+bench: $(VENV)/.test-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	@for b in bench/bench_*.py; do m=$$(basename $$b .py); echo "== bench.$$m"; \
 		$(BIN)/python -m bench.$$m || exit 1; done
