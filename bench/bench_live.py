@@ -92,12 +92,12 @@ def train(owner, name: str):
     return model
 
 
-def finish(model) -> float:
-    """Train to ``ITERATIONS`` updates, stop; steps/s over the training time."""
+def finish(model, iterations: int = ITERATIONS) -> float:
+    """Train to ``iterations`` updates, stop; steps/s over the training time."""
     from bench.bench_training import job_of
     from training.services import training_stop
 
-    while job_of(model).iterations < ITERATIONS:
+    while job_of(model).iterations < iterations:
         time.sleep(0.5)
     job = job_of(model)
     rate = job.steps / job.training_seconds
@@ -134,6 +134,9 @@ def main() -> None:
         session = client.cookies[settings.SESSION_COOKIE_NAME].value
         cookie = f"{settings.SESSION_COOKIE_NAME}={session}"
 
+        # The worker's processes pay once for the sandbox self-test and for loading PyTorch; a
+        # first job takes that cost, so that neither measured one does.
+        finish(train(owner, "warm-up"), iterations=1)
         print(f"Training to {ITERATIONS} policy updates, PPO defaults, camera, one worker:")
         alone = finish(train(owner, "unwatched"))
         print(f"nobody watching: {alone:,.1f} steps/s", flush=True)

@@ -21,6 +21,7 @@ import cv2
 import gymnasium
 from django.core.files import File
 from django.core.files.storage import default_storage
+from django.db import transaction
 from django.utils import timezone
 
 import simulator
@@ -33,6 +34,11 @@ from training.policies import Policy
 
 logger = logging.getLogger(__name__)
 
+RUNNABLE = (
+    EvaluationJob.Status.QUEUED,
+    EvaluationJob.Status.INITIALIZING,
+    EvaluationJob.Status.IN_PROGRESS,
+)
 VIDEO = "video.webm"
 VIDEO_CODEC = "VP80"
 TRACE = "evaluation-simtrace/0-iteration.csv"
@@ -49,18 +55,24 @@ def files_prefix(evaluation: EvaluationJob) -> str:
 
 
 def run(evaluation_id: int) -> EvaluationJob | None:
-    """Run evaluation ``evaluation_id`` if it is still queued (a second delivery finds it taken
-    and returns None); the evaluation as it ended."""
-    claimed = EvaluationJob.objects.filter(
-        pk=evaluation_id, status=EvaluationJob.Status.QUEUED
-    ).update(
-        status=EvaluationJob.Status.INITIALIZING,
-        started_at=timezone.now(),
-        message="Loading the model",
-    )
-    if not claimed:
-        logger.info("Evaluation %s is not queued; nothing to do", evaluation_id)
-        return None
+    """Run evaluation ``evaluation_id`` if it is waiting; None when it has ended or vanished.
+
+    One that is under way again is a redelivery after its worker died (Celery acknowledges the
+    task late): it starts over, so the racer gets a whole evaluation, not half of one."""
+    with transaction.atomic():
+        evaluation = EvaluationJob.objects.select_for_update().filter(pk=evaluation_id).first()
+        if evaluation is None or evaluation.status not in RUNNABLE:
+            logger.info("Evaluation %s is not waiting; nothing to do", evaluation_id)
+            return None
+        if evaluation.status != EvaluationJob.Status.QUEUED:
+            logger.warning("Evaluation %s was interrupted; starting it over", evaluation_id)
+            evaluation.trial_rows.all().delete()
+        _update(
+            evaluation,
+            status=EvaluationJob.Status.INITIALIZING,
+            started_at=timezone.now(),
+            message="Loading the model",
+        )
     evaluation = EvaluationJob.objects.select_related("model", "track").get(pk=evaluation_id)
     _announce(evaluation)
     try:

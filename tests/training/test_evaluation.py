@@ -204,3 +204,27 @@ def test_the_evaluate_page_keeps_what_was_typed_and_says_what_to_change(client, 
     again = client.post(url, {"track": "pitlane-oval", "trials": "3"})
     assert again.status_code == 400
     assert "once it is ready" in again.content.decode()
+
+
+@pytest.mark.django_db
+def test_an_evaluation_interrupted_by_a_dead_worker_starts_over_and_an_ended_one_never_reruns(
+    alice,
+):
+    from training import evaluation as runner
+
+    model = ready_model(alice)
+    evaluation = services.evaluation_start(
+        model=model, settings={"off_track_penalty": 0, "continuous_laps": True}, enqueue=False
+    )
+    EvaluationJob.objects.filter(pk=evaluation.pk).update(status=EvaluationJob.Status.IN_PROGRESS)
+    evaluation.trial_rows.create(number=1, time_ms=1, progress=3.0, status="time_up")
+
+    assert runner.run(evaluation.pk) is not None
+    evaluation.refresh_from_db()
+    assert evaluation.status == EvaluationJob.Status.COMPLETED
+    trials = list(evaluation.trial_rows.all())
+    assert [(t.number, t.status) for t in trials] == [(i, "lap_complete") for i in (1, 2, 3)]
+    assert all(t.penalty_ms == 0 and t.resets == t.off_tracks > 0 for t in trials)
+
+    assert runner.run(evaluation.pk) is None  # a duplicate delivery of an ended evaluation
+    assert evaluation.trial_rows.count() == 3
