@@ -16,6 +16,7 @@ most. The page chooses what to watch with ``{"type": "watch", "worker": N, "view
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import struct
 
@@ -34,6 +35,12 @@ REFUSED_ANONYMOUS = 4401
 REFUSED_FORBIDDEN = 4403
 
 
+@functools.cache
+def _viewers_redis() -> redis.Redis:
+    """One client (and connection pool) for every viewer this server process holds."""
+    return redis_client(timeout=2.0)
+
+
 class LiveConsumer(AsyncWebsocketConsumer):
     """What the training and evaluation streams share: who may watch, flow control, viewers."""
 
@@ -50,7 +57,7 @@ class LiveConsumer(AsyncWebsocketConsumer):
             await self.close(code=REFUSED_FORBIDDEN)
             return
         self.group = self.group_for(pk)
-        self.stream = live.Stream(redis_client(timeout=2.0), self.group)
+        self.stream = live.Stream(_viewers_redis(), self.group)
         self.worker, self.view = 0, "spectator"
         self.in_flight, self.pending = 0, None
         await self.channel_layer.group_add(self.group, self.channel_name)

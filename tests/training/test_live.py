@@ -53,6 +53,15 @@ async def viewer(path: str, user=None, origin=ORIGIN) -> WebsocketCommunicator:
     return WebsocketCommunicator(application, path, headers=headers)
 
 
+async def watching(job: TrainingJob, user) -> WebsocketCommunicator:
+    """A viewer of ``job``, connected, past the state it gets on connecting."""
+    communicator = await viewer(f"/ws/jobs/{job.pk}/", user)
+    connected, _ = await communicator.connect()
+    assert connected
+    assert (await communicator.receive_json_from(timeout=5))["type"] == "state"
+    return communicator
+
+
 def frame_header(message: bytes) -> tuple[dict, bytes]:
     (length,) = struct.unpack("!I", message[:4])
     return json.loads(message[4 : 4 + length]), message[4 + length :]
@@ -114,9 +123,7 @@ async def test_a_bad_origin_is_refused_even_for_the_owner(alice):
 
 async def test_updates_arrive_in_the_order_they_were_sent(alice):
     job = await sync_to_async(queued_job)(alice)
-    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
-    await communicator.connect()
-    await communicator.receive_json_from(timeout=5)
+    communicator = await watching(job, alice)
     group = live.training_group(job.pk)
     layer = get_channel_layer()
     for number in range(1, 51):
@@ -130,9 +137,7 @@ async def test_updates_arrive_in_the_order_they_were_sent(alice):
 
 async def test_frames_are_binary_with_a_header_and_each_is_released_by_an_ack(alice):
     job = await sync_to_async(queued_job)(alice)
-    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
-    await communicator.connect()
-    await communicator.receive_json_from(timeout=5)
+    communicator = await watching(job, alice)
     group = live.training_group(job.pk)
 
     await send_frames(group, 1)
@@ -150,9 +155,7 @@ async def test_frames_are_binary_with_a_header_and_each_is_released_by_an_ack(al
 
 async def test_a_slow_viewer_gets_the_newest_frame_and_never_a_backlog(alice):
     job = await sync_to_async(queued_job)(alice)
-    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
-    await communicator.connect()
-    await communicator.receive_json_from(timeout=5)
+    communicator = await watching(job, alice)
     group = live.training_group(job.pk)
 
     await send_frames(group, 10)  # the viewer acknowledges nothing
@@ -181,9 +184,7 @@ async def test_a_slow_viewer_gets_the_newest_frame_and_never_a_backlog(alice):
 async def test_viewers_register_what_they_watch_and_leave_no_registration_behind(alice):
     job = await sync_to_async(queued_job)(alice)
     stream = live.Stream(redis_client(), live.training_group(job.pk))
-    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
-    await communicator.connect()
-    await communicator.receive_json_from(timeout=5)
+    communicator = await watching(job, alice)
     assert await sync_to_async(stream.wanted)(0) == {"spectator"}
 
     await communicator.send_json_to({"type": "watch", "worker": 0, "view": "camera"})
@@ -216,9 +217,7 @@ async def test_a_viewer_who_reconnects_gets_the_newest_frame_at_once(alice):
 async def test_the_publisher_sends_the_newest_frame_and_never_blocks_the_simulation(alice):
     job = await sync_to_async(queued_job)(alice)
     group = live.training_group(job.pk)
-    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
-    await communicator.connect()
-    await communicator.receive_json_from(timeout=5)
+    communicator = await watching(job, alice)
 
     def simulate() -> float:
         with live.FramePublisher(redis_client(), group) as publisher:
@@ -240,9 +239,7 @@ async def test_the_publisher_sends_the_newest_frame_and_never_blocks_the_simulat
 
 async def test_status_and_iterations_from_the_trainer_reach_the_page(alice):
     job = await sync_to_async(queued_job)(alice)
-    communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
-    await communicator.connect()
-    await communicator.receive_json_from(timeout=5)
+    communicator = await watching(job, alice)
 
     def trainer_side() -> None:
         TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.IN_PROGRESS)

@@ -1,0 +1,43 @@
+import threading
+
+import pytest
+from playwright.sync_api import Page, expect
+
+from tests.browser.test_accounts_in_chromium import log_in
+from tests.conftest import PASSWORD
+from tests.training.factories import ready_model
+from training import evaluation, services
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+
+def test_a_racer_reads_the_results_and_plays_the_recorded_video(page: Page, alice, tracks):
+    model = ready_model(alice)
+    job = services.evaluation_start(
+        model=model, settings={"continuous_laps": True, "off_track_penalty": 0}, enqueue=False
+    )
+    # Playwright's event loop runs in this thread; the evaluator, sync code that sends to the
+    # channel layer, runs in a thread of its own, as it does in a worker.
+    runner = threading.Thread(target=evaluation.run, args=(job.pk,))
+    runner.start()
+    runner.join()
+
+    log_in(page, "alice", PASSWORD)
+    page.goto(f"/models/{model.pk}/")
+    page.get_by_role("link", name="Results").click()
+    expect(page.locator("[data-live-trials] tbody tr")).to_have_count(3)
+    expect(page.locator("[data-live-trials] tbody tr").first).to_contain_text("lap_complete")
+    expect(page.locator("[data-live-status]")).to_have_text("Completed")
+
+    video = page.locator("[data-evaluation-video]")
+    page.wait_for_function(
+        "() => document.querySelector('[data-evaluation-video]').readyState >= 2", timeout=15_000
+    )
+    assert video.evaluate("v => [v.videoWidth, v.videoHeight]") == [640, 480]
+    assert video.evaluate("v => v.error") is None
+    video.evaluate("v => { v.muted = true; return v.play(); }")
+    page.wait_for_function(
+        "() => document.querySelector('[data-evaluation-video]').currentTime > 0.5"
+    )
+    expect(page.get_by_role("link", name="Simulation trace (CSV)")).to_be_visible()
+    expect(page.get_by_role("link", name="Evaluation metrics (JSON)")).to_be_visible()
