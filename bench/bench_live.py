@@ -10,7 +10,8 @@ Daphne with a logged-in session, acknowledging each frame as a page does once it
 - Frames/s delivered to each of 20 viewers while training goes on (frames of the car waiting
   during policy updates included, and counted apart).
 - Training throughput (environment steps/s to the same number of policy updates) with and
-  without the 20 viewers. Both runs drive the same episodes, so the difference is the viewers'.
+  without the 20 viewers, and the share of a core the web server (Daphne) and Redis use in each
+  run: what serving the viewers takes from the machine, apart from the run-to-run spread.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import struct
 import threading
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from bench.stack import running_console
 
@@ -83,6 +85,51 @@ class Audience:
         return self.viewers
 
 
+def server_processes(console: dict) -> dict[str, list[int]]:
+    """The pids of the console's Daphne and Redis, found by their command lines."""
+    found: dict[str, list[int]] = {"Daphne": [], "Redis": []}
+    port, redis_port = console["env"]["PITLANE_PORT"], console["env"]["PITLANE_REDIS_PORT"]
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            command = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:
+            continue
+        if "daphne" in command and f"-p {port}" in command:
+            found["Daphne"].append(int(entry.name))
+        elif "redis-server" in command and redis_port in command:
+            found["Redis"].append(int(entry.name))
+    return found
+
+
+def cpu_seconds(pids: list[int]) -> float:
+    """User and system CPU time of ``pids`` so far."""
+    total = 0
+    for pid in pids:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        total += int(fields[11]) + int(fields[12])  # utime, stime
+    return total / os.sysconf("SC_CLK_TCK")
+
+
+class CpuMeter:
+    """The share of one core each server process used between ``start`` and ``stop``."""
+
+    def __init__(self, processes: dict[str, list[int]]) -> None:
+        self.processes = processes
+
+    def start(self) -> None:
+        self.started = time.monotonic()
+        self.before = {name: cpu_seconds(pids) for name, pids in self.processes.items()}
+
+    def stop(self) -> str:
+        wall = time.monotonic() - self.started
+        return ", ".join(
+            f"{name} {(cpu_seconds(pids) - self.before[name]) / wall:.1%}"
+            for name, pids in self.processes.items()
+        )
+
+
 def train(owner, name: str):
     from bench.bench_training import default_model, job_of
 
@@ -138,8 +185,11 @@ def main() -> None:
         # first job takes that cost, so that neither measured one does.
         finish(train(owner, "warm-up"), iterations=1)
         print(f"Training to {ITERATIONS} policy updates, PPO defaults, camera, one worker:")
-        alone = finish(train(owner, "unwatched"))
-        print(f"nobody watching: {alone:,.1f} steps/s", flush=True)
+        meter = CpuMeter(server_processes(console))
+        model = train(owner, "unwatched")
+        meter.start()
+        alone = finish(model)
+        print(f"nobody watching: {alone:,.1f} steps/s; of one core: {meter.stop()}", flush=True)
 
         model = train(owner, "watched")
         job_id = job_of(model).pk
@@ -147,7 +197,9 @@ def main() -> None:
         time.sleep(ONE_VIEWER_SECONDS)
         print(f"1 viewer: latency {latency_line(one.close())}", flush=True)
         crowd = Audience(console["url"], job_id, cookie, VIEWERS)
+        meter.start()
         watched = finish(model)
+        serving = meter.stop()
         viewers = crowd.close()
         print(f"{VIEWERS} viewers: latency {latency_line(viewers)}")
         rates = [v.frames / max(v.stopped - v.started, 1e-9) for v in viewers]
@@ -159,7 +211,8 @@ def main() -> None:
         )
         print(
             f"{VIEWERS} viewers watching: {watched:,.1f} steps/s "
-            f"({(watched - alone) / alone:+.1%} against nobody watching)"
+            f"({(watched - alone) / alone:+.1%} against nobody watching); "
+            f"of one core: {serving}"
         )
 
 
