@@ -23,6 +23,8 @@ MAP_WIDTH = 200  # [px]
 TRAIL_POINTS = 900  # the last minute at 15 steps/s
 TRAIL_COLOUR = (60, 60, 230)
 TEXT_COLOUR = (255, 255, 255)
+VIEWS = ("spectator", "camera")  # what a live viewer can watch (see ``view_image``)
+FRAME_INTERVAL = 1 / 15  # [s] between live frames: 15 per second of wall-clock time
 
 
 class Spectator:
@@ -89,7 +91,7 @@ def view_image(env: DeepRacerEnv, view: str, observation: dict | None = None) ->
     pair), from ``observation`` when given, else rendered now."""
     if view == "spectator":
         return env.spectator.render(env)
-    if view != "camera":
+    if view not in VIEWS:
         raise ValueError(f"no view named {view!r}")
     if observation is None:
         observation = env._observe()

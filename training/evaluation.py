@@ -26,7 +26,7 @@ from django.utils import timezone
 
 import simulator
 from console.workers import redis_client
-from simulator.spectator import SIZE, jpeg, view_image
+from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
 from training import artifacts, live, selectors
 from training.models import EvaluationJob, EvaluationTrial, RLModel
@@ -166,7 +166,7 @@ class Evaluator:
                 writer.write(frame)
                 watched = publisher.watched(0)
                 now = time.monotonic()
-                if watched and now - last_live >= live.FRAME_INTERVAL:
+                if watched and now - last_live >= FRAME_INTERVAL:
                     last_live = now
                     for view in watched:
                         image = (

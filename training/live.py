@@ -25,10 +25,10 @@ from asgiref.sync import async_to_sync
 from channels import DEFAULT_CHANNEL_LAYER
 from channels.layers import channel_layers, get_channel_layer
 
+from simulator.spectator import VIEWS
+
 logger = logging.getLogger(__name__)
 
-VIEWS = ("spectator", "camera")
-FRAME_INTERVAL = 1 / 15  # [s] 15 frames/s to whoever watches
 VIEWER_TTL = 15.0  # [s] a viewer's registration lives this long unless renewed
 VIEWER_RENEW = 5.0  # [s] between a consumer's renewals
 FRAME_KEEP = 60  # [s] the newest frame of each view is kept for viewers who connect

@@ -16,6 +16,7 @@ import msgpack
 import redis
 
 from console.workers import redis_client
+from simulator.spectator import FRAME_INTERVAL
 from training import hyperparameters as hp
 from training import live
 from training.experience import JobChannel
@@ -83,7 +84,7 @@ class Viewing:
     def hold(self) -> None:
         """The last frames again, marked paused, at the live frame rate: the viewer sees the
         car wait for the new policy, not a stream that stalled."""
-        if time.monotonic() - self.held < live.FRAME_INTERVAL:
+        if time.monotonic() - self.held < FRAME_INTERVAL:
             return
         self.held = time.monotonic()
         for view in self.views:
@@ -149,7 +150,7 @@ def _await_next_version(
         channel.beat(worker)
         viewing.update()
         viewing.hold()
-        time.sleep(live.FRAME_INTERVAL if viewing.views else WAIT_POLL)
+        time.sleep(FRAME_INTERVAL if viewing.views else WAIT_POLL)
 
 
 def _where(failure: SandboxFailure, worker: int) -> str:

@@ -25,7 +25,7 @@ import numpy as np
 
 from simulator.controller import RolloutStats, drive
 from simulator.rewards import RewardError, checked_reward
-from simulator.spectator import jpeg, view_image
+from simulator.spectator import FRAME_INTERVAL, VIEWS, jpeg, view_image
 from training.experience import encode_arrays
 from training.sandbox import seal
 from training.sandbox.protocol import pack, read_frame
@@ -37,9 +37,7 @@ PRELOADED = (
     "shapely.geometry", "shapely.ops", "shapely.affinity",
 )  # fmt: skip
 PROGRESS_EVERY = 0.25  # [s] between progress messages during a rollout
-FRAME_INTERVAL = 1 / 15  # [s] between frames of a watched view
 LOOK_EVERY = 0.05  # [s] between looks for a watch request during an episode
-VIEWS = ("spectator", "camera")
 MAX_LOG = 200  # characters per printed line kept, and lines per rollout step batch
 
 
