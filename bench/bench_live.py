@@ -1,36 +1,41 @@
 """Live streams: frame latency, frames/s per viewer, and what viewers cost training.
 
-`python -m bench.bench_live` starts the console as `make run` does and trains two identical models
-(DeepRacer's defaults, as in bench_training, same seed): the first with nobody watching, the
-second watched first by one viewer, then by twenty. Each viewer is a websocket client through
-Daphne with a logged-in session, acknowledging each frame as a page does once it has drawn it.
+`python -m bench.bench_live` starts the console as `make run` does and trains a model with
+DeepRacer's defaults (as bench_training does). Each viewer is a websocket client through Daphne
+with a logged-in session, acknowledging each frame as a page does once it has drawn it. The
+viewers run in a process of their own at the lowest CPU priority: they stand for browsers on
+other machines, so they take only the CPU that training leaves idle here, and what they use is
+printed apart.
 
 - Latency: from the frame's render in the simulation to its arrival at the viewer's websocket,
   p50 and p95, with 1 and with 20 viewers of one job.
-- Frames/s delivered to each of 20 viewers while training goes on (frames of the car waiting
-  during policy updates included, and counted apart).
-- Training throughput (environment steps/s to the same number of policy updates) with and
-  without the 20 viewers, and the share of a core the web server (Daphne) and Redis use in each
-  run: what serving the viewers takes from the machine, apart from the run-to-run spread.
+- Frames/s delivered to each of 20 viewers while training goes on: while the car drives, and
+  over the whole time (the car waits, one frame a second, while the policy is updated).
+- What 20 viewers cost training: the job's iterations alternate between nobody watching and 20
+  viewers, so that both kinds run on the same job at the same stage of learning; each
+  iteration's throughput is its environment steps over the time from the previous iteration's
+  end to its own (driving, evaluation and policy update). Printed: each kind's mean and spread,
+  the mean of each watched iteration against the mean of its unwatched neighbours, and the share
+  of a core the web server (Daphne), Redis and the viewers used in each kind.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import multiprocessing
 import os
 import statistics
 import struct
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from bench.stack import running_console
 
-ITERATIONS = 4  # policy updates each run trains for
-ONE_VIEWER_SECONDS = 30.0
 VIEWERS = 20
+WATCHED = 5  # iterations that 20 viewers watch, each between two that nobody watches
+DRIVING_GAP = 0.5  # [s] frames closer than this, and not paused, are of the car driving
 
 
 @dataclass
@@ -38,15 +43,18 @@ class Viewer:
     latencies: list[float] = field(default_factory=list)
     frames: int = 0
     held: int = 0
+    driving_frames: int = 0
+    driving_seconds: float = 0.0
     started: float = 0.0
     stopped: float = 0.0
 
 
-async def watch(url: str, headers: dict, viewer: Viewer, stop: threading.Event) -> None:
+async def watch(url: str, headers: dict, viewer: Viewer, stop: asyncio.Event) -> None:
     import websockets
 
     async with websockets.connect(url, additional_headers=headers, max_size=None) as socket:
         viewer.started = time.monotonic()
+        last_driving = None
         while not stop.is_set():
             try:
                 message = await asyncio.wait_for(socket.recv(), timeout=0.5)
@@ -59,30 +67,56 @@ async def watch(url: str, headers: dict, viewer: Viewer, stop: threading.Event) 
             header = json.loads(message[4 : 4 + length])
             viewer.latencies.append(arrived - header["rendered_at"])
             viewer.frames += 1
-            viewer.held += bool(header.get("paused"))
+            if header.get("paused"):
+                viewer.held += 1
+                last_driving = None
+            else:
+                now = time.monotonic()
+                if last_driving is not None and now - last_driving < DRIVING_GAP:
+                    viewer.driving_frames += 1
+                    viewer.driving_seconds += now - last_driving
+                last_driving = now
             await socket.send('{"type": "ack"}')
         viewer.stopped = time.monotonic()
 
 
+def audience(url: str, headers: dict, count: int, pipe) -> None:
+    """A viewers' process: ``count`` viewers until told to stop; their figures go back by
+    ``pipe``."""
+    os.nice(19)
+    viewers = [Viewer() for _ in range(count)]
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        loop.add_reader(pipe.fileno(), stop.set)
+        await asyncio.gather(*(watch(url, headers, v, stop) for v in viewers))
+
+    asyncio.run(main())
+    pipe.recv()
+    pipe.send(viewers)
+
+
 class Audience:
-    """``count`` viewers of one job, in a thread of their own, until ``close``."""
+    """``count`` viewers of one job, in a process of their own, until ``close``."""
 
     def __init__(self, base: str, job_id: int, cookie: str, count: int) -> None:
-        self.viewers = [Viewer() for _ in range(count)]
-        self.stop = threading.Event()
         url = base.replace("http", "ws", 1) + f"/ws/jobs/{job_id}/"
         headers = {"Cookie": cookie, "Origin": base}
+        context = multiprocessing.get_context("spawn")
+        self.pipe, theirs = context.Pipe()
+        self.process = context.Process(target=audience, args=(url, headers, count, theirs))
+        self.process.start()
 
-        async def main() -> None:
-            await asyncio.gather(*(watch(url, headers, v, self.stop) for v in self.viewers))
-
-        self.thread = threading.Thread(target=asyncio.run, args=(main(),), daemon=True)
-        self.thread.start()
+    @property
+    def pids(self) -> list[int]:
+        return [self.process.pid]
 
     def close(self) -> list[Viewer]:
-        self.stop.set()
-        self.thread.join(30)
-        return self.viewers
+        self.pipe.send("stop")
+        viewers = self.pipe.recv()
+        self.process.join(30)
+        return viewers
 
 
 def server_processes(console: dict) -> dict[str, list[int]]:
@@ -130,30 +164,6 @@ class CpuMeter:
         )
 
 
-def train(owner, name: str):
-    from bench.bench_training import default_model, job_of
-
-    model = default_model(owner, name)
-    while job_of(model).status != "IN_PROGRESS":
-        time.sleep(0.5)
-    return model
-
-
-def finish(model, iterations: int = ITERATIONS) -> float:
-    """Train to ``iterations`` updates, stop; steps/s over the training time."""
-    from bench.bench_training import job_of
-    from training.services import training_stop
-
-    while job_of(model).iterations < iterations:
-        time.sleep(0.5)
-    job = job_of(model)
-    rate = job.steps / job.training_seconds
-    training_stop(job=job)
-    while job_of(model).status != "COMPLETED":
-        time.sleep(1)
-    return rate
-
-
 def latency_line(viewers: list[Viewer]) -> str:
     latencies = sorted(x for v in viewers for x in v.latencies)
     if not latencies:
@@ -161,6 +171,23 @@ def latency_line(viewers: list[Viewer]) -> str:
     p50 = statistics.median(latencies) * 1000
     p95 = latencies[int(0.95 * (len(latencies) - 1))] * 1000
     return f"p50 {p50:.0f} ms, p95 {p95:.0f} ms over {len(latencies):,} frames"
+
+
+def frames_line(viewers: list[Viewer]) -> str:
+    driving = [v.driving_frames / v.driving_seconds for v in viewers if v.driving_seconds]
+    overall = [v.frames / max(v.stopped - v.started, 1e-9) for v in viewers]
+    held = sum(v.held for v in viewers) / max(sum(v.frames for v in viewers), 1)
+    return (
+        f"{min(driving, default=0):.1f}-{max(driving, default=0):.1f} frames/s each while the "
+        f"car drives (mean {statistics.mean(driving or [0]):.1f}); "
+        f"{statistics.mean(overall):.1f} frames/s over the whole time "
+        f"({held:.0%} of the frames show the car waiting for a policy update)"
+    )
+
+
+def spread(rates: list[float]) -> str:
+    deviation = statistics.stdev(rates) if len(rates) > 1 else 0.0
+    return f"{statistics.mean(rates):,.1f} ± {deviation:,.1f} steps/s"
 
 
 def main() -> None:
@@ -173,47 +200,76 @@ def main() -> None:
         from django.contrib.auth.models import User
         from django.test import Client
 
-        from bench.bench_training import job_of
+        from bench.bench_training import default_model, job_of
+        from training.models import Iteration
+        from training.services import training_stop
 
         owner = User.objects.create_user("bench", password="bench-password-1")  # noqa: S106
         client = Client()
         client.force_login(owner)
         session = client.cookies[settings.SESSION_COOKIE_NAME].value
         cookie = f"{settings.SESSION_COOKIE_NAME}={session}"
+        servers = server_processes(console)
 
-        # The worker's processes pay once for the sandbox self-test and for loading PyTorch; a
-        # first job takes that cost, so that neither measured one does.
-        finish(train(owner, "warm-up"), iterations=1)
-        print(f"Training to {ITERATIONS} policy updates, PPO defaults, camera, one worker:")
-        meter = CpuMeter(server_processes(console))
-        model = train(owner, "unwatched")
-        meter.start()
-        alone = finish(model)
-        print(f"nobody watching: {alone:,.1f} steps/s; of one core: {meter.stop()}", flush=True)
+        model = default_model(owner, "live")
+        job = job_of(model)
 
-        model = train(owner, "watched")
-        job_id = job_of(model).pk
-        one = Audience(console["url"], job_id, cookie, 1)
-        time.sleep(ONE_VIEWER_SECONDS)
+        def iterations() -> int:
+            return Iteration.objects.filter(job=job).count()
+
+        def next_iteration(after: int) -> None:
+            while iterations() <= after:
+                time.sleep(0.1)
+
+        # The first iteration pays for the worker's first sandbox and PyTorch's start-up; one
+        # viewer watches the second.
+        next_iteration(0)
+        one = Audience(console["url"], job.pk, cookie, 1)
+        next_iteration(1)
         print(f"1 viewer: latency {latency_line(one.close())}", flush=True)
-        crowd = Audience(console["url"], job_id, cookie, VIEWERS)
-        meter.start()
-        watched = finish(model)
-        serving = meter.stop()
-        viewers = crowd.close()
-        print(f"{VIEWERS} viewers: latency {latency_line(viewers)}")
-        rates = [v.frames / max(v.stopped - v.started, 1e-9) for v in viewers]
-        held = sum(v.held for v in viewers) / max(sum(v.frames for v in viewers), 1)
+        rates: dict[bool, list[float]] = {False: [], True: []}
+        cpu: dict[bool, dict[str, list[float]]] = {False: {}, True: {}}
+        crowd: list[Viewer] = []
+        print(f"Training, PPO defaults, camera, one worker: {2 * WATCHED + 1} iterations, every "
+              f"other one watched by {VIEWERS} viewers", flush=True)  # fmt: skip
+        for phase in range(2 * WATCHED + 1):
+            watched, done = phase % 2 == 1, iterations()
+            viewers = Audience(console["url"], job.pk, cookie, VIEWERS) if watched else None
+            processes = {**servers, "viewers": viewers.pids if viewers else []}
+            before = {name: cpu_seconds(pids) for name, pids in processes.items()}
+            started = time.monotonic()
+            next_iteration(done)
+            wall = time.monotonic() - started
+            for name, pids in processes.items():
+                used = (cpu_seconds(pids) - before[name]) / wall
+                cpu[watched].setdefault(name, []).append(used)
+            if viewers:
+                crowd += viewers.close()
+            rows = Iteration.objects.filter(job=job).order_by("number")
+            previous, row = rows[done - 1 : done + 1]
+            rate = row.steps / (row.created_at - previous.created_at).total_seconds()
+            rates[watched].append(rate)
+            print(f"iteration {row.number}: {rate:,.1f} steps/s, "
+                  f"{'watched' if watched else 'nobody watching'}", flush=True)  # fmt: skip
+        training_stop(job=job_of(model))
+
+        print(f"{VIEWERS} viewers: latency {latency_line(crowd)}")
+        print(f"{VIEWERS} viewers: {frames_line(crowd)}")
+        alone, watched = rates[False], rates[True]
+        # Each watched iteration against its unwatched neighbours: learning changes the episodes'
+        # lengths, and so the throughput, as the job goes on.
+        paired = [rate / statistics.mean(alone[i : i + 2]) - 1 for i, rate in enumerate(watched)]
+        print(f"nobody watching: {spread(alone)}; {VIEWERS} viewers: {spread(watched)}")
         print(
-            f"{VIEWERS} viewers: {min(rates):.1f}-{max(rates):.1f} frames/s each "
-            f"(mean {statistics.mean(rates):.1f}; {held:.0%} of them show the car waiting "
-            "for a policy update)"
+            f"{VIEWERS} viewers against nobody: {statistics.mean(paired):+.1%} "
+            f"(each watched iteration against its neighbours: "
+            f"{', '.join(f'{x:+.1%}' for x in paired)})"
         )
-        print(
-            f"{VIEWERS} viewers watching: {watched:,.1f} steps/s "
-            f"({(watched - alone) / alone:+.1%} against nobody watching); "
-            f"of one core: {serving}"
-        )
+        for watched in (False, True):
+            shares = ", ".join(
+                f"{name} {statistics.mean(used):.1%}" for name, used in cpu[watched].items()
+            )
+            print(f"of one core, {'watched' if watched else 'nobody watching'}: {shares}")
 
 
 if __name__ == "__main__":

@@ -3,8 +3,7 @@
 ``ws/jobs/<id>/`` (training) and ``ws/evaluations/<id>/``. On connecting, the viewer gets the
 whole current state at once (a ``state`` message, then the newest frame of the view it watches),
 then ``status`` and ``iteration`` messages as JSON text, in the order they were sent, and frames as
-binary messages: a 4-byte big-endian length, a JSON header of that length (worker, view, seq,
-rendered_at, episode, step, status, progress, paused), then the JPEG.
+binary messages (see ``training.live``), sent as the publisher built them.
 
 Frames are flow-controlled: at most ``WINDOW`` are in flight to the browser, each released by the
 page's ``{"type": "ack"}`` once it has drawn the frame. Frames that come meanwhile replace one
@@ -18,7 +17,6 @@ from __future__ import annotations
 import asyncio
 import functools
 import json
-import struct
 
 import redis
 from asgiref.sync import sync_to_async
@@ -30,7 +28,6 @@ from training import live, selectors
 from training.models import EvaluationJob, TrainingJob
 
 WINDOW = 2  # frames sent and not yet acknowledged
-HEADER = struct.Struct("!I")
 REFUSED_ANONYMOUS = 4401
 REFUSED_FORBIDDEN = 4403
 
@@ -112,10 +109,7 @@ class LiveConsumer(AsyncWebsocketConsumer):
             return
         frame, self.pending = self.pending, None
         self.in_flight += 1
-        header = json.dumps(
-            {key: value for key, value in frame.items() if key not in ("type", "jpeg")}
-        ).encode()
-        await self.send(bytes_data=HEADER.pack(len(header)) + header + frame["jpeg"])
+        await self.send(bytes_data=frame["data"])
 
     async def _show_latest(self) -> None:
         """The newest frame of what this viewer watches, at once, rather than at the next."""

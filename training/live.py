@@ -7,19 +7,26 @@ simulation renders a view only while a live registration asks for it. The simula
 frames to a ``FramePublisher``, whose own thread sends them, newest first: the simulation never
 waits on the channel layer, and a frame not yet sent when the next one comes is replaced, not
 queued. Each viewer's consumer does the same on its side (see ``training.consumers``).
+
+A frame goes to the page as one binary websocket message: a 4-byte big-endian length, a JSON
+header of that length (worker, view, seq, rendered_at, episode, step, status, progress, paused),
+then the JPEG. The publisher builds it once; the channel layer carries it once to each server
+process (channels_redis groups a message's channels by process), and every viewer there is sent
+the same bytes.
 """
 
 from __future__ import annotations
 
 import asyncio
 import itertools
+import json
 import logging
+import struct
 import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
-import msgpack
 import redis
 from asgiref.sync import async_to_sync
 from channels import DEFAULT_CHANNEL_LAYER
@@ -33,6 +40,7 @@ VIEWER_TTL = 15.0  # [s] a viewer's registration lives this long unless renewed
 VIEWER_RENEW = 5.0  # [s] between a consumer's renewals
 FRAME_KEEP = 60  # [s] the newest frame of each view is kept for viewers who connect
 MAX_JPEG = 1024 * 1024  # [bytes] a frame from a sandbox child beyond this is dropped
+HEADER_LENGTH = struct.Struct("!I")
 
 
 def training_group(job_id: int) -> str:
@@ -79,32 +87,36 @@ class Stream:
             self.client.hdel(self.viewers, *lapsed)
         return views
 
-    def keep_frame(self, frame: dict) -> None:
+    def keep_frame(self, message: dict) -> None:
+        """Keep ``message``, a ``job.frame`` event, for viewers who connect later."""
         self.client.set(
-            self._frame_key(frame["worker"], frame["view"]),
-            msgpack.packb(frame, use_bin_type=True),
-            ex=FRAME_KEEP,
+            self._frame_key(message["worker"], message["view"]), message["data"], ex=FRAME_KEEP
         )
 
     def latest_frame(self, worker: int, view: str) -> dict | None:
         data = self.client.get(self._frame_key(worker, view))
-        return msgpack.unpackb(data, raw=False) if data else None
+        return frame_message(worker, view, data) if data else None
 
     def _frame_key(self, worker: int, view: str) -> str:
         return f"pitlane:live:{self.group}:frame:{worker}:{view}"
 
 
 def frame_event(worker: int, view: str, jpeg: bytes, **details) -> dict:
-    """A ``job.frame`` event for the channel layer. ``details``: what the page shows with it
-    (episode, step, status, progress, paused)."""
-    return {
-        "type": "job.frame",
-        "worker": worker,
-        "view": view,
-        "rendered_at": time.time(),
-        "jpeg": jpeg,
-        **details,
-    }
+    """A frame as the simulation offers it to a ``FramePublisher``. ``details``: what the page
+    shows with it (episode, step, status, progress, paused)."""
+    return {"worker": worker, "view": view, "rendered_at": time.time(), "jpeg": jpeg, **details}
+
+
+def frame_message(worker: int, view: str, data: bytes) -> dict:
+    """The ``job.frame`` event the channel layer carries: ``data`` is the page's message."""
+    return {"type": "job.frame", "worker": worker, "view": view, "data": data}
+
+
+def pack_frame(frame: dict) -> dict:
+    """The ``job.frame`` event of ``frame`` (from ``frame_event``), its message built once."""
+    header = json.dumps({key: value for key, value in frame.items() if key != "jpeg"}).encode()
+    data = HEADER_LENGTH.pack(len(header)) + header + frame["jpeg"]
+    return frame_message(frame["worker"], frame["view"], data)
 
 
 def frame_from_child(raw: dict[str, Any], worker: int) -> dict | None:
@@ -171,7 +183,7 @@ class FramePublisher:
         return views
 
     def offer(self, frame: dict) -> None:
-        """Send ``frame`` (a ``job.frame`` event) soon, numbered in the order offered."""
+        """Send ``frame`` (from ``frame_event``) soon, numbered in the order offered."""
         with self._condition:
             frame["seq"] = next(self._numbers)
             self._mailbox[(frame["worker"], frame["view"])] = frame
@@ -210,9 +222,10 @@ class FramePublisher:
             loop.close()
 
     def _deliver(self, loop: asyncio.AbstractEventLoop, layer, frame: dict) -> None:
+        message = pack_frame(frame)
         try:
-            loop.run_until_complete(layer.group_send(self.group, frame))
-            self.stream.keep_frame(frame)
+            loop.run_until_complete(layer.group_send(self.group, message))
+            self.stream.keep_frame(message)
         except (OSError, redis.RedisError) as error:
             logger.warning("A frame for %s was not sent: %s", self.group, error)
 

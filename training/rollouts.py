@@ -16,7 +16,6 @@ import msgpack
 import redis
 
 from console.workers import redis_client
-from simulator.spectator import FRAME_INTERVAL
 from training import hyperparameters as hp
 from training import live
 from training.experience import JobChannel
@@ -29,6 +28,7 @@ REWARD_CALL_LIMIT = 1.0  # [s]
 WAIT_POLL = 0.2  # [s] between looks for new weights while the trainer learns
 JOB_CHECK = 15.0  # [s] between looks at the job's row
 MEMORY_ALLOWANCE = 1024 * MiB  # beyond the child's size with torch and the simulator loaded
+HOLD_INTERVAL = 1.0  # [s] between the paused frames shown while the trainer learns
 
 
 def run(job_id: int, worker: int, attempt: int, track: str) -> None:
@@ -82,9 +82,10 @@ class Viewing:
             self.publisher.offer(frame)
 
     def hold(self) -> None:
-        """The last frames again, marked paused, at the live frame rate: the viewer sees the
-        car wait for the new policy, not a stream that stalled."""
-        if time.monotonic() - self.held < FRAME_INTERVAL:
+        """The last frames again, marked paused, once a second: the viewer sees the car wait for
+        the new policy, not a stream that stalled, and an unchanging picture costs the server
+        one frame a second rather than fifteen."""
+        if time.monotonic() - self.held < HOLD_INTERVAL:
             return
         self.held = time.monotonic()
         for view in self.views:
@@ -150,7 +151,7 @@ def _await_next_version(
         channel.beat(worker)
         viewing.update()
         viewing.hold()
-        time.sleep(FRAME_INTERVAL if viewing.views else WAIT_POLL)
+        time.sleep(WAIT_POLL)
 
 
 def _where(failure: SandboxFailure, worker: int) -> str:

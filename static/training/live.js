@@ -103,7 +103,7 @@ function showFrame(data) {
     const now = performance.now();
     frameTimes = frameTimes.filter((time) => now - time < 1000);
     frameTimes.push(now);
-    if (rate) rate.textContent = `${frameTimes.length} frames/s`;
+    if (rate) rate.textContent = header.paused ? "paused" : `${frameTimes.length} frames/s`;
     if (header.paused) say("The car waits while the policy is updated.");
     else if (state && state.active) say("");
   }).catch(() => URL.revokeObjectURL(url)).finally(() => send({ type: "ack", seq: header.seq }));
