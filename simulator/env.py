@@ -125,7 +125,7 @@ class DeepRacerEnv(gym.Env):
         if render_mode not in (None, "rgb_array"):
             raise config.ConfigError(f"The render mode must be rgb_array, not {render_mode!r}.")
         self.render_mode = render_mode
-        self.car_colour = car_colour
+        self.car_colour = tuple(int(channel) for channel in car_colour)  # JSON gives a list
 
         self.car = Car(car, substeps=self.config["physics_substeps"])
         self.dt = 1.0 / self.config["control_hz"]

@@ -1,6 +1,6 @@
 from django.contrib import admin
 
-from training.models import RLModel, Track, Vehicle
+from training.models import Quota, QuotaDefaults, RLModel, Track, Vehicle
 
 
 @admin.register(Track)
@@ -24,3 +24,24 @@ class VehicleAdmin(admin.ModelAdmin):
     list_display = ["name", "owner", "camera", "lidar", "shell_colour"]
     list_filter = ["camera", "lidar"]
     search_fields = ["name", "owner__username"]
+
+
+@admin.register(QuotaDefaults)
+class QuotaDefaultsAdmin(admin.ModelAdmin):
+    """One row: what new racers get."""
+
+    list_display = ["__str__", "max_models", "max_minutes_per_month"]
+
+    def has_add_permission(self, request) -> bool:
+        return not QuotaDefaults.objects.exists()
+
+    def has_delete_permission(self, request, obj=None) -> bool:
+        return False
+
+
+@admin.register(Quota)
+class QuotaAdmin(admin.ModelAdmin):
+    list_display = ["racer", "max_models", "max_minutes_per_month"]
+    search_fields = ["racer__username"]
+    list_select_related = ["racer"]
+    autocomplete_fields = ["racer"]

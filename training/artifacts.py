@@ -7,9 +7,13 @@ import json
 
 import yaml
 from django.core.files.base import ContentFile
-from django.core.files.storage import default_storage
+from django.core.files.storage import FileSystemStorage, default_storage
+from django.http import FileResponse, HttpResponse, HttpResponseRedirect
 
 from training.models import RLModel
+
+TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE section 5
+CLONED_WEIGHTS = "checkpoints/cloned.safetensors"  # a clone's start: its source's best weights
 
 
 def path(model: RLModel, relative: str) -> str:
@@ -30,12 +34,58 @@ def read(name: str) -> bytes:
         return file.read()
 
 
+def download(
+    name: str, filename: str, *, attachment: bool = True, content_type: str | None = None
+) -> HttpResponse:
+    """The stored file ``name`` for a racer whose right to it the caller has checked: streamed
+    from local storage, or a redirect to a presigned URL that expires in minutes from a bucket
+    (the bytes then never pass through the web server)."""
+    if isinstance(default_storage, FileSystemStorage):
+        response = FileResponse(
+            default_storage.open(name, "rb"), as_attachment=attachment, filename=filename
+        )
+        if content_type:
+            response["Content-Type"] = content_type
+        return response
+    disposition = "attachment" if attachment else "inline"
+    parameters = {"ResponseContentDisposition": f'{disposition}; filename="{filename}"'}
+    if content_type:
+        parameters["ResponseContentType"] = content_type
+    return HttpResponseRedirect(default_storage.url(name, parameters=parameters))
+
+
+def delete_all(model: RLModel) -> int:
+    """Delete every stored object under the model's prefix; how many there were."""
+    return _delete_tree(path(model, "").rstrip("/"))
+
+
+def _delete_tree(directory: str) -> int:
+    try:
+        folders, files = default_storage.listdir(directory)
+    except FileNotFoundError:
+        return 0
+    for file in files:
+        default_storage.delete(f"{directory}/{file}")
+    removed = len(files) + sum(_delete_tree(f"{directory}/{folder}") for folder in folders)
+    if isinstance(default_storage, FileSystemStorage):
+        default_storage.delete(directory)  # the emptied folder
+    return removed
+
+
+def model_files(model: RLModel) -> dict[str, str]:
+    """DeepRacer's description of a model: its metadata, reward function and settings (the
+    hyperparameters are kept under DeepRacer's names)."""
+    return {
+        "model_metadata.json": json.dumps(model.metadata(), indent=2),
+        "reward_function.py": model.reward_function,
+        "hyperparameters.json": json.dumps(model.hyperparameters, indent=2),
+        "training_params.yaml": yaml.safe_dump(training_params(model), sort_keys=True),
+    }
+
+
 def write_model_files(model: RLModel) -> None:
-    """DeepRacer's description of a model: its metadata, reward function and settings."""
-    save(model, "model_metadata.json", json.dumps(model.metadata(), indent=2))
-    save(model, "reward_function.py", model.reward_function)
-    save(model, "hyperparameters.json", json.dumps(model.hyperparameters, indent=2))
-    save(model, "training_params.yaml", yaml.safe_dump(training_params(model), sort_keys=True))
+    for relative, text in model_files(model).items():
+        save(model, relative, text)
 
 
 def training_params(model: RLModel) -> dict:

@@ -12,7 +12,7 @@ import re
 
 from simulator import config as sim
 from training import hyperparameters as hp
-from training.models import Algorithm, Network, RLModel, Track
+from training.models import Algorithm, Network, RLModel, ShellColour, Track, Vehicle
 from training.rewards import reward_validate
 
 NAME = re.compile(r"^[A-Za-z0-9-]{1,64}$")
@@ -49,7 +49,7 @@ def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
     track = _check_track(settings, clean, errors)
     direction = clean["direction"]
     _check_race(settings, clean, errors)
-    _check_car(settings, clean, errors)
+    _check_car(settings, clean, errors, owner)
 
     algorithm = settings.get("algorithm") or Algorithm.PPO
     if algorithm not in Algorithm.values:
@@ -94,18 +94,42 @@ def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
 
     source_model = settings.get("cloned_from")
     if isinstance(source_model, RLModel):
-        if source_model.status != RLModel.Status.READY:
-            errors["cloned_from"] = "Only a ready model can be cloned."
-        elif sorted(source_model.sensors) != sorted(clean.get("sensors") or []):
-            errors["sensors"] = (
-                "A clone keeps its source's sensors ("
-                + ", ".join(source_model.sensors) + "); it learns from the same inputs."
-            )  # fmt: skip
+        errors.update(_clone_errors(source_model, clean))
         clean["cloned_from"] = source_model
 
     if errors:
         raise Invalid(errors)
     return clean
+
+
+def _clone_errors(source: RLModel, clean: dict) -> dict[str, str]:
+    """What a clone may not change: its weights must fit the network it starts from."""
+    if source.status != RLModel.Status.READY:
+        return {"cloned_from": "Only a ready model can be cloned."}
+    errors = {}
+    if sorted(source.sensors) != sorted(clean.get("sensors") or []):
+        errors["sensors"] = (
+            f"A clone keeps its source's sensors ({', '.join(source.sensors)}); it learns from "
+            "the same inputs."
+        )
+    if "network" in clean and clean["network"] != source.network:
+        errors["network"] = "A clone keeps its source's network: its weights are for that one."
+    if "algorithm" in clean and clean["algorithm"] != source.algorithm:
+        errors["algorithm"] = (
+            f"A clone keeps its source's training algorithm ({source.get_algorithm_display()})."
+        )
+    space = clean.get("action_space")
+    if "action_space" in clean and clean.get("action_space_type") != source.action_space_type:
+        errors["action_space"] = (
+            f"A clone keeps its source's {source.action_space_type} action space; you may "
+            "change the actions' angles and speeds, not their kind."
+        )
+    elif isinstance(space, list) and len(space) != len(source.action_space):
+        errors["action_space"] = (
+            f"A clone keeps its source's number of actions ({len(source.action_space)}); you "
+            "may change their angles and speeds."
+        )
+    return errors
 
 
 def check_evaluation(settings: dict, *, model: RLModel) -> dict:
@@ -163,7 +187,17 @@ def _check_race(settings: dict, clean: dict, errors: dict) -> None:
     clean["bots"] = vars(bots) if bots else None
 
 
-def _check_car(settings: dict, clean: dict, errors: dict) -> None:
+def _check_car(settings: dict, clean: dict, errors: dict, owner) -> None:
+    vehicle = settings.get("vehicle")
+    if vehicle is not None and (not isinstance(vehicle, Vehicle) or vehicle.owner_id != owner.pk):
+        errors["vehicle"] = "Choose one of the vehicles in your garage."
+        vehicle = None
+    clean["vehicle"] = vehicle
+    clean["shell_colour"] = (
+        vehicle.shell_colour if vehicle else settings.get("shell_colour") or ShellColour.BLACK
+    )
+    if clean["shell_colour"] not in ShellColour.values:
+        errors["shell_colour"] = "Choose one of the garage's colours."
     sensors = settings.get("sensors") or ["FRONT_FACING_CAMERA"]
     try:
         camera, lidar = sim.sensors(sensors)

@@ -2,9 +2,26 @@ import json
 
 from django import forms
 
-from training import hyperparameters
+from training import hyperparameters, imports
 from training.models import Algorithm, EvaluationJob, Network, RaceType, Track, Vehicle
 from training.rewards import MAX_SOURCE_SIZE
+
+
+class ModelImportForm(forms.Form):
+    archive = forms.FileField(
+        label="Archive (.tar.gz)",
+        help_text="A Pitlane virtual model, or a model downloaded from DeepRacer.",
+    )
+    name = forms.CharField(
+        max_length=64, required=False,
+        help_text="Leave empty to keep the archive's name. Letters, digits and hyphens.",
+    )  # fmt: skip
+
+    def clean_archive(self):
+        archive = self.cleaned_data["archive"]
+        if archive.size > imports.MAX_ARCHIVE:
+            raise forms.ValidationError(f"The archive is over {imports.size(imports.MAX_ARCHIVE)}.")
+        return archive
 
 
 class VehicleForm(forms.ModelForm):
@@ -176,6 +193,46 @@ class ModelCreateForm(TrackAndRaceFields):
                 field.required = False
                 self.fields[name] = field
 
+    @staticmethod
+    def initial_from(model) -> dict:
+        """The page filled in with ``model``'s settings: what Clone starts from."""
+        initial = {
+            "name": f"{model.name}-clone"[:64],
+            "description": model.description,
+            "track": model.track.name,
+            "direction": model.direction,
+            "race_type": model.race_type,
+            "camera": next((s for s in model.sensors if s in Vehicle.Camera.values), ""),
+            "lidar": next((s for s in model.sensors if s in ("LIDAR", "SECTOR_LIDAR")), ""),
+            "vehicle": model.vehicle_id,
+            "network": model.network,
+            "action_space_type": model.action_space_type,
+            "algorithm": model.algorithm,
+            "max_minutes": model.max_minutes,
+            "workers": model.workers,
+            "extra_tracks": list(model.extra_tracks),
+            "reward_function": model.reward_function,
+        }
+        if model.boxes:
+            initial.update(box_count=model.boxes.get("count"),
+                           box_randomize=model.boxes.get("randomize"))  # fmt: skip
+        if model.bots:
+            initial.update(bot_count=model.bots.get("count"), bot_speed=model.bots.get("speed"),
+                           bot_lane_changes=model.bots.get("lane_changes"))  # fmt: skip
+        if model.action_space_type == "discrete":
+            initial["actions"] = json.dumps(model.action_space)
+        else:
+            space = model.action_space
+            initial.update(
+                steering_low=space["steering_angle"]["low"],
+                steering_high=space["steering_angle"]["high"],
+                speed_low=space["speed"]["low"],
+                speed_high=space["speed"]["high"],
+            )
+        for name, value in model.hyperparameters.items():
+            initial[f"{model.algorithm}__{name}"] = value
+        return initial
+
     def hyperparameter_fields(self, algorithm: str) -> list:
         return [self[f"{algorithm}__{s.name}"] for s in hyperparameters.SETTINGS[algorithm]]
 
@@ -207,6 +264,7 @@ class ModelCreateForm(TrackAndRaceFields):
             "description": data.get("description", ""),
             **self.race_settings(),
             "sensors": sensors,
+            "vehicle": vehicle,
             "network": data["network"],
             "action_space": action_space,
             "algorithm": algorithm,

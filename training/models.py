@@ -28,6 +28,25 @@ class Algorithm(models.TextChoices):
     SAC = "sac", "SAC"
 
 
+class ShellColour(models.TextChoices):
+    """A car's shell, as the garage offers it and the spectator video paints it."""
+
+    BLACK = "#1f2328", "Black"
+    WHITE = "#f5f5f5", "White"
+    RED = "#d1242f", "Red"
+    ORANGE = "#f28c28", "Orange"
+    YELLOW = "#f2c94c", "Yellow"
+    GREEN = "#2da44e", "Green"
+    BLUE = "#0969da", "Blue"
+    PURPLE = "#8250df", "Purple"
+
+    @staticmethod
+    def bgr(colour: str) -> tuple[int, int, int]:
+        """``#rrggbb`` in OpenCV's channel order."""
+        red, green, blue = (int(colour[i : i + 2], 16) for i in (1, 3, 5))
+        return blue, green, red
+
+
 class Track(models.Model):
     """A built-in track from ``simulator.tracks``, mirrored here so pages and forms can list it.
 
@@ -122,6 +141,13 @@ class RLModel(models.Model):
     cloned_from = models.ForeignKey(
         "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="clones"
     )
+    vehicle = models.ForeignKey(
+        "Vehicle", null=True, blank=True, on_delete=models.SET_NULL, related_name="rl_models"
+    )
+    shell_colour = models.CharField(
+        max_length=7, choices=ShellColour.choices, default=ShellColour.BLACK,
+        help_text="The car's colour in the video: its vehicle's when it was created.",
+    )  # fmt: skip
 
     class Meta:
         verbose_name = "model"
@@ -143,6 +169,7 @@ class RLModel(models.Model):
             "race_type": self.race_type,
             "objects": self.boxes,
             "bots": self.bots,
+            "car_colour": ShellColour.bgr(self.shell_colour),
         }
 
     def metadata(self) -> dict:
@@ -164,15 +191,7 @@ class RLModel(models.Model):
 class Vehicle(models.Model):
     """A car in the racer's garage: its look and its sensors. Models are trained for a vehicle."""
 
-    class ShellColour(models.TextChoices):
-        BLACK = "#1f2328", "Black"
-        WHITE = "#f5f5f5", "White"
-        RED = "#d1242f", "Red"
-        ORANGE = "#f28c28", "Orange"
-        YELLOW = "#f2c94c", "Yellow"
-        GREEN = "#2da44e", "Green"
-        BLUE = "#0969da", "Blue"
-        PURPLE = "#8250df", "Purple"
+    ShellColour = ShellColour
 
     class Camera(models.TextChoices):
         FRONT_FACING_CAMERA = "FRONT_FACING_CAMERA", "Single camera"
@@ -406,3 +425,43 @@ class EvaluationTrial(models.Model):
     @property
     def completed(self) -> bool:
         return self.status == "lap_complete"
+
+
+class QuotaDefaults(models.Model):
+    """What new racers get (one row, edited by staff in the admin): DeepRacer on AWS limited
+    models per account and training hours per month."""
+
+    max_models = models.PositiveIntegerField("models", default=20)
+    max_minutes_per_month = models.PositiveIntegerField("training minutes per month", default=600)
+
+    class Meta:
+        verbose_name = verbose_name_plural = "quota for new racers"
+
+    def __str__(self) -> str:
+        return f"{self.max_models} models, {self.max_minutes_per_month} min/month"
+
+    @classmethod
+    def current(cls) -> QuotaDefaults:
+        return cls.objects.get_or_create(pk=1)[0]
+
+
+class Quota(models.Model):
+    """A racer's limits, set from the defaults when they sign up; staff may change them."""
+
+    racer = models.OneToOneField(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="quota"
+    )
+    max_models = models.PositiveIntegerField("models")
+    max_minutes_per_month = models.PositiveIntegerField("training minutes per month")
+
+    def __str__(self) -> str:
+        return f"{self.racer}: {self.max_models} models, {self.max_minutes_per_month} min/month"
+
+    @classmethod
+    def of(cls, racer) -> Quota:
+        defaults = QuotaDefaults.current()
+        return cls.objects.get_or_create(
+            racer=racer,
+            defaults={"max_models": defaults.max_models,
+                      "max_minutes_per_month": defaults.max_minutes_per_month},
+        )[0]  # fmt: skip

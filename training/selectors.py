@@ -6,13 +6,15 @@ from dataclasses import dataclass
 
 from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
-from django.db.models import QuerySet
+from django.db.models import QuerySet, Sum
+from django.utils import timezone
 
 from training import artifacts, jobs
 from training.models import (
     EvaluationJob,
     EvaluationTrial,
     Iteration,
+    Quota,
     RLModel,
     Track,
     TrainingJob,
@@ -42,8 +44,8 @@ def model_files(*, model: RLModel) -> list[ModelFile]:
     """The model's downloadable logs: the metrics JSON and each iteration's simulation trace."""
     files = []
     prefix = artifacts.path(model, "")
-    if default_storage.exists(prefix + "metrics/training_metrics.json"):
-        files.append(ModelFile("metrics/training_metrics.json", "Training metrics (JSON)"))
+    if default_storage.exists(prefix + artifacts.TRAINING_METRICS):
+        files.append(ModelFile(artifacts.TRAINING_METRICS, "Training metrics (JSON)"))
     try:
         _, names = default_storage.listdir(prefix + "training-simtrace")
     except FileNotFoundError:
@@ -155,3 +157,37 @@ def evaluation_snapshot(*, evaluation: EvaluationJob) -> dict:
 
 def evaluations_for_model(*, model: RLModel) -> QuerySet[EvaluationJob]:
     return model.evaluations.select_related("track").prefetch_related("trial_rows")
+
+
+@dataclass(frozen=True)
+class Allowance:
+    """What a racer's quota leaves them: models, and training minutes this calendar month (a
+    running or queued job counts with its whole time budget)."""
+
+    max_models: int
+    models: int
+    max_minutes: int
+    minutes: float
+
+    @property
+    def models_left(self) -> int:
+        return max(self.max_models - self.models, 0)
+
+    @property
+    def minutes_left(self) -> int:
+        return max(int(self.max_minutes - self.minutes), 0)
+
+
+def allowance_for(*, racer: AbstractBaseUser) -> Allowance:
+    quota = Quota.of(racer)
+    month = timezone.localtime().replace(day=1, hour=0, minute=0, second=0, microsecond=0)
+    jobs = TrainingJob.objects.filter(model__owner=racer, created_at__gte=month)
+    active = TrainingJob.ACTIVE
+    used = jobs.exclude(status__in=active).aggregate(seconds=Sum("training_seconds"))["seconds"]
+    reserved = jobs.filter(status__in=active).aggregate(minutes=Sum("model__max_minutes"))
+    return Allowance(
+        max_models=quota.max_models,
+        models=RLModel.objects.filter(owner=racer).exclude(status=RLModel.Status.DELETING).count(),
+        max_minutes=quota.max_minutes_per_month,
+        minutes=(used or 0.0) / 60 + (reserved["minutes"] or 0),
+    )

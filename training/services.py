@@ -7,8 +7,16 @@ from django.db import transaction
 from django.utils import timezone
 
 from simulator import tracks as simulator_tracks
-from training import configuration, live, selectors, tasks
-from training.models import Direction, EvaluationJob, RLModel, Track, TrainingJob, Vehicle
+from training import artifacts, configuration, live, selectors, tasks
+from training.models import (
+    Direction,
+    EvaluationJob,
+    Quota,
+    RLModel,
+    Track,
+    TrainingJob,
+    Vehicle,
+)
 
 
 @transaction.atomic
@@ -46,14 +54,42 @@ def vehicle_create(
     return vehicle
 
 
+def check_quota(*, owner: AbstractBaseUser, minutes: int) -> None:
+    """Within a transaction: ``configuration.Invalid`` unless the racer may have one more model
+    that trains for up to ``minutes``. Their quota row is locked until the transaction ends, so
+    two models created at once cannot both take the last of it."""
+    Quota.objects.select_for_update().filter(pk=Quota.of(owner).pk).first()
+    allowance = selectors.allowance_for(racer=owner)
+    if allowance.models_left < 1:
+        raise configuration.Invalid({"quota": (
+            f"You have {allowance.models} models, your limit; delete one to make room."
+        )})  # fmt: skip
+    if minutes > allowance.minutes_left:
+        raise configuration.Invalid({"max_minutes": (
+            f"You have {allowance.minutes_left} training minutes left this month (of "
+            f"{allowance.max_minutes}); choose at most that, or wait for the 1st."
+        )})  # fmt: skip
+
+
 @transaction.atomic
 def model_create(
     *, owner: AbstractBaseUser, settings: dict, validate_reward: bool = True
 ) -> RLModel:
     """Check every setting (``configuration.Invalid`` lists the problems), then save the model and
-    its training job, QUEUED; the trainer task is enqueued once both are committed."""
+    its training job, QUEUED; the trainer task is enqueued once both are committed. A clone
+    (``cloned_from``: the racer's own READY model) gets a copy of its source's best weights, which
+    its training starts from."""
     clean = configuration.check(settings, owner=owner, validate_reward=validate_reward)
+    check_quota(owner=owner, minutes=clean["max_minutes"])
+    source = clean.get("cloned_from")
+    if source is not None and source.owner_id != owner.pk:
+        raise configuration.Invalid({"cloned_from": "You can clone only your own models."})
+    weights = selectors.model_checkpoint(model=source) if source is not None else None
+    if source is not None and weights is None:
+        raise configuration.Invalid({"cloned_from": "This model has no trained weights to clone."})
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.QUEUED, **clean)
+    if weights is not None:
+        artifacts.save(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))
     job = TrainingJob.objects.create(model=model)
     transaction.on_commit(lambda: tasks.train.delay(job.pk))
     return model
@@ -79,6 +115,33 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
     if job.status == TrainingJob.Status.CANCELED:
         live.announce_queue()
     return job
+
+
+class ModelBusy(Exception):
+    """The model is training, evaluating or racing; the message says what to wait for."""
+
+
+def model_delete(*, model: RLModel) -> int:
+    """Delete a READY or ERROR model: its rows, and every object stored under its prefix (how
+    many is returned). The model is DELETING meanwhile, so nothing starts on it."""
+    deletable = (RLModel.Status.READY, RLModel.Status.ERROR)
+    with transaction.atomic():
+        locked = RLModel.objects.select_for_update().get(pk=model.pk)
+        if locked.status not in deletable:
+            raise ModelBusy(
+                f"The model is {locked.get_status_display().lower()}; it can be deleted once it "
+                "is ready (stop its training first) or has failed."
+            )
+        was, locked.status = locked.status, RLModel.Status.DELETING
+        locked.save(update_fields=["status", "updated_at"])
+    try:
+        removed = artifacts.delete_all(model)
+    except Exception:
+        # Storage failed part-way: the model stays, as it was, for the racer to delete again.
+        RLModel.objects.filter(pk=model.pk).update(status=was)
+        raise
+    model.delete()
+    return removed
 
 
 class EvaluationRefused(Exception):

@@ -37,7 +37,7 @@ EVALUATION_EPISODES = 5
 CHECK_EVERY = 3.0  # [s] between lease renewals, stop checks and worker checks
 REPLACEMENTS = 2  # per worker slot, before the job carries on without it
 REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
-METRICS = "metrics/training_metrics.json"
+METRICS = artifacts.TRAINING_METRICS
 
 
 class JobFailed(Exception):
@@ -139,6 +139,10 @@ class Trainer:
             )
         else:
             artifacts.write_model_files(model)
+            cloned = artifacts.path(model, artifacts.CLONED_WEIGHTS)
+            if model.cloned_from_id is not None and default_storage.exists(cloned):
+                self.learner.restore(artifacts.read(cloned))
+                jobs.log(job, "Starting from the weights of the model this one was cloned from.")
             self._checkpoint(0)
         self.version = job.weights_version
         self.channel.start(job.attempt)

@@ -6,9 +6,20 @@ app_name = "training"
 urlpatterns = [
     path("models/", views.model_list, name="model-list"),
     path("models/create/", views.model_create, name="model-create"),
+    path("models/import/", views.model_import, name="model-import"),
     path("models/<int:pk>/", views.model_detail, name="model-detail"),
     path("models/<int:pk>/stop/", views.model_stop, name="model-stop"),
     path("models/<int:pk>/files/<path:relative>", views.model_file, name="model-file"),
+    *(
+        path(
+            f"models/<int:pk>/download/{kind}/",
+            views.model_export,
+            {"kind": kind},
+            name=f"model-export-{kind}",
+        )
+        for kind in ("physical", "virtual")
+    ),
+    path("models/<int:pk>/delete/", views.model_delete, name="model-delete"),
     path("models/<int:pk>/evaluate/", views.evaluation_create, name="evaluation-create"),
     path(
         "models/<int:pk>/evaluations/<int:evaluation>/",

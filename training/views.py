@@ -10,12 +10,27 @@ from django.views.decorators.http import require_POST, require_safe
 
 from simulator import config as sim_config
 from simulator import tracks as simulator_tracks
-from training import artifacts, configuration, jobs, rewards, selectors, services
+from training import (
+    artifacts,
+    configuration,
+    exports,
+    imports,
+    jobs,
+    rewards,
+    selectors,
+    services,
+)
 from training.evaluation import METRICS as EVALUATION_METRICS
 from training.evaluation import TRACE as EVALUATION_TRACE
 from training.evaluation import VIDEO as EVALUATION_VIDEO
 from training.evaluation import files_prefix
-from training.forms import EvaluationForm, ModelCreateForm, RewardValidationForm, VehicleForm
+from training.forms import (
+    EvaluationForm,
+    ModelCreateForm,
+    ModelImportForm,
+    RewardValidationForm,
+    VehicleForm,
+)
 from training.models import EvaluationJob, RLModel
 from training.sandbox import SandboxFailure, SandboxUnavailable
 
@@ -92,6 +107,12 @@ def reward_validation(request: HttpRequest) -> JsonResponse:
     return JsonResponse(result.as_dict())
 
 
+def _number(text: str) -> int:
+    if not text.isdigit():
+        raise Http404("No such model")
+    return int(text)
+
+
 def _get_model_for_user(request: HttpRequest, pk: int) -> RLModel:
     """The racer's own model, or 404: no view can forget whose model it is."""
     return get_object_or_404(RLModel.objects.select_related("track"), pk=pk, owner=request.user)
@@ -99,29 +120,44 @@ def _get_model_for_user(request: HttpRequest, pk: int) -> RLModel:
 
 @login_required
 def model_create(request: HttpRequest) -> HttpResponse:
-    initial = {
-        "reward_function": rewards.EXAMPLES[0].source,
-        "actions": json.dumps(sim_config.DiscreteActions(
-            tuple((a["steering_angle"], a["speed"]) for a in sim_config.DEFAULT_ACTION_SPACE)
-        ).metadata()),
-        "track": "rookie-loop",
-    }  # fmt: skip
+    """The create-model wizard; with ``?clone=<id>``, filled in from that model of the racer's,
+    whose best weights the new model starts from."""
+    source = None
+    if "clone" in request.GET:
+        source = _get_model_for_user(request, _number(request.GET["clone"]))
+        initial = ModelCreateForm.initial_from(source)
+    else:
+        initial = {
+            "reward_function": rewards.EXAMPLES[0].source,
+            "actions": json.dumps(sim_config.DiscreteActions(
+                tuple((a["steering_angle"], a["speed"]) for a in sim_config.DEFAULT_ACTION_SPACE)
+            ).metadata()),
+            "track": "rookie-loop",
+        }  # fmt: skip
     form = ModelCreateForm(request.POST or None, owner=request.user, initial=initial)
     if request.method == "POST" and form.is_valid():
         try:
-            model = services.model_create(owner=request.user, settings=form.settings())
+            inherited = (
+                {"cloned_from": source, "shell_colour": source.shell_colour} if source else {}
+            )
+            model = services.model_create(
+                owner=request.user, settings={**inherited, **form.settings()}
+            )
         except configuration.Invalid as invalid:
             form.add_setting_errors(invalid.errors)
         except (SandboxUnavailable, SandboxFailure) as error:
             form.add_error("reward_function", f"The reward function could not be checked: {error}")
         else:
-            messages.success(request, f"{model.name} is created; its training is queued.")
+            created = "cloned from " + source.name if source else "created"
+            messages.success(request, f"{model.name} is {created}; its training is queued.")
             return redirect("training:model-detail", pk=model.pk)
     return render(
         request,
         "training/model_create.html",
         {
             "form": form,
+            "source": source,
+            "allowance": selectors.allowance_for(racer=request.user),
             "ppo_fields": form.hyperparameter_fields("clipped_ppo"),
             "sac_fields": form.hyperparameter_fields("sac"),
             "tracks": selectors.tracks_available(),
@@ -148,6 +184,8 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "iterations": iterations,
             "evaluations": selectors.evaluations_for_model(model=model)[:20],
             "can_evaluate": model.status == RLModel.Status.READY,
+            "can_delete": model.status in (RLModel.Status.READY, RLModel.Status.ERROR),
+            "has_weights": selectors.model_checkpoint(model=model) is not None,
             "workers_range": range(model.workers),
             "log_lines": list(job.log_lines.all().order_by("-at", "-pk")[:200]) if job else [],
             "files": selectors.model_files(model=model),
@@ -170,14 +208,80 @@ def model_stop(request: HttpRequest, pk: int) -> HttpResponse:
 
 @login_required
 @require_safe
-def model_file(request: HttpRequest, pk: int, relative: str) -> FileResponse:
+def model_file(request: HttpRequest, pk: int, relative: str) -> HttpResponse:
     """One of the model's files (metrics, simulation traces), after the ownership check."""
     model = _get_model_for_user(request, pk)
     if relative not in {f.relative for f in selectors.model_files(model=model)}:
         raise Http404("No such file")
-    name = artifacts.path(model, relative)
-    return FileResponse(default_storage.open(name, "rb"), as_attachment=True,
-                        filename=relative.replace("/", "-"))  # fmt: skip
+    return artifacts.download(artifacts.path(model, relative), relative.replace("/", "-"))
+
+
+@login_required
+@require_safe
+def model_export(request: HttpRequest, pk: int, kind: str) -> HttpResponse:
+    """The physical-car archive (of the ``checkpoint`` asked for, best by default) or the
+    virtual-model archive, built on first request and kept in the model's storage."""
+    model = _get_model_for_user(request, pk)
+    which = request.GET.get("checkpoint", "best")
+    if which not in ("best", "last"):
+        messages.error(request, "Choose the best or the last checkpoint.")
+        return redirect("training:model-detail", pk=model.pk)
+    try:
+        export = exports.physical(model, which) if kind == "physical" else exports.virtual(model)
+    except exports.ExportRefused as refused:
+        messages.error(request, str(refused))
+        return redirect("training:model-detail", pk=model.pk)
+    return artifacts.download(export.name, export.filename, content_type="application/gzip")
+
+
+@login_required
+def model_import(request: HttpRequest) -> HttpResponse:
+    form = ModelImportForm(request.POST or None, request.FILES or None)
+    if request.method == "POST" and form.is_valid():
+        try:
+            imported = imports.import_model(
+                owner=request.user, archive=form.cleaned_data["archive"],
+                name=form.cleaned_data["name"].strip(),
+            )  # fmt: skip
+        except imports.ImportRefused as refused:
+            form.add_error("archive", str(refused))
+        except configuration.Invalid as invalid:
+            for setting, message in invalid.errors.items():
+                if setting == "name":
+                    form.add_error("name", message)
+                else:  # a setting the archive brought: say which
+                    label = setting.split(".")[-1].replace("_", " ").capitalize()
+                    form.add_error(None, f"{label}: {message}")
+        except (SandboxUnavailable, SandboxFailure) as error:
+            form.add_error(None, f"The reward function could not be checked: {error}")
+        else:
+            model = imported.model
+            ready = model.status == RLModel.Status.READY
+            messages.success(request, f"Imported {model.name}" + (
+                ": it is ready to evaluate, clone or download." if ready
+                else "; its training is queued."))  # fmt: skip
+            for note in imported.notes:
+                messages.warning(request, note)
+            return redirect("training:model-detail", pk=model.pk)
+    return render(
+        request, "training/model_import.html", {"form": form},
+        status=400 if form.errors else 200,
+    )  # fmt: skip
+
+
+@login_required
+def model_delete(request: HttpRequest, pk: int) -> HttpResponse:
+    """Asks first (GET); deletes the model and all its files (POST)."""
+    model = _get_model_for_user(request, pk)
+    if request.method == "POST":
+        try:
+            services.model_delete(model=model)
+        except services.ModelBusy as busy:
+            messages.error(request, str(busy))
+            return redirect("training:model-detail", pk=model.pk)
+        messages.success(request, f"Deleted {model.name} and all its files.")
+        return redirect("training:model-list")
+    return render(request, "training/model_delete.html", {"model": model})
 
 
 @login_required
@@ -243,7 +347,7 @@ def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpRes
 
 @login_required
 @require_safe
-def evaluation_file(request: HttpRequest, pk: int, evaluation: int, name: str) -> FileResponse:
+def evaluation_file(request: HttpRequest, pk: int, evaluation: int, name: str) -> HttpResponse:
     """The evaluation's video (played in the page), trace or metrics, after the ownership
     check."""
     job = _get_evaluation_for_user(request, pk, evaluation)
@@ -254,8 +358,6 @@ def evaluation_file(request: HttpRequest, pk: int, evaluation: int, name: str) -
         raise Http404("No such file")
     video = name == EVALUATION_VIDEO
     filename = f"{job.model.name}-evaluation-{job.pk}-{name.replace('/', '-')}"
-    response = FileResponse(default_storage.open(stored, "rb"), as_attachment=not video,
-                            filename=filename)  # fmt: skip
-    if video:
-        response["Content-Type"] = "video/webm"
-    return response
+    return artifacts.download(
+        stored, filename, attachment=not video, content_type="video/webm" if video else None
+    )

@@ -6,11 +6,17 @@ machine (SQLite, a local Redis started by ``make run``, files under ``var/``). S
 """
 
 import os
+import sys
 from pathlib import Path
 
 import dj_database_url
 
 from console.env import env
+
+# OpenVINO (the physical car's download) reports usage to Intel over the network, and writes under
+# ~/intel, as soon as it is imported, unless its telemetry package is missing; then it uses its own
+# no-op stub. A server does neither: the package is made unimportable in every Django process.
+sys.modules.setdefault("openvino_telemetry", None)
 
 BASE_DIR = Path(__file__).resolve().parent.parent.parent
 VAR_DIR = env.path("PITLANE_VAR_DIR", BASE_DIR / "var")
@@ -181,7 +187,8 @@ if S3_BUCKET:
             # a profile, or an instance role.
             "default_acl": None,
             "querystring_auth": True,
-            "querystring_expire": 300,
+            "querystring_expire": 300,  # [s] a download link's life
+            "signature_version": "s3v4",
             "file_overwrite": True,
         },
     }

@@ -22,28 +22,37 @@ def ready_model(owner, name: str = "straight-ahead", track: str = "pitlane-oval"
     """A READY model with one checkpoint whose policy always chooses to drive straight at 1 m/s:
     on a loop it leaves the track at each bend and is put back, so it finishes its laps, with
     penalties, in a predictable number of steps."""
-    clean = configuration.check(
-        {
-            "name": name,
-            "track": track,
-            "action_space": STRAIGHT_AHEAD,
-            "hyperparameters": hyperparameters.defaults("clipped_ppo"),
-            "reward_function": EXAMPLES[0].source,
-        },
-        owner=owner,
-        validate_reward=False,
-    )
+
+    def straight_ahead(learner: Learner) -> None:
+        head = learner.model.policy.action_net
+        with torch.no_grad():
+            head.weight.zero_()
+            head.bias.copy_(torch.tensor([0.0, 10.0, 0.0]))
+
+    return trained_model(owner, name, weights=straight_ahead, track=track,
+                         action_space=STRAIGHT_AHEAD)  # fmt: skip
+
+
+def trained_model(owner, name: str, *, weights=None, **settings) -> RLModel:
+    """A READY model with one checkpoint: the learner's first weights (seeded), changed by
+    ``weights(learner)`` when given. ``settings``: the model's, over the defaults."""
+    settings = {
+        "name": name,
+        "track": "pitlane-oval",
+        "hyperparameters": hyperparameters.defaults(settings.get("algorithm", "clipped_ppo")),
+        "reward_function": EXAMPLES[0].source,
+        **settings,
+    }
+    clean = configuration.check(settings, owner=owner, validate_reward=False)
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean)
     env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
     learner = Learner(
         algorithm=model.algorithm, hyperparameters=model.hyperparameters, network=model.network,
-        observation_space=env.observation_space, action_space=env.action_space,
+        observation_space=env.observation_space, action_space=env.action_space, seed=model.seed,
     )  # fmt: skip
     env.close()
-    head = learner.model.policy.action_net
-    with torch.no_grad():
-        head.weight.zero_()
-        head.bias.copy_(torch.tensor([0.0, 10.0, 0.0]))
+    if weights is not None:
+        weights(learner)
     name = artifacts.save(model, "checkpoints/iteration-1.safetensors", learner.checkpoint())
     TrainingJob.objects.create(
         model=model, status=TrainingJob.Status.COMPLETED, iterations=1, weights_version=1,

@@ -1,9 +1,12 @@
+import gymnasium
 import pytest
 from django.core.management import call_command
 from django.urls import reverse
 
+import simulator
 from simulator import tracks as simulator_tracks
-from training.models import Track, Vehicle
+from simulator.spectator import view_image
+from training.models import RLModel, Track, Vehicle
 
 pytestmark = pytest.mark.django_db
 
@@ -73,3 +76,29 @@ def test_a_track_preview_is_a_cacheable_png(client):
 
 def test_an_unknown_track_preview_is_a_404(client):
     assert client.get(reverse("training:track-preview", args=["monza"])).status_code == 404
+
+
+def test_a_models_car_has_its_vehicles_colour_in_the_video(client, alice, bob, tracks):
+    from tests.training.test_model_pages import form_data
+
+    red = Vehicle.objects.create(owner=alice, name="red-one", shell_colour="#d1242f")
+    theirs = Vehicle.objects.create(owner=bob, name="not-yours")
+    client.force_login(alice)
+    refused = client.post(reverse("training:model-create"), form_data(vehicle=theirs.pk))
+    assert refused.status_code == 400  # another racer's vehicle is not a choice
+    response = client.post(reverse("training:model-create"), form_data(vehicle=red.pk))
+    assert response.status_code == 302
+    model = RLModel.objects.get(name="first-model")
+    assert model.vehicle == red and model.shell_colour == "#d1242f"
+
+    def reddish_pixels(settings: dict) -> int:
+        env = gymnasium.make(simulator.ENV_ID, **settings)
+        env.reset(seed=1)
+        frame = view_image(env.unwrapped, "spectator").astype(int)
+        env.close()
+        blue, green, red = frame[..., 0], frame[..., 1], frame[..., 2]
+        return int(((red > 150) & (green < 90) & (blue < 90)).sum())
+
+    painted = reddish_pixels(model.environment_settings())
+    black = reddish_pixels({**model.environment_settings(), "car_colour": (40, 35, 31)})
+    assert painted > 300 and black < painted / 10  # the car, seen from behind, and its map dot

@@ -1,9 +1,9 @@
-from django.contrib.auth import get_user_model
 from django.core.management.base import BaseCommand, CommandError
 
 from console.templatetags.pitlane import laptime
 from training import configuration, evaluation, services
-from training.models import EvaluationJob, RLModel
+from training.management.lookup import find_model
+from training.models import EvaluationJob
 
 
 class Command(BaseCommand):
@@ -31,7 +31,7 @@ class Command(BaseCommand):
         parser.add_argument("--checkpoint", choices=["best", "last"], default="best")
 
     def handle(self, *args, **options) -> None:
-        model = self._model(options["model"], options["owner"])
+        model = find_model(options["model"], options["owner"])
         settings = {
             "race_type": options["race_type"],
             "trials": options["trials"],
@@ -63,20 +63,6 @@ class Command(BaseCommand):
         if job.status != EvaluationJob.Status.COMPLETED:
             raise CommandError(f"The evaluation failed: {job.failure_reason}")
         self.stdout.write(self._table(job))
-
-    def _model(self, name: str, owner: str | None) -> RLModel:
-        models = RLModel.objects.all()
-        if owner:
-            racer = get_user_model().objects.filter(username=owner).first()
-            if racer is None:
-                raise CommandError(f"No racer named {owner!r}.")
-            models = models.filter(owner=racer)
-        found = list(models.filter(pk=int(name)) if name.isdigit() else models.filter(name=name))
-        if not found:
-            raise CommandError(f"No model named {name!r}" + (f" of {owner}." if owner else "."))
-        if len(found) > 1:
-            raise CommandError(f"Several racers have a model named {name!r}; add --owner.")
-        return found[0]
 
     def _table(self, job: EvaluationJob) -> str:
         header = ("Trial", "Time", "Completed", "Status", "Off-tracks", "Crashes", "Penalty",

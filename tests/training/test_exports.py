@@ -1,0 +1,184 @@
+"""Downloads: the physical-car archive runs on ONNX Runtime and OpenVINO as the PyTorch policy
+does; the virtual model holds everything needed to go on training."""
+
+import io
+import json
+import tarfile
+
+import gymnasium
+import numpy as np
+import onnxruntime
+import openvino
+import pytest
+import torch
+from django.core.management import CommandError, call_command
+from django.urls import reverse
+
+import simulator
+from tests.training.factories import trained_model
+from training import artifacts, hyperparameters
+from training.models import RLModel
+from training.policies import Policy
+
+pytestmark = pytest.mark.django_db
+
+CONTINUOUS = {"steering_angle": {"low": -30.0, "high": 30.0}, "speed": {"low": 0.5, "high": 2.0}}
+
+
+def decisive(learner) -> None:
+    """Policy heads that tell frames apart: the first weights' heads are near zero (SB3 starts
+    them so), which would give every frame almost the same action."""
+    policy = learner.model.policy
+    head = policy.action_net if hasattr(policy, "action_net") else policy.actor.mu
+    with torch.no_grad():
+        head.weight.mul_(200.0)
+
+
+def observations(model: RLModel, count: int = 12) -> list[dict]:
+    """What the car's sensors see along the track: ``count`` observations a few steps apart."""
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+    observation, _ = env.reset(seed=3)
+    seen = []
+    rng = np.random.default_rng(7)
+    while len(seen) < count:
+        for _ in range(4):
+            observation, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            if terminated or truncated:
+                observation, _ = env.reset(seed=int(rng.integers(1000)))
+        seen.append(observation)
+    env.close()
+    return seen
+
+
+def torch_policy(model: RLModel) -> Policy:
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+    policy = Policy.build(model.algorithm, model.network, env.observation_space, env.action_space)
+    env.close()
+    policy.load_checkpoint(
+        artifacts.read(artifacts.path(model, "checkpoints/iteration-1.safetensors"))
+    )
+    return policy
+
+
+def archive_members(data: bytes) -> dict[str, bytes]:
+    with tarfile.open(fileobj=io.BytesIO(data), mode="r:gz") as archive:
+        return {m.name: archive.extractfile(m).read() for m in archive.getmembers() if m.isfile()}
+
+
+def export(tmp_path, model: RLModel, *flags: str) -> dict[str, bytes]:
+    output = tmp_path / "archive.tar.gz"
+    call_command("exportmodel", model.name, *flags, "-o", str(output), stdout=io.StringIO())
+    return archive_members(output.read_bytes())
+
+
+def car_inputs(model: RLModel, observation: dict) -> dict[str, np.ndarray]:
+    """The car's inputs: camera bytes as float32, and the lidar, each with a batch axis."""
+    return {sensor: observation[sensor][None].astype(np.float32) for sensor in model.sensors}
+
+
+def runtimes(members: dict[str, bytes], tmp_path):
+    onnx = onnxruntime.InferenceSession(members["agent/model.onnx"])
+    (tmp_path / "model.xml").write_bytes(members["agent/model.xml"])
+    (tmp_path / "model.bin").write_bytes(members["agent/model.bin"])
+    core = openvino.Core()
+    # fp32 throughout: the CPU plugin may otherwise compute in bf16 where the CPU has it.
+    ir = core.compile_model(core.read_model(str(tmp_path / "model.xml")), "CPU",
+                            {"INFERENCE_PRECISION_HINT": "f32"})  # fmt: skip
+    return (lambda inputs: onnx.run(None, inputs)[0]), (lambda inputs: ir(inputs)[0])
+
+
+def test_the_car_archive_chooses_the_pytorch_policys_action_on_camera_frames(
+    alice, tracks, tmp_path
+):
+    model = trained_model(alice, "discrete-camera", weights=decisive)
+    members = export(tmp_path, model, "--physical")
+    assert sorted(members) == [
+        "agent/model.bin", "agent/model.onnx", "agent/model.xml", "model_metadata.json",
+    ]  # fmt: skip
+    metadata = json.loads(members["model_metadata.json"])
+    assert metadata == model.metadata()
+    assert metadata["sensor"] == ["FRONT_FACING_CAMERA"] and metadata["version"] == "5"
+
+    policy, (onnx, ir) = torch_policy(model), runtimes(members, tmp_path)
+    chosen = []
+    for observation in observations(model):
+        action, _, _ = policy.act(observation, deterministic=True)
+        tensor, _ = policy.network.obs_to_tensor(observation)
+        with torch.no_grad():
+            expected = policy.network.get_distribution(tensor).distribution.probs.numpy()
+        inputs = car_inputs(model, observation)
+        assert inputs["FRONT_FACING_CAMERA"].shape == (1, 1, 120, 160)
+        for runtime in (onnx, ir):
+            probabilities = runtime(inputs)
+            assert probabilities.shape == (1, len(model.action_space))
+            np.testing.assert_allclose(probabilities, expected, atol=1e-4)
+            assert int(probabilities.argmax()) == int(action)
+        chosen.append(int(action))
+    assert len(set(chosen)) > 1  # the frames are told apart: the comparison means something
+
+
+def test_a_continuous_stereo_lidar_car_gets_the_same_action_from_each_runtime(
+    alice, tracks, tmp_path
+):
+    model = trained_model(
+        alice, "sac-stereo-lidar", weights=decisive, algorithm="sac", action_space=CONTINUOUS,
+        sensors=["STEREO_CAMERAS", "LIDAR"],
+    )  # fmt: skip
+    members = export(tmp_path, model, "--physical", "--checkpoint", "last")
+    policy, (onnx, ir) = torch_policy(model), runtimes(members, tmp_path)
+    for observation in observations(model, count=6):
+        expected, _, _ = policy.act(observation, deterministic=True)
+        inputs = car_inputs(model, observation)
+        assert inputs["STEREO_CAMERAS"].shape == (1, 2, 120, 160)
+        assert inputs["LIDAR"].shape == (1, 64)
+        for runtime in (onnx, ir):
+            action = runtime(inputs)
+            assert action.shape == (1, 2)
+            np.testing.assert_allclose(action[0], expected, atol=1e-4)
+
+
+def test_the_virtual_model_holds_what_training_elsewhere_needs(alice, tracks, tmp_path):
+    model = trained_model(alice, "to-move")
+    members = export(tmp_path, model, "--virtual")
+    assert {
+        "model_metadata.json", "reward_function.py", "training_params.yaml",
+        "hyperparameters.json", "pitlane.json", "checkpoints/best.safetensors",
+        "checkpoints/last.safetensors",
+    } <= set(members)  # fmt: skip
+    assert members["reward_function.py"].decode() == model.reward_function
+    assert json.loads(members["hyperparameters.json"]) == hyperparameters.defaults("clipped_ppo")
+    assert b"WORLD_NAME: pitlane-oval" in members["training_params.yaml"]
+    settings = json.loads(members["pitlane.json"])
+    assert settings["track"] == "pitlane-oval" and settings["name"] == "to-move"
+    # The checkpoints load into a fresh policy (strictly: every tensor, every shape).
+    torch_policy(model).load_checkpoint(members["checkpoints/best.safetensors"])
+
+
+def test_a_model_without_weights_has_nothing_to_download(alice, tracks, tmp_path, client):
+    model = trained_model(alice, "untrained")
+    model.jobs.update(last_checkpoint="", best_checkpoint="")
+    with pytest.raises(CommandError, match="no trained weights yet"):
+        call_command("exportmodel", model.name, "--physical", "-o", str(tmp_path / "x.tar.gz"))
+    client.force_login(alice)
+    response = client.get(reverse("training:model-export-virtual", args=[model.pk]), follow=True)
+    assert "no trained weights yet" in response.text
+    assert "Downloads for the car and for another console appear" in response.text
+
+
+def test_the_model_page_offers_both_archives_to_its_owner_only(alice, bob, tracks, client):
+    model = trained_model(alice, "downloadable")
+    client.force_login(alice)
+    page = client.get(reverse("training:model-detail", args=[model.pk])).text
+    assert (
+        "physicalmodel-downloadable.tar.gz" in page and "virtualmodel-downloadable.tar.gz" in page
+    )
+    url = reverse("training:model-export-physical", args=[model.pk])
+    response = client.get(url, {"checkpoint": "last"})
+    assert response.status_code == 200
+    assert 'filename="physicalmodel-downloadable.tar.gz"' in response["Content-Disposition"]
+    assert "agent/model.onnx" in archive_members(b"".join(response.streaming_content))
+    assert client.get(url, {"checkpoint": "worst"}).status_code == 302  # with a message
+
+    client.force_login(bob)
+    assert client.get(url).status_code == 404
+    assert client.get(reverse("training:model-export-virtual", args=[model.pk])).status_code == 404

@@ -1,0 +1,241 @@
+"""Import: a Pitlane virtual model arrives READY and drives like the original; a DeepRacer export
+brings its settings and reward function; a hostile archive is refused and leaves nothing."""
+
+from __future__ import annotations
+
+import io
+import json
+import tarfile
+
+import pytest
+import torch
+import yaml
+from django.conf import settings
+from django.core.files.uploadedfile import SimpleUploadedFile
+from django.core.management import CommandError, call_command
+from django.urls import reverse
+from safetensors.torch import save as save_tensors
+
+from tests.training.factories import ready_model
+from training import artifacts, exports, imports
+from training.learner import load_tensors
+from training.models import RLModel, TrainingJob
+from training.rewards import EXAMPLES
+
+pytestmark = pytest.mark.django_db
+
+DEEPRACER_METADATA = {
+    "action_space": [
+        {"steering_angle": -30.0, "speed": 0.6, "index": 0},
+        {"steering_angle": 0.0, "speed": 1.2, "index": 1},
+        {"steering_angle": 30.0, "speed": 0.6, "index": 2},
+    ],
+    "sensor": ["FRONT_FACING_CAMERA"],
+    "neural_network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+    "version": "4",
+    "training_algorithm": "clipped_ppo",
+    "action_space_type": "discrete",
+}
+DEEPRACER_HYPERPARAMETERS = {
+    "batch_size": 64, "beta_entropy": 0.01, "discount_factor": 0.999, "e_greedy_value": 0.05,
+    "epsilon_steps": 10000, "exploration_type": "categorical", "loss_type": "huber",
+    "lr": 0.0003, "num_episodes_between_training": 20, "num_epochs": 10, "stack_size": 1,
+    "term_cond_avg_score": 350.0, "term_cond_max_episodes": 1000,
+}  # fmt: skip
+DEEPRACER_PARAMS = {
+    "WORLD_NAME": "reInvent2019_track", "REVERSE_DIR": False, "RACE_TYPE": "TIME_TRIAL",
+    "CAR_NAME": "my-deepracer-car",
+}  # fmt: skip
+
+
+def tar_gz(members: dict[str, bytes], tweak=None) -> bytes:
+    """A .tar.gz of ``members``; ``tweak(tar)`` may add hostile entries."""
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode="w:gz") as tar:
+        for name, data in members.items():
+            info = tarfile.TarInfo(name)
+            info.size = len(data)
+            tar.addfile(info, io.BytesIO(data))
+        if tweak:
+            tweak(tar)
+    return buffer.getvalue()
+
+
+def deepracer_export(**changes) -> dict[str, bytes]:
+    members = {
+        "model_metadata.json": json.dumps(DEEPRACER_METADATA).encode(),
+        "reward_function.py": EXAMPLES[0].source.encode(),
+        "hyperparameters.json": json.dumps(DEEPRACER_HYPERPARAMETERS).encode(),
+        "training_params.yaml": yaml.safe_dump(DEEPRACER_PARAMS).encode(),
+        "model/model_8.pb": b"\x08\x01" * 64,
+        "model/8_Step-7040.ckpt.index": b"\x00" * 32,
+        "model/checkpoint": b'model_checkpoint_path: "8_Step-7040.ckpt"\n',
+    }
+    return {**members, **changes}
+
+
+def virtual_archive(model: RLModel) -> bytes:
+    with artifacts.default_storage.open(exports.virtual(model).name, "rb") as file:
+        return file.read()
+
+
+def stored_objects() -> set[str]:
+    root = settings.MEDIA_ROOT / "models"
+    return {str(path.relative_to(root)) for path in root.rglob("*") if path.is_file()}
+
+
+def test_a_virtual_model_imports_ready_with_the_same_weights(alice, bob, tracks, tmp_path):
+    original = ready_model(alice)
+    archive = tmp_path / "virtualmodel-straight-ahead.tar.gz"
+    archive.write_bytes(virtual_archive(original))
+    out = io.StringIO()
+    call_command("importmodel", str(archive), "--owner", "bob", stdout=out)
+    assert "Imported straight-ahead" in out.getvalue() and "ready" in out.getvalue()
+
+    model = RLModel.objects.get(owner=bob)
+    assert model.status == RLModel.Status.READY
+    assert model.metadata() == original.metadata()
+    assert model.track.name == "pitlane-oval" and model.reward_function == original.reward_function
+    assert model.hyperparameters == original.hyperparameters
+    job = model.jobs.get()
+    assert job.status == TrainingJob.Status.COMPLETED
+    imported = load_tensors(artifacts.read(job.best_checkpoint))
+    source = load_tensors(artifacts.read(original.jobs.get().best_checkpoint))
+    assert imported.keys() == source.keys()
+    assert all(torch.equal(imported[key], source[key]) for key in source)
+
+    # It evaluates like the original: straight ahead, laps with penalties.
+    out = io.StringIO()
+    call_command("evaluate", str(model.pk), "--trials", "3", stdout=out)
+    assert out.getvalue().count("lap_complete") == 3
+
+
+def test_the_import_page_takes_an_archive_and_a_new_name(alice, tracks, client):
+    original = ready_model(alice)
+    client.force_login(alice)
+    assert "Import a model" in client.get(reverse("training:model-import")).text
+    upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(original))
+    # The name is taken: the page says so and keeps the form.
+    response = client.post(reverse("training:model-import"), {"archive": upload})
+    assert response.status_code == 400
+    assert "You already have a model named" in response.text
+    upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(original))
+    response = client.post(reverse("training:model-import"), {"archive": upload, "name": "again"})
+    model = RLModel.objects.get(owner=alice, name="again")
+    assert response.status_code == 302 and response["Location"].endswith(f"/models/{model.pk}/")
+    assert model.status == RLModel.Status.READY
+    clone = client.get(reverse("training:model-create") + f"?clone={model.pk}")
+    assert 'value="again-clone"' in clone.text  # it clones like the original
+
+
+def test_a_deepracer_export_brings_its_settings_and_says_the_weights_stay_behind(
+    alice, tracks, tmp_path
+):
+    archive = tmp_path / "deepracer.tar.gz"
+    archive.write_bytes(tar_gz(deepracer_export()))
+    out = io.StringIO()
+    call_command("importmodel", str(archive), "--owner", "alice", stdout=out)
+    said = out.getvalue()
+    assert "queued for training" in said
+    assert "TensorFlow checkpoints were not carried over" in said
+    assert "reInvent2019_track is not one of this console's" in said
+    model = RLModel.objects.get(owner=alice)
+    assert model.name == "my-deepracer-car" and model.status == RLModel.Status.QUEUED
+    assert [a["speed"] for a in model.action_space] == [0.6, 1.2, 0.6]
+    assert model.hyperparameters["discount_factor"] == 0.999
+    assert model.reward_function == EXAMPLES[0].source
+    assert model.jobs.get().status == TrainingJob.Status.QUEUED
+
+
+def symlink(tar):
+    info = tarfile.TarInfo("agent/link")
+    info.type, info.linkname = tarfile.SYMTYPE, "/etc/passwd"
+    tar.addfile(info)
+
+
+def hardlink(tar):
+    info = tarfile.TarInfo("hard")
+    info.type, info.linkname = tarfile.LNKTYPE, "model_metadata.json"
+    tar.addfile(info)
+
+
+def device(tar):
+    info = tarfile.TarInfo("dev/null")
+    info.type, info.devmajor, info.devminor = tarfile.CHRTYPE, 1, 3
+    tar.addfile(info)
+
+
+def fifo(tar):
+    info = tarfile.TarInfo("pipe")
+    info.type = tarfile.FIFOTYPE
+    tar.addfile(info)
+
+
+def wrong_shapes() -> bytes:
+    return save_tensors({"action_net.weight": torch.zeros(7, 64), "action_net.bias": torch.ones(7)})
+
+
+DQN_METADATA = json.dumps({**DEEPRACER_METADATA, "training_algorithm": "dqn"}).encode()
+HOSTILE = {
+    "absolute path": (tar_gz(deepracer_export(**{"/etc/cron.d/x": b"x"})), "not a relative path"),
+    "parent folder": (tar_gz(deepracer_export(**{"../../x.py": b"x"})), "not a relative path"),
+    "symbolic link": (tar_gz(deepracer_export(), symlink), "is a link or a device"),
+    "hard link": (tar_gz(deepracer_export(), hardlink), "is a link or a device"),
+    "device": (tar_gz(deepracer_export(), device), "is a link or a device"),
+    "fifo": (tar_gz(deepracer_export(), fifo), "is a link or a device"),
+    "not an archive": (b"PK\x03\x04 a zip, or anything", "not a readable .tar.gz archive"),
+    "no metadata": (tar_gz({"reward_function.py": b"x"}), "no model_metadata.json"),
+    "bad metadata": (tar_gz(deepracer_export(**{"model_metadata.json": b"{"})), "not valid JSON"),
+    "unknown algorithm": (
+        tar_gz(deepracer_export(**{"model_metadata.json": DQN_METADATA})),
+        "this console trains PPO",
+    ),
+    "reward function that does not compile": (
+        tar_gz(deepracer_export(**{"reward_function.py": b"def reward_function(params:\n"})),
+        "Reward function: syntax (line 1): '(' was never closed",
+    ),
+    "weights for another network": (
+        tar_gz({**deepracer_export(), "checkpoints/best.safetensors": wrong_shapes()}),
+        "does not fit the model's network",
+    ),
+    "weights that are not safetensors": (
+        tar_gz({**deepracer_export(), "checkpoints/last.safetensors": b"\x80\x04pickle"}),
+        "does not fit the model's network",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", HOSTILE)
+def test_a_bad_archive_is_refused_with_its_reason_and_leaves_nothing(case, alice, tracks, client):
+    data, reason = HOSTILE[case]
+    before = stored_objects()
+    client.force_login(alice)
+    response = client.post(reverse("training:model-import"),
+                           {"archive": SimpleUploadedFile("model.tar.gz", data)})  # fmt: skip
+    assert response.status_code == 400
+    assert reason in response.text.replace("&#x27;", "'")
+    assert "Traceback" not in response.text
+    assert not RLModel.objects.exists() and not TrainingJob.objects.exists()
+    assert stored_objects() == before
+
+
+@pytest.mark.parametrize(
+    ("limit", "value", "reason"),
+    [("MAX_MEMBERS", 3, "holds over 3 files"), ("MAX_UNPACKED", 100, "unpacks to over")],
+)
+def test_archive_limits(limit, value, reason, alice, tracks, tmp_path, monkeypatch):
+    monkeypatch.setattr(imports, limit, value)
+    archive = tmp_path / "big.tar.gz"
+    archive.write_bytes(tar_gz(deepracer_export()))
+    with pytest.raises(CommandError, match=reason):
+        call_command("importmodel", str(archive), "--owner", "alice")
+    assert not RLModel.objects.exists()
+
+
+def test_an_archive_over_the_upload_limit_is_refused_before_it_is_read(alice, client, monkeypatch):
+    monkeypatch.setattr(imports, "MAX_ARCHIVE", 1024)
+    client.force_login(alice)
+    upload = SimpleUploadedFile("model.tar.gz", b"\x1f\x8b" + bytes(4096))
+    response = client.post(reverse("training:model-import"), {"archive": upload})
+    assert response.status_code == 400
+    assert "The archive is over" in response.text

@@ -1,0 +1,223 @@
+"""What a racer downloads (REFERENCE section 6): the archive for the physical car and the virtual
+model, both kept in storage under the model's prefix (``exports/``) once built.
+
+The physical car gets ``physicalmodel-<name>.tar.gz``: ``model_metadata.json`` at the root and,
+under ``agent/``, the policy as ONNX (``model.onnx``) and as OpenVINO IR (``model.xml`` +
+``model.bin``, written from the ONNX by OpenVINO's converter). The network takes the camera as
+the car gives it: grayscale bytes (0-255, as float32) of shape (1, 1, 120, 160), or (1, 2, 120,
+160) for stereo, named after the sensor (``FRONT_FACING_CAMERA`` or ``STEREO_CAMERAS``), plus the
+lidar (``LIDAR``: 64 distances in metres; ``SECTOR_LIDAR``: 8 bits) when the car has one. It gives
+``probabilities``, one per action of ``model_metadata.json`` (discrete), or ``action``, steering
+and speed each in [-1, 1] of its range (continuous), as the car's navigation scales it.
+
+The virtual model, ``virtualmodel-<name>.tar.gz``, holds what another Pitlane (or a DeepRacer
+toolchain) needs to go on training: ``model_metadata.json``, ``reward_function.py``,
+``training_params.yaml``, ``hyperparameters.json`` (DeepRacer's names), the best and the last
+checkpoints as safetensors under ``checkpoints/``, the metrics, and ``pitlane.json`` (the settings
+DeepRacer's files do not carry: track, direction, race type, network seed, workers).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import tarfile
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import gymnasium
+import torch
+from django.core.files.storage import default_storage
+from torch import nn
+
+import simulator
+from training import artifacts, selectors
+from training.models import RLModel
+from training.networks import CAMERAS, LIDARS
+from training.policies import Policy
+
+OPSET = 17
+PITLANE_SETTINGS = "pitlane.json"
+FORMAT = 1  # of pitlane.json
+
+
+class ExportRefused(Exception):
+    """The model has nothing to export yet; the message says why."""
+
+
+@dataclass(frozen=True)
+class Export:
+    """An archive in storage: its storage name and the name the racer's browser saves it as."""
+
+    name: str
+    filename: str
+
+
+class CarNetwork(nn.Module):
+    """The policy as the car runs it: sensor inputs in, the action's distribution out."""
+
+    def __init__(self, policy: Policy, discrete: bool) -> None:
+        super().__init__()
+        self.network = policy.network  # a submodule: its weights go into the graph
+        self.ppo, self.discrete = policy.ppo, discrete
+        space = policy.network.observation_space
+        self.camera = next(key for key in space.spaces if key in CAMERAS)
+        self.lidar = next((key for key in space.spaces if key in LIDARS), None)
+
+    def forward(self, camera: torch.Tensor, lidar: torch.Tensor | None = None) -> torch.Tensor:
+        observation = {self.camera: camera}
+        if self.lidar is not None:
+            observation[self.lidar] = lidar
+        network = self.network
+        if self.ppo:
+            # SB3 scales image inputs to [0, 1] in its preprocessing, inside the graph.
+            features = network.extract_features(observation)
+            latent = network.mlp_extractor.forward_actor(features)
+            out = network.action_net(latent)
+            return torch.softmax(out, dim=1) if self.discrete else out.clamp(-1.0, 1.0)
+        mean, _, _ = network.actor.get_action_dist_params(observation)
+        return torch.tanh(mean)
+
+    def sample_inputs(self) -> tuple[torch.Tensor, ...]:
+        space = self.network.observation_space
+        inputs = [torch.zeros((1, *space[self.camera].shape), dtype=torch.float32)]
+        if self.lidar is not None:
+            inputs.append(torch.zeros((1, *space[self.lidar].shape), dtype=torch.float32))
+        return tuple(inputs)
+
+    @property
+    def input_names(self) -> list[str]:
+        return [self.camera] + ([self.lidar] if self.lidar else [])
+
+    @property
+    def output_name(self) -> str:
+        return "probabilities" if self.discrete else "action"
+
+
+def car_network(model: RLModel, weights: bytes) -> CarNetwork:
+    """The model's network with ``weights`` (a checkpoint), as the car runs it."""
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+    try:
+        policy = Policy.build(
+            model.algorithm, model.network, env.observation_space, env.action_space
+        )
+    finally:
+        env.close()
+    policy.load_checkpoint(weights)
+    network = CarNetwork(policy, model.action_space_type == "discrete")
+    network.eval()
+    return network
+
+
+def onnx_model(network: CarNetwork, path: Path) -> None:
+    with torch.no_grad():
+        torch.onnx.export(
+            network, network.sample_inputs(), str(path), dynamo=False, opset_version=OPSET,
+            input_names=network.input_names, output_names=[network.output_name],
+        )  # fmt: skip
+
+
+def openvino_model(onnx_path: Path, directory: Path) -> None:
+    """``model.xml`` and ``model.bin`` in ``directory``, read from the ONNX by OpenVINO's runtime
+    (its ONNX front end) and saved in fp32. Not ``openvino.convert_model``: that tool reports
+    usage to Intel over the network unless told otherwise, and a worker must not."""
+    import openvino
+
+    network = openvino.Core().read_model(str(onnx_path))
+    openvino.save_model(network, str(directory / "model.xml"), compress_to_fp16=False)
+
+
+def physical(model: RLModel, which: str = "best") -> Export:
+    """The physical-car archive of the model's ``which`` checkpoint, built once per checkpoint."""
+    weights = _checkpoint(model, which)
+    export = Export(
+        artifacts.path(model, f"exports/physical-{_digest(weights)}.tar.gz"),
+        f"physicalmodel-{model.name}.tar.gz",
+    )
+    if default_storage.exists(export.name):
+        return export
+    network = car_network(model, weights)
+    with tempfile.TemporaryDirectory(prefix="pitlane-export-") as directory:
+        agent = Path(directory)
+        onnx_model(network, agent / "model.onnx")
+        openvino_model(agent / "model.onnx", agent)
+        members = {"model_metadata.json": _json(model.metadata())}
+        for name in ("model.onnx", "model.xml", "model.bin"):
+            members[f"agent/{name}"] = (agent / name).read_bytes()
+        _store(export.name, members)
+    return export
+
+
+def virtual(model: RLModel) -> Export:
+    """The virtual-model archive: everything needed to go on training elsewhere; built once per
+    last checkpoint (training ends with it, and with the metrics it goes with)."""
+    last = _checkpoint(model, "last")
+    export = Export(
+        artifacts.path(model, f"exports/virtual-{_digest(last)}.tar.gz"),
+        f"virtualmodel-{model.name}.tar.gz",
+    )
+    if default_storage.exists(export.name):
+        return export
+    members = {name: text.encode() for name, text in artifacts.model_files(model).items()}
+    members.update({
+        PITLANE_SETTINGS: _json(pitlane_settings(model)),
+        "checkpoints/best.safetensors": _checkpoint(model, "best"),
+        "checkpoints/last.safetensors": last,
+    })  # fmt: skip
+    metrics = artifacts.path(model, artifacts.TRAINING_METRICS)
+    if default_storage.exists(metrics):
+        members[artifacts.TRAINING_METRICS] = artifacts.read(metrics)
+    _store(export.name, members)
+    return export
+
+
+def pitlane_settings(model: RLModel) -> dict:
+    """What ``model_metadata.json`` and the others leave out, for an import that trains on."""
+    return {
+        "format": FORMAT,
+        "name": model.name,
+        "description": model.description,
+        "track": model.track.name,
+        "direction": model.direction,
+        "race_type": model.race_type,
+        "boxes": model.boxes,
+        "bots": model.bots,
+        "max_minutes": model.max_minutes,
+        "workers": model.workers,
+        "extra_tracks": list(model.extra_tracks),
+        "seed": model.seed,
+        "shell_colour": model.shell_colour,
+    }
+
+
+def _checkpoint(model: RLModel, which: str) -> bytes:
+    name = selectors.model_checkpoint(model=model, which=which)
+    if name is None:
+        raise ExportRefused("This model has no trained weights yet: train it first.")
+    return artifacts.read(name)
+
+
+def _digest(data: bytes) -> str:
+    """What names an export: the weights it holds (so a changed checkpoint is a new export)."""
+    return hashlib.sha256(data).hexdigest()[:16]
+
+
+def _json(document: dict) -> bytes:
+    return json.dumps(document, indent=2).encode()
+
+
+def _store(name: str, members: dict[str, bytes]) -> None:
+    """A gzipped tar of ``members`` (relative name: bytes) saved in storage at ``name``."""
+    with tempfile.SpooledTemporaryFile(max_size=16 * 1024 * 1024) as spool:
+        with tarfile.open(fileobj=spool, mode="w:gz") as archive:
+            for relative, data in members.items():
+                info = tarfile.TarInfo(relative)
+                info.size, info.mtime, info.mode = len(data), int(time.time()), 0o644
+                archive.addfile(info, io.BytesIO(data))
+        spool.seek(0)
+        if default_storage.exists(name):
+            default_storage.delete(name)
+        default_storage.save(name, spool)

@@ -1,0 +1,265 @@
+"""Importing a model from an archive: a Pitlane virtual model (``exports.virtual``), which arrives
+READY with its weights, or a DeepRacer export, whose settings and reward function arrive as a new
+model whose training is queued (its TensorFlow checkpoints cannot be loaded into our network).
+
+An archive is hostile until proven otherwise. Before anything is written: its size, the number
+of its members and their unpacked size are limited; only regular files under relative paths are
+read (no absolute paths, no ``..``, no links, devices or FIFOs); the settings are checked as the
+create-model page checks them, the reward function validated in the sandbox; weights are read
+only from safetensors, into our own network, every tensor and shape checked. A refused archive
+leaves nothing in the database or in storage.
+"""
+
+from __future__ import annotations
+
+import json
+import tarfile
+from dataclasses import dataclass, field
+from pathlib import PurePosixPath
+from typing import IO
+
+import gymnasium
+import yaml
+from django.contrib.auth.models import AbstractBaseUser
+from django.db import transaction
+from safetensors import SafetensorError
+
+import simulator
+from training import artifacts, configuration, exports, hyperparameters, services
+from training.models import Algorithm, RLModel, Track, TrainingJob
+from training.policies import Policy
+
+MiB = 1024 * 1024
+MAX_ARCHIVE = 256 * MiB  # [bytes] as uploaded
+MAX_UNPACKED = 512 * MiB  # [bytes] all members together
+MAX_MEMBERS = 256
+TEXT_LIMIT = 1 * MiB  # [bytes] each of the JSON, YAML and Python files
+CHECKPOINTS = ("checkpoints/best.safetensors", "checkpoints/last.safetensors")
+DEFAULT_TRACK = "rookie-loop"
+DEEPRACER_ALGORITHMS = {"clipped_ppo": Algorithm.PPO, "ppo": Algorithm.PPO, "sac": Algorithm.SAC}
+
+
+class ImportRefused(Exception):
+    """The archive cannot be imported; the message says why, in a racer's words."""
+
+
+@dataclass
+class Imported:
+    model: RLModel
+    notes: list[str] = field(default_factory=list)
+
+
+def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "") -> Imported:
+    """The model in ``archive`` (a file opened for reading), as ``owner``'s; ``name`` replaces
+    the archive's. ``ImportRefused`` or ``configuration.Invalid`` when it cannot be imported."""
+    members = read_archive(archive)
+    metadata = _json(members, "model_metadata.json")
+    if metadata is None:
+        raise ImportRefused("The archive has no model_metadata.json: is it a model's download?")
+    reward = _text(members, "reward_function.py")
+    if reward is None:
+        raise ImportRefused("The archive has no reward_function.py.")
+    ours = _json(members, exports.PITLANE_SETTINGS) or {}
+    notes: list[str] = []
+    settings = _settings(metadata, ours, members, reward, name, notes)
+    weights = {path: members[path] for path in CHECKPOINTS if path in members}
+    if weights:
+        imported = _import_trained(owner, settings, weights)
+        imported.notes += notes
+        return imported
+    if any(_is_tensorflow(path) for path in members):
+        notes.append(
+            "The archive's TensorFlow checkpoints were not carried over: this console trains "
+            "PyTorch networks. The settings and the reward function were; the model trains "
+            "from new weights."
+        )
+    model = services.model_create(owner=owner, settings=settings)
+    return Imported(model, notes)
+
+
+def read_archive(archive: IO[bytes]) -> dict[str, bytes]:
+    """The regular files of a tar (optionally gzipped) archive, by relative path, with a single
+    top-level folder (as some tools pack) taken off; ``ImportRefused`` for anything unsafe."""
+    archive.seek(0, 2)
+    if archive.tell() > MAX_ARCHIVE:
+        raise ImportRefused(f"The archive is over {size(MAX_ARCHIVE)}.")
+    archive.seek(0)
+    members: dict[str, bytes] = {}
+    unpacked = 0
+    try:
+        with tarfile.open(fileobj=archive, mode="r:*") as tar:
+            for count, member in enumerate(tar, start=1):
+                if count > MAX_MEMBERS:
+                    raise ImportRefused(f"The archive holds over {MAX_MEMBERS} files.")
+                path = _safe_path(member.name)
+                if member.isdir():
+                    continue
+                if not member.isfile():
+                    raise ImportRefused(f"{member.name} is a link or a device: models hold files.")
+                unpacked += member.size
+                if unpacked > MAX_UNPACKED:
+                    raise ImportRefused(f"The archive unpacks to over {size(MAX_UNPACKED)}.")
+                handle = tar.extractfile(member)
+                data = handle.read(member.size + 1) if handle else b""
+                if len(data) != member.size:
+                    raise ImportRefused(f"{member.name} is cut short: the archive is damaged.")
+                members[path] = data
+    except (tarfile.TarError, EOFError, OSError, ValueError) as error:
+        raise ImportRefused(f"This is not a readable .tar.gz archive ({error}).") from None
+    return _without_top_folder(members)
+
+
+def size(limit: int) -> str:
+    return f"{limit / MiB:g} MiB" if limit >= MiB else f"{limit:,} bytes"
+
+
+def _safe_path(name: str) -> str:
+    path = PurePosixPath(name)
+    if (
+        not name
+        or path.is_absolute()
+        or name.startswith(("/", "\\"))
+        or ".." in path.parts
+        or "\\" in name
+        or "\x00" in name
+        or ":" in path.parts[0]
+    ):
+        raise ImportRefused(f"{name!r} is not a relative path inside the archive.")
+    return "/".join(part for part in path.parts if part != ".")
+
+
+def _without_top_folder(members: dict[str, bytes]) -> dict[str, bytes]:
+    tops = {path.split("/", 1)[0] for path in members}
+    if len(tops) == 1 and all("/" in path for path in members):
+        return {path.split("/", 1)[1]: data for path, data in members.items()}
+    return members
+
+
+def _text(members: dict[str, bytes], path: str) -> str | None:
+    data = members.get(path)
+    if data is None:
+        return None
+    if len(data) > TEXT_LIMIT:
+        raise ImportRefused(f"{path} is over {size(TEXT_LIMIT)}.")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ImportRefused(f"{path} is not UTF-8 text.") from None
+
+
+def _json(members: dict[str, bytes], path: str) -> dict | None:
+    text = _text(members, path)
+    if text is None:
+        return None
+    try:
+        document = json.loads(text)
+    except ValueError as error:
+        raise ImportRefused(f"{path} is not valid JSON: {error}.") from None
+    if not isinstance(document, dict):
+        raise ImportRefused(f"{path} must hold a JSON object.")
+    return document
+
+
+def _yaml(members: dict[str, bytes], path: str) -> dict:
+    text = _text(members, path)
+    if text is None:
+        return {}
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError:
+        raise ImportRefused(f"{path} is not valid YAML.") from None
+    return document if isinstance(document, dict) else {}
+
+
+def _settings(
+    metadata: dict, ours: dict, members: dict, reward: str, name: str, notes: list[str]
+) -> dict:
+    """The create-model settings the archive describes, in ``training.configuration``'s
+    vocabulary; what it leaves out takes the defaults, and ``notes`` says what changed."""
+    params = _yaml(members, "training_params.yaml")
+    algorithm = DEEPRACER_ALGORITHMS.get(
+        str(metadata.get("training_algorithm", "clipped_ppo")).lower(), "unknown"
+    )
+    if algorithm == "unknown":
+        raise ImportRefused(
+            f"model_metadata.json names the algorithm {metadata.get('training_algorithm')!r}; "
+            "this console trains PPO (clipped_ppo) and SAC."
+        )
+    given = _json(members, "hyperparameters.json") or {}
+    known = hyperparameters.defaults(algorithm)
+    hyper = {**known, **{key: value for key, value in given.items() if key in known}}
+    track = ours.get("track") or _deepracer_track(params, notes)
+    return {
+        "name": name or ours.get("name") or str(params.get("CAR_NAME") or "imported-model"),
+        "description": str(ours.get("description") or "Imported."),
+        "track": track,
+        "direction": ours.get("direction")
+        or ("clockwise" if params.get("REVERSE_DIR") else "counterclockwise"),
+        "race_type": ours.get("race_type") or params.get("RACE_TYPE") or "TIME_TRIAL",
+        "boxes": ours.get("boxes"),
+        "bots": ours.get("bots"),
+        "sensors": metadata.get("sensor") or ["FRONT_FACING_CAMERA"],
+        "network": metadata.get("neural_network"),
+        "action_space": metadata.get("action_space"),
+        "algorithm": algorithm,
+        "hyperparameters": hyper,
+        "max_minutes": ours.get("max_minutes", 60),
+        "workers": ours.get("workers", 1),
+        "extra_tracks": ours.get("extra_tracks", []),
+        "seed": ours.get("seed", 0),
+        "shell_colour": ours.get("shell_colour"),
+        "reward_function": reward,
+    }
+
+
+def _deepracer_track(params: dict, notes: list[str]) -> str:
+    """A DeepRacer track name (``WORLD_NAME``) as ours, or the default track (and a note)."""
+    world = str(params.get("WORLD_NAME") or "")
+    candidates = (world, world.lower().replace("_", "-"))
+    known = Track.objects.filter(name__in=candidates).values_list("name", flat=True).first()
+    if known:
+        return known
+    if world:
+        notes.append(f"The track {world} is not one of this console's; the model trains on "
+                     f"{DEFAULT_TRACK} (change it by cloning once it is ready).")  # fmt: skip
+    return DEFAULT_TRACK
+
+
+def _is_tensorflow(path: str) -> bool:
+    name = PurePosixPath(path).name
+    return ".ckpt" in name or name.endswith((".pb", ".index")) or name == "checkpoint"
+
+
+def _import_trained(owner, settings: dict, weights: dict[str, bytes]) -> Imported:
+    """A Pitlane virtual model: READY, with its checkpoints, after they load into our network."""
+    clean = configuration.check(settings, owner=owner)
+    env = gymnasium.make(simulator.ENV_ID, **RLModel(**clean).environment_settings())
+    try:
+        policy = Policy.build(
+            clean["algorithm"], clean["network"], env.observation_space, env.action_space
+        )
+    finally:
+        env.close()
+    for path, data in weights.items():
+        try:
+            policy.load_checkpoint(data)
+        except (ValueError, RuntimeError, SafetensorError) as error:
+            raise ImportRefused(f"{path} does not fit the model's network: {error}") from None
+    best = weights.get(CHECKPOINTS[0]) or weights[CHECKPOINTS[1]]
+    last = weights.get(CHECKPOINTS[1]) or best
+    with transaction.atomic():
+        services.check_quota(owner=owner, minutes=0)
+        model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean)
+        try:
+            artifacts.write_model_files(model)
+            best_name = artifacts.save(model, "checkpoints/imported-best.safetensors", best)
+            last_name = artifacts.save(model, "checkpoints/imported-last.safetensors", last)
+            TrainingJob.objects.create(
+                model=model, status=TrainingJob.Status.COMPLETED, weights_version=1,
+                best_checkpoint=best_name, last_checkpoint=last_name,
+                message="Imported with its weights.",
+            )  # fmt: skip
+        except BaseException:
+            artifacts.delete_all(model)
+            raise
+    return Imported(model)

@@ -1,0 +1,37 @@
+from pathlib import Path
+
+from django.core.management.base import BaseCommand, CommandError
+
+from training import configuration, imports
+from training.management.lookup import find_racer
+
+
+class Command(BaseCommand):
+    help = (
+        "Import a model from a .tar.gz archive: a Pitlane virtual model (it arrives ready, with "
+        "its weights) or a DeepRacer export (its settings and reward function arrive as a new "
+        "model whose training is queued)."
+    )
+
+    def add_arguments(self, parser) -> None:
+        parser.add_argument("file", type=Path, help="the archive")
+        parser.add_argument("--owner", required=True, help="the racer who will own the model")
+        parser.add_argument("--name", default="", help="the model's name (default: the archive's)")
+
+    def handle(self, *args, file: Path, owner: str, name: str, **options) -> None:
+        racer = find_racer(owner)
+        try:
+            with file.open("rb") as archive:
+                imported = imports.import_model(owner=racer, archive=archive, name=name)
+        except OSError as error:
+            raise CommandError(f"Cannot read {file}: {error.strerror or error}") from None
+        except imports.ImportRefused as refused:
+            raise CommandError(f"The model was not imported: {refused}") from None
+        except configuration.Invalid as invalid:
+            lines = "\n".join(f"  {key}: {message}" for key, message in invalid.errors.items())
+            raise CommandError(f"The model was not imported:\n{lines}") from None
+        model = imported.model
+        state = "ready" if model.status == model.Status.READY else "queued for training"
+        self.stdout.write(f"Imported {model.name} (#{model.pk}), {state}.")
+        for note in imported.notes:
+            self.stdout.write(note)
