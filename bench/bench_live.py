@@ -197,14 +197,13 @@ def main() -> None:
 
         django.setup()
         from django.conf import settings
-        from django.contrib.auth.models import User
         from django.test import Client
 
-        from bench.bench_training import default_model, job_of
+        from bench.bench_training import bench_racer, default_model, job_of
         from training.models import Iteration
         from training.services import training_stop
 
-        owner = User.objects.create_user("bench", password="bench-password-1")  # noqa: S106
+        owner = bench_racer()
         client = Client()
         client.force_login(owner)
         session = client.cookies[settings.SESSION_COOKIE_NAME].value

@@ -35,8 +35,15 @@ MAX_UNPACKED = 512 * MiB  # [bytes] all members together
 MAX_MEMBERS = 256
 TEXT_LIMIT = 1 * MiB  # [bytes] each of the JSON, YAML and Python files
 CHECKPOINTS = ("checkpoints/best.safetensors", "checkpoints/last.safetensors")
+WANTED = {
+    "model_metadata.json", "reward_function.py", "hyperparameters.json",
+    "training_params.yaml", exports.PITLANE_SETTINGS, *CHECKPOINTS,
+}  # fmt: skip
 DEFAULT_TRACK = "rookie-loop"
 DEEPRACER_ALGORITHMS = {"clipped_ppo": Algorithm.PPO, "ppo": Algorithm.PPO, "sac": Algorithm.SAC}
+
+
+Members = dict[str, bytes | None]  # an archive's files: contents of those read, None for the rest
 
 
 class ImportRefused(Exception):
@@ -62,7 +69,7 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
     ours = _json(members, exports.PITLANE_SETTINGS) or {}
     notes: list[str] = []
     settings = _settings(metadata, ours, members, reward, name, notes)
-    weights = {path: members[path] for path in CHECKPOINTS if path in members}
+    weights = {path: members[path] for path in CHECKPOINTS if members.get(path) is not None}
     if weights:
         imported = _import_trained(owner, settings, weights)
         imported.notes += notes
@@ -77,14 +84,16 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
     return Imported(model, notes)
 
 
-def read_archive(archive: IO[bytes]) -> dict[str, bytes]:
-    """The regular files of a tar (optionally gzipped) archive, by relative path, with a single
-    top-level folder (as some tools pack) taken off; ``ImportRefused`` for anything unsafe."""
+def read_archive(archive: IO[bytes]) -> Members:
+    """The regular files of a tar (optionally gzipped) archive by relative path, with a single
+    top-level folder (as some tools pack) taken off: the contents of those an import reads
+    (``WANTED``), None for the others, which are only checked; ``ImportRefused`` for anything
+    unsafe."""
     archive.seek(0, 2)
     if archive.tell() > MAX_ARCHIVE:
         raise ImportRefused(f"The archive is over {size(MAX_ARCHIVE)}.")
     archive.seek(0)
-    members: dict[str, bytes] = {}
+    members: Members = {}
     unpacked = 0
     try:
         with tarfile.open(fileobj=archive, mode="r:*") as tar:
@@ -99,14 +108,23 @@ def read_archive(archive: IO[bytes]) -> dict[str, bytes]:
                 unpacked += member.size
                 if unpacked > MAX_UNPACKED:
                     raise ImportRefused(f"The archive unpacks to over {size(MAX_UNPACKED)}.")
-                handle = tar.extractfile(member)
-                data = handle.read(member.size + 1) if handle else b""
-                if len(data) != member.size:
-                    raise ImportRefused(f"{member.name} is cut short: the archive is damaged.")
-                members[path] = data
+                members[path] = _read(tar, member) if _wanted(path) else None
     except (tarfile.TarError, EOFError, OSError, ValueError) as error:
         raise ImportRefused(f"This is not a readable .tar.gz archive ({error}).") from None
     return _without_top_folder(members)
+
+
+def _wanted(path: str) -> bool:
+    """Whether an import reads ``path``, at the root or under a single top-level folder."""
+    return path in WANTED or path.split("/", 1)[-1] in WANTED
+
+
+def _read(tar: tarfile.TarFile, member: tarfile.TarInfo) -> bytes:
+    handle = tar.extractfile(member)
+    data = handle.read(member.size + 1) if handle else b""
+    if len(data) != member.size:
+        raise ImportRefused(f"{member.name} is cut short: the archive is damaged.")
+    return data
 
 
 def size(limit: int) -> str:
@@ -128,14 +146,14 @@ def _safe_path(name: str) -> str:
     return "/".join(part for part in path.parts if part != ".")
 
 
-def _without_top_folder(members: dict[str, bytes]) -> dict[str, bytes]:
+def _without_top_folder(members: Members) -> Members:
     tops = {path.split("/", 1)[0] for path in members}
     if len(tops) == 1 and all("/" in path for path in members):
         return {path.split("/", 1)[1]: data for path, data in members.items()}
     return members
 
 
-def _text(members: dict[str, bytes], path: str) -> str | None:
+def _text(members: Members, path: str) -> str | None:
     data = members.get(path)
     if data is None:
         return None
@@ -147,7 +165,7 @@ def _text(members: dict[str, bytes], path: str) -> str | None:
         raise ImportRefused(f"{path} is not UTF-8 text.") from None
 
 
-def _json(members: dict[str, bytes], path: str) -> dict | None:
+def _json(members: Members, path: str) -> dict | None:
     text = _text(members, path)
     if text is None:
         return None
@@ -160,7 +178,7 @@ def _json(members: dict[str, bytes], path: str) -> dict | None:
     return document
 
 
-def _yaml(members: dict[str, bytes], path: str) -> dict:
+def _yaml(members: Members, path: str) -> dict:
     text = _text(members, path)
     if text is None:
         return {}
@@ -172,7 +190,7 @@ def _yaml(members: dict[str, bytes], path: str) -> dict:
 
 
 def _settings(
-    metadata: dict, ours: dict, members: dict, reward: str, name: str, notes: list[str]
+    metadata: dict, ours: dict, members: Members, reward: str, name: str, notes: list[str]
 ) -> dict:
     """The create-model settings the archive describes, in ``training.configuration``'s
     vocabulary; what it leaves out takes the defaults, and ``notes`` says what changed."""
