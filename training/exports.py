@@ -28,12 +28,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import gymnasium
 import torch
 from django.core.files.storage import default_storage
 from torch import nn
 
-import simulator
 from training import artifacts, selectors
 from training.models import RLModel
 from training.networks import CAMERAS, LIDARS
@@ -99,13 +97,7 @@ class CarNetwork(nn.Module):
 
 def car_network(model: RLModel, weights: bytes) -> CarNetwork:
     """The model's network with ``weights`` (a checkpoint), as the car runs it."""
-    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-    try:
-        policy = Policy.build(
-            model.algorithm, model.network, env.observation_space, env.action_space
-        )
-    finally:
-        env.close()
+    policy = Policy.for_environment(model.algorithm, model.network, model.environment_settings())
     policy.load_checkpoint(weights)
     network = CarNetwork(policy, model.action_space_type == "discrete")
     network.eval()

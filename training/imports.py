@@ -18,13 +18,11 @@ from dataclasses import dataclass, field
 from pathlib import PurePosixPath
 from typing import IO
 
-import gymnasium
 import yaml
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import transaction
 from safetensors import SafetensorError
 
-import simulator
 from training import artifacts, configuration, exports, hyperparameters, services
 from training.models import Algorithm, RLModel, Track, TrainingJob
 from training.policies import Policy
@@ -251,13 +249,9 @@ def _is_tensorflow(path: str) -> bool:
 def _import_trained(owner, settings: dict, weights: dict[str, bytes]) -> Imported:
     """A Pitlane virtual model: READY, with its checkpoints, after they load into our network."""
     clean = configuration.check(settings, owner=owner)
-    env = gymnasium.make(simulator.ENV_ID, **RLModel(**clean).environment_settings())
-    try:
-        policy = Policy.build(
-            clean["algorithm"], clean["network"], env.observation_space, env.action_space
-        )
-    finally:
-        env.close()
+    policy = Policy.for_environment(
+        clean["algorithm"], clean["network"], RLModel(**clean).environment_settings()
+    )
     for path, data in weights.items():
         try:
             policy.load_checkpoint(data)

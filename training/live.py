@@ -120,8 +120,8 @@ def pack_frame(frame: dict) -> dict:
 
 
 def frame_from_child(raw: dict[str, Any], worker: int) -> dict | None:
-    """A ``job.frame`` event from what a sandbox child sent, or None if it is not a frame: the
-    child ran a racer's code, so only checked fields of known types go on to viewers."""
+    """A frame (as ``frame_event`` makes one) from what a sandbox child sent, or None if it is
+    not one: the child ran a racer's code, so only checked fields of known types go on."""
     data, view = raw.get("jpeg"), raw.get("view")
     if view not in VIEWS or not isinstance(data, bytes) or len(data) > MAX_JPEG:
         return None

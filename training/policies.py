@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import gymnasium
 import numpy as np
 import torch
 
+import simulator
 from training.learner import load_weights
 from training.networks import policy_kwargs
 
@@ -44,6 +46,16 @@ class Policy:
             module = policy.actor
         policy.set_training_mode(False)
         return cls(algorithm, policy, module)
+
+    @classmethod
+    def for_environment(cls, algorithm: str, network: str, environment: dict) -> Policy:
+        """The policy for the environment that ``environment`` (``gymnasium.make``'s keyword
+        arguments) describes, built from its spaces."""
+        env = gymnasium.make(simulator.ENV_ID, **environment)
+        try:
+            return cls.build(algorithm, network, env.observation_space, env.action_space)
+        finally:
+            env.close()
 
     @property
     def ppo(self) -> bool:

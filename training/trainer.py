@@ -37,7 +37,6 @@ EVALUATION_EPISODES = 5
 CHECK_EVERY = 3.0  # [s] between lease renewals, stop checks and worker checks
 REPLACEMENTS = 2  # per worker slot, before the job carries on without it
 REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
-METRICS = artifacts.TRAINING_METRICS
 
 
 class JobFailed(Exception):
@@ -285,7 +284,7 @@ class Trainer:
 
     def _recall_progress(self) -> None:
         """On resuming: the metrics written so far, and the best evaluation so far."""
-        metrics = artifacts.path(self.model, METRICS)
+        metrics = artifacts.path(self.model, artifacts.TRAINING_METRICS)
         if default_storage.exists(metrics):
             self.metrics = json.loads(artifacts.read(metrics))["metrics"]
         evaluated = Iteration.objects.filter(job=self.job, evaluation_completion__isnull=False)
@@ -330,7 +329,7 @@ class Trainer:
 
     def _save_metrics(self) -> None:
         document = {"metrics": self.metrics, "best_model_metric": "progress"}
-        artifacts.save(self.model, METRICS, json.dumps(document))
+        artifacts.save(self.model, artifacts.TRAINING_METRICS, json.dumps(document))
 
     def _take_evaluations(self) -> None:
         by_version: dict[int, list[dict]] = {}

@@ -51,9 +51,7 @@ def observations(model: RLModel, count: int = 12) -> list[dict]:
 
 
 def torch_policy(model: RLModel) -> Policy:
-    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-    policy = Policy.build(model.algorithm, model.network, env.observation_space, env.action_space)
-    env.close()
+    policy = Policy.for_environment(model.algorithm, model.network, model.environment_settings())
     policy.load_checkpoint(
         artifacts.read(artifacts.path(model, "checkpoints/iteration-1.safetensors"))
     )
