@@ -102,7 +102,7 @@ class Supervisor:
         self._spawn(
             "Celery worker",
             [sys.executable, "-m", "celery", "-A", "console", "worker",
-             "-Q", ",".join(settings.PITLANE_QUEUES), "--hostname", "pitlane@%h",
+             "-Q", ",".join(settings.PITLANE_QUEUES), "--hostname", "pitlane@%h", "--beat",
              "--concurrency", str(self.concurrency), "--loglevel", "INFO"],
         )  # fmt: skip
         self._spawn(

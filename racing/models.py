@@ -1,12 +1,21 @@
-"""The league: seasons hold events; a racer's best qualifying score per event is their ranking."""
+"""The league: seasons hold events; racers submit models to events; a submission's laps give its
+score, and a racer's best qualifying score per event is their ranking."""
+
+from __future__ import annotations
+
+import secrets
 
 from django.conf import settings
+from django.core.exceptions import ValidationError
 from django.core.validators import MaxValueValidator, MinValueValidator
 from django.db import models
 from django.urls import reverse
 from django.utils import timezone
 
-from training.models import Direction, RaceType, Track
+from racing import scoring
+from training import configuration
+from training.configuration import PENALTY_MAX
+from training.models import Direction, EvaluationJob, RaceType, RLModel, Track
 
 
 class Division(models.TextChoices):
@@ -15,10 +24,35 @@ class Division(models.TextChoices):
 
 
 class RankingMethod(models.TextChoices):
-    FIRST_CONSECUTIVE = "FIRST_CONSECUTIVE", "Average of the first N consecutive laps"
-    BEST_CONSECUTIVE = "BEST_CONSECUTIVE", "Best average of N consecutive laps"
-    BEST_LAP = "BEST_LAP", "Best lap"
-    TOTAL_TIME = "TOTAL_TIME", "Total time"
+    FIRST_CONSECUTIVE = scoring.FIRST_CONSECUTIVE, "Average of the first N consecutive laps"
+    BEST_CONSECUTIVE = scoring.BEST_CONSECUTIVE, "Best average of N consecutive laps"
+    BEST_LAP = scoring.BEST_LAP, "Best lap"
+    TOTAL_TIME = scoring.TOTAL_TIME, "Total time"
+
+
+class Racer(models.Model):
+    """A user's place in the league: their division. Everyone starts in Open; the monthly
+    promotion moves the top 10% of the Open time trials to Pro, unless staff set the division."""
+
+    user = models.OneToOneField(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="league"
+    )
+    division = models.CharField(max_length=8, choices=Division.choices, default=Division.OPEN)
+    division_set_by_staff = models.BooleanField(
+        default=False, help_text="Staff chose the division: the monthly promotion leaves it alone."
+    )
+    promoted_at = models.DateTimeField(null=True, blank=True)
+
+    class Meta:
+        verbose_name = "racer's division"
+        verbose_name_plural = "racers' divisions"
+
+    def __str__(self) -> str:
+        return f"{self.user} ({self.get_division_display()})"
+
+    @classmethod
+    def of(cls, user) -> Racer:
+        return cls.objects.get_or_create(user=user)[0]
 
 
 class Season(models.Model):
@@ -40,14 +74,26 @@ class Event(models.Model):
         OPEN = "open", "Open"
         CLOSED = "closed", "Closed"
 
-    season = models.ForeignKey(Season, on_delete=models.CASCADE, related_name="events")
+    season = models.ForeignKey(
+        Season, null=True, blank=True, on_delete=models.CASCADE, related_name="events",
+        help_text="Empty for a community race.",
+    )  # fmt: skip
     name = models.CharField(max_length=100)
     slug = models.SlugField(max_length=100, unique=True)
     track = models.ForeignKey(Track, on_delete=models.PROTECT, related_name="events")
     direction = models.CharField(
         max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE
     )
-    race_type = models.CharField(max_length=16, choices=RaceType.choices)
+    race_type = models.CharField(
+        max_length=16, choices=RaceType.choices, default=RaceType.TIME_TRIAL
+    )
+    boxes = models.JSONField(
+        null=True, blank=True, help_text='Object avoidance: {"count": 1-6, "randomize": false}.'
+    )
+    bots = models.JSONField(
+        null=True, blank=True,
+        help_text='Head-to-bot: {"count": 1-6, "speed": 0.2-6, "lane_changes": false}.',
+    )  # fmt: skip
     division = models.CharField(max_length=8, choices=Division.choices, default=Division.OPEN)
     opens_at = models.DateTimeField()
     closes_at = models.DateTimeField()
@@ -55,14 +101,40 @@ class Event(models.Model):
         max_length=24, choices=RankingMethod.choices, default=RankingMethod.FIRST_CONSECUTIVE
     )
     laps_required = models.PositiveSmallIntegerField(
-        default=3, validators=[MinValueValidator(1), MaxValueValidator(20)]
-    )
+        "consecutive laps to qualify (N)", default=3,
+        validators=[MinValueValidator(1), MaxValueValidator(20)],
+    )  # fmt: skip
+    laps_to_drive = models.PositiveSmallIntegerField(
+        "laps to drive", default=3, validators=[MinValueValidator(1), MaxValueValidator(20)],
+        help_text="The car drives this many laps without stopping; at least N.",
+    )  # fmt: skip
     off_track_penalty_s = models.FloatField(
-        "off-track penalty [s]", default=2.0, validators=[MinValueValidator(0)]
-    )
+        "off-track penalty [s]", default=2.0,
+        validators=[MinValueValidator(0), MaxValueValidator(PENALTY_MAX)],
+    )  # fmt: skip
     crash_penalty_s = models.FloatField(
-        "crash penalty [s]", default=5.0, validators=[MinValueValidator(0)]
+        "crash penalty [s]", default=5.0,
+        validators=[MinValueValidator(0), MaxValueValidator(PENALTY_MAX)],
+    )  # fmt: skip
+    max_off_tracks_per_lap = models.PositiveSmallIntegerField(
+        "off-tracks allowed per lap", null=True, blank=True,
+        help_text="A lap with more off-tracks does not count. Empty: any number.",
+    )  # fmt: skip
+    submissions_per_racer = models.PositiveSmallIntegerField(
+        default=10, validators=[MinValueValidator(1), MaxValueValidator(1000)]
     )
+    public = models.BooleanField(
+        default=True, help_text="A private event is a community race: entered by invitation."
+    )
+    organiser = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, blank=True, on_delete=models.CASCADE,
+        related_name="organised_events", help_text="The racer who runs a community race.",
+    )  # fmt: skip
+    invite_token = models.CharField(max_length=43, blank=True, db_index=True)
+    participants = models.ManyToManyField(
+        settings.AUTH_USER_MODEL, blank=True, related_name="joined_events",
+        help_text="Who may enter a private event (through its invitation).",
+    )  # fmt: skip
 
     class Meta:
         ordering = ["opens_at", "name"]
@@ -73,14 +145,132 @@ class Event(models.Model):
     def get_absolute_url(self) -> str:
         return reverse("racing:leaderboard", args=[self.slug])
 
+    def clean(self) -> None:
+        errors = {}
+        if self.opens_at and self.closes_at and self.closes_at <= self.opens_at:
+            errors["closes_at"] = "An event closes after it opens."
+        if self.laps_required and self.laps_to_drive and self.laps_to_drive < self.laps_required:
+            errors["laps_to_drive"] = (
+                f"Drive at least the {self.laps_required} consecutive laps that qualify."
+            )
+        if self.public and self.division == Division.OPEN and self.race_type != RaceType.TIME_TRIAL:
+            errors["race_type"] = (
+                "Open events are time trials; object avoidance and head-to-bot are Pro events."
+            )
+        if self.public and self.season_id is None:
+            errors["season"] = "A league event belongs to a season."
+        if self.track_id and self.direction and not getattr(self.track, self.direction):
+            errors["direction"] = f"{self.track} cannot be driven {self.direction}."
+        try:
+            race = configuration.check_race(
+                {"race_type": self.race_type, "boxes": self.boxes, "bots": self.bots}
+            )
+        except configuration.Invalid as invalid:
+            errors.update({
+                "bots" if self.race_type == RaceType.HEAD_TO_BOT else "boxes": message
+                for message in invalid.errors.values()
+            })  # fmt: skip
+        else:
+            self.boxes, self.bots = race["boxes"], race["bots"]
+        if errors:
+            raise ValidationError(errors)
+
+    def ensure_invite(self) -> str:
+        if not self.invite_token:
+            self.invite_token = secrets.token_urlsafe(32)
+        return self.invite_token
+
     @property
-    def state(self) -> "Event.State":
+    def state(self) -> Event.State:
         now = timezone.now()
         if now < self.opens_at:
             return self.State.UPCOMING
         if now < self.closes_at:
             return self.State.OPEN
         return self.State.CLOSED
+
+    @property
+    def is_open(self) -> bool:
+        return self.state == self.State.OPEN
+
+
+class Submission(models.Model):
+    """A racer's model entered in an event: an evaluation under the event's rules, then its laps
+    and score. It keeps the model's name, laps and video when the model is deleted."""
+
+    Status = EvaluationJob.Status
+    ACTIVE = EvaluationJob.ACTIVE
+
+    event = models.ForeignKey(Event, on_delete=models.CASCADE, related_name="submissions")
+    racer = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="submissions"
+    )
+    model = models.ForeignKey(
+        RLModel, null=True, blank=True, on_delete=models.SET_NULL, related_name="submissions"
+    )
+    model_name = models.CharField(max_length=64)
+    evaluation = models.OneToOneField(
+        EvaluationJob, null=True, blank=True, on_delete=models.SET_NULL, related_name="submission"
+    )
+    status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
+    failure_reason = models.TextField(blank=True)
+    created_at = models.DateTimeField("submitted", auto_now_add=True, db_index=True)
+    finished_at = models.DateTimeField(null=True, blank=True)
+    score_ms = models.PositiveIntegerField("score [ms]", null=True, blank=True)
+    qualified = models.BooleanField(default=False)
+    laps_completed = models.PositiveSmallIntegerField(default=0)
+    off_tracks = models.PositiveIntegerField(default=0)
+    video = models.CharField(max_length=255, blank=True, help_text="Storage name of the video.")
+    disqualified = models.BooleanField(default=False)
+    disqualification_reason = models.CharField(max_length=255, blank=True)
+
+    class Meta:
+        ordering = ["-created_at", "-pk"]
+        indexes = [
+            models.Index(fields=["event", "racer", "created_at"]),
+            models.Index(fields=["racer", "created_at"]),
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.model_name} in {self.event} (#{self.pk})"
+
+    def get_absolute_url(self) -> str:
+        return reverse("racing:submission-detail", args=[self.pk])
+
+    @property
+    def is_active(self) -> bool:
+        return self.status in self.ACTIVE
+
+    @property
+    def ranked_score(self) -> int | None:
+        """The score that may rank: a qualified, not disqualified submission's."""
+        return self.score_ms if self.qualified and not self.disqualified else None
+
+
+class Lap(models.Model):
+    """One lap of a submission, as the race's evaluation drove it (penalties in the time)."""
+
+    submission = models.ForeignKey(Submission, on_delete=models.CASCADE, related_name="laps")
+    number = models.PositiveSmallIntegerField()
+    time_ms = models.PositiveIntegerField("time [ms]")
+    status = models.CharField(max_length=20, help_text="lap_complete, or time_up when cut short.")
+    counted = models.BooleanField(help_text="Complete, within the event's off-track limit.")
+    off_tracks = models.PositiveIntegerField(default=0)
+    crashes = models.PositiveIntegerField(default=0)
+    resets = models.PositiveIntegerField(default=0)
+    penalty_ms = models.PositiveIntegerField("penalty [ms]", default=0)
+
+    class Meta:
+        ordering = ["submission", "number"]
+        constraints = [
+            models.UniqueConstraint(fields=["submission", "number"], name="one_row_per_lap")
+        ]
+
+    def __str__(self) -> str:
+        return f"lap {self.number}"
+
+    def scoring_lap(self) -> scoring.Lap:
+        return scoring.Lap(self.time_ms, self.counted)
 
 
 class Ranking(models.Model):
@@ -90,16 +280,19 @@ class Ranking(models.Model):
     racer = models.ForeignKey(
         settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="rankings"
     )
+    submission = models.ForeignKey(Submission, on_delete=models.CASCADE, related_name="+")
     model_name = models.CharField(max_length=64)
     score_ms = models.PositiveIntegerField("score [ms]")
     submitted_at = models.DateTimeField()
+    laps_completed = models.PositiveSmallIntegerField(default=0)
+    off_tracks = models.PositiveIntegerField(default=0)
 
     class Meta:
-        ordering = ["event", "score_ms", "submitted_at"]
+        ordering = ["event", "score_ms", "submitted_at", "id"]
         constraints = [
             models.UniqueConstraint(fields=["event", "racer"], name="one_ranking_per_racer")
         ]
-        indexes = [models.Index(fields=["event", "score_ms", "submitted_at"])]
+        indexes = [models.Index(fields=["event", "score_ms", "submitted_at", "id"])]
 
     def __str__(self) -> str:
         return f"{self.racer} in {self.event}"

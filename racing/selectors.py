@@ -2,31 +2,208 @@
 
 from __future__ import annotations
 
-from django.db.models import Count, Min, QuerySet
-from django.utils import timezone
+from dataclasses import dataclass, field
 
-from racing.models import Event, Ranking, Season
+from django.contrib.auth.models import AbstractBaseUser
+from django.core.paginator import Page, Paginator
+from django.db.models import Count, Min, Prefetch, Q, QuerySet
+from django.utils import timezone
+from django.utils.formats import date_format
+
+from racing.models import Division, Event, Racer, Ranking, Season, Submission
+from training.models import RLModel
+
+LEADERBOARD_PAGE = 100  # rankings per page
+# Season points by place in an event, 1st to 10th (Formula 1's table); lower places score none.
+POINTS = (25, 18, 15, 12, 10, 8, 6, 4, 2, 1)
 
 
 def seasons_with_events() -> QuerySet[Season]:
-    return Season.objects.prefetch_related("events__track")
+    return Season.objects.prefetch_related(
+        Prefetch("events", queryset=public_events().select_related("track"))
+    )
+
+
+def public_events() -> QuerySet[Event]:
+    return Event.objects.filter(public=True)
 
 
 def events_with_leaders() -> QuerySet[Event]:
-    return Event.objects.select_related("season", "track").annotate(
-        entries=Count("rankings"), best_ms=Min("rankings__score_ms")
+    return (
+        public_events()
+        .select_related("season", "track")
+        .annotate(entries=Count("rankings"), best_ms=Min("rankings__score_ms"))
     )
 
 
 def events_not_closed() -> QuerySet[Event]:
-    """Open and upcoming events, soonest first."""
+    """Open and upcoming public events, soonest first."""
     return events_with_leaders().filter(closes_at__gt=timezone.now())
 
 
-def leaderboard_for_event(*, event: Event) -> list[Ranking]:
-    """The event's rankings in order, each with its ``position`` and ``gap_ms`` to first."""
-    rankings = list(event.rankings.select_related("racer"))
-    for position, ranking in enumerate(rankings, start=1):
-        ranking.position = position
-        ranking.gap_ms = ranking.score_ms - rankings[0].score_ms
-    return rankings
+def event_visible_to(*, event: Event, user: AbstractBaseUser) -> bool:
+    """Public events are for everyone; a community race for its organiser, its participants
+    and league staff."""
+    if event.public or user.is_staff:
+        return True
+    return user.is_authenticated and (
+        event.organiser_id == user.pk or event.participants.filter(pk=user.pk).exists()
+    )
+
+
+# Leaderboards
+
+
+def leaderboard_page(*, event: Event, page: int | str = 1) -> Page:
+    """One page of the event's rankings in order, each with its ``position`` and ``gap_ms`` to
+    first. An out-of-range page number gives the last page."""
+    rankings = event.rankings.select_related("racer").order_by("score_ms", "submitted_at", "id")
+    current = Paginator(rankings, LEADERBOARD_PAGE).get_page(page)
+    leader = current.object_list[0] if current.number == 1 and current.object_list else None
+    best = leader.score_ms if leader else rankings.values_list("score_ms", flat=True).first()
+    for offset, ranking in enumerate(current.object_list):
+        ranking.position = current.start_index() + offset
+        ranking.gap_ms = ranking.score_ms - best
+    return current
+
+
+def ranking_of(*, event: Event, racer: AbstractBaseUser) -> Ranking | None:
+    """The racer's ranking in the event with its ``position`` (None when they are not ranked)."""
+    if not racer.is_authenticated:
+        return None
+    ranking = Ranking.objects.filter(event=event, racer=racer).first()
+    if ranking is None:
+        return None
+    ahead = event.rankings.filter(
+        Q(score_ms__lt=ranking.score_ms)
+        | Q(score_ms=ranking.score_ms, submitted_at__lt=ranking.submitted_at)
+        | Q(score_ms=ranking.score_ms, submitted_at=ranking.submitted_at, id__lt=ranking.pk)
+    ).count()
+    ranking.position = ahead + 1
+    ranking.page = ahead // LEADERBOARD_PAGE + 1
+    return ranking
+
+
+# Season standings
+
+
+@dataclass
+class Standing:
+    racer: str
+    points: int = 0
+    finishes: list[int] = field(default_factory=list)  # places, best first
+    position: int = 0
+
+    @property
+    def best(self) -> int:
+        return self.finishes[0]
+
+
+def season_standings(*, season: Season, division: str) -> tuple[list[Standing], list[Event]]:
+    """The season's standings in one division, and the events they count: every public event
+    of that division that has opened. Each event gives its first ten places ``POINTS``; racers
+    are ordered by points, then by countback (more first places, then more second places, and
+    so on), then by name."""
+    events = list(
+        season.events.filter(public=True, division=division, opens_at__lte=timezone.now())
+        .select_related("track")
+        .order_by("opens_at", "name")
+    )
+    standings: dict[str, Standing] = {}
+    for event in events:
+        top = event.rankings.select_related("racer").order_by("score_ms", "submitted_at", "id")
+        for place, ranking in enumerate(top[: len(POINTS)], start=1):
+            standing = standings.setdefault(
+                ranking.racer.username, Standing(ranking.racer.username)
+            )
+            standing.points += POINTS[place - 1]
+            standing.finishes.append(place)
+    ordered = sorted(standings.values(), key=lambda s: (-s.points, sorted(s.finishes), s.racer))
+    for position, standing in enumerate(ordered, start=1):
+        standing.finishes.sort()
+        standing.position = position
+    return ordered, events
+
+
+# Submitting
+
+
+def submission_refusal(
+    *, racer: AbstractBaseUser, event: Event, model: RLModel | None
+) -> str | None:
+    """Why ``racer`` cannot submit ``model`` to ``event`` now, in words for them; None if they
+    can (the model's own state is checked when the race is reserved)."""
+    if model is not None and model.owner_id != racer.pk:
+        return "You can submit only your own models."
+    state = event.state
+    if state == Event.State.UPCOMING:
+        when = date_format(timezone.localtime(event.opens_at), "j M Y, H:i")
+        return f"{event.name} opens on {when}; submit then."
+    if state == Event.State.CLOSED:
+        return f"{event.name} has closed; it takes no more submissions."
+    if not event.public:
+        joined = event.participants.filter(pk=racer.pk).exists()
+        if not joined:
+            return "This is a private race: join it through its invitation link first."
+    else:
+        division = Racer.of(racer).division
+        if division != event.division:
+            return (
+                f"{event.name} is a {event.get_division_display()} event and you race in the "
+                f"{Division(division).label} division. "
+                + (
+                    "Place in the top 10% of a month's Open time trials to move up to Pro."
+                    if division == Division.OPEN
+                    else "Pro racers enter Pro events."
+                )
+            )
+    used = submissions_counted(racer=racer, event=event)
+    if used >= event.submissions_per_racer:
+        return (
+            f"You have made your {event.submissions_per_racer} submissions to {event.name}, "
+            "its limit."
+        )
+    return None
+
+
+def submissions_counted(*, racer: AbstractBaseUser, event: Event) -> int:
+    """Submissions that count against the event's limit: all but those that failed (a failure
+    is ours, not the racer's)."""
+    return (
+        Submission.objects.filter(racer=racer, event=event)
+        .exclude(status=Submission.Status.FAILED)
+        .count()
+    )
+
+
+def events_open_to(*, racer: AbstractBaseUser) -> list[Event]:
+    """The open events ``racer`` may enter now: public ones of their division and community
+    races they joined."""
+    now = timezone.now()
+    division = Racer.of(racer).division
+    return list(
+        Event.objects.filter(opens_at__lte=now, closes_at__gt=now)
+        .filter(Q(public=True, division=division) | Q(public=False, participants=racer))
+        .select_related("track", "season")
+        .distinct()
+        .order_by("closes_at", "name")
+    )
+
+
+def models_ready_for(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:
+    return RLModel.objects.filter(owner=racer, status=RLModel.Status.READY).order_by("name")
+
+
+def submissions_for_racer(*, racer: AbstractBaseUser) -> QuerySet[Submission]:
+    return Submission.objects.filter(racer=racer).select_related("event", "event__track")
+
+
+def community_races_for(*, racer: AbstractBaseUser) -> QuerySet[Event]:
+    """Community races the racer organises or joined, newest first."""
+    return (
+        Event.objects.filter(public=False)
+        .filter(Q(organiser=racer) | Q(participants=racer))
+        .select_related("track", "organiser")
+        .distinct()
+        .order_by("-opens_at")
+    )

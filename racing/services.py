@@ -1,15 +1,336 @@
-"""Writes for the league."""
+"""Writes for the league: submissions and their scores, rankings, events, divisions."""
 
 from __future__ import annotations
 
 import calendar
+import logging
+import math
 from datetime import date, datetime, time, timedelta
 
+from django.contrib.auth import get_user_model
+from django.contrib.auth.models import AbstractBaseUser
+from django.core.files.storage import default_storage
 from django.db import transaction
 from django.utils import timezone
+from django.utils.crypto import get_random_string
+from django.utils.text import slugify
 
-from racing.models import Division, Event, RaceType, Season
-from training.models import Track
+from racing import live, scoring, selectors, tasks
+from racing.models import Division, Event, Lap, Racer, RaceType, Ranking, Season, Submission
+from training import services as training_services
+from training.models import EvaluationJob, EvaluationTrial, RLModel, Track
+
+logger = logging.getLogger(__name__)
+
+PROMOTED_SHARE = 0.10  # the top 10% of a month's Open time trials move up to Pro
+VIDEO = "video.webm"
+
+
+class SubmissionRefused(Exception):
+    """The racer cannot submit this model to this event; the message says why."""
+
+
+# Submitting and scoring
+
+
+def submission_create(*, racer: AbstractBaseUser, event: Event, model: RLModel) -> Submission:
+    """Enter ``model`` in ``event``: checked (``SubmissionRefused`` says why not), then a race
+    evaluation under the event's rules is queued and the model is SUBMITTING until it ends. The
+    racer's row is locked meanwhile, so two submissions at once cannot overrun the limit."""
+    with transaction.atomic():
+        Racer.objects.select_for_update().filter(pk=Racer.of(racer).pk).first()
+        reason = selectors.submission_refusal(racer=racer, event=event, model=model)
+        if reason:
+            raise SubmissionRefused(reason)
+        try:
+            evaluation = training_services.evaluation_reserve(
+                model=model, purpose=RLModel.Status.SUBMITTING, **race_rules(event)
+            )
+        except training_services.EvaluationRefused as refused:
+            raise SubmissionRefused(str(refused)) from None
+        submission = Submission.objects.create(
+            event=event, racer=racer, model=model, model_name=model.name, evaluation=evaluation
+        )
+        transaction.on_commit(lambda: tasks.race.delay(submission.pk))
+    return submission
+
+
+def race_rules(event: Event) -> dict:
+    """The evaluation a submission to ``event`` drives: its track and race, its laps one after
+    another, its penalties, the model's best checkpoint."""
+    return {
+        "track": event.track,
+        "direction": event.direction,
+        "race_type": event.race_type,
+        "boxes": event.boxes,
+        "bots": event.bots,
+        "trials": event.laps_to_drive,
+        "continuous_laps": True,
+        "off_track_penalty": event.off_track_penalty_s,
+        "crash_penalty": event.crash_penalty_s,
+        "checkpoint": EvaluationJob.Checkpoint.BEST,
+    }
+
+
+def submission_run(*, submission_id: int) -> Submission | None:
+    """The ``racing.race`` task's work: drive the submission's evaluation, then score it. A
+    redelivered task drives an interrupted evaluation again and scores a finished one; a
+    submission that has ended or vanished is left alone (None)."""
+    from training import evaluation as evaluations
+
+    submission = Submission.objects.select_related("event").filter(pk=submission_id).first()
+    if submission is None or not submission.is_active:
+        logger.info("Submission %s is not waiting; nothing to do", submission_id)
+        return None
+    _update(submission, status=Submission.Status.IN_PROGRESS)
+    live.announce_submission(submission)
+    if submission.evaluation_id is not None:
+        evaluations.run(submission.evaluation_id)
+    evaluation = EvaluationJob.objects.filter(pk=submission.evaluation_id).first()
+    if evaluation is None or evaluation.status != EvaluationJob.Status.COMPLETED:
+        reason = (evaluation.failure_reason if evaluation else "") or "The race did not finish."
+        _update(
+            submission,
+            status=Submission.Status.FAILED,
+            failure_reason=reason,
+            finished_at=timezone.now(),
+        )
+        live.announce_submission(submission)
+        return submission
+    return submission_score(
+        submission=submission,
+        trials=list(evaluation.trial_rows.all()),
+        video=evaluation.video,
+    )
+
+
+def submission_score(
+    *, submission: Submission, trials: list[EvaluationTrial], video: str = ""
+) -> Submission:
+    """Store the laps the race drove, score them by the event's rules, keep the video, and offer
+    the score to the racer's ranking. Scoring the same laps again changes nothing."""
+    event = submission.event
+    limit = event.max_off_tracks_per_lap
+    laps = [_lap(submission, trial, limit) for trial in trials]
+    score = scoring.score(
+        [lap.scoring_lap() for lap in laps], method=event.ranking_method, size=event.laps_required
+    )
+    video_name = _keep_video(submission, video)
+    with transaction.atomic():
+        submission.laps.all().delete()
+        Lap.objects.bulk_create(laps)
+        _update(
+            submission,
+            status=Submission.Status.COMPLETED,
+            finished_at=submission.finished_at or timezone.now(),
+            score_ms=score,
+            qualified=score is not None,
+            laps_completed=sum(lap.status == "lap_complete" for lap in laps),
+            off_tracks=sum(lap.off_tracks for lap in laps),
+            video=video_name,
+        )
+        ranked = ranking_offer(submission=submission)
+    live.announce_submission(submission, ranked=ranked)
+    return submission
+
+
+def _lap(submission: Submission, trial: EvaluationTrial, limit: int | None) -> Lap:
+    """A lap counts when the car finished it with at most ``limit`` off-tracks (None: any)."""
+    return Lap(
+        submission=submission, number=trial.number, time_ms=trial.time_ms, status=trial.status,
+        off_tracks=trial.off_tracks, crashes=trial.crashes, resets=trial.resets,
+        penalty_ms=trial.penalty_ms,
+        counted=trial.completed and (limit is None or trial.off_tracks <= limit),
+    )  # fmt: skip
+
+
+def _keep_video(submission: Submission, video: str) -> str:
+    """A copy of the race's video under the league's prefix: the leaderboard shows it after the
+    model (and its evaluations) are deleted."""
+    if not video or not default_storage.exists(video):
+        return ""
+    name = f"league/submissions/{submission.pk}/{VIDEO}"
+    if default_storage.exists(name):
+        default_storage.delete(name)
+    with default_storage.open(video, "rb") as source:
+        return default_storage.save(name, source)
+
+
+def _update(submission: Submission, **fields) -> None:
+    Submission.objects.filter(pk=submission.pk).update(**fields)
+    for name, value in fields.items():
+        setattr(submission, name, value)
+
+
+# Rankings
+
+
+def ranking_offer(*, submission: Submission) -> bool:
+    """Give the submission's score to its racer's ranking in its event if it is better: a lower
+    score, or the same score submitted earlier (ties go to the earlier submission). Under a lock
+    on the racer, so scorings that finish together cannot overwrite one another. Whether the
+    ranking changed."""
+    if submission.ranked_score is None:
+        return False
+    with transaction.atomic():
+        Racer.objects.select_for_update().filter(pk=Racer.of(submission.racer).pk).first()
+        ranking = Ranking.objects.filter(event=submission.event, racer=submission.racer).first()
+        if ranking is not None and _order(ranking) <= (
+            submission.score_ms,
+            submission.created_at,
+            submission.pk,
+        ):
+            return False
+        _rank(submission, ranking)
+    return True
+
+
+def _order(ranking: Ranking) -> tuple:
+    return ranking.score_ms, ranking.submitted_at, ranking.submission_id
+
+
+def _rank(submission: Submission, ranking: Ranking | None) -> Ranking:
+    fields = {
+        "submission": submission,
+        "model_name": submission.model_name,
+        "score_ms": submission.score_ms,
+        "submitted_at": submission.created_at,
+        "laps_completed": submission.laps_completed,
+        "off_tracks": submission.off_tracks,
+    }
+    if ranking is None:
+        return Ranking.objects.create(event=submission.event, racer=submission.racer, **fields)
+    for name, value in fields.items():
+        setattr(ranking, name, value)
+    ranking.save(update_fields=list(fields))
+    return ranking
+
+
+def ranking_recompute(*, event: Event, racer: AbstractBaseUser) -> Ranking | None:
+    """The racer's ranking in ``event`` from scratch: their best qualified submission that is not
+    disqualified, or no ranking at all."""
+    with transaction.atomic():
+        Racer.objects.select_for_update().filter(pk=Racer.of(racer).pk).first()
+        best = (
+            Submission.objects.filter(event=event, racer=racer, qualified=True, disqualified=False)
+            .order_by("score_ms", "created_at", "pk")
+            .first()
+        )
+        ranking = Ranking.objects.filter(event=event, racer=racer).first()
+        if best is None:
+            if ranking is not None:
+                ranking.delete()
+            return None
+        return _rank(best, ranking)
+
+
+def event_rankings_recompute(*, event: Event) -> int:
+    """Every ranking of ``event`` from its submissions (the admin's "Recompute rankings"); how
+    many racers are ranked afterwards."""
+    racers = set(event.submissions.values_list("racer", flat=True)) | set(
+        event.rankings.values_list("racer", flat=True)
+    )
+    for racer in get_user_model().objects.filter(pk__in=racers):
+        ranking_recompute(event=event, racer=racer)
+    live.announce_leaderboard(event)
+    return event.rankings.count()
+
+
+def submission_disqualify(*, submission: Submission, reason: str) -> Submission:
+    """Take the submission out of the ranking (league staff); the racer's next best takes its
+    place."""
+    _update(submission, disqualified=True, disqualification_reason=reason[:255])
+    ranking_recompute(event=submission.event, racer=submission.racer)
+    live.announce_leaderboard(submission.event)
+    return submission
+
+
+# Events
+
+
+def event_close(*, event: Event) -> Event:
+    """Close the event now (races already submitted still finish and count)."""
+    now = timezone.now()
+    if event.closes_at > now:
+        event.closes_at = now
+        event.opens_at = min(event.opens_at, now)
+        event.save(update_fields=["opens_at", "closes_at"])
+    live.announce_leaderboard(event)
+    return event
+
+
+def community_race_create(*, organiser: AbstractBaseUser, fields: dict) -> Event:
+    """A private event that ``organiser`` runs (a community race), entered through its
+    invitation link; ``ValidationError`` lists what is wrong with ``fields``."""
+    event = Event(**fields, organiser=organiser, public=False, season=None, division=Division.OPEN)
+    event.slug = _free_slug(fields.get("name") or "race")
+    event.ensure_invite()
+    event.full_clean()
+    event.save()
+    event.participants.add(organiser)
+    return event
+
+
+def _free_slug(name: str) -> str:
+    base = slugify(name)[:80] or "race"
+    while True:
+        slug = f"{base}-{get_random_string(6, 'abcdefghijkmnpqrstuvwxyz23456789')}"
+        if not Event.objects.filter(slug=slug).exists():
+            return slug
+
+
+def event_join(*, event: Event, racer: AbstractBaseUser) -> None:
+    """The racer accepts a community race's invitation (``SubmissionRefused`` once it closed)."""
+    if event.state == Event.State.CLOSED:
+        raise SubmissionRefused("This invitation expired when the race closed.")
+    event.participants.add(racer)
+
+
+def participant_remove(*, event: Event, racer: AbstractBaseUser) -> None:
+    """The organiser takes a racer out of their community race, with the racer's ranking."""
+    if racer.pk == event.organiser_id:
+        raise SubmissionRefused("The organiser stays in their own race.")
+    event.participants.remove(racer)
+    Ranking.objects.filter(event=event, racer=racer).delete()
+    live.announce_leaderboard(event)
+
+
+# Divisions
+
+
+def divisions_promote(*, today: date | None = None) -> list[Racer]:
+    """The monthly promotion: the racers in the top 10% (at least one) of each of last month's
+    public Open time trials move up to Pro, unless staff set their division. Running it again
+    changes nothing; the racers promoted are returned."""
+    today = today or timezone.localdate()
+    this_month = _start_of(today.replace(day=1))
+    last_month = _start_of((today.replace(day=1) - timedelta(days=1)).replace(day=1))
+    events = Event.objects.filter(
+        public=True,
+        division=Division.OPEN,
+        race_type=RaceType.TIME_TRIAL,
+        closes_at__gte=last_month,
+        closes_at__lt=this_month,
+    )
+    winners: set[int] = set()
+    for event in events:
+        ranked = event.rankings.count()
+        top = event.rankings.order_by("score_ms", "submitted_at", "id")[
+            : math.ceil(ranked * PROMOTED_SHARE)
+        ]
+        winners.update(top.values_list("racer_id", flat=True))
+    promoted = []
+    for user_id in sorted(winners):
+        racer, _ = Racer.objects.get_or_create(user_id=user_id)
+        if racer.division == Division.OPEN and not racer.division_set_by_staff:
+            racer.division, racer.promoted_at = Division.PRO, timezone.now()
+            racer.save(update_fields=["division", "promoted_at"])
+            promoted.append(racer)
+    logger.info("Promoted %d racers to Pro from %d events", len(promoted), len(events))
+    return promoted
+
+
+# The demo season
 
 
 @transaction.atomic
@@ -45,6 +366,7 @@ def demo_season_load(*, today: date | None = None) -> Season:
             "name": f"{month} Pro object avoidance",
             "track": "kidney-bean",
             "race_type": RaceType.OBJECT_AVOIDANCE,
+            "boxes": {"count": 3, "randomize": False},
             "division": Division.PRO,
             "window": (first, last),
         },

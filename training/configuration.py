@@ -160,6 +160,17 @@ def check_evaluation(settings: dict, *, model: RLModel) -> dict:
     return clean
 
 
+def check_race(settings: dict) -> dict:
+    """A race type with its boxes or bots (``race_type``, ``boxes``, ``bots``), complete and
+    typed; ``Invalid`` otherwise."""
+    clean: dict = {}
+    errors: dict[str, str] = {}
+    _check_race(settings, clean, errors)
+    if errors:
+        raise Invalid(errors)
+    return clean
+
+
 def _check_track(settings: dict, clean: dict, errors: dict) -> Track | None:
     track = Track.objects.filter(name=settings.get("track")).first()
     if track is None:

@@ -263,9 +263,10 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
     _update(
         evaluation, status=status, failure_reason=reason, message="", finished_at=timezone.now()
     )
-    RLModel.objects.filter(pk=evaluation.model_id, status=RLModel.Status.EVALUATING).update(
-        status=RLModel.Status.READY
-    )
+    RLModel.objects.filter(
+        pk=evaluation.model_id,
+        status__in=(RLModel.Status.EVALUATING, RLModel.Status.SUBMITTING),
+    ).update(status=RLModel.Status.READY)
     _announce(evaluation)
 
 

@@ -154,17 +154,27 @@ def evaluation_start(*, model: RLModel, settings: dict, enqueue: bool = True) ->
     False: ``manage.py evaluate`` runs it in its own process)."""
     clean = configuration.check_evaluation(settings, model=model)
     with transaction.atomic():
-        model = RLModel.objects.select_for_update().get(pk=model.pk)
-        if model.status != RLModel.Status.READY:
-            raise EvaluationRefused(
-                f"The model is {model.get_status_display().lower()}; "
-                "it can be evaluated once it is ready."
-            )
-        if selectors.model_checkpoint(model=model) is None:
-            raise EvaluationRefused("The model has no trained weights yet; train it first.")
-        evaluation = EvaluationJob.objects.create(model=model, **clean)
-        model.status = RLModel.Status.EVALUATING
-        model.save(update_fields=["status", "updated_at"])
+        evaluation = evaluation_reserve(model=model, purpose=RLModel.Status.EVALUATING, **clean)
         if enqueue:
             transaction.on_commit(lambda: tasks.evaluate.delay(evaluation.pk))
+    return evaluation
+
+
+def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJob:
+    """Within a transaction: a QUEUED evaluation of ``model`` with checked ``fields``, the model
+    marked ``purpose`` (EVALUATING, or SUBMITTING for a race) under a row lock, so that one model
+    drives one evaluation at a time. ``EvaluationRefused`` unless it is ready and has weights."""
+    model = RLModel.objects.select_for_update().get(pk=model.pk)
+    if model.status != RLModel.Status.READY:
+        raise EvaluationRefused(
+            f"The model {model.name} is {model.get_status_display().lower()}; "
+            "it can be evaluated or raced once it is ready."
+        )
+    if selectors.model_checkpoint(model=model) is None:
+        raise EvaluationRefused(
+            f"The model {model.name} has no trained weights yet; train it first."
+        )
+    evaluation = EvaluationJob.objects.create(model=model, **fields)
+    model.status = purpose
+    model.save(update_fields=["status", "updated_at"])
     return evaluation

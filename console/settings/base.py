@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import dj_database_url
+from celery.schedules import crontab
 
 from console.env import env
 
@@ -163,8 +164,19 @@ PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # 
 CELERY_TASK_ROUTES = {
     "training.train": {"queue": "training"},  # the trainer: a GPU machine, where there is one
     "training.rollout": {"queue": "simulation"},  # rollouts: any CPU machine
-    "training.evaluate": {"queue": "simulation"},  # evaluations and races: no racer code
+    "training.evaluate": {"queue": "simulation"},  # evaluations: no racer code
+    "racing.race": {"queue": "simulation"},  # a race submission is an evaluation
+    "racing.promote": {"queue": "simulation"},
 }
+# Celery beat (run inside the worker by `make run`; one `celery -A console beat` when scaled out).
+CELERY_BEAT_SCHEDULE = {
+    "promote-to-pro": {  # the top 10% of last month's Open time trials move up to Pro
+        "task": "racing.promote",
+        "schedule": crontab(minute=15, hour=0, day_of_month=1),
+    },
+}
+CELERY_BEAT_SCHEDULE_FILENAME = str(VAR_DIR / "celerybeat-schedule")
+CELERY_TIMEZONE = TIME_ZONE
 
 # Files: static assets are served by WhiteNoise; artifacts go through Django's storage API, to local
 # disk under var/media/ by default or to an S3 bucket (or an S3-compatible store) when one is named.
