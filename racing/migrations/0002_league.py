@@ -31,7 +31,7 @@ class Migration(migrations.Migration):
                 (
                     "status",
                     models.CharField(
-                        help_text="lap_complete, or time_up for a lap cut short.", max_length=20
+                        help_text="lap_complete, or time_up when cut short.", max_length=20
                     ),
                 ),
                 (
