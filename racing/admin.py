@@ -1,6 +1,16 @@
-from django.contrib import admin
+"""The league staff's tool: seasons, events, submissions, rankings and divisions in the admin.
 
-from racing.models import Event, Ranking, Season
+Members of the "Race staff" group (with staff status) hold every permission on these models and
+none on users; superusers manage everything.
+"""
+
+from django.contrib import admin, messages
+from django.db.models import QuerySet
+from django.http import HttpRequest
+
+from console.templatetags.pitlane import laptime
+from racing import services
+from racing.models import Event, Lap, Racer, Ranking, Season, Submission
 
 
 class EventInline(admin.TabularInline):
@@ -13,21 +23,145 @@ class EventInline(admin.TabularInline):
 @admin.register(Season)
 class SeasonAdmin(admin.ModelAdmin):
     list_display = ["name", "year", "starts_on", "ends_on"]
+    list_filter = ["year"]
+    search_fields = ["name"]
+    date_hierarchy = "starts_on"
     inlines = [EventInline]
 
 
 @admin.register(Event)
 class EventAdmin(admin.ModelAdmin):
-    list_display = ["name", "season", "track", "race_type", "division", "opens_at", "closes_at"]
-    list_filter = ["season", "division", "race_type", "track"]
-    search_fields = ["name", "slug"]
+    list_display = [
+        "name", "season", "track", "race_type", "division", "opens_at", "closes_at", "state",
+        "public",
+    ]  # fmt: skip
+    list_filter = ["season", "division", "race_type", "track", "public", "ranking_method"]
+    search_fields = ["name", "slug", "organiser__username"]
     prepopulated_fields = {"slug": ["name"]}
     date_hierarchy = "opens_at"
+    list_select_related = ["season", "track"]
+    raw_id_fields = ["organiser", "participants"]
+    readonly_fields = ["invite_token"]
+    actions = ["close_events", "recompute_rankings"]
+    fieldsets = [
+        (None, {"fields": ["season", "name", "slug", "division"]}),
+        ("Race", {"fields": ["track", "direction", "race_type", "boxes", "bots"]}),
+        ("When", {"fields": ["opens_at", "closes_at"]}),
+        ("Rules", {"fields": [
+            "ranking_method", "laps_required", "laps_to_drive", "off_track_penalty_s",
+            "crash_penalty_s", "max_off_tracks_per_lap", "submissions_per_racer",
+        ]}),
+        ("Community race", {"classes": ["collapse"], "fields": [
+            "public", "organiser", "invite_token", "participants",
+        ]}),
+    ]  # fmt: skip
+
+    @admin.display(description="state")
+    def state(self, event: Event) -> str:
+        return event.state.label
+
+    @admin.action(description="Close the selected events now")
+    def close_events(self, request: HttpRequest, queryset: QuerySet[Event]) -> None:
+        for event in queryset:
+            services.event_close(event=event)
+        self.message_user(request, f"Closed {len(queryset)} events.", messages.SUCCESS)
+
+    @admin.action(description="Recompute the selected events' rankings")
+    def recompute_rankings(self, request: HttpRequest, queryset: QuerySet[Event]) -> None:
+        for event in queryset:
+            ranked = services.event_rankings_recompute(event=event)
+            self.message_user(request, f"{event.name}: {ranked} racers ranked.", messages.SUCCESS)
+
+    def save_model(self, request, event: Event, form, change: bool) -> None:
+        if not event.public:
+            event.ensure_invite()
+        super().save_model(request, event, form, change)
+
+
+class LapInline(admin.TabularInline):
+    model = Lap
+    fields = readonly_fields = [
+        "number", "time_ms", "status", "counted", "off_tracks", "crashes", "resets", "penalty_ms",
+    ]  # fmt: skip
+    extra = 0
+    can_delete = False
+
+    def has_add_permission(self, request, obj=None) -> bool:
+        return False
+
+
+@admin.register(Submission)
+class SubmissionAdmin(admin.ModelAdmin):
+    list_display = [
+        "pk", "event", "racer", "model_name", "status", "score", "qualified", "disqualified",
+        "created_at",
+    ]  # fmt: skip
+    list_filter = ["event__season", "event", "status", "qualified", "disqualified"]
+    search_fields = ["racer__username", "model_name", "event__name"]
+    date_hierarchy = "created_at"
+    list_select_related = ["event", "racer"]
+    readonly_fields = [
+        "event", "racer", "model", "model_name", "evaluation", "status", "failure_reason",
+        "created_at", "finished_at", "score_ms", "qualified", "laps_completed", "off_tracks",
+        "video",
+    ]  # fmt: skip
+    fields = [*readonly_fields, "disqualified", "disqualification_reason"]
+    inlines = [LapInline]
+    actions = ["disqualify"]
+
+    @admin.display(description="score", ordering="score_ms")
+    def score(self, submission: Submission) -> str:
+        return laptime(submission.score_ms)
+
+    @admin.action(description="Disqualify the selected submissions (their rankings recompute)")
+    def disqualify(self, request: HttpRequest, queryset: QuerySet[Submission]) -> None:
+        for submission in queryset.select_related("event", "racer"):
+            services.submission_disqualify(
+                submission=submission, reason="Disqualified by the league staff."
+            )
+        self.message_user(request, f"Disqualified {len(queryset)} submissions.", messages.SUCCESS)
+
+    def save_model(self, request, submission: Submission, form, change: bool) -> None:
+        super().save_model(request, submission, form, change)
+        if "disqualified" in form.changed_data:
+            services.ranking_recompute(event=submission.event, racer=submission.racer)
+
+    def has_add_permission(self, request) -> bool:
+        return False  # submissions come from racers
 
 
 @admin.register(Ranking)
 class RankingAdmin(admin.ModelAdmin):
-    list_display = ["event", "racer", "model_name", "score_ms", "submitted_at"]
-    list_filter = ["event"]
+    list_display = ["event", "racer", "model_name", "time", "submitted_at"]
+    list_filter = ["event__season", "event"]
     search_fields = ["racer__username", "model_name"]
     list_select_related = ["event", "racer"]
+    readonly_fields = [
+        "event", "racer", "submission", "model_name", "score_ms", "submitted_at",
+        "laps_completed", "off_tracks",
+    ]  # fmt: skip
+
+    @admin.display(description="time", ordering="score_ms")
+    def time(self, ranking: Ranking) -> str:
+        return laptime(ranking.score_ms)
+
+    def has_add_permission(self, request) -> bool:
+        return False  # rankings come from scored submissions
+
+
+@admin.register(Racer)
+class RacerAdmin(admin.ModelAdmin):
+    list_display = ["user", "division", "division_set_by_staff", "promoted_at"]
+    list_filter = ["division", "division_set_by_staff"]
+    search_fields = ["user__username"]
+    list_select_related = ["user"]
+    readonly_fields = ["user", "promoted_at"]
+    fields = ["user", "division", "division_set_by_staff", "promoted_at"]
+
+    def save_model(self, request, racer: Racer, form, change: bool) -> None:
+        if "division" in form.changed_data:
+            racer.division_set_by_staff = True  # the monthly promotion leaves it alone now
+        super().save_model(request, racer, form, change)
+
+    def has_add_permission(self, request) -> bool:
+        return False  # every racer gets one on first use

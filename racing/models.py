@@ -166,10 +166,7 @@ class Event(models.Model):
                 {"race_type": self.race_type, "boxes": self.boxes, "bots": self.bots}
             )
         except configuration.Invalid as invalid:
-            errors.update({
-                "bots" if self.race_type == RaceType.HEAD_TO_BOT else "boxes": message
-                for message in invalid.errors.values()
-            })  # fmt: skip
+            errors["race_type"] = list(invalid.errors.values())
         else:
             self.boxes, self.bots = race["boxes"], race["bots"]
         if errors:

@@ -5,6 +5,19 @@ from racing import views
 app_name = "racing"
 urlpatterns = [
     path("races/", views.race_list, name="race-list"),
+    path("races/submit/", views.submission_create, name="submission-create"),
+    path("races/submissions/", views.submission_list, name="submission-list"),
+    path("races/submissions/<int:pk>/", views.submission_detail, name="submission-detail"),
+    path("races/submissions/<int:pk>/video", views.submission_video, name="submission-video"),
+    path("races/community/new/", views.community_race_create, name="community-race-create"),
+    path("races/community/<slug:slug>/", views.community_race_manage,
+         name="community-race-manage"),
+    path("races/community/<slug:slug>/close", views.community_race_close,
+         name="community-race-close"),
+    path("races/community/<slug:slug>/remove/<int:user_pk>", views.community_race_remove,
+         name="community-race-remove"),
+    path("races/invite/<str:token>/", views.event_join, name="event-join"),
     path("leaderboards/", views.leaderboard_list, name="leaderboard-list"),
     path("leaderboards/<slug:slug>/", views.leaderboard, name="leaderboard"),
-]
+    path("seasons/<int:pk>/", views.season_standings, name="season-standings"),
+]  # fmt: skip

@@ -1,12 +1,30 @@
-from django.http import HttpRequest, HttpResponse
-from django.shortcuts import get_object_or_404, render
+from django.contrib import messages
+from django.contrib.auth import get_user_model
+from django.contrib.auth.decorators import login_required
+from django.contrib.auth.views import redirect_to_login
+from django.core.exceptions import ValidationError
+from django.http import Http404, HttpRequest, HttpResponse
+from django.shortcuts import get_object_or_404, redirect, render
+from django.urls import reverse
+from django.views.decorators.http import require_POST
 
-from racing import selectors
-from racing.models import Event
+from racing import selectors, services
+from racing.forms import CommunityRaceForm, SubmissionForm
+from racing.models import Division, Event, Ranking, Season, Submission
+from training import artifacts
 
 
 def race_list(request: HttpRequest) -> HttpResponse:
-    return render(request, "racing/race_list.html", {"seasons": selectors.seasons_with_events()})
+    user = request.user
+    return render(
+        request,
+        "racing/race_list.html",
+        {
+            "seasons": selectors.seasons_with_events(),
+            "community": selectors.community_races_for(racer=user) if user.is_authenticated else [],
+            "open_events": selectors.events_open_to(racer=user) if user.is_authenticated else [],
+        },
+    )
 
 
 def leaderboard_list(request: HttpRequest) -> HttpResponse:
@@ -15,10 +33,212 @@ def leaderboard_list(request: HttpRequest) -> HttpResponse:
     )
 
 
-def leaderboard(request: HttpRequest, slug: str) -> HttpResponse:
+def _get_event_for_user(request: HttpRequest, slug: str) -> Event:
+    """The event, if this user may see it (public events: anyone); 404 otherwise."""
     event = get_object_or_404(Event.objects.select_related("season", "track"), slug=slug)
+    if not selectors.event_visible_to(event=event, user=request.user):
+        raise Http404("No such event.")
+    return event
+
+
+def leaderboard(request: HttpRequest, slug: str) -> HttpResponse:
+    event = _get_event_for_user(request, slug)
+    page = selectors.leaderboard_page(event=event, page=request.GET.get("page", 1))
+    mine = selectors.ranking_of(event=event, racer=request.user)
+    context = {
+        "event": event,
+        "page": page,
+        "rankings": page.object_list,
+        "mine": mine,
+        "mine_elsewhere": mine is not None and mine.page != page.number,
+    }
+    if request.GET.get("fragment") == "table":
+        return render(request, "racing/includes/leaderboard_table.html", context)
+    if request.user.is_authenticated:
+        context["can_submit"] = not selectors.submission_refusal(
+            racer=request.user, event=event, model=None
+        )
+    return render(request, "racing/leaderboard.html", context)
+
+
+def season_standings(request: HttpRequest, pk: int) -> HttpResponse:
+    season = get_object_or_404(Season, pk=pk)
+    division = request.GET.get("division", Division.OPEN)
+    if division not in Division.values:
+        division = Division.OPEN
+    standings, events = selectors.season_standings(season=season, division=division)
     return render(
         request,
-        "racing/leaderboard.html",
-        {"event": event, "rankings": selectors.leaderboard_for_event(event=event)},
+        "racing/season_standings.html",
+        {
+            "season": season,
+            "division": Division(division),
+            "divisions": Division,
+            "standings": standings,
+            "events": events,
+            "points": selectors.POINTS,
+        },
+    )
+
+
+# Submissions
+
+
+@login_required
+def submission_create(request: HttpRequest) -> HttpResponse:
+    initial = {"model": request.GET.get("model"), "event": None}
+    if slug := request.GET.get("event"):
+        initial["event"] = Event.objects.filter(slug=slug).values_list("pk", flat=True).first()
+    form = SubmissionForm(request.POST or None, racer=request.user, initial=initial)
+    if request.method == "POST" and form.is_valid():
+        try:
+            submission = services.submission_create(
+                racer=request.user,
+                event=form.cleaned_data["event"],
+                model=form.cleaned_data["model"],
+            )
+        except services.SubmissionRefused as refused:
+            form.add_error(None, str(refused))
+        else:
+            messages.success(
+                request, f"{submission.model_name} is on the grid for {submission.event.name}."
+            )
+            return redirect(submission)
+    return render(
+        request,
+        "racing/submission_create.html",
+        {"form": form, "has_events": form.fields["event"].queryset.exists(),
+         "has_models": form.fields["model"].queryset.exists()},
+    )  # fmt: skip
+
+
+@login_required
+def submission_list(request: HttpRequest) -> HttpResponse:
+    return render(
+        request,
+        "racing/submission_list.html",
+        {"submissions": selectors.submissions_for_racer(racer=request.user)[:200]},
+    )
+
+
+def _get_submission_for_user(request: HttpRequest, pk: int) -> Submission:
+    """The racer's own submission (any, for staff); 404 otherwise."""
+    submissions = Submission.objects.select_related("event", "event__track", "racer")
+    if request.user.is_staff:
+        return get_object_or_404(submissions, pk=pk)
+    return get_object_or_404(submissions, pk=pk, racer=request.user)
+
+
+@login_required
+def submission_detail(request: HttpRequest, pk: int) -> HttpResponse:
+    submission = _get_submission_for_user(request, pk)
+    return render(
+        request,
+        "racing/submission_detail.html",
+        {
+            "submission": submission,
+            "event": submission.event,
+            "laps": list(submission.laps.all()),
+            "ranking": selectors.ranking_of(event=submission.event, racer=submission.racer),
+        },
+    )
+
+
+def submission_video(request: HttpRequest, pk: int) -> HttpResponse:
+    """A race's video: for its racer and staff, and for everyone who may see the event once
+    the submission stands on its leaderboard."""
+    submission = get_object_or_404(Submission.objects.select_related("event"), pk=pk)
+    user = request.user
+    own = user.is_authenticated and (user.pk == submission.racer_id or user.is_staff)
+    on_board = (
+        selectors.event_visible_to(event=submission.event, user=user)
+        and Ranking.objects.filter(submission=submission).exists()
+    )
+    if not submission.video or not (own or on_board):
+        raise Http404("No such video.")
+    filename = f"{submission.event.slug}-{submission.model_name}-{submission.pk}.webm"
+    return artifacts.download(
+        submission.video, filename, attachment=False, content_type="video/webm"
+    )
+
+
+# Community races
+
+
+@login_required
+def community_race_create(request: HttpRequest) -> HttpResponse:
+    form = CommunityRaceForm(request.POST or None, organiser=request.user)
+    if request.method == "POST" and form.is_valid():
+        try:
+            event = services.community_race_create(
+                organiser=request.user, fields=form.fields_for_service()
+            )
+        except ValidationError as invalid:
+            form.add_error(None, invalid)
+        else:
+            messages.success(request, "Your race is set up: send its invitation link to racers.")
+            return redirect("racing:community-race-manage", slug=event.slug)
+    return render(request, "racing/community_race_create.html", {"form": form})
+
+
+def _get_organised_event(request: HttpRequest, slug: str) -> Event:
+    """A community race the user organises; 404 otherwise."""
+    return get_object_or_404(
+        Event.objects.select_related("track"), slug=slug, public=False, organiser=request.user
+    )
+
+
+@login_required
+def community_race_manage(request: HttpRequest, slug: str) -> HttpResponse:
+    event = _get_organised_event(request, slug)
+    invite = request.build_absolute_uri(reverse("racing:event-join", args=[event.invite_token]))
+    return render(
+        request,
+        "racing/community_race_manage.html",
+        {"event": event, "invite": invite, "participants": event.participants.order_by("username")},
+    )
+
+
+@login_required
+@require_POST
+def community_race_close(request: HttpRequest, slug: str) -> HttpResponse:
+    event = _get_organised_event(request, slug)
+    services.event_close(event=event)
+    messages.success(request, f"{event.name} is closed; its invitation no longer works.")
+    return redirect("racing:community-race-manage", slug=event.slug)
+
+
+@login_required
+@require_POST
+def community_race_remove(request: HttpRequest, slug: str, user_pk: int) -> HttpResponse:
+    event = _get_organised_event(request, slug)
+    racer = get_object_or_404(get_user_model(), pk=user_pk, joined_events=event)
+    try:
+        services.participant_remove(event=event, racer=racer)
+    except services.SubmissionRefused as refused:
+        messages.error(request, str(refused))
+    else:
+        messages.success(request, f"{racer.username} is out of {event.name}.")
+    return redirect("racing:community-race-manage", slug=event.slug)
+
+
+def event_join(request: HttpRequest, token: str) -> HttpResponse:
+    event = get_object_or_404(
+        Event.objects.select_related("track", "organiser"), public=False, invite_token=token
+    )
+    expired = event.state == Event.State.CLOSED
+    if request.method == "POST" and not expired:
+        if not request.user.is_authenticated:
+            return redirect_to_login(request.get_full_path())
+        services.event_join(event=event, racer=request.user)
+        messages.success(request, f"You are in {event.name}. Submit a model while it is open.")
+        return redirect(event)
+    joined = (
+        request.user.is_authenticated and event.participants.filter(pk=request.user.pk).exists()
+    )
+    return render(
+        request,
+        "racing/event_join.html",
+        {"event": event, "expired": expired, "joined": joined},
+        status=410 if expired else 200,
     )

@@ -1,0 +1,46 @@
+"""The live leaderboard: ``ws/events/<id>/`` relays the event's ``event_<id>`` group.
+
+Anyone who may see the event may listen (public events need no login). Messages are JSON:
+``leaderboard`` when the rankings changed, ``submission`` when a submission's status or score
+did (see ``racing.live``). The page refetches its table on either.
+"""
+
+from __future__ import annotations
+
+import json
+
+from channels.db import database_sync_to_async
+from channels.generic.websocket import AsyncWebsocketConsumer
+
+from racing import selectors
+from racing.live import event_group
+from racing.models import Event
+
+REFUSED = 4404
+
+
+class EventConsumer(AsyncWebsocketConsumer):
+    async def connect(self) -> None:
+        pk = self.scope["url_route"]["kwargs"]["pk"]
+        if not await database_sync_to_async(self.may_watch)(self.scope.get("user"), pk):
+            await self.close(code=REFUSED)
+            return
+        self.group = event_group(pk)
+        await self.channel_layer.group_add(self.group, self.channel_name)
+        await self.accept()
+
+    async def disconnect(self, code: int) -> None:
+        if hasattr(self, "group"):
+            await self.channel_layer.group_discard(self.group, self.channel_name)
+
+    async def event_update(self, event: dict) -> None:
+        await self.send(text_data=json.dumps(event["message"]))
+
+    @staticmethod
+    def may_watch(user, pk: int) -> bool:
+        event = Event.objects.filter(pk=pk).first()
+        if event is None:
+            return False
+        if user is None:
+            return event.public
+        return selectors.event_visible_to(event=event, user=user)
