@@ -59,6 +59,7 @@ def leaderboard_page(*, event: Event, page: int | str = 1) -> Page:
     first. An out-of-range page number gives the last page."""
     rankings = event.rankings.select_related("racer").order_by("score_ms", "submitted_at", "id")
     current = Paginator(rankings, LEADERBOARD_PAGE).get_page(page)
+    current.object_list = list(current.object_list)
     leader = current.object_list[0] if current.number == 1 and current.object_list else None
     best = leader.score_ms if leader else rankings.values_list("score_ms", flat=True).first()
     for offset, ranking in enumerate(current.object_list):

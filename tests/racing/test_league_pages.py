@@ -6,8 +6,9 @@ from django.urls import reverse
 from django.utils import timezone
 
 from console.templatetags.pitlane import gap, laptime
-from racing.models import Event, Ranking, Season
+from racing.models import Event, Season
 from racing.services import demo_season_load
+from tests.racing.factories import scored
 
 pytestmark = pytest.mark.django_db
 
@@ -48,10 +49,8 @@ def test_the_races_page_lists_the_seasons_events_with_their_state(client, tracks
 def ranked_event(tracks, alice, bob):
     event = demo_season_load().events.get(division="OPEN", opens_at__lte=timezone.now())
     now = timezone.now()
-    Ranking.objects.create(event=event, racer=alice, model_name="a1", score_ms=31_002,
-                           submitted_at=now)  # fmt: skip
-    Ranking.objects.create(event=event, racer=bob, model_name="b1", score_ms=29_450,
-                           submitted_at=now - timedelta(hours=1))  # fmt: skip
+    scored(event, alice, 31_002, 31_002, 31_002, model_name="a1", at=now)
+    scored(event, bob, 29_450, 29_450, 29_450, model_name="b1", at=now - timedelta(hours=1))
     return event
 
 

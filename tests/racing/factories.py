@@ -1,0 +1,55 @@
+"""Events, submissions and laps in the states the league tests need."""
+
+from __future__ import annotations
+
+from datetime import timedelta
+
+from django.utils import timezone
+
+from racing import services
+from racing.models import Division, Event, Season, Submission
+from training.models import EvaluationJob, EvaluationTrial, RaceType, Track
+
+DAY = timedelta(days=1)
+
+
+def season() -> Season:
+    today = timezone.localdate()
+    return Season.objects.get_or_create(
+        name="Test season",
+        defaults={"year": today.year, "starts_on": today - 400 * DAY, "ends_on": today + 400 * DAY},
+    )[0]
+
+
+def event(name: str = "Time trial", *, opens=-DAY, closes=DAY, **fields) -> Event:
+    """A public event (open now, by default) of the test season; ``opens``/``closes`` are
+    offsets from now."""
+    now = timezone.now()
+    fields = {
+        "season": season(), "name": name, "slug": name.lower().replace(" ", "-"),
+        "track": Track.objects.get(name="pitlane-oval"), "race_type": RaceType.TIME_TRIAL,
+        "division": Division.OPEN, "opens_at": now + opens, "closes_at": now + closes,
+        **fields,
+    }  # fmt: skip
+    event = Event(**fields)
+    event.full_clean()
+    event.save()
+    return event
+
+
+def scored(event: Event, racer, *times: int | None, model_name: str = "m", at=None) -> Submission:
+    """A submission scored from lap times in ms (None: a lap cut short by time)."""
+    submission = Submission.objects.create(event=event, racer=racer, model_name=model_name)
+    if at is not None:
+        Submission.objects.filter(pk=submission.pk).update(created_at=at)
+        submission.refresh_from_db()
+    trials = [
+        EvaluationTrial(number=number, time_ms=time or 5_000, progress=100 if time else 40,
+                        status="lap_complete" if time else "time_up")
+        for number, time in enumerate(times, start=1)
+    ]  # fmt: skip
+    return services.submission_score(submission=submission, trials=trials)
+
+
+def race_evaluation(model, event: Event) -> EvaluationJob:
+    return EvaluationJob.objects.create(model=model, **services.race_rules(event))

@@ -1,0 +1,187 @@
+"""Who may do what: race staff in the admin, racers in their own community races, and anyone
+reading the leaderboards."""
+
+import pytest
+from django.contrib.auth.models import Group, User
+from django.urls import reverse
+
+from racing.models import Event, Ranking, Submission
+from tests.conftest import PASSWORD
+from tests.racing.factories import DAY, event, scored
+from training.models import Track
+
+pytestmark = pytest.mark.usefixtures("tracks")
+
+
+@pytest.fixture
+def race_staff(db) -> User:
+    user = User.objects.create_user("rita", password=PASSWORD, is_staff=True)
+    user.groups.add(Group.objects.get(name="Race staff"))
+    return user
+
+
+@pytest.mark.django_db
+def test_anonymous_visitors_read_leaderboards_and_standings(client, alice):
+    trial = event()
+    scored(trial, alice, 10_000, 10_000, 10_000)
+    page = client.get(trial.get_absolute_url())
+    assert page.status_code == 200 and "0:10.000" in page.text and "Watch" in page.text
+    standings = client.get(reverse("racing:season-standings", args=[trial.season_id]))
+    assert standings.status_code == 200 and "alice" in standings.text
+    ranking = Ranking.objects.get()
+    video = client.get(reverse("racing:submission-video", args=[ranking.submission_id]))
+    assert video.status_code == 404  # this test's submission has no video file
+
+
+@pytest.mark.django_db
+def test_a_racer_cannot_change_events(client, alice):
+    client.force_login(alice)
+    response = client.get(reverse("admin:racing_event_add"))
+    assert response.status_code == 302 and "/login/" in response.url
+
+
+@pytest.mark.django_db
+def test_race_staff_manage_events_but_not_users(client, race_staff):
+    client.force_login(race_staff)
+    assert client.get(reverse("admin:racing_event_add")).status_code == 200
+    assert client.get(reverse("admin:racing_season_changelist")).status_code == 200
+    assert client.get(reverse("admin:auth_user_changelist")).status_code == 403
+
+
+@pytest.mark.django_db
+def test_staff_close_an_event_and_disqualify_from_the_admin(client, race_staff, alice, bob):
+    trial = event()
+    fast = scored(trial, alice, 9_000, 9_000, 9_000)
+    scored(trial, alice, 10_000, 10_000, 10_000)
+    client.force_login(race_staff)
+    response = client.post(
+        reverse("admin:racing_submission_changelist"),
+        {"action": "disqualify", "_selected_action": [fast.pk]},
+    )
+    assert response.status_code == 302
+    assert Ranking.objects.get(racer=alice).score_ms == 10_000
+    client.post(
+        reverse("admin:racing_event_changelist"),
+        {"action": "close_events", "_selected_action": [trial.pk]},
+    )
+    assert Event.objects.get(pk=trial.pk).state == Event.State.CLOSED
+    changelist = client.get(reverse("admin:racing_submission_change", args=[fast.pk]))
+    assert changelist.status_code == 200 and "Laps" in changelist.text
+
+
+@pytest.mark.django_db
+def test_a_staff_division_change_is_kept_from_the_monthly_promotion(client, race_staff, alice):
+    from racing.models import Racer
+
+    racer = Racer.of(alice)
+    client.force_login(race_staff)
+    response = client.post(
+        reverse("admin:racing_racer_change", args=[racer.pk]), {"division": "PRO"}
+    )
+    assert response.status_code == 302
+    racer.refresh_from_db()
+    assert racer.division == "PRO" and racer.division_set_by_staff
+
+
+# Community races
+
+
+@pytest.fixture
+def community_race(client, alice):
+    client.force_login(alice)
+    response = client.post(reverse("racing:community-race-create"), {
+        "name": "Friday night", "track": Track.objects.get(name="pitlane-oval").pk, "direction": "counterclockwise", "race_type": "TIME_TRIAL",
+        "opens_at": "2026-01-01T00:00", "closes_at": "2099-01-01T00:00",
+        "ranking_method": "BEST_LAP", "laps_required": 1, "laps_to_drive": 3,
+        "off_track_penalty_s": 1, "crash_penalty_s": 2, "submissions_per_racer": 5,
+    })  # fmt: skip
+    assert response.status_code == 302, response.context["form"].errors
+    client.logout()
+    return Event.objects.get(name="Friday night")
+
+
+@pytest.mark.django_db
+def test_the_race_form_keeps_what_was_typed_and_says_what_to_change(client, alice):
+    client.force_login(alice)
+    response = client.post(reverse("racing:community-race-create"), {
+        "name": "Backwards", "track": "", "race_type": "TIME_TRIAL", "ranking_method": "BEST_LAP",
+        "opens_at": "2026-02-01T00:00", "closes_at": "2026-01-01T00:00", "laps_required": 3,
+        "laps_to_drive": 2, "off_track_penalty_s": 1, "crash_penalty_s": 2,
+        "submissions_per_racer": 5,
+    })  # fmt: skip
+    assert response.status_code == 200
+    assert 'value="Backwards"' in response.text
+    errors = response.context["form"].errors
+    assert "track" in errors
+    assert errors["closes_at"] == ["An event closes after it opens."]
+    assert errors["laps_to_drive"] == ["Drive at least the 3 consecutive laps that qualify."]
+    assert not Event.objects.filter(name="Backwards").exists()
+
+
+@pytest.mark.django_db
+def test_a_private_race_is_entered_through_its_invitation(client, community_race, alice, bob):
+    assert not community_race.public and community_race.organiser == alice
+    assert client.get(community_race.get_absolute_url()).status_code == 404
+    client.force_login(bob)
+    assert client.get(community_race.get_absolute_url()).status_code == 404
+    invite = reverse("racing:event-join", args=[community_race.invite_token])
+    assert "Join the race" in client.get(invite).text
+    response = client.post(invite)
+    assert response.status_code == 302
+    assert client.get(community_race.get_absolute_url()).status_code == 200
+    assert community_race.participants.filter(pk=bob.pk).exists()
+    assert client.get(reverse("racing:event-join", args=["not-a-token"])).status_code == 404
+
+
+@pytest.mark.django_db
+def test_the_organiser_removes_a_racer_and_closes_the_race_early(
+    client, community_race, alice, bob
+):
+    community_race.participants.add(bob)
+    scored(community_race, bob, 10_000)
+    client.force_login(bob)
+    assert client.get(reverse("racing:community-race-manage", args=[community_race.slug])
+                      ).status_code == 404  # fmt: skip
+    client.force_login(alice)
+    manage = client.get(reverse("racing:community-race-manage", args=[community_race.slug]))
+    assert community_race.invite_token in manage.text
+    client.post(reverse("racing:community-race-remove", args=[community_race.slug, bob.pk]))
+    assert not community_race.participants.filter(pk=bob.pk).exists()
+    assert not Ranking.objects.filter(event=community_race).exists()
+    assert Submission.objects.filter(event=community_race, racer=bob).exists()  # history stays
+
+    client.post(reverse("racing:community-race-close", args=[community_race.slug]))
+    community_race.refresh_from_db()
+    assert community_race.state == Event.State.CLOSED
+    client.force_login(bob)
+    expired = client.get(reverse("racing:event-join", args=[community_race.invite_token]))
+    assert expired.status_code == 410 and "expired when the race closed" in expired.text
+    client.post(reverse("racing:event-join", args=[community_race.invite_token]))
+    assert not community_race.participants.filter(pk=bob.pk).exists()
+
+
+@pytest.mark.django_db
+def test_season_standings_give_points_by_place_per_division(client, alice, bob, stella):
+    first = event("First")
+    second = event("Second")
+    scored(first, alice, 9_000, 9_000, 9_000)
+    scored(first, bob, 10_000, 10_000, 10_000)
+    scored(second, bob, 9_000, 9_000, 9_000)
+    scored(second, alice, 10_000, 10_000, 10_000)
+    scored(second, stella, 11_000, 11_000, 11_000)
+    event("Pro one", division="PRO")
+    response = client.get(reverse("racing:season-standings", args=[first.season_id]))
+    rows = [(s.position, s.racer, s.points, s.finishes) for s in response.context["standings"]]
+    # 25 + 18 each: countback sorts them by name then (both have a first and a second place)
+    assert rows == [(1, "alice", 43, [1, 2]), (2, "bob", 43, [1, 2]), (3, "stella", 15, [3])]
+    pro = client.get(reverse("racing:season-standings", args=[first.season_id]) + "?division=PRO")
+    assert pro.context["standings"] == [] and "No points yet in the Pro division" in pro.text
+
+
+@pytest.mark.django_db
+def test_an_upcoming_event_can_be_closed_before_it_opens(alice):
+    from racing import services
+
+    later = event("Later", opens=DAY, closes=2 * DAY)
+    services.event_close(event=later)
+    assert later.state == Event.State.CLOSED
