@@ -31,6 +31,7 @@ format: $(VENV)/.test-installed
 
 bench: $(VENV)/.test-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
+	@scripts/ensure-system-package.sh postgresql sh -c 'command -v initdb || ls /usr/lib/postgresql/*/bin/initdb'
 	@for b in bench/bench_*.py; do m=$$(basename $$b .py); echo "== bench.$$m"; \
 		$(BIN)/python -m bench.$$m || exit 1; done
 
