@@ -38,7 +38,7 @@ def submission_create(*, racer: AbstractBaseUser, event: Event, model: RLModel) 
     evaluation under the event's rules is queued and the model is SUBMITTING until it ends. The
     racer's row is locked meanwhile, so two submissions at once cannot overrun the limit."""
     with transaction.atomic():
-        Racer.objects.select_for_update().filter(pk=Racer.of(racer).pk).first()
+        _lock(racer)
         reason = selectors.submission_refusal(racer=racer, event=event, model=model)
         if reason:
             raise SubmissionRefused(reason)
@@ -173,7 +173,7 @@ def ranking_offer(*, submission: Submission) -> bool:
     if submission.ranked_score is None:
         return False
     with transaction.atomic():
-        Racer.objects.select_for_update().filter(pk=Racer.of(submission.racer).pk).first()
+        _lock(submission.racer)
         ranking = Ranking.objects.filter(event=submission.event, racer=submission.racer).first()
         if ranking is not None and _order(ranking) <= (
             submission.score_ms,
@@ -183,6 +183,12 @@ def ranking_offer(*, submission: Submission) -> bool:
             return False
         _rank(submission, ranking)
     return True
+
+
+def _lock(racer: AbstractBaseUser) -> None:
+    """Within a transaction: hold the racer's league row until it ends (their submissions and
+    ranking change one transaction at a time)."""
+    Racer.objects.select_for_update().filter(pk=Racer.of(racer).pk).first()
 
 
 def _order(ranking: Ranking) -> tuple:
@@ -210,7 +216,7 @@ def ranking_recompute(*, event: Event, racer: AbstractBaseUser) -> Ranking | Non
     """The racer's ranking in ``event`` from scratch: their best qualified submission that is not
     disqualified, or no ranking at all."""
     with transaction.atomic():
-        Racer.objects.select_for_update().filter(pk=Racer.of(racer).pk).first()
+        _lock(racer)
         best = (
             Submission.objects.filter(event=event, racer=racer, qualified=True, disqualified=False)
             .order_by("score_ms", "created_at", "pk")
