@@ -199,6 +199,14 @@ def submissions_for_racer(*, racer: AbstractBaseUser) -> QuerySet[Submission]:
     return Submission.objects.filter(racer=racer).select_related("event", "event__track")
 
 
+def submissions_in_event(*, event: Event, racer: AbstractBaseUser) -> list[Submission]:
+    """The racer's own runs in the event, newest first: qualified or not, what the leaderboard
+    shows them beside the rankings (nothing for a visitor)."""
+    if not racer.is_authenticated:
+        return []
+    return list(submissions_for_racer(racer=racer).filter(event=event).order_by("-created_at"))
+
+
 def community_races_for(*, racer: AbstractBaseUser) -> QuerySet[Event]:
     """Community races the racer organises or joined, newest first."""
     return (

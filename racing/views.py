@@ -51,6 +51,7 @@ def leaderboard(request: HttpRequest, slug: str) -> HttpResponse:
         "rankings": page.object_list,
         "mine": mine,
         "mine_elsewhere": mine is not None and mine.page != page.number,
+        "my_submissions": selectors.submissions_in_event(event=event, racer=request.user),
     }
     if request.GET.get("fragment") == "table":
         return render(request, "racing/includes/leaderboard_table.html", context)

@@ -306,6 +306,10 @@ class Iteration(models.Model):
     def __str__(self) -> str:
         return f"{self.job}, iteration {self.number}"
 
+    @property
+    def best_lap_ms(self) -> int | None:
+        return None if self.best_lap_time is None else round(self.best_lap_time * 1000)
+
 
 class JobLogLine(models.Model):
     """The job's log, as the racer reads it on the model page."""

@@ -49,6 +49,7 @@ MIDDLEWARE = [
     "django.middleware.common.CommonMiddleware",
     "django.middleware.csrf.CsrfViewMiddleware",
     "django.contrib.auth.middleware.AuthenticationMiddleware",
+    "console.time_zones.TimeZoneMiddleware",
     "django.contrib.messages.middleware.MessageMiddleware",
     "django.middleware.clickjacking.XFrameOptionsMiddleware",
 ]
@@ -68,6 +69,7 @@ TEMPLATES = [
                 "django.contrib.auth.context_processors.auth",
                 "django.contrib.messages.context_processors.messages",
                 "console.context_processors.navigation",
+                "console.time_zones.time_zone",
             ],
         },
     },
@@ -117,7 +119,9 @@ CHANNEL_LAYERS = {
     "default": {
         "BACKEND": "channels_redis.core.RedisChannelLayer",
         "CONFIG": {
-            "hosts": [REDIS_URL],
+            # redis-py 8 times reads out after 5 s by default, as long as the layer's blocking
+            # BZPOPMIN waits: an idle websocket's consumer would die (channels_redis#422).
+            "hosts": [{"address": REDIS_URL, "socket_timeout": 30}],
             "prefix": "pitlane:asgi",
             # A viewer that falls behind loses old messages instead of growing a backlog.
             "capacity": 100,

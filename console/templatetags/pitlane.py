@@ -1,8 +1,28 @@
-"""Template filters used across the site."""
+"""Template tags and filters used across the site."""
+
+from datetime import datetime
 
 from django import template
+from django.utils import dateformat, timezone
+from django.utils.html import format_html
 
 register = template.Library()
+
+# How a moment is written; static/console/time_zone.js writes the same in the browser's zone.
+WHEN_FORMATS = {"datetime": "j M Y, H:i", "time": "H:i:s"}
+
+
+@register.simple_tag
+def when(moment: datetime | None, style: str = "datetime") -> str:
+    """A moment in the racer's time zone (see console.time_zones), as a ``<time>`` element the
+    browser can relabel: ``{% when job.created_at %}`` or ``{% when line.at "time" %}``."""
+    if moment is None:
+        return "—"
+    local = timezone.localtime(moment)
+    return format_html(
+        '<time datetime="{}" data-when="{}">{}</time>',
+        moment.isoformat(), style, dateformat.format(local, WHEN_FORMATS[style]),
+    )  # fmt: skip
 
 
 @register.filter

@@ -11,7 +11,8 @@ function connect() {
   socket.addEventListener("open", () => { retry = 1000; });
   socket.addEventListener("message", (message) => {
     const update = JSON.parse(message.data);
-    if (update.type === "leaderboard" || (update.type === "submission" && update.ranked)) {
+    const own = root.querySelector(`[data-my-submission="${update.submission}"]`);
+    if (update.type === "leaderboard" || (update.type === "submission" && (update.ranked || own))) {
       refresh(update);
     }
   });

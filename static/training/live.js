@@ -145,8 +145,10 @@ function setStatus(message) {
   const badge = find("model-status");
   if (badge && message.model_status_display) badge.textContent = message.model_status_display;
   for (const element of document.querySelectorAll("[data-live-when-active]")) element.hidden = !message.active;
-  for (const element of document.querySelectorAll("[data-live-when-ready]")) {
-    element.hidden = message.model_status !== "READY";
+  if (message.model_status) {
+    for (const element of document.querySelectorAll("[data-live-when-model]")) {
+      element.hidden = !element.dataset.liveWhenModel.split(" ").includes(message.model_status);
+    }
   }
   const progress = find("progress");
   if (progress && message.iterations !== undefined) {
@@ -188,7 +190,7 @@ function addIteration(row) {
   const cells = [
     row.number, row.reward.toFixed(2), `${row.completion.toFixed(1)}%`,
     row.evaluation_completion === null ? "—" : `${row.evaluation_completion.toFixed(1)}%`,
-    row.best_lap_time === null ? "—" : row.best_lap_time.toFixed(3),
+    laptime(row.best_lap_time === null ? null : row.best_lap_time * 1000),
     row.episodes, row.steps,
   ];
   let line = body.querySelector(`tr[data-number="${row.number}"]`);

@@ -1,0 +1,48 @@
+"""Dates in the racer's time zone.
+
+The browser names its IANA zone in a cookie (``static/console/time_zone.js`` sets it on every
+page); each request then renders its dates in that zone. A page written before the cookie
+existed (a racer's very first page) is relabelled in place by the same script, so no date is
+ever shown in the server's zone to a racer who lives in another.
+"""
+
+from __future__ import annotations
+
+import functools
+import zoneinfo
+from collections.abc import Callable
+
+from django.http import HttpRequest, HttpResponse
+from django.utils import timezone
+
+COOKIE = "pitlane_tz"
+
+
+@functools.cache
+def _known() -> frozenset[str]:
+    return frozenset(zoneinfo.available_timezones())
+
+
+def zone_named(name: str | None) -> zoneinfo.ZoneInfo | None:
+    """The zone a cookie names, if it is a real IANA zone (anything else is ignored)."""
+    if not name or len(name) > 64 or name not in _known():
+        return None
+    return zoneinfo.ZoneInfo(name)
+
+
+class TimeZoneMiddleware:
+    def __init__(self, get_response: Callable[[HttpRequest], HttpResponse]) -> None:
+        self.get_response = get_response
+
+    def __call__(self, request: HttpRequest) -> HttpResponse:
+        zone = zone_named(request.COOKIES.get(COOKIE))
+        if zone is None:
+            timezone.deactivate()
+        else:
+            timezone.activate(zone)
+        return self.get_response(request)
+
+
+def time_zone(request: HttpRequest) -> dict:
+    """Context: the zone this page's dates are written in, for the footer."""
+    return {"time_zone_name": timezone.get_current_timezone_name()}
