@@ -77,4 +77,3 @@ async def test_a_websocket_from_the_site_itself_reaches_the_consumer():
     connected, code = await communicator.connect()
     assert not connected
     assert code == 4403  # refused by the consumer (anonymous), not by the origin check
-
