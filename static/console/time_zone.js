@@ -21,11 +21,12 @@ function label(date, style) {
     day: "numeric", month: "numeric", year: "numeric",
     hour: "2-digit", minute: "2-digit", second: "2-digit", hourCycle: "h23",
   });
-  return style === "time" ? `${p.hour}:${p.minute}:${p.second}` : `${p.day} ${MONTHS[p.month - 1]} ${p.year}, ${p.hour}:${p.minute}`;
+  return style === "time" ? `${p.hour}:${p.minute}:${p.second}` : `${Number(p.day)} ${MONTHS[p.month - 1]} ${p.year}, ${p.hour}:${p.minute}`;
 }
 
-if (zone && (!sent || decodeURIComponent(sent.split("=")[1]) !== zone)) {
-  document.cookie = `${COOKIE}=${encodeURIComponent(zone)}; path=/; max-age=31536000; samesite=lax`;
+// IANA names (Area/City, letters, digits, _ + -) are cookie-safe as they are.
+if (zone && (!sent || sent.split("=")[1] !== zone)) {
+  document.cookie = `${COOKIE}=${zone}; path=/; max-age=31536000; samesite=lax`;
   for (const element of document.querySelectorAll("time[data-when]")) {
     element.textContent = label(new Date(element.dateTime), element.dataset.when);
   }

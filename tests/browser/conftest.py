@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 import pytest
 from playwright.sync_api import Browser, Page, sync_playwright
@@ -14,6 +16,8 @@ from tests.services import ROOT
 # Playwright's sync API runs an event loop in this thread; the ORM calls the tests make in between
 # (creating racers, reading what a page saved) are still plain synchronous calls.
 os.environ.setdefault("DJANGO_ALLOW_ASYNC_UNSAFE", "true")
+
+T = TypeVar("T")
 
 ARTIFACTS = ROOT / "test-artifacts" / "screenshots"
 CHROMIUM_FLAGS = [
@@ -51,3 +55,10 @@ def page(browser, daphne_server, request) -> Iterator[Page]:
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=ARTIFACTS / f"{request.node.name}.png", full_page=True)
     context.close()
+
+
+def off_the_loop(function: Callable[..., T], *args, **kwargs) -> T:
+    """Run ``function`` in a thread of its own: code that sends to the channel layer (scoring a
+    race announces it) may not run in the thread where Playwright's event loop runs."""
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        return pool.submit(function, *args, **kwargs).result()

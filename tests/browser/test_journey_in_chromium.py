@@ -149,7 +149,7 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     submission = Submission.objects.get(event=race)
     assert submission.status == Submission.Status.COMPLETED
     album.shoot("submission")
-    page.get_by_role("link", name="Leaderboard").click()
+    page.get_by_role("link", name="Leaderboard", exact=True).click()
     mine = page.locator("[data-my-submissions]")
     expect(mine).to_contain_text("first-laps")
     expect(mine).to_contain_text(f"{submission.laps_completed} of 1 lap")
@@ -174,8 +174,10 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     page.get_by_role("button", name="Create model and start training").click()
     expect(page.get_by_role("heading", name="first-laps-clone")).to_be_visible()
     album.shoot("clone")
+    page.get_by_role("button", name="Stop training").click()  # a training model is not deleted
+    expect(page.locator("[data-live-model-status]")).to_have_text("Ready", timeout=60_000)
     page.get_by_role("link", name="Delete").click()
-    page.get_by_role("button", name=re.compile("Delete")).click()
-    expect(page.get_by_text("first-laps-clone is deleted")).to_be_visible()
+    page.get_by_role("button", name="Delete first-laps-clone").click()
+    expect(page.get_by_text("Deleted first-laps-clone and all its files.")).to_be_visible()
     album.shoot("models")
     assert list(RLModel.objects.values_list("name", flat=True)) == ["first-laps"]

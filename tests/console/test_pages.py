@@ -1,8 +1,15 @@
 import re
+from datetime import datetime
+from pathlib import Path
+from zoneinfo import ZoneInfo
 
 import pytest
+from django.conf import settings
 from django.test import Client
 from django.urls import reverse
+
+from tests.training.factories import ready_model
+from training.models import RLModel
 
 pytestmark = pytest.mark.django_db
 
@@ -69,3 +76,39 @@ def test_an_expired_form_gets_a_readable_403(alice):
     response = client.post(reverse("login"), {"username": "alice", "password": "x"})
     assert response.status_code == 403
     assert "That form has expired" in response.text
+
+
+@pytest.mark.parametrize(
+    ("cookie", "shown", "zone"),
+    [
+        ("Asia/Tokyo", "2 Mar 2026, 08:30", "Asia/Tokyo"),
+        ("America/Vancouver", "1 Mar 2026, 15:30", "America/Vancouver"),
+        ("Mars/Olympus_Mons", "1 Mar 2026, 23:30", "UTC"),  # not a zone: the server's
+        ("../../etc/passwd", "1 Mar 2026, 23:30", "UTC"),
+    ],
+)
+def test_dates_are_written_in_the_zone_the_browser_names(
+    client, alice, tracks, cookie, shown, zone
+):
+    model = ready_model(alice)
+    RLModel.objects.filter(pk=model.pk).update(
+        created_at=datetime(2026, 3, 1, 23, 30, tzinfo=ZoneInfo("UTC"))
+    )
+    client.force_login(alice)
+    client.cookies["pitlane_tz"] = cookie
+    page = client.get(reverse("training:model-list")).text
+    assert f'<time datetime="2026-03-01T23:30:00+00:00" data-when="datetime">{shown}</time>' in page
+    assert f"times in <span data-time-zone>{zone}</span>" in page
+
+
+def test_no_template_comment_spans_lines():
+    """``{# #}`` ends at the line's end: one that goes on shows the racer its source."""
+    roots = [Path(settings.BASE_DIR) / "templates", *Path(settings.BASE_DIR).glob("*/templates")]
+    broken = [
+        f"{path}:{number}"
+        for root in roots
+        for path in root.rglob("*.html")
+        for number, line in enumerate(path.read_text().splitlines(), start=1)
+        if "{#" in line and "#}" not in line.split("{#", 1)[1]
+    ]
+    assert broken == []
