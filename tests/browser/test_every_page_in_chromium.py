@@ -23,7 +23,7 @@ from training.models import Vehicle
 pytestmark = pytest.mark.django_db(transaction=True)
 
 SCREENS = {"laptop": {"width": 1280, "height": 800}, "phone": {"width": 390, "height": 844}}
-PUBLIC = ["/", "/accounts/login/", "/accounts/signup/", "/races/", "/leaderboards/", "/no-such-page/"]
+PUBLIC = ["/", "/accounts/login/", "/accounts/signup/", "/races/", "/leaderboards/", "/nothing/"]
 
 
 def racer_pages(alice) -> list[str]:
@@ -70,8 +70,8 @@ def test_a_racer_logs_in_and_builds_a_vehicle_with_the_keyboard_alone(page: Page
         for _ in range(30):
             page.keyboard.press("Tab")
             if page.evaluate("() => document.activeElement.name") == name:
-                outline = page.evaluate("() => getComputedStyle(document.activeElement).outlineStyle")
-                assert outline != "none", f"{name} shows no focus"
+                focused = "() => getComputedStyle(document.activeElement).outlineStyle"
+                assert page.evaluate(focused) != "none", f"{name} shows no focus"
                 return
         raise AssertionError(f"Tab never reached {name}")
 
@@ -96,9 +96,9 @@ def test_a_racer_logs_in_and_builds_a_vehicle_with_the_keyboard_alone(page: Page
     assert (vehicle.get_shell_colour_display(), vehicle.camera) == ("Red", "STEREO_CAMERAS")
 
 
-CUSTOM = '''def reward_function(params):
+CUSTOM = """def reward_function(params):
     return 1.0 if params["all_wheels_on_track"] else 1e-3
-'''
+"""
 
 
 def test_a_model_form_with_a_mistake_keeps_everything_the_racer_chose(page: Page, alice, tracks):
@@ -145,7 +145,7 @@ def test_dates_are_shown_in_the_racers_own_time_zone(tokyo_page: Page, alice, tr
     off_the_loop(scored, trial, alice, 10_000, 10_000, 10_000, at=moment)
     # The first page a browser sees is relabelled in place; every page after it is written in
     # the zone the browser named.
-    for visit in ("first", "second"):
+    for _visit in ("first", "second"):
         tokyo_page.goto(trial.get_absolute_url())
         expect(tokyo_page.locator("td time")).to_have_text("2 Mar 2026, 08:30")
         expect(tokyo_page.locator("[data-time-zone]")).to_have_text("Asia/Tokyo")

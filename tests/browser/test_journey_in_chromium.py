@@ -13,6 +13,7 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from racing.models import Submission
+from tests.browser.checks import page_problems
 from tests.browser.conftest import ARTIFACTS
 from tests.browser.test_live_training_in_chromium import FRAME_BYTES
 from tests.conftest import PASSWORD
@@ -33,16 +34,18 @@ FIXED = TYPO.replace("    else\n", "    else:\n")
 
 
 class Album:
-    """Numbered full-page screenshots of the pages the journey passes through."""
+    """Numbered full-page screenshots of the pages the journey passes through, each checked for
+    contrast and width as it is taken."""
 
     def __init__(self, page: Page) -> None:
-        self.page, self.count = page, 0
+        self.page, self.count, self.problems = page, 0, []
         SCREENSHOTS.mkdir(parents=True, exist_ok=True)
         for old in SCREENSHOTS.glob("*.png"):
             old.unlink()
 
     def shoot(self, name: str) -> None:
         self.count += 1
+        self.problems += page_problems(self.page)
         self.page.screenshot(path=SCREENSHOTS / f"{self.count:02d}-{name}.png", full_page=True)
 
 
@@ -181,3 +184,4 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     expect(page.get_by_text("Deleted first-laps-clone and all its files.")).to_be_visible()
     album.shoot("models")
     assert list(RLModel.objects.values_list("name", flat=True)) == ["first-laps"]
+    assert album.problems == []
