@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
-from django.db.models import QuerySet, Sum
+from django.db.models import Prefetch, QuerySet, Sum
 from django.utils import timezone
 
 from training import artifacts, jobs
@@ -24,6 +24,22 @@ from training.models import (
 
 def models_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:
     return RLModel.objects.filter(owner=racer).select_related("track")
+
+
+def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
+    """The racer's models, each with ``training``: its latest job (or None) and, on that job,
+    ``queue_position`` (None unless it waits): two queries, and one per waiting job."""
+    newest_first = TrainingJob.objects.order_by("-created_at")
+    models = list(
+        models_for_racer(racer=racer).prefetch_related(
+            Prefetch("jobs", queryset=newest_first, to_attr="jobs_newest_first")
+        )
+    )
+    for model in models:
+        model.training = model.jobs_newest_first[0] if model.jobs_newest_first else None
+        if model.training is not None:
+            model.training.queue_position = jobs.queue_position(model.training)
+    return models
 
 
 def tracks_available() -> QuerySet[Track]:

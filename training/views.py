@@ -41,7 +41,7 @@ def model_list(request: HttpRequest) -> HttpResponse:
         request,
         "training/model_list.html",
         {
-            "models": selectors.models_for_racer(racer=request.user),
+            "models": selectors.models_with_training(racer=request.user),
             "tracks": selectors.tracks_available(),
         },
     )

@@ -37,6 +37,13 @@ def laptime(milliseconds: int | float | None) -> str:
 
 
 @register.filter
+def clock(seconds: int | float | None) -> str:
+    """A duration in seconds as M:SS, as the training clock shows it."""
+    whole = max(0, round(float(seconds or 0)))
+    return f"{whole // 60}:{whole % 60:02d}"
+
+
+@register.filter
 def gap(milliseconds: int | float | None) -> str:
     """The gap to first as +S.mmm (or +M:SS.mmm past a minute); first place shows a dash."""
     if not milliseconds:

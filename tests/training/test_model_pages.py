@@ -1,4 +1,5 @@
 import json
+import re
 
 import pytest
 from django.urls import reverse
@@ -50,6 +51,30 @@ def test_a_racer_creates_a_model_and_its_training_is_queued(client, alice, track
     page = client.get(response["Location"])
     assert "number 1 in the queue" in page.text
     assert "Stop training" in page.text
+
+
+def test_the_model_list_shows_each_models_training_progress(
+    client, alice, bob, tracks, django_assert_max_num_queries
+):
+    ahead = model_create(owner=bob, settings=form_data(name="ahead"))
+    model_create(owner=alice, settings=form_data(name="waiting"))
+    running = model_create(owner=alice, settings=form_data(name="running"))
+    done = model_create(owner=alice, settings=form_data(name="done", max_minutes=10))
+    TrainingJob.objects.filter(model=running).update(
+        status=TrainingJob.Status.IN_PROGRESS, training_seconds=75.4, iterations=2
+    )
+    TrainingJob.objects.filter(model=done).update(
+        status=TrainingJob.Status.COMPLETED, training_seconds=600, iterations=12
+    )
+    assert ahead.jobs.get().status == TrainingJob.Status.QUEUED
+    client.force_login(alice)
+    with django_assert_max_num_queries(8):  # session, racer, models, jobs, one waiting job
+        page = client.get(reverse("training:model-list")).text
+    rows = {name: re.search(rf'>{name}</a>.*?</tr>', page, re.S).group(0)
+            for name in ("waiting", "running", "done")}  # fmt: skip
+    assert "Number 2 in the queue" in rows["waiting"]  # behind bob's
+    assert "1:15 used of 60 min, 2 iterations" in rows["running"]
+    assert "Completed after 10:00 of 10 min, 12 iterations" in rows["done"]
 
 
 def test_sac_with_discrete_actions_is_refused_and_the_form_keeps_what_was_typed(
