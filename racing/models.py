@@ -190,6 +190,13 @@ class Event(models.Model):
     def is_open(self) -> bool:
         return self.state == self.State.OPEN
 
+    @property
+    def ranking_rule(self) -> str:
+        """How runs are ranked, in words, with N filled in: "average of the first 3 consecutive
+        laps"."""
+        rule = self.get_ranking_method_display().replace(" N ", f" {self.laps_required} ")
+        return rule[0].lower() + rule[1:]
+
 
 class Submission(models.Model):
     """A racer's model entered in an event: an evaluation under the event's rules, then its laps

@@ -17,13 +17,18 @@ def log_in(page: Page, username: str, password: str) -> None:
     page.get_by_role("button", name="Log in").click()
 
 
-def test_a_new_racer_signs_up_logs_out_and_logs_back_in(page: Page):
-    page.goto("/")
+def sign_up(page: Page, username: str) -> None:
+    """From the home page, as a visitor finds it."""
     page.get_by_role("link", name="Create your racer account").click()
-    page.get_by_label("Racer name").fill("dana")
+    page.get_by_label("Racer name").fill(username)
     page.get_by_label("Password", exact=True).fill(PASSWORD)
     page.get_by_label("Password confirmation").fill(PASSWORD)
     page.get_by_role("button", name="Sign up").click()
+
+
+def test_a_new_racer_signs_up_logs_out_and_logs_back_in(page: Page):
+    page.goto("/")
+    sign_up(page, "dana")
 
     expect(page.get_by_role("heading", name="Welcome back, dana")).to_be_visible()
     expect(page.get_by_text("Welcome to Pitlane, dana!")).to_be_visible()

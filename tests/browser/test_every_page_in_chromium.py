@@ -49,6 +49,8 @@ def test_every_page_reads_well_on_a_laptop_and_a_phone(page: Page, alice, tracks
         page.set_viewport_size(size)
         folder = ARTIFACTS.parent / screen
         folder.mkdir(parents=True, exist_ok=True)
+        for old in folder.glob("*.png"):
+            old.unlink()
         page.context.clear_cookies()
         for path in PUBLIC:
             page.goto(path)
