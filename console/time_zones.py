@@ -11,11 +11,14 @@ from __future__ import annotations
 import functools
 import zoneinfo
 from collections.abc import Callable
+from datetime import datetime
 
 from django.http import HttpRequest, HttpResponse
-from django.utils import timezone
+from django.utils import dateformat, timezone
 
 COOKIE = "pitlane_tz"
+# How a moment is written; static/console/time_zone.js writes the same in the browser's zone.
+FORMATS = {"datetime": "j M Y, H:i", "time": "H:i:s"}
 
 
 @functools.cache
@@ -41,6 +44,11 @@ class TimeZoneMiddleware:
         else:
             timezone.activate(zone)
         return self.get_response(request)
+
+
+def local_text(moment: datetime, style: str = "datetime") -> str:
+    """``moment`` as the racer reads it: in the zone this request is in, in a ``FORMATS`` style."""
+    return dateformat.format(timezone.localtime(moment), FORMATS[style])
 
 
 def time_zone(request: HttpRequest) -> dict:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from django import forms
 from django.core.exceptions import ValidationError
 
+from console.time_zones import local_text
 from racing import selectors
 from racing.models import Event, RaceType, RankingMethod
 from training.models import RLModel
@@ -46,7 +47,7 @@ class SubmissionForm(forms.Form):
 
 def _event_label(event: Event) -> str:
     rule = f"{event.get_race_type_display().lower()} on {event.track}"
-    return f"{event.name} ({rule}, closes {event.closes_at:%d %b %H:%M})"
+    return f"{event.name} ({rule}, closes {local_text(event.closes_at)})"
 
 
 class CommunityRaceForm(forms.ModelForm):

@@ -8,8 +8,8 @@ from django.contrib.auth.models import AbstractBaseUser
 from django.core.paginator import Page, Paginator
 from django.db.models import Count, Min, Prefetch, Q, QuerySet
 from django.utils import timezone
-from django.utils.formats import date_format
 
+from console.time_zones import local_text
 from racing.models import Division, Event, Racer, Ranking, Season, Submission
 from training.models import RLModel
 
@@ -138,8 +138,7 @@ def submission_refusal(
         return "You can submit only your own models."
     state = event.state
     if state == Event.State.UPCOMING:
-        when = date_format(timezone.localtime(event.opens_at), "j M Y, H:i")
-        return f"{event.name} opens on {when}; submit then."
+        return f"{event.name} opens on {local_text(event.opens_at)}; submit then."
     if state == Event.State.CLOSED:
         return f"{event.name} has closed; it takes no more submissions."
     if not event.public:

@@ -3,13 +3,11 @@
 from datetime import datetime
 
 from django import template
-from django.utils import dateformat, timezone
 from django.utils.html import format_html
 
-register = template.Library()
+from console.time_zones import local_text
 
-# How a moment is written; static/console/time_zone.js writes the same in the browser's zone.
-WHEN_FORMATS = {"datetime": "j M Y, H:i", "time": "H:i:s"}
+register = template.Library()
 
 
 @register.simple_tag
@@ -18,10 +16,9 @@ def when(moment: datetime | None, style: str = "datetime") -> str:
     browser can relabel: ``{% when job.created_at %}`` or ``{% when line.at "time" %}``."""
     if moment is None:
         return "—"
-    local = timezone.localtime(moment)
     return format_html(
         '<time datetime="{}" data-when="{}">{}</time>',
-        moment.isoformat(), style, dateformat.format(local, WHEN_FORMATS[style]),
+        moment.isoformat(), style, local_text(moment, style),
     )  # fmt: skip
 
 

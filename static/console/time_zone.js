@@ -13,7 +13,7 @@ function parts(date, options) {
   return found;
 }
 
-// Django's "j M Y, H:i" and "H:i:s" (Intl's own short months differ: "Sept").
+// console.time_zones.FORMATS: Django's "j M Y, H:i" and "H:i:s" (Intl's own short months differ: "Sept").
 const MONTHS = ["Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec"];
 
 function label(date, style) {

@@ -1,4 +1,5 @@
 from datetime import date, timedelta
+from zoneinfo import ZoneInfo
 
 import pytest
 from django.core.management import call_command
@@ -6,9 +7,10 @@ from django.urls import reverse
 from django.utils import timezone
 
 from console.templatetags.pitlane import gap, laptime
+from racing.forms import SubmissionForm
 from racing.models import Event, Season
 from racing.services import demo_season_load
-from tests.racing.factories import scored
+from tests.racing.factories import event, scored
 
 pytestmark = pytest.mark.django_db
 
@@ -89,3 +91,11 @@ def test_times_show_as_minutes_seconds_and_milliseconds(ms, shown):
 
 def test_gaps_show_as_seconds_and_first_place_as_a_dash():
     assert (gap(0), gap(1552), gap(75_000)) == ("—", "+1.552", "+1:15.000")
+
+
+def test_the_submit_form_names_when_events_close_in_the_racers_time_zone(alice, tracks):
+    trial = event("Late trial")
+    label = SubmissionForm(racer=alice).fields["event"].label_from_instance
+    with timezone.override(ZoneInfo("Asia/Tokyo")):
+        tokyo = timezone.localtime(trial.closes_at)
+        assert label(trial).endswith(f"closes {tokyo:%-d %b %Y, %H:%M})")
