@@ -277,6 +277,10 @@ class Lap(models.Model):
         return scoring.Lap(self.time_ms, self.counted)
 
 
+# Places on a leaderboard: the lower score, then the earlier submission, then the older row.
+RANKING_ORDER = ("score_ms", "submitted_at", "id")
+
+
 class Ranking(models.Model):
     """A racer's best qualifying score in one event (lower is better)."""
 
@@ -292,11 +296,11 @@ class Ranking(models.Model):
     off_tracks = models.PositiveIntegerField(default=0)
 
     class Meta:
-        ordering = ["event", "score_ms", "submitted_at", "id"]
+        ordering = ["event", *RANKING_ORDER]
         constraints = [
             models.UniqueConstraint(fields=["event", "racer"], name="one_ranking_per_racer")
         ]
-        indexes = [models.Index(fields=["event", "score_ms", "submitted_at", "id"])]
+        indexes = [models.Index(fields=["event", *RANKING_ORDER])]
 
     def __str__(self) -> str:
         return f"{self.racer} in {self.event}"

@@ -10,7 +10,15 @@ from django.db.models import Count, Min, Prefetch, Q, QuerySet
 from django.utils import timezone
 
 from console.time_zones import local_text
-from racing.models import Division, Event, Racer, Ranking, Season, Submission
+from racing.models import (
+    RANKING_ORDER,
+    Division,
+    Event,
+    Racer,
+    Ranking,
+    Season,
+    Submission,
+)
 from training.models import RLModel
 
 LEADERBOARD_PAGE = 100  # rankings per page
@@ -57,7 +65,7 @@ def event_visible_to(*, event: Event, user: AbstractBaseUser) -> bool:
 def leaderboard_page(*, event: Event, page: int | str = 1) -> Page:
     """One page of the event's rankings in order, each with its ``position`` and ``gap_ms`` to
     first. An out-of-range page number gives the last page."""
-    rankings = event.rankings.select_related("racer").order_by("score_ms", "submitted_at", "id")
+    rankings = event.rankings.select_related("racer").order_by(*RANKING_ORDER)
     current = Paginator(rankings, LEADERBOARD_PAGE).get_page(page)
     current.object_list = list(current.object_list)
     leader = current.object_list[0] if current.number == 1 and current.object_list else None
@@ -112,7 +120,7 @@ def season_standings(*, season: Season, division: str) -> tuple[list[Standing], 
     )
     standings: dict[str, Standing] = {}
     for event in events:
-        top = event.rankings.select_related("racer").order_by("score_ms", "submitted_at", "id")
+        top = event.rankings.select_related("racer").order_by(*RANKING_ORDER)
         for place, ranking in enumerate(top[: len(POINTS)], start=1):
             standing = standings.setdefault(
                 ranking.racer.username, Standing(ranking.racer.username)

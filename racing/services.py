@@ -16,7 +16,17 @@ from django.utils.crypto import get_random_string
 from django.utils.text import slugify
 
 from racing import live, scoring, selectors, tasks
-from racing.models import Division, Event, Lap, Racer, RaceType, Ranking, Season, Submission
+from racing.models import (
+    RANKING_ORDER,
+    Division,
+    Event,
+    Lap,
+    Racer,
+    RaceType,
+    Ranking,
+    Season,
+    Submission,
+)
 from training import services as training_services
 from training.models import EvaluationJob, EvaluationTrial, RLModel, Track
 
@@ -321,9 +331,7 @@ def divisions_promote(*, today: date | None = None) -> list[Racer]:
     winners: set[int] = set()
     for event in events:
         ranked = event.rankings.count()
-        top = event.rankings.order_by("score_ms", "submitted_at", "id")[
-            : math.ceil(ranked * PROMOTED_SHARE)
-        ]
+        top = event.rankings.order_by(*RANKING_ORDER)[: math.ceil(ranked * PROMOTED_SHARE)]
         winners.update(top.values_list("racer_id", flat=True))
     promoted = []
     for user_id in sorted(winners):

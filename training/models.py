@@ -96,6 +96,8 @@ class RLModel(models.Model):
         IMPORTING = "IMPORTING", "Importing"
         DELETING = "DELETING", "Deleting"
 
+    DELETABLE = (Status.READY, Status.ERROR)  # nothing runs on the model
+
     owner = models.ForeignKey(
         settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="rl_models"
     )

@@ -124,10 +124,9 @@ class ModelBusy(Exception):
 def model_delete(*, model: RLModel) -> int:
     """Delete a READY or ERROR model: its rows, and every object stored under its prefix (how
     many is returned). The model is DELETING meanwhile, so nothing starts on it."""
-    deletable = (RLModel.Status.READY, RLModel.Status.ERROR)
     with transaction.atomic():
         locked = RLModel.objects.select_for_update().get(pk=model.pk)
-        if locked.status not in deletable:
+        if locked.status not in RLModel.DELETABLE:
             raise ModelBusy(
                 f"The model is {locked.get_status_display().lower()}; it can be deleted once it "
                 "is ready (stop its training first) or has failed."

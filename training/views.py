@@ -184,7 +184,7 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "iterations": iterations,
             "evaluations": selectors.evaluations_for_model(model=model)[:20],
             "can_evaluate": model.status == RLModel.Status.READY,
-            "can_delete": model.status in (RLModel.Status.READY, RLModel.Status.ERROR),
+            "can_delete": model.status in RLModel.DELETABLE,
             "has_weights": selectors.model_checkpoint(model=model) is not None,
             "workers_range": range(model.workers),
             "log_lines": list(job.log_lines.all().order_by("-at", "-pk")[:200]) if job else [],
