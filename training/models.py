@@ -190,6 +190,29 @@ class RLModel(models.Model):
         return self.jobs.order_by("-created_at").first()
 
 
+class RewardFunction(models.Model):
+    """A named reward function in the racer's library, picked when a model is created."""
+
+    owner = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="reward_functions"
+    )
+    name = models.CharField(max_length=64)
+    source = models.TextField()
+    created_at = models.DateTimeField(auto_now_add=True)
+    updated_at = models.DateTimeField(auto_now=True)
+
+    class Meta:
+        ordering = ["name"]
+        constraints = [
+            models.UniqueConstraint(
+                fields=["owner", "name"], name="unique_reward_function_name_per_racer"
+            )
+        ]
+
+    def __str__(self) -> str:
+        return self.name
+
+
 class Vehicle(models.Model):
     """A car in the racer's garage: its look and its sensors. Models are trained for a vehicle."""
 
@@ -264,6 +287,11 @@ class TrainingJob(models.Model):
     episodes = models.PositiveIntegerField(default=0)
     steps = models.PositiveBigIntegerField(default=0)
     training_seconds = models.FloatField(default=0.0)
+    clock_at = models.DateTimeField(
+        null=True,
+        blank=True,
+        help_text="When training_seconds was measured: the live clock's origin.",
+    )
     last_checkpoint = models.CharField(max_length=255, blank=True)
     best_checkpoint = models.CharField(max_length=255, blank=True)
 
@@ -316,9 +344,15 @@ class Iteration(models.Model):
 class JobLogLine(models.Model):
     """The job's log, as the racer reads it on the model page."""
 
+    class Source(models.TextChoices):
+        TRAINER = "trainer", "Trainer"
+        WORKER = "worker", "Simulation worker"
+        REWARD = "reward", "Reward function"
+
     job = models.ForeignKey(TrainingJob, on_delete=models.CASCADE, related_name="log_lines")
     at = models.DateTimeField(auto_now_add=True)
     level = models.CharField(max_length=8, default="info")
+    source = models.CharField(max_length=8, choices=Source.choices, default=Source.TRAINER)
     text = models.CharField(max_length=500)
 
     class Meta:
@@ -358,6 +392,9 @@ class EvaluationJob(models.Model):
     crash_penalty = models.FloatField("crash penalty [s]", default=5.0)
     checkpoint = models.CharField(max_length=8, choices=Checkpoint.choices, default=Checkpoint.BEST)
     checkpoint_name = models.CharField(max_length=255, blank=True, help_text="The weights used.")
+    checkpoint_iteration = models.PositiveIntegerField(
+        null=True, blank=True, help_text="The training iteration whose weights were used."
+    )
     status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
     message = models.CharField(max_length=255, blank=True)
     failure_reason = models.TextField(blank=True)
