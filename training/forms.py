@@ -39,10 +39,21 @@ class VehicleForm(forms.ModelForm):
     def __init__(self, *args, owner, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.owner = owner
+        self.fields["name"].error_messages["required"] = "Give your vehicle a name."
+        self.fields["shell_colour"].error_messages["required"] = "Choose a shell colour."
+        self.sensors_locked = bool(self.instance.pk) and self.instance.rl_models.exists()
+        if self.sensors_locked:
+            for field in ("camera", "lidar"):
+                self.fields[field].disabled = True
+                self.fields[field].help_text = (
+                    "Locked: models were trained on these sensors, and a model only reads the "
+                    "sensors it learnt with. Build a new vehicle to try other sensors."
+                )
 
     def clean_name(self) -> str:
         name = self.cleaned_data["name"].strip()
-        if Vehicle.objects.filter(owner=self.owner, name__iexact=name).exists():
+        others = Vehicle.objects.filter(owner=self.owner).exclude(pk=self.instance.pk)
+        if others.filter(name__iexact=name).exists():
             raise forms.ValidationError(
                 f"You already have a vehicle named “{name}”; choose another name."
             )

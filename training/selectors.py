@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
-from django.db.models import Prefetch, QuerySet, Sum
+from django.db.models import Count, Prefetch, QuerySet, Sum
 from django.utils import timezone
 
 from training import artifacts, jobs
@@ -48,6 +48,11 @@ def tracks_available() -> QuerySet[Track]:
 
 def vehicles_for_racer(*, racer: AbstractBaseUser) -> QuerySet[Vehicle]:
     return Vehicle.objects.filter(owner=racer)
+
+
+def vehicles_in_garage(*, racer: AbstractBaseUser) -> QuerySet[Vehicle]:
+    """The racer's vehicles, each with ``model_count``: how many models were trained on it."""
+    return vehicles_for_racer(racer=racer).annotate(model_count=Count("rl_models"))
 
 
 @dataclass(frozen=True)

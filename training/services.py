@@ -54,6 +54,34 @@ def vehicle_create(
     return vehicle
 
 
+class VehicleSensorsLocked(Exception):
+    """The vehicle's sensors cannot change: models were trained on them."""
+
+
+def vehicle_update(
+    *, vehicle: Vehicle, name: str, shell_colour: str, camera: str, lidar: str
+) -> Vehicle:
+    """Rename or repaint the vehicle. Its sensors change only while no model was trained on it:
+    a model's network reads exactly the sensors it was trained with. Models already trained keep
+    the colour they were created in."""
+    if (camera, lidar) != (vehicle.camera, vehicle.lidar) and vehicle.rl_models.exists():
+        raise VehicleSensorsLocked(
+            f"Models were trained on {vehicle.name}'s sensors, so they cannot change; "
+            "build a new vehicle to try other sensors."
+        )
+    vehicle.name, vehicle.shell_colour = name, shell_colour
+    vehicle.camera, vehicle.lidar = camera, lidar
+    vehicle.full_clean()
+    vehicle.save()
+    return vehicle
+
+
+def vehicle_delete(*, vehicle: Vehicle) -> None:
+    """Remove the vehicle from the garage. Models trained on it keep their sensors and colour
+    (their link to it is cleared)."""
+    vehicle.delete()
+
+
 def check_quota(*, owner: AbstractBaseUser, minutes: int) -> None:
     """Within a transaction: ``configuration.Invalid`` unless the racer may have one more model
     that trains for up to ``minutes``. Their quota row is locked until the transaction ends, so

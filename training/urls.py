@@ -32,6 +32,8 @@ urlpatterns = [
         name="evaluation-file",
     ),
     path("garage/", views.garage, name="garage"),
+    path("garage/<int:pk>/edit/", views.vehicle_edit, name="vehicle-edit"),
+    path("garage/<int:pk>/delete/", views.vehicle_delete, name="vehicle-delete"),
     path("models/reward-function/", views.reward_editor, name="reward-editor"),
     path("models/reward-function/validate/", views.reward_validation, name="reward-validation"),
     path("tracks/<slug:name>.png", views.track_preview, name="track-preview"),

@@ -1,4 +1,5 @@
 import json
+from copy import copy
 
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
@@ -31,7 +32,7 @@ from training.forms import (
     RewardValidationForm,
     VehicleForm,
 )
-from training.models import EvaluationJob, RLModel
+from training.models import EvaluationJob, RLModel, Vehicle
 from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
@@ -68,9 +69,47 @@ def garage(request: HttpRequest) -> HttpResponse:
     return render(
         request,
         "training/garage.html",
-        {"vehicles": selectors.vehicles_for_racer(racer=request.user), "form": form},
+        {"vehicles": selectors.vehicles_in_garage(racer=request.user), "form": form},
         status=400 if form.errors else 200,
     )
+
+
+def _get_vehicle_for_user(request: HttpRequest, pk: int) -> Vehicle:
+    """The racer's own vehicle, or 404."""
+    return get_object_or_404(Vehicle, pk=pk, owner=request.user)
+
+
+@login_required
+def vehicle_edit(request: HttpRequest, pk: int) -> HttpResponse:
+    vehicle = _get_vehicle_for_user(request, pk)
+    # The form writes what was typed into its instance: give it its own copy of the row.
+    form = VehicleForm(request.POST or None, instance=copy(vehicle), owner=request.user)
+    if request.method == "POST" and form.is_valid():
+        try:
+            services.vehicle_update(vehicle=vehicle, **form.cleaned_data)
+        except services.VehicleSensorsLocked as locked:
+            form.add_error(None, str(locked))
+        else:
+            messages.success(request, f"{vehicle.name} is saved.")
+            return redirect("training:garage")
+    return render(
+        request,
+        "training/vehicle_edit.html",
+        {"vehicle": vehicle, "form": form},
+        status=400 if form.errors else 200,
+    )
+
+
+@login_required
+def vehicle_delete(request: HttpRequest, pk: int) -> HttpResponse:
+    """Asks first (GET); removes the vehicle, not its models (POST)."""
+    vehicle = _get_vehicle_for_user(request, pk)
+    if request.method == "POST":
+        services.vehicle_delete(vehicle=vehicle)
+        messages.success(request, f"{vehicle.name} has left your garage.")
+        return redirect("training:garage")
+    models = selectors.models_for_racer(racer=request.user).filter(vehicle=vehicle)
+    return render(request, "training/vehicle_delete.html", {"vehicle": vehicle, "models": models})
 
 
 @login_required
@@ -134,7 +173,9 @@ def model_create(request: HttpRequest) -> HttpResponse:
             ).metadata()),
             "track": "rookie-loop",
         }  # fmt: skip
-    form = ModelCreateForm(request.POST or None, owner=request.user, initial=initial)
+    form = ModelCreateForm(
+        request.POST or None, owner=request.user, initial=initial, source=source
+    )
     if request.method == "POST" and form.is_valid():
         try:
             inherited = (

@@ -31,10 +31,12 @@ def racer_pages(alice) -> list[str]:
     trial = event("Time trial")
     submission = off_the_loop(scored, trial, alice, 10_000, 11_000, 12_000, model_name=model.name)
     season = Season.objects.get(name="Test season")
+    vehicle = Vehicle.objects.create(owner=alice, name="page-car", shell_colour="#f5f5f5")
     return [
         "/models/", f"/models/{model.pk}/", f"/models/{model.pk}/evaluate/",
         f"/models/{model.pk}/delete/", "/models/create/", f"/models/create/?clone={model.pk}",
-        "/models/import/", "/models/reward-function/", "/garage/", "/races/", "/races/submit/",
+        "/models/import/", "/models/reward-function/", "/garage/", f"/garage/{vehicle.pk}/edit/",
+        f"/garage/{vehicle.pk}/delete/", "/races/", "/races/submit/",
         "/races/submissions/", submission.get_absolute_url(), "/leaderboards/",
         trial.get_absolute_url(), f"/seasons/{season.pk}/", "/races/community/new/",
         "/accounts/password/",

@@ -102,3 +102,132 @@ def test_a_models_car_has_its_vehicles_colour_in_the_video(client, alice, bob, t
     painted = reddish_pixels(model.environment_settings())
     black = reddish_pixels({**model.environment_settings(), "car_colour": (40, 35, 31)})
     assert painted > 300 and black < painted / 10  # the car, seen from behind, and its map dot
+
+
+def _model_on(vehicle, name: str = "on-the-car") -> RLModel:
+    from training.rewards import EXAMPLES
+    from training.services import model_create
+
+    return model_create(owner=vehicle.owner, validate_reward=False, settings={
+        "name": name, "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
+        "vehicle": vehicle, "sensors": vehicle.sensors,
+    })  # fmt: skip
+
+
+def test_the_garage_offers_shell_colours_as_named_swatches(client, alice):
+    client.force_login(alice)
+    response = client.get(reverse("training:garage"))
+    swatches = response.text.count('class="swatch-choice"')
+    assert swatches == len(Vehicle.ShellColour.choices) == 8
+    assert 'value="#d1242f" id="id_shell_colour_2" style="--shell: #d1242f"' in response.text
+    assert '<span class="visually-hidden">Red</span>' in response.text
+
+
+def test_a_racer_renames_and_repaints_a_vehicle(client, alice):
+    vehicle = Vehicle.objects.create(owner=alice, name="Rocket", shell_colour="#1f2328")
+    client.force_login(alice)
+    url = reverse("training:vehicle-edit", args=[vehicle.pk])
+    page = client.get(url)
+    assert 'value="Rocket"' in page.text and 'value="#1f2328" id="id_shell_colour_0"' in page.text
+    response = client.post(url, {"name": "Comet", "shell_colour": "#2da44e",
+                                 "camera": "STEREO_CAMERAS", "lidar": "LIDAR"},
+                           follow=True)  # fmt: skip
+    assert "Comet is saved." in response.text
+    vehicle.refresh_from_db()
+    assert (vehicle.name, vehicle.shell_colour) == ("Comet", "#2da44e")
+    assert vehicle.sensors == ["STEREO_CAMERAS", "LIDAR"]  # no model yet: sensors may change
+
+
+def test_an_edit_with_a_taken_name_says_so_and_keeps_what_was_typed(client, alice):
+    Vehicle.objects.create(owner=alice, name="Taken")
+    vehicle = Vehicle.objects.create(owner=alice, name="Rocket")
+    client.force_login(alice)
+    url = reverse("training:vehicle-edit", args=[vehicle.pk])
+    response = client.post(url, {"name": "taken", "shell_colour": "#0969da",
+                                 "camera": "FRONT_FACING_CAMERA", "lidar": ""})  # fmt: skip
+    assert response.status_code == 400
+    assert "You already have a vehicle named “taken”" in response.text
+    assert 'value="taken"' in response.text
+    assert (
+        'value="#0969da" id="id_shell_colour_6" style="--shell: #0969da" checked' in response.text
+    )
+    assert "<h1>Edit Rocket</h1>" in response.text
+    kept = client.post(url, {"name": "rocket", "shell_colour": "#0969da",
+                             "camera": "FRONT_FACING_CAMERA", "lidar": ""})  # fmt: skip
+    assert kept.status_code == 302  # its own name, in another case, is not taken
+    no_name = client.post(url, {"name": " ", "camera": "FRONT_FACING_CAMERA", "lidar": ""})
+    assert "Give your vehicle a name." in no_name.text
+    assert "Choose a shell colour." in no_name.text
+
+
+def test_a_vehicle_with_models_keeps_its_sensors_and_says_why(client, alice, tracks):
+    vehicle = Vehicle.objects.create(owner=alice, name="Rocket", camera="FRONT_FACING_CAMERA")
+    _model_on(vehicle)
+    client.force_login(alice)
+    url = reverse("training:vehicle-edit", args=[vehicle.pk])
+    page = client.get(url)
+    assert "Locked: models were trained on these sensors" in page.text
+    assert page.text.count("disabled") >= 3  # two camera radios and the lidar list
+    response = client.post(url, {"name": "Rocket-2", "shell_colour": "#f28c28",
+                                 "camera": "STEREO_CAMERAS", "lidar": "LIDAR"})  # fmt: skip
+    assert response.status_code == 302
+    vehicle.refresh_from_db()
+    assert vehicle.name == "Rocket-2" and vehicle.shell_colour == "#f28c28"
+    assert vehicle.sensors == ["FRONT_FACING_CAMERA"]
+
+
+def test_the_update_service_refuses_new_sensors_once_a_model_was_trained(alice, tracks):
+    from training.services import VehicleSensorsLocked, vehicle_update
+
+    vehicle = Vehicle.objects.create(owner=alice, name="Rocket")
+    _model_on(vehicle)
+    with pytest.raises(VehicleSensorsLocked, match="build a new vehicle"):
+        vehicle_update(vehicle=vehicle, name="Rocket", shell_colour=vehicle.shell_colour,
+                       camera="STEREO_CAMERAS", lidar="")  # fmt: skip
+
+
+def test_a_racer_deletes_a_vehicle_after_confirming_and_its_models_keep_their_settings(
+    client, alice, tracks
+):
+    vehicle = Vehicle.objects.create(owner=alice, name="Rocket", shell_colour="#d1242f",
+                                     camera="STEREO_CAMERAS", lidar="SECTOR_LIDAR")  # fmt: skip
+    model = _model_on(vehicle)
+    client.force_login(alice)
+    detail = client.get(reverse("training:model-detail", args=[model.pk]))
+    assert f'<a href="{reverse("training:garage")}">Rocket</a>' in detail.text
+    url = reverse("training:vehicle-delete", args=[vehicle.pk])
+    confirm = client.get(url)
+    assert "Delete Rocket?" in confirm.text
+    assert "1 model was trained on this vehicle" in confirm.text and "on-the-car" in confirm.text
+    assert Vehicle.objects.filter(pk=vehicle.pk).exists()  # asking deletes nothing
+    response = client.post(url, follow=True)
+    assert "Rocket has left your garage." in response.text
+    assert not Vehicle.objects.filter(pk=vehicle.pk).exists()
+    model.refresh_from_db()
+    assert model.vehicle is None
+    assert (model.sensors, model.shell_colour) == (["STEREO_CAMERAS", "SECTOR_LIDAR"], "#d1242f")
+    detail = client.get(reverse("training:model-detail", args=[model.pk]))
+    assert "No vehicle" in detail.text and "Red shell" in detail.text
+
+
+def test_a_racer_cannot_edit_or_delete_another_racers_vehicle(client, alice, bob):
+    theirs = Vehicle.objects.create(owner=bob, name="Bobs-car")
+    client.force_login(alice)
+    for name in ("training:vehicle-edit", "training:vehicle-delete"):
+        url = reverse(name, args=[theirs.pk])
+        assert client.get(url).status_code == 404
+        assert client.post(url, {"name": "mine", "shell_colour": "#d1242f",
+                                 "camera": "FRONT_FACING_CAMERA"}).status_code == 404  # fmt: skip
+    theirs.refresh_from_db()
+    assert theirs.name == "Bobs-car"
+
+
+def test_the_garage_lists_each_vehicles_models_and_its_edit_and_delete_links(client, alice, tracks):
+    vehicle = Vehicle.objects.create(owner=alice, name="Rocket")
+    _model_on(vehicle, "one")
+    _model_on(vehicle, "two")
+    client.force_login(alice)
+    response = client.get(reverse("training:garage"))
+    assert "<td>2</td>" in response.text
+    assert reverse("training:vehicle-edit", args=[vehicle.pk]) in response.text
+    assert reverse("training:vehicle-delete", args=[vehicle.pk]) in response.text
