@@ -4,18 +4,115 @@ Members of the "Race staff" group (with staff status) hold every permission on t
 none on users; superusers manage everything.
 """
 
+from django import forms
 from django.contrib import admin, messages
+from django.core.exceptions import NON_FIELD_ERRORS, ValidationError
 from django.db.models import QuerySet
 from django.http import HttpRequest
 
 from console.templatetags.pitlane import laptime
 from racing import services
-from racing.models import Event, Lap, Racer, Ranking, Season, Submission
+from racing.models import Event, Lap, Racer, RaceType, Ranking, Season, Submission
+from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
+
+
+class EventInlineForm(forms.ModelForm):
+    """An event as the admin edits it. The model also checks fields a form may not show (the
+    season of an inline row, the direction): their errors are said above the form or row,
+    named, rather than left on a field nobody sees."""
+
+    def add_error(self, field: str | None, error) -> None:
+        if field is None and isinstance(error, ValidationError) and hasattr(error, "error_dict"):
+            error = ValidationError(self._shown(error.error_dict))
+        super().add_error(field, error)
+
+    def _shown(self, errors: dict[str, list[ValidationError]]) -> dict:
+        shown: dict[str, list] = {}
+        for name, messages_ in errors.items():
+            field = self.fields.get(name)
+            if name == NON_FIELD_ERRORS or (field is not None and not field.widget.is_hidden):
+                shown.setdefault(name, []).extend(messages_)
+                continue
+            label = Event._meta.get_field(name).verbose_name.capitalize()
+            shown.setdefault(NON_FIELD_ERRORS, []).extend(
+                f"{label}: {message}" for error in messages_ for message in error.messages
+            )
+        return shown
+
+
+class EventAdminForm(EventInlineForm):
+    """Boxes and bot cars as fields of their own rather than raw JSON."""
+
+    box_count = forms.IntegerField(
+        label="Boxes", min_value=1, max_value=MAX_OBJECTS, initial=3, required=False,
+        help_text="Object avoidance: how many boxes stand on the track.",
+    )  # fmt: skip
+    box_randomize = forms.BooleanField(
+        label="Move the boxes every trial", required=False,
+        help_text="Off: the boxes stay where they are for every trial.",
+    )  # fmt: skip
+    bot_count = forms.IntegerField(
+        label="Bot cars", min_value=1, max_value=MAX_OBJECTS, initial=3, required=False,
+        help_text="Head-to-bot: how many bot cars drive the track.",
+    )  # fmt: skip
+    bot_speed = forms.FloatField(
+        label="Bot car speed [m/s]", min_value=BOT_SPEED_RANGE[0], max_value=BOT_SPEED_RANGE[1],
+        initial=1.0, required=False,
+    )  # fmt: skip
+    bot_lane_changes = forms.BooleanField(label="Bot cars change lanes", required=False)
+
+    class Meta:
+        model = Event
+        fields = [
+            "season", "name", "slug", "division", "track", "direction", "race_type", "opens_at",
+            "closes_at", "ranking_method", "laps_required", "laps_to_drive",
+            "off_track_penalty_s", "crash_penalty_s", "max_off_tracks_per_lap",
+            "submissions_per_racer", "public", "organiser", "participants",
+        ]  # fmt: skip
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        boxes, bots = self.instance.boxes or {}, self.instance.bots or {}
+        for name, value in {
+            "box_count": boxes.get("count"), "box_randomize": boxes.get("randomize"),
+            "bot_count": bots.get("count"), "bot_speed": bots.get("speed"),
+            "bot_lane_changes": bots.get("lane_changes"),
+        }.items():  # fmt: skip
+            if value is not None:
+                self.initial[name] = value
+
+    def clean(self) -> dict:
+        data = super().clean()
+        race_type = data.get("race_type")
+        needed = {
+            RaceType.OBJECT_AVOIDANCE: {"box_count": "Say how many boxes the race has."},
+            RaceType.HEAD_TO_BOT: {
+                "bot_count": "Say how many bot cars the race has.",
+                "bot_speed": "Say how fast the bot cars drive.",
+            },
+        }.get(race_type, {})
+        for name, message in needed.items():
+            if name in self.fields and data.get(name) is None and name not in self.errors:
+                self.add_error(name, message)
+        self.instance.boxes = (
+            {"count": data.get("box_count"), "randomize": bool(data.get("box_randomize"))}
+            if race_type == RaceType.OBJECT_AVOIDANCE
+            else None
+        )
+        self.instance.bots = (
+            {"count": data.get("bot_count"), "speed": data.get("bot_speed"),
+             "lane_changes": bool(data.get("bot_lane_changes"))}
+            if race_type == RaceType.HEAD_TO_BOT
+            else None
+        )  # fmt: skip
+        return data
 
 
 class EventInline(admin.TabularInline):
     model = Event
+    form = EventInlineForm
     fields = ["name", "slug", "track", "race_type", "division", "opens_at", "closes_at"]
+    prepopulated_fields = {"slug": ["name"]}
     extra = 0
     show_change_link = True
 
@@ -37,6 +134,7 @@ class EventAdmin(admin.ModelAdmin):
     ]  # fmt: skip
     list_filter = ["season", "division", "race_type", "track", "public", "ranking_method"]
     search_fields = ["name", "slug", "organiser__username"]
+    form = EventAdminForm
     prepopulated_fields = {"slug": ["name"]}
     date_hierarchy = "opens_at"
     list_select_related = ["season", "track"]
@@ -45,7 +143,9 @@ class EventAdmin(admin.ModelAdmin):
     actions = ["close_events", "recompute_rankings"]
     fieldsets = [
         (None, {"fields": ["season", "name", "slug", "division"]}),
-        ("Race", {"fields": ["track", "direction", "race_type", "boxes", "bots"]}),
+        ("Race", {"fields": ["track", "direction", "race_type"]}),
+        ("Object avoidance", {"fields": ["box_count", "box_randomize"]}),
+        ("Head-to-bot", {"fields": ["bot_count", "bot_speed", "bot_lane_changes"]}),
         ("When", {"fields": ["opens_at", "closes_at"]}),
         ("Rules", {"fields": [
             "ranking_method", "laps_required", "laps_to_drive", "off_track_penalty_s",

@@ -4,6 +4,7 @@ score, and a racer's best qualifying score per event is their ranking."""
 from __future__ import annotations
 
 import secrets
+from datetime import date, datetime, time, timedelta
 
 from django.conf import settings
 from django.core.exceptions import ValidationError
@@ -157,10 +158,17 @@ class Event(models.Model):
             errors["race_type"] = (
                 "Open events are time trials; object avoidance and head-to-bot are Pro events."
             )
-        if self.public and self.season_id is None:
+        # An inline event of a season being added holds the unsaved season, not its id yet.
+        cached = self._meta.get_field("season").is_cached(self)
+        season = self.season if self.season_id or cached else None
+        if self.public and season is None:
             errors["season"] = "A league event belongs to a season."
+        if season is not None and self.opens_at and self.closes_at:
+            errors.update(self._outside(season))
         if self.track_id and self.direction and not getattr(self.track, self.direction):
-            errors["direction"] = f"{self.track} cannot be driven {self.direction}."
+            errors["direction"] = (
+                f"{self.track} cannot be driven {self.get_direction_display().lower()}."
+            )
         try:
             race = configuration.check_race(
                 {"race_type": self.race_type, "boxes": self.boxes, "bots": self.bots}
@@ -171,6 +179,18 @@ class Event(models.Model):
             self.boxes, self.bots = race["boxes"], race["bots"]
         if errors:
             raise ValidationError(errors)
+
+    def _outside(self, season: Season) -> dict[str, str]:
+        """Errors for the times that fall outside the season's days (in this request's zone)."""
+        starts = timezone.make_aware(datetime.combine(season.starts_on, time.min))
+        ends = timezone.make_aware(datetime.combine(season.ends_on + timedelta(days=1), time.min))
+        days = f"{season.name} runs from {_day(season.starts_on)} to {_day(season.ends_on)}"
+        errors = {}
+        if not starts <= self.opens_at < ends:
+            errors["opens_at"] = f"{days}: open the event within those days."
+        if not starts < self.closes_at <= ends:
+            errors["closes_at"] = f"{days}: close the event by the end of its last day."
+        return errors
 
     def ensure_invite(self) -> str:
         if not self.invite_token:
@@ -196,6 +216,10 @@ class Event(models.Model):
         laps"."""
         rule = self.get_ranking_method_display().replace(" N ", f" {self.laps_required} ")
         return rule[0].lower() + rule[1:]
+
+
+def _day(day: date) -> str:
+    return f"{day.day} {day:%B %Y}"
 
 
 class Submission(models.Model):
