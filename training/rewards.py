@@ -9,6 +9,8 @@ checks are for feedback only; the sandbox is what keeps the code in its box.
 from __future__ import annotations
 
 import ast
+import difflib
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -104,7 +106,7 @@ PARAMS = (
 
 @dataclass
 class Problem:
-    type: str  # "syntax", "import" or "test failure" (errors); "style" (warnings)
+    type: str  # "syntax", "import", "key" or "test failure" (errors); "style" (warnings)
     message: str
     line: int | None = None
 
@@ -151,22 +153,37 @@ def reward_validate(*, source: str, track: str, direction: str = "counterclockwi
         except SandboxFailure as failure:
             result.errors.append(_problem_for(failure))
             return result
-        for situation in situations(track, direction):
+        samples = situations(track, direction)
+        failed: dict[tuple[str, str, int | None], list[str]] = {}
+        for situation in samples:
             try:
                 reward = sandbox.call(situation.params)
             except SandboxFailure as failure:
                 problem = _problem_for(failure)
-                problem.message = f"In the {situation.name} sample: {problem.message}"
-                result.errors.append(problem)
+                failed.setdefault((problem.type, problem.message, problem.line), []).append(
+                    situation.name
+                )
                 result.samples.append(
-                    Sample(situation.name, situation.description, None, failure.message)
+                    Sample(situation.name, situation.description, None, problem.message)
                 )
                 if failure.kind in ("crashed", "timeout", "protocol"):
                     break  # the sandbox is gone; the remaining samples cannot run
                 continue
             result.samples.append(Sample(situation.name, situation.description, reward))
         result.log = list(sandbox.logs)
+    for (kind, message, line), names in failed.items():
+        result.errors.append(Problem(kind, f"{_where(names, len(samples))}: {message}", line))
     return result
+
+
+def _where(names: list[str], total: int) -> str:
+    """Which samples a failure happened in: one problem for the same failure in several."""
+    if len(names) == 1:
+        return f"In the {names[0]} sample"
+    if len(names) == total:
+        return f"In all {total} samples"
+    listed = ", ".join(names[:-1]) + " and " + names[-1]
+    return f"In {len(names)} of the {total} samples ({listed})"
 
 
 def static_problems(source: str) -> tuple[list[Problem], list[Problem]]:
@@ -203,7 +220,8 @@ def static_problems(source: str) -> tuple[list[Problem], list[Problem]]:
                     )
                 )
     errors.extend(_signature_problems(tree))
-    return errors, warnings
+    key_errors, key_warnings = _params_key_problems(tree)
+    return errors + key_errors, warnings + key_warnings
 
 
 def _import_problems(node: ast.Import | ast.ImportFrom) -> list[Problem]:
@@ -257,6 +275,63 @@ def _syntax_message(error: SyntaxError) -> str:
     return message
 
 
+PARAM_NAMES = tuple(name for name, _, _ in PARAMS)
+KEY_ERROR = re.compile(r"KeyError: '([^'\\]*)'")
+
+
+def unknown_key_message(key: str) -> str:
+    """What to say about ``params[key]`` for a key params does not have: the closest real key."""
+    close = difflib.get_close_matches(key, PARAM_NAMES, n=1, cutoff=0.6)
+    if close:
+        return f"params has no key '{key}'; did you mean '{close[0]}'?"
+    return f"params has no key '{key}'; its keys are listed under Input parameters."
+
+
+def _params_key_problems(tree: ast.Module) -> tuple[list[Problem], list[Problem]]:
+    """Keys of params that DeepRacer never sends, read by ``params["..."]`` (an error: it fails
+    whenever that line runs) or ``params.get("...")`` (a warning: it always gives its default)."""
+    names = {"params"}
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef) and node.name == "reward_function":
+            names.update(a.arg for a in (node.args.posonlyargs + node.args.args)[:1])
+    errors: list[Problem] = []
+    warnings: list[Problem] = []
+    for node in ast.walk(tree):
+        if (
+            isinstance(node, ast.Subscript)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in names
+            and isinstance(node.slice, ast.Constant)
+            and isinstance(node.slice.value, str)
+            and node.slice.value not in PARAM_NAMES
+        ):
+            errors.append(Problem("key", unknown_key_message(node.slice.value), node.lineno))
+        elif (
+            isinstance(node, ast.Call)
+            and isinstance(node.func, ast.Attribute)
+            and node.func.attr == "get"
+            and isinstance(node.func.value, ast.Name)
+            and node.func.value.id in names
+            and node.args
+            and isinstance(node.args[0], ast.Constant)
+            and isinstance(node.args[0].value, str)
+            and node.args[0].value not in PARAM_NAMES
+        ):
+            key = node.args[0].value
+            warnings.append(Problem(
+                "style",
+                f"{node.func.value.id}.get('{key}') always gives its default, since "
+                + unknown_key_message(key),
+                node.lineno,
+            ))  # fmt: skip
+    return errors, warnings
+
+
 def _problem_for(failure: SandboxFailure) -> Problem:
     kind = {"syntax": "syntax", "import": "import"}.get(failure.kind, "test failure")
-    return Problem(kind, failure.message, failure.line)
+    message = failure.message
+    missing = KEY_ERROR.fullmatch(message)
+    key = missing.group(1) if missing else None
+    if key and key not in PARAM_NAMES and difflib.get_close_matches(key, PARAM_NAMES, cutoff=0.6):
+        kind, message = "key", unknown_key_message(key)  # a typo, not a local dict's key
+    return Problem(kind, message, failure.line)

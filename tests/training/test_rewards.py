@@ -197,3 +197,60 @@ class TestTheEditorPage:
         assert client.get(reverse("training:reward-editor")).status_code == 302
         response = client.post(reverse("training:reward-validation"), {})
         assert response.status_code == 302
+
+
+def test_a_misspelt_key_is_one_error_naming_the_closest_real_key_and_its_line():
+    source = (
+        "def reward_function(params):\n"
+        "    track_width = params['track_width']\n"
+        "    if params['distance_from_centre'] < 0.1 * track_width:\n"
+        "        return 1.0\n"
+        "    return 1e-3\n"
+    )
+    result = reward_validate(source=source, track="rookie-loop")
+    assert [(e.type, e.line, e.message) for e in result.errors] == [
+        ("key", 3, "params has no key 'distance_from_centre'; did you mean 'distance_from_center'?")
+    ]
+
+
+def test_the_same_failure_in_every_sample_is_one_error_that_says_in_how_many():
+    source = (
+        "def reward_function(params):\n"
+        "    p = params\n"  # out of the static check's sight: every sample fails the same way
+        "    return float(p['distance_from_centre'])\n"
+    )
+    result = reward_validate(source=source, track="rookie-loop")
+    (error,) = result.errors
+    assert (error.type, error.line) == ("key", 3)
+    assert error.message == (
+        "In all 5 samples: params has no key 'distance_from_centre'; "
+        "did you mean 'distance_from_center'?"
+    )
+    assert all("distance_from_center" in sample.error for sample in result.samples)
+
+
+def test_a_failure_in_some_samples_names_them_once():
+    source = (
+        "def reward_function(params):\n"
+        "    if params['progress'] > 50:\n"
+        "        return params['objects_location'][0]\n"
+        "    return 1.0\n"
+    )
+    (error,) = reward_validate(source=source, track="rookie-loop").errors
+    assert error.message == (
+        "In 2 of the 5 samples (mid-lap and finish): KeyError: 'objects_location'"
+    )
+
+
+def test_a_misspelt_get_is_a_warning_naming_the_closest_real_key():
+    source = (
+        "def reward_function(params):\n"
+        "    speed = params.get('sped', 1.0)\n"
+        "    return float(speed)\n"
+    )
+    result = reward_validate(source=source, track="rookie-loop")
+    assert result.valid
+    assert [(w.line, w.message) for w in result.warnings] == [
+        (2, "params.get('sped') always gives its default, since params has no key 'sped'; "
+            "did you mean 'speed'?"),
+    ]  # fmt: skip
