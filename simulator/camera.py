@@ -65,6 +65,7 @@ class Solid:
 # Faces of a box by corner index (0-3 bottom, 4-7 top; counter-clockwise seen from outside).
 _FACES = ((4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
 _FACE_LIGHT = (1.0, 0.78, 0.62, 0.7, 0.86)  # top, then the four sides: a fixed light from above
+_FACE_CORNERS = np.array(_FACES)
 
 
 class PerspectiveView:
@@ -132,6 +133,69 @@ class PerspectiveView:
             near.append((reach, solid))
         for _, solid in sorted(near, key=lambda item: -item[0]):
             self._fill_faces(image, solid, rotation, position)
+
+    def fill_polygons(
+        self,
+        image: np.ndarray,
+        polygons: np.ndarray,
+        shade: int | tuple[int, int, int],
+        rotation: np.ndarray,
+        position: np.ndarray,
+    ) -> None:
+        """Fill flat convex polygons given by their world corners (k x n x 3, metres) in the
+        order given, clipped at the near plane; the caller decides which face the camera."""
+        camera = (polygons - position) @ rotation.T
+        if not (camera[..., 2] >= NEAR).all():
+            camera = [_clip_near(polygon) for polygon in camera]
+        for polygon in camera:
+            if len(polygon) < 3:
+                continue
+            pixels = np.round(
+                (polygon[:, :2] / polygon[:, 2:3] * self._k[0, 0] + self._k[:2, 2]) * 16
+            ).astype(np.int32)
+            cv2.fillConvexPoly(image, pixels, shade, cv2.LINE_AA, 4)
+
+    def fill_solids(
+        self, image: np.ndarray, solids: list[Solid], rotation: np.ndarray, position: np.ndarray
+    ) -> None:
+        """Draw solids in the order given, with no depth sorting: the parts of one object whose
+        order the caller knows (a car's wheels, body and cabin). Their corners are projected
+        together, which keeps a many-part object about as cheap as one box."""
+        if not solids:
+            return
+        x, y, yaw, half_length, half_width, height = np.array(
+            [(s.x, s.y, s.yaw, s.length / 2, s.width / 2, s.height) for s in solids]
+        ).T
+        c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+        local = _UNIT_BOX * np.stack([half_length, half_width, height], axis=1)[:, None, :]
+        corners = np.stack(
+            [
+                local[..., 0] * c - local[..., 1] * s + x[:, None],
+                local[..., 0] * s + local[..., 1] * c + y[:, None],
+                local[..., 2],
+            ],
+            axis=-1,
+        )
+        camera = (corners - position) @ rotation.T
+        if not (camera[..., 2] >= NEAR).all():
+            for solid in solids:
+                self._fill_faces(image, solid, rotation, position)
+            return
+        pixels = np.round(
+            (camera[..., :2] / camera[..., 2:3] * self._k[0, 0] + self._k[:2, 2]) * 16
+        ).astype(np.int32)
+        faces_pixels = np.ascontiguousarray(pixels[:, _FACE_CORNERS])  # OpenCV wants it dense
+        dx, dy = position[0] - x, position[1] - y
+        along, across = dx * c[:, 0] + dy * s[:, 0], -dx * s[:, 0] + dy * c[:, 0]
+        facing = np.stack(
+            [position[2] > height, across < -half_width, along > half_length,
+             across > half_width, along < -half_length],
+            axis=1,
+        ).tolist()  # fmt: skip
+        for solid, faces, visible in zip(solids, faces_pixels, facing, strict=True):
+            for face, light, seen in zip(faces, _FACE_LIGHT, visible, strict=True):
+                if seen:
+                    cv2.fillConvexPoly(image, face, _lit(solid.shade, light), cv2.LINE_AA, 4)
 
     def _fill_faces(
         self, image: np.ndarray, solid: Solid, rotation: np.ndarray, position: np.ndarray

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import cv2
@@ -12,6 +13,7 @@ from simulator.texture import preview_texture, render
 from simulator.tracks import Track
 
 if TYPE_CHECKING:
+    from simulator.car import Car
     from simulator.env import DeepRacerEnv
 
 SIZE = (640, 480)  # [px]
@@ -24,6 +26,11 @@ TRAIL_POINTS = 900  # the last minute at 15 steps/s
 TRAIL_COLOUR = (60, 60, 230)
 TEXT_COLOUR = (255, 255, 255)
 VIEWS = ("spectator", "camera")  # what a live viewer can watch (see ``view_image``)
+TYRE_SHADE = (30, 30, 30)  # BGR: dark on every shell colour
+GLASS_SHADE = (78, 56, 40)  # BGR: tinted windows
+WHEEL = (0.066, 0.034)  # [m] diameter and width of a 1/18 car's wheel
+MAP_CAR_SCALE = 1.0  # [px] per unit of ``_MAP_CAR_BODY``: larger than the car at the map's scale
+_MAP_CAR_BODY = ((-6.0, -3.5), (2.0, -3.5), (9.0, 0.0), (2.0, 3.5), (-6.0, 3.5))  # nose at +9
 FRAME_INTERVAL = 1 / 15  # [s] between live frames: 15 per second of wall-clock time
 
 
@@ -44,14 +51,37 @@ class Spectator:
 
     def render(self, env: DeepRacerEnv) -> np.ndarray:
         car = env.car
-        spec = car.spec
-        solids = env.traffic.solids(colour=True)
-        x, y = car.point_ahead(spec.centre_offset)
-        solids.append(Solid(x, y, car.yaw, spec.length, spec.width, spec.height, env.car_colour))
-        frame = self.chase.render(car.x, car.y, car.yaw, solids)
+        frame = self.chase.render(car.x, car.y, car.yaw)
+        rotation, position = self.chase.pose(car.x, car.y, car.yaw)
+        # Boxes and bot cars beyond the racer's car are drawn before it, those nearer after.
+        x, y = car.point_ahead(car.spec.centre_offset)
+        reach = math.hypot(x - position[0], y - position[1])
+        beyond, nearer = [], []
+        for solid in env.traffic.solids(colour=True):
+            far = math.hypot(solid.x - position[0], solid.y - position[1]) >= reach
+            (beyond if far else nearer).append(solid)
+        self.chase.draw_solids(frame, beyond, rotation, position)
+        self._draw_car(frame, car, env.car_colour, rotation, position)
+        self.chase.draw_solids(frame, nearer, rotation, position)
         self._draw_map(frame, env)
         self._draw_status(frame, env)
         return frame
+
+    def _draw_car(
+        self,
+        frame: np.ndarray,
+        car: Car,
+        colour: tuple[int, int, int],
+        rotation: np.ndarray,
+        position: np.ndarray,
+    ) -> None:
+        """The racer's 1/18 car: four dark wheels (the front ones steered), a low body and a
+        cabin in the shell colour, tinted windows whose front one shows which way it faces.
+        The chase camera is always above the car, so lower parts are drawn first."""
+        self.chase.fill_solids(frame, car_solids(car, colour), rotation, position)
+        windows, normals = car_windows(car)
+        facing = np.einsum("kj,kj->k", position - windows[:, 0], normals) > 0
+        self.chase.fill_polygons(frame, windows[facing], GLASS_SHADE, rotation, position)
 
     def _to_map(self, points: np.ndarray) -> np.ndarray:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
@@ -68,12 +98,32 @@ class Spectator:
             colour = (64, 160, 232) if actor.kind == "box" else (200, 90, 40)
             centre = self._to_map([(actor.x, actor.y)])[0]
             cv2.circle(inset, tuple(centre), 4 * 16, colour, -1, cv2.LINE_AA, 4)
-        centre = self._to_map([env.car.position])[0]
-        cv2.circle(inset, tuple(centre), 5 * 16, env.car_colour, -1, cv2.LINE_AA, 4)
-        cv2.circle(inset, tuple(centre), 5 * 16, (255, 255, 255), 1, cv2.LINE_AA, 4)
+        self._draw_map_car(inset, env.car, env.car_colour)
         region = frame[top : top + height, left : left + width]
         cv2.addWeighted(inset, 0.9, region, 0.1, 0, dst=region)
         cv2.rectangle(frame, (left - 1, top - 1), (left + width, top + height), (90, 90, 90), 1)
+
+    def _draw_map_car(self, inset: np.ndarray, car: Car, colour: tuple[int, int, int]) -> None:
+        """The racer's car on the map: a car seen from above, nose first, with its wheels;
+        boxes and bot cars are dots."""
+        x, y = car.point_ahead(car.spec.centre_offset)
+        centre, ahead = self._map_texture.to_pixels(
+            np.array([(x, y), (x + math.cos(car.yaw), y + math.sin(car.yaw))])
+        )
+        forward = (ahead - centre) / np.linalg.norm(ahead - centre)
+        left = np.array([-forward[1], forward[0]])
+
+        def pixels(*points: tuple[float, float]) -> np.ndarray:
+            at = [centre + MAP_CAR_SCALE * (a * forward + b * left) for a, b in points]
+            return np.round(np.array(at) * 16).astype(np.int32)
+
+        for along in (-3.5, 4.0):
+            for side in (-4.0, 4.0):
+                ends = pixels((along - 1.6, side), (along + 1.6, side))
+                cv2.line(inset, tuple(ends[0]), tuple(ends[1]), TYRE_SHADE, 3, cv2.LINE_AA, 4)
+        body = pixels(*_MAP_CAR_BODY)
+        cv2.fillConvexPoly(inset, body, colour, cv2.LINE_AA, 4)
+        cv2.polylines(inset, [body], True, (255, 255, 255), 1, cv2.LINE_AA, 4)
 
     def _draw_status(self, frame: np.ndarray, env: DeepRacerEnv) -> None:
         laps = (
@@ -83,6 +133,52 @@ class Spectator:
         cv2.rectangle(frame, (0, SIZE[1] - 30), (SIZE[0], SIZE[1]), (30, 30, 30), -1)
         cv2.putText(frame, text, (10, SIZE[1] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55,
                     TEXT_COLOUR, 1, cv2.LINE_AA)  # fmt: skip
+
+
+def car_solids(car: Car, colour: tuple[int, int, int]) -> list[Solid]:
+    """The racer's car as solids, lowest first: the wheels, the body, the cabin."""
+    spec = car.spec
+    diameter, tyre = WHEEL
+    body_width = spec.width - 2 * tyre
+    parts = [
+        # (forward of the rear axle, left, yaw, length, width, height, shade)
+        *((along, side * spec.wheel_track / 2, steer, diameter, tyre, diameter, TYRE_SHADE)
+          for along, steer in ((0.0, 0.0), (spec.wheelbase, car.steering))
+          for side in (1, -1)),
+        (spec.centre_offset, 0.0, 0.0, spec.length, body_width, spec.height / 2, colour),
+        (spec.centre_offset - 0.02, 0.0, 0.0, 0.45 * spec.length, 0.85 * body_width,
+         spec.height, colour),
+    ]  # fmt: skip
+    c, s = math.cos(car.yaw), math.sin(car.yaw)
+    return [
+        Solid(car.x + along * c - side * s, car.y + along * s + side * c, car.yaw + yaw,
+              length, width, height, shade)
+        for along, side, yaw, length, width, height, shade in parts
+    ]  # fmt: skip
+
+
+def car_windows(car: Car) -> tuple[np.ndarray, np.ndarray]:
+    """The cabin's windows: their world corners (k x 4 x 3) and outward normals (k x 3). The
+    rear window, the windscreen, and the windscreen's top edge on the roof, which the chase
+    camera sees from behind and which marks the car's front."""
+    cabin = car_solids(car, (0, 0, 0))[-1]
+    c, s = math.cos(car.yaw), math.sin(car.yaw)
+    forward, left, up = np.array([c, s, 0.0]), np.array([-s, c, 0.0]), np.array([0.0, 0.0, 1.0])
+    middle = np.array([cabin.x, cabin.y, 0.0])
+    half, wide, top = cabin.length / 2, 0.4 * cabin.width * left, cabin.height
+    lift = 0.002  # [m] in front of the face it lies on
+    low, tall = 0.75 * top * up, 0.15 * top * up  # a window's middle and half its height
+    centres = (
+        middle - (half + lift) * forward + low,
+        middle + (half + lift) * forward + low,
+        middle + 0.7 * half * forward + (top + lift) * up,
+    )
+    spans = (tall, tall, 0.3 * half * forward)
+    windows = np.array([
+        (centre - wide - span, centre + wide - span, centre + wide + span, centre - wide + span)
+        for centre, span in zip(centres, spans, strict=True)
+    ])  # fmt: skip
+    return windows, np.array([-forward, forward, up])
 
 
 def view_image(env: DeepRacerEnv, view: str, observation: dict | None = None) -> np.ndarray:
