@@ -1,6 +1,6 @@
 from django.contrib import admin
 
-from training.models import Quota, QuotaDefaults, RLModel, Track, Vehicle
+from training.models import Quota, QuotaDefaults, RewardFunction, RLModel, Track, Vehicle
 
 
 @admin.register(Track)
@@ -17,6 +17,14 @@ class RLModelAdmin(admin.ModelAdmin):
     search_fields = ["name", "owner__username"]
     date_hierarchy = "created_at"
     list_select_related = ["owner", "track"]
+
+
+@admin.register(RewardFunction)
+class RewardFunctionAdmin(admin.ModelAdmin):
+    list_display = ["name", "owner", "updated_at"]
+    search_fields = ["name", "owner__username"]
+    list_select_related = ["owner"]
+    readonly_fields = ["created_at", "updated_at"]
 
 
 @admin.register(Vehicle)

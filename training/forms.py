@@ -81,6 +81,20 @@ class RewardValidationForm(forms.Form):
         return next(iter(self.errors.values()))[0]
 
 
+class RewardFunctionForm(RewardValidationForm):
+    """Save the editor's code in the racer's library: a name, the code, and the track its
+    samples are taken from (the editor's "Try it on")."""
+
+    name = forms.CharField(
+        label="Name",
+        max_length=64,
+        required=False,  # the service says what is wrong with a name, in one place
+        widget=forms.TextInput(attrs={"autocomplete": "off", "data-reward-name": ""}),
+        help_text="Saved functions can be picked when you create a model.",
+    )
+    field_order = ["name", "source", "track"]
+
+
 class TrackAndRaceFields(forms.Form):
     """Where and how the car races: the fields the create-model and evaluation pages share."""
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
 from django.db.models import Count, Prefetch, QuerySet, Sum
+from django.db.models.functions import Lower
 from django.utils import timezone
 
 from training import artifacts, jobs
@@ -15,6 +16,7 @@ from training.models import (
     EvaluationTrial,
     Iteration,
     Quota,
+    RewardFunction,
     RLModel,
     Track,
     TrainingJob,
@@ -212,3 +214,8 @@ def allowance_for(*, racer: AbstractBaseUser) -> Allowance:
         max_minutes=quota.max_minutes_per_month,
         minutes=(used or 0.0) / 60 + (reserved["minutes"] or 0),
     )
+
+
+def reward_functions_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RewardFunction]:
+    """The racer's library of named reward functions, by name."""
+    return RewardFunction.objects.filter(owner=racer).order_by(Lower("name"))

@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 from django.contrib.auth.models import AbstractBaseUser
-from django.db import transaction
+from django.db import IntegrityError, transaction
 from django.utils import timezone
 
 from simulator import tracks as simulator_tracks
-from training import artifacts, configuration, live, selectors, tasks
+from training import artifacts, configuration, live, rewards, selectors, tasks
 from training.models import (
     Direction,
     EvaluationJob,
     Quota,
+    RewardFunction,
     RLModel,
     Track,
     TrainingJob,
@@ -205,3 +206,73 @@ def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJ
     model.status = purpose
     model.save(update_fields=["status", "updated_at"])
     return evaluation
+
+
+class RewardFunctionInvalid(Exception):
+    """The reward function was not saved: ``errors`` says why, by field (``name``, ``source``);
+    ``validation`` holds the code's problems, line by line, when the code was run."""
+
+    def __init__(self, errors: dict[str, str], validation: rewards.Validation | None = None):
+        super().__init__("; ".join(errors.values()))
+        self.errors, self.validation = errors, validation
+
+
+def reward_function_save(
+    *,
+    owner: AbstractBaseUser,
+    name: str,
+    source: str,
+    track: str,
+    reward_function: RewardFunction | None = None,
+) -> RewardFunction:
+    """Save the racer's code under ``name`` in their library: a new function, or their
+    ``reward_function`` changed (renamed too). The code is validated first, on ``track``'s
+    samples; names are unique per racer, whatever their case (``RewardFunctionInvalid``)."""
+    if reward_function is not None and reward_function.owner_id != owner.pk:
+        raise RewardFunctionInvalid({"name": "You can change only your own reward functions."})
+    name = " ".join(name.split())
+    errors = {}
+    max_length = RewardFunction._meta.get_field("name").max_length
+    if not name:
+        errors["name"] = "Name your reward function to save it."
+    elif len(name) > max_length:
+        errors["name"] = f"A name is at most {max_length} characters long."
+    elif _reward_function_named(owner, name, besides=reward_function):
+        errors["name"] = (
+            f"You already have a reward function named “{name}”; choose another name, "
+            "or open that one from your list to change it."
+        )
+    validation = None
+    if not source.strip():
+        errors["source"] = "Write a reward function first."
+    else:
+        validation = rewards.reward_validate(source=source, track=track)
+        if not validation.valid:
+            count = len(validation.errors)
+            errors["source"] = (
+                f"It was not saved: the code has {count} error{'s' if count > 1 else ''} to fix."
+            )
+    if errors:
+        raise RewardFunctionInvalid(errors, validation)
+    function = reward_function or RewardFunction(owner=owner)
+    function.name, function.source = name, source
+    try:
+        with transaction.atomic():
+            function.save()
+    except IntegrityError:  # the same name saved a moment ago, from another tab
+        raise RewardFunctionInvalid(
+            {"name": f"You already have a reward function named “{name}”; choose another name."}
+        ) from None
+    return function
+
+
+def _reward_function_named(
+    owner: AbstractBaseUser, name: str, *, besides: RewardFunction | None
+) -> bool:
+    same = RewardFunction.objects.filter(owner=owner, name__iexact=name)
+    return same.exclude(pk=besides.pk).exists() if besides else same.exists()
+
+
+def reward_function_delete(*, reward_function: RewardFunction) -> None:
+    """Take a function out of the racer's library; models created with it keep their copy."""
+    reward_function.delete()

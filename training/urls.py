@@ -35,6 +35,12 @@ urlpatterns = [
     path("garage/<int:pk>/edit/", views.vehicle_edit, name="vehicle-edit"),
     path("garage/<int:pk>/delete/", views.vehicle_delete, name="vehicle-delete"),
     path("models/reward-function/", views.reward_editor, name="reward-editor"),
+    path("models/reward-function/<int:pk>/", views.reward_editor, name="reward-function"),
+    path(
+        "models/reward-function/<int:pk>/delete/",
+        views.reward_function_delete,
+        name="reward-function-delete",
+    ),
     path("models/reward-function/validate/", views.reward_validation, name="reward-validation"),
     path("tracks/<slug:name>.png", views.track_preview, name="track-preview"),
 ]

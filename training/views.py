@@ -6,6 +6,7 @@ from django.contrib.auth.decorators import login_required
 from django.core.files.storage import default_storage
 from django.http import FileResponse, Http404, HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import get_object_or_404, redirect, render
+from django.urls import reverse
 from django.views.decorators.cache import cache_control
 from django.views.decorators.http import require_POST, require_safe
 
@@ -29,10 +30,11 @@ from training.forms import (
     EvaluationForm,
     ModelCreateForm,
     ModelImportForm,
+    RewardFunctionForm,
     RewardValidationForm,
     VehicleForm,
 )
-from training.models import EvaluationJob, RLModel, Vehicle
+from training.models import EvaluationJob, RewardFunction, RLModel, Vehicle
 from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
@@ -112,20 +114,74 @@ def vehicle_delete(request: HttpRequest, pk: int) -> HttpResponse:
     return render(request, "training/vehicle_delete.html", {"vehicle": vehicle, "models": models})
 
 
+def _get_reward_function_for_user(request: HttpRequest, pk: int) -> RewardFunction:
+    """The racer's own saved reward function, or 404."""
+    return get_object_or_404(RewardFunction, pk=pk, owner=request.user)
+
+
 @login_required
-def reward_editor(request: HttpRequest) -> HttpResponse:
+def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResponse:
+    """Write, validate and save a reward function in the racer's library (``pk``: open a saved
+    one to change it); "Save and create a model" goes on to the create form with it."""
+    function = _get_reward_function_for_user(request, pk) if pk is not None else None
+    form = RewardFunctionForm(
+        request.POST or None,
+        initial={"name": function.name if function else "", "track": "rookie-loop"},
+    )
+    validation = None
+    if request.method == "POST" and form.is_valid():
+        try:
+            saved = services.reward_function_save(
+                owner=request.user,
+                reward_function=function,
+                name=form.cleaned_data["name"],
+                source=form.cleaned_data["source"],
+                track=form.cleaned_data["track"].name,
+            )
+        except services.RewardFunctionInvalid as invalid:
+            for field, message in invalid.errors.items():
+                form.add_error(field, message)
+            validation = invalid.validation
+        except (SandboxUnavailable, SandboxFailure) as error:
+            form.add_error("source", f"The reward function could not be checked: {error}")
+        else:
+            messages.success(request, f"Saved “{saved.name}”.")
+            if request.POST.get("then") == "create":
+                return redirect(f"{reverse('training:model-create')}?reward={saved.pk}")
+            return redirect("training:reward-function", pk=saved.pk)
+    if form.is_bound:
+        source = form.data.get("source", "")
+    else:
+        source = function.source if function else rewards.EXAMPLES[0].source
     return render(
         request,
         "training/reward_editor.html",
         {
+            "form": form,
+            "function": function,
+            "library": selectors.reward_functions_for_racer(racer=request.user),
+            "validation": validation.as_dict() if validation else None,
             "examples": rewards.EXAMPLES,
             "example_sources": {example.slug: example.source for example in rewards.EXAMPLES},
             "params": rewards.PARAMS,
             "tracks": selectors.tracks_available(),
-            "source": rewards.EXAMPLES[0].source,
+            "try_on_track": form["track"].value(),
+            "source": source,
             "allowed_imports": rewards.ALLOWED_IMPORTS,
         },
+        status=400 if form.errors else 200,
     )
+
+
+@login_required
+def reward_function_delete(request: HttpRequest, pk: int) -> HttpResponse:
+    """Asks first (GET); takes the function out of the racer's library (POST)."""
+    function = _get_reward_function_for_user(request, pk)
+    if request.method == "POST":
+        services.reward_function_delete(reward_function=function)
+        messages.success(request, f"Deleted “{function.name}”. Models created with it keep it.")
+        return redirect("training:reward-editor")
+    return render(request, "training/reward_function_delete.html", {"function": function})
 
 
 @login_required
@@ -173,6 +229,11 @@ def model_create(request: HttpRequest) -> HttpResponse:
             ).metadata()),
             "track": "rookie-loop",
         }  # fmt: skip
+    chosen_reward = None
+    if "reward" in request.GET:  # "Create a model" with a function of the racer's library
+        chosen_reward = _get_reward_function_for_user(request, _number(request.GET["reward"]))
+        initial["reward_function"] = chosen_reward.source
+    reward_library = selectors.reward_functions_for_racer(racer=request.user)
     form = ModelCreateForm(
         request.POST or None, owner=request.user, initial=initial, source=source
     )
@@ -205,6 +266,9 @@ def model_create(request: HttpRequest) -> HttpResponse:
             "examples": rewards.EXAMPLES,
             "example_sources": {example.slug: example.source for example in rewards.EXAMPLES},
             "params": rewards.PARAMS,
+            "reward_library": reward_library,
+            "reward_library_sources": {f.pk: f.source for f in reward_library},
+            "chosen_reward": chosen_reward,
         },
         status=400 if form.errors else 200,
     )

@@ -1,7 +1,10 @@
-// The reward-function editor: CodeMirror on the textarea, examples, and Validate without leaving
-// the page. Errors come back with their line, which gets a marker in the gutter.
+// The reward-function editor: CodeMirror on the textarea, examples, the racer's saved functions
+// (the create form's "Start from"), and Validate without leaving the page. Errors come back with
+// their line, which gets a marker in the gutter. On the reward-function page, what the racer has
+// not saved is kept in sessionStorage, so Back (or a reload) brings it back.
 const root = document.querySelector("[data-reward-editor]");
 const examples = JSON.parse(document.getElementById("reward-examples").textContent);
+const library = JSON.parse(document.getElementById("reward-library")?.textContent || "{}");
 const status = root.querySelector("[data-status]");
 const results = root.querySelector("[data-results]");
 const validateButton = root.querySelector("[data-validate]");
@@ -111,16 +114,95 @@ async function validate() {
   }
 }
 
+// Replace the code with `source`, asking first unless the code is empty or one we offer as is.
+function replaceCode(source, question) {
+  const current = editor.getValue().trim();
+  const offered = [...Object.values(examples), ...Object.values(library)];
+  const known = offered.some((text) => text.trim() === current);
+  if (current && !known && current !== source.trim() && !window.confirm(question)) return false;
+  clearMarks();
+  results.hidden = true;
+  status.className = "muted";
+  status.textContent = "";
+  editor.setValue(source);
+  editor.focus();
+  return true;
+}
+
 validateButton.addEventListener("click", validate);
 for (const button of document.querySelectorAll("[data-example]")) {
   button.addEventListener("click", () => {
-    const current = editor.getValue().trim();
-    const isExample = Object.values(examples).some((source) => source.trim() === current);
-    if (current && !isExample && !window.confirm("Replace your code with this example?")) return;
-    clearMarks();
-    results.hidden = true;
-    status.textContent = "";
-    editor.setValue(examples[button.dataset.example]);
-    editor.focus();
+    replaceCode(examples[button.dataset.example], "Replace your code with this example?");
   });
+}
+
+const picker = root.querySelector("[data-reward-pick]");
+root.querySelector("[data-reward-load]")?.addEventListener("click", () => {
+  const colon = picker.value.indexOf(":");
+  const key = picker.value.slice(colon + 1);
+  const source = picker.value.startsWith("saved:") ? library[key] : examples[key];
+  if (source === undefined) {
+    status.className = "badge badge-down";
+    status.textContent = "Choose a saved function or an example first.";
+    return;
+  }
+  const title = picker.selectedOptions[0].textContent;
+  if (replaceCode(source, `Replace your code with “${title}”?`)) status.textContent = `Loaded “${title}”.`;
+});
+
+// What the server found when it refused to save: shown as if Validate had been pressed.
+const refused = JSON.parse(document.getElementById("reward-validation-result")?.textContent || "null");
+if (refused) show(refused);
+
+const draftForm = root.closest("[data-draft-key]");
+if (draftForm) keepDrafts(draftForm);
+
+function keepDrafts(form) {
+  const key = form.dataset.draftKey;
+  const nameInput = form.querySelector("[data-reward-name]");
+  const now = () => ({ source: editor.getValue(), name: nameInput ? nameInput.value : "" });
+  const read = (name) => {
+    try {
+      return JSON.parse(window.sessionStorage.getItem(name));
+    } catch {
+      return null;
+    }
+  };
+  const same = (a, b) => Boolean(a && b) && a.source === b.source && a.name === b.name;
+  // A page the server rendered from a refused save shows unsaved code: keep it as the draft.
+  const restorable = "draftRestore" in form.dataset;
+  const saved = restorable ? now() : null;
+  const clear = form.dataset.draftClear;  // the new-function draft, once it is this saved one
+  if (clear && read(clear)?.source === saved?.source) window.sessionStorage.removeItem(clear);
+
+  function remember() {
+    try {
+      if (same(now(), saved)) window.sessionStorage.removeItem(key);
+      else window.sessionStorage.setItem(key, JSON.stringify(now()));
+    } catch {
+      // Storage full or refused: the code is still in the editor.
+    }
+  }
+
+  const draft = read(key);
+  if (restorable && draft && typeof draft.source === "string" && !same(draft, saved)) {
+    editor.setValue(draft.source);
+    if (nameInput) nameInput.value = draft.name || "";
+    status.className = "muted";
+    status.textContent = "What you had not saved is back. ";
+    const discard = document.createElement("button");
+    discard.type = "button";
+    discard.className = "button button-secondary button-small";
+    discard.textContent = "Discard it";
+    discard.addEventListener("click", () => {
+      editor.setValue(saved.source);
+      if (nameInput) nameInput.value = saved.name;
+      window.sessionStorage.removeItem(key);
+      status.textContent = "";
+    });
+    status.append(discard);
+  }
+  if (!restorable) remember();
+  editor.on("change", remember);
+  nameInput?.addEventListener("input", remember);
 }
