@@ -10,6 +10,7 @@ racer's code, so the trainer checks every field before it learns from one (``dec
 
 from __future__ import annotations
 
+import json
 import time
 import zlib
 from dataclasses import dataclass
@@ -22,7 +23,20 @@ from training.sandbox.protocol import unpack
 
 EXPIRE_AFTER = 3600  # [s] the keys live after the job ends
 MAX_QUEUED_EPISODES = 2000  # the buffer is trimmed beyond this, oldest first
-MAX_LOG_LINES = 500  # printed lines waiting for the trainer to file them
+MAX_LOG_LINES = 500  # log lines waiting for the trainer to file them
+MAX_LOG_TEXT = 500  # [characters] of one log line
+LOG_SOURCES = ("worker", "reward")  # JobLogLine.Source values a rollout worker may send
+LOG_LEVELS = ("info", "warning", "error")
+
+
+@dataclass(frozen=True)
+class LogEntry:
+    """A line for the job's log from a rollout worker: its own message (``source`` "worker"), or
+    what the reward function printed ("reward")."""
+
+    source: str
+    text: str
+    level: str = "info"
 
 
 def key(job_id: int, part: str) -> str:
@@ -135,15 +149,27 @@ class JobChannel:
         value = self.client.hget(self.control, "failure")
         return value.decode("utf-8", "replace") if value else None
 
-    def push_log(self, lines: list[str]) -> None:
-        if lines:
+    def push_log(self, entries: list[LogEntry]) -> None:
+        """Lines for the job's log; the list keeps the newest ``MAX_LOG_LINES`` until filed."""
+        if entries:
             pipe = self.client.pipeline()
-            pipe.rpush(self.log, *[line[:300] for line in lines])
+            pipe.rpush(self.log, *[
+                json.dumps([entry.source, entry.level, entry.text[:MAX_LOG_TEXT]])
+                for entry in entries
+            ])  # fmt: skip
             pipe.ltrim(self.log, -MAX_LOG_LINES, -1)
             pipe.execute()
 
-    def pop_log(self) -> list[str]:
-        return [line.decode("utf-8", "replace") for line in self.client.lpop(self.log, 100) or []]
+    def pop_log(self) -> list[LogEntry]:
+        entries = []
+        for raw in self.client.lpop(self.log, MAX_LOG_LINES) or []:
+            try:
+                source, level, text = json.loads(raw)
+            except (ValueError, TypeError):
+                continue
+            if source in LOG_SOURCES and level in LOG_LEVELS and isinstance(text, str):
+                entries.append(LogEntry(source, text[:MAX_LOG_TEXT], level))
+        return entries
 
     def expire(self) -> None:
         for name in (self.experience, self.evaluation, self.policy, self.control, self.log):

@@ -17,6 +17,7 @@ from django.utils import timezone
 from training.models import JobLogLine, TrainingJob
 
 LEASE = timedelta(seconds=45)
+IMPORTED = "import"  # the lease owner of a job an import recorded: it never ran on this console
 
 
 class LeaseLost(Exception):
@@ -56,8 +57,37 @@ def write(job: TrainingJob, **fields) -> None:
         setattr(job, name, value)
 
 
-def log(job: TrainingJob, text: str, level: str = "info") -> None:
-    JobLogLine.objects.create(job=job, text=text[:500], level=level)
+def clock_write(job: TrainingJob, seconds: float, **fields) -> bool:
+    """Write the training time used, measured now (``clock_at``), with ``fields``, unless the
+    racer has asked to stop: the stop froze the clock at the time it was asked (what is billed),
+    and the trainer's later measurements must not move it. False when the stop was asked (``job``
+    then mirrors the frozen clock); ``LeaseLost`` when another run holds the job."""
+    holder = TrainingJob.objects.filter(pk=job.pk, attempt=job.attempt, lease_owner=job.lease_owner)
+    now = timezone.now()
+    if holder.filter(stop_requested=False).update(training_seconds=seconds, clock_at=now, **fields):
+        job.training_seconds, job.clock_at = seconds, now
+        for name, value in fields.items():
+            setattr(job, name, value)
+        return True
+    frozen = holder.values("training_seconds", "clock_at", "stop_requested").first()
+    if frozen is None:
+        raise LeaseLost(f"training job {job.pk} is held by another run")
+    for name, value in frozen.items():
+        setattr(job, name, value)
+    return False
+
+
+def saving_message(iterations: int) -> str:
+    """What a stopping job waits for, in the racer's words."""
+    if iterations:
+        return f"Saving the model from iteration {iterations}"
+    return "Saving the model as it started: no iteration finished"
+
+
+def log(
+    job: TrainingJob, text: str, level: str = "info", source: str = JobLogLine.Source.TRAINER
+) -> None:
+    JobLogLine.objects.create(job=job, text=text[:500], level=level, source=source)
 
 
 def queue_position(job: TrainingJob) -> int | None:

@@ -8,6 +8,7 @@ value loss (Huber or MSE) is honoured; SAC's is SB3's. Weights go out as safeten
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import gymnasium
@@ -28,6 +29,12 @@ from training.networks import policy_kwargs
 GAE_LAMBDA = 0.95
 CLIP_RANGE = 0.2
 REPLAY_SIZE = 10_000  # [transitions] SAC's replay buffer
+SAC_CHUNK = 32  # gradient steps between looks at whether the update should be abandoned
+
+
+class Interrupted(Exception):
+    """The update was abandoned part-way (the racer stopped training, or its time ran out); the
+    model's weights are half-updated and must not be saved."""
 
 
 class SpacesOnly(gymnasium.Env):
@@ -49,6 +56,7 @@ class DeepRacerPPO(PPO):
 
     def __init__(self, *args, value_loss: str = "huber", **kwargs) -> None:
         self.value_loss = value_loss
+        self.interrupted: Callable[[], bool] = lambda: False  # looked at between minibatches
         super().__init__(*args, **kwargs)
 
     def train(self) -> None:
@@ -62,6 +70,8 @@ class DeepRacerPPO(PPO):
         losses = []
         for _ in range(self.n_epochs):
             for batch in self.rollout_buffer.get(self.batch_size):
+                if self.interrupted():
+                    raise Interrupted
                 actions = batch.actions.long().flatten() if discrete else batch.actions
                 values, log_prob, entropy = self.policy.evaluate_actions(
                     batch.observations, actions
@@ -144,11 +154,19 @@ class Learner:
 
     # Learning
 
-    def learn(self, episodes: list[Episode]) -> Update:
+    def learn(
+        self, episodes: list[Episode], interrupted: Callable[[], bool] = lambda: False
+    ) -> Update:
+        """One policy update from ``episodes``. ``interrupted`` is asked between minibatches (or
+        every few gradient steps): when it says True, the update is abandoned (``Interrupted``)."""
         if self.algorithm == hp.PPO:
-            self._learn_ppo(episodes)
+            self.model.interrupted = interrupted
+            try:
+                self._learn_ppo(episodes)
+            finally:
+                self.model.interrupted = lambda: False
         else:
-            self._learn_sac(episodes)
+            self._learn_sac(episodes, interrupted)
         laps = [e.lap_time for e in episodes if e.lap_time]
         return Update(
             episodes=len(episodes),
@@ -189,7 +207,7 @@ class Learner:
         model._current_progress_remaining = 1.0
         model.train()
 
-    def _learn_sac(self, episodes: list[Episode]) -> None:
+    def _learn_sac(self, episodes: list[Episode], interrupted: Callable[[], bool]) -> None:
         model = self.model
         for episode in episodes:
             for t in range(episode.steps):
@@ -203,7 +221,11 @@ class Learner:
                     [{}],
                 )
         gradient_steps = sum(e.steps for e in episodes)
-        model.train(gradient_steps=gradient_steps, batch_size=self.hyperparameters["batch_size"])
+        for done in range(0, gradient_steps, SAC_CHUNK):
+            if interrupted():
+                raise Interrupted
+            model.train(gradient_steps=min(SAC_CHUNK, gradient_steps - done),
+                        batch_size=self.hyperparameters["batch_size"])  # fmt: skip
 
 
 def _gae(episode: Episode, gamma: float, lam: float) -> np.ndarray:

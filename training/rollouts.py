@@ -18,8 +18,8 @@ import redis
 from console.workers import redis_client
 from training import hyperparameters as hp
 from training import live
-from training.experience import JobChannel
-from training.models import TrainingJob
+from training.experience import JobChannel, LogEntry
+from training.models import Track, TrainingJob
 from training.sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
 
 logger = logging.getLogger(__name__)
@@ -29,6 +29,13 @@ WAIT_POLL = 0.2  # [s] between looks for new weights while the trainer learns
 JOB_CHECK = 15.0  # [s] between looks at the job's row
 MEMORY_ALLOWANCE = 1024 * MiB  # beyond the child's size with torch and the simulator loaded
 HOLD_INTERVAL = 1.0  # [s] between the paused frames shown while the trainer learns
+STOP_LOOK = 1.0  # [s] between looks for the end of the job in the middle of an episode
+PRINTED_LINES = 20  # lines of what the reward function printed a worker keeps per iteration
+PRINTED_CHARACTERS = 4000  # and characters of them
+
+
+class JobEnded(Exception):
+    """The trainer ended the job while an episode was being driven: the episode is abandoned."""
 
 
 def run(job_id: int, worker: int, attempt: int, track: str) -> None:
@@ -44,14 +51,23 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
         channel.report_failure(str(error))
         return
     policy = {"algorithm": model.algorithm, "network": model.network, "seed": model.seed + worker}
+    name = f"Simulation worker {worker + 1}"
+    printed = Printed(name if model.workers > 1 else "")
     try:
         with Sandbox(
             env=model.environment_settings(track), policy=policy,
             call_timeout=REWARD_CALL_LIMIT, memory_allowance=MEMORY_ALLOWANCE,
         ) as sandbox:  # fmt: skip
             sandbox.load(model.reward_function)
+            shown = Track.objects.filter(name=track).values_list("display_name", flat=True)
+            channel.push_log([LogEntry("worker", f"{name} is driving {shown.first() or track}.")])
             with live.FramePublisher(channel.client, live.training_group(job_id)) as publisher:
-                _drive(sandbox, channel, job, worker, Viewing(sandbox, publisher, worker))
+                try:
+                    why = _drive(sandbox, channel, job, worker, Viewing(sandbox, publisher, worker),
+                                 printed)  # fmt: skip
+                except JobEnded:
+                    why = "the training ended; the episode it was driving was abandoned"
+                channel.push_log([*printed.close(), LogEntry("worker", f"{name} stopped: {why}.")])
     except SandboxFailure as failure:
         channel.report_failure(f"Your reward function failed {_where(failure, worker)}: {failure}")
     except redis.RedisError as error:
@@ -94,17 +110,61 @@ class Viewing:
                                       "rendered_at": time.time()})  # fmt: skip
 
 
+class Printed:
+    """What the reward function printed, as a worker files it: per iteration, the first
+    ``PRINTED_LINES`` lines (``PRINTED_CHARACTERS`` at most); the rest is counted, and a note
+    says how many lines were not kept once the iteration is over. ``label``: who printed, where
+    several workers do."""
+
+    def __init__(self, label: str = "") -> None:
+        self.label = label
+        self.iteration = 0
+        self.kept = self.characters = self.dropped = 0
+
+    def take(self, sandbox: Sandbox, iteration: int) -> list[LogEntry]:
+        """The log entries for what ``sandbox`` printed since the last take, driving for
+        ``iteration``."""
+        lines, dropped = sandbox.take_logs()
+        entries = self.close() if iteration != self.iteration else []
+        self.iteration = iteration
+        for line in lines:
+            if self.kept < PRINTED_LINES and self.characters + len(line) <= PRINTED_CHARACTERS:
+                entries.append(LogEntry("reward", f"{self.label}: {line}" if self.label else line))
+                self.kept += 1
+                self.characters += len(line)
+            else:
+                self.dropped += 1
+        self.dropped += dropped
+        return entries
+
+    def close(self) -> list[LogEntry]:
+        """The note of the lines the iteration printed and were not kept, if any."""
+        dropped, self.kept, self.characters, self.dropped = self.dropped, 0, 0, 0
+        if not dropped:
+            return []
+        who = f" by {self.label.lower()}" if self.label else ""
+        return [LogEntry("reward", f"… {dropped:,} more line{'s' if dropped != 1 else ''} "
+                         f"printed{who} in iteration {self.iteration} not kept")]  # fmt: skip
+
+
 def _drive(
-    sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int, viewing: Viewing
-) -> None:
+    sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int, viewing: Viewing,
+    printed: Printed,
+) -> str:  # fmt: skip
+    """Drive episodes until the job ends; why it ended, in the racer's words."""
     algorithm, attempt = job.model.algorithm, job.attempt
     version = -1
     evaluated = -1
-    checked = time.monotonic()
+    checked = looked = time.monotonic()
 
     def beat(steps: int) -> None:  # a long episode still shows the trainer this worker lives
+        nonlocal looked
         channel.beat(worker)
         viewing.update()
+        if time.monotonic() - looked >= STOP_LOOK:
+            looked = time.monotonic()
+            if channel.should_stop(attempt):
+                raise JobEnded
 
     while not channel.should_stop(attempt):
         channel.beat(worker)
@@ -112,7 +172,7 @@ def _drive(
         if time.monotonic() - checked > JOB_CHECK:
             checked = time.monotonic()
             if not _still_wanted(job):
-                return
+                return "the training is over"
         published = channel.policy_version()
         if published > version:
             published, weights = channel.fetch_policy()
@@ -122,16 +182,18 @@ def _drive(
             for _ in range(channel.evaluations_wanted()):
                 summary = sandbox.episode("evaluate", worker, beat)["summary"]
                 channel.push_evaluation(msgpack.packb({**summary, "version": version}))
+                channel.push_log(printed.take(sandbox, version + 1))
                 channel.beat(worker)
             evaluated = version
             continue
         mode = "random" if version == 0 and algorithm == hp.SAC else "explore"
         reply = sandbox.episode(mode, worker, beat)
         channel.push_episode(reply["payload"])
-        channel.push_log(list(sandbox.logs))
-        sandbox.logs.clear()
+        channel.push_log(printed.take(sandbox, version + 1))
         if channel.count_episode(version) >= channel.episodes_wanted():
+            channel.push_log(printed.close())  # this worker's share of the iteration is done
             _await_next_version(channel, version, worker, attempt, viewing)
+    return "the training ended"
 
 
 def _still_wanted(job: TrainingJob) -> bool:

@@ -2,19 +2,23 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
+from datetime import datetime
 
 from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
-from django.db.models import Count, Prefetch, QuerySet, Sum
-from django.db.models.functions import Lower
+from django.db.models import Count, F, FloatField, Prefetch, QuerySet, Sum
+from django.db.models.functions import Least, Lower
 from django.utils import timezone
 
 from training import artifacts, jobs
+from training.jobs import IMPORTED
 from training.models import (
     EvaluationJob,
     EvaluationTrial,
     Iteration,
+    JobLogLine,
     Quota,
     RewardFunction,
     RLModel,
@@ -30,7 +34,9 @@ def models_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:
 
 def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
     """The racer's models, each with ``training``: its latest job (or None) and, on that job,
-    ``queue_position`` (None unless it waits): two queries, and one per waiting job."""
+    ``queue_position`` (None unless it waits) and ``clock``: two queries, and one per waiting
+    job."""
+    now = timezone.now()
     newest_first = TrainingJob.objects.order_by("-created_at")
     models = list(
         models_for_racer(racer=racer).prefetch_related(
@@ -41,6 +47,7 @@ def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
         model.training = model.jobs_newest_first[0] if model.jobs_newest_first else None
         if model.training is not None:
             model.training.queue_position = jobs.queue_position(model.training)
+            model.training.clock = training_clock(job=model.training, now=now)
     return models
 
 
@@ -80,10 +87,83 @@ def model_files(*, model: RLModel) -> list[ModelFile]:
     return files
 
 
+@dataclass(frozen=True)
+class TrainingClock:
+    """A training job's clock at one moment (``at``, the server's time): the time it has used,
+    whether that still grows, and its limit. Every page, the live stream and the quota read it
+    from the same origin (``TrainingJob.training_seconds`` measured at ``clock_at``), so they
+    agree to the second."""
+
+    seconds: float  # [s] used at ``at``
+    at: datetime
+    running: bool
+    max_seconds: int
+
+    @property
+    def left(self) -> float:
+        return max(self.max_seconds - self.seconds, 0.0)
+
+    def as_dict(self) -> dict:
+        """What the page's clock counts from: the time used at the server's ``server_now``."""
+        return {
+            "seconds_used": round(self.seconds, 3),
+            "server_now": round(self.at.timestamp(), 3),
+            "clock_running": self.running,
+            "max_seconds": self.max_seconds,
+        }
+
+
+def training_clock(*, job: TrainingJob, now: datetime | None = None) -> TrainingClock:
+    """The job's clock ``now``: the trainer's last measurement, plus the time since it while the
+    job trains. It stops once the racer asks to stop (the time up to the request is what is
+    billed) and at the time limit."""
+    now = now or timezone.now()
+    max_seconds = job.model.max_minutes * 60
+    seconds = job.training_seconds
+    running = (
+        job.status == TrainingJob.Status.IN_PROGRESS
+        and not job.stop_requested
+        and job.clock_at is not None
+    )
+    if running:
+        seconds += max((now - job.clock_at).total_seconds(), 0.0)
+    return TrainingClock(
+        seconds=min(seconds, max_seconds),
+        at=now,
+        running=running and seconds < max_seconds,
+        max_seconds=max_seconds,
+    )
+
+
+LOG_SHOWN = 200  # lines of a job's log its model page shows; the download has them all
+
+
+def job_log(*, job: TrainingJob, source: str = "") -> list[JobLogLine]:
+    """The newest ``LOG_SHOWN`` lines of the job's log, newest first; only those of ``source``
+    (trainer, worker, reward) when it is given."""
+    lines = job.log_lines.all()
+    if source:
+        lines = lines.filter(source=source)
+    return list(lines.order_by("-at", "-pk")[:LOG_SHOWN])
+
+
+def model_log_lines(*, model: RLModel) -> Iterator[str]:
+    """The whole log of the model's training, oldest first, as lines of text: the time in the
+    racer's zone, who wrote the line, and what it says."""
+    sources = dict(JobLogLine.Source.choices)
+    yield f"Training log of {model.name}; times in {timezone.get_current_timezone_name()}\n"
+    lines = JobLogLine.objects.filter(job__model=model).order_by("job__created_at", "at", "pk")
+    for line in lines.iterator(chunk_size=2000):
+        when = timezone.localtime(line.at).strftime("%Y-%m-%d %H:%M:%S")
+        level = "" if line.level == "info" else f" {line.level.upper()}:"
+        yield f"{when}  [{sources.get(line.source, line.source)}]{level} {line.text}\n"
+
+
 def training_status(*, job: TrainingJob) -> dict:
     """A training job's state as the live page shows it (a ``status`` message)."""
     model = job.model
     return {
+        **training_clock(job=job).as_dict(),
         "type": "status",
         "status": job.status,
         "status_display": job.get_status_display(),
@@ -91,8 +171,6 @@ def training_status(*, job: TrainingJob) -> dict:
         "message": job.message,
         "failure_reason": job.failure_reason,
         "queue_position": jobs.queue_position(job),
-        "training_seconds": round(job.training_seconds, 1),
-        "max_seconds": model.max_minutes * 60,
         "iterations": job.iterations,
         "episodes": job.episodes,
         "steps": job.steps,
@@ -185,7 +263,8 @@ def evaluations_for_model(*, model: RLModel) -> QuerySet[EvaluationJob]:
 @dataclass(frozen=True)
 class Allowance:
     """What a racer's quota leaves them: models, and training minutes this calendar month (a
-    running or queued job counts with its whole time budget)."""
+    running or queued job counts with its whole time budget, a stopped one with the time it
+    used up to the stop)."""
 
     max_models: int
     models: int
@@ -206,8 +285,13 @@ def allowance_for(*, racer: AbstractBaseUser) -> Allowance:
     month = timezone.localtime().replace(day=1, hour=0, minute=0, second=0, microsecond=0)
     jobs = TrainingJob.objects.filter(model__owner=racer, created_at__gte=month)
     active = TrainingJob.ACTIVE
-    used = jobs.exclude(status__in=active).aggregate(seconds=Sum("training_seconds"))["seconds"]
-    reserved = jobs.filter(status__in=active).aggregate(minutes=Sum("model__max_minutes"))
+    # A job the racer stopped is billed the time up to the stop (its clock froze there), even
+    # while it still saves; one that trains holds its whole budget.
+    training = jobs.filter(status__in=active, stop_requested=False)
+    ran_here = jobs.exclude(pk__in=training).exclude(lease_owner=IMPORTED)  # not imports' time
+    billed = Least("training_seconds", F("model__max_minutes") * 60.0, output_field=FloatField())
+    used = ran_here.aggregate(seconds=Sum(billed))["seconds"]
+    reserved = training.aggregate(minutes=Sum("model__max_minutes"))
     return Allowance(
         max_models=quota.max_models,
         models=RLModel.objects.filter(owner=racer).exclude(status=RLModel.Status.DELETING).count(),

@@ -7,7 +7,7 @@ from django.db import IntegrityError, transaction
 from django.utils import timezone
 
 from simulator import tracks as simulator_tracks
-from training import artifacts, configuration, live, rewards, selectors, tasks
+from training import artifacts, configuration, jobs, live, rewards, selectors, tasks
 from training.models import (
     Direction,
     EvaluationJob,
@@ -125,8 +125,10 @@ def model_create(
 
 
 def training_stop(*, job: TrainingJob) -> TrainingJob:
-    """The racer's "Stop training": a running job moves through STOPPING to COMPLETED with a model;
-    a job still waiting in the queue is canceled."""
+    """The racer's "Stop training": a running job moves through STOPPING to COMPLETED with the
+    model of its last finished iteration (the trainer abandons one it is learning, within seconds);
+    its clock stops now, and the time up to now is what it is billed. A job still waiting in the
+    queue is canceled."""
     with transaction.atomic():
         job = TrainingJob.objects.select_for_update().get(pk=job.pk)
         if job.status == TrainingJob.Status.QUEUED and job.attempt == 0:
@@ -135,10 +137,14 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
             job.failure_reason = "Stopped before training began."
             job.save(update_fields=["status", "finished_at", "failure_reason"])
             RLModel.objects.filter(pk=job.model_id).update(status=RLModel.Status.ERROR)
-        elif job.is_active:
+        elif job.is_active and not job.stop_requested:
+            clock = selectors.training_clock(job=job)  # frozen here: the time billed
+            job.training_seconds, job.clock_at = clock.seconds, clock.at
             job.stop_requested = True
             job.status = TrainingJob.Status.STOPPING
-            job.save(update_fields=["stop_requested", "status"])
+            job.message = jobs.saving_message(job.iterations)
+            job.save(update_fields=["stop_requested", "status", "message", "training_seconds",
+                                    "clock_at"])  # fmt: skip
             RLModel.objects.filter(pk=job.model_id).update(status=RLModel.Status.STOPPING)
     live.announce_training(job.pk)
     if job.status == TrainingJob.Status.CANCELED:

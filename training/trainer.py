@@ -27,16 +27,18 @@ from training import artifacts, jobs, live
 from training import hyperparameters as hp
 from training.experience import Episode, JobChannel, decode_episode
 from training.jobs import LeaseLost
-from training.learner import Learner
-from training.models import Iteration, RLModel, TrainingJob
+from training.learner import Interrupted, Learner
+from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 from training.sandbox.protocol import unpack
 
 logger = logging.getLogger(__name__)
 
 EVALUATION_EPISODES = 5
-CHECK_EVERY = 3.0  # [s] between lease renewals, stop checks and worker checks
+CHECK_EVERY = 3.0  # [s] between lease renewals, clock writes and worker checks
+STOP_CHECK = 1.0  # [s] between looks for the racer's stop request, even in the middle of an update
 REPLACEMENTS = 2  # per worker slot, before the job carries on without it
 REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
+MAX_PRINTED_LINES = 20_000  # reward function and worker lines a job's log keeps, in all
 
 
 class JobFailed(Exception):
@@ -101,12 +103,22 @@ class Trainer:
         ]
         self.metrics: list[dict] = []
         self.best: tuple[float, float] | None = None  # (evaluation completion, -lap time)
+        self.session_started: float | None = None  # when this run's clock started [monotonic]
+        self.base_seconds = job.training_seconds  # the time used before this run
+        self.ending: str | None = None  # why the loop ends: "stop" or "limit"
+        self.last_look = self.last_check = 0.0
+        self.abandoned: int | None = None  # the iteration an ending cut short
+        self.printed: int | None = None  # lines of the workers and the reward function filed
 
     # The loop
 
     def train(self) -> None:
         job, model = self.job, self.model
         first_run = job.started_at is None
+        if job.stop_requested:  # asked while this run waited to resume the job
+            jobs.log(job, "Stopped by the racer.")
+            self.finish(TrainingJob.Status.COMPLETED)
+            return
         jobs.write(
             job,
             status=TrainingJob.Status.INITIALIZING,
@@ -148,27 +160,36 @@ class Trainer:
         self._publish()
         for slot in self.slots:
             self.start_rollouts(job, slot)
-        tracks = ", ".join(sorted({slot.track for slot in self.slots}))
-        jobs.write(
-            job,
-            status=TrainingJob.Status.IN_PROGRESS,
-            message=f"Training with {len(self.slots)} simulation worker(s) on {tracks}",
-        )
+        self.training_message = f"Training with {_workers(len(self.slots))} on {self._tracks()}"
+        self.session_started, self.base_seconds = time.monotonic(), job.training_seconds
+        started = jobs.clock_write(
+            job, self.base_seconds, status=TrainingJob.Status.IN_PROGRESS,
+            message=self.training_message,
+        )  # fmt: skip
         live.announce_training(job.pk)
+        if not started:  # the racer stopped it while it was being prepared
+            jobs.log(job, "Stopped by the racer.")
+            self.finish(TrainingJob.Status.COMPLETED)
+            return
         if first_run:
+            device = "the GPU" if self.learner.device.startswith("cuda") else "the CPU"
             jobs.log(
                 job,
                 f"Training started: {model.get_algorithm_display()}, "
-                f"{len(self.slots)} simulation worker(s), on {self.learner.device}.",
+                f"{_workers(len(self.slots))}, learning on {device}.",
             )
         self._loop()
         self.finish(TrainingJob.Status.COMPLETED)
 
+    def _tracks(self) -> str:
+        """The tracks of the job's workers, by the names racers know them by."""
+        names = {slot.track for slot in self.slots}
+        shown = dict(Track.objects.filter(name__in=names).values_list("name", "display_name"))
+        return ", ".join(sorted(shown.get(name, name) for name in names))
+
     def _loop(self) -> None:
         self.collected: list[Episode] = []
-        self.session_started = time.monotonic()
-        self.base_seconds = self.job.training_seconds
-        self.last_check = 0.0
+        self.last_watch = 0.0
         while True:
             try:
                 if self._turn():
@@ -180,18 +201,12 @@ class Trainer:
         """One turn of the loop: the periodic checks, the episodes that came, and an update when
         enough have; True when training should end."""
         job, model = self.job, self.model
+        if self._should_end():
+            self._say_why_it_ended()
+            return True
         now = time.monotonic()
-        if now - self.last_check >= CHECK_EVERY:
-            self.last_check = now
-            spent = self.base_seconds + now - self.session_started
-            jobs.write(job, training_seconds=spent, lease_expires=timezone.now() + jobs.LEASE)
-            live.announce_training(job.pk)
-            if self._stop_requested():
-                jobs.log(job, "Stopped by the racer.")
-                return True
-            if spent >= model.max_minutes * 60:
-                jobs.log(job, f"Reached the maximum training time of {model.max_minutes} min.")
-                return True
+        if now - self.last_watch >= CHECK_EVERY:
+            self.last_watch = now
             if not self.channel.is_set_up(job.attempt):
                 self._recover_redis("Redis restarted and lost the job's keys")
                 return False
@@ -207,9 +222,54 @@ class Trainer:
                 continue  # PPO learns on-policy: episodes of older weights are dropped
             self.collected.append(episode)
         if len(self.collected) >= model.hyperparameters["num_episodes_between_training"]:
-            self._update(self.collected)
-            self.collected = []
+            episodes, self.collected = self.collected, []
+            if not self._update(episodes):
+                self._say_why_it_ended()
+                return True
         return False
+
+    # The clock, the stop and the time limit
+
+    def _spent(self) -> float:
+        """The training time used so far [s], this run's and the runs' before it."""
+        if self.session_started is None:
+            return self.base_seconds
+        return self.base_seconds + time.monotonic() - self.session_started
+
+    def _should_end(self) -> bool:
+        """Whether training should end now: the racer asked to stop, or the time is up. Looks at
+        most once a second (in the middle of an update too), and renews the lease and writes the
+        clock every few seconds."""
+        now = time.monotonic()
+        if self.ending is not None or now - self.last_look < STOP_CHECK:
+            return self.ending is not None
+        self.last_look = now
+        max_seconds = self.model.max_minutes * 60
+        spent = min(self._spent(), max_seconds)
+        if now - self.last_check >= CHECK_EVERY:
+            self.last_check = now
+            jobs.write(self.job, lease_expires=timezone.now() + jobs.LEASE)
+            if not jobs.clock_write(self.job, spent):
+                self.ending = "stop"
+            live.announce_training(self.job.pk)
+        elif self._stop_requested():
+            self.ending = "stop"
+        if self.ending is None and spent >= max_seconds:
+            self.ending = "limit"
+        return self.ending is not None
+
+    def _say_why_it_ended(self) -> None:
+        job, model = self.job, self.model
+        if self.ending == "stop":
+            jobs.log(job, "Stopped by the racer.")
+        else:
+            jobs.log(job, f"Reached the maximum training time of {model.max_minutes} min.")
+        if self.abandoned is not None:
+            jobs.log(
+                job,
+                f"Iteration {self.abandoned} was being learnt and was abandoned; the model is "
+                f"saved from iteration {self.abandoned - 1}.",
+            )
 
     def _recover_redis(self, what: str) -> None:
         """Wait for Redis to come back, then set the job's keys up again and restart the rollout
@@ -237,11 +297,22 @@ class Trainer:
             self.job, "Redis is back: the experience buffer starts again from the newest weights."
         )
 
-    def _update(self, episodes: list[Episode]) -> None:
+    def _update(self, episodes: list[Episode]) -> bool:
+        """Learn one iteration from ``episodes`` and record it; False when training ended
+        meanwhile (the racer stopped it, or its time ran out) and the iteration was abandoned."""
         started = time.monotonic()
-        update = self.learner.learn(episodes)
-        self.version += 1
-        number = self.version
+        number = self.version + 1
+        jobs.clock_write(
+            self.job, self._spent(), message=f"Learning iteration {number} from "
+            f"{len(episodes)} episode{'s' if len(episodes) != 1 else ''}",
+        )  # fmt: skip
+        live.announce_training(self.job.pk)
+        try:
+            update = self.learner.learn(episodes, interrupted=self._should_end)
+        except Interrupted:
+            self.abandoned = number
+            return False
+        self.version = number
         self._publish(evaluate=EVALUATION_EPISODES)
         wall = time.monotonic() - started
         with transaction.atomic():
@@ -269,12 +340,15 @@ class Trainer:
                 last_checkpoint=checkpoint,
             )
         self._record_training(number, episodes)
+        jobs.clock_write(self.job, self._spent(), message=self.training_message)
         live.announce_iteration(self.job.pk, number)
+        live.announce_training(self.job.pk)
         jobs.log(
             self.job,
             f"Iteration {number}: {update.episodes} episodes, {update.steps} steps, "
             f"average progress {update.completion:.1f}%, learnt in {wall:.1f} s.",
         )
+        return True
 
     def _publish(self, evaluate: int = 0) -> None:
         self.channel.publish(
@@ -432,8 +506,29 @@ class Trainer:
         return TrainingJob.objects.filter(pk=self.job.pk, stop_requested=True).exists()
 
     def _file_logs(self) -> None:
-        for line in self.channel.pop_log():
-            jobs.log(self.job, line, "reward")
+        """File what the workers sent for the log: their messages, and what the reward function
+        printed (each worker keeps a bounded share of it per iteration); past
+        ``MAX_PRINTED_LINES`` in the job's log, the rest is dropped, and the log says so once."""
+        entries = self.channel.pop_log()
+        if not entries:
+            return
+        if self.printed is None:
+            self.printed = self.job.log_lines.exclude(source=JobLogLine.Source.TRAINER).count()
+        room = MAX_PRINTED_LINES - self.printed
+        kept = entries[: max(room, 0)]
+        JobLogLine.objects.bulk_create(
+            JobLogLine(job=self.job, source=entry.source, level=entry.level, text=entry.text)
+            for entry in kept
+        )
+        self.printed += len(kept)
+        if len(kept) < len(entries) and room >= 0:
+            self.printed += 1  # said once
+            jobs.log(
+                self.job,
+                f"The log holds {MAX_PRINTED_LINES:,} lines from the simulation workers and the "
+                "reward function; later ones are not kept.",
+                "warning",
+            )
 
     def _decode(self, payload: bytes) -> Episode | None:
         try:
@@ -445,14 +540,21 @@ class Trainer:
     # The end
 
     def finish(self, status: str, reason: str = "") -> None:
+        """End the job: the clock stops (where the racer's stop froze it, or at the time used, up
+        to the limit), the workers are told to stop, and the model is saved from its last
+        finished iteration."""
         job = self.job
         try:
             self.channel.request_stop()
             self.channel.expire()
+            self._file_logs()
         except redis.RedisError:
             pass
         try:
-            jobs.write(job, status=TrainingJob.Status.STOPPING, message="Saving the model")
+            if self.session_started is not None:
+                jobs.clock_write(job, min(self._spent(), self.model.max_minutes * 60))
+            message = jobs.saving_message(job.iterations)
+            jobs.write(job, status=TrainingJob.Status.STOPPING, message=message)
             if status == TrainingJob.Status.COMPLETED:
                 artifacts.write_model_files(self.model)
             jobs.write(
@@ -473,3 +575,7 @@ class Trainer:
             status=RLModel.Status.READY if ready else RLModel.Status.ERROR
         )
         live.announce_training(job.pk)
+
+
+def _workers(count: int) -> str:
+    return f"{count} simulation worker{'s' if count != 1 else ''}"

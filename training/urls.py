@@ -9,6 +9,7 @@ urlpatterns = [
     path("models/import/", views.model_import, name="model-import"),
     path("models/<int:pk>/", views.model_detail, name="model-detail"),
     path("models/<int:pk>/stop/", views.model_stop, name="model-stop"),
+    path("models/<int:pk>/log.txt", views.model_log, name="model-log"),
     path("models/<int:pk>/files/<path:relative>", views.model_file, name="model-file"),
     *(
         path(

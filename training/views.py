@@ -4,7 +4,14 @@ from copy import copy
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.files.storage import default_storage
-from django.http import FileResponse, Http404, HttpRequest, HttpResponse, JsonResponse
+from django.http import (
+    FileResponse,
+    Http404,
+    HttpRequest,
+    HttpResponse,
+    JsonResponse,
+    StreamingHttpResponse,
+)
 from django.shortcuts import get_object_or_404, redirect, render
 from django.urls import reverse
 from django.views.decorators.cache import cache_control
@@ -34,7 +41,7 @@ from training.forms import (
     RewardValidationForm,
     VehicleForm,
 )
-from training.models import EvaluationJob, RewardFunction, RLModel, Vehicle
+from training.models import EvaluationJob, JobLogLine, RewardFunction, RLModel, Vehicle
 from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
@@ -279,6 +286,9 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
     model = _get_model_for_user(request, pk)
     job = model.latest_job
     iterations = list(job.iteration_rows.all()) if job else []
+    log_source = request.GET.get("log", "")
+    if log_source not in JobLogLine.Source.values:
+        log_source = ""
     return render(
         request,
         "training/model_detail.html",
@@ -292,23 +302,47 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "can_delete": model.status in RLModel.DELETABLE,
             "has_weights": selectors.model_checkpoint(model=model) is not None,
             "workers_range": range(model.workers),
-            "log_lines": list(job.log_lines.all().order_by("-at", "-pk")[:200]) if job else [],
+            "clock": selectors.training_clock(job=job) if job else None,
+            "log_lines": selectors.job_log(job=job, source=log_source) if job else [],
+            "log_source": log_source,
+            "log_sources": JobLogLine.Source.choices,
             "files": selectors.model_files(model=model),
         },
     )
 
 
 @login_required
-@require_POST
 def model_stop(request: HttpRequest, pk: int) -> HttpResponse:
+    """Asks first (GET: what stopping does; the model page asks in a dialog), then stops the
+    model's training (POST)."""
     model = _get_model_for_user(request, pk)
     job = model.latest_job
     if job is None or not job.is_active:
         messages.error(request, "This model is not training.")
-    else:
-        services.training_stop(job=job)
-        messages.success(request, "Stopping: the model is saved from its last checkpoint.")
-    return redirect("training:model-detail", pk=model.pk)
+        return redirect("training:model-detail", pk=model.pk)
+    if request.method == "POST":
+        job = services.training_stop(job=job)
+        if job.status == job.Status.CANCELED:
+            messages.success(request, "Canceled: the model had not started training.")
+        else:
+            messages.success(request, f"Stopping: {job.message[0].lower()}{job.message[1:]}.")
+        return redirect("training:model-detail", pk=model.pk)
+    return render(
+        request, "training/model_stop.html",
+        {"model": model, "job": job, "clock": selectors.training_clock(job=job)},
+    )  # fmt: skip
+
+
+@login_required
+@require_safe
+def model_log(request: HttpRequest, pk: int) -> StreamingHttpResponse:
+    """The whole training log of the model, as a text file."""
+    model = _get_model_for_user(request, pk)
+    response = StreamingHttpResponse(
+        selectors.model_log_lines(model=model), content_type="text/plain; charset=utf-8"
+    )
+    response["Content-Disposition"] = f'attachment; filename="{model.name}-training-log.txt"'
+    return response
 
 
 @login_required

@@ -16,7 +16,6 @@ const REFUSED = new Set([4401, 4403]);
 let socket = null;
 let retryDelay = 1000;
 let state = null;
-let stateAt = 0;
 let frameUrl = null;
 let framesShown = 0;
 let frameTimes = [];
@@ -129,7 +128,6 @@ function receive(message) {
 function setStatus(message) {
   const wasActive = state ? state.active : null;
   state = message;
-  stateAt = performance.now();
   section.dataset.jobStatus = message.status;
   let text = message.status_display;
   if (message.queue_position) {
@@ -150,6 +148,14 @@ function setStatus(message) {
       element.hidden = !element.dataset.liveWhenModel.split(" ").includes(message.model_status);
     }
   }
+  if (message.seconds_used !== undefined) {
+    clockOrigin = {
+      seconds: message.seconds_used, at: performance.now(), running: message.clock_running,
+      max: message.max_seconds, active: message.active,
+    };
+  }
+  const finished = document.querySelector("[data-stop-iteration]");
+  if (finished && message.iterations) finished.textContent = `iteration ${message.iterations}`;
   const progress = find("progress");
   if (progress && message.iterations !== undefined) {
     progress.textContent = `${message.iterations} iteration${message.iterations === 1 ? "" : "s"}, `
@@ -164,15 +170,39 @@ function setStatus(message) {
   tick();
 }
 
-function tick() {
+// The training clock counts from the server's word: the time used (seconds_used) when the
+// server said it, counted on with the page's monotonic clock from the moment the word came (the
+// page's response, then each status message), never from the page's own idea of the time. So
+// the page, every other tab and the model list agree, and nothing jumps when a message comes.
+
+let clockOrigin = null; // {seconds, at (performance.now() when said), running, max, active}
+let clockShown = 0;
+
+function clockFromPage() {
   const time = find("time");
-  if (!time || !state || state.training_seconds === undefined) return;
-  const running = state.status === "IN_PROGRESS";
-  const used = state.training_seconds + (running ? (performance.now() - stateAt) / 1000 : 0);
-  const left = Math.max(0, state.max_seconds - used);
-  time.textContent = `${clock(used)} used of ${state.max_seconds / 60} min` + (state.active ? ` · ${clock(left)} left` : "");
+  if (!time || time.dataset.secondsUsed === undefined) return;
+  const response = performance.getEntriesByType("navigation")[0]?.responseStart;
+  clockOrigin = {
+    seconds: Number(time.dataset.secondsUsed), at: response || performance.now(),
+    running: time.dataset.clockRunning === "true", max: Number(time.dataset.maxSeconds),
+    active: time.dataset.active === "true",
+  };
 }
 
+function tick() {
+  const time = find("time");
+  if (!time || !clockOrigin) return;
+  const { seconds, at, running, max, active } = clockOrigin;
+  let used = Math.min(seconds + (running ? (performance.now() - at) / 1000 : 0), max);
+  if (running) used = Math.max(used, clockShown); // a fresher word never turns it back
+  clockShown = used;
+  time.dataset.shownSeconds = used.toFixed(1);
+  time.textContent = `${clock(used)} used of ${max / 60} min` + (active ? ` · ${clock(max - used)} left` : "");
+  for (const element of document.querySelectorAll("[data-stop-time]")) element.textContent = clock(used);
+}
+
+clockFromPage();
+tick();
 setInterval(tick, 1000);
 
 // Training: the graph and the iteration table

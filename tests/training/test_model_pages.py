@@ -114,5 +114,5 @@ def test_stop_on_a_queued_model_cancels_it(client, alice, tracks):
     }, validate_reward=False)  # fmt: skip
     client.force_login(alice)
     response = client.post(reverse("training:model-stop", args=[model.pk]), follow=True)
-    assert "Stopping" in response.text
+    assert "Canceled: the model had not started training." in response.text
     assert model.jobs.get().status == TrainingJob.Status.CANCELED

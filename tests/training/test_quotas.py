@@ -1,14 +1,17 @@
 """Quotas as on DeepRacer on AWS: models per racer and training minutes per month, set by staff
 for each racer and for new ones; the wizard says what is left, and a model over it is refused."""
 
+from datetime import timedelta
+
 import pytest
 from django.urls import reverse
+from django.utils import timezone
 
 from tests.training.factories import ready_model
 from tests.training.test_model_pages import form_data
-from training import configuration, selectors
+from training import configuration, jobs, selectors
 from training.models import Quota, QuotaDefaults, RLModel, TrainingJob
-from training.services import model_create
+from training.services import model_create, training_stop
 
 pytestmark = pytest.mark.django_db
 
@@ -54,3 +57,34 @@ def test_a_racer_at_the_model_limit_is_told_to_delete_one(client, alice, tracks)
                      "reward_function": "def reward_function(params):\n    return 1.0\n"},
                      validate_reward=False)  # fmt: skip
     assert RLModel.objects.filter(owner=alice).count() == 1
+
+
+def test_a_stopped_training_is_billed_the_time_up_to_the_stop_not_its_budget(alice, tracks):
+    Quota.objects.create(racer=alice, max_models=5, max_minutes_per_month=100)
+    model = ready_model(alice)
+    RLModel.objects.filter(pk=model.pk).update(max_minutes=60, status=RLModel.Status.TRAINING)
+    job = TrainingJob.objects.get(model=model)
+    TrainingJob.objects.filter(pk=job.pk).update(
+        status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="trainer:1",
+        training_seconds=5 * 60, clock_at=timezone.now() - timedelta(seconds=4),
+    )  # fmt: skip
+    assert selectors.allowance_for(racer=alice).minutes_left == 40  # it holds its 60 min
+
+    stopped = training_stop(job=job)
+    assert selectors.allowance_for(racer=alice).minutes_left == 94  # 5:04 used, while it saves
+
+    # The iteration it was learning ends minutes later; the trainer's time does not count.
+    assert jobs.clock_write(stopped, 8 * 60 + 7) is False
+    TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.COMPLETED)
+    assert selectors.allowance_for(racer=alice).minutes == pytest.approx(
+        stopped.training_seconds / 60
+    )
+    assert selectors.allowance_for(racer=alice).minutes_left == 94
+
+
+def test_time_past_the_limit_is_not_billed(alice, tracks):
+    Quota.objects.create(racer=alice, max_models=5, max_minutes_per_month=100)
+    model = ready_model(alice)
+    RLModel.objects.filter(pk=model.pk).update(max_minutes=10)
+    TrainingJob.objects.filter(model=model).update(training_seconds=10 * 60 + 42)
+    assert selectors.allowance_for(racer=alice).minutes == 10

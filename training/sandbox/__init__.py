@@ -28,6 +28,7 @@ from training.sandbox.protocol import ProtocolError, pack, read_frame
 ROOT = Path(__file__).resolve().parents[2]
 MiB = 1024 * 1024
 GRACE = 2.0  # [s] past a call's own time limit before the child is killed
+LOG_KEEP = 1000  # printed lines kept until taken; later ones are counted in ``logs_dropped``
 CHILD_ENVIRONMENT = {
     # Nothing of the worker's: no secrets, no paths. Only one thread per numerical library.
     "OPENBLAS_NUM_THREADS": "1",
@@ -79,7 +80,8 @@ class Sandbox:
     call_timeout: float = 1.0  # [s] per call of the reward function
     memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing
     start_timeout: float = 60.0  # [s]
-    logs: deque = field(default_factory=lambda: deque(maxlen=1000))
+    logs: deque = field(default_factory=lambda: deque(maxlen=LOG_KEEP))
+    logs_dropped: int = 0  # lines printed and not kept: past LOG_KEEP, or the child's bound
     report: dict = field(default_factory=dict)
     on_frame: Callable[[dict], None] | None = None  # given each frame the child sends (unchecked)
 
@@ -219,7 +221,7 @@ class Sandbox:
             if isinstance(frame, ProtocolError):
                 self._kill()
                 raise SandboxFailure("protocol", f"The sandbox sent something unreadable: {frame}")
-            self.logs.extend(str(line)[:200] for line in frame.get("log") or [])
+            self._keep_logs(frame.get("log"), frame.get("log_dropped"))
             kind = frame.get("type")
             if kind == "progress":
                 if on_progress is not None:
@@ -239,6 +241,21 @@ class Sandbox:
                 )  # fmt: skip
             self._kill()
             raise SandboxFailure("protocol", f"The sandbox answered {kind!r} to {what!r}.")
+
+    def take_logs(self) -> tuple[list[str], int]:
+        """The printed lines kept since the last take, and how many more were not kept."""
+        taken = (list(self.logs), self.logs_dropped)
+        self.logs.clear()
+        self.logs_dropped = 0
+        return taken
+
+    def _keep_logs(self, lines: Any, dropped: Any) -> None:
+        lines = lines if isinstance(lines, list) else []
+        room = max(LOG_KEEP - len(self.logs), 0)
+        self.logs.extend(str(line)[:200] for line in lines[:room])
+        self.logs_dropped += max(len(lines) - room, 0)
+        if isinstance(dropped, int) and not isinstance(dropped, bool) and dropped > 0:
+            self.logs_dropped += dropped
 
     def _died(self) -> SandboxFailure:
         process = self._process

@@ -38,7 +38,7 @@ PRELOADED = (
 )  # fmt: skip
 PROGRESS_EVERY = 0.25  # [s] between progress messages during a rollout
 LOOK_EVERY = 0.05  # [s] between looks for a watch request during an episode
-MAX_LOG = 200  # characters per printed line kept, and lines per rollout step batch
+MAX_LOG = 200  # characters per printed line kept, and lines kept between two messages
 
 
 class CallTimeout(BaseException):
@@ -61,10 +61,13 @@ class Child:
         self.ppo = True
         self.call_timeout = 1.0
         self.logs: list[str] = []
-        sys.stdout = _Printed(self.logs)
+        self.printed = _Printed(self.logs)
+        sys.stdout = self.printed
         signal.signal(signal.SIGALRM, _alarm)
 
     def send(self, message: dict[str, Any]) -> None:
+        if "log" in message and self.printed.dropped:  # lines printed past what is kept
+            message["log_dropped"], self.printed.dropped = self.printed.dropped, 0
         data = pack(message)
         while data:
             data = data[os.write(self.reply_fd, data) :]
@@ -211,6 +214,8 @@ class Child:
                     os._exit(0)
                 if request.get("op") == "watch":
                     self.op_watch(request)
+                elif request.get("op") == "exit":  # the worker stops mid-episode
+                    os._exit(0)
         if not self.views or now - self._last_frame < FRAME_INTERVAL:
             return
         self._last_frame = now
@@ -326,20 +331,26 @@ class Child:
 
 
 class _Printed(io.TextIOBase):
-    """Standard output for user code: each printed line becomes a log message."""
+    """Standard output for user code: each printed line becomes a log message. At most
+    ``MAX_LOG`` lines of ``MAX_LOG`` characters wait to be sent; lines past them are counted
+    (``dropped``), not kept, so that a print flood costs neither memory nor the pipe."""
 
     def __init__(self, lines: list[str]) -> None:
         self.lines = lines
         self.partial = ""
+        self.dropped = 0
 
     def writable(self) -> bool:
         return True
 
     def write(self, text: str) -> int:
-        *complete, self.partial = (self.partial + text).split("\n")
-        if len(self.lines) < 10 * MAX_LOG:
-            self.lines.extend(line[:MAX_LOG] for line in complete)
-        self.partial = self.partial[: 10 * MAX_LOG]
+        room = max(MAX_LOG - len(self.lines), 0)
+        *complete, rest = (self.partial + str(text)).split("\n", room)
+        if len(complete) == room and "\n" in rest:  # no room for the lines in ``rest``
+            self.dropped += rest.count("\n")
+            rest = rest[rest.rindex("\n") + 1 :]
+        self.lines.extend(line[:MAX_LOG] for line in complete)
+        self.partial = rest[:MAX_LOG]
         return len(text)
 
 

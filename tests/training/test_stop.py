@@ -1,0 +1,65 @@
+"""Stopping a training on the real parts (a Celery worker, Redis, the sandbox, SB3): the trainer
+abandons an update it is in the middle of, the job ends at once with the model of its last
+finished iteration, and it is billed the time up to the stop. What the reward function printed
+reaches the job's log, a bounded share of it."""
+
+import pytest
+
+from tests.training.test_training import TINY_PPO, settings, wait_for_job
+from training import configuration, hyperparameters, rollouts, tasks
+from training.models import Iteration, JobLogLine, RLModel, TrainingJob
+from training.services import training_stop
+
+PRINTING = """\
+def reward_function(params):
+    print("progress", params["progress"], "steps", params["steps"])
+    return 1.0
+"""
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_the_stop(
+    alice, tracks, celery_worker_process
+):
+    clean = configuration.check(
+        settings(name="long-update", reward_function=PRINTING), owner=alice, validate_reward=False
+    )
+    # An update that would take hours: far more epochs than a racer may choose.
+    clean["hyperparameters"] = {
+        **hyperparameters.defaults("clipped_ppo"), **TINY_PPO, "num_epochs": 100_000,
+    }  # fmt: skip
+    model = RLModel.objects.create(owner=alice, **clean)
+    job = TrainingJob.objects.create(model=model)
+    tasks.train.delay(job.pk)
+    job = wait_for_job(
+        job, lambda j: j.message.startswith("Learning iteration 1 from 5 episodes"),
+        "the first update to begin",
+    )  # fmt: skip
+
+    stopping = training_stop(job=job)
+    assert stopping.status == TrainingJob.Status.STOPPING
+    assert stopping.message == "Saving the model as it started: no iteration finished"
+
+    # The update would go on for hours: the job ends only because the trainer abandoned it.
+    job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 90)
+    assert job.iterations == 0 and not Iteration.objects.filter(job=job).exists()
+    assert job.model.status == RLModel.Status.READY
+    assert job.training_seconds == stopping.training_seconds  # billed up to the stop, no more
+    assert job.clock_at == stopping.clock_at
+    assert job.log_lines.filter(text="Stopped by the racer.").exists()
+    assert job.log_lines.filter(
+        text="Iteration 1 was being learnt and was abandoned; the model is saved from iteration 0."
+    ).exists()
+
+    # What the reward function printed: the first lines of the iteration, then how many more.
+    printed = job.log_lines.filter(source=JobLogLine.Source.REWARD)
+    kept = printed.filter(text__startswith="progress ")
+    assert 0 < kept.count() <= rollouts.PRINTED_LINES
+    (note,) = printed.exclude(text__startswith="progress ")
+    assert note.text.startswith("… ") and note.text.endswith(
+        " more lines printed in iteration 1 not kept"
+    )
+    assert job.log_lines.filter(
+        source=JobLogLine.Source.WORKER, text="Simulation worker 1 is driving Pitlane Oval."
+    ).exists()
+    assert job.log_lines.filter(text__contains="1 simulation worker,").exists()
