@@ -14,7 +14,8 @@ The virtual model, ``virtualmodel-<name>.tar.gz``, holds what another Pitlane (o
 toolchain) needs to go on training: ``model_metadata.json``, ``reward_function.py``,
 ``training_params.yaml``, ``hyperparameters.json`` (DeepRacer's names), the best and the last
 checkpoints as safetensors under ``checkpoints/``, the metrics, and ``pitlane.json`` (the settings
-DeepRacer's files do not carry: track, direction, race type, network seed, workers).
+DeepRacer's files do not carry: track, direction, race type, network seed, workers; and the time
+the model trained, which its page shows).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from pathlib import Path
 
 import torch
 from django.core.files.storage import default_storage
+from django.db.models import Sum
 from torch import nn
 
 from training import artifacts, selectors
@@ -145,10 +147,12 @@ def physical(model: RLModel, which: str = "best") -> Export:
 
 def virtual(model: RLModel) -> Export:
     """The virtual-model archive: everything needed to go on training elsewhere; built once per
-    last checkpoint (training ends with it, and with the metrics it goes with)."""
+    last checkpoint and metrics (training ends with both)."""
     last = _checkpoint(model, "last")
+    stored_metrics = artifacts.path(model, artifacts.TRAINING_METRICS)
+    metrics = artifacts.read(stored_metrics) if default_storage.exists(stored_metrics) else None
     export = Export(
-        artifacts.path(model, f"exports/virtual-{_digest(last)}.tar.gz"),
+        artifacts.path(model, f"exports/virtual-{_digest(last + (metrics or b''))}.tar.gz"),
         f"virtualmodel-{model.name}.tar.gz",
     )
     if default_storage.exists(export.name):
@@ -159,9 +163,8 @@ def virtual(model: RLModel) -> Export:
         "checkpoints/best.safetensors": _checkpoint(model, "best"),
         "checkpoints/last.safetensors": last,
     })  # fmt: skip
-    metrics = artifacts.path(model, artifacts.TRAINING_METRICS)
-    if default_storage.exists(metrics):
-        members[artifacts.TRAINING_METRICS] = artifacts.read(metrics)
+    if metrics is not None:
+        members[artifacts.TRAINING_METRICS] = metrics
     _store(export.name, members)
     return export
 
@@ -182,6 +185,7 @@ def pitlane_settings(model: RLModel) -> dict:
         "extra_tracks": list(model.extra_tracks),
         "seed": model.seed,
         "shell_colour": model.shell_colour,
+        "training_seconds": round(model.jobs.aggregate(s=Sum("training_seconds"))["s"] or 0, 1),
     }
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import tarfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import PurePosixPath
 from typing import IO
@@ -23,7 +24,7 @@ from django.contrib.auth.models import AbstractBaseUser
 from django.db import transaction
 from safetensors import SafetensorError
 
-from training import artifacts, configuration, exports, hyperparameters, services
+from training import artifacts, configuration, exports, history, hyperparameters, jobs, services
 from training.models import Algorithm, RLModel, Track, TrainingJob
 from training.policies import Policy
 
@@ -32,16 +33,24 @@ MAX_ARCHIVE = 256 * MiB  # [bytes] as uploaded
 MAX_UNPACKED = 512 * MiB  # [bytes] all members together
 MAX_MEMBERS = 256
 TEXT_LIMIT = 1 * MiB  # [bytes] each of the JSON, YAML and Python files
+METRICS_LIMIT = 32 * MiB  # [bytes] the training metrics: a row per episode
 CHECKPOINTS = ("checkpoints/best.safetensors", "checkpoints/last.safetensors")
 WANTED = {
     "model_metadata.json", "reward_function.py", "hyperparameters.json",
-    "training_params.yaml", exports.PITLANE_SETTINGS, *CHECKPOINTS,
+    "training_params.yaml", exports.PITLANE_SETTINGS, artifacts.TRAINING_METRICS, *CHECKPOINTS,
 }  # fmt: skip
 DEFAULT_TRACK = "rookie-loop"
 DEEPRACER_ALGORITHMS = {"clipped_ppo": Algorithm.PPO, "ppo": Algorithm.PPO, "sac": Algorithm.SAC}
 
 
 Members = dict[str, bytes | None]  # an archive's files: contents of those read, None for the rest
+
+
+NOT_AN_ARCHIVE = (
+    "This file is not a .tar.gz model archive, or it is damaged: choose the "
+    "virtualmodel-<name>.tar.gz downloaded from a Pitlane model's page, or a model "
+    "downloaded from DeepRacer."
+)
 
 
 class ImportRefused(Exception):
@@ -69,8 +78,8 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
     settings = _settings(metadata, ours, members, reward, name, notes)
     weights = {path: members[path] for path in CHECKPOINTS if members.get(path) is not None}
     if weights:
-        imported = _import_trained(owner, settings, weights)
-        imported.notes += notes
+        imported = _import_trained(owner, settings, weights, members, ours)
+        imported.notes = notes + imported.notes
         return imported
     if any(_is_tensorflow(path) for path in members):
         notes.append(
@@ -107,8 +116,8 @@ def read_archive(archive: IO[bytes]) -> Members:
                 if unpacked > MAX_UNPACKED:
                     raise ImportRefused(f"The archive unpacks to over {size(MAX_UNPACKED)}.")
                 members[path] = _read(tar, member) if _wanted(path) else None
-    except (tarfile.TarError, EOFError, OSError, ValueError) as error:
-        raise ImportRefused(f"This is not a readable .tar.gz archive ({error}).") from None
+    except (tarfile.TarError, EOFError, OSError, ValueError, zlib.error):
+        raise ImportRefused(NOT_AN_ARCHIVE) from None
     return _without_top_folder(members)
 
 
@@ -169,8 +178,12 @@ def _json(members: Members, path: str) -> dict | None:
         return None
     try:
         document = json.loads(text)
-    except ValueError as error:
-        raise ImportRefused(f"{path} is not valid JSON: {error}.") from None
+    except json.JSONDecodeError as error:
+        raise ImportRefused(
+            f"{path} is not valid JSON (line {error.lineno}, column {error.colno})."
+        ) from None
+    except ValueError:
+        raise ImportRefused(f"{path} is not valid JSON.") from None
     if not isinstance(document, dict):
         raise ImportRefused(f"{path} must hold a JSON object.")
     return document
@@ -246,8 +259,11 @@ def _is_tensorflow(path: str) -> bool:
     return ".ckpt" in name or name.endswith((".pb", ".index")) or name == "checkpoint"
 
 
-def _import_trained(owner, settings: dict, weights: dict[str, bytes]) -> Imported:
-    """A Pitlane virtual model: READY, with its checkpoints, after they load into our network."""
+def _import_trained(
+    owner, settings: dict, weights: dict[str, bytes], members: Members, ours: dict
+) -> Imported:
+    """A Pitlane virtual model: READY, with its checkpoints, after they load into our network,
+    and its training history when the archive's metrics hold one."""
     clean = configuration.check(settings, owner=owner)
     policy = Policy.for_environment(
         clean["algorithm"], clean["network"], RLModel(**clean).environment_settings()
@@ -255,8 +271,11 @@ def _import_trained(owner, settings: dict, weights: dict[str, bytes]) -> Importe
     for path, data in weights.items():
         try:
             policy.load_checkpoint(data)
-        except (ValueError, RuntimeError, SafetensorError) as error:
-            raise ImportRefused(f"{path} does not fit the model's network: {error}") from None
+        except (ValueError, RuntimeError, SafetensorError):
+            raise ImportRefused(
+                f"{path} does not fit the model's network: its layers differ from those the "
+                "sensors, network and action space of model_metadata.json make."
+            ) from None
     best = weights.get(CHECKPOINTS[0]) or weights[CHECKPOINTS[1]]
     last = weights.get(CHECKPOINTS[1]) or best
     with transaction.atomic():
@@ -266,12 +285,36 @@ def _import_trained(owner, settings: dict, weights: dict[str, bytes]) -> Importe
             artifacts.write_model_files(model)
             best_name = artifacts.save(model, "checkpoints/imported-best.safetensors", best)
             last_name = artifacts.save(model, "checkpoints/imported-last.safetensors", last)
-            TrainingJob.objects.create(
+            job = TrainingJob.objects.create(
                 model=model, status=TrainingJob.Status.COMPLETED, weights_version=1,
-                best_checkpoint=best_name, last_checkpoint=last_name,
+                best_checkpoint=best_name, last_checkpoint=last_name, lease_owner=jobs.IMPORTED,
                 message="Imported with its weights.",
             )  # fmt: skip
+            notes = _import_history(model, job, members, ours)
         except BaseException:
             artifacts.delete_all(model)
             raise
-    return Imported(model)
+    return Imported(model, notes)
+
+
+def _import_history(model: RLModel, job: TrainingJob, members: Members, ours: dict) -> list[str]:
+    """The job's iterations and totals from the archive's training metrics, which are kept with
+    the model; a note instead when the archive has none that can be read."""
+    data = members.get(artifacts.TRAINING_METRICS)
+    if data is None:
+        return ["The archive has no training metrics: the model arrives without its training "
+                "history (no graph or iterations)."]  # fmt: skip
+    try:
+        if len(data) > METRICS_LIMIT:
+            raise history.Unreadable(f"it is over {size(METRICS_LIMIT)}")
+        found = history.read(
+            data, episodes_per_iteration=model.hyperparameters["num_episodes_between_training"]
+        )
+    except history.Unreadable as unreadable:
+        return [f"The archive's training metrics could not be read ({unreadable}): the model "
+                "arrives without its training history (no graph or iterations)."]  # fmt: skip
+    seconds = ours.get("training_seconds")
+    exact = isinstance(seconds, int | float) and 0 <= seconds < 10**7
+    history.history_save(job=job, history=found, seconds=float(seconds) if exact else None)
+    artifacts.save(model, artifacts.TRAINING_METRICS, data)
+    return []

@@ -17,7 +17,7 @@ from django.urls import reverse
 from safetensors.torch import save as save_tensors
 
 from tests.training.factories import ready_model
-from training import artifacts, exports, imports
+from training import artifacts, exports, history, imports, selectors
 from training.learner import load_tensors
 from training.models import RLModel, TrainingJob
 from training.rewards import EXAMPLES
@@ -183,7 +183,7 @@ HOSTILE = {
     "hard link": (tar_gz(deepracer_export(), hardlink), "is a link or a device"),
     "device": (tar_gz(deepracer_export(), device), "is a link or a device"),
     "fifo": (tar_gz(deepracer_export(), fifo), "is a link or a device"),
-    "not an archive": (b"PK\x03\x04 a zip, or anything", "not a readable .tar.gz archive"),
+    "not an archive": (b"PK\x03\x04 a zip, or anything", "not a .tar.gz model archive"),
     "no metadata": (tar_gz({"reward_function.py": b"x"}), "no model_metadata.json"),
     "bad metadata": (tar_gz(deepracer_export(**{"model_metadata.json": b"{"})), "not valid JSON"),
     "unknown algorithm": (
@@ -239,3 +239,118 @@ def test_an_archive_over_the_upload_limit_is_refused_before_it_is_read(alice, cl
     response = client.post(reverse("training:model-import"), {"archive": upload})
     assert response.status_code == 400
     assert "The archive is over" in response.text
+
+
+def trainer_metrics(iterations: int = 2, episodes: int = 3) -> dict:
+    """training_metrics.json as our trainer writes it: each iteration's training episodes
+    (trial 1, 2, ...), then the evaluation of the policy learnt from them."""
+    rows, episode, clock = [], 0, 1_700_000_000_000
+    for number in range(1, iterations + 1):
+        for trial in range(1, episodes + 1):
+            episode += 1
+            lap = number == iterations and trial == episodes
+            rows.append({
+                "reward_score": 10.0 * number + trial, "metric_time": clock + 4000,
+                "start_time": clock, "elapsed_time_in_milliseconds": 4000 if lap else 2000,
+                "episode": episode, "trial": trial, "phase": "training",
+                "completion_percentage": 100 if lap else 20 * number,
+                "episode_status": "lap_complete" if lap else "off_track",
+            })  # fmt: skip
+            clock += 5000
+        for trial in (1, 2):
+            rows.append({
+                "reward_score": 0, "metric_time": clock + 1000, "start_time": clock,
+                "elapsed_time_in_milliseconds": 1000, "episode": episode, "trial": trial,
+                "phase": "evaluation", "completion_percentage": 30 * number + 10 * trial,
+                "episode_status": "off_track",
+            })  # fmt: skip
+            clock += 1000
+    return {"metrics": rows, "best_model_metric": "progress"}
+
+
+def trained_with_history(owner) -> RLModel:
+    model = ready_model(owner)
+    artifacts.save(model, artifacts.TRAINING_METRICS, json.dumps(trainer_metrics()))
+    TrainingJob.objects.filter(model=model).update(training_seconds=150.4, iterations=2)
+    return model
+
+
+def test_an_imported_virtual_model_keeps_its_training_history(alice, bob, tracks, client):
+    upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(trained_with_history(alice)))
+    client.force_login(bob)
+    response = client.post(reverse("training:model-import"), {"archive": upload})
+    model = RLModel.objects.get(owner=bob)
+    assert response.status_code == 302
+    job = model.jobs.get()
+    assert (job.status, job.iterations, job.episodes) == (TrainingJob.Status.COMPLETED, 2, 6)
+    assert job.steps == 5 * 30 + 60 and round(job.training_seconds) == 150
+    first, second = job.iteration_rows.all()
+    assert (first.number, first.reward, first.completion) == (1, 12.0, 20.0)
+    assert first.training_points == [[11.0, 20.0], [12.0, 20.0], [13.0, 20.0]]
+    assert first.evaluation_completion == 45.0 and first.evaluation_points == [40.0, 50.0]
+    assert first.best_lap_time is None and second.best_lap_time == 4.0
+    assert second.evaluation_completion == 75.0
+    # The racer sees it: the list says how long it trained, the page has the graph's history.
+    listing = client.get(reverse("training:model-list")).text
+    assert "Completed after 2:30 of 60 min, 2 iterations" in listing
+    page = client.get(reverse("training:model-detail", args=[model.pk])).text
+    assert "2 iterations, 6 episodes, 210 steps" in page and "No iteration yet" not in page
+    assert "Training metrics (JSON)" in page  # kept, and carried by the next download
+    # Time trained elsewhere is not taken from the racer's monthly allowance.
+    assert selectors.allowance_for(racer=bob).minutes == 0
+
+
+DEEPRACER_METRICS = {
+    "version": "2",
+    "best_model_metric": "progress",
+    "metrics": [
+        {"reward_score": 5, "metric_time": 1000, "start_time": 0,
+         "elapsed_time_in_milliseconds": 1000, "episode": 1, "trial": 1, "phase": "training",
+         "completion_percentage": 10, "episode_status": "Off track"},
+        {"reward_score": 7, "metric_time": 9000, "start_time": 1000,
+         "elapsed_time_in_milliseconds": 8000, "episode": 2, "trial": 2, "phase": "training",
+         "completion_percentage": 100, "episode_status": "Lap complete"},
+        # DeepRacer's evaluation rows repeat the last training episode's numbers.
+        {"reward_score": 0, "metric_time": 12000, "start_time": 9000,
+         "elapsed_time_in_milliseconds": 3000, "episode": 2, "trial": 2, "phase": "evaluation",
+         "completion_percentage": 60, "episode_status": "Crashed"},
+        {"reward_score": 9, "metric_time": 14000, "start_time": 12000,
+         "elapsed_time_in_milliseconds": 2000, "episode": 3, "trial": 1, "phase": "training",
+         "completion_percentage": 30, "episode_status": "Off track"},
+    ],
+}  # fmt: skip
+
+
+def test_deepracers_own_metrics_read_as_iterations():
+    found = history.read(json.dumps(DEEPRACER_METRICS).encode(), episodes_per_iteration=20)
+    first, second = found.iterations
+    assert (first.episodes, first.reward, first.best_lap_time) == (2, 6.0, 8.0)
+    assert first.evaluation_points == [60.0] and second.evaluation_completion is None
+    assert (second.episodes, second.steps) == (1, 30)
+    assert found.seconds == 14.0 and found.episodes == 3
+
+
+@pytest.mark.parametrize(
+    ("metrics", "said"),
+    [
+        (None, "The archive has no training metrics"),
+        (b"{not json", "training metrics could not be read"),
+        (json.dumps({"metrics": [{"phase": "training"}]}).encode(), "could not be read"),
+    ],
+)
+def test_a_virtual_model_without_readable_metrics_imports_without_history_and_says_so(
+    metrics, said, alice, bob, tracks
+):
+    original = ready_model(alice)
+    members = {}
+    with tarfile.open(fileobj=io.BytesIO(virtual_archive(original)), mode="r:gz") as tar:
+        for member in tar:
+            members[member.name] = tar.extractfile(member).read()
+    members.pop(artifacts.TRAINING_METRICS, None)
+    if metrics is not None:
+        members[artifacts.TRAINING_METRICS] = metrics
+    imported = imports.import_model(owner=bob, archive=io.BytesIO(tar_gz(members)))
+    assert imported.model.status == RLModel.Status.READY
+    assert any(said in note for note in imported.notes)
+    job = imported.model.jobs.get()
+    assert job.iterations == 0 and not job.iteration_rows.exists()
