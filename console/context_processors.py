@@ -7,6 +7,7 @@ NAVIGATION = (
     ("Garage", "training:garage", "racer"),
     ("Races", "racing:race-list", "everyone"),
     ("Leaderboards", "racing:leaderboard-list", "everyone"),
+    ("Help", "help", "everyone"),
     ("System", "system", "staff"),
     ("Admin", "admin:index", "staff"),
 )

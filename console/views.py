@@ -6,9 +6,12 @@ from django.shortcuts import redirect, render
 from django.views.decorators.cache import never_cache
 from django.views.decorators.http import require_safe
 
+from console import guidance
 from console.forms import SignUpForm
 from console.health import system_health
+from racing.models import RankingMethod
 from racing.selectors import events_not_closed
+from training.rewards import PARAMS
 from training.selectors import models_for_racer, vehicles_for_racer
 
 
@@ -40,6 +43,21 @@ def healthz(request: HttpRequest) -> JsonResponse:
     """Reachability of the database, Redis and the workers: 200 when all are up, else 503."""
     health = system_health()
     return JsonResponse(health, status=200 if health["status"] == "ok" else 503)
+
+
+@require_safe
+def help_page(request: HttpRequest) -> HttpResponse:
+    """What every setting means, tuning hints, and how to get a model onto the car: public."""
+    return render(
+        request,
+        "console/help.html",
+        {
+            "hyperparameters": guidance.hyperparameter_help(),
+            "lookaheads": [(d, *guidance.lookahead(d)) for d in (0.9, 0.99, 0.999, 0.9999)],
+            "params": PARAMS,
+            "ranking_methods": RankingMethod.choices,
+        },
+    )
 
 
 @staff_member_required

@@ -23,7 +23,10 @@ from training.models import Vehicle
 pytestmark = pytest.mark.django_db(transaction=True)
 
 SCREENS = {"laptop": {"width": 1280, "height": 800}, "phone": {"width": 390, "height": 844}}
-PUBLIC = ["/", "/accounts/login/", "/accounts/signup/", "/races/", "/leaderboards/", "/nothing/"]
+PUBLIC = [
+    "/", "/accounts/login/", "/accounts/signup/", "/races/", "/leaderboards/", "/help/",
+    "/nothing/",
+]  # fmt: skip
 
 
 def racer_pages(alice) -> list[str]:

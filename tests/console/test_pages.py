@@ -21,14 +21,14 @@ def nav_labels(response) -> list[str]:
 
 def test_a_visitor_sees_the_public_sections_and_how_to_start(client):
     response = client.get(reverse("home"))
-    assert nav_labels(response) == ["Races", "Leaderboards"]
+    assert nav_labels(response) == ["Races", "Leaderboards", "Help"]
     assert "Create your racer account" in response.text
 
 
 def test_a_racer_sees_their_sections_and_next_steps(client, alice):
     client.force_login(alice)
     response = client.get(reverse("home"))
-    assert nav_labels(response) == ["Models", "Garage", "Races", "Leaderboards"]
+    assert nav_labels(response) == ["Models", "Garage", "Races", "Leaderboards", "Help"]
     assert "Your next steps" in response.text
     assert "Build a vehicle" in response.text
 
@@ -36,7 +36,7 @@ def test_a_racer_sees_their_sections_and_next_steps(client, alice):
 def test_staff_also_see_system_and_admin(client, stella):
     client.force_login(stella)
     assert nav_labels(client.get(reverse("home"))) == [
-        "Models", "Garage", "Races", "Leaderboards", "System", "Admin",
+        "Models", "Garage", "Races", "Leaderboards", "Help", "System", "Admin",
     ]  # fmt: skip
 
 
