@@ -73,3 +73,9 @@ def test_the_help_page_says_how_to_get_a_model_onto_the_car(client):
                   "<strong>Start vehicle</strong>", "<code>model_metadata.json</code>",
                   "<code>model.onnx</code>", "<code>model.xml</code>"):  # fmt: skip
         assert words in section, words
+
+
+def test_the_create_form_links_to_the_help_on_its_settings(client, alice, tracks):
+    client.force_login(alice)
+    response = client.get(reverse("training:model-create"))
+    assert f'href="{reverse("help")}#hyperparameters">What each setting means</a>' in response.text
