@@ -12,8 +12,8 @@ from django.http import HttpRequest
 
 from console.templatetags.pitlane import laptime
 from racing import services
-from racing.models import Event, Lap, Racer, RaceType, Ranking, Season, Submission
-from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
+from racing.forms import RaceObstaclesForm
+from racing.models import Event, Lap, Racer, Ranking, Season, Submission
 
 
 class EventInlineForm(forms.ModelForm):
@@ -40,26 +40,8 @@ class EventInlineForm(forms.ModelForm):
         return shown
 
 
-class EventAdminForm(EventInlineForm):
-    """Boxes and bot cars as fields of their own rather than raw JSON."""
-
-    box_count = forms.IntegerField(
-        label="Boxes", min_value=1, max_value=MAX_OBJECTS, initial=3, required=False,
-        help_text="Object avoidance: how many boxes stand on the track.",
-    )  # fmt: skip
-    box_randomize = forms.BooleanField(
-        label="Move the boxes every trial", required=False,
-        help_text="Off: the boxes stay where they are for every trial.",
-    )  # fmt: skip
-    bot_count = forms.IntegerField(
-        label="Bot cars", min_value=1, max_value=MAX_OBJECTS, initial=3, required=False,
-        help_text="Head-to-bot: how many bot cars drive the track.",
-    )  # fmt: skip
-    bot_speed = forms.FloatField(
-        label="Bot car speed [m/s]", min_value=BOT_SPEED_RANGE[0], max_value=BOT_SPEED_RANGE[1],
-        initial=1.0, required=False,
-    )  # fmt: skip
-    bot_lane_changes = forms.BooleanField(label="Bot cars change lanes", required=False)
+class EventAdminForm(RaceObstaclesForm, EventInlineForm):
+    """An event, with its boxes and bot cars as fields of their own rather than raw JSON."""
 
     class Meta:
         model = Event
@@ -67,45 +49,8 @@ class EventAdminForm(EventInlineForm):
             "season", "name", "slug", "division", "track", "direction", "race_type", "opens_at",
             "closes_at", "ranking_method", "laps_required", "laps_to_drive",
             "off_track_penalty_s", "crash_penalty_s", "max_off_tracks_per_lap",
-            "submissions_per_racer", "public", "organiser", "participants",
+            "submissions_per_racer", "public", "organiser", "participants", "removed",
         ]  # fmt: skip
-
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        boxes, bots = self.instance.boxes or {}, self.instance.bots or {}
-        for name, value in {
-            "box_count": boxes.get("count"), "box_randomize": boxes.get("randomize"),
-            "bot_count": bots.get("count"), "bot_speed": bots.get("speed"),
-            "bot_lane_changes": bots.get("lane_changes"),
-        }.items():  # fmt: skip
-            if value is not None:
-                self.initial[name] = value
-
-    def clean(self) -> dict:
-        data = super().clean()
-        race_type = data.get("race_type")
-        needed = {
-            RaceType.OBJECT_AVOIDANCE: {"box_count": "Say how many boxes the race has."},
-            RaceType.HEAD_TO_BOT: {
-                "bot_count": "Say how many bot cars the race has.",
-                "bot_speed": "Say how fast the bot cars drive.",
-            },
-        }.get(race_type, {})
-        for name, message in needed.items():
-            if name in self.fields and data.get(name) is None and name not in self.errors:
-                self.add_error(name, message)
-        self.instance.boxes = (
-            {"count": data.get("box_count"), "randomize": bool(data.get("box_randomize"))}
-            if race_type == RaceType.OBJECT_AVOIDANCE
-            else None
-        )
-        self.instance.bots = (
-            {"count": data.get("bot_count"), "speed": data.get("bot_speed"),
-             "lane_changes": bool(data.get("bot_lane_changes"))}
-            if race_type == RaceType.HEAD_TO_BOT
-            else None
-        )  # fmt: skip
-        return data
 
 
 class EventInline(admin.TabularInline):
@@ -138,7 +83,7 @@ class EventAdmin(admin.ModelAdmin):
     prepopulated_fields = {"slug": ["name"]}
     date_hierarchy = "opens_at"
     list_select_related = ["season", "track"]
-    raw_id_fields = ["organiser", "participants"]
+    raw_id_fields = ["organiser", "participants", "removed"]
     readonly_fields = ["invite_token"]
     actions = ["close_events", "recompute_rankings"]
     fieldsets = [
@@ -152,7 +97,7 @@ class EventAdmin(admin.ModelAdmin):
             "crash_penalty_s", "max_off_tracks_per_lap", "submissions_per_racer",
         ]}),
         ("Community race", {"classes": ["collapse"], "fields": [
-            "public", "organiser", "invite_token", "participants",
+            "public", "organiser", "invite_token", "participants", "removed",
         ]}),
     ]  # fmt: skip
 

@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+from datetime import timedelta
+
 from django import forms
 from django.core.exceptions import ValidationError
+from django.utils import timezone
 
 from console.time_zones import local_text
 from racing import selectors
 from racing.models import Event, RaceType, RankingMethod
-from training.models import RLModel
+from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
+from training.models import RLModel, Track
 
 LOCAL = "%Y-%m-%dT%H:%M"  # what <input type="datetime-local"> sends
+RACE_LENGTH = timedelta(days=7)  # a new community race closes a week after it opens
 
 
 class SubmissionForm(forms.Form):
@@ -50,18 +55,83 @@ def _event_label(event: Event) -> str:
     return f"{event.name} ({rule}, closes {local_text(event.closes_at)})"
 
 
-class CommunityRaceForm(forms.ModelForm):
-    """A community race: a private event its organiser runs, entered by invitation."""
+class RaceObstaclesForm(forms.ModelForm):
+    """An event's boxes and bot cars as fields of their own (the model keeps them as JSON);
+    those of the chosen race type are required."""
 
-    obstacles = forms.IntegerField(
-        label="Boxes or bot cars", min_value=1, max_value=6, initial=3, required=False,
-        help_text="For object avoidance (boxes) and head-to-bot (bot cars at 1 m/s).",
+    box_count = forms.IntegerField(
+        label="Boxes", min_value=1, max_value=MAX_OBJECTS, initial=3, required=False,
+        help_text="Object avoidance: how many boxes stand on the track.",
+    )  # fmt: skip
+    box_randomize = forms.BooleanField(
+        label="Move the boxes every trial", required=False,
+        help_text="Off: the boxes stand in the same places for every trial.",
+    )  # fmt: skip
+    bot_count = forms.IntegerField(
+        label="Bot cars", min_value=1, max_value=MAX_OBJECTS, initial=3, required=False,
+        help_text="Head-to-bot: how many bot cars drive the track.",
+    )  # fmt: skip
+    bot_speed = forms.FloatField(
+        label="Bot car speed [m/s]", min_value=BOT_SPEED_RANGE[0], max_value=BOT_SPEED_RANGE[1],
+        initial=1.0, required=False,
+    )  # fmt: skip
+    bot_lane_changes = forms.BooleanField(label="Bot cars change lanes", required=False)
+
+    BOXES = ("box_count", "box_randomize")
+    BOTS = ("bot_count", "bot_speed", "bot_lane_changes")
+    NEEDED = {
+        RaceType.OBJECT_AVOIDANCE: {"box_count": "Say how many boxes the race has."},
+        RaceType.HEAD_TO_BOT: {
+            "bot_count": "Say how many bot cars the race has.",
+            "bot_speed": "Say how fast the bot cars drive.",
+        },
+    }
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        boxes, bots = self.instance.boxes or {}, self.instance.bots or {}
+        for name, value in {
+            "box_count": boxes.get("count"), "box_randomize": boxes.get("randomize"),
+            "bot_count": bots.get("count"), "bot_speed": bots.get("speed"),
+            "bot_lane_changes": bots.get("lane_changes"),
+        }.items():  # fmt: skip
+            if value is not None:
+                self.initial[name] = value
+
+    def clean(self) -> dict:
+        data = super().clean()
+        race_type = data.get("race_type")
+        for name, message in self.NEEDED.get(race_type, {}).items():
+            if data.get(name) is None and name not in self.errors:
+                self.add_error(name, message)
+        self.instance.boxes = (
+            {"count": data.get("box_count"), "randomize": bool(data.get("box_randomize"))}
+            if race_type == RaceType.OBJECT_AVOIDANCE
+            else None
+        )
+        self.instance.bots = (
+            {"count": data.get("bot_count"), "speed": data.get("bot_speed"),
+             "lane_changes": bool(data.get("bot_lane_changes"))}
+            if race_type == RaceType.HEAD_TO_BOT
+            else None
+        )  # fmt: skip
+        return data
+
+
+class CommunityRaceForm(RaceObstaclesForm):
+    """A community race: a private event its organiser runs, entered by invitation. It opens
+    now and closes in a week unless the organiser says otherwise (in their own time zone)."""
+
+    track = forms.ModelChoiceField(
+        queryset=Track.objects.all(), to_field_name="name",
+        error_messages={"required": "Choose a track.",
+                        "invalid_choice": "Choose one of the tracks shown."},
     )  # fmt: skip
 
     class Meta:
         model = Event
         fields = [
-            "name", "track", "direction", "race_type", "obstacles", "opens_at", "closes_at",
+            "name", "track", "direction", "race_type", "opens_at", "closes_at",
             "ranking_method", "laps_required", "laps_to_drive", "off_track_penalty_s",
             "crash_penalty_s", "max_off_tracks_per_lap", "submissions_per_racer",
         ]  # fmt: skip
@@ -69,28 +139,22 @@ class CommunityRaceForm(forms.ModelForm):
             "opens_at": forms.DateTimeInput(attrs={"type": "datetime-local"}, format=LOCAL),
             "closes_at": forms.DateTimeInput(attrs={"type": "datetime-local"}, format=LOCAL),
         }
-        help_texts = {"ranking_method": "The league's rule is the first; lower is better."}
+        help_texts = {
+            "ranking_method": "The league's rule is the first; lower is better.",
+            "opens_at": "In your time zone.",
+            "closes_at": "In your time zone. The invitation works until then.",
+        }
 
     def __init__(self, *args, organiser, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.fields["ranking_method"].initial = RankingMethod.FIRST_CONSECUTIVE
+        self.fields["track"].initial = Track.objects.values_list("name", flat=True).first()
+        now = timezone.localtime().replace(second=0, microsecond=0)
+        self.fields["opens_at"].initial = now
+        self.fields["closes_at"].initial = now + RACE_LENGTH
         self.instance.organiser = organiser
         self.instance.public = False
 
-    def clean(self) -> dict:
-        data = super().clean()
-        race_type = data.get("race_type")
-        count = data.get("obstacles") or 3
-        self.instance.boxes = (
-            {"count": count, "randomize": False} if race_type == RaceType.OBJECT_AVOIDANCE else None
-        )
-        self.instance.bots = (
-            {"count": count, "speed": 1.0, "lane_changes": False}
-            if race_type == RaceType.HEAD_TO_BOT
-            else None
-        )
-        return data
-
     def fields_for_service(self) -> dict:
-        data = {name: self.cleaned_data[name] for name in self.Meta.fields if name != "obstacles"}
+        data = {name: self.cleaned_data[name] for name in self.Meta.fields}
         return {**data, "boxes": self.instance.boxes, "bots": self.instance.bots}

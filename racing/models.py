@@ -136,6 +136,11 @@ class Event(models.Model):
         settings.AUTH_USER_MODEL, blank=True, related_name="joined_events",
         help_text="Who may enter a private event (through its invitation).",
     )  # fmt: skip
+    removed = models.ManyToManyField(
+        settings.AUTH_USER_MODEL, blank=True, related_name="removed_from_events",
+        verbose_name="racers taken out",
+        help_text="Racers the organiser took out: the invitation no longer lets them back in.",
+    )  # fmt: skip
 
     class Meta:
         ordering = ["opens_at", "name"]

@@ -214,6 +214,18 @@ def submissions_in_event(*, event: Event, racer: AbstractBaseUser) -> list[Submi
     return list(submissions_for_racer(racer=racer).filter(event=event).order_by("-created_at"))
 
 
+def invitation_refusal(*, event: Event, racer: AbstractBaseUser) -> str | None:
+    """Why the racer cannot join the community race through its invitation; None if they can."""
+    if event.state == Event.State.CLOSED:
+        return "This invitation expired when the race closed."
+    if racer.is_authenticated and event.removed.filter(pk=racer.pk).exists():
+        return (
+            f"{event.organiser} took you out of {event.name}, so its invitation no longer lets "
+            f"you in. If you think that was a mistake, ask {event.organiser} to let you back in."
+        )
+    return None
+
+
 def community_races_for(*, racer: AbstractBaseUser) -> QuerySet[Event]:
     """Community races the racer organises or joined, newest first."""
     return (

@@ -296,19 +296,43 @@ def _free_slug(name: str) -> str:
 
 
 def event_join(*, event: Event, racer: AbstractBaseUser) -> None:
-    """The racer accepts a community race's invitation (``SubmissionRefused`` once it closed)."""
-    if event.state == Event.State.CLOSED:
-        raise SubmissionRefused("This invitation expired when the race closed.")
+    """The racer accepts a community race's invitation (``SubmissionRefused`` once it closed,
+    or when the organiser took them out)."""
+    reason = selectors.invitation_refusal(event=event, racer=racer)
+    if reason:
+        raise SubmissionRefused(reason)
     event.participants.add(racer)
 
 
 def participant_remove(*, event: Event, racer: AbstractBaseUser) -> None:
-    """The organiser takes a racer out of their community race, with the racer's ranking."""
+    """The organiser takes a racer out of their community race, with the racer's ranking; the
+    invitation no longer lets them back in (the organiser may, with ``participant_readmit``)."""
     if racer.pk == event.organiser_id:
         raise SubmissionRefused("The organiser stays in their own race.")
-    event.participants.remove(racer)
-    Ranking.objects.filter(event=event, racer=racer).delete()
+    with transaction.atomic():
+        event.participants.remove(racer)
+        event.removed.add(racer)
+        Ranking.objects.filter(event=event, racer=racer).delete()
     live.announce_leaderboard(event)
+
+
+def participant_readmit(*, event: Event, racer: AbstractBaseUser) -> None:
+    """The organiser lets a racer they took out back into their community race (their earlier
+    runs rank again)."""
+    with transaction.atomic():
+        event.removed.remove(racer)
+        event.participants.add(racer)
+    ranking_recompute(event=event, racer=racer)
+    live.announce_leaderboard(event)
+
+
+def invitation_renew(*, event: Event) -> str:
+    """A new invitation link for the community race; the old one stops working (racers who
+    joined stay in)."""
+    event.invite_token = ""
+    token = event.ensure_invite()
+    event.save(update_fields=["invite_token"])
+    return token
 
 
 # Divisions

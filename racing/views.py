@@ -12,6 +12,7 @@ from racing import selectors, services
 from racing.forms import CommunityRaceForm, SubmissionForm
 from racing.models import Division, Event, Ranking, Season, Submission
 from training import artifacts
+from training import selectors as training_selectors
 
 
 def race_list(request: HttpRequest) -> HttpResponse:
@@ -179,7 +180,11 @@ def community_race_create(request: HttpRequest) -> HttpResponse:
         else:
             messages.success(request, "Your race is set up: send its invitation link to racers.")
             return redirect("racing:community-race-manage", slug=event.slug)
-    return render(request, "racing/community_race_create.html", {"form": form})
+    return render(
+        request,
+        "racing/community_race_create.html",
+        {"form": form, "tracks": training_selectors.tracks_available()},
+    )
 
 
 def _get_organised_event(request: HttpRequest, slug: str) -> Event:
@@ -196,7 +201,12 @@ def community_race_manage(request: HttpRequest, slug: str) -> HttpResponse:
     return render(
         request,
         "racing/community_race_manage.html",
-        {"event": event, "invite": invite, "participants": event.participants.order_by("username")},
+        {
+            "event": event,
+            "invite": invite,
+            "participants": event.participants.order_by("username"),
+            "removed": event.removed.order_by("username"),
+        },
     )
 
 
@@ -223,12 +233,34 @@ def community_race_remove(request: HttpRequest, slug: str, user_pk: int) -> Http
     return redirect("racing:community-race-manage", slug=event.slug)
 
 
+@login_required
+@require_POST
+def community_race_readmit(request: HttpRequest, slug: str, user_pk: int) -> HttpResponse:
+    event = _get_organised_event(request, slug)
+    racer = get_object_or_404(get_user_model(), pk=user_pk, removed_from_events=event)
+    services.participant_readmit(event=event, racer=racer)
+    messages.success(request, f"{racer.username} is back in {event.name}.")
+    return redirect("racing:community-race-manage", slug=event.slug)
+
+
+@login_required
+@require_POST
+def community_race_invitation_renew(request: HttpRequest, slug: str) -> HttpResponse:
+    event = _get_organised_event(request, slug)
+    services.invitation_renew(event=event)
+    messages.success(
+        request, "Here is a new invitation link; the old one no longer works. Racers in stay in."
+    )
+    return redirect("racing:community-race-manage", slug=event.slug)
+
+
 def event_join(request: HttpRequest, token: str) -> HttpResponse:
     event = get_object_or_404(
         Event.objects.select_related("track", "organiser"), public=False, invite_token=token
     )
     expired = event.state == Event.State.CLOSED
-    if request.method == "POST" and not expired:
+    refusal = selectors.invitation_refusal(event=event, racer=request.user)
+    if request.method == "POST" and not refusal:
         if not request.user.is_authenticated:
             return redirect_to_login(request.get_full_path())
         services.event_join(event=event, racer=request.user)
@@ -240,6 +272,6 @@ def event_join(request: HttpRequest, token: str) -> HttpResponse:
     return render(
         request,
         "racing/event_join.html",
-        {"event": event, "expired": expired, "joined": joined},
-        status=410 if expired else 200,
+        {"event": event, "expired": expired, "refusal": refusal, "joined": joined},
+        status=410 if expired else 403 if refusal else 200,
     )

@@ -8,7 +8,6 @@ from django.urls import reverse
 from racing.models import Event, Ranking, Submission
 from tests.conftest import PASSWORD
 from tests.racing.factories import DAY, event, scored
-from training.models import Track
 
 pytestmark = pytest.mark.usefixtures("tracks")
 
@@ -84,21 +83,6 @@ def test_a_staff_division_change_is_kept_from_the_monthly_promotion(client, race
 
 
 # Community races
-
-
-@pytest.fixture
-def community_race(client, alice):
-    client.force_login(alice)
-    response = client.post(reverse("racing:community-race-create"), {
-        "name": "Friday night", "track": Track.objects.get(name="pitlane-oval").pk,
-        "direction": "counterclockwise", "race_type": "TIME_TRIAL",
-        "opens_at": "2026-01-01T00:00", "closes_at": "2099-01-01T00:00",
-        "ranking_method": "BEST_LAP", "laps_required": 1, "laps_to_drive": 3,
-        "off_track_penalty_s": 1, "crash_penalty_s": 2, "submissions_per_racer": 5,
-    })  # fmt: skip
-    assert response.status_code == 302, response.context["form"].errors
-    client.logout()
-    return Event.objects.get(name="Friday night")
 
 
 @pytest.mark.django_db

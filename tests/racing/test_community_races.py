@@ -1,0 +1,121 @@
+"""Community races: invitations, taking a racer out, and the form that sets a race up."""
+
+import re
+from datetime import datetime, timedelta
+from zoneinfo import ZoneInfo
+
+import pytest
+from django.urls import reverse
+from django.utils import timezone
+
+from racing.models import Event, Ranking
+from tests.racing.conftest import race_form
+from tests.racing.factories import scored
+
+pytestmark = pytest.mark.django_db
+
+
+def invitation(event: Event) -> str:
+    return reverse("racing:event-join", args=[event.invite_token])
+
+
+def test_a_racer_taken_out_cannot_rejoin_with_the_same_invitation(
+    client, community_race, alice, bob
+):
+    client.force_login(bob)
+    client.post(invitation(community_race))
+    client.force_login(alice)
+    client.post(reverse("racing:community-race-remove", args=[community_race.slug, bob.pk]))
+
+    client.force_login(bob)
+    page = client.get(invitation(community_race))
+    assert page.status_code == 403
+    assert "alice took you out of Friday night" in page.text
+    assert "ask alice to let you back in" in page.text
+    assert "Join the race" not in page.text
+    client.post(invitation(community_race))
+    assert not community_race.participants.filter(pk=bob.pk).exists()
+    assert client.get(community_race.get_absolute_url()).status_code == 404
+
+
+def test_the_organiser_lets_a_racer_they_took_out_back_in(client, community_race, alice, bob):
+    community_race.participants.add(bob)
+    scored(community_race, bob, 10_000)
+    client.force_login(alice)
+    client.post(reverse("racing:community-race-remove", args=[community_race.slug, bob.pk]))
+    manage = client.get(reverse("racing:community-race-manage", args=[community_race.slug]))
+    assert "Taken out" in manage.text and "Let back in" in manage.text
+
+    readmit = reverse("racing:community-race-readmit", args=[community_race.slug, bob.pk])
+    client.post(readmit)
+    assert community_race.participants.filter(pk=bob.pk).exists()
+    assert not community_race.removed.exists()
+    assert Ranking.objects.filter(event=community_race, racer=bob).exists()  # its runs rank again
+
+
+def test_a_new_invitation_link_replaces_the_old_one(client, community_race, alice, bob):
+    old = invitation(community_race)
+    client.force_login(alice)
+    client.post(reverse("racing:community-race-invitation-renew", args=[community_race.slug]))
+    community_race.refresh_from_db()
+    assert invitation(community_race) != old
+    client.force_login(bob)
+    assert client.get(old).status_code == 404
+    client.post(invitation(community_race))
+    assert community_race.participants.filter(pk=bob.pk).exists()
+
+
+def test_only_the_organiser_readmits_or_renews(client, community_race, bob):
+    client.force_login(bob)
+    renew = reverse("racing:community-race-invitation-renew", args=[community_race.slug])
+    assert client.post(renew).status_code == 404
+
+
+def test_a_visitor_is_offered_to_sign_up_and_come_back_to_the_invitation(client, community_race):
+    page = client.get(invitation(community_race))
+    back = f"?next=/races/invite/{community_race.invite_token}/"
+    assert f'href="{reverse("signup")}{back}"' in page.text
+    assert f'href="{reverse("login")}{back}"' in page.text
+
+
+def test_a_new_race_opens_now_and_closes_in_a_week_in_the_organisers_zone(client, alice, tracks):
+    client.force_login(alice)
+    client.cookies["pitlane_tz"] = "Asia/Tokyo"
+    page = client.get(reverse("racing:community-race-create"))
+    tokyo = ZoneInfo("Asia/Tokyo")
+
+    def shown(name: str) -> datetime:
+        value = re.search(rf'name="{name}" value="([^"]+)"', page.text)[1]
+        return datetime.strptime(value, "%Y-%m-%dT%H:%M").replace(tzinfo=tokyo)
+
+    assert abs(shown("opens_at") - timezone.now()) < timedelta(minutes=2)
+    assert shown("closes_at") - shown("opens_at") == timedelta(days=7)
+    assert re.search(r'name="track" value="[\w-]+" checked', page.text)  # a track chosen
+
+
+def test_the_race_form_shows_track_pictures_and_only_the_race_types_fields(client, alice, tracks):
+    client.force_login(alice)
+    page = client.get(reverse("racing:community-race-create"))
+    assert reverse("training:track-preview", args=["pitlane-oval"]) in page.text
+    assert '<div data-race-fields="OBJECT_AVOIDANCE" hidden>' in page.text
+    assert '<div data-race-fields="HEAD_TO_BOT" hidden>' in page.text
+
+
+def test_an_object_avoidance_race_takes_its_boxes_from_the_form(client, alice, tracks):
+    client.force_login(alice)
+    form = race_form(race_type="OBJECT_AVOIDANCE", box_count=5, box_randomize="on")
+    response = client.post(reverse("racing:community-race-create"), form)
+    assert response.status_code == 302, response.context["form"].errors
+    event = Event.objects.get(name="Friday night")
+    assert event.boxes == {"count": 5, "randomize": True} and event.bots is None
+
+
+def test_a_head_to_bot_race_without_its_bot_cars_says_so_and_keeps_them_shown(
+    client, alice, tracks
+):
+    client.force_login(alice)
+    form = race_form(race_type="HEAD_TO_BOT", bot_count="", bot_speed="1.5")
+    response = client.post(reverse("racing:community-race-create"), form)
+    assert response.context["form"].errors["bot_count"] == ["Say how many bot cars the race has."]
+    assert '<div data-race-fields="HEAD_TO_BOT" >' in response.text
+    assert 'value="1.5"' in response.text
