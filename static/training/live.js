@@ -151,9 +151,11 @@ function setStatus(message) {
   if (message.seconds_used !== undefined) {
     clockOrigin = {
       seconds: message.seconds_used, at: performance.now(), running: message.clock_running,
-      max: message.max_seconds, active: message.active,
+      max: message.max_seconds, active: message.active && message.status !== "STOPPING",
     };
   }
+  const stopper = document.querySelector("[data-stop-open]"); // hidden once the stop is asked
+  if (stopper) stopper.hidden = !message.active || message.status === "STOPPING";
   const finished = document.querySelector("[data-stop-iteration]");
   if (finished && message.iterations) finished.textContent = `iteration ${message.iterations}`;
   const progress = find("progress");

@@ -49,6 +49,7 @@ def test_a_racer_watches_the_car_learn_and_stops_training(
     expect(page.locator("[data-live-time]")).to_contain_text("left")
 
     page.get_by_role("button", name="Stop training").click()
+    page.get_by_role("dialog").get_by_role("button", name="Stop training").click()
     expect(section).to_have_attribute("data-job-status", "COMPLETED", timeout=60_000)
     expect(page.locator("[data-live-status]")).to_have_text("Completed")
     expect(page.locator("[data-live-model-status]")).to_have_text("Ready")
