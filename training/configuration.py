@@ -30,16 +30,23 @@ class Invalid(Exception):
         self.errors = errors
 
 
+def name_problem(name: str, *, owner) -> str | None:
+    """What is wrong with ``name`` for a new model of ``owner``'s, or None."""
+    if not NAME.match(name):
+        return "A model's name is 1-64 letters, digits and hyphens."
+    if RLModel.objects.filter(owner=owner, name__iexact=name).exists():
+        return f"You already have a model named “{name}”; choose another name."
+    return None
+
+
 def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
     """The settings, complete and typed, ready for ``RLModel(**...)``; ``Invalid`` otherwise."""
     errors: dict[str, str] = {}
     clean: dict = {}
 
     name = str(settings.get("name", "")).strip()
-    if not NAME.match(name):
-        errors["name"] = "A model's name is 1-64 letters, digits and hyphens."
-    elif RLModel.objects.filter(owner=owner, name__iexact=name).exists():
-        errors["name"] = f"You already have a model named “{name}”; choose another name."
+    if problem := name_problem(name, owner=owner):
+        errors["name"] = problem
     clean["name"] = name
     description = str(settings.get("description") or "")
     if len(description) > 255:

@@ -2,26 +2,56 @@ import json
 
 from django import forms
 
-from training import hyperparameters, imports
+from training import configuration, hyperparameters, imports
 from training.models import Algorithm, EvaluationJob, Network, RaceType, Track, Vehicle
 from training.rewards import MAX_SOURCE_SIZE
 
 
 class ModelImportForm(forms.Form):
-    archive = forms.FileField(
-        label="Archive (.tar.gz)",
-        help_text="A Pitlane virtual model, or a model downloaded from DeepRacer.",
-    )
+    """The name first (checked before the archive is read, and in the browser as it is typed),
+    then the archive, or the one the racer uploaded to an attempt that had to be corrected
+    (``kept_upload``, named by the hidden ``kept`` token)."""
+
     name = forms.CharField(
         max_length=64, required=False,
         help_text="Leave empty to keep the archive's name. Letters, digits and hyphens.",
     )  # fmt: skip
+    archive = forms.FileField(
+        label="Archive (.tar.gz)", required=False,
+        help_text="A Pitlane virtual model, or a model downloaded from DeepRacer.",
+        widget=forms.FileInput(attrs={"accept": ".tar.gz,.tgz,.tar,application/gzip"}),
+    )  # fmt: skip
+    kept = forms.CharField(required=False, widget=forms.HiddenInput)
+
+    def __init__(self, *args, owner, kept: imports.KeptUpload | None = None, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.owner = owner
+        self.kept_upload = kept
+
+    def clean_name(self) -> str:
+        name = self.cleaned_data["name"].strip()
+        if name and (problem := configuration.name_problem(name, owner=self.owner)):
+            raise forms.ValidationError(problem)
+        return name
 
     def clean_archive(self):
         archive = self.cleaned_data["archive"]
+        if archive is None:
+            if self.kept_upload is None:
+                raise forms.ValidationError(
+                    "Choose the model's archive: a virtualmodel-<name>.tar.gz or a model "
+                    "downloaded from DeepRacer."
+                )
+            return None
         if archive.size > imports.MAX_ARCHIVE:
             raise forms.ValidationError(f"The archive is over {imports.size(imports.MAX_ARCHIVE)}.")
         return archive
+
+    def keep(self, kept: imports.KeptUpload | None) -> None:
+        """Show ``kept`` (or nothing) as the archive the next attempt uses."""
+        self.kept_upload = kept
+        self.data = self.data.copy()
+        self.data["kept"] = kept.token if kept else ""
 
 
 class VehicleForm(forms.ModelForm):

@@ -13,15 +13,21 @@ leaves nothing in the database or in storage.
 from __future__ import annotations
 
 import json
+import secrets
 import tarfile
 import zlib
 from dataclasses import dataclass, field
+from datetime import timedelta
 from pathlib import PurePosixPath
 from typing import IO
 
 import yaml
 from django.contrib.auth.models import AbstractBaseUser
+from django.contrib.sessions.backends.base import SessionBase
+from django.core.files.storage import default_storage
+from django.core.files.uploadedfile import UploadedFile
 from django.db import transaction
+from django.utils import timezone
 from safetensors import SafetensorError
 
 from training import artifacts, configuration, exports, history, hyperparameters, jobs, services
@@ -39,6 +45,9 @@ WANTED = {
     "model_metadata.json", "reward_function.py", "hyperparameters.json",
     "training_params.yaml", exports.PITLANE_SETTINGS, artifacts.TRAINING_METRICS, *CHECKPOINTS,
 }  # fmt: skip
+KEPT_FOLDER = "imports/kept"  # in storage: archives kept between a racer's attempts
+KEPT_FOR = timedelta(hours=6)
+KEPT_SESSION_KEY = "training:kept-import"
 DEFAULT_TRACK = "rookie-loop"
 DEEPRACER_ALGORITHMS = {"clipped_ppo": Algorithm.PPO, "ppo": Algorithm.PPO, "sac": Algorithm.SAC}
 
@@ -89,6 +98,64 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
         )
     model = services.model_create(owner=owner, settings=settings)
     return Imported(model, notes)
+
+
+@dataclass(frozen=True)
+class KeptUpload:
+    """An archive the racer uploaded to a form that had to be corrected, kept in storage so that
+    they need not choose it again (a browser cannot fill a file input in)."""
+
+    token: str
+    filename: str
+    name: str  # in storage
+
+    def open(self) -> IO[bytes]:
+        return default_storage.open(self.name, "rb")
+
+
+def upload_keep(*, session: SessionBase, upload: UploadedFile) -> KeptUpload:
+    """Keep ``upload`` for the racer's next attempt (replacing one kept before); kept archives
+    older than ``KEPT_FOR`` are deleted on the way, whoever left them."""
+    upload_discard(session=session)
+    _delete_stale_uploads()
+    token = secrets.token_urlsafe(16)
+    upload.seek(0)
+    name = default_storage.save(f"{KEPT_FOLDER}/{token}.tar.gz", upload)
+    filename = PurePosixPath(upload.name or "model.tar.gz").name[:120]
+    session[KEPT_SESSION_KEY] = {"token": token, "filename": filename, "name": name}
+    return KeptUpload(token, filename, name)
+
+
+def upload_kept(*, session: SessionBase, token: str) -> KeptUpload | None:
+    """The archive kept for this racer under ``token`` (the form's hidden field), if it still is."""
+    kept = session.get(KEPT_SESSION_KEY)
+    if not kept or not token or not secrets.compare_digest(kept["token"], token):
+        return None
+    if not default_storage.exists(kept["name"]):
+        return None
+    return KeptUpload(kept["token"], kept["filename"], kept["name"])
+
+
+def upload_discard(*, session: SessionBase) -> None:
+    """Forget, and delete, the archive kept for this racer."""
+    kept = session.pop(KEPT_SESSION_KEY, None)
+    if kept and default_storage.exists(kept["name"]):
+        default_storage.delete(kept["name"])
+
+
+def _delete_stale_uploads() -> None:
+    try:
+        _, names = default_storage.listdir(KEPT_FOLDER)
+    except FileNotFoundError:
+        return
+    oldest = timezone.now() - KEPT_FOR
+    for file in names:
+        name = f"{KEPT_FOLDER}/{file}"
+        try:
+            if default_storage.get_modified_time(name) < oldest:
+                default_storage.delete(name)
+        except (FileNotFoundError, NotImplementedError):
+            continue
 
 
 def read_archive(archive: IO[bytes]) -> Members:

@@ -1,4 +1,5 @@
 import json
+from contextlib import nullcontext
 from copy import copy
 
 from django.contrib import messages
@@ -375,25 +376,31 @@ def model_export(request: HttpRequest, pk: int, kind: str) -> HttpResponse:
 
 @login_required
 def model_import(request: HttpRequest) -> HttpResponse:
-    form = ModelImportForm(request.POST or None, request.FILES or None)
-    if request.method == "POST" and form.is_valid():
+    """The import form. An attempt that has to be corrected keeps the racer's archive (unless
+    the archive itself was refused), so the next one need not choose it again."""
+    if request.method != "POST":
+        imports.upload_discard(session=request.session)
+        form = ModelImportForm(owner=request.user)
+        return render(request, "training/model_import.html", {"form": form})
+    kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
+    form = ModelImportForm(request.POST, request.FILES, owner=request.user, kept=kept)
+    refused = False
+    if form.is_valid():
+        upload = form.cleaned_data["archive"]
         try:
-            imported = imports.import_model(
-                owner=request.user, archive=form.cleaned_data["archive"],
-                name=form.cleaned_data["name"].strip(),
-            )  # fmt: skip
-        except imports.ImportRefused as refused:
-            form.add_error("archive", str(refused))
+            with nullcontext(upload) if upload else kept.open() as archive:
+                imported = imports.import_model(
+                    owner=request.user, archive=archive, name=form.cleaned_data["name"]
+                )
+        except imports.ImportRefused as refusal:
+            form.add_error("archive", str(refusal))
+            refused = True
         except configuration.Invalid as invalid:
-            for setting, message in invalid.errors.items():
-                if setting == "name":
-                    form.add_error("name", message)
-                else:  # a setting the archive brought: say which
-                    label = setting.split(".")[-1].replace("_", " ").capitalize()
-                    form.add_error(None, f"{label}: {message}")
+            _import_errors(form, invalid.errors)
         except (SandboxUnavailable, SandboxFailure) as error:
             form.add_error(None, f"The reward function could not be checked: {error}")
         else:
+            imports.upload_discard(session=request.session)
             model = imported.model
             ready = model.status == RLModel.Status.READY
             messages.success(request, f"Imported {model.name}" + (
@@ -402,10 +409,32 @@ def model_import(request: HttpRequest) -> HttpResponse:
             for note in imported.notes:
                 messages.warning(request, note)
             return redirect("training:model-detail", pk=model.pk)
-    return render(
-        request, "training/model_import.html", {"form": form},
-        status=400 if form.errors else 200,
-    )  # fmt: skip
+    upload = request.FILES.get("archive")
+    if refused or ("archive" in form.errors and upload is not None):
+        imports.upload_discard(session=request.session)  # the racer must choose another
+        form.keep(None)
+    elif upload is not None:
+        form.keep(imports.upload_keep(session=request.session, upload=upload))
+    return render(request, "training/model_import.html", {"form": form}, status=400)
+
+
+def _import_errors(form: ModelImportForm, errors: dict[str, str]) -> None:
+    """The settings an archive brought that cannot be used, each where the racer can act."""
+    for setting, message in errors.items():
+        if setting == "name":
+            form.add_error("name", message)
+        else:  # a setting the archive brought: say which
+            label = setting.split(".")[-1].replace("_", " ").capitalize()
+            form.add_error(None, f"{label}: {message}")
+
+
+@login_required
+@require_safe
+def model_name_check(request: HttpRequest) -> JsonResponse:
+    """Whether the racer may give a new model this name, for forms that check as they type."""
+    name = request.GET.get("name", "").strip()
+    problem = configuration.name_problem(name, owner=request.user) if name else None
+    return JsonResponse({"name": name, "ok": problem is None, "message": problem or ""})
 
 
 @login_required

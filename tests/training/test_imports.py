@@ -354,3 +354,62 @@ def test_a_virtual_model_without_readable_metrics_imports_without_history_and_sa
     assert any(said in note for note in imported.notes)
     job = imported.model.jobs.get()
     assert job.iterations == 0 and not job.iteration_rows.exists()
+
+
+def test_a_file_that_is_not_an_archive_is_refused_in_a_racers_words(alice, client):
+    client.force_login(alice)
+    upload = SimpleUploadedFile("notes.txt", b"just some notes, not a model")
+    response = client.post(reverse("training:model-import"), {"archive": upload})
+    assert response.status_code == 400
+    assert "This file is not a .tar.gz model archive" in response.text
+    for python in ("file could not be opened", "not a gzip file", "tarfile", "Error"):
+        assert python not in response.text
+    assert "you uploaded" not in response.text  # a refused file is not kept
+
+
+def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
+    alice, tracks, client
+):
+    original = ready_model(alice)
+    client.force_login(alice)
+    page = client.get(reverse("training:model-import")).text
+    assert page.index('name="name"') < page.index('name="archive"')  # the name comes first
+    check = client.get(reverse("training:model-name-check"), {"name": "Straight-Ahead"}).json()
+    assert check["ok"] is False and "You already have a model named" in check["message"]
+    assert client.get(reverse("training:model-name-check"), {"name": "fresh"}).json()["ok"]
+
+    # A taken name with a file that is no archive: the name is what the page talks about.
+    upload = SimpleUploadedFile("model.tar.gz", b"not read yet")
+    response = client.post(reverse("training:model-import"),
+                           {"name": "straight-ahead", "archive": upload})  # fmt: skip
+    assert response.status_code == 400
+    assert "You already have a model named" in response.text
+    assert "not a .tar.gz model archive" not in response.text
+
+    # The archive chosen is kept: correcting the name is enough.
+    upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(original))
+    response = client.post(reverse("training:model-import"),
+                           {"name": "straight-ahead", "archive": upload})  # fmt: skip
+    assert "Using <strong>virtualmodel.tar.gz</strong> you uploaded" in response.text
+    assert 'value="straight-ahead"' in response.text
+    kept = response.context["form"].kept_upload
+    assert artifacts.default_storage.exists(kept.name)
+    response = client.post(reverse("training:model-import"), {"name": "again", "kept": kept.token})
+    assert response.status_code == 302
+    assert RLModel.objects.get(owner=alice, name="again").status == RLModel.Status.READY
+    assert not artifacts.default_storage.exists(kept.name)  # cleaned up once used
+
+    # Without a file or a kept one, the page asks for one.
+    response = client.post(reverse("training:model-import"), {"name": "third", "kept": "stale"})
+    assert response.status_code == 400 and "Choose the model&#x27;s archive" in response.text
+
+
+def test_a_kept_archive_is_another_racers_to_use_never(alice, bob, tracks, client):
+    client.force_login(alice)
+    upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(ready_model(alice)))
+    response = client.post(reverse("training:model-import"),
+                           {"name": "straight-ahead", "archive": upload})  # fmt: skip
+    token = response.context["form"].kept_upload.token
+    client.force_login(bob)
+    response = client.post(reverse("training:model-import"), {"name": "mine", "kept": token})
+    assert response.status_code == 400 and not RLModel.objects.filter(owner=bob).exists()
