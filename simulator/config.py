@@ -30,6 +30,17 @@ class ConfigError(ValueError):
     """A setting out of range or malformed; the message names it and says what is allowed."""
 
 
+class ActionSpaceError(ConfigError):
+    """An action space with problems. ``problems`` maps each place to what is wrong there:
+    ``""`` is the space as a whole; ``"<index>"`` a discrete action and ``"<index>.speed"`` or
+    ``"<index>.steering_angle"`` one of its values, actions numbered from 0 as ``index`` is in
+    ``model_metadata.json``; ``"speed.high"`` and the like a bound of a continuous range."""
+
+    def __init__(self, problems: dict[str, str]) -> None:
+        super().__init__(" ".join(problems.values()))
+        self.problems = problems
+
+
 @dataclass(frozen=True)
 class DiscreteActions:
     actions: tuple[tuple[float, float], ...]  # (steering [deg], speed [m/s]) per action index
@@ -98,43 +109,106 @@ def sensors(value: Sequence[str]) -> tuple[str, str | None]:
 
 
 def action_space(value) -> DiscreteActions | ContinuousActions:
+    """The action space from ``model_metadata.json``'s form; ``None`` gives DeepRacer's default.
+
+    Every problem is reported at once, each at its place (``ActionSpaceError.problems``)."""
     if value is None:
         value = DEFAULT_ACTION_SPACE
     if isinstance(value, Mapping):
-        try:
-            steering = (
-                float(value["steering_angle"]["low"]),
-                float(value["steering_angle"]["high"]),
+        return _continuous(value)
+    if isinstance(value, str) or not isinstance(value, Sequence):
+        raise ActionSpaceError({"": "The action space is a list of actions or a pair of ranges."})
+    return _discrete(value)
+
+
+# What each value of an action is called, where it may lie, and in what unit.
+VALUES = {
+    "steering_angle": ("steering angle", (-MAX_STEERING, MAX_STEERING), "degrees"),
+    "speed": ("speed", SPEED_RANGE, "m/s"),
+}
+BOUNDS = {"low": "lowest", "high": "highest"}
+
+
+def _discrete(value: Sequence) -> DiscreteActions:
+    if not 2 <= len(value) <= 30:
+        raise ActionSpaceError({"": (
+            f"A discrete action space has 2 to 30 actions, not {len(value)}." if value
+            else "There are no actions: a discrete action space has 2 to 30."
+        )})  # fmt: skip
+    problems: dict[str, str] = {}
+    actions: list[tuple[float, float]] = []
+    seen: dict[tuple[float, float], int] = {}
+    for index, action in enumerate(value):
+        if not isinstance(action, Mapping):
+            problems[str(index)] = f'Action {index} needs a "steering_angle" and a "speed".'
+            continue
+        numbers = []
+        for name, (label, limits, unit) in VALUES.items():
+            number, problem = _reading(action.get(name), f"{label.capitalize()} in action {index}",
+                                       limits, unit)  # fmt: skip
+            if problem:
+                problems[f"{index}.{name}"] = problem
+            numbers.append(number)
+        if None in numbers:
+            continue
+        pair = (numbers[0], numbers[1])
+        if pair in seen:
+            problems[str(index)] = (
+                f"Actions {seen[pair]} and {index} are the same ({pair[0]:g} degrees, "
+                f"{pair[1]:g} m/s): change or remove one."
             )
-            speed = (float(value["speed"]["low"]), float(value["speed"]["high"]))
-        except (KeyError, TypeError, ValueError):
-            raise ConfigError(
+        seen.setdefault(pair, index)
+        actions.append(pair)
+    if problems:
+        raise ActionSpaceError(problems)
+    return DiscreteActions(tuple(actions))
+
+
+def _continuous(value: Mapping) -> ContinuousActions:
+    problems: dict[str, str] = {}
+    ranges = {}
+    for name, (label, limits, unit) in VALUES.items():
+        bounds = value.get(name)
+        if not isinstance(bounds, Mapping):
+            raise ActionSpaceError({"": (
                 'A continuous action space is {"steering_angle": {"low": -30, "high": 30}, '
                 '"speed": {"low": 1, "high": 2}}.'
-            ) from None
-        _check_steering(*steering)
-        _check_speed(*speed)
-        if steering[0] >= steering[1] or speed[0] >= speed[1]:
-            raise ConfigError("In a continuous action space each low must be below its high.")
-        return ContinuousActions(steering=steering, speed=speed)
-    if isinstance(value, str) or not isinstance(value, Sequence):
-        raise ConfigError("The action space is a list of actions or a pair of ranges.")
-    if not 2 <= len(value) <= 30:
-        raise ConfigError(f"A discrete action space has 2 to 30 actions, not {len(value)}.")
-    actions = []
-    for number, action in enumerate(value, start=1):
-        try:
-            steering, speed = float(action["steering_angle"]), float(action["speed"])
-        except (KeyError, TypeError, ValueError):
-            raise ConfigError(
-                f'Action {number} must have a numeric "steering_angle" and "speed".'
-            ) from None
-        _check_steering(steering, where=f"action {number}")
-        _check_speed(speed, where=f"action {number}")
-        actions.append((steering, speed))
-    if len(set(actions)) != len(actions):
-        raise ConfigError("Two actions of the action space are the same.")
-    return DiscreteActions(tuple(actions))
+            )})  # fmt: skip
+        for bound, word in BOUNDS.items():
+            number, problem = _reading(bounds.get(bound), f"The {word} {label}", limits, unit)
+            if problem:
+                problems[f"{name}.{bound}"] = problem
+            ranges[name, bound] = number
+        low, high = ranges[name, "low"], ranges[name, "high"]
+        if low is not None and high is not None and low >= high:
+            problems[f"{name}.high"] = (
+                f"The highest {label} must be above the lowest, {low:g} {unit}."
+            )
+    if problems:
+        raise ActionSpaceError(problems)
+    return ContinuousActions(
+        steering=(ranges["steering_angle", "low"], ranges["steering_angle", "high"]),
+        speed=(ranges["speed", "low"], ranges["speed", "high"]),
+    )
+
+
+def _reading(
+    value, what: str, limits: tuple[float, float], unit: str
+) -> tuple[float | None, str | None]:
+    """(the number, None), or (None, what is wrong with it) for a value a racer typed."""
+    low, high = limits
+    allowed = f"{low:g} to {high:g} {unit}"
+    if value is None or (isinstance(value, str) and not value.strip()):
+        return None, f"{what} is blank: enter {allowed}."
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if isinstance(value, bool) or not math.isfinite(number):
+        return None, f"{what} must be a number from {allowed}, not “{value}”."
+    if not low <= number <= high:
+        return None, f"{what} is {allowed}, not {number:g}."
+    return number, None
 
 
 def choice(name: str, value: str, allowed: Sequence[str]) -> str:
@@ -205,19 +279,3 @@ def _fields(value, kind, name: str) -> dict:
 
 def _check_count(count, what: str) -> None:
     positive_int(f"The number of {what}", count, 1, MAX_OBJECTS)
-
-
-def _check_steering(*angles: float, where: str = "the action space") -> None:
-    for angle in angles:
-        if not -MAX_STEERING <= angle <= MAX_STEERING:
-            raise ConfigError(
-                f"Steering in {where} is {-MAX_STEERING:g} to {MAX_STEERING:g} degrees, "
-                f"not {angle:g}."
-            )
-
-
-def _check_speed(*speeds: float, where: str = "the action space") -> None:
-    low, high = SPEED_RANGE
-    for speed in speeds:
-        if not low <= speed <= high:
-            raise ConfigError(f"Speed in {where} is {low:g} to {high:g} m/s, not {speed:g}.")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Mapping
 
 from simulator import config as sim
 from training import hyperparameters as hp
@@ -77,11 +78,11 @@ def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
     clean["max_minutes"] = minutes
     workers = _integer(settings.get("workers", 1))
     if workers is None or not 1 <= workers <= MAX_WORKERS:
-        errors["workers"] = f"A job has 1 to {MAX_WORKERS} simulation workers."
+        errors["workers"] = f"A model trains in 1 to {MAX_WORKERS} simulations at once."
     clean["workers"] = workers
     extra = [str(name) for name in settings.get("extra_tracks") or []]
     if workers and len(extra) > workers - 1:
-        errors["extra_tracks"] = "Each extra track needs a simulation worker of its own."
+        errors["extra_tracks"] = "Each extra track needs a simulation of its own."
     known = set(Track.objects.filter(name__in=extra).values_list("name", flat=True))
     if set(extra) - known:
         errors["extra_tracks"] = "Choose extra tracks from the listed ones."
@@ -227,11 +228,15 @@ def _check_car(settings: dict, clean: dict, errors: dict, owner) -> None:
     if network not in Network.values:
         errors["network"] = "The network is the 3-layer or the 5-layer CNN."
     clean["network"] = network
+    space = settings.get("action_space")
     try:
-        actions = sim.action_space(settings.get("action_space") or None)
-    except sim.ConfigError as error:
-        errors["action_space"] = str(error)
-        clean["action_space_type"], clean["action_space"] = "discrete", []
+        actions = sim.action_space(space)
+    except sim.ActionSpaceError as error:
+        for place, message in error.problems.items():
+            errors["action_space" + (f".{place}" if place else "")] = message
+        # the kind the racer chose, so that no other check blames the kind for a bad value
+        kind = "continuous" if isinstance(space, Mapping) else "discrete"
+        clean["action_space_type"], clean["action_space"] = kind, None
         return
     if isinstance(actions, sim.ContinuousActions):
         clean["action_space_type"], clean["action_space"] = "continuous", actions.metadata()

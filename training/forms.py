@@ -1,8 +1,10 @@
 import json
+import re
 
 from django import forms
 
-from training import configuration, hyperparameters, imports
+from simulator import config as sim
+from training import configuration, hyperparameters, imports, selectors
 from training.models import Algorithm, EvaluationJob, Network, RaceType, Track, Vehicle
 from training.rewards import MAX_SOURCE_SIZE
 
@@ -125,6 +127,23 @@ class RewardFunctionForm(RewardValidationForm):
     field_order = ["name", "source", "track"]
 
 
+def _number(value: float) -> str:
+    return f"{value:g}".replace("e-0", "e-")
+
+
+def range_help(low: float, high: float, default: float, *, note: str = "") -> str:
+    """“Range 3-10, default 10 (DeepRacer's default).”: what a number field allows."""
+    low_text, high_text = _number(low), _number(high)
+    span = (f"{low_text} to {high_text}" if low < 0 or "e" in low_text + high_text
+            else f"{low_text}-{high_text}")  # fmt: skip
+    return f"Range {span}, default {_number(default)} (DeepRacer's default).{note}"
+
+
+def limit(field: forms.Field, low: float, high: float, step: float | str = "any") -> None:
+    """Give a number input its range, so a racer sees the limits before submitting."""
+    field.widget.attrs.update(min=_number(low), max=_number(high), step=step)
+
+
 class TrackAndRaceFields(forms.Form):
     """Where and how the car races: the fields the create-model and evaluation pages share."""
 
@@ -141,15 +160,18 @@ class TrackAndRaceFields(forms.Form):
         choices=RaceType.choices, widget=forms.RadioSelect, initial=RaceType.TIME_TRIAL
     )
     box_count = forms.IntegerField(
-        label="Boxes", min_value=1, max_value=6, initial=3, required=False
-    )
+        label="Boxes", min_value=1, max_value=6, initial=3, required=False,
+        help_text=range_help(1, 6, 3),
+    )  # fmt: skip
     box_randomize = forms.BooleanField(label="New box positions every episode", required=False)
     bot_count = forms.IntegerField(
-        label="Bot cars", min_value=1, max_value=6, initial=3, required=False
-    )
+        label="Bot cars", min_value=1, max_value=6, initial=3, required=False,
+        help_text=range_help(1, 6, 3),
+    )  # fmt: skip
     bot_speed = forms.FloatField(
-        label="Bot speed [m/s]", min_value=0.2, max_value=6, initial=0.5, required=False
-    )
+        label="Bot speed [m/s]", min_value=0.2, max_value=6, initial=0.5, required=False,
+        widget=forms.NumberInput(attrs={"step": "0.1"}), help_text=range_help(0.2, 6, 0.5),
+    )  # fmt: skip
     bot_lane_changes = forms.BooleanField(label="Bots change lanes", required=False)
 
     PLACES = {"boxes": "box_count", "bots": "bot_count"}  # where a setting's error shows
@@ -182,10 +204,11 @@ class ModelCreateForm(TrackAndRaceFields):
     """The create-model page: each field as a racer fills it in. The settings are checked as a
     whole by ``training.configuration``; its errors come back onto these fields."""
 
-    name = forms.CharField(max_length=64, help_text="Letters, digits and hyphens.")
+    name = forms.CharField(max_length=64, help_text="1 to 64 letters, digits and hyphens.")
     description = forms.CharField(
-        max_length=255, required=False, widget=forms.Textarea(attrs={"rows": 2})
-    )
+        max_length=255, required=False, widget=forms.Textarea(attrs={"rows": 2}),
+        help_text="Optional, up to 255 characters.",
+    )  # fmt: skip
     field_order = ["name", "description", "track", "direction", "race_type"]
     vehicle = forms.ModelChoiceField(
         queryset=Vehicle.objects.none(),
@@ -212,41 +235,124 @@ class ModelCreateForm(TrackAndRaceFields):
     actions = forms.CharField(
         required=False, widget=forms.HiddenInput, help_text="The discrete actions, as JSON."
     )
-    steering_low = forms.FloatField(initial=-30, required=False)
-    steering_high = forms.FloatField(initial=30, required=False)
-    speed_low = forms.FloatField(initial=1.0, required=False)
-    speed_high = forms.FloatField(initial=2.0, required=False)
+    steering_low = forms.FloatField(
+        label="Lowest steering angle [°]",
+        initial=-30,
+        required=False,
+        help_text=range_help(-30, 30, -30),
+    )
+    steering_high = forms.FloatField(
+        label="Highest steering angle [°]",
+        initial=30,
+        required=False,
+        help_text=range_help(-30, 30, 30),
+    )
+    speed_low = forms.FloatField(
+        label="Lowest speed [m/s]",
+        initial=1.0,
+        required=False,
+        help_text=range_help(*sim.SPEED_RANGE, 1),
+    )
+    speed_high = forms.FloatField(
+        label="Highest speed [m/s]",
+        initial=2.0,
+        required=False,
+        help_text=range_help(*sim.SPEED_RANGE, 2),
+    )
     algorithm = forms.ChoiceField(
         choices=Algorithm.choices, widget=forms.RadioSelect, initial=Algorithm.PPO
     )
     max_minutes = forms.IntegerField(label="Maximum training time [min]", initial=60)
-    workers = forms.IntegerField(label="Simulation workers", initial=1)
+    workers = forms.IntegerField(
+        label="Simulations at once", initial=1,
+        help_text=range_help(1, configuration.MAX_WORKERS, 1,
+                             note=" Each extra track needs one more."),
+    )  # fmt: skip
     extra_tracks = forms.ModelMultipleChoiceField(
         queryset=Track.objects.all(),
         to_field_name="name",
         required=False,
-        help_text="Train on more tracks at once: one extra simulation worker each.",
+        help_text="Train on more tracks at once: one more simulation each.",
     )
     reward_function = forms.CharField(strip=False, widget=forms.Textarea)
 
-    def __init__(self, *args, owner, **kwargs) -> None:
+    # What a clone keeps from its source, since its weights are made for them; the number of
+    # discrete actions too (the page's table offers no adding or removing).
+    KEPT_BY_A_CLONE = {
+        "vehicle": "sensors", "camera": "sensors", "lidar": "sensors", "network": "network",
+        "algorithm": "training algorithm", "action_space_type": "kind of action space",
+    }  # fmt: skip
+
+    def __init__(self, *args, owner, source=None, **kwargs) -> None:
+        """``source``: the model this one is a clone of, if it is one."""
         super().__init__(*args, **kwargs)
         self.owner = owner
+        self.source = source
+        self.action_errors: list[dict] = []  # the discrete action table's bad cells
         self.fields["vehicle"].queryset = Vehicle.objects.filter(owner=owner)
         for algorithm, settings in hyperparameters.SETTINGS.items():
             for setting in settings:
-                name = f"{algorithm}__{setting.name}"
-                if setting.choices:
-                    field = forms.TypedChoiceField(
-                        choices=[(c, c) for c in setting.choices],
-                        coerce=type(setting.default),
-                        initial=setting.default,
-                    )
-                else:
-                    field = forms.FloatField(initial=setting.default)
-                field.label = setting.label
-                field.required = False
-                self.fields[name] = field
+                self.fields[f"{algorithm}__{setting.name}"] = self._hyperparameter_field(setting)
+        for name in ("steering_low", "steering_high"):
+            limit(self.fields[name], -sim.MAX_STEERING, sim.MAX_STEERING, 1)
+        for name in ("speed_low", "speed_high"):
+            limit(self.fields[name], *sim.SPEED_RANGE, 0.1)
+        self._limit_time(selectors.allowance_for(racer=owner).minutes_left)
+        limit(self.fields["workers"], 1, configuration.MAX_WORKERS, 1)
+        if source is not None:
+            self._lock_what_a_clone_keeps()
+
+    @staticmethod
+    def _hyperparameter_field(setting: hyperparameters.Setting) -> forms.Field:
+        if setting.choices:
+            field = forms.TypedChoiceField(
+                choices=[(c, c) for c in setting.choices],
+                coerce=type(setting.default),
+                initial=setting.default,
+            )
+            field.help_text = (
+                f"Fixed at {setting.default}, as in DeepRacer."
+                if len(setting.choices) == 1
+                else f"One of {', '.join(map(str, setting.choices))}; default {setting.default} "
+                "(DeepRacer's default)."
+            )
+        else:
+            field = forms.FloatField(initial=setting.default)
+            limit(field, setting.low, setting.high, 1 if setting.integer else "any")
+            field.help_text = (
+                f"Fixed at {_number(setting.low)}, as in DeepRacer."
+                if setting.low == setting.high
+                else range_help(setting.low, setting.high, setting.default)
+            )
+        field.label = setting.label
+        field.required = False
+        return field
+
+    def _limit_time(self, minutes_left: int) -> None:
+        low, high = configuration.MINUTES
+        field = self.fields["max_minutes"]
+        limit(field, low, max(low, min(high, minutes_left)), 1)
+        field.help_text = range_help(
+            low, high, 60, note=f" You have {minutes_left} training minutes left this month."
+        )
+
+    def _lock_what_a_clone_keeps(self) -> None:
+        """Show what a clone keeps locked. A browser sends nothing for a disabled input, so the
+        source's values fill in for them; a change sent anyway is refused by
+        ``configuration``, which names what a clone keeps."""
+        if self.is_bound:
+            self.data = self.data.copy()
+            for name in self.KEPT_BY_A_CLONE:
+                if name not in self.data:
+                    value = self.initial.get(name)
+                    self.data[name] = "" if value is None else value
+        for name, what in self.KEPT_BY_A_CLONE.items():
+            field = self.fields[name]
+            field.widget.attrs["disabled"] = True
+            field.help_text = (
+                f"Locked: a clone keeps {self.source.name}'s {what}, which its weights were "
+                "trained for."
+            )
 
     @staticmethod
     def initial_from(model) -> dict:
@@ -310,7 +416,7 @@ class ModelCreateForm(TrackAndRaceFields):
             }
         else:
             try:
-                action_space = json.loads(data.get("actions") or "null")
+                action_space = json.loads(data.get("actions") or "[]")
             except json.JSONDecodeError:
                 action_space = "unreadable"
         algorithm = data["algorithm"]
@@ -338,16 +444,39 @@ class ModelCreateForm(TrackAndRaceFields):
         **TrackAndRaceFields.PLACES,
         "sensors": "camera",
         "action_space": "actions",
+        "action_space.steering_angle.low": "steering_low",
+        "action_space.steering_angle.high": "steering_high",
+        "action_space.speed.low": "speed_low",
+        "action_space.speed.high": "speed_high",
         "cloned_from": None,
     }
+    ACTION_CELL = re.compile(r"^action_space\.(\d+)(?:\.(steering_angle|speed))?$")
 
     def field_for(self, setting: str) -> str | None:
         if setting.startswith("hyperparameters."):
             return f"{self.cleaned_data.get('algorithm', '')}__{setting.split('.', 1)[1]}"
+        if self.ACTION_CELL.match(setting):
+            return "actions"
         field = super().field_for(setting)
         if field == "actions" and self.cleaned_data.get("action_space_type") == "continuous":
-            return "steering_low"
+            return "action_space_type"
         return field
+
+    def add_setting_errors(self, errors: dict[str, str]) -> None:
+        """As for every field; an action's error also marks its cells in the action table."""
+        for setting, message in errors.items():
+            cell = self.ACTION_CELL.match(setting)
+            if cell:
+                columns = [cell[2]] if cell[2] else ["steering_angle", "speed"]
+                self.action_errors.append(
+                    {"index": int(cell[1]), "columns": columns, "message": message}
+                )
+        super().add_setting_errors(errors)
+
+    def action_table_errors(self) -> list[str]:
+        """The action table's errors that no single action's cells show."""
+        in_cells = {error["message"] for error in self.action_errors}
+        return [error for error in self.errors.get("actions", []) if error not in in_cells]
 
 
 class EvaluationForm(TrackAndRaceFields):
@@ -364,11 +493,14 @@ class EvaluationForm(TrackAndRaceFields):
     )  # fmt: skip
     off_track_penalty = forms.FloatField(
         label="Off-track penalty [s]", min_value=0, max_value=10, initial=2.0,
-        help_text="The car waits this long after leaving the track, then goes back on it.",
+        widget=forms.NumberInput(attrs={"step": "0.1"}),
+        help_text="The car waits this long after leaving the track, then goes back on it. "
+        + range_help(0, 10, 2),
     )  # fmt: skip
     crash_penalty = forms.FloatField(
         label="Crash penalty [s]", min_value=0, max_value=10, initial=5.0,
-        help_text="The same, after hitting a box or a bot car.",
+        widget=forms.NumberInput(attrs={"step": "0.1"}),
+        help_text="The same, after hitting a box or a bot car. " + range_help(0, 10, 5),
     )  # fmt: skip
     checkpoint = forms.ChoiceField(
         choices=EvaluationJob.Checkpoint.choices, initial=EvaluationJob.Checkpoint.BEST,

@@ -1,32 +1,23 @@
 // The create-model page: show the settings that apply, and edit the discrete action space as a
-// table kept in the hidden "actions" field (JSON in model_metadata.json's form).
+// table kept in the hidden "actions" field (JSON in model_metadata.json's form, the actions
+// numbered from 0 as there). On a clone the table keeps its number of rows.
+import { checked, refreshTrackAndRace, showWhen } from "./track_and_race.js";
+
 const form = document.querySelector("[data-model-form]");
 const actionsField = form.querySelector("input[name=actions]");
 const tableBody = form.querySelector("[data-actions]");
-
-function checked(name) {
-  return form.querySelector(`input[name=${name}]:checked`)?.value;
-}
-
-function showWhen(attribute, value) {
-  for (const element of form.querySelectorAll(`[data-when-${attribute}]`)) {
-    element.hidden = element.dataset[`when${attribute[0].toUpperCase()}${attribute.slice(1)}`] !== value;
-  }
-}
+const countLocked = form.querySelector("[data-add-action]") === null;
+const COLUMNS = { steering_angle: ["Steering angle", -30, 30], speed: ["Speed", 0.1, 4] };
+// What the server found wrong with single actions ({index, columns, message} each): the cells
+// stay marked until the racer changes them, or adds or removes a row.
+let actionErrors = JSON.parse(document.getElementById("action-errors").textContent);
 
 function refresh() {
-  showWhen("race", checked("race_type"));
-  showWhen("actions", checked("action_space_type"));
-  showWhen("algorithm", checked("algorithm"));
+  refreshTrackAndRace(form);
+  showWhen(form, "actions", checked(form, "action_space_type"));
+  showWhen(form, "algorithm", checked(form, "algorithm"));
   const vehicle = form.querySelector("select[name=vehicle]");
   form.querySelector("[data-sensors]").hidden = Boolean(vehicle && vehicle.value);
-  const track = form.querySelector("input[name=track]:checked");
-  const direction = form.querySelector("select[name=direction]");
-  if (track && direction) {
-    const allowed = track.dataset.directions.split(" ").filter(Boolean);
-    for (const option of direction.options) option.disabled = !allowed.includes(option.value);
-    if (!allowed.includes(direction.value)) direction.value = allowed[0];
-  }
 }
 
 function readActions() {
@@ -38,52 +29,100 @@ function readActions() {
   }
 }
 
-function writeActions(actions) {
+// A cell as the racer left it: a number, null when blank, or the text that is no number, so that
+// the server can say which cell is wrong and how.
+function cellValue(value) {
+  const text = String(value ?? "").trim();
+  if (text === "") return null;
+  const number = Number(text);
+  return Number.isFinite(number) ? number : text;
+}
+
+function saveActions(actions) {
   actionsField.value = JSON.stringify(actions.map((action, index) => ({
-    steering_angle: Number(action.steering_angle), speed: Number(action.speed), index,
+    steering_angle: cellValue(action.steering_angle), speed: cellValue(action.speed), index,
   })));
+}
+
+function writeActions(actions) {
+  saveActions(actions);
   renderActions();
 }
 
-function numberInput(value, label, onChange) {
+function cellInput(actions, index, column) {
+  const [label, min, max] = COLUMNS[column];
   const input = document.createElement("input");
   input.type = "number";
   input.step = "any";
-  input.value = value;
-  input.setAttribute("aria-label", label);
-  input.addEventListener("change", () => onChange(input.value));
-  return input;
+  input.min = min;
+  input.max = max;
+  input.value = actions[index][column] ?? "";
+  input.setAttribute("aria-label", `${label} of action ${index}`);
+  input.addEventListener("change", () => {  // the table stays as it is: focus stays too
+    actions[index][column] = input.value;
+    saveActions(actions);
+    actionErrors = actionErrors.filter((error) => error.index !== index || !error.columns.includes(column));
+    markErrors();
+  });
+  const cell = document.createElement("td");
+  cell.append(input);
+  return cell;
+}
+
+// Mark each bad cell, with the message beside the last of an error's cells.
+function markErrors() {
+  for (const message of tableBody.querySelectorAll(".field-error")) message.remove();
+  for (const input of tableBody.querySelectorAll("[aria-invalid]")) {
+    input.removeAttribute("aria-invalid");
+    input.removeAttribute("aria-describedby");
+  }
+  actionErrors.forEach((error, number) => {
+    const row = tableBody.rows[error.index];
+    if (!row) return;
+    const id = `action-error-${number}`;
+    const inputs = error.columns.map((column) => row.querySelector(`[data-column=${column}] input`));
+    for (const input of inputs) {
+      input.setAttribute("aria-invalid", "true");
+      input.setAttribute("aria-describedby", id);
+    }
+    const message = document.createElement("p");
+    message.className = "field-error";
+    message.id = id;
+    message.textContent = error.message;
+    inputs.at(-1).after(message);
+  });
 }
 
 function renderActions() {
   const actions = readActions();
-  tableBody.replaceChildren(...actions.map((action, index) => {
+  const rows = actions.map((action, index) => {
     const row = document.createElement("tr");
     const number = document.createElement("td");
     number.textContent = index;
-    const steering = document.createElement("td");
-    steering.append(numberInput(action.steering_angle, `Steering of action ${index}`, (value) => {
-      actions[index].steering_angle = value;
-      writeActions(actions);
-    }));
-    const speed = document.createElement("td");
-    speed.append(numberInput(action.speed, `Speed of action ${index}`, (value) => {
-      actions[index].speed = value;
-      writeActions(actions);
-    }));
-    const remove = document.createElement("td");
-    const button = document.createElement("button");
-    button.type = "button";
-    button.className = "link-button danger";
-    button.textContent = "Remove";
-    button.addEventListener("click", () => {
-      actions.splice(index, 1);
-      writeActions(actions);
-    });
-    remove.append(button);
-    row.append(number, steering, speed, remove);
+    row.append(number);
+    for (const column of Object.keys(COLUMNS)) {
+      const cell = cellInput(actions, index, column);
+      cell.dataset.column = column;
+      row.append(cell);
+    }
+    if (!countLocked) {
+      const remove = document.createElement("td");
+      const button = document.createElement("button");
+      button.type = "button";
+      button.className = "link-button danger";
+      button.textContent = "Remove";
+      button.addEventListener("click", () => {
+        actions.splice(index, 1);
+        actionErrors = [];
+        writeActions(actions);
+      });
+      remove.append(button);
+      row.append(remove);
+    }
     return row;
-  }));
+  });
+  tableBody.replaceChildren(...rows);
+  markErrors();
 }
 
 function generate() {
@@ -99,13 +138,17 @@ function generate() {
       actions.push({ steering_angle: Math.round(steering * 10) / 10, speed });
     }
   }
+  actionErrors = [];
   writeActions(actions);
 }
 
 form.addEventListener("change", refresh);
-form.querySelector("[data-generate]").addEventListener("click", generate);
-form.querySelector("[data-add-action]").addEventListener("click", () => {
-  writeActions([...readActions(), { steering_angle: 0, speed: 1 }]);
-});
+if (!countLocked) {
+  form.querySelector("[data-generate]").addEventListener("click", generate);
+  form.querySelector("[data-add-action]").addEventListener("click", () => {
+    actionErrors = [];
+    writeActions([...readActions(), { steering_angle: 0, speed: 1 }]);
+  });
+}
 refresh();
 renderActions();

@@ -3,6 +3,7 @@ from playwright.sync_api import Page, expect
 
 from tests.browser.test_accounts_in_chromium import log_in
 from tests.conftest import PASSWORD
+from tests.training.factories import ready_model
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -35,3 +36,119 @@ def test_a_racer_creates_a_model_with_a_generated_action_space(page: Page, alice
     steering = [a["steering_angle"] for a in model.action_space]
     assert steering == [-20.0, -10.0, 0.0, 10.0, 20.0, 30.0]
     assert {a["speed"] for a in model.action_space} == {1.5}
+
+
+def open_create_page(page: Page, name: str) -> None:
+    log_in(page, "alice", PASSWORD)
+    page.goto("/models/create/")
+    page.get_by_label("Name").fill(name)
+
+
+def field(page: Page, label: str):
+    """The form field (label, input, its errors and help) that holds the input named ``label``."""
+    return page.locator(".field").filter(has=page.get_by_label(label, exact=True))
+
+
+def test_a_continuous_speed_too_high_is_named_under_the_highest_speed_and_nowhere_else(
+    page: Page, alice, tracks
+):
+    open_create_page(page, "fast-sac")
+    page.get_by_label("Continuous", exact=True).check()
+    page.get_by_label("SAC", exact=True).check()
+    page.get_by_label("Highest speed [m/s]").fill("100")
+    page.get_by_role("button", name="Create model and start training").click()
+
+    message = "The highest speed is 0.1 to 4 m/s, not 100."
+    expect(field(page, "Highest speed [m/s]").locator(".field-error")).to_have_text(message)
+    expect(page.locator(".field-error")).to_have_count(1)  # not under the steering, no SAC error
+    expect(page.get_by_text("SAC needs a continuous action space")).to_have_count(0)
+    expect(page.get_by_label("Highest speed [m/s]")).to_have_attribute("aria-invalid", "true")
+    expect(page.get_by_label("Highest speed [m/s]")).to_have_value("100")  # kept as typed
+    assert not RLModel.objects.exists()
+
+
+def test_only_the_bad_cells_are_marked_each_named_by_the_number_its_row_shows(
+    page: Page, alice, tracks
+):
+    open_create_page(page, "bad-cells")
+    rows = page.locator("[data-actions] tr")
+    expect(rows).to_have_count(10)
+    expect(rows.nth(0).locator("td").first).to_have_text("0")  # numbered from 0, as DeepRacer
+    page.get_by_label("Speed of action 4", exact=True).fill("9")
+    page.get_by_label("Steering angle of action 2", exact=True).fill("")
+    page.get_by_role("button", name="Create model and start training").click()
+
+    bad_speed = page.get_by_label("Speed of action 4", exact=True)
+    blank_steering = page.get_by_label("Steering angle of action 2", exact=True)
+    expect(rows.nth(4).locator("td").first).to_have_text("4")
+    expect(bad_speed).to_have_attribute("aria-invalid", "true")
+    expect(bad_speed).to_have_accessible_description("Speed in action 4 is 0.1 to 4 m/s, not 9.")
+    expect(blank_steering).to_have_attribute("aria-invalid", "true")
+    expect(blank_steering).to_have_accessible_description(
+        "Steering angle in action 2 is blank: enter -30 to 30 degrees."
+    )
+    expect(page.locator("[data-actions] [aria-invalid=true]")).to_have_count(2)
+    expect(rows.nth(4).locator(".field-error")).to_have_text(
+        "Speed in action 4 is 0.1 to 4 m/s, not 9."
+    )
+    expect(page.locator(".field-invalid")).to_have_count(0)  # no whole table in red
+
+    bad_speed.fill("2")
+    blank_steering.fill("5")
+    blank_steering.press("Tab")  # a corrected cell loses its mark at once
+    expect(page.locator("[data-actions] [aria-invalid=true]")).to_have_count(0)
+    page.get_by_role("button", name="Create model and start training").click()
+    expect(page.get_by_text("bad-cells is created; its training is queued.")).to_be_visible()
+    model = RLModel.objects.get(name="bad-cells")
+    assert model.action_space[2]["steering_angle"] == 5 and model.action_space[4]["speed"] == 2
+
+
+def test_an_empty_action_table_is_refused(page: Page, alice, tracks):
+    open_create_page(page, "no-actions")
+    remove = page.get_by_role("button", name="Remove")
+    while remove.count():
+        remove.first.click()
+    expect(page.locator("[data-actions] tr")).to_have_count(0)
+    page.get_by_role("button", name="Create model and start training").click()
+
+    expect(
+        page.get_by_text("There are no actions: a discrete action space has 2 to 30.")
+    ).to_be_visible()
+    expect(page.locator("[data-actions] tr")).to_have_count(0)  # the table as it was sent
+    assert not RLModel.objects.exists()
+
+
+def test_a_clone_shows_what_it_keeps_locked_and_is_created_with_it(page: Page, alice, tracks):
+    source = ready_model(alice)
+    log_in(page, "alice", PASSWORD)
+    page.goto(f"/models/create/?clone={source.pk}")
+    expect(page.get_by_label("5-layer CNN")).to_be_disabled()
+    expect(page.get_by_label("SAC", exact=True)).to_be_disabled()
+    expect(page.get_by_label("Continuous", exact=True)).to_be_disabled()
+    expect(page.get_by_label("Stereo cameras")).to_be_disabled()
+    expect(page.get_by_text("Locked: a clone keeps straight-ahead's network")).to_be_visible()
+    expect(page.get_by_role("button", name="Add an action")).to_have_count(0)
+    expect(page.get_by_role("button", name="Remove")).to_have_count(0)
+    page.get_by_label("Speed of action 1", exact=True).fill("1.5")
+    page.get_by_role("button", name="Create model and start training").click()
+
+    expect(page.get_by_text("straight-ahead-clone is cloned from straight-ahead")).to_be_visible()
+    clone = RLModel.objects.get(name="straight-ahead-clone")
+    assert (clone.network, clone.sensors) == (source.network, source.sensors)
+    assert [a["speed"] for a in clone.action_space] == [1.0, 1.5, 1.0]
+
+
+def test_the_evaluate_page_shows_only_the_chosen_race_types_settings(page: Page, alice, tracks):
+    model = ready_model(alice)
+    log_in(page, "alice", PASSWORD)
+    page.goto(f"/models/{model.pk}/evaluate/")
+    boxes, bots = page.get_by_label("Boxes", exact=True), page.get_by_label("Bot cars", exact=True)
+    expect(boxes).to_be_hidden()
+    expect(bots).to_be_hidden()
+    page.get_by_label("Object avoidance").check()
+    expect(boxes).to_be_visible()
+    expect(bots).to_be_hidden()
+    page.get_by_label("Head-to-bot").check()
+    expect(boxes).to_be_hidden()
+    expect(bots).to_be_visible()
+    expect(page.get_by_label("Bot speed [m/s]")).to_have_attribute("max", "6")

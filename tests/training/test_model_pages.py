@@ -35,7 +35,7 @@ def test_the_create_page_offers_every_setting_with_its_default(client, alice, tr
     assert response.status_code == 200
     for text in ("Rookie Loop", "Object avoidance", "Stereo cameras", "5-layer CNN",
                  "Generate the table", "Entropy", "SAC alpha (entropy)", "Maximum training time",
-                 "Simulation workers", "Use this example"):  # fmt: skip
+                 "Simulations at once", "Use this example"):  # fmt: skip
         assert text in response.text, text
     assert 'value="rookie-loop" checked' in response.text
 
