@@ -38,7 +38,8 @@ def test_a_racer_validates_a_reward_function_fixes_it_and_sees_its_rewards(
     expect(editor).to_contain_text("ABS_STEERING_THRESHOLD")
     page.get_by_label("Try it on").select_option("hairpin-alley")
     page.get_by_role("button", name="Validate").click()
-    expect(page.locator("[data-status]")).to_have_text("Valid: ready to train.")
+    validated = {"timeout": 30_000}  # the sandbox runs five samples: seconds on a busy machine
+    expect(page.locator("[data-status]")).to_have_text("Valid: ready to train.", **validated)
     rows = page.locator("[data-samples] tr")
     expect(rows).to_have_count(5)
     expect(rows.nth(2)).to_contain_text("off-track")
