@@ -9,14 +9,28 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
-from urllib.parse import urlsplit
+from urllib.parse import unquote, urlsplit
 
 from django.core.exceptions import ImproperlyConfigured
 
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 _MISSING = object()
+
+
+@dataclass(frozen=True)
+class EmailServer:
+    """Django's EMAIL_* settings, as ``Env.email`` reads them from one URL."""
+
+    backend: str
+    host: str = ""
+    port: int = 25
+    user: str = ""
+    password: str = ""
+    use_tls: bool = False
+    use_ssl: bool = False
 
 
 class Env:
@@ -95,6 +109,38 @@ class Env:
                 f"The environment variable {name} must name a host, not {_redact(value)!r}."
             )
         return value
+
+    def email(self, name: str) -> EmailServer | None:
+        """An email server as a URL: ``smtp://user:password@host:587`` (STARTTLS with
+        ``smtp+tls://``, TLS from the start with ``smtps://``), or ``console://`` to print the
+        emails instead of sending them; None when the variable is unset (no email)."""
+        if urlsplit(self.str(name, "")).scheme == "console":
+            return EmailServer("django.core.mail.backends.console.EmailBackend")
+        value = self.url(name, "", schemes=("smtp", "smtp+tls", "smtps", "console"))
+        if not value:
+            return None
+        parts = urlsplit(value)
+        if not parts.hostname:
+            raise ImproperlyConfigured(
+                f"The environment variable {name} must name the email server's host, "
+                f"not {_redact(value)!r}."
+            )
+        try:
+            port = parts.port or (465 if parts.scheme == "smtps" else 25)
+        except ValueError:
+            raise ImproperlyConfigured(
+                f"The environment variable {name} has a port that is not a number: "
+                f"{_redact(value)!r}."
+            ) from None
+        return EmailServer(
+            "django.core.mail.backends.smtp.EmailBackend",
+            host=parts.hostname,
+            port=port,
+            user=unquote(parts.username or ""),
+            password=unquote(parts.password or ""),
+            use_tls=parts.scheme == "smtp+tls",
+            use_ssl=parts.scheme == "smtps",
+        )
 
     def path(self, name: str, default: Path | object = _MISSING) -> Path:
         value = self._raw(name, default)

@@ -15,6 +15,7 @@ from django.utils import timezone
 from django.utils.crypto import get_random_string
 from django.utils.text import slugify
 
+from notifications import services as notifications
 from racing import live, scoring, selectors, tasks
 from racing.models import (
     RANKING_ORDER,
@@ -141,6 +142,7 @@ def submission_score(
         )
         ranked = ranking_offer(submission=submission)
     live.announce_submission(submission, ranked=ranked)
+    notifications.submission_scored(submission=submission)
     return submission
 
 

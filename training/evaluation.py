@@ -26,6 +26,7 @@ from django.utils import timezone
 
 import simulator
 from console.workers import redis_client
+from notifications import services as notifications
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
 from training import artifacts, live, selectors
@@ -268,6 +269,7 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
         status__in=(RLModel.Status.EVALUATING, RLModel.Status.SUBMITTING),
     ).update(status=RLModel.Status.READY)
     _announce(evaluation)
+    notifications.evaluation_ended(evaluation=evaluation)
 
 
 def _announce(evaluation: EvaluationJob) -> None:

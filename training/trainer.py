@@ -22,6 +22,7 @@ from django.utils import timezone
 
 import simulator
 from console.workers import redis_client
+from notifications import services as notifications
 from simulator.trace import SimTraceRow, to_csv
 from training import artifacts, jobs, live
 from training import hyperparameters as hp
@@ -575,6 +576,7 @@ class Trainer:
             status=RLModel.Status.READY if ready else RLModel.Status.ERROR
         )
         live.announce_training(job.pk)
+        notifications.training_ended(job=job)
 
 
 def _workers(count: int) -> str:

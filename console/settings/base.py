@@ -40,6 +40,7 @@ INSTALLED_APPS = [
     "console",
     "training",
     "racing",
+    "notifications",
 ]
 
 MIDDLEWARE = [
@@ -70,6 +71,7 @@ TEMPLATES = [
                 "django.contrib.messages.context_processors.messages",
                 "console.context_processors.navigation",
                 "console.time_zones.time_zone",
+                "notifications.context_processors.bell",
             ],
         },
     },
@@ -217,6 +219,20 @@ STORAGES = {
     "default": _artifact_storage,
     "staticfiles": {"BACKEND": "whitenoise.storage.CompressedManifestStaticFilesStorage"},
 }
+
+# Email: notifications (a training's, an evaluation's or a race's end) also go out by email when
+# PITLANE_EMAIL_URL names a server; without it the bell in the console is all there is.
+_email_server = env.email("PITLANE_EMAIL_URL")
+PITLANE_EMAIL_NOTIFICATIONS = _email_server is not None
+if _email_server is not None:
+    EMAIL_BACKEND = _email_server.backend
+    EMAIL_HOST, EMAIL_PORT = _email_server.host, _email_server.port
+    EMAIL_HOST_USER, EMAIL_HOST_PASSWORD = _email_server.user, _email_server.password
+    EMAIL_USE_TLS, EMAIL_USE_SSL = _email_server.use_tls, _email_server.use_ssl
+    EMAIL_TIMEOUT = 20  # [s]
+DEFAULT_FROM_EMAIL = env.str("PITLANE_EMAIL_FROM", "Pitlane <pitlane@localhost>")
+# Where racers reach this console: the links in emails.
+PITLANE_SITE_URL = env.url("PITLANE_SITE_URL", "http://127.0.0.1:8000", schemes=("http", "https"))
 
 LOGGING = {
     "version": 1,
