@@ -3,6 +3,7 @@ from django.contrib.admin.views.decorators import staff_member_required
 from django.contrib.auth import login
 from django.http import HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import redirect, render
+from django.utils.http import url_has_allowed_host_and_scheme
 from django.views.decorators.cache import never_cache
 from django.views.decorators.http import require_safe
 
@@ -14,27 +15,48 @@ from racing.selectors import events_not_closed
 from training.rewards import PARAMS
 from training.selectors import models_for_racer, vehicles_for_racer
 
+NEW_RACER = "new_racer"  # session key: the home page greets a racer who just signed up once
+
 
 def home(request: HttpRequest) -> HttpResponse:
     context = {"events": events_not_closed()[:3]}
     if request.user.is_authenticated:
+        context["new_racer"] = request.session.pop(NEW_RACER, False)
         context["has_vehicle"] = vehicles_for_racer(racer=request.user).exists()
         context["models"] = models_for_racer(racer=request.user)[:5]
     return render(request, "console/home.html", context)
 
 
 def signup(request: HttpRequest) -> HttpResponse:
+    """A new racer's account; they land logged in where they were going (``next``, when it is
+    a page of this site), or on the home page, greeted once either way."""
+    next_url = _safe_next(request)
     if request.user.is_authenticated:
-        return redirect("home")
+        return redirect(next_url or "home")
     form = SignUpForm(request.POST or None)
     if request.method == "POST" and form.is_valid():
         user = form.save()
         login(request, user, backend="django.contrib.auth.backends.ModelBackend")
+        if not next_url:
+            request.session[NEW_RACER] = True  # the home page's heading greets them
+            return redirect("home")
         messages.success(request, f"Welcome to Pitlane, {user.username}!")
-        return redirect("home")
+        return redirect(next_url)
     return render(
-        request, "registration/signup.html", {"form": form}, status=400 if form.errors else 200
+        request,
+        "registration/signup.html",
+        {"form": form, "next": next_url},
+        status=400 if form.errors else 200,
     )
+
+
+def _safe_next(request: HttpRequest) -> str:
+    """The page to go to after signing up, if it is one of this site's; "" otherwise."""
+    url = request.POST.get("next") or request.GET.get("next") or ""
+    allowed = url_has_allowed_host_and_scheme(
+        url, allowed_hosts={request.get_host()}, require_https=request.is_secure()
+    )
+    return url if allowed else ""
 
 
 @never_cache

@@ -15,8 +15,66 @@ def test_a_new_racer_signs_up_and_is_logged_in(client):
     )
     assert response.redirect_chain == [(reverse("home"), 302)]
     assert response.context["user"].username == "carol"
-    assert "Welcome to Pitlane, carol!" in response.text
     assert User.objects.filter(username="carol").exists()
+
+
+def test_a_new_racer_is_greeted_once_and_not_welcomed_back(client):
+    response = client.post(
+        reverse("signup"),
+        {"username": "carol", "password1": PASSWORD, "password2": PASSWORD},
+        follow=True,
+    )
+    assert response.text.count("Welcome") == 1
+    assert "<h1>Welcome to Pitlane, carol</h1>" in response.text
+    assert "Welcome back, carol" in client.get(reverse("home")).text  # the next visit
+
+
+def test_sign_up_takes_the_racer_back_where_they_were_going(client):
+    invitation = "/races/invite/some-token/"
+    form = client.get(reverse("signup"), {"next": invitation})
+    assert f'<input type="hidden" name="next" value="{invitation}">' in form.text
+    response = client.post(
+        reverse("signup"),
+        {"username": "carol", "password1": PASSWORD, "password2": PASSWORD, "next": invitation},
+    )
+    assert response.status_code == 302 and response.url == invitation
+    assert client.session.get("_auth_user_id")
+
+
+def test_a_racer_who_signs_up_on_the_way_to_a_page_is_greeted_there_once(client):
+    races = reverse("racing:race-list")
+    response = client.post(
+        reverse("signup"),
+        {"username": "carol", "password1": PASSWORD, "password2": PASSWORD, "next": races},
+        follow=True,
+    )
+    assert response.redirect_chain == [(races, 302)]
+    assert "Welcome to Pitlane, carol!" in response.text
+    assert response.text.count("Welcome") == 1
+
+
+@pytest.mark.parametrize("elsewhere", ["https://evil.example/", "//evil.example/", "javascript:x"])
+def test_sign_up_never_sends_a_racer_off_the_site(client, elsewhere):
+    response = client.post(
+        reverse("signup"),
+        {"username": "carol", "password1": PASSWORD, "password2": PASSWORD, "next": elsewhere},
+    )
+    assert response.status_code == 302 and response.url == reverse("home")
+
+
+def test_a_sign_up_that_fails_keeps_where_the_racer_was_going(client):
+    response = client.post(
+        reverse("signup"),
+        {"username": "carol", "password1": PASSWORD, "password2": "other", "next": "/races/"},
+    )
+    assert response.status_code == 400
+    assert '<input type="hidden" name="next" value="/races/">' in response.text
+
+
+def test_the_log_in_page_sends_new_racers_to_sign_up_with_where_they_were_going(client):
+    page = client.get(reverse("login"), {"next": "/races/invite/some-token/"})
+    signup = reverse("signup")
+    assert f'href="{signup}?next=/races/invite/some-token/"' in page.text
 
 
 def test_sign_up_refuses_a_racer_name_that_is_taken_and_keeps_what_was_typed(client, alice):

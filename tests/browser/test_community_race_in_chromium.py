@@ -1,0 +1,96 @@
+"""A community race in Chromium: the organiser copies the invitation and is asked before taking
+a racer out or closing the race; an invitee without an account signs up and comes back to it."""
+
+import re
+
+import pytest
+from django.contrib.auth.models import User
+from playwright.sync_api import Page, expect
+
+from racing.models import Event
+from tests.browser.test_accounts_in_chromium import log_in
+from tests.conftest import PASSWORD
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+
+def organise(page: Page) -> Event:
+    page.goto("/races/community/new/")
+    page.get_by_label("Name").fill("Friday night")
+    page.get_by_role("button", name="Create the race").click()
+    expect(page.get_by_role("heading", name=re.compile("Friday night"))).to_be_visible()
+    return Event.objects.get(name="Friday night")
+
+
+def test_an_invitee_signs_up_comes_back_and_joins(page: Page, alice, tracks):
+    log_in(page, "alice", PASSWORD)
+    race = organise(page)
+    page.context.clear_cookies()
+
+    page.goto(f"/races/invite/{race.invite_token}/")
+    page.get_by_role("link", name="Create a racer account").click()
+    page.get_by_label("Racer name").fill("dana")
+    page.get_by_label("Password", exact=True).fill(PASSWORD)
+    page.get_by_label("Password confirmation").fill(PASSWORD)
+    page.get_by_role("button", name="Sign up").click()
+
+    expect(page).to_have_url(re.compile(f"/races/invite/{race.invite_token}/$"))
+    expect(page.get_by_text("Welcome to Pitlane, dana!")).to_be_visible()
+    page.get_by_role("button", name="Join the race").click()
+    expect(page.get_by_text("You are in Friday night.")).to_be_visible()
+    assert race.participants.filter(username="dana").exists()
+
+
+def test_the_organiser_copies_the_invitation(page: Page, alice, tracks, daphne_server):
+    page.context.grant_permissions(["clipboard-read", "clipboard-write"], origin=daphne_server)
+    log_in(page, "alice", PASSWORD)
+    race = organise(page)
+    page.get_by_role("button", name="Copy the link").click()
+    expect(page.locator("[data-copy-status]")).to_contain_text("Copied")
+    copied = page.evaluate("navigator.clipboard.readText()")
+    assert copied.endswith(f"/races/invite/{race.invite_token}/")
+
+
+def test_the_organiser_is_asked_before_removing_a_racer_and_closing(page: Page, alice, bob, tracks):
+    log_in(page, "alice", PASSWORD)
+    race = organise(page)
+    race.participants.add(bob)
+    page.reload()
+
+    page.get_by_role("button", name="Remove bob").click()
+    dialog = page.get_by_role("dialog")
+    expect(dialog).to_contain_text("Take bob out of Friday night?")
+    dialog.get_by_role("button", name="Cancel").click()
+    expect(dialog).to_be_hidden()
+    assert race.participants.filter(pk=bob.pk).exists()
+
+    page.get_by_role("button", name="Remove bob").click()
+    dialog.get_by_role("button", name="Remove bob").click()
+    expect(page.get_by_text("bob is out of Friday night.")).to_be_visible()
+    assert not race.participants.filter(pk=bob.pk).exists()
+    expect(page.get_by_role("button", name="Let bob back in")).to_be_visible()
+    page.get_by_role("button", name="Let bob back in").click()
+    expect(page.get_by_text("bob is back in Friday night.")).to_be_visible()
+    assert race.participants.filter(pk=bob.pk).exists()
+
+    page.get_by_role("button", name="Close the race now").click()
+    expect(dialog).to_contain_text("Close Friday night now?")
+    dialog.get_by_role("button", name="Close the race").click()
+    expect(page.get_by_text("Friday night is closed")).to_be_visible()
+    race.refresh_from_db()
+    assert race.state == Event.State.CLOSED
+
+
+def test_the_race_form_shows_only_the_fields_of_the_race_type(page: Page, alice, tracks):
+    log_in(page, "alice", PASSWORD)
+    page.goto("/races/community/new/")
+    expect(page.get_by_label("Boxes", exact=True)).to_be_hidden()
+    expect(page.get_by_label("Bot cars", exact=True)).to_be_hidden()
+    page.get_by_label("Race type").select_option(label="Object avoidance")
+    expect(page.get_by_label("Boxes", exact=True)).to_be_visible()
+    expect(page.get_by_label("Bot cars", exact=True)).to_be_hidden()
+    page.get_by_label("Race type").select_option(label="Head-to-bot")
+    expect(page.get_by_label("Boxes", exact=True)).to_be_hidden()
+    expect(page.get_by_label("Bot cars", exact=True)).to_be_visible()
+    expect(page.locator(".track-choice img").first).to_be_visible()
+    assert User.objects.count() == 1
