@@ -257,7 +257,19 @@ def evaluation_snapshot(*, evaluation: EvaluationJob) -> dict:
 
 
 def evaluations_for_model(*, model: RLModel) -> QuerySet[EvaluationJob]:
-    return model.evaluations.select_related("track").prefetch_related("trial_rows")
+    """The evaluations the racer ran; a race submission's evaluation is listed with the model's
+    races (``races_for_model``) instead."""
+    return (
+        model.evaluations.filter(submission__isnull=True)
+        .select_related("track")
+        .prefetch_related("trial_rows")
+    )
+
+
+def races_for_model(*, model: RLModel) -> QuerySet:
+    """The model's race submissions, newest first (the league's ``Submission`` rows, reached
+    through their relation so this app need not import the league)."""
+    return model.submissions.select_related("event", "event__track").order_by("-created_at")
 
 
 @dataclass(frozen=True)

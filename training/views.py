@@ -299,6 +299,7 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "queue_position": jobs.queue_position(job) if job else None,
             "iterations": iterations,
             "evaluations": selectors.evaluations_for_model(model=model)[:20],
+            "races": selectors.races_for_model(model=model)[:20],
             "can_evaluate": model.status == RLModel.Status.READY,
             "can_delete": model.status in RLModel.DELETABLE,
             "has_weights": selectors.model_checkpoint(model=model) is not None,
