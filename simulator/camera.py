@@ -9,6 +9,7 @@ farthest first.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -103,6 +104,13 @@ class PerspectiveView:
     def render(self, x: float, y: float, yaw: float, solids: list[Solid] = ()) -> np.ndarray:
         """The picture from the car at pose (x, y, yaw)."""
         rotation, position = self.pose(x, y, yaw)
+        return self.render_from(rotation, position, solids)
+
+    def render_from(
+        self, rotation: np.ndarray, position: np.ndarray, solids: list[Solid] = ()
+    ) -> np.ndarray:
+        """The picture from a camera pose that ``pose`` gave: for a caller that draws more on
+        it with the same pose."""
         t = -rotation @ position
         image_from_ground = self._k @ np.column_stack([rotation[:, 0], rotation[:, 1], t])
         texture_from_image = self._texture_from_world @ np.linalg.inv(image_from_ground)
@@ -263,6 +271,7 @@ def _clip_near(polygon: np.ndarray) -> np.ndarray:
     return np.array(kept)
 
 
+@functools.lru_cache(maxsize=256)  # a handful of shades times five lights, asked every frame
 def _lit(shade: int | tuple[int, int, int], light: float):
     if isinstance(shade, int):
         return int(shade * light)

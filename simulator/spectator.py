@@ -30,7 +30,11 @@ TYRE_SHADE = (30, 30, 30)  # BGR: dark on every shell colour
 GLASS_SHADE = (78, 56, 40)  # BGR: tinted windows
 WHEEL = (0.066, 0.034)  # [m] diameter and width of a 1/18 car's wheel
 MAP_CAR_SCALE = 1.0  # [px] per unit of ``_MAP_CAR_BODY``: larger than the car at the map's scale
-_MAP_CAR_BODY = ((-6.0, -3.5), (2.0, -3.5), (9.0, 0.0), (2.0, 3.5), (-6.0, 3.5))  # nose at +9
+# The map's car in units of MAP_CAR_SCALE px, (forward, left) of its middle: nose at +9.
+_MAP_CAR_BODY = np.array([(-6.0, -3.5), (2.0, -3.5), (9.0, 0.0), (2.0, 3.5), (-6.0, 3.5)])
+_MAP_CAR_WHEELS = np.array(  # one short thick line per wheel
+    [[(along - 1.6, side), (along + 1.6, side)] for along in (-3.5, 4.0) for side in (-4.0, 4.0)]
+)
 FRAME_INTERVAL = 1 / 15  # [s] between live frames: 15 per second of wall-clock time
 
 
@@ -51,8 +55,8 @@ class Spectator:
 
     def render(self, env: DeepRacerEnv) -> np.ndarray:
         car = env.car
-        frame = self.chase.render(car.x, car.y, car.yaw)
         rotation, position = self.chase.pose(car.x, car.y, car.yaw)
+        frame = self.chase.render_from(rotation, position)
         # Boxes and bot cars beyond the racer's car are drawn before it, those nearer after.
         x, y = car.point_ahead(car.spec.centre_offset)
         reach = math.hypot(x - position[0], y - position[1])
@@ -111,17 +115,10 @@ class Spectator:
             np.array([(x, y), (x + math.cos(car.yaw), y + math.sin(car.yaw))])
         )
         forward = (ahead - centre) / np.linalg.norm(ahead - centre)
-        left = np.array([-forward[1], forward[0]])
-
-        def pixels(*points: tuple[float, float]) -> np.ndarray:
-            at = [centre + MAP_CAR_SCALE * (a * forward + b * left) for a, b in points]
-            return np.round(np.array(at) * 16).astype(np.int32)
-
-        for along in (-3.5, 4.0):
-            for side in (-4.0, 4.0):
-                ends = pixels((along - 1.6, side), (along + 1.6, side))
-                cv2.line(inset, tuple(ends[0]), tuple(ends[1]), TYRE_SHADE, 3, cv2.LINE_AA, 4)
-        body = pixels(*_MAP_CAR_BODY)
+        axes = MAP_CAR_SCALE * 16 * np.array([forward, (-forward[1], forward[0])])
+        wheels, body = (np.round(shape @ axes + centre * 16).astype(np.int32)
+                        for shape in (_MAP_CAR_WHEELS, _MAP_CAR_BODY))  # fmt: skip
+        cv2.polylines(inset, list(wheels), False, TYRE_SHADE, 3, cv2.LINE_AA, 4)
         cv2.fillConvexPoly(inset, body, colour, cv2.LINE_AA, 4)
         cv2.polylines(inset, [body], True, (255, 255, 255), 1, cv2.LINE_AA, 4)
 
