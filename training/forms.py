@@ -72,7 +72,13 @@ class VehicleForm(forms.ModelForm):
         super().__init__(*args, **kwargs)
         self.owner = owner
         self.fields["name"].error_messages["required"] = "Give your vehicle a name."
-        self.fields["shell_colour"].error_messages["required"] = "Choose a shell colour."
+        self.fields["shell_colour"].error_messages.update(
+            required="Choose a shell colour.", invalid_choice="Choose one of the shell colours."
+        )
+        self.fields["camera"].error_messages.update(
+            required="Choose a camera.", invalid_choice="Choose one of the cameras."
+        )
+        self.fields["lidar"].error_messages["invalid_choice"] = "Choose a lidar, or no lidar."
         self.sensors_locked = bool(self.instance.pk) and self.instance.rl_models.exists()
         if self.sensors_locked:
             for field in ("camera", "lidar"):

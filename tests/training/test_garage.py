@@ -158,6 +158,9 @@ def test_an_edit_with_a_taken_name_says_so_and_keeps_what_was_typed(client, alic
     no_name = client.post(url, {"name": " ", "camera": "FRONT_FACING_CAMERA", "lidar": ""})
     assert "Give your vehicle a name." in no_name.text
     assert "Choose a shell colour." in no_name.text
+    odd = client.post(url, {"name": "Rocket", "shell_colour": "#123456", "camera": "LIDAR"})
+    assert "Choose one of the shell colours." in odd.text
+    assert "Choose one of the cameras." in odd.text
 
 
 def test_a_vehicle_with_models_keeps_its_sensors_and_says_why(client, alice, tracks):
