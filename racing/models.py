@@ -275,6 +275,16 @@ class Submission(models.Model):
         return self.status in self.ACTIVE
 
     @property
+    def disqualification_text(self) -> str:
+        """"Disqualified", with the staff's reason when they gave one, never the word twice."""
+        reason = self.disqualification_reason.strip()
+        if not reason:
+            return "Disqualified"
+        if reason.lower().startswith("disqualified"):
+            return reason
+        return f"Disqualified: {reason}"
+
+    @property
     def ranked_score(self) -> int | None:
         """The score that may rank: a qualified, not disqualified submission's."""
         return self.score_ms if self.qualified and not self.disqualified else None

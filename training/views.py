@@ -472,8 +472,7 @@ def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
             form.add_setting_errors(invalid.errors)
         except services.EvaluationRefused as refused:
             refusal = str(refused)
-        else:
-            messages.success(request, "The evaluation is queued.")
+        else:  # no message: the page's status line says queued, then follows the evaluation
             return redirect("training:evaluation-detail", pk=model.pk, evaluation=evaluation.pk)
     return render(
         request,
