@@ -237,6 +237,7 @@ def reward_function_save(
     if reward_function is not None and reward_function.owner_id != owner.pk:
         raise RewardFunctionInvalid({"name": "You can change only your own reward functions."})
     name = " ".join(name.split())
+    source = source.replace("\r\n", "\n")  # a form's textarea sends CRLF; the editor has LF
     errors = {}
     max_length = RewardFunction._meta.get_field("name").max_length
     if not name:

@@ -161,13 +161,15 @@ def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResponse:
         source = form.data.get("source", "")
     else:
         source = function.source if function else rewards.EXAMPLES[0].source
+    library = selectors.reward_functions_for_racer(racer=request.user)
     return render(
         request,
         "training/reward_editor.html",
         {
             "form": form,
             "function": function,
-            "library": selectors.reward_functions_for_racer(racer=request.user),
+            "library": library,
+            "library_sources": {saved.pk: saved.source for saved in library},
             "validation": validation.as_dict() if validation else None,
             "examples": rewards.EXAMPLES,
             "example_sources": {example.slug: example.source for example in rewards.EXAMPLES},

@@ -4,7 +4,10 @@
 // not saved is kept in sessionStorage, so Back (or a reload) brings it back.
 const root = document.querySelector("[data-reward-editor]");
 const examples = JSON.parse(document.getElementById("reward-examples").textContent);
-const library = JSON.parse(document.getElementById("reward-library")?.textContent || "{}");
+const library = Object.fromEntries(
+  Object.entries(JSON.parse(document.getElementById("reward-library")?.textContent || "{}"))
+    .map(([pk, source]) => [pk, source.replace(/\r\n/g, "\n")]),
+);
 const status = root.querySelector("[data-status]");
 const results = root.querySelector("[data-results]");
 const validateButton = root.querySelector("[data-validate]");
@@ -185,6 +188,12 @@ function keepDrafts(form) {
   }
 
   const draft = read(key);
+  const savedAs = draft && Object.keys(library).find((pk) => library[pk] === draft.source);
+  if (restorable && savedAs && form.dataset.openUrl) {
+    // Saved since ("Save and create a model", then Back): open the saved function instead.
+    window.location.replace(form.dataset.openUrl.replace("/0/", `/${savedAs}/`));
+    return;
+  }
   if (restorable && draft && typeof draft.source === "string" && !same(draft, saved)) {
     editor.setValue(draft.source);
     if (nameInput) nameInput.value = draft.name || "";

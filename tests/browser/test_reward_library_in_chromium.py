@@ -87,9 +87,12 @@ def test_save_and_create_a_model_takes_new_code_to_the_form_and_back_keeps_it(
     expect(page.get_by_role("heading", name="Create a model")).to_be_visible(**SAVED)
     assert page.locator(".CodeMirror").evaluate(GET_CODE) == MINE
 
-    page.go_back()  # to the reward function page: the racer's code, not the default
+    page.go_back()  # to the reward function page: the racer's saved function, not the default
+    expect(page.get_by_role("heading", name="Reward function: fast")).to_be_visible()
     expect(page.locator(".CodeMirror")).to_contain_text("faster is better")
     assert page.locator(".CodeMirror").evaluate(GET_CODE) == MINE
+    page.goto("/models/reward-function/")  # a new function starts from the default again
+    expect(page.locator(".CodeMirror")).to_contain_text("Follow the centre line")
 
 
 def test_unsaved_code_on_the_reward_page_survives_leaving_it(page: Page, alice, tracks):
