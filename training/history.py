@@ -166,8 +166,9 @@ def history_save(*, job: TrainingJob, history: History, seconds: float | None = 
     )  # fmt: skip
     job.training_seconds = history.seconds if seconds is None else seconds
     job.finished_at = job.clock_at = timezone.now()
+    job.message = "Imported with its weights and its training history."
     job.save(update_fields=["iterations", "episodes", "steps", "training_seconds",
-                            "finished_at", "clock_at"])  # fmt: skip
+                            "finished_at", "clock_at", "message"])  # fmt: skip
     JobLogLine.objects.create(
         job=job,
         text=f"Imported with its training history: {job.iterations} iteration"

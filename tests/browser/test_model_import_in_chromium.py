@@ -1,0 +1,86 @@
+"""The import page in the browser: a taken name is said as it is typed, before any upload, and
+the form is not sent while it is; after an attempt the server refuses, the chosen archive is
+kept, so correcting the name is enough. Then the bell: a notification shows as a count in the
+navigation, and its page marks them read."""
+
+import pytest
+from playwright.sync_api import Page, expect
+
+from notifications import services as notifications
+from tests.browser.checks import page_problems
+from tests.browser.test_accounts_in_chromium import log_in
+from tests.conftest import PASSWORD
+from tests.training.factories import ready_model
+from tests.training.test_imports import trained_with_history, virtual_archive
+from training.models import RLModel
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+
+def test_the_import_page_checks_the_name_early_and_keeps_the_chosen_archive(
+    page: Page, alice, tracks, tmp_path
+):
+    archive = tmp_path / "virtualmodel-straight-ahead.tar.gz"
+    archive.write_bytes(virtual_archive(trained_with_history(alice)))
+    page.set_default_timeout(60_000)  # an upload of megabytes on a busy machine
+    log_in(page, "alice", PASSWORD)
+    page.goto("/models/import/")
+    name = page.get_by_label("Name", exact=True)
+    status = page.locator("[data-name-status]")
+
+    # As the racer types a name they already use, the page says so; the form is not sent.
+    name.fill("Straight-Ahead")
+    expect(status).to_have_text(
+        "You already have a model named “Straight-Ahead”; choose another name."
+    )
+    page.get_by_label("Archive (.tar.gz)").set_input_files(archive)
+    page.get_by_role("button", name="Import").click()
+    expect(name).to_be_focused()
+    expect(page.locator("[data-kept-archive]")).to_have_count(0)  # nothing was uploaded
+    name.fill("fresh-name")
+    expect(status).to_have_text("")
+
+    # Left empty, the name is the archive's, which is taken: the server says so after the
+    # upload, and keeps the archive.
+    name.fill("")
+    page.get_by_role("button", name="Import").click()
+    expect(page.locator("[data-kept-archive]")).to_have_text(
+        "Using virtualmodel-straight-ahead.tar.gz you uploaded; choose another file to replace it."
+    )
+    expect(status).to_contain_text("You already have a model named “straight-ahead”")
+    assert page_problems(page) == []
+    name.fill("imported-again")
+    page.get_by_role("button", name="Import").click()
+    expect(page.get_by_role("heading", name="imported-again")).to_be_visible()
+    expect(page.locator("[data-live-progress]")).to_have_text("2 iterations, 6 episodes, 210 steps")
+    assert RLModel.objects.get(owner=alice, name="imported-again").jobs.get().iterations == 2
+
+
+def test_the_bell_shows_unread_notifications_and_marks_them_read(page: Page, alice, tracks):
+    model = ready_model(alice)
+    log_in(page, "alice", PASSWORD)
+    bell = page.locator("[data-bell]")
+    expect(bell).to_have_attribute("aria-label", "Notifications")
+    notifications.notification_send(
+        recipient=alice, text="straight-ahead finished training: 3 iterations in 1:35.",
+        url=f"/models/{model.pk}/",
+    )  # fmt: skip
+    notifications.notification_send(recipient=alice, text="Another one.", url="/models/")
+    page.reload()
+    expect(page.locator("[data-bell-count]")).to_have_text("2")
+    expect(bell).to_have_attribute("aria-label", "Notifications, 2 unread")
+    bell.click()
+    expect(page.get_by_role("heading", name="Notifications")).to_be_visible()
+    problems = page_problems(page)
+    page.get_by_role("link", name="straight-ahead finished training").click()
+    expect(page.get_by_role("heading", name="straight-ahead")).to_be_visible()
+    expect(page.locator("[data-bell-count]")).to_have_text("1")
+    page.locator("[data-bell]").click()
+    page.get_by_role("button", name="Mark all read").click()
+    expect(page.get_by_text("Marked 1 notification read.")).to_be_visible()
+    expect(page.locator("[data-bell-count]")).to_have_count(0)
+    for size in ({"width": 390, "height": 844},):
+        page.set_viewport_size(size)
+        page.reload()
+        problems += page_problems(page)
+    assert problems == []
