@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import yaml
 from django.core.files.base import ContentFile
@@ -14,6 +15,19 @@ from training.models import RLModel
 
 TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE section 5
 CLONED_WEIGHTS = "checkpoints/cloned.safetensors"  # a clone's start: its source's best weights
+
+
+def checkpoint(number: int) -> str:
+    """Where the trainer keeps the weights of iteration ``number`` (0: the weights it started
+    from), relative to the model's prefix."""
+    return f"checkpoints/iteration-{number}.safetensors"
+
+
+def checkpoint_iteration(name: str) -> int | None:
+    """The iteration whose weights the stored checkpoint ``name`` holds; None for weights that
+    came otherwise (an import)."""
+    found = re.search(r"/checkpoints/iteration-(\d+)\.safetensors$", name)
+    return int(found.group(1)) if found else None
 
 
 def path(model: RLModel, relative: str) -> str:

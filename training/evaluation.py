@@ -126,7 +126,11 @@ class Evaluator:
             policy.load_checkpoint(artifacts.read(checkpoint))
         except (ValueError, OSError) as error:
             raise EvaluationFailed(f"The model's weights could not be loaded: {error}") from None
-        _update(evaluation, checkpoint_name=checkpoint)
+        _update(
+            evaluation,
+            checkpoint_name=checkpoint,
+            checkpoint_iteration=artifacts.checkpoint_iteration(checkpoint),
+        )
         _update(evaluation, status=EvaluationJob.Status.IN_PROGRESS, message="Racing")
         _announce(evaluation)
         with tempfile.TemporaryDirectory(prefix="pitlane-evaluation-") as directory:
@@ -225,7 +229,7 @@ class Evaluator:
                 "metric_time": int(wall * 1000),
                 "start_time": int((wall - seconds) * 1000),
                 "elapsed_time_in_milliseconds": trial.time_ms,
-                "episode_status": "Lap complete" if trial.completed else "Time up",
+                "episode_status": trial.status_display,
                 "crash_count": crashes,
                 "immobilized_count": now["immobilized"] - before.immobilized,
                 "off_track_count": off_tracks,

@@ -513,6 +513,14 @@ class EvaluationForm(TrackAndRaceFields):
         widget=forms.RadioSelect,
     )  # fmt: skip
 
+    def __init__(
+        self, *args, checkpoints: list[selectors.CheckpointChoice] | None = None, **kwargs
+    ) -> None:
+        """``checkpoints``: the model's, to name each choice by its iteration."""
+        super().__init__(*args, **kwargs)
+        if checkpoints:
+            self.fields["checkpoint"].choices = [(c.which, c.label) for c in checkpoints]
+
     def settings(self) -> dict:
         data = self.cleaned_data
         return {

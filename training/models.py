@@ -189,6 +189,14 @@ class RLModel(models.Model):
     def latest_job(self) -> TrainingJob | None:
         return self.jobs.order_by("-created_at").first()
 
+    @property
+    def extra_track_names(self) -> list[str]:
+        """The extra tracks' names as racers read them, in the order chosen."""
+        names = dict(
+            Track.objects.filter(name__in=self.extra_tracks).values_list("name", "display_name")
+        )
+        return [names.get(name, name) for name in self.extra_tracks]
+
 
 class RewardFunction(models.Model):
     """A named reward function in the racer's library, picked when a model is created."""
@@ -444,6 +452,10 @@ class EvaluationJob(models.Model):
 class EvaluationTrial(models.Model):
     """One trial of an evaluation: a lap, or as much of one as the car drove."""
 
+    # What the statuses say on pages and in DeepRacer's metrics (the live table gets the same
+    # words through ``selectors.trial_row``).
+    STATUS_LABELS = {"lap_complete": "Lap complete", "time_up": "Time up"}
+
     evaluation = models.ForeignKey(
         EvaluationJob, on_delete=models.CASCADE, related_name="trial_rows"
     )
@@ -468,6 +480,10 @@ class EvaluationTrial(models.Model):
     @property
     def completed(self) -> bool:
         return self.status == "lap_complete"
+
+    @property
+    def status_display(self) -> str:
+        return self.STATUS_LABELS.get(self.status, self.status.replace("_", " ").capitalize())
 
 
 class QuotaDefaults(models.Model):

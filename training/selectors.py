@@ -205,18 +205,67 @@ def training_snapshot(*, job: TrainingJob) -> dict:
     }
 
 
-def model_checkpoint(*, model: RLModel, which: str = "best") -> str | None:
-    """The storage name of the model's ``best`` or ``last`` checkpoint, from its newest training
-    that saved one; None when it has none."""
-    job = (
+def _newest_trained_job(model: RLModel) -> TrainingJob | None:
+    """The model's newest training that saved a checkpoint."""
+    return (
         TrainingJob.objects.filter(model=model)
         .exclude(last_checkpoint="")
         .order_by("-created_at")
         .first()
     )
-    if job is None:
-        return None
+
+
+def model_checkpoint(*, model: RLModel, which: str = "best") -> str | None:
+    """The storage name of the model's ``best`` or ``last`` checkpoint, from its newest training
+    that saved one; None when it has none."""
+    job = _newest_trained_job(model)
+    return None if job is None else _checkpoint_of(job, which)
+
+
+def _checkpoint_of(job: TrainingJob, which: str) -> str:
     return (job.best_checkpoint if which == "best" else "") or job.last_checkpoint
+
+
+@dataclass(frozen=True)
+class CheckpointChoice:
+    """The model's best or last checkpoint, as the Evaluate form and the downloads name it."""
+
+    which: str  # "best" or "last"
+    iteration: int | None  # None: weights that came with an import
+    evaluation_completion: float | None  # [%] in that iteration's evaluation episodes
+
+    @property
+    def label(self) -> str:
+        if self.iteration is None:
+            return EvaluationJob.Checkpoint(self.which).label
+        name = "Best" if self.which == EvaluationJob.Checkpoint.BEST else "Last"
+        if self.iteration == 0:
+            return f"{name}: the weights training started from"
+        text = f"{name}: iteration {self.iteration}"
+        if self.evaluation_completion is not None:
+            text += f", {self.evaluation_completion:.0f}% evaluation completion"
+        return text
+
+
+def model_checkpoint_choices(*, model: RLModel) -> list[CheckpointChoice]:
+    """The best and the last checkpoint of the model, with the iteration each holds and how
+    that iteration did in evaluation; [] when the model has no weights yet."""
+    job = _newest_trained_job(model)
+    if job is None:
+        return []
+    iterations = {
+        which: artifacts.checkpoint_iteration(_checkpoint_of(job, which))
+        for which in EvaluationJob.Checkpoint.values
+    }
+    completions = dict(
+        Iteration.objects.filter(job=job, number__in=iterations.values()).values_list(
+            "number", "evaluation_completion"
+        )
+    )
+    return [
+        CheckpointChoice(which, number, completions.get(number))
+        for which, number in iterations.items()
+    ]
 
 
 def trial_row(*, trial: EvaluationTrial) -> dict:
@@ -227,6 +276,7 @@ def trial_row(*, trial: EvaluationTrial) -> dict:
         "time_ms": trial.time_ms,
         "progress": trial.progress,
         "status": trial.status,
+        "status_display": trial.status_display,
         "off_tracks": trial.off_tracks,
         "crashes": trial.crashes,
         "resets": trial.resets,

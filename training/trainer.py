@@ -370,9 +370,7 @@ class Trainer:
     # Checkpoints, metrics, traces
 
     def _checkpoint(self, number: int) -> str:
-        name = artifacts.save(
-            self.model, f"checkpoints/iteration-{number}.safetensors", self.learner.checkpoint()
-        )
+        name = artifacts.save(self.model, artifacts.checkpoint(number), self.learner.checkpoint())
         if number == 0:
             jobs.write(
                 self.job, last_checkpoint=name, best_checkpoint=self.job.best_checkpoint or name
@@ -459,9 +457,7 @@ class Trainer:
             self.best = score
             jobs.write(
                 self.job,
-                best_checkpoint=artifacts.path(
-                    self.model, f"checkpoints/iteration-{version}.safetensors"
-                ),
+                best_checkpoint=artifacts.path(self.model, artifacts.checkpoint(version)),
             )
 
     # Workers and the racer

@@ -304,7 +304,7 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "races": selectors.races_for_model(model=model)[:20],
             "can_evaluate": model.status == RLModel.Status.READY,
             "can_delete": model.status in RLModel.DELETABLE,
-            "has_weights": selectors.model_checkpoint(model=model) is not None,
+            "checkpoints": selectors.model_checkpoint_choices(model=model),
             "workers_range": range(model.workers),
             "clock": selectors.training_clock(job=job) if job else None,
             "log_lines": selectors.job_log(job=job, source=log_source) if job else [],
@@ -460,7 +460,10 @@ def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
     model = _get_model_for_user(request, pk)
     initial = {"track": model.track.name, "direction": model.direction,
                "race_type": model.race_type}  # fmt: skip
-    form = EvaluationForm(request.POST or None, initial=initial)
+    form = EvaluationForm(
+        request.POST or None, initial=initial,
+        checkpoints=selectors.model_checkpoint_choices(model=model),
+    )  # fmt: skip
     refusal = None
     if model.status != RLModel.Status.READY:
         refusal = (
