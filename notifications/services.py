@@ -8,7 +8,9 @@ page that shows it. None of them raises for a failed email: the console keeps th
 
 from __future__ import annotations
 
+import functools
 import logging
+from collections.abc import Callable
 
 from django.conf import settings
 from django.contrib.auth.models import AbstractBaseUser
@@ -60,10 +62,25 @@ def notification_mark_read(*, notification: Notification) -> None:
         notification.save(update_fields=["read_at"])
 
 
-# The moments the console tells a racer about
+# The moments the console tells a racer about. They run at the end of a trainer's, an
+# evaluation's or a race's work: a notification that cannot be written is logged, and never
+# changes how that work ended.
 
 
-def training_ended(*, job) -> Notification:
+def _quietly(event: Callable[..., Notification | None]) -> Callable[..., Notification | None]:
+    @functools.wraps(event)
+    def told(**about) -> Notification | None:
+        try:
+            return event(**about)
+        except Exception:
+            logger.exception("Could not notify %s", event.__name__)
+            return None
+
+    return told
+
+
+@_quietly
+def training_ended(*, job) -> Notification | None:
     """A training job has completed (its time was up, or the racer stopped it) or failed."""
     model = job.model
     url = reverse("training:model-detail", args=[model.pk])
@@ -80,6 +97,7 @@ def training_ended(*, job) -> Notification:
     return notification_send(recipient=model.owner, text=text, url=url)
 
 
+@_quietly
 def evaluation_ended(*, evaluation) -> Notification | None:
     """An evaluation the racer started has ended; a race's evaluation says nothing (the race
     does, once it is scored)."""
@@ -97,7 +115,8 @@ def evaluation_ended(*, evaluation) -> Notification | None:
     return notification_send(recipient=model.owner, text=text, url=url)
 
 
-def submission_scored(*, submission) -> Notification:
+@_quietly
+def submission_scored(*, submission) -> Notification | None:
     """A race submission has been driven and scored."""
     where = f"{submission.model_name} in {submission.event.name}"
     if submission.qualified and submission.score_ms is not None:

@@ -163,3 +163,14 @@ def test_the_bell_costs_one_query_and_visitors_none(alice, client):
         assert len(counted) == (1 if visitor == "racer" else 0)
         assert ("data-bell" in page) == (visitor == "racer")
         client.logout()
+
+
+def test_a_notification_that_cannot_be_written_never_changes_how_training_ended(
+    alice, tracks, monkeypatch
+):
+    def broken(**fields):
+        raise RuntimeError("the database said no")
+
+    monkeypatch.setattr(Notification.objects, "create", broken)
+    job = finished_by_the_trainer(queued_job(alice), TrainingJob.Status.COMPLETED)
+    assert job.status == TrainingJob.Status.COMPLETED and not Notification.objects.exists()
