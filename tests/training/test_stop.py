@@ -3,10 +3,15 @@ abandons an update it is in the middle of, the job ends at once with the model o
 finished iteration, and it is billed the time up to the stop. What the reward function printed
 reaches the job's log, a bounded share of it."""
 
+import gymnasium
+import numpy as np
 import pytest
 
+import simulator
 from tests.training.test_training import TINY_PPO, settings, wait_for_job
 from training import configuration, hyperparameters, rollouts, tasks
+from training.experience import Episode
+from training.learner import Interrupted, Learner
 from training.models import Iteration, JobLogLine, RLModel, TrainingJob
 from training.services import training_stop
 
@@ -63,3 +68,40 @@ def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_
         source=JobLogLine.Source.WORKER, text="Simulation worker 1 is driving Pitlane Oval."
     ).exists()
     assert job.log_lines.filter(text__contains="1 simulation worker,").exists()
+
+
+def synthetic_episode(env, steps: int = 40) -> Episode:
+    """An episode of random observations and actions, shaped as a rollout worker sends one."""
+    observations = [env.observation_space.sample() for _ in range(steps + 1)]
+    return Episode(
+        worker=0, version=0,
+        observations={name: np.stack([o[name] for o in observations])
+                      for name in env.observation_space.spaces},
+        actions=np.array([env.action_space.sample() for _ in range(steps)]),
+        rewards=np.ones(steps, dtype=np.float32), values=np.zeros(steps, dtype=np.float32),
+        log_probs=np.zeros(steps, dtype=np.float32), terminated=True, final_value=0.0,
+        progress=10.0, status="off_track", lap_time=None, trace=[],
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("algorithm", ["clipped_ppo", "sac"])
+def test_an_update_is_abandoned_as_soon_as_it_is_told_to(algorithm):
+    continuous = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}}
+    settings = {"action_space": continuous} if algorithm == "sac" else {}
+    env = gymnasium.make(simulator.ENV_ID, track="pitlane-oval", **settings)
+    values = {**hyperparameters.defaults(algorithm), "batch_size": 32}
+    learner = Learner(
+        algorithm=algorithm, hyperparameters=values, network="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+        observation_space=env.observation_space, action_space=env.action_space,
+    )  # fmt: skip
+    asked = []
+
+    def interrupted() -> bool:  # the trainer's look at the stop request
+        asked.append(True)
+        return len(asked) > 1
+
+    with pytest.raises(Interrupted):
+        learner.learn([synthetic_episode(env, steps=70)], interrupted=interrupted)
+    assert len(asked) == 2  # it looked between steps of the update, and stopped at the first yes
+    update = learner.learn([synthetic_episode(env, steps=4)])  # a later update is not affected
+    assert update.episodes == 1
