@@ -7,12 +7,13 @@ none on users; superusers manage everything.
 from django import forms
 from django.contrib import admin, messages
 from django.core.exceptions import NON_FIELD_ERRORS, ValidationError
+from django.db import models
 from django.db.models import QuerySet
 from django.http import HttpRequest
 
 from console.templatetags.pitlane import laptime
 from racing import services
-from racing.forms import RaceObstaclesForm
+from racing.forms import LOCAL, RaceObstaclesForm
 from racing.models import Event, Lap, Racer, Ranking, Season, Submission
 
 
@@ -54,12 +55,25 @@ class EventAdminForm(RaceObstaclesForm, EventInlineForm):
 
 
 class EventInline(admin.TabularInline):
+    """A season's events as a table that fits a laptop screen: one date-and-time box per
+    moment, short name boxes (an event's own page has every field)."""
+
     model = Event
     form = EventInlineForm
     fields = ["name", "slug", "track", "race_type", "division", "opens_at", "closes_at"]
     prepopulated_fields = {"slug": ["name"]}
+    formfield_overrides = {
+        models.DateTimeField: {
+            "form_class": forms.DateTimeField,
+            "widget": forms.DateTimeInput(attrs={"type": "datetime-local"}, format=LOCAL),
+        },
+        models.CharField: {"widget": forms.TextInput(attrs={"size": 14})},
+    }
     extra = 0
     show_change_link = True
+
+    class Media:
+        css = {"all": ["racing/admin.css"]}
 
 
 @admin.register(Season)
@@ -69,6 +83,11 @@ class SeasonAdmin(admin.ModelAdmin):
     search_fields = ["name"]
     date_hierarchy = "starts_on"
     inlines = [EventInline]
+
+    def changeform_view(self, request, object_id=None, form_url="", extra_context=None):
+        # The events table needs the page's width: no side menu on a season's page.
+        extra_context = {**(extra_context or {}), "is_nav_sidebar_enabled": False}
+        return super().changeform_view(request, object_id, form_url, extra_context)
 
 
 @admin.register(Event)

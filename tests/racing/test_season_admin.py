@@ -24,8 +24,8 @@ def season_form(**event) -> dict:
     fields = {
         "name": "Summer Cup", "slug": "summer-cup-july",
         "track": Track.objects.get(name="pitlane-oval").pk, "race_type": "TIME_TRIAL",
-        "division": "OPEN", "opens_at_0": "2026-07-01", "opens_at_1": "00:00:00",
-        "closes_at_0": "2026-07-31", "closes_at_1": "00:00:00", **event,
+        "division": "OPEN", "opens_at": "2026-07-01T00:00", "closes_at": "2026-07-31T00:00",
+        **event,
     }  # fmt: skip
     return {
         "name": "Summer 2026", "year": 2026, "starts_on": "2026-06-01", "ends_on": "2026-08-31",
@@ -45,7 +45,7 @@ def test_staff_add_a_season_with_an_event_in_one_form(client, race_staff):
 
 def test_an_event_outside_its_season_is_refused_with_the_season_dates(client, race_staff):
     client.force_login(race_staff)
-    form = season_form(opens_at_0="2026-05-20", closes_at_0="2026-09-02")
+    form = season_form(opens_at="2026-05-20T00:00", closes_at="2026-09-02T00:00")
     response = client.post(reverse("admin:racing_season_add"), form)
     assert response.status_code == 200
     errors = response.context["inline_admin_formsets"][0].formset.errors[0]
@@ -58,7 +58,7 @@ def test_an_event_outside_its_season_is_refused_with_the_season_dates(client, ra
 
 def test_an_event_may_close_at_midnight_after_the_last_day(client, race_staff):
     client.force_login(race_staff)
-    form = season_form(opens_at_0="2026-06-01", closes_at_0="2026-09-01")
+    form = season_form(opens_at="2026-06-01T00:00", closes_at="2026-09-01T00:00")
     assert client.post(reverse("admin:racing_season_add"), form).status_code == 302
 
 

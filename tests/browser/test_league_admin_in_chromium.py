@@ -1,0 +1,39 @@
+"""League staff in the admin, in Chromium: a season's inline event table fits a laptop screen,
+and a new event's slug fills in from its name."""
+
+import pytest
+from django.contrib.auth.models import Group, User
+from playwright.sync_api import Page, expect
+
+from tests.browser.test_accounts_in_chromium import log_in
+from tests.conftest import PASSWORD
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+
+@pytest.fixture
+def race_staff(db) -> User:
+    user = User.objects.create_user("rita", password=PASSWORD, is_staff=True)
+    user.groups.add(Group.objects.get(name="Race staff"))
+    return user
+
+
+def test_the_seasons_event_table_fits_a_laptop_and_fills_slugs(page: Page, race_staff, tracks):
+    page.set_viewport_size({"width": 1280, "height": 800})
+    log_in(page, "rita", PASSWORD)
+    page.goto("/admin/racing/season/add/")
+    page.get_by_text("Add another Event").click()
+    table = page.locator(".inline-group table")
+    expect(table).to_be_visible()
+    wider = table.evaluate(
+        "t => t.getBoundingClientRect().right - document.documentElement.clientWidth"
+    )
+    assert wider <= 0, f"the event table runs {wider} px past the window"
+    clipped = page.locator(".inline-group").evaluate(
+        "g => [...g.querySelectorAll('*')].some(e => e.scrollWidth > e.clientWidth + 1"
+        " && getComputedStyle(e).overflowX !== 'visible')"
+    )
+    assert not clipped, "the event table scrolls sideways inside the page"
+
+    page.locator("#id_events-0-name").press_sequentially("Summer Cup July")
+    expect(page.locator("#id_events-0-slug")).to_have_value("summer-cup-july")
