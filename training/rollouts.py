@@ -83,6 +83,7 @@ class Viewing:
         self.views: set[str] = set()
         self.last: dict[str, dict] = {}
         self.held = 0.0
+        self.shown: set[str] | None = None  # while holding: the views drawn since it began
         sandbox.on_frame = self.relay
 
     def update(self) -> None:
@@ -95,19 +96,31 @@ class Viewing:
         frame = live.frame_from_child(raw, self.worker)
         if frame is not None:
             self.last[frame["view"]] = frame
-            self.publisher.offer(frame)
+            if self.shown is None:
+                self.publisher.offer(frame)
 
     def hold(self) -> None:
         """The last frames again, marked paused, once a second: the viewer sees the car wait for
         the new policy, not a stream that stalled, and an unchanging picture costs the server
-        one frame a second rather than fifteen."""
-        if time.monotonic() - self.held < HOLD_INTERVAL:
+        one frame a second rather than fifteen. A view not yet drawn since the pause began
+        (the viewer chose it meanwhile) is drawn at once, as the car stands."""
+        if self.shown is None:
+            self.shown = set()
+        unseen = self.views - self.shown
+        if not unseen and time.monotonic() - self.held < HOLD_INTERVAL:
             return
+        if unseen:
+            self.sandbox.show(unseen)
+            self.shown |= unseen
         self.held = time.monotonic()
         for view in self.views:
             if view in self.last:
                 self.publisher.offer({**self.last[view], "paused": True,
                                       "rendered_at": time.time()})  # fmt: skip
+
+    def resume(self) -> None:
+        """The pause is over: frames flow from the sandbox again."""
+        self.shown = None
 
 
 class Printed:
@@ -214,6 +227,7 @@ def _await_next_version(
         viewing.update()
         viewing.hold()
         time.sleep(WAIT_POLL)
+    viewing.resume()
 
 
 def _where(failure: SandboxFailure, worker: int) -> str:

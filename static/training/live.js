@@ -73,7 +73,17 @@ function watch() {
   });
 }
 
-find("view")?.addEventListener("change", watch);
+// The view chosen is remembered per model, for the next visit and the next reload.
+const viewChoice = find("view");
+const viewKey = viewChoice?.dataset.remember;
+if (viewChoice && viewKey) {
+  const kept = window.localStorage.getItem(viewKey);
+  if ([...viewChoice.options].some((option) => option.value === kept)) viewChoice.value = kept;
+}
+viewChoice?.addEventListener("change", () => {
+  if (viewKey) window.localStorage.setItem(viewKey, viewChoice.value);
+  watch();
+});
 find("worker")?.addEventListener("change", watch);
 
 function say(text) {
@@ -96,6 +106,8 @@ function showFrame(data) {
     frame.hidden = false;
     frame.dataset.view = header.view;
     frame.dataset.seq = header.seq;
+    frame.dataset.paused = Boolean(header.paused);
+    frame.dataset.moment = `${header.episode}:${header.step}`;
     frame.dataset.frames = ++framesShown;
     if (frameUrl) URL.revokeObjectURL(frameUrl);
     frameUrl = url;
@@ -235,18 +247,41 @@ function addIteration(row) {
   cells.forEach((value, index) => { line.children[index].textContent = value; });
 }
 
+// The completion axis ends at 100%, and points there are drawn whole (clip: false), not cut
+// in half by the chart's edge. On a narrow screen the legend goes under the graph, in short
+// words and small marks, so that the graph keeps its height.
+const NARROW = 560; // [px] of chart width
+
+function legendFor(width) {
+  const narrow = width < NARROW;
+  return {
+    position: narrow ? "bottom" : "top",
+    labels: {
+      usePointStyle: true,
+      boxWidth: narrow ? 7 : 10,
+      boxHeight: narrow ? 7 : 10,
+      padding: narrow ? 6 : 10,
+      font: { size: narrow ? 10 : 12 },
+      generateLabels: (current) => window.Chart.defaults.plugins.legend.labels.generateLabels(current)
+        .map((item) => ({ ...item, text: current.data.datasets[item.datasetIndex][narrow ? "short" : "label"] })),
+    },
+  };
+}
+
 function drawChart() {
   if (!chartCanvas || !window.Chart) return;
   const rows = [...iterations.values()].sort((a, b) => a.number - b.number);
   const line = (key) => rows.filter((row) => row[key] !== null).map((row) => ({ x: row.number, y: row[key] }));
   const points = (pick) => rows.flatMap((row) => pick(row).map((y) => ({ x: row.number, y })));
+  const averages = { type: "line", clip: false, borderWidth: 2, pointRadius: 3, pointHoverRadius: 5 };
+  const dots = { type: "scatter", clip: false, pointRadius: 3.5, pointHoverRadius: 5, pointBorderWidth: 1 };
   const datasets = [
-    { type: "line", label: "Average reward (training)", data: line("reward"), yAxisID: "reward", borderColor: "#0969da", backgroundColor: "#0969da" },
-    { type: "line", label: "Average completion (training)", data: line("completion"), yAxisID: "completion", borderColor: "#2da44e", backgroundColor: "#2da44e" },
-    { type: "line", label: "Average completion (evaluation)", data: line("evaluation_completion"), yAxisID: "completion", borderColor: "#d1242f", backgroundColor: "#d1242f" },
-    { type: "scatter", label: "Reward per episode", data: points((row) => row.training_points.map((p) => p[0])), yAxisID: "reward", backgroundColor: "rgb(9 105 218 / 0.25)", pointRadius: 2 },
-    { type: "scatter", label: "Completion per episode (training)", data: points((row) => row.training_points.map((p) => p[1])), yAxisID: "completion", backgroundColor: "rgb(45 164 78 / 0.25)", pointRadius: 2 },
-    { type: "scatter", label: "Completion per episode (evaluation)", data: points((row) => row.evaluation_points), yAxisID: "completion", backgroundColor: "rgb(209 36 47 / 0.3)", pointRadius: 2 },
+    { ...averages, label: "Average reward (training)", short: "Reward", data: line("reward"), yAxisID: "reward", borderColor: "#0969da", backgroundColor: "#0969da" },
+    { ...averages, label: "Average completion (training)", short: "Completion", data: line("completion"), yAxisID: "completion", borderColor: "#1a7f37", backgroundColor: "#1a7f37" },
+    { ...averages, label: "Average completion (evaluation)", short: "Evaluation", data: line("evaluation_completion"), yAxisID: "completion", borderColor: "#cf222e", backgroundColor: "#cf222e" },
+    { ...dots, label: "Reward per episode", short: "Reward, episode", data: points((row) => row.training_points.map((p) => p[0])), yAxisID: "reward", backgroundColor: "rgb(9 105 218 / 0.45)", borderColor: "#0550ae" },
+    { ...dots, label: "Completion per episode (training)", short: "Completion, episode", data: points((row) => row.training_points.map((p) => p[1])), yAxisID: "completion", backgroundColor: "rgb(26 127 55 / 0.45)", borderColor: "#116329", pointStyle: "rect" },
+    { ...dots, label: "Completion per episode (evaluation)", short: "Evaluation, episode", data: points((row) => row.evaluation_points), yAxisID: "completion", backgroundColor: "rgb(207 34 46 / 0.5)", borderColor: "#a40e26", pointStyle: "triangle" },
   ];
   chartCanvas.dataset.iterations = rows.length;
   chartCanvas.dataset.points = datasets.reduce((sum, set) => sum + set.data.length, 0);
@@ -261,12 +296,16 @@ function drawChart() {
       animation: false,
       maintainAspectRatio: false,
       interaction: { mode: "nearest", intersect: false },
+      layout: { padding: { top: 8 } },
       scales: {
         x: { type: "linear", title: { display: true, text: "Iteration" }, ticks: { precision: 0 } },
-        reward: { position: "left", title: { display: true, text: "Reward" } },
+        reward: { position: "left", grace: "5%", title: { display: true, text: "Reward" } },
         completion: { position: "right", min: 0, max: 100, title: { display: true, text: "Completion [%]" }, grid: { drawOnChartArea: false } },
       },
-      plugins: { legend: { labels: { boxWidth: 12 } } },
+      plugins: { legend: legendFor(chartCanvas.parentElement.clientWidth) },
+      onResize: (current, size) => {
+        current.config.options.plugins.legend = legendFor(size.width);
+      },
     },
   });
 }
@@ -284,7 +323,7 @@ function addTrial(row) {
     body.append(line);
   }
   const cells = [
-    row.number, laptime(row.time_ms), `${row.progress.toFixed(1)}%`, row.status,
+    row.number, laptime(row.time_ms), `${row.progress.toFixed(1)}%`, row.status_display,
     row.off_tracks, row.crashes, laptime(row.penalty_ms), row.resets,
   ];
   line.replaceChildren(...cells.map((value, index) => Object.assign(document.createElement("td"), {

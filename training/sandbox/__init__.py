@@ -161,6 +161,11 @@ class Sandbox:
         it drives, to ``on_frame``; an empty set stops them. Takes effect within an episode."""
         self._send({"op": "watch", "views": sorted(views)})
 
+    def show(self, views: set[str]) -> None:
+        """Have the child send these views once, as its car stands now, to ``on_frame``: for a
+        viewer while the child waits between episodes."""
+        self._request({"op": "show", "views": sorted(views)}, {"shown"}, 5.0)
+
     def probe(self, secret_path: str, port: int) -> list[str]:
         """What the sealed child managed to do of the forbidden things; [] when it held."""
         reply = self._request({"op": "probe", "secret_path": secret_path, "port": port}, {"probe"})

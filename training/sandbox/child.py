@@ -53,6 +53,8 @@ class Child:
         self._requests_ready = select.poll()
         self._requests_ready.register(0, select.POLLIN)
         self.views: set[str] = set()
+        self.observation: dict | None = None  # the newest, for views drawn between episodes
+        self.worker = 0
         self._last_look = self._last_frame = 0.0
         self.reply_fd = 1
         self.reward_function = None
@@ -135,6 +137,7 @@ class Child:
         """One episode: ``mode`` "explore" (the policy, sampling), "random" (uniform actions) or
         "evaluate" (the policy, deterministic: only a summary comes back)."""
         env, mode = self.env, request.get("mode", "explore")
+        self.worker = int(request.get("worker", 0))
         discrete = hasattr(env.action_space, "n")
         observation, _ = env.reset()
         observations = {name: [value] for name, value in observation.items()}
@@ -157,9 +160,10 @@ class Child:
                     for name, value_now in observation.items():
                         observations[name].append(value_now)
                     trace.append(list(info["trace"]))
+                self.observation = observation
                 if terminated or truncated:
                     break
-                self._live(observation, request)
+                self._live(observation)
                 if time.perf_counter() - last_report >= PROGRESS_EVERY:
                     self.send({"type": "progress", "steps": len(rewards), "log": self._take_logs()})
                     last_report = time.perf_counter()
@@ -202,7 +206,7 @@ class Child:
         """Which views to send while driving; no answer."""
         self.views = {view for view in request.get("views", []) if view in VIEWS}
 
-    def _live(self, observation: dict, episode_request: dict) -> None:
+    def _live(self, observation: dict) -> None:
         """Between two steps: take a watch request that came, and send each watched view at
         15 frames/s (wall clock)."""
         now = time.perf_counter()
@@ -219,14 +223,25 @@ class Child:
         if not self.views or now - self._last_frame < FRAME_INTERVAL:
             return
         self._last_frame = now
-        env = self.env.unwrapped
         for view in sorted(self.views):
-            self.send({
-                "type": "frame", "view": view, "rendered_at": time.time(),
-                "jpeg": jpeg(view_image(env, view, observation)),
-                "worker": int(episode_request.get("worker", 0)), "episode": env._episode,
-                "step": env.steps, "status": env.status, "progress": env.progress,
-            })  # fmt: skip
+            self._send_view(view, observation)
+
+    def op_show(self, request: dict) -> None:
+        """Send ``views`` once, as the car stands now (between episodes, while the trainer
+        learns, a viewer who picks another view gets it at once), then ``shown``."""
+        if self.env is not None:
+            for view in sorted(set(request.get("views", [])) & set(VIEWS)):
+                self._send_view(view, self.observation)
+        self.send({"type": "shown"})
+
+    def _send_view(self, view: str, observation: dict | None) -> None:
+        env = self.env.unwrapped
+        self.send({
+            "type": "frame", "view": view, "rendered_at": time.time(),
+            "jpeg": jpeg(view_image(env, view, observation)),
+            "worker": self.worker, "episode": env._episode,
+            "step": env.steps, "status": env.status, "progress": env.progress,
+        })  # fmt: skip
 
     def op_load(self, request: dict) -> None:
         source = request["source"]
