@@ -340,7 +340,7 @@ def test_a_deepracer_file_written_here_loads_and_drives(environments, tmp_path):
          ConfigError, "Speed in action 0 is 0.1 to 4 m/s, not 5"),
         ({"action_space": [{"steering_angle": 0, "speed": 1}]}, ConfigError, "2 to 30 actions"),
         ({"action_space": {"steering_angle": {"low": 10, "high": -10},
-                           "speed": {"low": 1, "high": 2}}}, ConfigError, "must be above the lowest"),
+                           "speed": {"low": 1, "high": 2}}}, ConfigError, "above the lowest"),
         ({"race_type": "DRAG_RACE"}, ConfigError, "race type must be one of"),
         ({"race_type": "OBJECT_AVOIDANCE", "objects": {"count": 7}}, ConfigError,
          "number of boxes must be a whole number from 1 to 6"),
