@@ -25,7 +25,7 @@ def test_a_new_racer_is_greeted_once_and_not_welcomed_back(client):
         follow=True,
     )
     assert response.text.count("Welcome") == 1
-    assert "<h1>Welcome to Pitlane, carol</h1>" in response.text
+    assert "<h1>Welcome to Pitlane, carol!</h1>" in response.text
     assert "Welcome back, carol" in client.get(reverse("home")).text  # the next visit
 
 
