@@ -8,6 +8,7 @@ from django.contrib.auth.models import User
 from playwright.sync_api import Page, expect
 
 from racing.models import Event
+from tests.browser.checks import page_problems
 from tests.browser.test_accounts_in_chromium import log_in
 from tests.conftest import PASSWORD
 
@@ -49,6 +50,8 @@ def test_the_organiser_copies_the_invitation(page: Page, alice, tracks, daphne_s
     expect(page.locator("[data-copy-status]")).to_contain_text("Copied")
     copied = page.evaluate("navigator.clipboard.readText()")
     assert copied.endswith(f"/races/invite/{race.invite_token}/")
+    page.set_viewport_size({"width": 375, "height": 800})  # a phone
+    assert page_problems(page) == []
 
 
 def test_the_organiser_is_asked_before_removing_a_racer_and_closing(page: Page, alice, bob, tracks):
