@@ -110,3 +110,11 @@ def test_an_error_on_a_field_the_row_does_not_show_is_said_in_the_row(client, ra
     row = response.context["inline_admin_formsets"][0].formset.forms[0]
     assert row.non_field_errors() == ["Direction: Pitlane Oval cannot be driven counter-clockwise."]
     assert "Direction: Pitlane Oval cannot be driven counter-clockwise." in response.text
+
+
+def test_an_events_own_page_refuses_dates_outside_its_season(client, race_staff):
+    client.force_login(race_staff)
+    response = client.post(reverse("admin:racing_event_add"), event_form(closes_at_0="2026-10-01"))
+    errors = response.context["adminform"].form.errors
+    days = "Summer 2026 runs from 1 June 2026 to 31 August 2026"
+    assert errors == {"closes_at": [f"{days}: close the event by the end of its last day."]}
