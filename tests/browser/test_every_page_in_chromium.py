@@ -42,7 +42,7 @@ def racer_pages(alice) -> list[str]:
         f"/garage/{vehicle.pk}/delete/", "/races/", "/races/submit/",
         "/races/submissions/", submission.get_absolute_url(), "/leaderboards/",
         trial.get_absolute_url(), f"/seasons/{season.pk}/", "/races/community/new/",
-        "/accounts/password/",
+        "/notifications/", "/accounts/password/",
     ]  # fmt: skip
 
 
