@@ -34,7 +34,8 @@ class EventInlineForm(forms.ModelForm):
             if name == NON_FIELD_ERRORS or (field is not None and not field.widget.is_hidden):
                 shown.setdefault(name, []).extend(messages_)
                 continue
-            label = Event._meta.get_field(name).verbose_name.capitalize()
+            label = (field.label if field else Event._meta.get_field(name).verbose_name) or name
+            label = label[0].upper() + label[1:]
             shown.setdefault(NON_FIELD_ERRORS, []).extend(
                 f"{label}: {message}" for error in messages_ for message in error.messages
             )
