@@ -400,6 +400,7 @@ def model_import(request: HttpRequest) -> HttpResponse:
             refused = True
         except configuration.Invalid as invalid:
             _import_errors(form, invalid.errors)
+            refused = not set(invalid.errors) <= RACERS_TO_FIX  # else the archive is at fault
         except (SandboxUnavailable, SandboxFailure) as error:
             form.add_error(None, f"The reward function could not be checked: {error}")
         else:
@@ -419,6 +420,9 @@ def model_import(request: HttpRequest) -> HttpResponse:
     elif upload is not None:
         form.keep(imports.upload_keep(session=request.session, upload=upload))
     return render(request, "training/model_import.html", {"form": form}, status=400)
+
+
+RACERS_TO_FIX = {"name", "quota", "max_minutes"}  # an import's problems the racer can fix
 
 
 def _import_errors(form: ModelImportForm, errors: dict[str, str]) -> None:

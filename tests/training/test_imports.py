@@ -414,3 +414,12 @@ def test_a_kept_archive_is_another_racers_to_use_never(alice, bob, tracks, clien
     client.force_login(bob)
     response = client.post(reverse("training:model-import"), {"name": "mine", "kept": token})
     assert response.status_code == 400 and not RLModel.objects.filter(owner=bob).exists()
+
+
+def test_an_archive_at_fault_is_not_kept_for_the_next_attempt(alice, tracks, client):
+    client.force_login(alice)
+    bad_reward = deepracer_export(**{"reward_function.py": b"def reward_function(params:\n"})
+    upload = SimpleUploadedFile("model.tar.gz", tar_gz(bad_reward))
+    response = client.post(reverse("training:model-import"), {"archive": upload})
+    assert response.status_code == 400 and "Reward function: syntax" in response.text
+    assert response.context["form"].kept_upload is None and "you uploaded" not in response.text
