@@ -26,7 +26,8 @@ def test_a_racer_reads_the_results_and_plays_the_recorded_video(page: Page, alic
     page.goto(f"/models/{model.pk}/")
     page.get_by_role("link", name="Results").click()
     expect(page.locator("[data-live-trials] tbody tr")).to_have_count(3)
-    expect(page.locator("[data-live-trials] tbody tr").first).to_contain_text("lap_complete")
+    expect(page.locator("[data-live-trials] tbody tr").first).to_contain_text("Lap complete")
+    expect(page.locator("[data-live-trials]")).not_to_contain_text("lap_complete")
     expect(page.locator("[data-live-status]")).to_have_text("Completed")
 
     video = page.locator("[data-evaluation-video]")

@@ -114,6 +114,7 @@ def test_a_models_pages_show_no_internal_status_names_or_track_slugs(client, ali
             "model": reverse("training:model-detail", args=[model.pk]),
             "evaluation": reverse("training:evaluation-detail", args=[model.pk, raced.pk]),
             "models": reverse("training:model-list"),
+            "evaluate": reverse("training:evaluation-create", args=[model.pk]),
         }.items()
     }
 
