@@ -276,7 +276,7 @@ class Submission(models.Model):
 
     @property
     def disqualification_text(self) -> str:
-        """"Disqualified", with the staff's reason when they gave one, never the word twice."""
+        """The word Disqualified, with the staff's reason when they gave one, never twice."""
         reason = self.disqualification_reason.strip()
         if not reason:
             return "Disqualified"

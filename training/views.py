@@ -244,9 +244,7 @@ def model_create(request: HttpRequest) -> HttpResponse:
         chosen_reward = _get_reward_function_for_user(request, _number(request.GET["reward"]))
         initial["reward_function"] = chosen_reward.source
     reward_library = selectors.reward_functions_for_racer(racer=request.user)
-    form = ModelCreateForm(
-        request.POST or None, owner=request.user, initial=initial, source=source
-    )
+    form = ModelCreateForm(request.POST or None, owner=request.user, initial=initial, source=source)
     if request.method == "POST" and form.is_valid():
         try:
             inherited = (

@@ -103,7 +103,7 @@ def test_a_box_between_the_camera_and_the_car_hides_the_car(environments):
         frame = view_image(unwrapped, "spectator")
     finally:
         unwrapped.traffic = traffic
-    blue, green, red = frame[_pixel(spectator, car, car.spec.centre_offset, 0.0, 0.06)]
+    _blue, green, red = frame[_pixel(spectator, car, car.spec.centre_offset, 0.0, 0.06)]
     assert red > 150 and green > 100  # the orange box, not the red car
 
 
