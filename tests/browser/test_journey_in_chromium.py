@@ -114,6 +114,9 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     album.shoot("training")
 
     page.get_by_role("button", name="Stop training").click()
+    stop = page.get_by_role("dialog")
+    expect(stop).to_contain_text("billed for the time used up to the stop")
+    stop.get_by_role("button", name="Stop training").click()
     expect(section).to_have_attribute("data-job-status", "COMPLETED", timeout=60_000)
     expect(page.locator("[data-live-model-status]")).to_have_text("Ready")
 
@@ -174,6 +177,7 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     expect(page.get_by_role("heading", name="first-laps-clone")).to_be_visible()
     album.shoot("clone")
     page.get_by_role("button", name="Stop training").click()  # a training model is not deleted
+    page.get_by_role("dialog").get_by_role("button", name="Stop training").click()
     expect(page.locator("[data-live-model-status]")).to_have_text("Ready", timeout=60_000)
     page.get_by_role("link", name="Delete").click()
     page.get_by_role("button", name="Delete first-laps-clone").click()
