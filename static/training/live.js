@@ -143,7 +143,7 @@ function setStatus(message) {
   section.dataset.jobStatus = message.status;
   let text = message.status_display;
   if (message.queue_position) {
-    text += `: number ${message.queue_position} in the queue, waiting for a free worker`;
+    text += `: number ${message.queue_position} in the queue, waiting for a free trainer`;
   }
   if (message.message) text += ` · ${message.message}`;
   find("status").textContent = text;
