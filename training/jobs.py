@@ -46,15 +46,21 @@ def lease_acquire(*, job_id: int, owner: str) -> TrainingJob | None:
     return job
 
 
-def write(job: TrainingJob, **fields) -> None:
-    """Update the job's row, only while ``job``'s attempt holds the lease; mirror on ``job``."""
-    updated = TrainingJob.objects.filter(
-        pk=job.pk, attempt=job.attempt, lease_owner=job.lease_owner
-    ).update(**fields)
-    if updated != 1:
-        raise LeaseLost(f"training job {job.pk} is held by another run")
+def _held(job: TrainingJob):
+    """The job's row while ``job``'s attempt holds the lease (else no row)."""
+    return TrainingJob.objects.filter(pk=job.pk, attempt=job.attempt, lease_owner=job.lease_owner)
+
+
+def _mirror(job: TrainingJob, fields: dict) -> None:
     for name, value in fields.items():
         setattr(job, name, value)
+
+
+def write(job: TrainingJob, **fields) -> None:
+    """Update the job's row, only while ``job``'s attempt holds the lease; mirror on ``job``."""
+    if _held(job).update(**fields) != 1:
+        raise LeaseLost(f"training job {job.pk} is held by another run")
+    _mirror(job, fields)
 
 
 def clock_write(job: TrainingJob, seconds: float, **fields) -> bool:
@@ -62,18 +68,15 @@ def clock_write(job: TrainingJob, seconds: float, **fields) -> bool:
     racer has asked to stop: the stop froze the clock at the time it was asked (what is billed),
     and the trainer's later measurements must not move it. False when the stop was asked (``job``
     then mirrors the frozen clock); ``LeaseLost`` when another run holds the job."""
-    holder = TrainingJob.objects.filter(pk=job.pk, attempt=job.attempt, lease_owner=job.lease_owner)
-    now = timezone.now()
-    if holder.filter(stop_requested=False).update(training_seconds=seconds, clock_at=now, **fields):
-        job.training_seconds, job.clock_at = seconds, now
-        for name, value in fields.items():
-            setattr(job, name, value)
+    held = _held(job)
+    fields = {**fields, "training_seconds": seconds, "clock_at": timezone.now()}
+    if held.filter(stop_requested=False).update(**fields):
+        _mirror(job, fields)
         return True
-    frozen = holder.values("training_seconds", "clock_at", "stop_requested").first()
+    frozen = held.values("training_seconds", "clock_at", "stop_requested").first()
     if frozen is None:
         raise LeaseLost(f"training job {job.pk} is held by another run")
-    for name, value in frozen.items():
-        setattr(job, name, value)
+    _mirror(job, frozen)
     return False
 
 
