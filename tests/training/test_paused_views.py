@@ -1,8 +1,11 @@
 """While the trainer learns, the rollout worker's car waits: a viewer who picks another view then
 gets that view of the waiting car at once, not nothing until the next episode."""
 
+import time
+
 import pytest
 
+from simulator.spectator import FRAME_INTERVAL
 from training.rewards import EXAMPLES
 from training.rollouts import Viewing
 from training.sandbox import MiB, Sandbox
@@ -60,6 +63,9 @@ def test_frames_flow_again_once_the_new_policy_comes(sandbox):
     viewing.hold()
     viewing.resume()
     publisher.offered.clear()
+    # Live frames come at most 15 a second of wall-clock time, and a random episode can be over
+    # in less than one interval: begin one interval after the last frame, so it draws at least one.
+    time.sleep(FRAME_INTERVAL)
 
     sandbox.episode("random", 0)
 
