@@ -47,10 +47,20 @@ class ShellColour(models.TextChoices):
         return blue, green, red
 
 
-class Track(models.Model):
-    """A built-in track from ``simulator.tracks``, mirrored here so pages and forms can list it.
+class TrackManager(models.Manager):
+    def get_queryset(self) -> models.QuerySet:
+        # The route and the preview are read one track at a time (by the simulator, by the preview
+        # view), never for a list: lists leave them out.
+        return super().get_queryset().defer("route", "preview")
 
-    ``manage.py loadtracks`` keeps these rows in step with the simulator's catalogue.
+
+class Track(models.Model):
+    """A track racers can train, evaluate and race on.
+
+    Built-in tracks come from ``simulator.tracks``' catalogue (``manage.py loadtracks`` keeps these
+    rows in step with it); tracks added by staff (``manage.py loadtracks FILE.npy --name NAME`` or
+    the admin's upload) carry their DeepRacer route file and preview here, so every machine of a
+    cluster reads them from the database, not from a disk it may not share.
     """
 
     class Difficulty(models.TextChoices):
@@ -70,6 +80,20 @@ class Track(models.Model):
     position = models.PositiveSmallIntegerField(
         default=0, help_text="Where the track comes in the simulator's catalogue."
     )
+    route = models.BinaryField(
+        blank=True, default=b"", editable=False,
+        help_text="The DeepRacer route file (.npy) of a track added by staff; empty when built in.",
+    )  # fmt: skip
+    preview = models.BinaryField(
+        blank=True, default=b"", editable=False, help_text="Its top-down picture (PNG)."
+    )
+    added_by = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, blank=True, on_delete=models.SET_NULL,
+        related_name="+",
+    )  # fmt: skip
+    added_at = models.DateTimeField(null=True, blank=True)
+
+    objects = TrackManager()
 
     class Meta:
         ordering = ["position", "name"]
@@ -80,6 +104,11 @@ class Track(models.Model):
     @property
     def directions(self) -> list[str]:
         return [d.label for d in Direction if getattr(self, d.value)]
+
+    @property
+    def builtin(self) -> bool:
+        """Whether the track is one of the simulator's own (an added track has no ``added_at``)."""
+        return self.added_at is None
 
 
 class RLModel(models.Model):
