@@ -3,21 +3,28 @@
 A track file is a ``.npy`` float64 array of shape (N, 6): centre x, centre y, inner x, inner y,
 outer x, outer y, in metres. A loop repeats its first row at the end. Built-in tracks live in
 ``data/`` with their metadata in ``data/catalog.json`` and a preview image each;
-``python -m simulator.tracks.generate`` makes them.
+``python -m simulator.tracks.generate`` makes them. Other tracks come as a file path, inline (a
+mapping with the file's bytes, which crosses to a sandbox child), or by name through a resolver
+the application registers (the training app's reads its Track table). Routes load as DeepRacer's
+loader takes them: repeated points dropped, the file's own direction read from it.
 """
 
 from __future__ import annotations
 
+import io
 import json
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cache, cached_property
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
-MIN_POINTS = 10
+MIN_POINTS = 3  # different waypoints: the fewest that close a loop
+REPEAT = 1e-9  # [m] a centre point that moved no further repeats the one before it
+OPEN_GAP = 3.0  # a route whose end is this many of its longest steps from its start is open
 DIRECTIONS = ("counterclockwise", "clockwise")
 
 
@@ -42,7 +49,8 @@ class Track:
     """A closed track: centre line and borders as (N, 2) arrays in metres, the loop closed.
 
     ``inner`` and ``outer`` keep their names whatever the direction; ``direction`` says which way
-    the waypoints run ("counterclockwise" as built, or "clockwise" for the reversed track).
+    the waypoints run ("counterclockwise" or "clockwise", read from the route as loaded), and
+    ``with_direction`` reverses them to run the other way.
     """
 
     name: str
@@ -192,29 +200,78 @@ def names() -> list[str]:
     return list(_catalog())
 
 
-def load(name_or_path: str | Path) -> Track:
-    """A built-in track by name, or a DeepRacer ``.npy`` file by path."""
+Resolver = Callable[[str], "Mapping[str, Any] | None"]
+_resolvers: list[Resolver] = []
+
+
+def register_resolver(resolver: Resolver) -> None:
+    """Let ``load(name)`` find tracks that are not built in: ``resolver(name)`` returns an inline
+    track (see ``load``) or None. The training app registers one that reads its Track table."""
+    if resolver not in _resolvers:
+        _resolvers.append(resolver)
+
+
+def unregister_resolver(resolver: Resolver) -> None:
+    if resolver in _resolvers:
+        _resolvers.remove(resolver)
+
+
+def inline(name: str) -> str | dict[str, Any]:
+    """``name`` as a process without the resolvers can load it: a built-in name stays a name, an
+    added track becomes its inline form (route bytes and metadata). Raises ``TrackError``."""
+    if name in _catalog():
+        return name
+    for resolver in _resolvers:
+        found = resolver(name)
+        if found is not None:
+            return dict(found)
+    raise TrackError(f"No track named {name!r}. Built-in tracks: {', '.join(_catalog())}.")
+
+
+def load(source: str | Path | Mapping[str, Any]) -> Track:
+    """A track from a built-in name, a track name a registered resolver knows, a DeepRacer
+    ``.npy`` file by path, or an inline track: a mapping with ``name``, ``route`` (the ``.npy``
+    file's bytes, or the array itself) and optionally ``display_name``, ``directions``,
+    ``description`` and ``difficulty``."""
+    if isinstance(source, Mapping):
+        return _from_inline(source)
     catalog = _catalog()
-    if isinstance(name_or_path, str) and name_or_path in catalog:
-        meta = catalog[name_or_path]
+    if isinstance(source, str) and source in catalog:
+        meta = catalog[source]
         return _from_array(
-            np.load(DATA_DIR / f"{name_or_path}.npy"),
-            name=name_or_path,
+            np.load(DATA_DIR / f"{source}.npy"),
+            name=source,
             display_name=meta["display_name"],
             description=meta["description"],
             difficulty=meta["difficulty"],
             directions=tuple(meta["directions"]),
-            source=DATA_DIR / f"{name_or_path}.npy",
+            source=DATA_DIR / f"{source}.npy",
         )
-    path = Path(name_or_path)
+    if isinstance(source, str) and not source.endswith(".npy"):
+        for resolver in _resolvers:
+            found = resolver(source)
+            if found is not None:
+                return _from_inline(found)
+    path = Path(source)
     if path.suffix != ".npy" or not path.is_file():
         known = ", ".join(catalog)
-        raise TrackError(f"No track named {str(name_or_path)!r}. Built-in tracks: {known}.")
+        raise TrackError(f"No track named {str(source)!r}. Built-in tracks: {known}.")
+    return _from_array(read_route(path.read_bytes(), path.name), name=path.stem,
+                       display_name=path.stem, source=path)  # fmt: skip
+
+
+def read_route(data: bytes, filename: str = "The route file") -> np.ndarray:
+    """The array in a DeepRacer route file's bytes (a NumPy ``.npy`` file, no pickles)."""
     try:
-        array = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as error:
-        raise TrackError(f"{path.name} is not a NumPy .npy track file ({error}).") from None
-    return _from_array(array, name=path.stem, display_name=path.stem, source=path)
+        array = np.load(io.BytesIO(data), allow_pickle=False)
+    except (OSError, ValueError, EOFError):
+        raise TrackError(
+            f"{filename} is not a NumPy .npy track file: DeepRacer route files are saved with "
+            "numpy.save."
+        ) from None
+    if not isinstance(array, np.ndarray):
+        raise TrackError(f"{filename} holds several arrays; a route file holds one.")
+    return array
 
 
 def preview_path(name: str) -> Path:
@@ -226,63 +283,160 @@ def preview_path(name: str) -> Path:
 
 def validate_array(array: np.ndarray) -> None:
     """Raise ``TrackError`` unless ``array`` is a raceable DeepRacer track."""
-    if array.ndim != 2 or array.shape[1] != 6:
+    _sanitized(array)
+
+
+def signed_area(ring: np.ndarray) -> float:
+    """Shoelace area of a closed (n, 2) polyline: positive when its points run counter-clockwise."""
+    x, y = ring[:, 0], ring[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+COLUMNS = ("centre x", "centre y", "inner border x", "inner border y", "outer border x",
+           "outer border y")  # fmt: skip
+
+
+def _sanitized(array: np.ndarray) -> np.ndarray:
+    """The route as a closed (n, 6) float64 loop, repeated points dropped; ``TrackError`` says
+    what is wrong with a route DeepRacer would refuse, or one whose borders cross.
+
+    Follows DeepRacer's loader, simapp bundle/markov/track_geom/track_data.py (01f5f01).
+    """
+    array = np.asarray(array)
+    # Shape: two rows of at least six columns (track_data.py:246-249); further columns are unused.
+    if array.ndim != 2 or array.shape[0] < 2 or array.shape[1] < 6:
         raise TrackError(
-            f"A track file holds an (N, 6) array of centre, inner and outer points; "
-            f"this one has shape {array.shape}."
+            "A route file holds one row per waypoint with six numbers: centre x, centre y, "
+            "inner border x, inner border y, outer border x, outer border y, in metres. "
+            f"This one has shape {array.shape}."
         )
-    if not np.issubdtype(array.dtype, np.number):
-        raise TrackError(f"A track file holds numbers; this one holds {array.dtype}.")
-    if len(array) < MIN_POINTS:
-        raise TrackError(f"A track needs at least {MIN_POINTS} points; this one has {len(array)}.")
-    if not np.isfinite(array).all():
-        raise TrackError("The track file contains NaN or infinite coordinates.")
+    if not (np.issubdtype(array.dtype, np.floating) or np.issubdtype(array.dtype, np.integer)):
+        raise TrackError(f"A route file holds numbers; this one holds {array.dtype} values.")
+    # Every coordinate finite (track_data.py:251-258).
+    core = array[:, :6].astype(np.float64)
+    if not np.isfinite(core).all():
+        row, column = (int(i) for i in np.argwhere(~np.isfinite(core))[0])
+        raise TrackError(
+            f"Waypoint {row} of the route file has no real value for its {COLUMNS[column]} "
+            "(NaN or infinity)."
+        )
+    # A loop repeats its first row, every column, at the end (track_data.py:201, 260); the
+    # repeated points dropped are consecutive rows whose centre moved <= 1e-9 m, keeping the
+    # first, and the closing row is kept apart from them (track_data.py:263-276).
+    is_loop = bool(np.all(array[0] == array[-1]))
+    body = core[:-1] if is_loop and len(core) > 2 else core
+    keep = np.ones(len(body), dtype=bool)
+    keep[1:] = np.linalg.norm(np.diff(body[:, :2], axis=0), axis=1) > REPEAT
+    body = body[keep]
+    # The closing point, repeated once or more, or a last centre point back at the first: the loop
+    # closes there. (DeepRacer drives a route that does not close as an open line; ours are loops.)
+    while len(body) > 1 and np.linalg.norm(body[-1, :2] - body[0, :2]) <= REPEAT:
+        body = body[:-1]
+    # A loop needs three different points (shapely's LinearRing, track_data.py:202-204).
+    if len(body) < MIN_POINTS:
+        raise TrackError(
+            f"A track needs at least {MIN_POINTS} different waypoints; this route has "
+            f"{len(body)} once repeated points are left out."
+        )
+    if not is_loop:
+        steps = np.linalg.norm(np.diff(body[:, :2], axis=0), axis=1)
+        if np.linalg.norm(body[-1, :2] - body[0, :2]) > OPEN_GAP * steps.max():
+            raise TrackError(
+                "This route does not come back to where it starts: it is an open line, like "
+                "DeepRacer's straight drag track, and tracks here are loops. Its last waypoint "
+                "should lead back to the first."
+            )
+    route = np.vstack([body, body[:1]])
+    # DeepRacer does not check the borders (the report's "no is_valid check"); a border that
+    # crosses itself or the other one has no inside, so we refuse it with the waypoint it is at.
     for column, border in ((2, "inner"), (4, "outer")):
-        if _self_intersects(array[:, column : column + 2]):
-            raise TrackError(f"The {border} border of this track crosses itself.")
-    if _segments_cross(array[:, 2:4], array[:, 4:6]):
-        raise TrackError("The inner and outer borders of this track cross each other.")
-
-
-def _from_array(array: np.ndarray, **metadata: object) -> Track:
-    validate_array(array)
-    array = np.asarray(array, dtype=np.float64)
-    if not np.allclose(array[0], array[-1]):
-        array = np.vstack([array, array[:1]])
-    # Drop repeated points: they make zero-length segments with no direction.
-    keep = np.concatenate([[True], np.linalg.norm(np.diff(array[:, :2], axis=0), axis=1) > 1e-9])
-    array = array[keep]
-    return Track(centre=array[:, 0:2], inner=array[:, 2:4], outer=array[:, 4:6], **metadata)  # type: ignore[arg-type]
-
-
-def _self_intersects(line: np.ndarray) -> bool:
-    """Whether any two non-adjacent segments of a closed polyline cross."""
-    points = line if np.allclose(line[0], line[-1]) else np.vstack([line, line[:1]])
-    return _segments_cross(points, points, same=True)
-
-
-def _segments_cross(first: np.ndarray, second: np.ndarray, *, same: bool = False) -> bool:
-    """Whether a segment of polyline ``first`` crosses one of ``second`` (both (n, 2) arrays)."""
-    a, b = first[:-1], first[1:]
-    c, d = second[:-1], second[1:]
-
-    def orientation(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
-        return np.sign(
-            (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
-            - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+        crossing = _first_crossing(route[:, column : column + 2], None)
+        if crossing is not None:
+            raise TrackError(
+                f"The {border} border of this track crosses itself (between waypoints "
+                f"{crossing[0]} and {crossing[1]})."
+            )
+    crossing = _first_crossing(route[:, 2:4], route[:, 4:6])
+    if crossing is not None:
+        raise TrackError(
+            "The inner and outer borders of this track cross each other (inner border near "
+            f"waypoint {crossing[0]}, outer border near waypoint {crossing[1]})."
         )
+    return route
 
-    if same:  # every pair (i, j), i < j, that does not share an end point
-        count = len(a)
-        i, j = np.triu_indices(count, k=2)
-        keep = ~((i == 0) & (j == count - 1))
-        i, j = i[keep], j[keep]
+
+def _from_array(array: np.ndarray, **metadata: Any) -> Track:
+    route = _sanitized(array)
+    centre = route[:, 0:2]
+    # Which way the file's points run: the sign of the centre line's area, as DeepRacer reads
+    # shapely's LinearRing.is_ccw of it (track_data.py:222).
+    direction = "counterclockwise" if signed_area(centre[:-1]) > 0 else "clockwise"
+    return Track(centre=centre, inner=route[:, 2:4], outer=route[:, 4:6], direction=direction,
+                 **metadata)  # fmt: skip
+
+
+def _from_inline(spec: Mapping[str, Any]) -> Track:
+    name = str(spec.get("name") or "track")
+    route = spec.get("route")
+    if isinstance(route, (bytes, bytearray, memoryview)):
+        array = read_route(bytes(route), f"The route file of {name}")
+    elif route is None:
+        raise TrackError(f"The track {name!r} comes with no route.")
     else:
-        i, j = (index.ravel() for index in np.meshgrid(np.arange(len(a)), np.arange(len(c))))
-    crosses = (orientation(a[i], b[i], c[j]) != orientation(a[i], b[i], d[j])) & (
-        orientation(c[j], d[j], a[i]) != orientation(c[j], d[j], b[i])
+        try:
+            array = np.asarray(route, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise TrackError(f"The route of {name!r} is not a table of numbers.") from None
+    directions = tuple(spec.get("directions") or DIRECTIONS)
+    unknown = [d for d in directions if d not in DIRECTIONS]
+    if unknown:
+        raise TrackError(
+            f"A track is driven {' or '.join(DIRECTIONS)}, not {', '.join(map(str, unknown))}."
+        )
+    return _from_array(
+        array,
+        name=name,
+        display_name=str(spec.get("display_name") or name),
+        description=str(spec.get("description") or ""),
+        difficulty=str(spec.get("difficulty") or "intermediate"),
+        directions=directions,
     )
-    return bool(crosses.any())
+
+
+def _first_crossing(first: np.ndarray, second: np.ndarray | None) -> tuple[int, int] | None:
+    """The first pair of segments (i, j) where polyline ``first`` properly crosses ``second``,
+    or crosses itself when ``second`` is None; None if none cross.
+
+    Only a proper crossing counts, the two segments passing through each other: segments that
+    merely touch (at a shared or repeated point, or end to end) and zero-length segments, which
+    repeated points make, never count.
+    """
+    a, b = first[:-1], first[1:]
+    same = second is None
+    c, d = (a, b) if same else (second[:-1], second[1:])
+    count = len(c)
+    chunk = max(1, 2_000_000 // max(count, 1))
+    for begin in range(0, len(a), chunk):
+        i = np.arange(begin, min(begin + chunk, len(a)))[:, None]
+        j = np.arange(count)[None, :]
+        ai, bi, cj, dj = a[i], b[i], c[j], d[j]
+        o1, o2 = _orientation(ai, bi, cj), _orientation(ai, bi, dj)
+        o3, o4 = _orientation(cj, dj, ai), _orientation(cj, dj, bi)
+        crosses = (o1 * o2 < 0) & (o3 * o4 < 0)
+        if same:  # each pair once, and not a segment with itself
+            crosses &= j > i
+        hits = np.argwhere(crosses)
+        if len(hits):
+            return int(i[hits[0, 0], 0]), int(hits[0, 1])
+    return None
+
+
+def _orientation(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Sign of the turn p -> q -> r: 1 left, -1 right, 0 in line (exactly, for a repeated point)."""
+    return np.sign(
+        (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
+        - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+    )
 
 
 @cache
