@@ -24,6 +24,7 @@ import numpy as np
 DATA_DIR = Path(__file__).resolve().parent / "data"
 MIN_POINTS = 3  # different waypoints: the fewest that close a loop
 REPEAT = 1e-9  # [m] a centre point that moved no further repeats the one before it
+CHUNK = 64  # consecutive segments checked for crossings at once
 OPEN_GAP = 3.0  # a route whose end is this many of its longest steps from its start is open
 DIRECTIONS = ("counterclockwise", "clockwise")
 
@@ -414,20 +415,26 @@ def _first_crossing(first: np.ndarray, second: np.ndarray | None) -> tuple[int, 
     a, b = first[:-1], first[1:]
     same = second is None
     c, d = (a, b) if same else (second[:-1], second[1:])
-    count = len(c)
-    chunk = max(1, 2_000_000 // max(count, 1))
-    for begin in range(0, len(a), chunk):
-        i = np.arange(begin, min(begin + chunk, len(a)))[:, None]
-        j = np.arange(count)[None, :]
-        ai, bi, cj, dj = a[i], b[i], c[j], d[j]
+    c_low, c_high = np.minimum(c, d), np.maximum(c, d)
+    for begin in range(0, len(a), CHUNK):
+        i = np.arange(begin, min(begin + CHUNK, len(a)))
+        # Only segments of ``second`` whose boxes meet this run of consecutive segments' box.
+        low = np.minimum(a[i], b[i]).min(axis=0)
+        high = np.maximum(a[i], b[i]).max(axis=0)
+        j = np.flatnonzero(((c_high >= low) & (c_low <= high)).all(axis=1))
+        if same:
+            j = j[j > begin]
+        if not len(j):
+            continue
+        ai, bi, cj, dj = a[i][:, None], b[i][:, None], c[j][None, :], d[j][None, :]
         o1, o2 = _orientation(ai, bi, cj), _orientation(ai, bi, dj)
         o3, o4 = _orientation(cj, dj, ai), _orientation(cj, dj, bi)
         crosses = (o1 * o2 < 0) & (o3 * o4 < 0)
         if same:  # each pair once, and not a segment with itself
-            crosses &= j > i
+            crosses &= j[None, :] > i[:, None]
         hits = np.argwhere(crosses)
         if len(hits):
-            return int(i[hits[0, 0], 0]), int(hits[0, 1])
+            return int(i[hits[0, 0]]), int(j[hits[0, 1]])
     return None
 
 
