@@ -1,13 +1,131 @@
+from django import forms
 from django.contrib import admin
+from django.urls import reverse
+from django.utils.html import format_html
 
-from training.models import Quota, QuotaDefaults, RewardFunction, RLModel, Track, Vehicle
+from training.models import (
+    Direction,
+    Quota,
+    QuotaDefaults,
+    RewardFunction,
+    RLModel,
+    Track,
+    Vehicle,
+)
+from training.services import ROUTE_MAX_BYTES, TrackRefused, track_add, track_check
+
+
+class TrackUploadForm(forms.ModelForm):
+    """Add a track from a DeepRacer route file; checked and stored by ``track_add``."""
+
+    route_file = forms.FileField(
+        label="Route file (.npy)",
+        help_text="A DeepRacer route file: one row per waypoint with centre x, centre y, inner "
+        "border x, inner border y, outer border x and outer border y, in metres.",
+    )
+    directions = forms.MultipleChoiceField(
+        choices=Direction.choices,
+        initial=[d.value for d in Direction],
+        widget=forms.CheckboxSelectMultiple,
+        help_text="The directions racers may drive it.",
+    )
+
+    class Meta:
+        model = Track
+        fields = ["name", "display_name", "description", "difficulty"]
+        help_texts = {
+            "name": "As DeepRacer's WORLD_NAME names it (letters, digits, '_' and '-'), e.g. "
+            "reInvent2019_track, so imported models trained on it find it."
+        }
+
+    def clean(self) -> dict:
+        cleaned = super().clean()
+        upload = cleaned.get("route_file")
+        if upload is None:
+            return cleaned
+        if upload.size > ROUTE_MAX_BYTES:
+            self.add_error("route_file", f"A route file is at most {ROUTE_MAX_BYTES >> 20} MB.")
+            return cleaned
+        self.route = upload.read()
+        if "name" not in cleaned or "directions" not in cleaned:
+            return cleaned
+        try:
+            track_check(
+                name=cleaned["name"], route=self.route, directions=cleaned["directions"],
+                difficulty=cleaned.get("difficulty") or Track.Difficulty.INTERMEDIATE,
+                display_name=cleaned.get("display_name", ""),
+                description=cleaned.get("description", ""),
+            )  # fmt: skip
+        except TrackRefused as error:
+            field = {"route": "route_file"}.get(error.field, error.field)
+            self.add_error(field if field in self.fields else None, error.message)
+        return cleaned
+
+
+class AddedTrackForm(forms.ModelForm):
+    class Meta:
+        model = Track
+        fields = ["display_name", "description", "difficulty", "counterclockwise", "clockwise"]
+
+    def clean(self) -> dict:
+        cleaned = super().clean()
+        if not cleaned.get("counterclockwise") and not cleaned.get("clockwise"):
+            raise forms.ValidationError("Choose at least one direction racers may drive it.")
+        return cleaned
 
 
 @admin.register(Track)
 class TrackAdmin(admin.ModelAdmin):
-    list_display = ["display_name", "name", "difficulty", "length_m", "width_m"]
-    list_filter = ["difficulty"]
+    """Built-in tracks are the simulator's (``manage.py loadtracks`` keeps them) and read-only;
+    staff add tracks from DeepRacer route files, and may change or delete those."""
+
+    list_display = ["display_name", "name", "difficulty", "length_m", "width_m", "builtin"]
+    list_filter = ["difficulty", ("added_at", admin.EmptyFieldListFilter)]
     search_fields = ["name", "display_name"]
+    readonly_fields = ["name", "length_m", "width_m", "picture", "added_by", "added_at"]
+
+    @admin.display(boolean=True, description="built in")
+    def builtin(self, track: Track) -> bool:
+        return track.builtin
+
+    @admin.display(description="preview")
+    def picture(self, track: Track) -> str:
+        url = reverse("training:track-preview", args=[track.name])
+        return format_html('<img src="{}" width="480" alt="Top-down map of {}">', url, track)
+
+    def get_form(self, request, obj=None, change=False, **kwargs):
+        kwargs["form"] = AddedTrackForm if obj is not None else TrackUploadForm
+        return super().get_form(request, obj, change=change, **kwargs)
+
+    def get_fields(self, request, obj=None) -> list[str]:
+        if obj is None:
+            return ["route_file", *TrackUploadForm.Meta.fields, "directions"]
+        return ["name", *AddedTrackForm.Meta.fields, "length_m", "width_m", "picture",
+                "added_by", "added_at"]  # fmt: skip
+
+    def get_readonly_fields(self, request, obj=None) -> list[str]:
+        return [] if obj is None else self.readonly_fields
+
+    def has_change_permission(self, request, obj=None) -> bool:
+        return super().has_change_permission(request, obj) and not (obj and obj.builtin)
+
+    def has_delete_permission(self, request, obj=None) -> bool:
+        return super().has_delete_permission(request, obj) and not (obj and obj.builtin)
+
+    def save_model(self, request, obj: Track, form, change: bool) -> None:
+        if change:  # through track_add again, so the preview follows the directions
+            directions = [d.value for d in Direction if getattr(obj, d.value)]
+            route = bytes(Track.objects.filter(pk=obj.pk).values_list("route", flat=True)[0])
+            name, replace = obj.name, True
+        else:
+            directions, route = form.cleaned_data["directions"], form.route
+            name, replace = form.cleaned_data["name"], False
+        row = track_add(
+            name=name, display_name=obj.display_name, route=route, directions=directions,
+            description=obj.description, difficulty=obj.difficulty, added_by=request.user,
+            replace=replace,
+        )  # fmt: skip
+        obj.pk, obj.length_m, obj.width_m = row.pk, row.length_m, row.width_m
 
 
 @admin.register(RLModel)

@@ -4,3 +4,27 @@ from django.apps import AppConfig
 class TrainingConfig(AppConfig):
     name = "training"
     verbose_name = "Training"
+
+    def ready(self) -> None:
+        from simulator import tracks
+
+        # Tracks staff added live in the Track table: let the simulator find them by name in this
+        # process (web, workers). A sandbox child gets them inline (training.sandbox).
+        tracks.register_resolver(added_track)
+
+
+def added_track(name: str) -> dict | None:
+    """An added track as the simulator loads it inline (its route file's bytes and metadata), or
+    None where no track was added by that name."""
+    from training.models import Direction, Track
+
+    fields = ("name", "display_name", "description", "difficulty", "counterclockwise", "clockwise",
+              "route")  # fmt: skip
+    row = Track.objects.filter(name=name, added_at__isnull=False).values(*fields).first()
+    if row is None:
+        return None
+    return {
+        "name": row["name"], "display_name": row["display_name"], "route": bytes(row["route"]),
+        "directions": [d.value for d in Direction if row[d.value]],
+        "description": row["description"], "difficulty": row["difficulty"],
+    }  # fmt: skip

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import re
+
+import cv2
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import IntegrityError, transaction
 from django.utils import timezone
 
+from simulator import texture
 from simulator import tracks as simulator_tracks
 from training import artifacts, configuration, jobs, live, rewards, selectors, tasks
 from training.models import (
@@ -27,7 +31,10 @@ def tracks_sync() -> list[Track]:
     A track that has left the catalogue stays (models may still refer to it).
     """
     synced = []
+    added = set(Track.objects.filter(added_at__isnull=False).values_list("name", flat=True))
     for position, name in enumerate(simulator_tracks.names()):
+        if name in added:
+            continue  # staff added a track by this name before the catalogue had one: theirs stays
         track = simulator_tracks.load(name)
         row, _ = Track.objects.update_or_create(
             name=name,
@@ -44,6 +51,117 @@ def tracks_sync() -> list[Track]:
         )
         synced.append(row)
     return synced
+
+
+TRACK_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
+ROUTE_MAX_BYTES = 8 * 1024 * 1024  # a DeepRacer route file is a few kilobytes
+
+
+class TrackRefused(Exception):
+    """A track that cannot be added; ``field`` is the input at fault ("route", "name", ...)."""
+
+    def __init__(self, field: str, message: str) -> None:
+        super().__init__(message)
+        self.field, self.message = field, message
+
+
+def track_check(
+    *,
+    name: str,
+    route: bytes,
+    directions: list[str] | tuple[str, ...],
+    difficulty: str = Track.Difficulty.INTERMEDIATE,
+    display_name: str = "",
+    description: str = "",
+    replace: bool = False,
+) -> simulator_tracks.Track:
+    """The simulator's track for what ``track_add`` would store, or ``TrackRefused`` saying what is
+    wrong. Writes nothing."""
+    if not TRACK_NAME.fullmatch(name or ""):
+        raise TrackRefused("name", (
+            "A track name is 1 to 64 letters, digits, '_' or '-', starting with a letter or "
+            "digit, like DeepRacer's reInvent2019_track."
+        ))  # fmt: skip
+    if name in simulator_tracks.names():
+        raise TrackRefused("name", f"{name} is a built-in track; choose another name.")
+    existing = Track.objects.filter(name=name).first()
+    if existing is not None and (existing.builtin or not replace):
+        raise TrackRefused("name", (
+            f"There is already a track named {name} ({existing.display_name})"
+            + ("." if existing.builtin else "; replace it, or choose another name.")
+        ))  # fmt: skip
+    if len(display_name) > Track._meta.get_field("display_name").max_length:
+        raise TrackRefused("display_name", "A display name is at most 100 characters.")
+    if len(description) > Track._meta.get_field("description").max_length:
+        raise TrackRefused("description", "A description is at most 255 characters.")
+    if difficulty not in Track.Difficulty.values:
+        raise TrackRefused("difficulty", (
+            f"The difficulty is one of {', '.join(Track.Difficulty.values)}, not {difficulty!r}."
+        ))  # fmt: skip
+    known = [direction.value for direction in Direction]
+    if not directions or any(direction not in known for direction in directions):
+        raise TrackRefused("directions", (
+            f"Choose the directions the track is driven: {' and/or '.join(known)}."
+        ))  # fmt: skip
+    if not route:
+        raise TrackRefused("route", "Choose the track's route file (.npy).")
+    if len(route) > ROUTE_MAX_BYTES:
+        raise TrackRefused("route", (
+            f"That file is {len(route) / 1024 / 1024:.1f} MB; a route file is at most "
+            f"{ROUTE_MAX_BYTES // 1024 // 1024} MB."
+        ))  # fmt: skip
+    try:
+        return simulator_tracks.load({
+            "name": name, "display_name": display_name or name, "route": route,
+            "directions": list(directions), "description": description, "difficulty": difficulty,
+        })  # fmt: skip
+    except simulator_tracks.TrackError as error:
+        raise TrackRefused("route", str(error)) from None
+
+
+@transaction.atomic
+def track_add(
+    *,
+    name: str,
+    display_name: str,
+    route: bytes,
+    directions: list[str] | tuple[str, ...],
+    description: str = "",
+    difficulty: str = Track.Difficulty.INTERMEDIATE,
+    added_by: AbstractBaseUser | None = None,
+    replace: bool = False,
+) -> Track:
+    """Add a track from a DeepRacer route file (``route``: the ``.npy`` file's bytes) so racers can
+    train, evaluate and race on it; with ``replace``, update the added track of that name instead.
+
+    The route is checked by the simulator's loader; the row keeps the file, its length and width
+    and a preview. ``TrackRefused`` says what is wrong.
+    """
+    display_name = display_name or name
+    track = track_check(
+        name=name, route=route, directions=directions, difficulty=difficulty,
+        display_name=display_name, description=description, replace=replace,
+    )  # fmt: skip
+    # The preview shows the track as first offered, with its arrow in that direction.
+    shown = track.with_direction(next(iter(directions)))
+    encoded, png = cv2.imencode(".png", texture.preview(shown), [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    if not encoded:
+        raise TrackRefused("route", "The track's preview could not be drawn.")
+    existing = Track.objects.select_for_update().filter(name=name).first()
+    row = existing or Track(name=name)
+    if existing is None:
+        last = Track.objects.order_by("-position").values_list("position", flat=True).first()
+        row.position = min((last or 0) + 1, 32_767)
+    row.display_name, row.description, row.difficulty = display_name, description, difficulty
+    row.length_m, row.width_m = round(track.length, 2), round(track.width, 3)
+    row.counterclockwise = Direction.COUNTERCLOCKWISE in directions
+    row.clockwise = Direction.CLOCKWISE in directions
+    row.route, row.preview = bytes(route), png.tobytes()
+    if added_by is not None or existing is None:
+        row.added_by = added_by
+    row.added_at = timezone.now()
+    row.save()
+    return row
 
 
 def vehicle_create(

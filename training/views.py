@@ -15,7 +15,7 @@ from django.http import (
 )
 from django.shortcuts import get_object_or_404, redirect, render
 from django.urls import reverse
-from django.views.decorators.cache import cache_control
+from django.utils.cache import patch_cache_control
 from django.views.decorators.http import require_POST, require_safe
 
 from simulator import config as sim_config
@@ -42,7 +42,7 @@ from training.forms import (
     RewardValidationForm,
     VehicleForm,
 )
-from training.models import EvaluationJob, JobLogLine, RewardFunction, RLModel, Vehicle
+from training.models import EvaluationJob, JobLogLine, RewardFunction, RLModel, Track, Vehicle
 from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
@@ -59,14 +59,21 @@ def model_list(request: HttpRequest) -> HttpResponse:
 
 
 @require_safe
-@cache_control(public=True, max_age=86_400)
-def track_preview(request: HttpRequest, name: str) -> FileResponse:
-    """The top-down picture of a built-in track."""
+def track_preview(request: HttpRequest, name: str) -> HttpResponse:
+    """The top-down picture of a track: a built-in one's file, or the one stored with an added
+    track (cached for less time: staff may replace the track)."""
+    added = Track.objects.filter(name=name, added_at__isnull=False).values("preview").first()
+    if added is not None and added["preview"]:
+        response = HttpResponse(bytes(added["preview"]), content_type="image/png")
+        patch_cache_control(response, public=True, max_age=300)
+        return response
     try:
         path = simulator_tracks.preview_path(name)
     except simulator_tracks.TrackError:
         raise Http404(f"No track named {name}") from None
-    return FileResponse(open(path, "rb"), content_type="image/png")
+    response = FileResponse(open(path, "rb"), content_type="image/png")  # noqa: SIM115 (it closes)
+    patch_cache_control(response, public=True, max_age=86_400)
+    return response
 
 
 @login_required

@@ -67,6 +67,17 @@ class SandboxFailure(Exception):
         return (", ".join(where) + ": " if where else "") + self.message
 
 
+def portable_env(env: dict | None) -> dict | None:
+    """``env`` with a track the child could not find by name sent inline instead: the child has
+    no database (nor, in a cluster, the disk a track was added on), so a track staff added
+    travels as its route file's bytes and metadata (``simulator.tracks.inline``)."""
+    if not env or not isinstance(env.get("track"), str):
+        return env
+    from simulator import tracks
+
+    return {**env, "track": tracks.inline(env["track"])}
+
+
 class SandboxUnavailable(Exception):
     """This machine cannot hold racers' code safely; the message says what got through."""
 
@@ -113,7 +124,7 @@ class Sandbox:
         threading.Thread(target=self._read_stderr, daemon=True).start()
         self._send({
             "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
-            "env": self.env, "policy": self.policy,
+            "env": portable_env(self.env), "policy": self.policy,
         })  # fmt: skip
         self.report = self._wait({"ready"}, self.start_timeout, "start")
         return self.report

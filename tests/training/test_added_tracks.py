@@ -1,0 +1,162 @@
+"""Tracks staff add from DeepRacer route files: loadtracks, the admin's upload, the preview, and
+models trained on them (validated in the web process, driven in a sandbox child)."""
+
+import io
+
+import numpy as np
+import pytest
+from django.contrib.auth.models import User
+from django.core.files.uploadedfile import SimpleUploadedFile
+from django.core.management import CommandError, call_command
+from django.urls import reverse
+
+from tests import routes
+from tests.training.test_model_pages import form_data
+from training.models import RLModel, Track
+from training.sandbox import Sandbox
+from training.services import TrackRefused, track_add, tracks_sync
+
+pytestmark = pytest.mark.django_db
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def route_file(tmp_path, kind: str = "clockwise"):
+    path = tmp_path / f"{kind}.npy"
+    np.save(path, routes.ROUTES[kind]())
+    return path
+
+
+def loadtracks(*args) -> str:
+    out = io.StringIO()
+    call_command("loadtracks", *map(str, args), stdout=out)
+    return out.getvalue()
+
+
+def test_loadtracks_adds_a_route_file_with_its_length_width_and_preview(tmp_path, tracks, client):
+    path = route_file(tmp_path)
+    said = loadtracks(path, "--name", "reInvent2019_track", "--display-name", "re:Invent 2019",
+                      "--directions", "clockwise", "--difficulty", "advanced")  # fmt: skip
+    assert said == (
+        "Added re:Invent 2019 (reInvent2019_track): 20.68 m long, 1.07 m wide, driven clockwise.\n"
+    )
+    track = Track.objects.get(name="reInvent2019_track")
+    assert not track.builtin and track.added_at is not None
+    assert (track.length_m, track.width_m) == (pytest.approx(20.68), pytest.approx(1.067))
+    assert (track.clockwise, track.counterclockwise, track.difficulty) == (True, False, "advanced")
+    assert bytes(track.route) == path.read_bytes()
+    assert bytes(track.preview).startswith(PNG)
+    assert track.position > max(t.position for t in tracks)
+    response = client.get(reverse("training:track-preview", args=["reInvent2019_track"]))
+    assert response.status_code == 200 and response["Content-Type"] == "image/png"
+    assert b"".join(response) == bytes(track.preview)
+    # Running the built-in sync again leaves it as it is.
+    assert "8 built-in tracks loaded" in loadtracks()
+    assert Track.objects.get(name="reInvent2019_track").length_m == pytest.approx(20.68)
+
+
+def test_loadtracks_refuses_what_it_cannot_add_in_the_loaders_words(tmp_path, tracks):
+    with pytest.raises(CommandError, match=r"^border_crosses_itself\.npy: The inner border of "
+                       r"this track crosses itself \(between waypoints"):  # fmt: skip
+        loadtracks(route_file(tmp_path, "border_crosses_itself"), "--name", "kinked")
+    with pytest.raises(CommandError, match=r"not_a_number\.npy: Waypoint 7 of the route file"):
+        loadtracks(route_file(tmp_path, "not_a_number"), "--name", "nan")
+    good = route_file(tmp_path, "repeated_point")
+    with pytest.raises(CommandError, match="pitlane-oval is a built-in track"):
+        loadtracks(good, "--name", "pitlane-oval")
+    with pytest.raises(CommandError, match="A track name is 1 to 64 letters, digits"):
+        loadtracks(good, "--name", "my track")
+    with pytest.raises(CommandError, match="Choose the directions the track is driven"):
+        loadtracks(good, "--name", "loop", "--directions", "sideways")
+    with pytest.raises(CommandError, match=r"Cannot read .*missing\.npy"):
+        loadtracks(tmp_path / "missing.npy", "--name", "loop")
+    assert "Added repeated_point (repeated_point)" in loadtracks(good)
+    with pytest.raises(CommandError, match=r"already a track named repeated_point .*replace it"):
+        loadtracks(good)
+    said = loadtracks(good, "--replace", "--display-name", "Loop", "--difficulty", "beginner")
+    assert said.startswith("Replaced Loop (repeated_point)")
+    assert Track.objects.get(name="repeated_point").difficulty == "beginner"
+    assert not Track.objects.filter(name__in=["kinked", "nan", "my track", "loop"]).exists()
+
+
+def test_an_added_track_is_never_clobbered_by_the_built_in_sync(tracks):
+    Track.objects.filter(name="s-bend").delete()
+    row = track_add(name="s-bend-2", display_name="Mine", route=routes.route_bytes("clockwise"),
+                    directions=["clockwise"])  # fmt: skip
+    Track.objects.filter(pk=row.pk).update(name="s-bend")  # as if the catalogue later took it
+    tracks_sync()
+    kept = Track.objects.get(name="s-bend")
+    assert (kept.display_name, kept.builtin) == ("Mine", False)
+    with pytest.raises(TrackRefused, match=r"^s-bend is a built-in track; choose another name"):
+        track_add(name="s-bend", display_name="", route=routes.route_bytes("clockwise"),
+                  directions=["clockwise"])  # fmt: skip
+
+
+@pytest.fixture
+def admin_client(client, db):
+    staff = User.objects.create_superuser("marshal", password="x")
+    client.force_login(staff)
+    return client
+
+
+def upload(client, kind: str, name: str):
+    data = {
+        "route_file": SimpleUploadedFile(f"{kind}.npy", routes.route_bytes(kind)),
+        "name": name, "display_name": "Upload", "description": "From the admin",
+        "difficulty": "beginner", "directions": ["counterclockwise", "clockwise"],
+    }  # fmt: skip
+    return client.post(reverse("admin:training_track_add"), data)
+
+
+def test_staff_add_a_track_by_uploading_its_route_file_in_the_admin(admin_client, tracks):
+    response = upload(admin_client, "repeated_border_point", "arctic_open")
+    assert response.status_code == 302
+    track = Track.objects.get(name="arctic_open")
+    assert (track.display_name, track.description, track.directions) == (
+        "Upload", "From the admin", ["Counter-clockwise", "Clockwise"],
+    )  # fmt: skip
+    assert track.added_by.username == "marshal"
+    assert bytes(track.preview).startswith(PNG)
+    page = admin_client.get(reverse("admin:training_track_change", args=[track.pk]))
+    assert 'name="display_name"' in page.text and "Top-down map of Upload" in page.text
+
+
+def test_a_bad_route_file_uploaded_in_the_admin_shows_the_loaders_message(admin_client, tracks):
+    response = upload(admin_client, "borders_cross", "twisted")
+    assert response.status_code == 200
+    assert "The inner and outer borders of this track cross each other" in response.text
+    response = upload(admin_client, "wrong_shape", "flat")
+    assert "This one has shape (61, 4)." in response.text
+    assert not Track.objects.filter(name__in=["twisted", "flat"]).exists()
+
+
+def test_built_in_tracks_are_read_only_in_the_admin(admin_client, tracks):
+    builtin = Track.objects.get(name="pitlane-oval")
+    url = reverse("admin:training_track_change", args=[builtin.pk])
+    page = admin_client.get(url)
+    assert page.status_code == 200 and 'name="display_name"' not in page.text
+    assert admin_client.post(url, {"display_name": "Renamed"}).status_code == 403
+    delete = reverse("admin:training_track_delete", args=[builtin.pk])
+    assert admin_client.post(delete, {"post": "yes"}).status_code == 403
+
+
+def test_a_model_on_an_added_track_validates_its_reward_and_drives_it_in_the_sandbox(
+    client, alice, tracks
+):
+    track_add(name="reInvent2019_track", display_name="re:Invent 2019",
+              route=routes.route_bytes("clockwise"), directions=["clockwise"])  # fmt: skip
+    client.force_login(alice)
+    page = client.get(reverse("training:model-create")).text
+    assert 'value="reInvent2019_track"' in page
+    data = form_data(track="reInvent2019_track", direction="clockwise")
+    response = client.post(reverse("training:model-create"), data)
+    assert response.status_code == 302, response.text
+    model = RLModel.objects.get(owner=alice)
+    assert model.track.name == "reInvent2019_track"
+    # The sandbox child has no database: the parent sends the track inline.
+    with Sandbox(env={"track": model.track.name, "direction": model.direction}) as sandbox:
+        sandbox.load("def reward_function(params):\n"
+                     "    print(round(params['track_length'], 2))\n"
+                     "    return 1.0\n")  # fmt: skip
+        result = sandbox.rollout(30)
+    assert result["steps"] == 30
+    assert set(sandbox.logs) == {"20.68"}, sandbox.logs
