@@ -218,15 +218,16 @@ def unregister_resolver(resolver: Resolver) -> None:
 
 
 def inline(name: str) -> str | dict[str, Any]:
-    """``name`` as a process without the resolvers can load it: a built-in name stays a name, an
-    added track becomes its inline form (route bytes and metadata). Raises ``TrackError``."""
+    """``name`` as a process without the resolvers (a sandbox child) can load it: an added track
+    becomes its inline form (route bytes and metadata); a built-in or unknown name stays a name
+    (an unknown one fails where it is loaded, with the usual message)."""
     if name in _catalog():
         return name
     for resolver in _resolvers:
         found = resolver(name)
         if found is not None:
             return dict(found)
-    raise TrackError(f"No track named {name!r}. Built-in tracks: {', '.join(_catalog())}.")
+    return name
 
 
 def load(source: str | Path | Mapping[str, Any]) -> Track:

@@ -2,9 +2,17 @@ import gymnasium
 import pytest
 
 import simulator
+from simulator import tracks
 from simulator.controller import CentreLineDriver
 
 CONTINUOUS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.1, "high": 4.0}}
+
+
+@pytest.fixture(autouse=True)
+def _no_track_resolvers(monkeypatch):
+    """The simulator knows no Django: its tests run without the resolver the training app
+    registers (which reads the database) when pytest-django sets the app up."""
+    monkeypatch.setattr(tracks, "_resolvers", [])
 
 
 def make(**settings):

@@ -124,6 +124,7 @@ def test_a_registered_resolver_lets_a_name_load_and_travel_inline():
         assert tracks.load("my-loop").display_name == "My loop"
         assert tracks.inline("my-loop")["name"] == "my-loop"
         assert tracks.inline("pitlane-oval") == "pitlane-oval"
+        assert tracks.inline("monza") == "monza"
         with pytest.raises(TrackError, match="No track named 'monza'"):
             tracks.load("monza")
     finally:
