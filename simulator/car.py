@@ -25,12 +25,22 @@ class CarSpec:
     wheelbase: float = 0.165  # [m] rear axle to front axle
     wheel_track: float = 0.16  # [m] between the wheels' contact points, left to right
     rear_overhang: float = 0.075  # [m] rear axle to rear bumper
-    position_offset: float = 0.14  # [m] ahead of the origin: the point params["x"], ["y"] report
+    # [m] ahead of the middle between the axles (DeepRacer's model origin): the point that
+    # params["x"], ["y"] and the trace's X, Y report. simapp
+    # bundle/markov/agent_ctrl/constants.py:24 (RELATIVE_POSITION_OF_FRONT_OF_CAR),
+    # rollout_agent_ctrl.py:630-638 (01f5f01); the origin is base_link, midway between the
+    # axles (bundle/urdf/deepracer/deepracer_single_cam.urdf:86,183).
+    position_offset: float = 0.14
     max_steering: float = 30.0  # [deg]
     steering_rate: float = 360.0  # [deg/s] of the steering servo
     speed_time_constant: float = 0.25  # [s] to reach 63% of a new commanded speed
     min_speed: float = 0.1  # [m/s] commanded
     max_speed: float = 4.0  # [m/s] commanded
+
+    @property
+    def report_offset(self) -> float:
+        """[m] from our origin (the rear axle) forward to the point DeepRacer reports."""
+        return self.wheelbase / 2 + self.position_offset
 
     @property
     def centre_offset(self) -> float:
@@ -83,8 +93,9 @@ class Car:
 
     @property
     def position(self) -> tuple[float, float]:
-        """The point DeepRacer reports as the car's position (``position_offset`` ahead)."""
-        return self.point_ahead(self.spec.position_offset)
+        """The point DeepRacer reports as the car's position: ``position_offset`` ahead of the
+        middle between the axles."""
+        return self.point_ahead(self.spec.report_offset)
 
     def wheels(self) -> np.ndarray:
         """The wheels' contact points, (4, 2): rear left, rear right, front left, front right."""

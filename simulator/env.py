@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -29,7 +30,11 @@ def default_config() -> dict[str, Any]:
     return {
         "control_hz": 15,  # [Hz] DeepRacer's control rate: one step is 1/15 s
         "physics_substeps": 4,  # per control step (60 Hz integration)
-        "max_steps": 10_000,  # per episode, then time_up
+        # Per episode, the prepare step included, then time_up. DeepRacer's cap is 100,000
+        # (simapp environments/deepracer_racetrack_env.py:33,182-184, 01f5f01); ours stays at
+        # 10,000 (11 simulated minutes): an evaluation of a car that never finishes would
+        # otherwise record two hours of video.
+        "max_steps": 10_000,
         "start_advance": 0.05,  # [fraction of the lap] the training start moves per episode
         "stall_steps": 15,  # consecutive steps that make reversed or immobilized
         "immobilized_distance": 0.0003,  # [m] moved per step under which the car is stuck
@@ -39,15 +44,30 @@ def default_config() -> dict[str, Any]:
         "stereo_baseline": 0.06,  # [m] between the stereo cameras
         "camera_texture_ppm": 64,  # [px/m] of the track image the camera projects
         "camera_sky": 150,  # gray level above the horizon
+        # simapp launch/racecar.launch.py:37-45, sensors/constants.py:20-28 (01f5f01): 64 rays
+        # over ±150°; LIDAR is clipped to 0.15-1.0 m (sensors/utils.py:56-57).
         "lidar_rays": 64,
         "lidar_fov": 300.0,  # [deg] ±150
         "lidar_range": (0.15, 1.0),  # [m] after clipping
         "lidar_height": 0.1,  # [m] above the ground
+        # SECTOR_LIDAR: 8 sectors of 8 consecutive rays, 1 when the nearest return in the sector
+        # is under 0.5 m. simapp environments/constants.py:27,29 and
+        # filters/observation/observation_sector_discretize_filter.py:53-71 (01f5f01).
         "sector_lidar_sectors": 8,
+        "sector_lidar_clipping": 0.5,  # [m]
     }
 
 
 TERMINAL = ("off_track", "crashed", "reversed", "immobilized", "lap_complete")
+
+
+def _prev_next(distances: Sequence[float], x: float) -> tuple[int, int]:
+    """The indices before and after ``x`` in the ascending ``distances``: after is the first
+    greater one (so ``x`` equal to entry i gives (i, i + 1)), wrapping past either end. simapp
+    bundle/markov/track_geom/utils.py:140-147 find_prev_next (01f5f01)."""
+    after = bisect.bisect_right(distances, x)
+    before = after - 1 if after > 0 else len(distances) - 1
+    return before, after if after < len(distances) else 0
 
 
 class DeepRacerEnv(gym.Env):
@@ -61,10 +81,15 @@ class DeepRacerEnv(gym.Env):
     **Observations**: a ``Dict`` keyed by sensor name. ``FRONT_FACING_CAMERA``: ``uint8`` (1, 120,
     160), grayscale; ``STEREO_CAMERAS``: (2, 120, 160), left then right; ``LIDAR``: ``float32``
     (64,), metres over ±150° (left is positive), clipped to 0.15-1.0; ``SECTOR_LIDAR``:
-    ``MultiBinary(8)``, each sector 1 when something is within range.
+    ``MultiBinary(8)``, each sector of 8 rays 1 when something is within 0.5 m.
 
     **Reward**: ``reward_fn(params)``, where ``params`` is the dict of DeepRacer's reward-function
     input (REFERENCE section 1). It must return a finite real number within ±1e5.
+
+    **Steps and clock**: as DeepRacer counts them, ``reset()`` is the episode's prepare step
+    (step 1, trace status ``prepare``, reward function not called) and the first ``step()`` is
+    step 2. ``clock`` is the simulation clock of this environment: it runs on through resets
+    (a reset with a seed starts the run over, the clock included).
 
     **Starting state**: the car at rest on the centre line, heading along the track. In training
     the start advances ``start_advance`` of the lap every episode, beginning at ``start``; in
@@ -136,9 +161,22 @@ class DeepRacerEnv(gym.Env):
         self._car_body = self._world.add_car(spec.length, spec.width, spec.height)
         self._actor_bodies = []
         self._waypoints = tuple(self.track.waypoints)
+        # Each waypoint's distance along the centre line, the last one the full lap: simapp
+        # track_geom/track_data.py:47-48 (01f5f01) normalises by the length, which orders alike.
+        # Computed as Track.project_points computes distances, so a car exactly on a waypoint
+        # projects to exactly that waypoint's distance.
+        steps = np.diff(self.track.centre, axis=0)
+        cumulative = np.concatenate(
+            [[0.0], np.cumsum(np.sqrt(np.maximum((steps**2).sum(axis=1), 1e-12)))]
+        )
+        self._waypoint_distances = [*cumulative[:-1].tolist(), math.inf]
         self._spectator = None
         self._episode = -1
         self._seed = seed
+        # The worker's simulation clock [s]: it runs on through resets and never backwards, as
+        # Gazebo's clock does in simapp (rollout_agent_ctrl.py:245, 01f5f01). The trace's tstamp and
+        # params["sim_time"] read it; deepracer-utils sums its differences (log_utils.py:349).
+        self.clock = 0.0
 
     # Gymnasium API
 
@@ -156,7 +194,14 @@ class DeepRacerEnv(gym.Env):
         start = self.traffic.reset(fraction * length, self.np_random)
         self._sync_actor_bodies()
         self._place_car(start)
-        self.steps = 0
+        # The reset is DeepRacer's prepare step: step 1 of the episode, the car held at its start,
+        # reward 0 and the reward function not called; so the first step() is step 2 and the first
+        # reward call sees steps == 2.0. simapp rollout_agent_ctrl.py:180,643,779-780,1079-1086
+        # (01f5f01). ``sim_time`` is the episode's time, 0 at the prepare row.
+        self.steps = 1
+        if seed is not None:
+            self.clock = 0.0  # a seed starts the run over, clock included (Gymnasium's contract)
+        self.clock += self.dt
         self.sim_time = 0.0
         self.lap = 1
         self._lap_finished = False
@@ -178,7 +223,8 @@ class DeepRacerEnv(gym.Env):
 
     def step(self, action):
         self.steps += 1
-        self.sim_time = self.steps * self.dt
+        self.clock += self.dt
+        self.sim_time = (self.steps - 1) * self.dt
         if self._lap_finished:
             self.lap += 1
             self._lap_finished = False
@@ -251,7 +297,7 @@ class DeepRacerEnv(gym.Env):
     def _place_car(self, distance: float) -> None:
         """Put the car at rest so that its reported position is at ``distance`` on the centre."""
         x, y, heading = self.track.point_at(distance)
-        back = self.car.spec.position_offset
+        back = self.car.spec.report_offset
         self.car.place(float(x) - back * math.cos(heading), float(y) - back * math.sin(heading),
                        float(heading))  # fmt: skip
         self._sync_car_body()
@@ -372,12 +418,14 @@ class DeepRacerEnv(gym.Env):
             if self.lidar_name == "LIDAR":
                 observation["LIDAR"] = distances.astype(np.float32)
             else:
-                sectors = np.array_split(distances, self.config["sector_lidar_sectors"])
-                high = self.config["lidar_range"][1]
-                observation["SECTOR_LIDAR"] = np.array(
-                    [int((sector < high).any()) for sector in sectors], dtype=np.int8
-                )
+                observation["SECTOR_LIDAR"] = self._sectors(distances)
         return observation
+
+    def _sectors(self, distances: np.ndarray) -> np.ndarray:
+        """SECTOR_LIDAR from the 64 distances: in ray order from -150°, 8 groups of 8 rays, each
+        1 when its nearest return is under the clipping distance (0.5 m)."""
+        sectors = distances.reshape(self.config["sector_lidar_sectors"], -1).min(axis=1)
+        return (sectors < self.config["sector_lidar_clipping"]).astype(np.int8)
 
     def _lidar(self) -> np.ndarray:
         low, high = self.config["lidar_range"]
@@ -405,7 +453,7 @@ class DeepRacerEnv(gym.Env):
     def _params(self, projection, on_track, crashed, steering, speed, status) -> dict:
         track, c = self.track, self.car
         x, y = c.position
-        segment = int(projection.segment[4])
+        distance = float(projection.distance[4])
         params = {
             "all_wheels_on_track": bool(on_track.all()),
             "x": x,
@@ -417,52 +465,115 @@ class DeepRacerEnv(gym.Env):
             "is_crashed": crashed,
             "is_reversed": track.direction == "clockwise",
             "progress": self.progress,
-            "steps": self.steps,
+            "steps": float(self.steps),  # a float in DeepRacer (rollout_agent_ctrl.py:180, 643)
             "speed": float(speed),
             "steering_angle": float(steering),
             "track_width": float(projection.width[4]),
             "track_length": track.length,
             "waypoints": list(self._waypoints),
-            "closest_waypoints": [segment, track.next_waypoint(segment)],
-            "projection_distance": float(projection.distance[4]),
-            "sim_time": self.sim_time,
+            "closest_waypoints": list(self._closest_waypoints(distance)),
+            "projection_distance": distance,
+            # The simulation clock, not reset per episode: simapp rollout_agent_ctrl.py:245,652.
+            "sim_time": self.clock,
+            # Object keys are always there; these are DeepRacer's defaults when there are no
+            # objects (simapp agent_ctrl/constants.py:110-136, track_data.py:380-381).
+            "closest_objects": [0, 0],
+            "objects_location": [],
+            "objects_distance": [],
+            "objects_distance_from_center": [],
+            "objects_heading": [],
+            "objects_left_of_center": [],
+            "objects_speed": [],
+            "object_in_camera": False,
         }
-        if self.traffic.present:
-            params.update(self._object_params(float(projection.distance[4])))
+        if self.traffic.actors:
+            params.update(self._object_params(distance))
         return params
 
+    def _closest_waypoints(self, distance: float) -> tuple[int, int]:
+        """DeepRacer's [behind, ahead] waypoint indices for a point projected ``distance`` along
+        the centre line: the next index is the first waypoint whose distance is greater, so a
+        point exactly on waypoint i gives [i, i + 1], and the loop's last segment gives
+        [N - 2, N - 1] (the repeated closing point, no wrap to 0). simapp
+        track_geom/track_data.py:47-48 (ndists) and track_geom/utils.py:140-147 (find_prev_next),
+        agent_ctrl/utils.py:76-77 (01f5f01)."""
+        return _prev_next(self._waypoint_distances, distance)
+
     def _object_params(self, car_distance: float) -> dict:
+        """The objects_* params as simapp track_geom/track_data.py:372-441 (01f5f01) makes them:
+        objects in the order they were placed, distances along the centre line from waypoint 0
+        (not sorted), [behind, ahead] by that distance with find_prev_next's rule, and headings
+        (radians) and speeds only when there are bot cars, 0.0 for every object otherwise."""
         actors = self.traffic.actors
         locations = np.array([[a.x, a.y] for a in actors])
         projection = self.track.project_points(locations)
-        length = self.track.length
-        ahead = (projection.distance - car_distance) % length
+        order = np.argsort(projection.distance, kind="stable")
+        behind, ahead = _prev_next(projection.distance[order].tolist(), car_distance)
+        bots = self.traffic.bots
         return {
-            "closest_objects": [int(np.argmax(ahead)), int(np.argmin(ahead))],
-            "objects_location": [(float(a.x), float(a.y)) for a in actors],
+            "closest_objects": [int(order[behind]), int(order[ahead])],
+            "objects_location": [[float(a.x), float(a.y)] for a in actors],
             "objects_distance": [float(d) for d in projection.distance],
             "objects_distance_from_center": [float(o) for o in projection.offset],
-            "objects_heading": [math.degrees(a.yaw) if a.kind == "bot" else 0.0 for a in actors],
+            "objects_heading": [float(a.yaw) if bots else 0.0 for a in actors],
             "objects_left_of_center": [bool(v) for v in projection.is_left],
-            "objects_speed": [float(a.speed) for a in actors],
+            "objects_speed": [float(bots.speed) if bots else 0.0 for _ in actors],
+            "object_in_camera": self._in_camera(actors[int(order[ahead])]),
         }
+
+    def _in_camera(self, actor) -> bool:
+        """Whether the object is in the front camera's view: its centre or a corner of its
+        footprint lies within the lens's horizontal field of view, at least 0.2 m ahead of the
+        camera. simapp track_geom/track_data.py:554-590 and cameras/frustum.py:41-42,117-122
+        (near plane 0.2 m; the far plane, 300 m, is beyond any track) (01f5f01)."""
+        c = self.car
+        forward, _height, _pitch = self.config["camera_mount"]
+        cx, cy = c.point_ahead(forward)
+        cos_a, sin_a = math.cos(actor.yaw), math.sin(actor.yaw)
+        half_l, half_w = actor.length / 2, actor.width / 2
+        points = [(actor.x, actor.y)] + [
+            (actor.x + u * half_l * cos_a - v * half_w * sin_a,
+             actor.y + u * half_l * sin_a + v * half_w * cos_a)
+            for u in (-1, 1) for v in (-1, 1)
+        ]  # fmt: skip
+        half_fov = math.radians(self.config["camera_fov"]) / 2
+        cos_y, sin_y = math.cos(c.yaw), math.sin(c.yaw)
+        for x, y in points:
+            along = (x - cx) * cos_y + (y - cy) * sin_y
+            across = -(x - cx) * sin_y + (y - cy) * cos_y
+            if along >= 0.2 and abs(across) <= along * math.tan(half_fov):
+                return True
+        return False
 
     def _reward(self, params: dict) -> float:
         return checked_reward(self.reward_fn(params))
 
+    def _wheels_on_track(self, params: dict | None) -> bool:
+        """all_wheels_on_track for the trace: the params' value, or the wheels' where there are no
+        params (the prepare and pause rows; DeepRacer computes it on every row)."""
+        if params is not None:
+            return bool(params["all_wheels_on_track"])
+        wheels = self.track.project_points(self.car.wheels())
+        return bool((wheels.offset <= wheels.half_width).all())
+
     def _info(self, status: str, params, reward: float, done: bool, action=None) -> dict:
         c = self.car
+        x, y = c.position
         if params is None:
-            segment = int(self.track.project_points([c.position]).segment[0])
+            distance = float(self.track.project_points([(x, y)]).distance[0])
+            behind, ahead = self._closest_waypoints(distance)
         else:
-            segment = params["closest_waypoints"][0]
-        if isinstance(self.actions, ContinuousActions) and action is not None:
-            steering, speed = self._command(action)
+            behind, ahead = params["closest_waypoints"]
+        # The trace's closest_waypoint is the nearer of the two, a tie going to the one behind:
+        # simapp bundle/markov/agent_ctrl/utils.py:124-125 (01f5f01).
+        (bx, by), (ax, ay) = self._waypoints[behind], self._waypoints[ahead]
+        nearest = ahead if math.hypot(ax - x, ay - y) < math.hypot(bx - x, by - y) else behind
+        # The prepare row has no action yet: -1, or [0.00 0.00] for a continuous action space.
+        steering, speed = (0.0, 0.0) if action is None else self._command(action)
+        if isinstance(self.actions, ContinuousActions):
             trace_action: int | str = f"[{steering:.2f} {speed:.2f}]"
         else:
-            steering, speed = (0.0, 0.0) if action is None else self._command(action)
             trace_action = -1 if action is None else int(action)
-        x, y = c.position
         info = {
             "params": params,
             "status": status,
@@ -470,11 +581,11 @@ class DeepRacerEnv(gym.Env):
             "lap": self.lap,
             "sim_time": self.sim_time,
             "trace": SimTraceRow(
-                episode=self._episode, steps=self.steps, X=x, Y=y, yaw=math.degrees(c.yaw),
-                steer=steering, throttle=speed, action=trace_action, reward=reward, done=done,
-                all_wheels_on_track=bool(params["all_wheels_on_track"]) if params else False,
-                progress=self.progress, closest_waypoint=segment, track_len=self.track.length,
-                tstamp=self.sim_time, episode_status=status, pause_duration=self._pause_duration,
+                episode=self._episode, steps=float(self.steps), X=x, Y=y,
+                yaw=math.degrees(c.yaw), steer=steering, throttle=speed, action=trace_action,
+                reward=reward, done=done, all_wheels_on_track=self._wheels_on_track(params),
+                progress=self.progress, closest_waypoint=nearest, track_len=self.track.length,
+                tstamp=self.clock, episode_status=status, pause_duration=self._pause_duration,
                 obstacle_crash_counter=self.counts["crashes"], wall_clock=None,
             ),
         }  # fmt: skip

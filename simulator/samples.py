@@ -41,7 +41,7 @@ def situations(track: str, direction: str = "counterclockwise") -> list[Situatio
             _at(env, "finish", "Crossing the finish line at the end of a lap",
                 length - 0.02, 0.0, 100.0, 0.0, 1.5),
             _at(env, "near-object", "A box 0.6 m ahead in the car's lane",
-                box.distance - box.length / 2 - 0.6 - env.car.spec.position_offset,
+                box.distance - box.length / 2 - 0.6 - env.car.spec.report_offset,
                 box.offset, 40.0, 0.0, 1.0),
         ]  # fmt: skip
     finally:
@@ -58,10 +58,12 @@ def _at(
     progress: float, steering: float, speed: float,
 ) -> Situation:  # fmt: skip
     x, y, heading = env.track.point_at(distance % env.track.length, offset)
-    back = env.car.spec.position_offset
+    back = env.car.spec.report_offset
     heading = float(heading)
     env.car.place(float(x) - back * math.cos(heading), float(y) - back * math.sin(heading), heading)
     env.progress = progress
-    env.steps = round(progress / 100 * env.track.length / LAP_SPEED * env.config["control_hz"])
-    env.sim_time = env.steps * env.dt
+    # Step 1 is the episode's prepare step, as DeepRacer counts steps.
+    env.steps = 1 + round(progress / 100 * env.track.length / LAP_SPEED * env.config["control_hz"])
+    env.sim_time = (env.steps - 1) * env.dt
+    env.clock = env.steps * env.dt  # as if the worker had begun with this episode
     return Situation(name, description, env.current_params(steering=steering, speed=speed))

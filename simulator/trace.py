@@ -17,7 +17,7 @@ LOG_PREFIX = "SIM_TRACE_LOG:"
 
 class SimTraceRow(NamedTuple):
     episode: int
-    steps: int
+    steps: float  # 1.0 on the episode's prepare row, as DeepRacer writes it
     X: float
     Y: float
     yaw: float  # [deg]
@@ -30,7 +30,7 @@ class SimTraceRow(NamedTuple):
     progress: float
     closest_waypoint: int
     track_len: float
-    tstamp: float  # [s] simulated time
+    tstamp: float  # [s] the worker's simulation clock: never runs backwards
     episode_status: str
     pause_duration: float  # [s]
     obstacle_crash_counter: int
@@ -40,11 +40,14 @@ class SimTraceRow(NamedTuple):
 FIELDS = SimTraceRow._fields
 
 
-def _cells(row: SimTraceRow) -> list[str]:
+def _cells(row: SimTraceRow, *, log: bool = False) -> list[str]:
+    """The row's fields as text. The CSV writes steps as a float (``1.0``), as simapp's
+    write_simtrace_to_local_file does with str(); the log line as an integer, as its
+    ``SIM_TRACE_LOG`` format's ``%d`` does (simapp metrics/s3_metrics.py:72,76-88, 01f5f01)."""
     wall_clock = time.time() if row.wall_clock is None else row.wall_clock
     return [
         str(row.episode),
-        str(row.steps),
+        str(int(row.steps)) if log else str(float(row.steps)),
         f"{row.X:.4f}",
         f"{row.Y:.4f}",
         f"{row.yaw:.4f}",
@@ -67,7 +70,7 @@ def _cells(row: SimTraceRow) -> list[str]:
 
 def log_line(row: SimTraceRow) -> str:
     """``SIM_TRACE_LOG:`` followed by the 19 fields, comma-separated."""
-    return LOG_PREFIX + ",".join(_cells(row))
+    return LOG_PREFIX + ",".join(_cells(row, log=True))
 
 
 class TraceWriter:

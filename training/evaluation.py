@@ -157,8 +157,21 @@ class Evaluator:
         unwrapped = env.unwrapped
         episodes = 1 if evaluation.continuous_laps else evaluation.trials
         last_live = last_step = 0.0
+        clock = 0.0
+
+        def row(info):
+            trace = info["trace"]
+            return trace._replace(
+                episode=len(self.results), tstamp=clock + trace.tstamp, wall_clock=time.time()
+            )
+
         for episode in range(episodes):
             observation, info = env.reset(seed=episode)
+            # Trace rows are numbered by trials done, so each lap of continuous laps is its own
+            # episode, as DeepRacer's evaluation numbers them (simapp rollout_agent_ctrl.py:819);
+            # the seeded reset restarts the env's clock, so tstamp runs on from the last row.
+            clock = self.trace[-1].tstamp if self.trace else 0.0
+            self.trace.append(row(info))  # the prepare row
             counts = LapCounts()
             laps_done = 0
             while True:
@@ -166,7 +179,7 @@ class Evaluator:
                 observation, _, terminated, truncated, info = env.step(
                     policy.command(action, discrete)
                 )
-                self.trace.append(info["trace"]._replace(wall_clock=time.time()))
+                self.trace.append(row(info))
                 frame = unwrapped.spectator.render(unwrapped)
                 writer.write(frame)
                 watched = publisher.watched(0)

@@ -20,7 +20,7 @@ REWARD_KEYS = {
 }  # fmt: skip
 OBJECT_KEYS = {
     "closest_objects", "objects_location", "objects_distance", "objects_distance_from_center",
-    "objects_heading", "objects_left_of_center", "objects_speed",
+    "objects_heading", "objects_left_of_center", "objects_speed", "object_in_camera",
 }  # fmt: skip
 
 
@@ -169,8 +169,9 @@ def test_time_up_truncates_the_episode(environments):
     env.unwrapped.config["max_steps"] = 40
     env.reset(seed=0)
     driver = CentreLineDriver(env.unwrapped)
-    endings = [env.step(driver.act())[2:4] for _ in range(40)]
-    assert endings == [(False, False)] * 39 + [(False, True)]
+    # The reset is step 1 (DeepRacer's prepare step), so the 39th step() is step 40.
+    endings = [env.step(driver.act())[2:4] for _ in range(39)]
+    assert endings == [(False, False)] * 38 + [(False, True)]
 
 
 @pytest.mark.parametrize("name", tracks.names())
@@ -189,7 +190,7 @@ def test_the_reward_params_have_every_key_with_the_right_types_and_ranges(enviro
                     "steering_angle", "track_width", "track_length", "projection_distance",
                     "sim_time"):  # fmt: skip
             assert type(params[key]) is float, key
-        assert type(params["steps"]) is int
+        assert type(params["steps"]) is float
         assert -180 < params["heading"] <= 180
         assert 0 <= params["progress"] <= 100
         assert 0 <= params["distance_from_center"] <= params["track_width"]
@@ -197,28 +198,33 @@ def test_the_reward_params_have_every_key_with_the_right_types_and_ranges(enviro
         assert params["sim_time"] == pytest.approx(params["steps"] / 15)
         assert all(type(p) is tuple and len(p) == 2 for p in params["waypoints"])
         behind, ahead = params["closest_waypoints"]
-        assert ahead in (behind + 1, 0)
+        assert ahead == behind + 1  # never wraps to 0: the closing point is the last index
         assert len(params["objects_location"]) == 2
         assert set(params["closest_objects"]) <= {0, 1}
     assert seen[0] is not seen[1] and seen[0]["waypoints"] is not seen[1]["waypoints"]
-    assert seen[-1]["steps"] == len(seen)
+    assert seen[0]["steps"] == 2.0 and seen[-1]["steps"] == len(seen) + 1  # 1 is prepare
 
 
-def test_the_params_point_is_014_m_ahead_of_the_car(environments):
+def test_the_params_point_is_014_m_ahead_of_the_middle_between_the_axles(environments):
     env = environments(track="pitlane-oval")
     env.reset(seed=0)
-    params = drive(env, steps=5)[-1]["params"]
+    infos = drive(env, steps=5)
+    params, row = infos[-1]["params"], infos[-1]["trace"]
     car = env.unwrapped.car
-    assert params["x"] == pytest.approx(car.x + 0.14 * math.cos(car.yaw))
-    assert params["y"] == pytest.approx(car.y + 0.14 * math.sin(car.yaw))
+    ahead = car.spec.wheelbase / 2 + 0.14  # our origin is the rear axle
+    assert params["x"] == pytest.approx(car.x + ahead * math.cos(car.yaw))
+    assert params["y"] == pytest.approx(car.y + ahead * math.sin(car.yaw))
+    assert (params["x"], params["y"]) == (row.X, row.Y)
     assert params["heading"] == pytest.approx(math.degrees(car.yaw))
 
 
-def test_a_time_trial_has_no_object_keys_and_clockwise_is_reported(environments):
+def test_a_time_trial_has_the_object_keys_with_deepracers_defaults(environments):
     env = environments(track="kidney-bean", direction="clockwise")
     env.reset(seed=0)
     params = drive(env, steps=3)[-1]["params"]
-    assert set(params) == REWARD_KEYS
+    assert set(params) == REWARD_KEYS | OBJECT_KEYS
+    assert params["closest_objects"] == [0, 0] and params["object_in_camera"] is False
+    assert all(params[key] == [] for key in OBJECT_KEYS - {"closest_objects", "object_in_camera"})
     assert params["is_reversed"] is True
 
 

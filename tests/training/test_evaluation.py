@@ -2,6 +2,7 @@
 
 import csv
 import io
+import itertools
 import json
 import tempfile
 
@@ -63,9 +64,15 @@ def test_the_evaluate_command_prints_the_results_and_records_every_step(alice, c
     rows = list(csv.DictReader(io.StringIO(stored(evaluation, TRACE).decode())))
     frames, size = decoded_frames(stored(evaluation, VIDEO))
     assert size == (640, 480)
-    assert frames == len(rows)  # one frame per step, that is per simulated 1/15 s
+    # One frame per step, that is per simulated 1/15 s; each trial's rows begin with
+    # DeepRacer's prepare row, numbered by the trials done before it, with no frame of its own.
+    assert frames == len(rows) - 3
     assert frames == round(sum(t.time_ms for t in trials) / STEP_MS)
     assert list(rows[0])[:3] == ["episode", "steps", "X"]
+    prepares = [(r["episode"], r["steps"]) for r in rows if r["episode_status"] == "prepare"]
+    assert prepares == [("0", "1.0"), ("1", "1.0"), ("2", "1.0")]
+    stamps = [float(r["tstamp"]) for r in rows]
+    assert all(b > a for a, b in itertools.pairwise(stamps))  # never backwards
 
     metrics = json.loads(stored(evaluation, METRICS))["metrics"]
     assert [m["trial"] for m in metrics] == [1, 2, 3]

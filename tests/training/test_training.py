@@ -15,6 +15,7 @@ from django.core.management import call_command
 from django.utils import timezone
 
 import simulator
+from simulator.trace import SimTraceRow
 from tests import services
 from tests.services import parent_of, wait_for
 from training import artifacts, configuration, hyperparameters, jobs, tasks, trainer
@@ -98,8 +99,10 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     assert phases == {"training", "evaluation"}
     trace = default_storage.open(prefix + "training-simtrace/1-iteration.csv").read().decode()
     table = list(csv.DictReader(io.StringIO(trace)))
-    assert len(table) == rows[0].steps
-    assert table[0]["episode_status"] and table[0]["track_len"]
+    # Each episode's rows: DeepRacer's prepare row (step 1), then one per step.
+    assert len(table) == rows[0].steps + rows[0].episodes
+    assert table[0]["episode_status"] == "prepare" and table[0]["steps"] == "1.0"
+    assert table[0]["track_len"]
     assert job.log_lines.filter(text__startswith="Training started").exists()
     assert job.log_lines.filter(text="Stopped by the racer.").exists()
     assert job.log_lines.filter(text__startswith="Iteration 1: ").exists()
@@ -347,6 +350,9 @@ def test_sac_learns_from_random_episodes_driven_in_the_sandbox():
         sandbox.set_weights(0, before)
         payload = sandbox.episode("random")["payload"]
         episode = decode_episode(payload, env.observation_space, env.action_space, ppo=False)
+        prepare = SimTraceRow(*episode.trace[0])  # DeepRacer's first row: step 1, no reward
+        assert (prepare.steps, prepare.episode_status, prepare.reward) == (1.0, "prepare", 0.0)
+        assert len(episode.trace) == episode.steps + 1
         update = learner.learn([episode])
         assert (update.episodes, update.steps) == (1, episode.steps)
         assert learner.policy_weights() != before  # the actor learnt

@@ -139,9 +139,11 @@ class Child:
         env, mode = self.env, request.get("mode", "explore")
         self.worker = int(request.get("worker", 0))
         discrete = hasattr(env.action_space, "n")
-        observation, _ = env.reset()
+        observation, info = env.reset()
         observations = {name: [value] for name, value in observation.items()}
         actions, rewards, values, log_probs, trace = [], [], [], [], []
+        if mode != "evaluate":
+            trace.append(list(info["trace"]))  # the prepare row, step 1, as DeepRacer's trace
         last_report = time.perf_counter()
         try:
             while True:
