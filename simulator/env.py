@@ -61,6 +61,22 @@ def default_config() -> dict[str, Any]:
 TERMINAL = ("off_track", "crashed", "reversed", "immobilized", "lap_complete")
 
 
+def object_param_defaults() -> dict:
+    """The object keys as DeepRacer gives them when there are no objects: every race has them.
+    simapp bundle/markov/agent_ctrl/constants.py:110-136, track_geom/track_data.py:380-381
+    (01f5f01)."""
+    return {
+        "closest_objects": [0, 0],
+        "objects_location": [],
+        "objects_distance": [],
+        "objects_distance_from_center": [],
+        "objects_heading": [],
+        "objects_left_of_center": [],
+        "objects_speed": [],
+        "object_in_camera": False,
+    }
+
+
 def _prev_next(distances: Sequence[float], x: float) -> tuple[int, int]:
     """The indices before and after ``x`` in the ascending ``distances``: after is the first
     greater one (so ``x`` equal to entry i gives (i, i + 1)), wrapping past either end. simapp
@@ -475,16 +491,7 @@ class DeepRacerEnv(gym.Env):
             "projection_distance": distance,
             # The simulation clock, not reset per episode: simapp rollout_agent_ctrl.py:245,652.
             "sim_time": self.clock,
-            # Object keys are always there; these are DeepRacer's defaults when there are no
-            # objects (simapp agent_ctrl/constants.py:110-136, track_data.py:380-381).
-            "closest_objects": [0, 0],
-            "objects_location": [],
-            "objects_distance": [],
-            "objects_distance_from_center": [],
-            "objects_heading": [],
-            "objects_left_of_center": [],
-            "objects_speed": [],
-            "object_in_camera": False,
+            **object_param_defaults(),
         }
         if self.traffic.actors:
             params.update(self._object_params(distance))

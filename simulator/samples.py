@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import gymnasium
 
 import simulator
-from simulator.env import DeepRacerEnv
+from simulator.env import DeepRacerEnv, object_param_defaults
 
 LAP_SPEED = 1.0  # [m/s] the pace the samples' step counts assume
 
@@ -46,10 +46,8 @@ def situations(track: str, direction: str = "counterclockwise") -> list[Situatio
         ]  # fmt: skip
     finally:
         env.close()
-    object_keys = {key for key in found[-1].params if key.startswith(("objects_", "closest_obj"))}
-    for situation in found[:-1]:  # only the last one has an object in front of the car
-        for key in object_keys:
-            situation.params.pop(key, None)
+    for situation in found[:-1]:  # only the last one has an object: the others are time trials
+        situation.params.update(object_param_defaults())
     return found
 
 

@@ -64,7 +64,11 @@ EXAMPLES = (
 # The input parameters, as DeepRacer documents them.
 PARAMS = (
     ("all_wheels_on_track", "bool", "All four wheels are inside the track borders."),
-    ("x", "float", "Position in metres (x), the point 0.14 m ahead of the car's rear axle."),
+    (
+        "x",
+        "float",
+        "Position in metres (x): the point 0.14 m ahead of the middle between the axles.",
+    ),
     ("y", "float", "Position in metres (y)."),
     ("heading", "float", "Yaw in degrees, -180 to 180, in the track's frame."),
     ("distance_from_center", "float", "Metres from the car's position to the centre line."),
@@ -73,7 +77,12 @@ PARAMS = (
     ("is_crashed", "bool", "The car hit an object or a bot car."),
     ("is_reversed", "bool", "The track is driven clockwise (not: the car drives backwards)."),
     ("progress", "float", "Per cent of the lap completed, 0 to 100."),
-    ("steps", "int", "Steps taken in this episode; 15 steps are one second."),
+    (
+        "steps",
+        "float",
+        "Steps in this episode, counted as DeepRacer does: step 1 is the start, so the first "
+        "call sees 2.0; 15 steps are one second.",
+    ),
     ("speed", "float", "The commanded speed of the chosen action, in m/s."),
     (
         "steering_angle",
@@ -83,24 +92,41 @@ PARAMS = (
     ("track_width", "float", "Track width in metres, measured across the nearest centre point."),
     ("track_length", "float", "Length of the centre line in metres."),
     ("waypoints", "list[(x, y)]", "Centre-line points; a loop repeats its first at the end."),
-    ("closest_waypoints", "[int, int]", "Indices of the waypoints behind and ahead of the car."),
+    (
+        "closest_waypoints",
+        "[int, int]",
+        "Indices of the waypoints behind and ahead of the car; on waypoint i: [i, i + 1].",
+    ),
     ("projection_distance", "float", "Metres along the centre line from the start line."),
-    ("sim_time", "float", "Simulated seconds since the episode began."),
+    ("sim_time", "float", "The simulation clock in seconds; it runs on from episode to episode."),
     (
         "closest_objects",
         "[int, int]",
-        "Indices of the objects behind and ahead (races with objects or bot cars only).",
+        "Indices of the objects behind and ahead; [0, 0] when there are none.",
     ),
-    ("objects_location", "list[(x, y)]", "Positions of the objects and bot cars."),
+    ("objects_location", "list[[x, y]]", "Positions of the objects and bot cars; [] if none."),
     (
         "objects_distance",
         "list[float]",
         "Each object's distance along the centre line from the start line.",
     ),
     ("objects_distance_from_center", "list[float]", "Each object's distance from the centre line."),
-    ("objects_heading", "list[float]", "Bot cars' heading in degrees; 0 for boxes."),
+    (
+        "objects_heading",
+        "list[float]",
+        "Each object's heading in radians when the race has bot cars; 0.0 otherwise.",
+    ),
     ("objects_left_of_center", "list[bool]", "Whether each object is left of the centre line."),
-    ("objects_speed", "list[float]", "Bot cars' speed in m/s; 0 for boxes."),
+    (
+        "objects_speed",
+        "list[float]",
+        "The bot cars' speed in m/s for every object when the race has bot cars; 0.0 otherwise.",
+    ),
+    (
+        "object_in_camera",
+        "bool",
+        "The next object ahead is in the front camera's view; False when there are none.",
+    ),
 )
 
 

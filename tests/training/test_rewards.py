@@ -111,9 +111,10 @@ def test_a_failing_sample_is_a_test_failure_with_its_line():
     result = reward_validate(source=source, track="rookie-loop")
     (error,) = result.errors
     assert (error.type, error.line) == ("test failure", 3)
-    assert error.message == "In the off-track sample: KeyError: 'objects_location'"
+    # Every sample has the object keys, as DeepRacer's params do: [] where there are no objects.
+    assert error.message == "In the off-track sample: IndexError: list index out of range"
     off_track = next(s for s in result.samples if s.situation == "off-track")
-    assert off_track.reward is None and "KeyError" in off_track.error
+    assert off_track.reward is None and "IndexError" in off_track.error
 
 
 def test_a_nan_reward_is_a_test_failure():
@@ -238,7 +239,7 @@ def test_a_failure_in_some_samples_names_them_once():
     )
     (error,) = reward_validate(source=source, track="rookie-loop").errors
     assert error.message == (
-        "In 2 of the 5 samples (mid-lap and finish): KeyError: 'objects_location'"
+        "In 2 of the 5 samples (mid-lap and finish): IndexError: list index out of range"
     )
 
 
