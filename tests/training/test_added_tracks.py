@@ -108,6 +108,9 @@ def upload(client, kind: str, name: str):
 
 
 def test_staff_add_a_track_by_uploading_its_route_file_in_the_admin(admin_client, tracks):
+    form = admin_client.get(reverse("admin:training_track_add")).text
+    assert 'enctype="multipart/form-data"' in form and 'name="route_file"' in form
+    assert 'name="directions"' in form and 'name="difficulty"' in form
     response = upload(admin_client, "repeated_border_point", "arctic_open")
     assert response.status_code == 302
     track = Track.objects.get(name="arctic_open")
