@@ -311,15 +311,16 @@ class ModelCreateForm(TrackAndRaceFields):
     @staticmethod
     def _hyperparameter_field(setting: hyperparameters.Setting) -> forms.Field:
         if setting.choices:
+            shown = {c: hyperparameters.LABELS.get(c, str(c)) for c in setting.choices}
             field = forms.TypedChoiceField(
-                choices=[(c, c) for c in setting.choices],
+                choices=list(shown.items()),
                 coerce=type(setting.default),
                 initial=setting.default,
             )
             field.help_text = (
-                f"Fixed at {setting.default}, as in DeepRacer."
+                f"Fixed at {shown[setting.default]}, as in DeepRacer."
                 if len(setting.choices) == 1
-                else f"One of {', '.join(map(str, setting.choices))}; default {setting.default} "
+                else f"One of {', '.join(shown.values())}; default {shown[setting.default]} "
                 "(DeepRacer's default)."
             )
         else:
@@ -397,7 +398,9 @@ class ModelCreateForm(TrackAndRaceFields):
                 speed_high=space["speed"]["high"],
             )
         for name, value in model.hyperparameters.items():
-            initial[f"{model.algorithm}__{name}"] = value
+            initial[f"{model.algorithm}__{name}"] = hyperparameters.spelled(
+                model.algorithm, name, value
+            )
         return initial
 
     def hyperparameter_fields(self, algorithm: str) -> list:
@@ -436,15 +439,25 @@ class ModelCreateForm(TrackAndRaceFields):
             "action_space": action_space,
             "algorithm": algorithm,
             "hyperparameters": {
-                s.name: data.get(f"{algorithm}__{s.name}")
-                for s in hyperparameters.SETTINGS.get(algorithm, ())
-                if data.get(f"{algorithm}__{s.name}") not in (None, "")
+                # DeepRacer's keys this console keeps without using: a clone keeps its source's
+                **self._kept_hyperparameters(algorithm),
+                **{
+                    s.name: data.get(f"{algorithm}__{s.name}")
+                    for s in hyperparameters.SETTINGS.get(algorithm, ())
+                    if data.get(f"{algorithm}__{s.name}") not in (None, "")
+                },
             },
             "max_minutes": data["max_minutes"],
             "workers": data["workers"],
             "extra_tracks": [track.name for track in data.get("extra_tracks") or []],
             "reward_function": data["reward_function"],
         }
+
+    def _kept_hyperparameters(self, algorithm: str) -> dict:
+        if self.source is None or self.source.algorithm != algorithm:
+            return {}
+        kept = hyperparameters.kept_settings(algorithm)
+        return {k: v for k, v in self.source.hyperparameters.items() if k in kept}
 
     PLACES = {
         **TrackAndRaceFields.PLACES,

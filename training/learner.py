@@ -54,7 +54,7 @@ class SpacesOnly(gymnasium.Env):
 class DeepRacerPPO(PPO):
     """SB3's PPO with DeepRacer's choice of value loss."""
 
-    def __init__(self, *args, value_loss: str = "huber", **kwargs) -> None:
+    def __init__(self, *args, value_loss: str = hp.HUBER, **kwargs) -> None:
         self.value_loss = value_loss
         self.interrupted: Callable[[], bool] = lambda: False  # looked at between minibatches
         super().__init__(*args, **kwargs)
@@ -63,8 +63,10 @@ class DeepRacerPPO(PPO):
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
         clip = self.clip_range(self._current_progress_remaining)
+        # As simapp: Huber when loss_type is "huber", mean squared error for anything else
+        # (bundle/markov/sagemaker_graph_manager.py:139-140, 01f5f01), "mse" included.
         value_loss_of = (
-            functional.smooth_l1_loss if self.value_loss == "huber" else functional.mse_loss
+            functional.smooth_l1_loss if self.value_loss == hp.HUBER else functional.mse_loss
         )
         discrete = isinstance(self.action_space, gymnasium.spaces.Discrete)
         losses = []

@@ -121,7 +121,7 @@ def field_html(page: str, name: str) -> str:
         ("clipped_ppo__lr", ('min="1e-8"', 'max="0.001"', 'step="any"'),
          "Range 1e-8 to 0.001, default 0.0003 (DeepRacer's default)."),
         ("clipped_ppo__beta_entropy", ('min="0"', 'max="1"'), "Range 0-1, default 0.01"),
-        ("clipped_ppo__discount_factor", ('min="0"', 'max="1"'), "Range 0-1, default 0.99"),
+        ("clipped_ppo__discount_factor", ('min="0"', 'max="1"'), "Range 0-1, default 0.999"),
         ("clipped_ppo__num_episodes_between_training", ('min="5"', 'max="100"'),
          "Range 5-100, default 20"),
         ("sac__sac_alpha", ('min="0"', 'max="1"'), "Range 0-1, default 0.2"),
@@ -184,6 +184,31 @@ def test_a_clone_takes_what_it_keeps_from_its_source_when_the_browser_sends_none
         source.algorithm,
         source.action_space_type,
     )
+
+
+def test_the_loss_type_reads_as_deepracers_and_a_clone_keeps_the_keys_pitlane_does_not_use(
+    client, alice, tracks
+):
+    source = ready_model(alice)
+    kept = {"term_cond_avg_score": 350.0, "exploration_type": "e-greedy", "stack_size": 2}
+    RLModel.objects.filter(pk=source.pk).update(
+        hyperparameters={**source.hyperparameters, **kept, "loss_type": "mean squared error"}
+    )
+    client.force_login(alice)
+    page = client.get(reverse("training:model-create") + f"?clone={source.pk}").text
+    loss = re.search(r'<select[^>]*name="clipped_ppo__loss_type".*?</select>', page, re.S)[0]
+    assert '<option value="huber">Huber</option>' in loss
+    assert '<option value="mean squared error" selected>Mean squared error</option>' in loss
+    assert "One of Huber, Mean squared error; default Huber" in page
+    data = form_data(name="clone", track="pitlane-oval", actions=json.dumps(STRAIGHT_AHEAD),
+                     clipped_ppo__loss_type="mean squared error")  # fmt: skip
+    for name in CLONE_KEEPS:
+        data.pop(name, None)
+    response = client.post(reverse("training:model-create") + f"?clone={source.pk}", data)
+    assert response.status_code == 302, response.context["form"].errors
+    clone = RLModel.objects.get(name="clone")
+    assert {key: clone.hyperparameters[key] for key in kept} == kept
+    assert clone.hyperparameters["loss_type"] == "mean squared error"
 
 
 def test_a_clone_cannot_change_what_it_keeps_even_if_sent(client, alice, tracks):

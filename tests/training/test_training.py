@@ -1,6 +1,7 @@
 """Training end to end on the real parts: a Celery worker, Redis, the sandbox, SB3."""
 
 import csv
+import importlib
 import io
 import json
 import os
@@ -181,7 +182,12 @@ class TestSettings:
              "one of 32, 64, 128, 256, 512"),
             ({"hyperparameters": {"lr": 0.1}}, "hyperparameters.lr", "between 1e-08 and 0.001"),
             ({"hyperparameters": {"num_epochs": 2}}, "hyperparameters.num_epochs", "3 and 10"),
-            ({"hyperparameters": {"loss_type": "l1"}}, "hyperparameters.loss_type", "huber, mse"),
+            ({"hyperparameters": {"loss_type": "l1"}}, "hyperparameters.loss_type",
+             "one of Huber, mean squared error"),
+            ({"hyperparameters": {"clip_range": 0.2}}, "hyperparameters.clip_range",
+             "“clip_range” is not one of DeepRacer's hyperparameters; they are batch_size"),
+            ({"hyperparameters": {"exploration_type": "random"}},
+             "hyperparameters.exploration_type", "one of categorical, e-greedy"),
             ({"max_minutes": 5}, "max_minutes", "10 to 1440 minutes"),
             ({"workers": 9}, "workers", "1 to 4"),
             ({"extra_tracks": ["speedway"]}, "extra_tracks", "needs a simulation of its own"),
@@ -191,6 +197,55 @@ class TestSettings:
     def test_each_bad_setting_gets_its_own_message(self, alice, tracks, changes, field, message):
         errors = self.errors(alice, **changes)
         assert message in errors[field], errors
+
+    @pytest.mark.parametrize(
+        ("given", "stored"),
+        [("huber", "huber"), ("Huber", "huber"), ("mean squared error", "mean squared error"),
+         ("Mean Squared Error", "mean squared error"), ("mse", "mean squared error")],
+    )  # fmt: skip
+    def test_the_loss_type_takes_deepracers_spellings_and_the_old_mse(
+        self, alice, tracks, given, stored
+    ):
+        clean = configuration.check(
+            settings(hyperparameters={"loss_type": given}), owner=alice, validate_reward=False
+        )
+        assert clean["hyperparameters"]["loss_type"] == stored
+
+    def test_deepracers_keys_pitlane_does_not_use_are_kept_with_the_model(self, alice, tracks):
+        kept = {"stack_size": 2, "exploration_type": "E-Greedy", "e_greedy_value": 0.1,
+                "epsilon_steps": 5000, "term_cond_max_episodes": 1000,
+                "term_cond_avg_score": 350.0, "sac_alpha": 0.3}  # fmt: skip
+        model = model_create(
+            owner=alice, settings=settings(hyperparameters=kept), validate_reward=False
+        )
+        model.refresh_from_db()
+        assert model.hyperparameters == {
+            **hyperparameters.defaults("clipped_ppo"),
+            **kept,
+            "exploration_type": "e-greedy",
+        }
+        # A new model has DeepRacer's defaults (discount 0.999 as simapp falls back to) for all.
+        defaults = configuration.check(settings(name="new", hyperparameters={}), owner=alice,
+                                       validate_reward=False)["hyperparameters"]  # fmt: skip
+        assert defaults["discount_factor"] == 0.999 and defaults["stack_size"] == 1
+        assert defaults["term_cond_avg_score"] == 100000 and "sac_alpha" not in defaults
+
+    def test_the_data_migration_respells_a_stored_mse_as_deepracer_does(self, alice, tracks):
+        from django.apps import apps
+
+        migration = importlib.import_module(
+            "training.migrations.0010_loss_type_spelled_as_deepracer"
+        )
+        old = model_create(owner=alice, settings=settings(), validate_reward=False)
+        RLModel.objects.filter(pk=old.pk).update(
+            hyperparameters={**old.hyperparameters, "loss_type": "mse"}
+        )
+        migration.forwards(apps, None)
+        old.refresh_from_db()
+        assert old.hyperparameters["loss_type"] == "mean squared error"
+        migration.backwards(apps, None)
+        old.refresh_from_db()
+        assert old.hyperparameters["loss_type"] == "mse"
 
     def test_sac_with_a_continuous_action_space_is_fine(self, alice, tracks):
         continuous = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 1, "high": 2}}
