@@ -74,13 +74,26 @@ class AddedTrackForm(forms.ModelForm):
         return cleaned
 
 
+class TrackOriginFilter(admin.SimpleListFilter):
+    title = "origin"
+    parameter_name = "origin"
+
+    def lookups(self, request, model_admin):
+        return [("builtin", "Built in"), ("added", "Added by staff")]
+
+    def queryset(self, request, queryset):
+        if self.value() in ("builtin", "added"):
+            return queryset.filter(added_at__isnull=self.value() == "builtin")
+        return queryset
+
+
 @admin.register(Track)
 class TrackAdmin(admin.ModelAdmin):
     """Built-in tracks are the simulator's (``manage.py loadtracks`` keeps them) and read-only;
     staff add tracks from DeepRacer route files, and may change or delete those."""
 
     list_display = ["display_name", "name", "difficulty", "length_m", "width_m", "builtin"]
-    list_filter = ["difficulty", ("added_at", admin.EmptyFieldListFilter)]
+    list_filter = ["difficulty", TrackOriginFilter]
     search_fields = ["name", "display_name"]
     readonly_fields = ["name", "length_m", "width_m", "picture", "added_by", "added_at"]
 

@@ -121,6 +121,18 @@ def test_staff_add_a_track_by_uploading_its_route_file_in_the_admin(admin_client
     assert bytes(track.preview).startswith(PNG)
     page = admin_client.get(reverse("admin:training_track_change", args=[track.pk]))
     assert 'name="display_name"' in page.text and "Top-down map of Upload" in page.text
+    added = admin_client.get(reverse("admin:training_track_changelist") + "?origin=added").text
+    assert "arctic_open" in added and "pitlane-oval" not in added
+    change = reverse("admin:training_track_change", args=[track.pk])
+    fields = {"display_name": "Arctic Open", "description": "", "difficulty": "expert"}
+    refused = admin_client.post(change, fields)
+    assert "Choose at least one direction racers may drive it." in refused.text
+    assert admin_client.post(change, {**fields, "clockwise": "on"}).status_code == 302
+    track = Track.objects.get(name="arctic_open")
+    assert (track.display_name, track.directions, track.difficulty) == (
+        "Arctic Open", ["Clockwise"], "expert",
+    )  # fmt: skip
+    assert track.added_by.username == "marshal" and bytes(track.preview).startswith(PNG)
 
 
 def test_a_bad_route_file_uploaded_in_the_admin_shows_the_loaders_message(admin_client, tracks):
