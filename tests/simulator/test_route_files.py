@@ -1,6 +1,9 @@
 """DeepRacer route files load as DeepRacer's loader takes them (tests/routes.py makes the files)."""
 
 import io
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,6 +11,8 @@ import pytest
 from simulator import tracks
 from simulator.tracks import TrackError
 from tests import routes
+
+ROOT = Path(__file__).resolve().parents[2]
 
 ACCEPTED = [
     "counterclockwise",
@@ -55,6 +60,24 @@ def test_a_route_with_repeated_points_or_either_direction_loads_as_the_same_loop
 def test_a_route_deepracer_or_a_racer_could_not_drive_is_refused_in_plain_words(route_files, name):
     with pytest.raises(TrackError, match=REFUSED[name]):
         tracks.load(route_files[name])
+
+
+def test_the_route_script_writes_its_files_from_the_command_line(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "tests.routes", str(tmp_path)],
+                            capture_output=True, text=True, check=True, cwd=ROOT)  # fmt: skip
+    assert sorted(result.stdout.split()) == sorted(
+        str(tmp_path / f"{n}.npy") for n in routes.ROUTES
+    )
+    np.testing.assert_array_equal(np.load(tmp_path / "clockwise.npy"), routes.clockwise())
+
+
+def test_columns_past_the_sixth_are_left_aside_as_deepracer_does():
+    array = routes.counterclockwise()
+    wide = np.hstack(
+        [array, np.arange(len(array))[:, None] % 2]
+    )  # the last row differs: not a loop
+    track = tracks.load({"name": "wide", "route": wide})
+    np.testing.assert_array_equal(track.centre, array[:, :2])
 
 
 def test_a_repeated_point_is_dropped_keeping_the_first_as_deepracer_does():
