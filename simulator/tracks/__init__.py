@@ -319,8 +319,8 @@ def _sanitized(array: np.ndarray) -> np.ndarray:
     if not np.isfinite(core).all():
         row, column = (int(i) for i in np.argwhere(~np.isfinite(core))[0])
         raise TrackError(
-            f"Waypoint {row} of the route file has no real value for its {COLUMNS[column]} "
-            "(NaN or infinity)."
+            f"Waypoint {row} of the route file has NaN or infinity for its {COLUMNS[column]}; "
+            "every coordinate is a number of metres."
         )
     # A loop repeats its first row, every column, at the end (track_data.py:201, 260); the
     # repeated points dropped are consecutive rows whose centre moved <= 1e-9 m, keeping the

@@ -25,7 +25,7 @@ ACCEPTED = [
 REFUSED = {
     "border_crosses_itself": r"^The inner border of this track crosses itself \(between waypoints",
     "borders_cross": r"^The inner and outer borders of this track cross each other",
-    "not_a_number": r"^Waypoint 7 of the route file has no real value for its inner border y",
+    "not_a_number": r"^Waypoint 7 of the route file has NaN or infinity for its inner border y;",
     "wrong_shape": r"six numbers: centre x, centre y, .*This one has shape \(61, 4\)\.$",
     "too_few_points": r"at least 3 different waypoints; this route has 2 once repeated points",
     "straight": r"^This route does not come back to where it starts",

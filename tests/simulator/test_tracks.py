@@ -100,7 +100,10 @@ def test_an_open_track_file_is_closed_on_load(tmp_path):
         (np.zeros((50, 4)), r"six numbers: centre x.*This one has shape \(50, 4\)"),
         (np.zeros(12), r"This one has shape \(12,\)"),
         (np.zeros((5, 6)), "at least 3 different waypoints; this route has 1"),
-        (np.full((20, 6), np.nan), r"Waypoint 0 .* centre x \(NaN or infinity\)"),
+        (
+            np.full((20, 6), np.nan),
+            r"Waypoint 0 of the route file has NaN or infinity for its centre x",
+        ),
         (np.array([["a"] * 6] * 20), "holds numbers; this one holds <U1 values"),
     ],
 )
