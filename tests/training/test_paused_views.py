@@ -51,7 +51,9 @@ def test_a_view_chosen_while_the_car_waits_is_drawn_at_once_as_the_car_stands(sa
     assert set(paused) == {"spectator", "camera"}
     camera, spectator = paused["camera"], paused["spectator"]
     assert camera["jpeg"].startswith(b"\xff\xd8\xff")
-    assert camera["step"] == spectator["step"] == summary["steps"]  # the same moment: the end
+    # The same moment: the end. Frames name DeepRacer's step (the reset is step 1, its prepare
+    # step); the summary counts the steps driven.
+    assert camera["step"] == spectator["step"] == summary["steps"] + 1
     assert camera["episode"] == spectator["episode"]
 
 
