@@ -1,7 +1,11 @@
 """DeepRacer's simulation trace: one row per step, as log lines and per-iteration CSV files.
 
 The 19 fields, in DeepRacer's order, are what deepracer-utils and Log Guru read. A continuous
-action is written ``[steer speed]``; booleans as True/False, as DeepRacer writes them.
+action is written ``[steer speed]``; booleans as True/False, as DeepRacer writes them. As in
+DeepRacer, an episode's first row is its ``prepare`` row (steps 1.0, reward 0, done False), and
+``tstamp`` is the simulation clock, which runs on from episode to episode: deepracer-utils times an
+episode by summing tstamp differences, zeroing the one that arrives at a prepare row (simapp
+bundle/markov/agent_ctrl/rollout_agent_ctrl.py:800,1079; metrics/constants.py:48-68, 01f5f01).
 """
 
 from __future__ import annotations
