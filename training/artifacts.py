@@ -17,6 +17,34 @@ TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE
 CLONED_WEIGHTS = "checkpoints/cloned.safetensors"  # a clone's start: its source's best weights
 
 
+# simapp bundle/markov/metrics/constants.py:118-129 (01f5f01): the labels the metrics JSON gives
+# an episode's status (the simulation trace keeps the names on the left)
+STATUS_LABELS = {
+    "lap_complete": "Lap complete",
+    "crashed": "Crashed",
+    "off_track": "Off track",
+    "immobilized": "Immobilized",
+    "in_progress": "In progress",
+    "pause": "Pause",
+    "reversed": "Reversed",
+    "park": "Park",
+    "time_up": "Time Up",
+    "prepare": "Prepare",
+}
+
+
+def status_label(status: str) -> str:
+    """An episode status as DeepRacer's metrics JSON writes it ("Lap complete", "Off track")."""
+    return STATUS_LABELS.get(status, status.replace("_", " ").capitalize())
+
+
+def training_trace(number: int) -> str:
+    """The simulation trace of iteration ``number`` (1, 2, ... as pages count them), named as
+    DeepRacer names it: its uploads count from 0, so iteration 1 is ``0-iteration.csv``
+    (simapp bundle/markov/boto/s3/files/simtrace_video.py:50-54, 70, 77 (01f5f01))."""
+    return f"training-simtrace/{number - 1}-iteration.csv"
+
+
 def checkpoint(number: int) -> str:
     """Where the trainer keeps the weights of iteration ``number`` (0: the weights it started
     from), relative to the model's prefix."""

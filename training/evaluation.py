@@ -242,7 +242,7 @@ class Evaluator:
                 "metric_time": int(wall * 1000),
                 "start_time": int((wall - seconds) * 1000),
                 "elapsed_time_in_milliseconds": trial.time_ms,
-                "episode_status": trial.status_display,
+                "episode_status": artifacts.status_label(trial.status),
                 "crash_count": crashes,
                 "immobilized_count": now["immobilized"] - before.immobilized,
                 "off_track_count": off_tracks,

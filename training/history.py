@@ -21,7 +21,7 @@ from django.utils import timezone
 from training.models import Iteration, JobLogLine, TrainingJob
 
 STEPS_PER_SECOND = 15  # [Hz] DeepRacer's and our simulator's control rate
-LAP_COMPLETE = "lap_complete"  # our trainer writes this; DeepRacer writes "Lap complete"
+LAP_COMPLETE = "lap_complete"  # statuses are read in the trace's spelling: "Lap complete" too
 
 
 class Unreadable(Exception):

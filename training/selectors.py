@@ -82,8 +82,8 @@ def model_files(*, model: RLModel) -> list[ModelFile]:
         names = []
     iterations = sorted(int(n.split("-")[0]) for n in names if n.split("-")[0].isdigit())
     for number in iterations:
-        relative = f"training-simtrace/{number}-iteration.csv"
-        files.append(ModelFile(relative, f"Simulation trace, iteration {number}"))
+        relative = f"training-simtrace/{number}-iteration.csv"  # counted from 0, as DeepRacer's
+        files.append(ModelFile(relative, f"Simulation trace, iteration {number + 1}"))
     return files
 
 

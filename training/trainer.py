@@ -18,6 +18,7 @@ import redis
 from django.conf import settings
 from django.core.files.storage import default_storage
 from django.db import transaction
+from django.db.models import Sum
 from django.utils import timezone
 
 import simulator
@@ -222,8 +223,14 @@ class Trainer:
             if episode is None or (self.ppo and episode.version != self.version):
                 continue  # PPO learns on-policy: episodes of older weights are dropped
             self.collected.append(episode)
-        if len(self.collected) >= model.hyperparameters["num_episodes_between_training"]:
-            episodes, self.collected = self.collected, []
+        wanted = model.hyperparameters["num_episodes_between_training"]
+        if len(self.collected) >= wanted:
+            # Exactly ``wanted`` episodes an iteration, as DeepRacer's workers play their shares
+            # of it (simapp bundle/markov/rollout_worker.py:249-254 (01f5f01)): each iteration's
+            # trace then numbers the same episodes, which its readers rely on. Episodes past
+            # that are of the weights about to be replaced: PPO drops them, SAC keeps them.
+            episodes, surplus = self.collected[:wanted], self.collected[wanted:]
+            self.collected = [] if self.ppo else surplus
             if not self._update(episodes):
                 self._say_why_it_ended()
                 return True
@@ -378,31 +385,15 @@ class Trainer:
         return name
 
     def _record_training(self, number: int, episodes: list[Episode]) -> None:
-        now = time.time()
-        episode_base = self.job.episodes - len(episodes)
-        for offset, episode in enumerate(episodes):
-            self.metrics.append(
-                {
-                    "reward_score": round(float(episode.rewards.sum()), 4),
-                    "metric_time": int(now * 1000),
-                    "start_time": int((now - episode.steps / 15) * 1000),
-                    "elapsed_time_in_milliseconds": int(episode.steps / 15 * 1000),
-                    "episode": episode_base + offset + 1,
-                    "trial": offset + 1,
-                    "phase": "training",
-                    "completion_percentage": round(episode.progress),
-                    "episode_status": episode.status,
-                }
-            )
+        before = self.job.episodes - len(episodes)  # training episodes of earlier iterations
+        self.metrics += training_metrics(episodes, before=before, now=time.time())
         self._save_metrics()
-        rows = [
-            SimTraceRow(*row) for episode in episodes for row in episode.trace if len(row) == 19
-        ]
-        artifacts.save(self.model, f"training-simtrace/{number}-iteration.csv", to_csv(rows))
+        artifacts.save(
+            self.model, artifacts.training_trace(number), training_trace(episodes, before=before)
+        )
 
     def _save_metrics(self) -> None:
-        document = {"metrics": self.metrics, "best_model_metric": "progress"}
-        artifacts.save(self.model, artifacts.TRAINING_METRICS, json.dumps(document))
+        artifacts.save(self.model, artifacts.TRAINING_METRICS, metrics_document(self.metrics))
 
     def _take_evaluations(self) -> None:
         by_version: dict[int, list[dict]] = {}
@@ -436,21 +427,12 @@ class Trainer:
             evaluation_points=[round(r["progress"], 2) for r in results],
         )
         live.announce_iteration(self.job.pk, version)
-        now = time.time()
-        for trial, result in enumerate(results, start=1):
-            self.metrics.append(
-                {
-                    "reward_score": 0,
-                    "metric_time": int(now * 1000),
-                    "start_time": int((now - result["steps"] / 15) * 1000),
-                    "elapsed_time_in_milliseconds": int(result["steps"] / 15 * 1000),
-                    "episode": self.job.episodes,
-                    "trial": trial,
-                    "phase": "evaluation",
-                    "completion_percentage": round(result["progress"]),
-                    "episode_status": result["status"],
-                }
-            )
+        learnt_from = Iteration.objects.filter(job=self.job, number__lte=version).aggregate(
+            total=Sum("episodes")
+        )["total"]
+        self.metrics = with_evaluation(
+            self.metrics, evaluation_metrics(results, now=time.time()), episodes=learnt_from or 0
+        )
         self._save_metrics()
         score = (completion, -min(laps) if laps else float("-inf"))
         if self.best is None or score > self.best:
@@ -573,6 +555,96 @@ class Trainer:
         )
         live.announce_training(job.pk)
         notifications.training_ended(job=job)
+
+
+# The files DeepRacer's tools read
+
+STEP_SECONDS = 1 / 15  # [s] a step of the simulation, at DeepRacer's 15 Hz
+
+
+def training_metrics(episodes: list[Episode], *, before: int, now: float) -> list[dict]:
+    """One iteration's training episodes as DeepRacer's metrics JSON lists them (simapp
+    bundle/markov/metrics/s3_metrics.py:315-329 (01f5f01)): ``episode`` counts the job's
+    training episodes from 1, ``trial`` counts them within the iteration from 1, the reward is
+    rounded to a whole number, the completion truncated, the status labelled ("Lap complete").
+    Times are in ms; ours are the wall clock's, DeepRacer's the simulator's."""
+    entries = []
+    for offset, episode in enumerate(episodes):
+        elapsed = round(episode.steps * STEP_SECONDS * 1000)
+        entries.append(
+            {
+                "reward_score": round(float(episode.rewards.sum())),
+                "metric_time": int(now * 1000),
+                "start_time": int(now * 1000) - elapsed,
+                "elapsed_time_in_milliseconds": elapsed,
+                "episode": before + offset + 1,
+                "trial": offset + 1,
+                "phase": "training",
+                "completion_percentage": int(min(max(float(episode.progress), 0.0), 100.0)),
+                "episode_status": artifacts.status_label(episode.status),
+            }
+        )
+    return entries
+
+
+def evaluation_metrics(results: list[dict], *, now: float) -> list[dict]:
+    """The evaluation episodes of one policy, in the same form; ``episode`` and ``trial`` are set
+    by ``with_evaluation``."""
+    entries = []
+    for result in results:
+        elapsed = round(result["steps"] * STEP_SECONDS * 1000)
+        entries.append(
+            {
+                "reward_score": 0,  # the evaluation drives no reward function
+                "metric_time": int(now * 1000),
+                "start_time": int(now * 1000) - elapsed,
+                "elapsed_time_in_milliseconds": elapsed,
+                "episode": 0,
+                "trial": 0,
+                "phase": "evaluation",
+                "completion_percentage": int(result["progress"]),
+                "episode_status": artifacts.status_label(result["status"]),
+            }
+        )
+    return entries
+
+
+def with_evaluation(metrics: list[dict], evaluation: list[dict], *, episodes: int) -> list[dict]:
+    """``metrics`` with the evaluation of the policy learnt from the first ``episodes`` training
+    episodes placed after them. As in DeepRacer's file, evaluation entries repeat the ``episode``
+    and ``trial`` of the last training episode before them (simapp
+    bundle/markov/metrics/s3_metrics.py:316-317, 399-406 (01f5f01)), which is how its readers
+    (deepracer-utils' TrainingMetrics) put them in their iteration."""
+    position, last = 0, {"episode": 0, "trial": 0}
+    for index, entry in enumerate(metrics):
+        if entry["episode"] > episodes:
+            break
+        position = index + 1
+        if entry["phase"] == "training":
+            last = entry
+    placed = [{**entry, "episode": last["episode"], "trial": last["trial"]} for entry in evaluation]
+    return metrics[:position] + placed + metrics[position:]
+
+
+def metrics_document(metrics: list[dict]) -> str:
+    """The training metrics file: simapp bundle/markov/metrics/s3_metrics.py:351-353 and
+    bundle/markov/constants.py:16 (01f5f01)."""
+    return json.dumps({"metrics": metrics, "version": 2.0, "best_model_metric": "progress"})
+
+
+def training_trace(episodes: list[Episode], *, before: int) -> str:
+    """One iteration's simulation trace: each episode's rows, numbered as DeepRacer numbers its
+    training episodes, from 0 over the whole job (simapp bundle/markov/metrics/s3_metrics.py:
+    316, 381-382 (01f5f01)). The workers share one experience buffer, so the episodes of all
+    workers are in one file, numbered in the order the trainer learnt from them: no two of an
+    iteration share a number."""
+    rows = [
+        SimTraceRow(*row)._replace(episode=before + offset)
+        for offset, episode in enumerate(episodes)
+        for row in episode.trace
+        if len(row) == 19
+    ]
+    return to_csv(rows)
 
 
 def _workers(count: int) -> str:

@@ -12,6 +12,7 @@ urlpatterns = [
     path("models/<int:pk>/stop/", views.model_stop, name="model-stop"),
     path("models/<int:pk>/log.txt", views.model_log, name="model-log"),
     path("models/<int:pk>/files/<path:relative>", views.model_file, name="model-file"),
+    path("models/<int:pk>/download/logs/", views.model_logs, name="model-logs"),
     *(
         path(
             f"models/<int:pk>/download/{kind}/",

@@ -1,4 +1,5 @@
 import json
+import tempfile
 from contextlib import nullcontext
 from copy import copy
 
@@ -26,6 +27,7 @@ from training import (
     exports,
     imports,
     jobs,
+    logs_archive,
     rewards,
     selectors,
     services,
@@ -380,6 +382,25 @@ def model_export(request: HttpRequest, pk: int, kind: str) -> HttpResponse:
         messages.error(request, str(refused))
         return redirect("training:model-detail", pk=model.pk)
     return artifacts.download(export.name, export.filename, content_type="application/gzip")
+
+
+@login_required
+@require_safe
+def model_logs(request: HttpRequest, pk: int) -> HttpResponse:
+    """The model's logs, laid out as a DeepRacer model folder (``training.logs_archive``), built
+    for this request: its traces grow while it trains."""
+    model = _get_model_for_user(request, pk)
+    archive = tempfile.TemporaryFile()  # noqa: SIM115 (the response closes it once sent)
+    try:
+        logs_archive.write(model, archive)
+    except logs_archive.LogsRefused as refused:
+        archive.close()
+        messages.error(request, str(refused))
+        return redirect("training:model-detail", pk=model.pk)
+    archive.seek(0)
+    response = FileResponse(archive, as_attachment=True, filename=logs_archive.filename(model))
+    response["Content-Type"] = "application/gzip"
+    return response
 
 
 @login_required

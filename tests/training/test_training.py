@@ -19,6 +19,7 @@ import simulator
 from simulator.trace import SimTraceRow
 from tests import services
 from tests.services import parent_of, wait_for
+from tests.training.test_deepracer_utils import assert_training_logs_read_as_recorded
 from training import artifacts, configuration, hyperparameters, jobs, tasks, trainer
 from training.experience import decode_episode
 from training.learner import Learner
@@ -98,7 +99,8 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     assert metrics["best_model_metric"] == "progress"
     phases = {entry["phase"] for entry in metrics["metrics"]}
     assert phases == {"training", "evaluation"}
-    trace = default_storage.open(prefix + "training-simtrace/1-iteration.csv").read().decode()
+    # DeepRacer counts its trace files from 0: iteration 1's is 0-iteration.csv.
+    trace = default_storage.open(prefix + "training-simtrace/0-iteration.csv").read().decode()
     table = list(csv.DictReader(io.StringIO(trace)))
     # Each episode's rows: DeepRacer's prepare row (step 1), then one per step.
     assert len(table) == rows[0].steps + rows[0].episodes
@@ -107,6 +109,8 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     assert job.log_lines.filter(text__startswith="Training started").exists()
     assert job.log_lines.filter(text="Stopped by the racer.").exists()
     assert job.log_lines.filter(text__startswith="Iteration 1: ").exists()
+    assert all(row.episodes == 5 for row in rows)  # DeepRacer's: exactly those of an iteration
+    assert_training_logs_read_as_recorded(job.model)
 
 
 @pytest.mark.django_db(transaction=True)

@@ -1,0 +1,128 @@
+"""A model's logs as one archive laid out as a DeepRacer model folder, the way
+DeepRacer-for-Cloud keeps one in its bucket, so that the community's log-analysis notebooks and
+deepracer-utils (``DeepRacerLog(folder)``) open it unchanged once it is extracted:
+
+    <model>/model/model_metadata.json
+    <model>/ip/hyperparameters.json
+    <model>/reward_function.py
+    <model>/training_params.yaml
+    <model>/training-simtrace/<n>-iteration.csv             iteration n + 1, from 0
+    <model>/metrics/TrainingMetrics.json
+    <model>/evaluation-<YYYYmmddHHMMSS>/evaluation-simtrace/0-iteration.csv
+    <model>/metrics/EvaluationMetrics-<YYYYmmddHHMMSS>.json    one pair per evaluation
+    <model>/logs/training-log.txt                            the training log, as text
+
+The names are DeepRacer's (simapp bundle/markov/boto/s3/constants.py:43, 50 and
+bundle/markov/boto/s3/files/simtrace_video.py:50-54 (01f5f01)) and DeepRacer-for-Cloud's
+(its scripts/training/prepare-config.py:24-37 and scripts/evaluation/prepare-config.py:45-55):
+the evaluation's timestamp is when it started, in UTC.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import tarfile
+import time
+from typing import BinaryIO
+
+from django.core.files.storage import default_storage
+
+from training import artifacts, selectors
+from training.evaluation import METRICS as EVALUATION_METRICS
+from training.evaluation import TRACE as EVALUATION_TRACE
+from training.evaluation import files_prefix
+from training.models import EvaluationJob, RLModel
+
+TRAINING_METRICS = "metrics/TrainingMetrics.json"
+TRAINING_LOG = "logs/training-log.txt"
+NO_LOGS = (
+    "This model has no logs yet: they appear after its first training iteration or its first "
+    "evaluation."
+)
+TIMESTAMP = "%Y%m%d%H%M%S"  # 14 digits: what deepracer-utils looks for in evaluation-<...>
+
+
+class LogsRefused(Exception):
+    """There are no logs to download yet; the message says so, for the racer."""
+
+
+def filename(model: RLModel) -> str:
+    return f"logs-{_folder(model)}.tar.gz"
+
+
+def has_logs(model: RLModel) -> bool:
+    """Whether the model has a training iteration's files or a finished evaluation to archive."""
+    return bool(_stored_files(model))
+
+
+def write(model: RLModel, target: BinaryIO) -> None:
+    """Write the model's logs archive (gzipped tar) to ``target``; ``LogsRefused`` when the model
+    has neither a training iteration's files nor a finished evaluation yet."""
+    stored = _stored_files(model)
+    if not stored:
+        raise LogsRefused(NO_LOGS)
+    root = _folder(model)
+    with tarfile.open(fileobj=target, mode="w:gz") as archive:
+        for relative, text in artifacts.model_files(model).items():
+            name = "model/model_metadata.json" if relative == "model_metadata.json" else relative
+            if relative == "hyperparameters.json":
+                name = "ip/hyperparameters.json"
+            _add_bytes(archive, f"{root}/{name}", text.encode())
+        for relative, name in stored:
+            _add_stored(archive, f"{root}/{relative}", name)
+        log = "".join(selectors.model_log_lines(model=model)).encode()
+        _add_bytes(archive, f"{root}/{TRAINING_LOG}", log)
+
+
+def _stored_files(model: RLModel) -> list[tuple[str, str]]:
+    """(name in the archive, storage name) of the model's traces and metrics."""
+    files = []
+    prefix = artifacts.path(model, "")
+    try:
+        _, names = default_storage.listdir(prefix + "training-simtrace")
+    except FileNotFoundError:
+        names = []
+    for name in sorted(n for n in names if re.fullmatch(r"\d+-iteration\.csv", n)):
+        files.append((f"training-simtrace/{name}", f"{prefix}training-simtrace/{name}"))
+    if files and default_storage.exists(prefix + artifacts.TRAINING_METRICS):
+        files.append((TRAINING_METRICS, prefix + artifacts.TRAINING_METRICS))
+    stamps: set[str] = set()
+    evaluations = model.evaluations.filter(status=EvaluationJob.Status.COMPLETED).order_by("pk")
+    for evaluation in evaluations:
+        trace = artifacts.path(model, files_prefix(evaluation) + EVALUATION_TRACE)
+        if not default_storage.exists(trace):
+            continue
+        stamp = _stamp(evaluation, stamps)
+        files.append((f"evaluation-{stamp}/evaluation-simtrace/0-iteration.csv", trace))
+        metrics = artifacts.path(model, files_prefix(evaluation) + EVALUATION_METRICS)
+        if default_storage.exists(metrics):
+            files.append((f"metrics/EvaluationMetrics-{stamp}.json", metrics))
+    return files
+
+
+def _stamp(evaluation: EvaluationJob, taken: set[str]) -> str:
+    """The evaluation's start in UTC to the second; a second later when another evaluation
+    started in the same second, so that every evaluation has its own folder."""
+    seconds = (evaluation.started_at or evaluation.created_at).timestamp()
+    while (stamp := time.strftime(TIMESTAMP, time.gmtime(seconds))) in taken:
+        seconds += 1
+    taken.add(stamp)
+    return stamp
+
+
+def _folder(model: RLModel) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "-", model.name).strip("-.") or f"model-{model.pk}"
+
+
+def _add_bytes(archive: tarfile.TarFile, name: str, data: bytes) -> None:
+    info = tarfile.TarInfo(name)
+    info.size, info.mtime, info.mode = len(data), int(time.time()), 0o644
+    archive.addfile(info, io.BytesIO(data))
+
+
+def _add_stored(archive: tarfile.TarFile, name: str, stored: str) -> None:
+    info = tarfile.TarInfo(name)
+    info.size, info.mtime, info.mode = default_storage.size(stored), int(time.time()), 0o644
+    with default_storage.open(stored, "rb") as source:
+        archive.addfile(info, source)
