@@ -156,6 +156,14 @@ def check_finished_evaluation(pk: int, owner, stranger) -> None:
     assert len(trials) == 3 and all(t.completed for t in trials)  # three consecutive laps
     assert all(t.penalty_ms == t.off_tracks * 1000 for t in trials)
     assert default_storage.exists(evaluation.video)
+    # Each lap is its own episode in the trace, as DRfC writes continuous laps, so that
+    # deepracer-utils (a lap is complete where an episode's progress reaches 100) counts three.
+    rows = list(csv.DictReader(io.StringIO(stored(evaluation, TRACE).decode())))
+    laps = {}
+    for row in rows:
+        laps[row["episode"]] = max(laps.get(row["episode"], 0.0), float(row["progress"]))
+    assert laps == {"0": 100.0, "1": 100.0, "2": 100.0}
+    assert [r["episode_status"] for r in rows].count("prepare") == 1
 
     client = Client()
     client.force_login(owner)
