@@ -479,7 +479,9 @@ class DeepRacerEnv(gym.Env):
             "is_left_of_center": bool(projection.is_left[4]),
             "is_offtrack": status == "off_track",
             "is_crashed": crashed,
-            "is_reversed": track.direction == "clockwise",
+            # The route driven against its file's order (simapp agent_ctrl/utils.py:101 reads
+            # REVERSE_DIR; a console "clockwise" world is its own file and reads False).
+            "is_reversed": track.reversed,
             "progress": self.progress,
             "steps": float(self.steps),  # a float in DeepRacer (rollout_agent_ctrl.py:180, 643)
             "speed": float(speed),

@@ -16,11 +16,16 @@ class TrainingConfig(AppConfig):
 def added_track(name: str) -> dict | None:
     """An added track as the simulator loads it inline (its route file's bytes and metadata), or
     None where no track was added by that name."""
+    from django.db import DatabaseError
+
     from training.models import Direction, Track
 
     fields = ("name", "display_name", "description", "difficulty", "counterclockwise", "clockwise",
               "route")  # fmt: skip
-    row = Track.objects.filter(name=name, added_at__isnull=False).values(*fields).first()
+    try:
+        row = Track.objects.filter(name=name, added_at__isnull=False).values(*fields).first()
+    except DatabaseError:  # no database here (a command run before `migrate`): built-ins only
+        return None
     if row is None:
         return None
     return {

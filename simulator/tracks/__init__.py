@@ -51,7 +51,8 @@ class Track:
 
     ``inner`` and ``outer`` keep their names whatever the direction; ``direction`` says which way
     the waypoints run ("counterclockwise" or "clockwise", read from the route as loaded), and
-    ``with_direction`` reverses them to run the other way.
+    ``with_direction`` reverses them to run the other way; ``reversed`` says the waypoints run
+    against the route file's own order (DeepRacer's ``REVERSE_DIR``).
     """
 
     name: str
@@ -63,6 +64,7 @@ class Track:
     difficulty: str = "intermediate"
     directions: tuple[str, ...] = DIRECTIONS
     direction: str = "counterclockwise"
+    reversed: bool = False
     source: Path | None = field(default=None, compare=False)
 
     # Geometry
@@ -187,6 +189,7 @@ class Track:
             inner=self.inner[::-1].copy(),
             outer=self.outer[::-1].copy(),
             direction=direction,
+            reversed=not self.reversed,
         )
 
     @property

@@ -107,6 +107,23 @@ def test_a_clockwise_file_driven_counterclockwise_is_reversed_and_clockwise_is_k
     # Driving counter-clockwise, the inner border (the one inside the loop) is on the left.
     point = ccw.point_at(3.0, 0.3)[:2]
     assert ccw.project(point)[2]
+    # DeepRacer's is_reversed is its REVERSE_DIR: against the file's order, not "clockwise".
+    assert not track.reversed and ccw.reversed
+
+
+@pytest.mark.parametrize("direction, reversed_", [("clockwise", False), ("counterclockwise", True)])
+def test_is_reversed_means_against_the_route_files_order(tmp_path, direction, reversed_):
+    import gymnasium
+
+    import simulator
+
+    path = tmp_path / "cw_track.npy"
+    np.save(path, routes.clockwise())
+    env = gymnasium.make(simulator.ENV_ID, track=str(path), direction=direction)
+    env.reset(seed=0)
+    params = env.step(env.action_space.sample())[4]["params"]
+    assert params["is_reversed"] is reversed_
+    env.close()
 
 
 def test_every_built_in_track_runs_counterclockwise_as_generated():
