@@ -15,6 +15,7 @@ from django.urls import reverse
 
 from tests.services import wait_for
 from tests.training.factories import ready_model
+from tests.training.test_deepracer_utils import assert_evaluation_logs_read_as_recorded
 from tests.training.test_live import frame_header, viewer
 from training import artifacts, configuration, services
 from training.evaluation import METRICS, TRACE, VIDEO, files_prefix
@@ -83,6 +84,7 @@ def test_the_evaluate_command_prints_the_results_and_records_every_step(alice, c
     }  # fmt: skip
     assert metrics[0]["off_track_count"] == trials[0].off_tracks
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
+    assert_evaluation_logs_read_as_recorded(evaluation)  # in the model's logs archive
 
 
 @pytest.mark.django_db
