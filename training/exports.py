@@ -12,7 +12,8 @@ and speed each in [-1, 1] of its range (continuous), as the car's navigation sca
 
 The virtual model, ``virtualmodel-<name>.tar.gz``, holds what another Pitlane (or a DeepRacer
 toolchain) needs to go on training: ``model_metadata.json``, ``reward_function.py``,
-``training_params.yaml``, ``hyperparameters.json`` (DeepRacer's names), the best and the last
+``training_params.yaml``, ``hyperparameters.json`` (DeepRacer's names and spellings, also at
+``ip/hyperparameters.json`` where DeepRacer keeps it), the best and the last
 checkpoints as safetensors under ``checkpoints/``, the metrics, and ``pitlane.json`` (the settings
 DeepRacer's files do not carry: track, direction, race type, network seed, workers; and the time
 the model trained, which its page shows).
@@ -34,13 +35,14 @@ from django.core.files.storage import default_storage
 from django.db.models import Sum
 from torch import nn
 
-from training import artifacts, selectors
+from training import artifacts, hyperparameters, selectors
 from training.models import RLModel
 from training.networks import CAMERAS, LIDARS
 from training.policies import Policy
 
 OPSET = 17
 PITLANE_SETTINGS = "pitlane.json"
+HYPERPARAMETERS = "ip/hyperparameters.json"  # simapp bundle/markov/boto/s3/constants.py:43
 FORMAT = 1  # of pitlane.json
 
 
@@ -147,26 +149,37 @@ def physical(model: RLModel, which: str = "best") -> Export:
 
 def virtual(model: RLModel) -> Export:
     """The virtual-model archive: everything needed to go on training elsewhere; built once per
-    last checkpoint and metrics (training ends with both)."""
-    last = _checkpoint(model, "last")
+    content (its checkpoints, metrics and settings files: a file this console writes
+    differently, as when it learnt DeepRacer's spellings, is a new export)."""
     stored_metrics = artifacts.path(model, artifacts.TRAINING_METRICS)
     metrics = artifacts.read(stored_metrics) if default_storage.exists(stored_metrics) else None
-    export = Export(
-        artifacts.path(model, f"exports/virtual-{_digest(last + (metrics or b''))}.tar.gz"),
-        f"virtualmodel-{model.name}.tar.gz",
-    )
-    if default_storage.exists(export.name):
-        return export
     members = {name: text.encode() for name, text in artifacts.model_files(model).items()}
+    # DeepRacer's hyperparameters.json, where a DeepRacer model has it (ip/) and where Pitlane's
+    # exports have always had it (the root).
+    members["hyperparameters.json"] = members[HYPERPARAMETERS] = deepracer_hyperparameters(model)
     members.update({
         PITLANE_SETTINGS: _json(pitlane_settings(model)),
         "checkpoints/best.safetensors": _checkpoint(model, "best"),
-        "checkpoints/last.safetensors": last,
+        "checkpoints/last.safetensors": _checkpoint(model, "last"),
     })  # fmt: skip
     if metrics is not None:
         members[artifacts.TRAINING_METRICS] = metrics
-    _store(export.name, members)
+    content = b"".join(name.encode() + b"\0" + data for name, data in sorted(members.items()))
+    export = Export(
+        artifacts.path(model, f"exports/virtual-{_digest(content)}.tar.gz"),
+        f"virtualmodel-{model.name}.tar.gz",
+    )
+    if not default_storage.exists(export.name):
+        _store(export.name, members)
     return export
+
+
+def deepracer_hyperparameters(model: RLModel) -> bytes:
+    """The model's hyperparameters.json as DeepRacer writes it: every key of the algorithm, the
+    ones this console keeps without using included, in DeepRacer's spellings, sorted and
+    indented as simapp bundle/markov/sagemaker_graph_manager.py:233 (01f5f01) dumps them."""
+    values = hyperparameters.deepracer_file(model.algorithm, model.hyperparameters)
+    return json.dumps(values, indent=2, sort_keys=True).encode()
 
 
 def pitlane_settings(model: RLModel) -> dict:

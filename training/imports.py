@@ -13,6 +13,7 @@ leaves nothing in the database or in storage.
 from __future__ import annotations
 
 import json
+import re
 import secrets
 import tarfile
 import zlib
@@ -30,8 +31,10 @@ from django.db import transaction
 from django.utils import timezone
 from safetensors import SafetensorError
 
+from simulator import config as sim
+from simulator import tracks as sim_tracks
 from training import artifacts, configuration, exports, history, hyperparameters, jobs, services
-from training.models import Algorithm, RLModel, Track, TrainingJob
+from training.models import Algorithm, Network, RLModel, ShellColour, Track, TrainingJob
 from training.policies import Policy
 
 MiB = 1024 * 1024
@@ -41,9 +44,19 @@ MAX_MEMBERS = 256
 TEXT_LIMIT = 1 * MiB  # [bytes] each of the JSON, YAML and Python files
 METRICS_LIMIT = 32 * MiB  # [bytes] the training metrics: a row per episode
 CHECKPOINTS = ("checkpoints/best.safetensors", "checkpoints/last.safetensors")
+# Where each of DeepRacer's files is looked for, first found first: at the root (a Pitlane
+# export, a folder of DeepRacer's files packed as they are), or where DeepRacer's training keeps
+# it under the model's prefix, as DeepRacer for Cloud uploads a model: model/model_metadata.json,
+# ip/hyperparameters.json (simapp bundle/markov/boto/s3/constants.py:43,50, 01f5f01).
+PLACES = {
+    "model_metadata.json": ("model_metadata.json", "model/model_metadata.json"),
+    "hyperparameters.json": ("hyperparameters.json", exports.HYPERPARAMETERS),
+    "reward_function.py": ("reward_function.py",),
+    "training_params.yaml": ("training_params.yaml",),
+}
 WANTED = {
-    "model_metadata.json", "reward_function.py", "hyperparameters.json",
-    "training_params.yaml", exports.PITLANE_SETTINGS, artifacts.TRAINING_METRICS, *CHECKPOINTS,
+    *(path for paths in PLACES.values() for path in paths),
+    exports.PITLANE_SETTINGS, artifacts.TRAINING_METRICS, *CHECKPOINTS,
 }  # fmt: skip
 KEPT_FOLDER = "imports/kept"  # in storage: archives kept between a racer's attempts
 KEPT_FOR = timedelta(hours=6)
@@ -76,10 +89,10 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
     """The model in ``archive`` (a file opened for reading), as ``owner``'s; ``name`` replaces
     the archive's. ``ImportRefused`` or ``configuration.Invalid`` when it cannot be imported."""
     members = read_archive(archive)
-    metadata = _json(members, "model_metadata.json")
+    metadata = _json(members, _place(members, "model_metadata.json"))
     if metadata is None:
         raise ImportRefused("The archive has no model_metadata.json: is it a model's download?")
-    reward = _text(members, "reward_function.py")
+    reward = _text(members, _place(members, "reward_function.py"))
     if reward is None:
         raise ImportRefused("The archive has no reward_function.py.")
     ours = _json(members, exports.PITLANE_SETTINGS) or {}
@@ -188,6 +201,11 @@ def read_archive(archive: IO[bytes]) -> Members:
     return _without_top_folder(members)
 
 
+def _place(members: Members, name: str) -> str:
+    """Where the archive has DeepRacer's file ``name`` (``PLACES``); its first place if nowhere."""
+    return next((path for path in PLACES[name] if path in members), PLACES[name][0])
+
+
 def _wanted(path: str) -> bool:
     """Whether an import reads ``path``, at the root or under a single top-level folder."""
     return path in WANTED or path.split("/", 1)[-1] in WANTED
@@ -271,8 +289,9 @@ def _settings(
     metadata: dict, ours: dict, members: Members, reward: str, name: str, notes: list[str]
 ) -> dict:
     """The create-model settings the archive describes, in ``training.configuration``'s
-    vocabulary; what it leaves out takes the defaults, and ``notes`` says what changed."""
-    params = _yaml(members, "training_params.yaml")
+    vocabulary; what it leaves out takes the defaults, and ``notes`` lists every setting it has
+    that could not be carried over."""
+    params = _yaml(members, _place(members, "training_params.yaml"))
     algorithm = DEEPRACER_ALGORITHMS.get(
         str(metadata.get("training_algorithm", "clipped_ppo")).lower(), "unknown"
     )
@@ -281,44 +300,283 @@ def _settings(
             f"model_metadata.json names the algorithm {metadata.get('training_algorithm')!r}; "
             "this console trains PPO (clipped_ppo) and SAC."
         )
-    given = _json(members, "hyperparameters.json") or {}
-    known = hyperparameters.defaults(algorithm)
-    hyper = {**known, **{key: value for key, value in given.items() if key in known}}
-    track = ours.get("track") or _deepracer_track(params, notes)
-    return {
-        "name": name or ours.get("name") or str(params.get("CAR_NAME") or "imported-model"),
+    given = _json(members, _place(members, "hyperparameters.json")) or {}
+    settings = {
+        "name": name or ours.get("name") or _model_name(params),
         "description": str(ours.get("description") or "Imported."),
-        "track": track,
-        "direction": ours.get("direction")
-        or ("clockwise" if params.get("REVERSE_DIR") else "counterclockwise"),
-        "race_type": ours.get("race_type") or params.get("RACE_TYPE") or "TIME_TRIAL",
-        "boxes": ours.get("boxes"),
-        "bots": ours.get("bots"),
-        "sensors": metadata.get("sensor") or ["FRONT_FACING_CAMERA"],
-        "network": metadata.get("neural_network"),
+        "sensors": _sensors(metadata, notes),
+        "network": _network(metadata, notes),
         "action_space": metadata.get("action_space"),
         "algorithm": algorithm,
-        "hyperparameters": hyper,
+        "hyperparameters": _hyperparameters(algorithm, given, notes),
         "max_minutes": ours.get("max_minutes", 60),
-        "workers": ours.get("workers", 1),
         "extra_tracks": ours.get("extra_tracks", []),
         "seed": ours.get("seed", 0),
-        "shell_colour": ours.get("shell_colour"),
         "reward_function": reward,
     }
+    _metadata_left_out(metadata, notes)
+    if ours.get("track"):  # a Pitlane export: its settings; training_params.yaml repeats them
+        for key in ("track", "direction", "race_type", "boxes", "bots", "shell_colour"):
+            settings[key] = ours.get(key)
+        settings["workers"] = ours.get("workers", 1)
+        return settings
+    settings["track"], settings["direction"] = _deepracer_track(params, notes)
+    settings.update(_deepracer_race(params, notes))
+    settings["workers"] = _deepracer_workers(params, notes)
+    settings["shell_colour"] = _deepracer_colour(params, notes)
+    _params_left_out(params, notes)
+    return settings
 
 
-def _deepracer_track(params: dict, notes: list[str]) -> str:
-    """A DeepRacer track name (``WORLD_NAME``) as ours, or the default track (and a note)."""
-    world = str(params.get("WORLD_NAME") or "")
-    candidates = (world, world.lower().replace("_", "-"))
-    known = Track.objects.filter(name__in=candidates).values_list("name", flat=True).first()
-    if known:
-        return known
-    if world:
-        notes.append(f"The track {world} is not one of this console's; the model trains on "
-                     f"{DEFAULT_TRACK} (change it by cloning once it is ready).")  # fmt: skip
-    return DEFAULT_TRACK
+def _model_name(params: dict) -> str:
+    """DeepRacer's model name as one of ours (letters, digits and hyphens), or a stand-in."""
+    raw = str(params.get("CAR_NAME") or "")
+    cleaned = "-".join(re.findall(r"[A-Za-z0-9]+", raw))[:64].strip("-")
+    return cleaned or "imported-model"
+
+
+def _shown(value) -> str:
+    return value if isinstance(value, str) else json.dumps(value, default=str)
+
+
+def _hyperparameters(algorithm: str, given: dict, notes: list[str]) -> dict:
+    """The archive's hyperparameters this console can take, checked one at a time: each one out
+    of range, or not DeepRacer's, is left at its default and noted."""
+    values, unknown = {}, []
+    for key, value in given.items():
+        setting = hyperparameters.setting(algorithm, key)
+        if setting is None:
+            unknown.append(f"{key} {_shown(value)}")
+            continue
+        try:
+            values[key] = setting.check(value)
+        except ValueError as error:
+            default = hyperparameters.spelled(algorithm, key, setting.default)
+            notes.append(
+                f"Not carried over from hyperparameters.json: {key} {_shown(value)}. {error} "
+                f"The model uses {_shown(default)}."
+            )
+    if unknown:
+        notes.append(f"Not carried over from hyperparameters.json: {', '.join(unknown)}: not "
+                     "one of DeepRacer's hyperparameters.")  # fmt: skip
+    return values
+
+
+def _sensors(metadata: dict, notes: list[str]) -> list[str]:
+    """The archive's sensors this console has; the others are noted. A car without a camera
+    gets the front-facing one, as DeepRacer's older models had (model_metadata.py:230-242)."""
+    given = metadata.get("sensor") or ["FRONT_FACING_CAMERA"]
+    if isinstance(given, str) or not isinstance(given, list):
+        raise ImportRefused('model_metadata.json\'s "sensor" must be a list of sensors.')
+    given = [str(sensor) for sensor in given]
+    camera = next((s for s in given if s in sim.CAMERAS), None)
+    lidar = next((s for s in given if s in sim.LIDARS), None)
+    kept = [camera or "FRONT_FACING_CAMERA"] + ([lidar] if lidar else [])
+    dropped = [s for s in given if s not in kept]
+    if dropped:
+        notes.append(
+            f"Not carried over from model_metadata.json: the sensor{'s' * (len(dropped) > 1)} "
+            f"{', '.join(dropped)}. This console's cars have {' or '.join(sim.CAMERAS)} and at "
+            f"most one of {', '.join(sim.LIDARS)}; the model has {', '.join(kept)}."
+        )
+    elif camera is None:
+        notes.append("model_metadata.json names no camera: the model has FRONT_FACING_CAMERA.")
+    return kept
+
+
+def _network(metadata: dict, notes: list[str]) -> str:
+    """The archive's network (DeepRacer's default is the shallow one: model_metadata.py:290-293)."""
+    network = metadata.get("neural_network") or Network.SHALLOW
+    if network in Network.values:
+        return network
+    notes.append(
+        f"Not carried over from model_metadata.json: the network {_shown(network)}. This "
+        f"console trains {' and '.join(Network.values)}; the model has {Network.SHALLOW}."
+    )
+    return Network.SHALLOW
+
+
+# model_metadata.json's keys (simapp bundle/markov/boto/s3/constants.py:90-106, 01f5f01) that the
+# settings above take, or that describe the file rather than the model.
+METADATA_TAKEN = {"sensor", "neural_network", "action_space", "action_space_type",
+                  "training_algorithm", "version"}  # fmt: skip
+
+
+def _metadata_left_out(metadata: dict, notes: list[str]) -> None:
+    left = [
+        f"{key} {_shown(value)}" for key, value in metadata.items() if key not in METADATA_TAKEN
+    ]
+    if left:
+        notes.append(f"Not carried over from model_metadata.json: {'; '.join(left)}.")
+
+
+def _truthy(value) -> bool:
+    """A YAML flag as simapp reads it (bundle/markov/utils.py:129-136, 01f5f01): "true" or a
+    true boolean."""
+    return value is True or str(value).strip().lower() == "true"
+
+
+def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str]:
+    """``WORLD_NAME`` as one of our tracks, and the direction to drive it. The name as it is
+    first; then without DeepRacer's ``_cw``/``_ccw`` suffix, which also gives the direction
+    (simapp bundle/markov/boto/s3/files/yaml_file.py:228-244, 01f5f01; constants.py
+    WorldNameSuffix); then lower-cased with hyphens for underscores. Without a suffix,
+    ``TRACK_DIRECTION_CLOCKWISE`` gives the direction, else the route's own; ``REVERSE_DIR``
+    turns it round. A track not loaded here is noted, and the model gets ``DEFAULT_TRACK``."""
+    world = str(params.get("WORLD_NAME") or "").strip()
+    suffixed = {"_cw": "clockwise", "_ccw": "counterclockwise"}
+    stem, suffix_direction = world, None
+    for suffix, direction in suffixed.items():
+        if world.lower().endswith(suffix) and len(world) > len(suffix):
+            stem, suffix_direction = world[: -len(suffix)], direction
+    candidates = [(world, None), (stem, suffix_direction),
+                  (_variant(world), None), (_variant(stem), suffix_direction)]  # fmt: skip
+    found = {t.name: t for t in Track.objects.filter(name__in=[c for c, _ in candidates if c])}
+    track, direction = next(
+        ((found[c], d) for c, d in candidates if c in found), (None, suffix_direction)
+    )
+    if track is None:
+        if world:
+            notes.append(f"Not carried over from training_params.yaml: the track {world}, which "
+                         f"is not loaded here. The model trains on {DEFAULT_TRACK}; choose "
+                         "another by cloning it.")  # fmt: skip
+        track = Track.objects.filter(name=DEFAULT_TRACK).first()
+    if direction is None and "TRACK_DIRECTION_CLOCKWISE" in params:
+        clockwise = _truthy(params["TRACK_DIRECTION_CLOCKWISE"])
+        direction = "clockwise" if clockwise else "counterclockwise"
+    if direction is None:
+        direction = _route_direction(track.name if track else DEFAULT_TRACK)
+    if _truthy(params.get("REVERSE_DIR")):
+        direction = "clockwise" if direction == "counterclockwise" else "counterclockwise"
+    if track is not None and not getattr(track, direction):
+        other = "clockwise" if direction == "counterclockwise" else "counterclockwise"
+        notes.append(f"{track.display_name} is not driven {direction} here: the model drives "
+                     f"it {other}.")  # fmt: skip
+        direction = other
+    return (track.name if track else DEFAULT_TRACK), direction
+
+
+def _variant(name: str) -> str:
+    return name.lower().replace("_", "-")
+
+
+def _route_direction(name: str) -> str:
+    """The way a track's route runs: what DeepRacer drives on a world without a suffix."""
+    try:
+        return sim_tracks.load(name).direction
+    except (ValueError, OSError, EOFError):  # a route that cannot be read: the default way
+        return "counterclockwise"
+
+
+# training_params.yaml's race settings (simapp YamlKey, boto/s3/constants.py:144-170, and
+# D's prepare-config), as our race types take them.
+RACE_KEYS = {
+    "OBJECT_AVOIDANCE": {"NUMBER_OF_OBSTACLES": "count",
+                         "RANDOMIZE_OBSTACLE_LOCATIONS": "randomize"},
+    "HEAD_TO_BOT": {"NUMBER_OF_BOT_CARS": "count", "BOT_CAR_SPEED": "speed",
+                    "IS_LANE_CHANGE": "lane_changes"},
+}  # fmt: skip
+
+
+def _deepracer_race(params: dict, notes: list[str]) -> dict:
+    """The race type and its boxes or bot cars; what does not fit is noted and defaulted."""
+    race_type = str(params.get("RACE_TYPE") or "TIME_TRIAL").strip().upper()
+    if race_type not in sim.RACE_TYPES:
+        notes.append(f"Not carried over from training_params.yaml: the race type {race_type}. "
+                     "The model trains for a TIME_TRIAL.")  # fmt: skip
+        return {"race_type": "TIME_TRIAL", "boxes": None, "bots": None}
+    race = {"race_type": race_type, "boxes": None, "bots": None}
+    if race_type == "TIME_TRIAL":
+        return race
+    given = {}
+    for key, field_name in RACE_KEYS[race_type].items():
+        if key in params:
+            value = params[key]
+            given[field_name] = _truthy(value) if field_name in ("randomize", "lane_changes") \
+                else value  # fmt: skip
+    which, check = (("boxes", sim.objects) if race_type == "OBJECT_AVOIDANCE"
+                    else ("bots", sim.bots))  # fmt: skip
+    try:
+        race[which] = vars(check(given, race_type))
+    except (sim.ConfigError, TypeError, ValueError) as error:
+        race[which] = vars(check({}, race_type))
+        notes.append(f"Not carried over from training_params.yaml: {_race_given(params, race_type)}"
+                     f" ({error}). The model has {_race_shown(race[which])}.")  # fmt: skip
+    return race
+
+
+def _race_given(params: dict, race_type: str) -> str:
+    return ", ".join(
+        f"{key} {_shown(params[key])}" for key in RACE_KEYS[race_type] if key in params
+    )
+
+
+def _race_shown(values: dict) -> str:
+    return ", ".join(f"{key.replace('_', ' ')} {_shown(value)}" for key, value in values.items())
+
+
+def _deepracer_workers(params: dict, notes: list[str]) -> int:
+    """DeepRacer's rollout workers (``NUM_WORKERS``) as our simulations at once."""
+    if "NUM_WORKERS" not in params:
+        return 1
+    try:
+        workers = int(params["NUM_WORKERS"])
+    except (TypeError, ValueError):
+        workers = 0
+    if 1 <= workers <= configuration.MAX_WORKERS:
+        return workers
+    chosen = min(max(workers, 1), configuration.MAX_WORKERS)
+    notes.append(
+        f"Not carried over from training_params.yaml: NUM_WORKERS {_shown(params['NUM_WORKERS'])}."
+        f" A model trains in 1 to {configuration.MAX_WORKERS} simulations at once here; it has "
+        f"{chosen}."
+    )
+    return chosen
+
+
+def _deepracer_colour(params: dict, notes: list[str]) -> str:
+    """``CAR_COLOR`` (a colour's name in DeepRacer) as one of the garage's shells."""
+    given = params.get("CAR_COLOR")
+    if given in (None, ""):
+        return ShellColour.BLACK
+    by_name = {label.lower(): value for value, label in ShellColour.choices}
+    found = by_name.get(str(given).strip().lower())
+    if found is None:
+        notes.append(f"Not carried over from training_params.yaml: CAR_COLOR {_shown(given)}, "
+                     "not one of the garage's colours. The car is black.")  # fmt: skip
+        return ShellColour.BLACK
+    return found
+
+
+# training_params.yaml's keys the settings above take.
+PARAMS_TAKEN = {"WORLD_NAME", "TRACK_DIRECTION_CLOCKWISE", "REVERSE_DIR", "RACE_TYPE",
+                "CAR_NAME", "NUM_WORKERS", "CAR_COLOR",
+                *RACE_KEYS["OBJECT_AVOIDANCE"], *RACE_KEYS["HEAD_TO_BOT"]}  # fmt: skip
+# Where DeepRacer kept its files and streams, and who ran it: nothing a model here could use.
+PARAMS_PLACES = re.compile(
+    r"(S3|BUCKET|PREFIX|REGION|ENDPOINT|ARN|KINESIS|SQS|_KEY$|JOB_TYPE|ROBOMAKER|SAGEMAKER)"
+)
+
+
+def _params_left_out(params: dict, notes: list[str]) -> None:
+    """Notes for the rest of training_params.yaml: the settings this console cannot honour
+    each with its value, and (in one line) where DeepRacer stored its files."""
+    left, places = [], []
+    for key, value in params.items():
+        key = str(key)
+        if key in PARAMS_TAKEN:
+            continue
+        if PARAMS_PLACES.search(key):
+            places.append(key)
+        else:
+            left.append(f"{key} {_shown(value)}")
+    if left:
+        notes.append(f"Not carried over from training_params.yaml: {', '.join(left)}.")
+    if places:
+        notes.append(
+            f"Not carried over from training_params.yaml: where DeepRacer kept the model's files "
+            f"and streams ({', '.join(places)}); this console keeps its own."
+        )
 
 
 def _is_tensorflow(path: str) -> bool:

@@ -145,6 +145,7 @@ def test_the_virtual_model_holds_what_training_elsewhere_needs(alice, tracks, tm
     } <= set(members)  # fmt: skip
     assert members["reward_function.py"].decode() == model.reward_function
     assert json.loads(members["hyperparameters.json"]) == hyperparameters.defaults("clipped_ppo")
+    assert members["ip/hyperparameters.json"] == members["hyperparameters.json"]  # DeepRacer's
     assert b"WORLD_NAME: pitlane-oval" in members["training_params.yaml"]
     settings = json.loads(members["pitlane.json"])
     assert settings["track"] == "pitlane-oval" and settings["name"] == "to-move"

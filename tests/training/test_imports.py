@@ -19,7 +19,7 @@ from safetensors.torch import save as save_tensors
 from tests.training.factories import ready_model
 from training import artifacts, exports, history, imports, selectors
 from training.learner import load_tensors
-from training.models import RLModel, TrainingJob
+from training.models import RLModel, ShellColour, Track, TrainingJob
 from training.rewards import EXAMPLES
 
 pytestmark = pytest.mark.django_db
@@ -138,11 +138,11 @@ def test_a_deepracer_export_brings_its_settings_and_says_the_weights_stay_behind
     said = out.getvalue()
     assert "queued for training" in said
     assert "TensorFlow checkpoints were not carried over" in said
-    assert "reInvent2019_track is not one of this console's" in said
+    assert "the track reInvent2019_track, which is not loaded here" in said
     model = RLModel.objects.get(owner=alice)
     assert model.name == "my-deepracer-car" and model.status == RLModel.Status.QUEUED
     assert [a["speed"] for a in model.action_space] == [0.6, 1.2, 0.6]
-    assert model.hyperparameters["discount_factor"] == 0.999
+    assert model.hyperparameters == {**DEEPRACER_HYPERPARAMETERS, "loss_type": "huber"}
     assert model.reward_function == EXAMPLES[0].source
     assert model.jobs.get().status == TrainingJob.Status.QUEUED
 
@@ -423,3 +423,163 @@ def test_an_archive_at_fault_is_not_kept_for_the_next_attempt(alice, tracks, cli
     response = client.post(reverse("training:model-import"), {"archive": upload})
     assert response.status_code == 400 and "Reward function: syntax" in response.text
     assert response.context["form"].kept_upload is None and "you uploaded" not in response.text
+
+
+def drfc_layout(members: dict[str, bytes]) -> dict[str, bytes]:
+    """The files as DeepRacer for Cloud uploads a model: the metadata under model/ (and at the
+    root), the hyperparameters under ip/."""
+    moved = dict(members)
+    moved["model/model_metadata.json"] = moved["model_metadata.json"]
+    moved["ip/hyperparameters.json"] = moved.pop("hyperparameters.json")
+    return moved
+
+
+LAYOUTS = {
+    "the root": lambda members: members,
+    "DeepRacer for Cloud's model/ and ip/": drfc_layout,
+    "model/ and ip/ only, no root metadata": lambda members: {
+        key: value for key, value in drfc_layout(members).items() if key != "model_metadata.json"
+    },
+    "one top folder": lambda members: {
+        f"DeepRacer-SageMaker-RoboMaker-comm-123/{key}": value
+        for key, value in drfc_layout(members).items()
+    },
+}
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_a_deepracer_model_imports_from_each_layout_with_every_hyperparameter(
+    layout, alice, tracks
+):
+    hyper = {**DEEPRACER_HYPERPARAMETERS, "loss_type": "mean squared error", "sac_alpha": 0.2}
+    params = {**DEEPRACER_PARAMS, "WORLD_NAME": "pitlane-oval_cw"}
+    members = deepracer_export(**{
+        "hyperparameters.json": json.dumps(hyper).encode(),
+        "training_params.yaml": yaml.safe_dump(params).encode(),
+    })  # fmt: skip
+    imported = imports.import_model(
+        owner=alice, archive=io.BytesIO(tar_gz(LAYOUTS[layout](members)))
+    )
+    model = imported.model
+    # Kept too: stack_size, exploration_type, e_greedy_value, epsilon_steps, term_cond_*, and
+    # sac_alpha, which DeepRacer for Cloud writes for PPO models as well.
+    assert model.hyperparameters == hyper
+    assert (model.track.name, model.direction) == ("pitlane-oval", "clockwise")
+    assert [a["steering_angle"] for a in model.action_space] == [-30.0, 0.0, 30.0]
+    assert not [note for note in imported.notes if "hyperparameters" in note or "track" in note]
+
+
+def track_row(name: str, **changes) -> Track:
+    fields = {"display_name": name, "difficulty": "beginner", "length_m": 20.0, "width_m": 1.0,
+              "counterclockwise": True, "clockwise": True, **changes}  # fmt: skip
+    return Track.objects.create(name=name, **fields)
+
+
+@pytest.mark.parametrize(
+    ("params", "expected", "noted"),
+    [
+        ({"WORLD_NAME": "reInvent2019_track"}, ("reInvent2019_track", "counterclockwise"), ""),
+        ({"WORLD_NAME": "reInvent2019_track_cw"}, ("reInvent2019_track", "clockwise"), ""),
+        ({"WORLD_NAME": "reInvent2019_track_ccw"}, ("reInvent2019_track", "counterclockwise"), ""),
+        ({"WORLD_NAME": "reInvent2019_track_ccw", "REVERSE_DIR": True},
+         ("reInvent2019_track", "clockwise"), ""),
+        ({"WORLD_NAME": "reInvent2019_track", "TRACK_DIRECTION_CLOCKWISE": "true"},
+         ("reInvent2019_track", "clockwise"), ""),
+        ({"WORLD_NAME": "reInvent2019_track", "TRACK_DIRECTION_CLOCKWISE": False,
+          "REVERSE_DIR": "True"}, ("reInvent2019_track", "clockwise"), ""),
+        # The exact name comes first: a track whose own name ends in _cw.
+        ({"WORLD_NAME": "Oval_cw"}, ("Oval_cw", "counterclockwise"), ""),
+        # Then lower-case, with hyphens for underscores; the suffix still gives the direction.
+        ({"WORLD_NAME": "Kidney_Bean_cw"}, ("kidney-bean", "clockwise"), ""),
+        ({"WORLD_NAME": "One_Way_cw"}, ("one-way", "counterclockwise"),
+         "One Way is not driven clockwise here: the model drives it counterclockwise."),
+        ({"WORLD_NAME": "monza_ccw"}, ("rookie-loop", "counterclockwise"),
+         "Not carried over from training_params.yaml: the track monza_ccw, which is not loaded "
+         "here. The model trains on rookie-loop"),
+    ],
+)  # fmt: skip
+def test_world_name_finds_the_loaded_track_and_its_direction(params, expected, noted):
+    for name in ("reInvent2019_track", "Oval_cw", "Oval", "kidney-bean", "rookie-loop"):
+        track_row(name)
+    track_row("one-way", display_name="One Way", clockwise=False)
+    notes = []
+    assert imports._deepracer_track(params, notes) == expected
+    if noted:
+        assert len(notes) == 1 and noted in notes[0], notes
+    else:
+        assert notes == []
+
+
+def test_every_setting_that_is_not_carried_over_is_listed_on_the_result_page(alice, tracks, client):
+    metadata = {**DEEPRACER_METADATA, "sensor": ["FRONT_FACING_CAMERA", "DISCRETIZED_SECTOR_LIDAR"],
+                "neural_network": "DEEP_CONVOLUTIONAL_NETWORK_DEEP",
+                "lidar_config": {"num_sectors": 8, "clipping_dist": 2.0}}  # fmt: skip
+    hyper = {**DEEPRACER_HYPERPARAMETERS, "num_epochs": 20, "clip_range": 0.3}
+    params = {
+        **DEEPRACER_PARAMS, "WORLD_NAME": "pitlane-oval", "RACE_TYPE": "OBJECT_AVOIDANCE",
+        "NUMBER_OF_OBSTACLES": 9, "RANDOMIZE_OBSTACLE_LOCATIONS": "True",
+        "OBJECT_POSITIONS": ["0.2,-1", "0.5,1"], "CHANGE_START_POSITION": True,
+        "NUM_WORKERS": 6, "CAR_COLOR": "Purple", "BODY_SHELL_TYPE": "f1_2021",
+        "SAGEMAKER_SHARED_S3_BUCKET": "bucket", "SAGEMAKER_SHARED_S3_PREFIX": "rl-deepracer",
+        "AWS_REGION": "us-east-1",
+    }  # fmt: skip
+    members = deepracer_export(**{
+        "model_metadata.json": json.dumps(metadata).encode(),
+        "hyperparameters.json": json.dumps(hyper).encode(),
+        "training_params.yaml": yaml.safe_dump(params).encode(),
+    })  # fmt: skip
+    client.force_login(alice)
+    upload = SimpleUploadedFile("model.tar.gz", tar_gz(drfc_layout(members)))
+    response = client.post(reverse("training:model-import"), {"archive": upload}, follow=True)
+    page = response.text.replace("&quot;", '"').replace("&#x27;", "'")
+    listed = [
+        "Not carried over from hyperparameters.json: num_epochs 20. Number of epochs must be "
+        "between 3 and 10. The model uses 10.",
+        "Not carried over from hyperparameters.json: clip_range 0.3: not one of DeepRacer's "
+        "hyperparameters.",
+        "Not carried over from model_metadata.json: the sensor DISCRETIZED_SECTOR_LIDAR.",
+        "Not carried over from model_metadata.json: the network DEEP_CONVOLUTIONAL_NETWORK_DEEP.",
+        'Not carried over from model_metadata.json: lidar_config {"num_sectors": 8, '
+        '"clipping_dist": 2.0}.',
+        "Not carried over from training_params.yaml: NUMBER_OF_OBSTACLES 9, "
+        "RANDOMIZE_OBSTACLE_LOCATIONS True (",
+        "Not carried over from training_params.yaml: NUM_WORKERS 6. A model trains in 1 to 4",
+        'OBJECT_POSITIONS ["0.2,-1", "0.5,1"]',
+        "CHANGE_START_POSITION true",
+        "BODY_SHELL_TYPE f1_2021",
+        "(AWS_REGION, SAGEMAKER_SHARED_S3_BUCKET, SAGEMAKER_SHARED_S3_PREFIX); this console keeps",
+        "TensorFlow checkpoints were not carried over",
+    ]
+    for note in listed:
+        assert note in page, note
+    model = RLModel.objects.get(owner=alice)
+    assert (model.sensors, model.network) == (
+        ["FRONT_FACING_CAMERA"],
+        "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+    )
+    assert model.boxes == {"count": 3, "randomize": False} and model.race_type == "OBJECT_AVOIDANCE"
+    assert (model.workers, model.shell_colour) == (4, ShellColour.PURPLE)
+    assert model.hyperparameters["num_epochs"] == 10
+    assert model.hyperparameters["term_cond_avg_score"] == 350.0
+
+
+def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(alice, bob, tracks):
+    original = ready_model(alice)
+    stored = {**original.hyperparameters, "loss_type": "mse", "term_cond_avg_score": 350.0,
+              "exploration_type": "e-greedy", "sac_alpha": 0.3,
+              "discount_factor": 0.99}  # fmt: skip
+    stored.pop("stack_size")  # a model from before the kept keys: the export fills them in
+    RLModel.objects.filter(pk=original.pk).update(hyperparameters=stored)
+    original.refresh_from_db()
+    members = {}
+    with tarfile.open(fileobj=io.BytesIO(virtual_archive(original)), mode="r:gz") as tar:
+        for member in tar:
+            members[member.name] = tar.extractfile(member).read()
+    written = members["ip/hyperparameters.json"]
+    assert members["hyperparameters.json"] == written
+    expected = {**stored, "loss_type": "mean squared error", "stack_size": 1}
+    assert json.loads(written) == expected
+    assert list(json.loads(written)) == sorted(expected)  # as simapp writes it: sorted keys
+    imported = imports.import_model(owner=bob, archive=io.BytesIO(virtual_archive(original)))
+    assert imported.model.hyperparameters == expected
+    assert not [note for note in imported.notes if "carried over" in note]
