@@ -11,6 +11,7 @@ from django.core.files.base import ContentFile
 from django.core.files.storage import FileSystemStorage, default_storage
 from django.http import FileResponse, HttpResponse, HttpResponseRedirect
 
+from training.hyperparameters import deepracer_json
 from training.models import RLModel
 
 TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE section 5
@@ -116,11 +117,11 @@ def _delete_tree(directory: str) -> int:
 
 def model_files(model: RLModel) -> dict[str, str]:
     """DeepRacer's description of a model: its metadata, reward function and settings (the
-    hyperparameters are kept under DeepRacer's names)."""
+    hyperparameters.json as DeepRacer writes it: every key, DeepRacer's spellings)."""
     return {
         "model_metadata.json": json.dumps(model.metadata(), indent=2),
         "reward_function.py": model.reward_function,
-        "hyperparameters.json": json.dumps(model.hyperparameters, indent=2),
+        "hyperparameters.json": deepracer_json(model.algorithm, model.hyperparameters),
         "training_params.yaml": yaml.safe_dump(training_params(model), sort_keys=True),
     }
 

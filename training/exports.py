@@ -178,8 +178,7 @@ def deepracer_hyperparameters(model: RLModel) -> bytes:
     """The model's hyperparameters.json as DeepRacer writes it: every key of the algorithm, the
     ones this console keeps without using included, in DeepRacer's spellings, sorted and
     indented as simapp bundle/markov/sagemaker_graph_manager.py:233 (01f5f01) dumps them."""
-    values = hyperparameters.deepracer_file(model.algorithm, model.hyperparameters)
-    return json.dumps(values, indent=2, sort_keys=True).encode()
+    return hyperparameters.deepracer_json(model.algorithm, model.hyperparameters).encode()
 
 
 def pitlane_settings(model: RLModel) -> dict:

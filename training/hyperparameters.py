@@ -8,6 +8,7 @@ model and written back, so that a model goes to DeepRacer and back without losin
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
 
@@ -180,3 +181,9 @@ def deepracer_file(algorithm: str, stored: dict) -> dict:
     values, _ = check(algorithm, {})
     values.update({name: spelled(algorithm, name, value) for name, value in stored.items()})
     return dict(sorted(values.items()))  # simapp: json.dumps(..., sort_keys=True)
+
+
+def deepracer_json(algorithm: str, stored: dict) -> str:
+    """``deepracer_file`` as simapp writes it: sorted keys, indented by 2
+    (bundle/markov/sagemaker_graph_manager.py:233, 01f5f01)."""
+    return json.dumps(deepracer_file(algorithm, stored), indent=2, sort_keys=True)
