@@ -27,6 +27,7 @@ from django.core.management import CommandError, call_command
 from django.urls import reverse
 
 import simulator
+from simulator.controller import CentreLineDriver
 from tests.training.factories import trained_model
 from training import artifacts, history, logs_archive, trainer
 from training.experience import Episode
@@ -142,12 +143,18 @@ def new_model(owner, name: str) -> RLModel:
     return model
 
 
+STRAIGHT_AHEAD = 7  # 0° at 1 m/s in DeepRacer's default action space: off at the first bend
+
+
 def drive(env, seed: int) -> Episode:
-    """One episode as a rollout worker drives it: the prepare row, then a row per step."""
+    """One episode as a rollout worker drives it: the prepare row, then a row per step. An even
+    ``seed`` follows the centre line round a lap, an odd one goes straight off the track."""
     _, info = env.reset(seed=seed)
+    driver = CentreLineDriver(env.unwrapped) if seed % 2 == 0 else None
     trace, rewards = [list(info["trace"])], []
     while True:
-        _, reward, terminated, truncated, info = env.step(seed % 3 + 4)
+        action = driver.act() if driver else STRAIGHT_AHEAD
+        _, reward, terminated, truncated, info = env.step(action)
         trace.append(list(info["trace"]))
         rewards.append(reward)
         if terminated or truncated:
@@ -193,6 +200,8 @@ def train_on_paper(model: RLModel) -> None:
 def test_deepracer_utils_reads_the_training_logs_as_the_job_recorded_them(alice, tracks):
     model = new_model(alice, "paper-trained")
     train_on_paper(model)
+    points = [p for row in Iteration.objects.filter(job__model=model) for p in row.training_points]
+    assert {progress >= 100 for _, progress in points} == {True, False}  # laps and off-tracks
     assert_training_logs_read_as_recorded(model)
 
 
