@@ -367,6 +367,9 @@ def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
 def test_a_redis_restart_mid_job_is_recovered_or_fails_cleanly(
     alice, tracks, celery_worker_process
 ):
+    # This test runs last, after the browser tests: their jobs' rollouts, whose rows the flush
+    # took, hold the worker's pool until they see the job is gone. Begin once they have.
+    wait_for(lambda: not sandbox_children(), "earlier tests' rollouts to end", timeout=120)
     model = model_create(owner=alice, settings=settings(name="restarted"), validate_reward=False)
     job = wait_for_job(model.jobs.get(), lambda j: j.iterations >= 1, "a first update")
     services.SESSION_REDIS.restart()  # everything in Redis is gone: buffer, policy, queues
