@@ -55,6 +55,13 @@ def tracks_available() -> QuerySet[Track]:
     return Track.objects.all()
 
 
+def track_added_preview(*, name: str) -> bytes | None:
+    """The stored preview (PNG) of the track staff added under ``name``, or None where there is
+    none (a built-in track's is the simulator's file)."""
+    row = Track.objects.filter(name=name, added_at__isnull=False).values("preview").first()
+    return bytes(row["preview"]) if row and row["preview"] else None
+
+
 def vehicles_for_racer(*, racer: AbstractBaseUser) -> QuerySet[Vehicle]:
     return Vehicle.objects.filter(owner=racer)
 

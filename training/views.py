@@ -44,7 +44,7 @@ from training.forms import (
     RewardValidationForm,
     VehicleForm,
 )
-from training.models import EvaluationJob, JobLogLine, RewardFunction, RLModel, Track, Vehicle
+from training.models import EvaluationJob, JobLogLine, RewardFunction, RLModel, Vehicle
 from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
@@ -64,9 +64,9 @@ def model_list(request: HttpRequest) -> HttpResponse:
 def track_preview(request: HttpRequest, name: str) -> HttpResponse:
     """The top-down picture of a track: a built-in one's file, or the one stored with an added
     track (cached for less time: staff may replace the track)."""
-    added = Track.objects.filter(name=name, added_at__isnull=False).values("preview").first()
-    if added is not None and added["preview"]:
-        response = HttpResponse(bytes(added["preview"]), content_type="image/png")
+    preview = selectors.track_added_preview(name=name)
+    if preview is not None:
+        response = HttpResponse(preview, content_type="image/png")
         patch_cache_control(response, public=True, max_age=300)
         return response
     try:
