@@ -205,7 +205,8 @@ def _drive(
         channel.push_log(printed.take(sandbox, version + 1))
         if channel.count_episode(version) >= channel.episodes_wanted():
             channel.push_log(printed.close())  # this worker's share of the iteration is done
-            _await_next_version(channel, version, worker, attempt, viewing)
+            if not _await_next_version(channel, job, version, worker, viewing):
+                return "the training is over"
     return "the training ended"
 
 
@@ -218,16 +219,24 @@ def _still_wanted(job: TrainingJob) -> bool:
 
 
 def _await_next_version(
-    channel: JobChannel, version: int, worker: int, attempt: int, viewing: Viewing
-) -> None:
+    channel: JobChannel, job: TrainingJob, version: int, worker: int, viewing: Viewing
+) -> bool:
     """The trainer has the episodes it wants of this version: wait while it learns, rather than
-    drive episodes it would drop (and take the CPU it learns with)."""
-    while channel.policy_version() <= version and not channel.should_stop(attempt):
+    drive episodes it would drop (and take the CPU it learns with). False when the job's row says
+    it is over: a trainer that died, or a job deleted, without a word to Redis would otherwise
+    leave this worker waiting for ever, holding a place in the pool."""
+    checked = time.monotonic()
+    while channel.policy_version() <= version and not channel.should_stop(job.attempt):
+        if time.monotonic() - checked > JOB_CHECK:
+            checked = time.monotonic()
+            if not _still_wanted(job):
+                return False
         channel.beat(worker)
         viewing.update()
         viewing.hold()
         time.sleep(WAIT_POLL)
     viewing.resume()
+    return True
 
 
 def _where(failure: SandboxFailure, worker: int) -> str:

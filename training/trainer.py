@@ -8,6 +8,7 @@ comes, or something fails. It is the only writer of the job's rows while it hold
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import time
@@ -73,7 +74,12 @@ def run(job_id: int, owner: str, start_rollouts) -> bool:
     try:
         trainer.train()
     except LeaseLost:
-        logger.warning("Training job %s was taken over by another run; this one stops", job_id)
+        if TrainingJob.objects.filter(pk=job_id, status__in=TrainingJob.ACTIVE).exists():
+            logger.warning("Training job %s was taken over by another run; this one stops", job_id)
+        else:  # deleted under the run: no other run will tell its rollout workers
+            logger.warning("Training job %s vanished; its rollout workers are told to stop", job_id)
+            with contextlib.suppress(redis.RedisError):
+                trainer.channel.request_stop()
     except JobFailed as failure:
         trainer.finish(TrainingJob.Status.FAILED, reason=str(failure))
     except redis.RedisError as error:

@@ -8,9 +8,16 @@ import numpy as np
 import pytest
 
 import simulator
-from tests.training.test_training import TINY_PPO, settings, wait_for_job
+from console.workers import redis_client
+from tests.services import wait_for
+from tests.training.test_training import (
+    TINY_PPO,
+    sandbox_children,
+    settings,
+    wait_for_job,
+)
 from training import configuration, hyperparameters, rollouts, tasks
-from training.experience import Episode
+from training.experience import Episode, JobChannel
 from training.learner import Interrupted, Learner
 from training.models import Iteration, JobLogLine, RLModel, TrainingJob
 from training.services import training_stop
@@ -68,6 +75,32 @@ def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_
         source=JobLogLine.Source.WORKER, text="Simulation worker 1 is driving Pitlane Oval."
     ).exists()
     assert job.log_lines.filter(text__contains="1 simulation worker,").exists()
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_job_deleted_in_the_middle_of_an_update_frees_its_rollout_worker(
+    alice, tracks, celery_worker_process
+):
+    # A job whose row vanishes (an admin's delete, a test database flushed) says nothing to Redis:
+    # its rollout worker, waiting for the next policy, must still end and give back its place.
+    before = set(sandbox_children())
+    clean = configuration.check(settings(name="vanishing"), owner=alice, validate_reward=False)
+    clean["hyperparameters"] = {
+        **hyperparameters.defaults("clipped_ppo"), **TINY_PPO, "num_epochs": 100_000,
+    }  # fmt: skip
+    model = RLModel.objects.create(owner=alice, **clean)
+    job = TrainingJob.objects.create(model=model)
+    tasks.train.delay(job.pk)
+    wait_for_job(
+        job, lambda j: j.message.startswith("Learning iteration 1 from 5 episodes"),
+        "the first update to begin",
+    )  # fmt: skip
+    ours = set(sandbox_children()) - before
+    assert ours  # this job's rollout, waiting while the trainer learns
+
+    TrainingJob.objects.filter(pk=job.pk).delete()
+    wait_for(lambda: not ours & set(sandbox_children()), "the rollout to end", timeout=60)
+    assert redis_client().hget(JobChannel(redis_client(), job.pk).control, "stop") == b"1"
 
 
 def synthetic_episode(env, steps: int = 40) -> Episode:
