@@ -1,46 +1,180 @@
-"""The 1/18-scale car: its size, where its wheels are, and how it answers speed and steering.
+"""The 1/18-scale car: DeepRacer's simulated car as a rigid body on four tyres that grip until
+friction runs out.
 
-The car follows a kinematic bicycle model about its rear axle, integrated in sub-steps within each
-control step, with the lags a real car has: speed approaches the command with a first-order time
-constant, and the steering servo turns at a limited rate. At DeepRacer's speeds (at most 4 m/s) a
-1/18 car on carpet barely slips, so a tyre model would cost time without changing what a policy
-learns; collisions with boxes and bot cars are detected by the PyBullet world (``simulator.world``).
+DeepRacer trains in Gazebo (ODE): a 6.6 kg rigid chassis on four wheel bodies, each wheel driven by
+a velocity controller toward ``speed / 0.035`` rad/s and the front pair turned by position
+controllers, the tyres held by Coulomb friction (mu 0.5). We model the same car as a single-track
+(bicycle) rigid body in the plane: each axle's contact carries the two wheels' forces, the tyres
+do not slip while the force they need stays within ``mu * N`` along and across the wheel (ODE's
+friction pyramid), and slide with that force once it does not. Within the grip limit the car
+follows the kinematic bicycle's arc exactly; beyond it the front slides (understeer) or the rear
+steps out (oversteer, a spin). The wheel controllers push the car toward the wheel speed they are
+asked for, as hard as the friction allows, so how fast the car speeds up, brakes and turns comes
+from the controllers' gains and the grip, not from a lag constant.
+
+Each sub-step solves the contact forces as ODE's solver does: velocity constraints at the two
+axles (no sliding across a wheel; along it, the wheel controller's pull toward its target),
+solved by projected Gauss-Seidel with each force clipped to the friction it can have. The
+solve is implicit, so it stays stable at any step; collisions with boxes and bot cars are
+detected by the PyBullet world (``simulator.world``).
+
+Every number below names its source: deepracer-simapp at 2fc2d75c, the last commit of the ROS 1 /
+Gazebo classic simulator that the DeepRacer console ran (its ROS 2 port, 01f5f01, keeps these
+numbers, see the notes on ``CarSpec``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
+
+GRAVITY = 9.81  # [m/s²]
+URDF = "bundle/urdf/deepracer/deepracer_single_cam.urdf"  # at 2fc2d75c
+WHEEL_MASS = 0.34055  # [kg] each wheel: URDF:46 (and each wheel link)
+WHEEL_IZZ = 0.00026046  # [kg m²] a wheel about the vertical axis: URDF:54
+HINGE_MASS = 0.1  # [kg] each steering hinge: URDF:152
+HINGE_IZZ = 4e-6  # [kg m²]: URDF:160
+REAR_AXLE_X = -0.081663  # [m] rear wheel joints, in the chassis frame: URDF:80-81 (left), 133
+FRONT_AXLE_X = 0.082311  # [m] front steering hinges: URDF:177-178 (left), 276
+REAR_WHEEL_Y = 0.08105  # [m] half the rear track: URDF:81
+FRONT_WHEEL_Y = 0.079601  # [m] half the front track: URDF:178
+CHASSIS_Z = 0.023249  # [m] chassis above base_link: URDF:35-36 (base_link_joint)
+REAR_AXLE_Z, FRONT_AXLE_Z = 0.01575, 0.011759  # [m] wheel centres above the chassis: URDF:81, 178
+
+
+@dataclass(frozen=True)
+class Part:
+    """A rigid part of the car: its mass, where its centre is (chassis frame, x forward, z up,
+    from the chassis origin) and its moment of inertia about its own vertical axis."""
+
+    mass: float  # [kg]
+    x: float  # [m]
+    y: float  # [m]
+    z: float  # [m]
+    izz: float  # [kg m²]
+
+
+def deepracer_parts() -> tuple[Part, ...]:
+    """The single-camera car's links (URDF at 2fc2d75c); the camera and lidar links weigh 1 g or
+    less and are left out. The stereo car's differ by 2 g (its second camera link)."""
+    wheels = [
+        Part(WHEEL_MASS, axle, side * half, z, WHEEL_IZZ)
+        for axle, half, z in ((REAR_AXLE_X, REAR_WHEEL_Y, REAR_AXLE_Z),
+                              (FRONT_AXLE_X, FRONT_WHEEL_Y, FRONT_AXLE_Z))
+        for side in (1, -1)
+    ]  # fmt: skip
+    hinges = [Part(HINGE_MASS, FRONT_AXLE_X, side * FRONT_WHEEL_Y, FRONT_AXLE_Z, HINGE_IZZ)
+              for side in (1, -1)]  # fmt: skip
+    # The chassis: 5.0 kg, its centre at the chassis origin, izz 0.05865 kg m²: URDF:10-24.
+    return (Part(5.0, 0.0, 0.0, 0.0, 0.05865), *wheels, *hinges)
 
 
 @dataclass(frozen=True)
 class CarSpec:
-    """DeepRacer's car at 1/18 scale. The origin is the middle of the rear axle."""
+    """DeepRacer's simulated car at 1/18 scale. The car's origin here is the middle of the rear
+    axle; DeepRacer's (base_link) is 0.0817 m ahead of it, nearly midway between the axles."""
 
+    # The body, for collisions, the lidar and drawing.
     length: float = 0.32  # [m] bumper to bumper
     width: float = 0.20  # [m]
     height: float = 0.12  # [m] of the body above the ground
-    wheelbase: float = 0.165  # [m] rear axle to front axle
-    wheel_track: float = 0.16  # [m] between the wheels' contact points, left to right
     rear_overhang: float = 0.075  # [m] rear axle to rear bumper
-    # [m] ahead of the middle between the axles (DeepRacer's model origin): the point that
-    # params["x"], ["y"] and the trace's X, Y report. simapp
+    wheel_track: float = 2 * REAR_WHEEL_Y  # [m] between the rear wheels' contact points
+    # [m] ahead of base_link: the point that params["x"], ["y"] and the trace's X, Y report. simapp
     # bundle/markov/agent_ctrl/constants.py:24 (RELATIVE_POSITION_OF_FRONT_OF_CAR),
-    # rollout_agent_ctrl.py:630-638 (01f5f01); the origin is base_link, midway between the
-    # axles (bundle/urdf/deepracer/deepracer_single_cam.urdf:86,183).
+    # rollout_agent_ctrl.py:630-638 (01f5f01).
     position_offset: float = 0.14
+    parts: tuple[Part, ...] = field(default_factory=deepracer_parts)
+
+    # The action's limits: simapp bundle/markov/agent_ctrl/constants.py:40-44 (2fc2d75c).
     max_steering: float = 30.0  # [deg]
-    steering_rate: float = 360.0  # [deg/s] of the steering servo
-    speed_time_constant: float = 0.25  # [s] to reach 63% of a new commanded speed
     min_speed: float = 0.1  # [m/s] commanded
     max_speed: float = 4.0  # [m/s] commanded
+
+    # Tyres: mu1 = mu2 = 0.5 on every wheel, racecar.gazebo:11-45; the track sets no friction of
+    # its own, and ODE takes the smaller of the two. Gazebo's ODE clips the force along and across
+    # each contact separately (its default "pyramid" friction model), as we do per axle.
+    friction: float = 0.5
+    # [m] the wheels' collision meshes (bundle/meshes/deepracer/*_wheel.STL): 36.0 mm to the tread.
+    wheel_radius: float = 0.036
+    # [m] the radius the action's speed is divided by to get the wheels' angular velocity,
+    # agent_ctrl/utils.py:212-217 and rollout_agent_ctrl.py:687. A wheel turning at speed/0.035
+    # rad/s on a 0.036 m tread rolls 2.9% faster than the action asks.
+    command_radius: float = 0.035
+    # [rad/s] the wheel joints' velocity limit, URDF:89-91; ros_control's saturation handle stops
+    # driving a wheel past it, so the car rolls at most 100 * 0.036 = 3.6 m/s.
+    wheel_speed_limit: float = 100.0
+    # [N m per rad/s] the wheel velocity controllers' proportional gains, the same on both wheels
+    # of an axle: config/racecar_control.yaml:11,15 (rear), 19,23 (front); torque is capped at
+    # 10 N m (URDF:89-91), 280 N at the tread, far beyond the grip, so the cap never binds.
+    rear_wheel_gain: float = 1.0
+    front_wheel_gain: float = 0.5
+    # The steering hinges' PD controllers, racecar_control.yaml:30,34: torque 1.0 * error - 0.5 *
+    # rate. The hinge with its wheel weighs so little (2.6e-4 kg m²) that the angle follows
+    # d(angle)/dt = (p / d) * error: a first-order lag of d / p = 0.5 s.
+    steering_p: float = 1.0
+    steering_d: float = 0.5
+
+    @cached_property
+    def mass(self) -> float:
+        return sum(part.mass for part in self.parts)
+
+    @cached_property
+    def _centre(self) -> tuple[float, float]:
+        """The centre of mass: ahead of the chassis origin [m], above the ground [m]."""
+        x = sum(p.mass * p.x for p in self.parts) / self.mass
+        z = sum(p.mass * p.z for p in self.parts) / self.mass
+        # The ground is the wheels' tread: the rear axle's height less the wheel radius.
+        ground = REAR_AXLE_Z + CHASSIS_Z - self.wheel_radius
+        return x, z + CHASSIS_Z - ground
+
+    @property
+    def wheelbase(self) -> float:
+        return FRONT_AXLE_X - REAR_AXLE_X
+
+    @property
+    def rear_to_centre(self) -> float:
+        """[m] from the rear axle forward to the centre of mass."""
+        return self._centre[0] - REAR_AXLE_X
+
+    @property
+    def centre_height(self) -> float:
+        """[m] of the centre of mass above the ground: it moves weight between the axles."""
+        return self._centre[1]
+
+    @cached_property
+    def yaw_inertia(self) -> float:
+        """[kg m²] about the vertical axis through the centre of mass."""
+        cx = self._centre[0]
+        return sum(p.izz + p.mass * ((p.x - cx) ** 2 + p.y**2) for p in self.parts)
+
+    @property
+    def top_speed(self) -> float:
+        """[m/s] the fastest the wheels are driven: the action's top speed or the joint limit."""
+        return self.wheel_target(self.max_speed)
+
+    def wheel_target(self, speed: float) -> float:
+        """[m/s] the speed of the tread the wheel controllers drive toward for a commanded speed."""
+        return min(speed / self.command_radius, self.wheel_speed_limit) * self.wheel_radius
+
+    @property
+    def steering_time_constant(self) -> float:
+        """[s] of the steering's first-order response."""
+        return self.steering_d / self.steering_p
+
+    @property
+    def base_link(self) -> float:
+        """[m] from our origin forward to DeepRacer's model origin, base_link (the chassis origin,
+        URDF:35-36): 0.3 mm short of midway between the axles."""
+        return -REAR_AXLE_X
 
     @property
     def report_offset(self) -> float:
         """[m] from our origin (the rear axle) forward to the point DeepRacer reports."""
-        return self.wheelbase / 2 + self.position_offset
+        return self.base_link + self.position_offset
 
     @property
     def centre_offset(self) -> float:
@@ -48,44 +182,130 @@ class CarSpec:
         return self.length / 2 - self.rear_overhang
 
 
-class Car:
-    """The car's state (pose, speed, steering) and its motion over one control step."""
+SOLVER_ITERATIONS = 4  # Gauss-Seidel sweeps over the four axle constraints per sub-step
 
-    def __init__(self, spec: CarSpec | None = None, substeps: int = 4) -> None:
+
+class Car:
+    """The car's state (pose, velocity, steering) and its motion over one control step.
+
+    ``x``, ``y`` (the middle of the rear axle) and ``yaw`` are its pose; ``speed`` its velocity
+    along its heading, ``lateral_speed`` across it (leftward, at the centre of mass), ``yaw_rate``
+    its turning, ``steering`` the front wheels' angle [rad]."""
+
+    def __init__(self, spec: CarSpec | None = None, substeps: int = 8) -> None:
         self.spec = spec or CarSpec()
         self.substeps = substeps
-        self.x = self.y = self.yaw = 0.0  # [m], [m], [rad]
-        self.speed = 0.0  # [m/s]
-        self.steering = 0.0  # [rad]
+        self.place(0.0, 0.0, 0.0)
 
     def place(self, x: float, y: float, yaw: float) -> None:
         """Put the car at rest at a pose."""
         self.x, self.y, self.yaw = x, y, yaw
-        self.speed = self.steering = 0.0
+        self.speed = self.lateral_speed = self.yaw_rate = 0.0
+        self.steering = 0.0
+        self._velocity = [0.0, 0.0]  # [m/s] of the centre of mass, world frame
+        self._impulses = [0.0, 0.0, 0.0, 0.0]  # the last sub-step's, to start the next solve
+        self._accel = 0.0  # [m/s²] along the heading in the last sub-step: it moves the weight
+        self.sliding = False  # whether an axle slid sideways in the last control step
+
+    @property
+    def slip_angle(self) -> float:
+        """[rad] between the heading and the direction the centre of mass travels."""
+        return math.atan2(self.lateral_speed, self.speed)
 
     def step(self, speed_command: float, steering_command_deg: float, dt: float) -> float:
         """Drive for ``dt`` seconds toward the commands; the distance the origin moved [m]."""
         spec = self.spec
         h = dt / self.substeps
-        blend = 1.0 - math.exp(-h / spec.speed_time_constant)
-        target = math.radians(steering_command_deg)
-        max_turn = math.radians(spec.steering_rate) * h
+        m, inertia = spec.mass, spec.yaw_inertia
+        b = spec.rear_to_centre
+        a = spec.wheelbase - b
+        length, height, mu = spec.wheelbase, spec.centre_height, spec.friction
+        target = spec.wheel_target(speed_command)
+        steer_target = math.radians(steering_command_deg)
+        steer_keep = math.exp(-h / spec.steering_time_constant)
+        # The wheel controllers, as dampers at the tread toward the target speed: a torque of
+        # gain * (target - speed) / radius per wheel, two wheels an axle. In the solve this is a
+        # soft constraint whose softness is 1 / (h * stiffness) [Catto, "Soft Constraints"].
+        radius = spec.wheel_radius
+        soft_rear = 1.0 / (h * 2 * spec.rear_wheel_gain / radius**2)
+        soft_front = 1.0 / (h * 2 * spec.front_wheel_gain / radius**2)
+        inv_m, inv_i = 1.0 / m, 1.0 / inertia
+        k_rear_lat = inv_m + b * b * inv_i
+        vx, vy = self._velocity
+        r = self.yaw_rate
+        # The centre of mass, from the rear axle's pose.
+        yaw = self.yaw
+        cx, cy = self.x + b * math.cos(yaw), self.y + b * math.sin(yaw)
         start_x, start_y = self.x, self.y
+        p_rl, p_rt, p_fl, p_ft = self._impulses
+        slid = False
         for _ in range(self.substeps):
-            self.steering += min(max(target - self.steering, -max_turn), max_turn)
-            self.speed += (speed_command - self.speed) * blend
-            yaw_rate = self.speed * math.tan(self.steering) / spec.wheelbase
-            # Exact integration along an arc (straight when the yaw rate is ~0).
-            if abs(yaw_rate) > 1e-9:
-                new_yaw = self.yaw + yaw_rate * h
-                radius = self.speed / yaw_rate
-                self.x += radius * (math.sin(new_yaw) - math.sin(self.yaw))
-                self.y -= radius * (math.cos(new_yaw) - math.cos(self.yaw))
-                self.yaw = new_yaw
-            else:
-                self.x += self.speed * h * math.cos(self.yaw)
-                self.y += self.speed * h * math.sin(self.yaw)
-        self.yaw = math.atan2(math.sin(self.yaw), math.cos(self.yaw))
+            self.steering = steer_target + (self.steering - steer_target) * steer_keep
+            delta = self.steering
+            cos_y, sin_y = math.cos(yaw), math.sin(yaw)
+            cos_f, sin_f = math.cos(yaw + delta), math.sin(yaw + delta)
+            sin_d, cos_d = math.sin(delta), math.cos(delta)
+            # Each axle's load: its static share, moved forward under braking and back under
+            # acceleration by the centre of mass's height.
+            transfer = m * self._accel * height / length
+            limit_rear = mu * max(m * GRAVITY * a / length + transfer, 0.0) * h
+            limit_front = mu * max(m * GRAVITY * b / length - transfer, 0.0) * h
+            k_front_long = inv_m + (a * sin_d) ** 2 * inv_i
+            k_front_lat = inv_m + (a * cos_d) ** 2 * inv_i
+            # Start from the last sub-step's forces (warm start): the solve then converges in
+            # a few sweeps. Apply them, then correct.
+            p_rl, p_rt, p_fl, p_ft = (
+                min(max(p_rl, -limit_rear), limit_rear), min(max(p_rt, -limit_rear), limit_rear),
+                min(max(p_fl, -limit_front), limit_front),
+                min(max(p_ft, -limit_front), limit_front),
+            )  # fmt: skip
+            vx += (p_rl * cos_y - p_rt * sin_y + p_fl * cos_f - p_ft * sin_f) * inv_m
+            vy += (p_rl * sin_y + p_rt * cos_y + p_fl * sin_f + p_ft * cos_f) * inv_m
+            r += (-b * p_rt + a * (p_fl * sin_d + p_ft * cos_d)) * inv_i
+            for _ in range(SOLVER_ITERATIONS):
+                # Rear, along the wheel: the controller's pull toward the target speed.
+                u = vx * cos_y + vy * sin_y
+                step = (target - u - soft_rear * p_rl) / (inv_m + soft_rear)
+                new = min(max(p_rl + step, -limit_rear), limit_rear)
+                step, p_rl = new - p_rl, new
+                vx += step * cos_y * inv_m
+                vy += step * sin_y * inv_m
+                # Rear, across the wheel: no sliding.
+                w = -vx * sin_y + vy * cos_y - r * b
+                new = min(max(p_rt - w / k_rear_lat, -limit_rear), limit_rear)
+                step, p_rt = new - p_rt, new
+                vx -= step * sin_y * inv_m
+                vy += step * cos_y * inv_m
+                r -= step * b * inv_i
+                # Front, along the wheel.
+                u = vx * cos_f + vy * sin_f + r * a * sin_d
+                step = (target - u - soft_front * p_fl) / (k_front_long + soft_front)
+                new = min(max(p_fl + step, -limit_front), limit_front)
+                step, p_fl = new - p_fl, new
+                vx += step * cos_f * inv_m
+                vy += step * sin_f * inv_m
+                r += step * a * sin_d * inv_i
+                # Front, across the wheel.
+                w = -vx * sin_f + vy * cos_f + r * a * cos_d
+                new = min(max(p_ft - w / k_front_lat, -limit_front), limit_front)
+                step, p_ft = new - p_ft, new
+                vx -= step * sin_f * inv_m
+                vy += step * cos_f * inv_m
+                r += step * a * cos_d * inv_i
+            slid = slid or abs(p_rt) >= limit_rear or abs(p_ft) >= limit_front
+            self._accel = (p_rl + p_fl * cos_d - p_ft * sin_d) / (m * h)
+            cx += vx * h
+            cy += vy * h
+            yaw += r * h
+        yaw = math.atan2(math.sin(yaw), math.cos(yaw))
+        cos_y, sin_y = math.cos(yaw), math.sin(yaw)
+        self.yaw, self.yaw_rate = yaw, r
+        self.x, self.y = cx - b * cos_y, cy - b * sin_y
+        self._velocity = [vx, vy]
+        self._impulses = [p_rl, p_rt, p_fl, p_ft]
+        self.speed = vx * cos_y + vy * sin_y
+        self.lateral_speed = -vx * sin_y + vy * cos_y
+        self.sliding = slid
         return math.hypot(self.x - start_x, self.y - start_y)
 
     def point_ahead(self, distance: float) -> tuple[float, float]:
@@ -93,17 +313,16 @@ class Car:
 
     @property
     def position(self) -> tuple[float, float]:
-        """The point DeepRacer reports as the car's position: ``position_offset`` ahead of the
-        middle between the axles."""
+        """The point DeepRacer reports as the car's position: ``position_offset`` ahead of
+        base_link."""
         return self.point_ahead(self.spec.report_offset)
 
     def wheels(self) -> np.ndarray:
         """The wheels' contact points, (4, 2): rear left, rear right, front left, front right."""
         c, s = math.cos(self.yaw), math.sin(self.yaw)
         half = self.spec.wheel_track / 2
-        local = np.array(
-            [[0.0, half], [0.0, -half], [self.spec.wheelbase, half], [self.spec.wheelbase, -half]]
-        )
+        base = self.spec.wheelbase
+        local = np.array([[0.0, half], [0.0, -half], [base, half], [base, -half]])
         return np.column_stack(
             [self.x + local[:, 0] * c - local[:, 1] * s, self.y + local[:, 0] * s + local[:, 1] * c]
         )

@@ -11,43 +11,137 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from simulator.car import GRAVITY
 from simulator.config import ContinuousActions
 from simulator.env import DeepRacerEnv
 
 
 class CentreLineDriver:
-    """Pure pursuit of a point ``lookahead`` metres ahead on the centre line, at ``speed``."""
+    """A scripted driver that follows the centre line at ``speed``.
 
-    def __init__(self, env: DeepRacerEnv, speed: float = 1.0, lookahead: float = 0.45) -> None:
+    It steers as a path-following controller does (Stanley's, with the curvature ahead fed
+    forward): the front axle is turned toward the centre line's heading, corrected by how far it
+    is off the line, plus the steering that the curvature of the line ahead needs. The steering
+    answers its command with a first-order lag (``CarSpec.steering_time_constant``, 0.5 s), so
+    the driver looks for the curvature where the car will be once the wheels have turned, and
+    commands past the angle it wants, enough for the wheels to reach it within ``settle``
+    seconds, as a racing policy learns to."""
+
+    SPACING = 0.05  # [m] between the points where the centre line's curvature is known
+    WINDOW = 0.25  # [m] on either side of a point, over which its curvature is measured
+
+    def __init__(
+        self,
+        env: DeepRacerEnv,
+        speed: float = 1.0,
+        gain: float = 2.0,
+        settle: float = 0.2,
+        anticipation: float = 0.3,
+        overshoot: float = 2.0,
+    ) -> None:
         self.env = env
         self.speed = speed
-        self.lookahead = lookahead
+        self.gain = gain  # [1/s] how fast an offset from the line is steered out
+        self.settle = settle  # [s]
+        self.anticipation = anticipation  # [s] ahead, where the curvature is read
+        self.overshoot = overshoot  # the command's limit, in multiples of the grip's angle
+        self.curvature = curvature(env.track, self.SPACING, self.WINDOW)
 
     def steering(self) -> float:
-        """[deg] the steering that points the car at the pursuit point, within ±30°."""
+        """[deg] the steering command, within ±30°."""
         env, car = self.env, self.env.car
-        here = float(env.track.project_points([(car.x, car.y)]).distance[0])
-        x, y, _ = env.track.point_at(here + self.lookahead)
-        alpha = math.atan2(float(y) - car.y, float(x) - car.x) - car.yaw
-        alpha = math.atan2(math.sin(alpha), math.cos(alpha))
-        distance = max(math.hypot(float(x) - car.x, float(y) - car.y), 1e-6)
-        steering = math.degrees(math.atan2(2 * car.spec.wheelbase * math.sin(alpha), distance))
-        return max(-car.spec.max_steering, min(car.spec.max_steering, steering))
+        spec = car.spec
+        front = car.point_ahead(spec.wheelbase)
+        where = env.track.project_points([front])
+        here = float(where.distance[0])
+        _, _, heading = env.track.point_at(here)
+        offset = float(where.offset[0]) * (1.0 if where.is_left[0] else -1.0)  # left of the line
+        speed = max(car.speed, 0.3)
+        ahead = here + speed * self.anticipation
+        bend = float(self.curvature[int(ahead / self.SPACING) % len(self.curvature)])
+        error = math.atan2(math.sin(float(heading) - car.yaw), math.cos(float(heading) - car.yaw))
+        wanted = math.atan(spec.wheelbase * bend) + error + math.atan2(-self.gain * offset, speed)
+        # Beyond the angle whose turn the grip can hold, the front tyres only slide.
+        grip = math.atan(spec.wheelbase * spec.friction * GRAVITY / speed**2)
+        wanted = max(-grip, min(grip, wanted))
+        now = car.steering
+        reached = 1.0 - math.exp(-self.settle / spec.steering_time_constant)
+        command = now + (wanted - now) / reached
+        limit = min(math.radians(spec.max_steering), self.overshoot * grip)
+        return math.degrees(max(-limit, min(limit, command)))
+
+    def target_speed(self) -> float:
+        """[m/s] the speed to command now."""
+        return self.speed
 
     def act(self):
-        """The action, in the environment's action space, closest to steering at ``speed``."""
+        """The action, in the environment's action space, closest to steering at the target
+        speed."""
         steering = self.steering()
+        speed = self.target_speed()
         actions = self.env.actions
         if isinstance(actions, ContinuousActions):
             (s_low, s_high), (v_low, v_high) = actions.steering, actions.speed
             return np.array(
                 [2 * (steering - s_low) / (s_high - s_low) - 1,
-                 2 * (self.speed - v_low) / (v_high - v_low) - 1],
+                 2 * (speed - v_low) / (v_high - v_low) - 1],
                 dtype=np.float32,
             )  # fmt: skip
         table = np.array(actions.actions)
-        cost = np.abs(table[:, 0] - steering) / 30.0 + np.abs(table[:, 1] - self.speed)
+        cost = np.abs(table[:, 0] - steering) / 30.0 + np.abs(table[:, 1] - speed)
         return int(np.argmin(cost))
+
+
+class BrakingDriver(CentreLineDriver):
+    """The centre-line driver with a racer's speed: as fast as the grip allows in each corner, up
+    to ``speed``, braking before corners and accelerating out of them.
+
+    The profile comes from the centre line's curvature and the car's friction: the highest speed
+    whose centripetal acceleration a share (``grip``) of mu * g covers, then limited by the
+    acceleration (forward pass) and braking (backward pass) that the same share allows."""
+
+    def __init__(self, env: DeepRacerEnv, speed: float = 4.0, grip: float = 0.8, **kw) -> None:
+        super().__init__(env, speed=speed, **kw)
+        self.profile = speed_profile(env.track, env.car.spec, speed, grip,
+                                     self.SPACING, self.WINDOW)  # fmt: skip
+
+    def target_speed(self) -> float:
+        env, car = self.env, self.env.car
+        # The command acts over the next step: ask now for the speed due where the car will be.
+        ahead = env.track.project_points([car.position]).distance[0] + car.speed * env.dt
+        index = int(ahead / self.SPACING) % len(self.profile)
+        return float(self.profile[index])
+
+
+def curvature(track, spacing: float, window: float) -> np.ndarray:
+    """[1/m] the centre line's curvature every ``spacing`` metres, positive where it turns left:
+    the turn between the chords ``window`` metres either side, whose middles are ``window``
+    apart."""
+    distances = np.arange(0.0, track.length, spacing)
+    before = track.point_at(distances - window)
+    after = track.point_at(distances + window)
+    x, y, _ = track.point_at(distances)
+    heading_in = np.arctan2(y - before[1], x - before[0])
+    heading_out = np.arctan2(after[1] - y, after[0] - x)
+    turn = np.angle(np.exp(1j * (heading_out - heading_in)))
+    return turn / window
+
+
+def speed_profile(track, spec, top: float, grip: float, spacing: float, window: float):
+    """[m/s] the commanded speed every ``spacing`` metres round the lap (see ``BrakingDriver``)."""
+    usable = grip * spec.friction * GRAVITY  # [m/s²]
+    rolling = spec.wheel_target(1.0)  # [m/s] rolled per 1 m/s commanded
+    limit = np.sqrt(usable / np.maximum(np.abs(curvature(track, spacing, window)), 1e-6))
+    speed = np.minimum(limit, spec.wheel_target(top))  # [m/s] rolled
+    n = len(speed)
+    for _ in range(2):  # twice round, so the limits carry over the start line
+        for i in range(2 * n):  # accelerate out of corners
+            j, k = i % n, (i - 1) % n
+            speed[j] = min(speed[j], math.sqrt(speed[k] ** 2 + 2 * usable * spacing))
+        for i in range(2 * n, 0, -1):  # brake before them
+            j, k = i % n, (i + 1) % n
+            speed[j] = min(speed[j], math.sqrt(speed[k] ** 2 + 2 * usable * spacing))
+    return np.clip(speed / rolling, spec.min_speed, top)
 
 
 @dataclass

@@ -18,9 +18,8 @@ from tests.simulator.conftest import make
 WIDTH = 1.0668  # [m]
 RADIUS = 2.0  # [m] of the half circles
 SPEC = CarSpec()
-# simapp: the reported point is 0.14 m ahead of base_link, which is midway between the axles
+# simapp: the reported point is 0.14 m ahead of base_link, which is nearly midway between the axles
 # (agent_ctrl/constants.py:24, rollout_agent_ctrl.py:630-638); our car's origin is the rear axle.
-MIDDLE = SPEC.wheelbase / 2
 
 
 def stadium(repeat: int | None = None) -> np.ndarray:
@@ -66,16 +65,16 @@ def env(route):
 
 
 def held_at(env, monkeypatch, x: float, y: float, yaw: float = 0.0, *, reported: bool = True):
-    """Put the car where its reported point (or, with ``reported=False``, the middle between its
-    axles) is (x, y), hold it there, and take one step: that step's info."""
-    ahead = SPEC.report_offset if reported else MIDDLE
+    """Put the car where its reported point (or, with ``reported=False``, base_link, its model
+    origin) is (x, y), hold it there, and take one step: that step's info."""
+    ahead = SPEC.report_offset if reported else SPEC.base_link
     car = env.unwrapped.car
     car.place(x - ahead * math.cos(yaw), y - ahead * math.sin(yaw), yaw)
     monkeypatch.setattr(car, "step", lambda *args: 0.0)
     return env.step(2)[4]  # 0° at 0.5 m/s, going nowhere
 
 
-def test_x_y_is_014_m_ahead_of_the_middle_between_the_axles(env, monkeypatch):
+def test_x_y_is_014_m_ahead_of_base_link(env, monkeypatch):
     # simapp rollout_agent_ctrl.py:630-638; the trace's X, Y is the same point (utils.py:117-120).
     info = held_at(env(), monkeypatch, 2.0, -2.0, reported=False)
     params, row = info["params"], info["trace"]

@@ -6,6 +6,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 from simulator import tracks
+from simulator.car import GRAVITY
 from simulator.config import ConfigError
 from simulator.controller import CentreLineDriver
 from simulator.rewards import RewardError
@@ -87,8 +88,11 @@ def test_the_scripted_driver_laps_every_track_in_the_time_its_speed_predicts(
     assert infos[-1]["status"] == "lap_complete"
     assert infos[-1]["resets"] == 0
     (lap,) = infos[-1]["lap_times"]
-    # The driver follows the centre line at ``speed`` after a start lag of about one time constant.
-    expected = env.unwrapped.track.length / speed + env.unwrapped.car.spec.speed_time_constant
+    # The driver follows the centre line at the speed the wheels are driven at, after a start at
+    # the acceleration the grip allows (4WD: mu * g), which loses half the time it takes.
+    spec = env.unwrapped.car.spec
+    rolling = spec.wheel_target(speed)
+    expected = env.unwrapped.track.length / rolling + rolling / (2 * spec.friction * GRAVITY)
     assert lap == pytest.approx(expected, rel=0.03)
 
 
@@ -205,13 +209,13 @@ def test_the_reward_params_have_every_key_with_the_right_types_and_ranges(enviro
     assert seen[0]["steps"] == 2.0 and seen[-1]["steps"] == len(seen) + 1  # 1 is prepare
 
 
-def test_the_params_point_is_014_m_ahead_of_the_middle_between_the_axles(environments):
+def test_the_params_point_is_014_m_ahead_of_base_link(environments):
     env = environments(track="pitlane-oval")
     env.reset(seed=0)
     infos = drive(env, steps=5)
     params, row = infos[-1]["params"], infos[-1]["trace"]
     car = env.unwrapped.car
-    ahead = car.spec.wheelbase / 2 + 0.14  # our origin is the rear axle
+    ahead = car.spec.base_link + 0.14  # our origin is the rear axle
     assert params["x"] == pytest.approx(car.x + ahead * math.cos(car.yaw))
     assert params["y"] == pytest.approx(car.y + ahead * math.sin(car.yaw))
     assert (params["x"], params["y"]) == (row.X, row.Y)
