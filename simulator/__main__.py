@@ -1,4 +1,8 @@
-"""Command line: ``python -m simulator demo --track NAME --out demo.mp4``."""
+"""Command line: ``python -m simulator demo --track NAME [--speed M/S] [--braking] --out FILE``.
+
+A scripted driver laps the track along its centre line and films it. At a constant speed too high
+for a track's corners the car slides, and leaves the track (``--track hairpin-alley --speed 3``);
+with ``--braking`` the driver brakes for each corner as the car's grip asks, and laps faster."""
 
 from __future__ import annotations
 
@@ -12,12 +16,13 @@ import gymnasium
 import simulator
 from simulator import tracks
 from simulator.config import ConfigError
-from simulator.controller import CentreLineDriver
+from simulator.controller import BrakingDriver, CentreLineDriver
 from simulator.tracks import TrackError
 
 
-def demo(track: str, direction: str, speed: float, out: Path) -> str:
-    """Drive one lap with the scripted centre-line driver and write the spectator video."""
+def demo(track: str, direction: str, speed: float, out: Path, braking: bool = False) -> str:
+    """Drive one lap with the scripted centre-line driver and write the spectator video; what
+    happened, in a line."""
     env = gymnasium.make(
         simulator.ENV_ID,
         track=track,
@@ -28,8 +33,9 @@ def demo(track: str, direction: str, speed: float, out: Path) -> str:
         action_space={"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.1, "high": 4}},
     )
     car = env.unwrapped
-    driver = CentreLineDriver(car, speed=speed)
     env.reset(seed=0)
+    driver = (BrakingDriver if braking else CentreLineDriver)(car, speed=speed)
+    slid = 0
     out.parent.mkdir(parents=True, exist_ok=True)
     writer = cv2.VideoWriter(str(out), cv2.VideoWriter_fourcc(*"mp4v"), 15, (640, 480))
     if not writer.isOpened():
@@ -40,16 +46,22 @@ def demo(track: str, direction: str, speed: float, out: Path) -> str:
         info, done = {}, False
         while not done:
             _, _, terminated, truncated, info = env.step(driver.act())
+            slid += car.car.sliding
             writer.write(spectator.render(car))
             done = terminated or truncated
     finally:
         writer.release()
         env.close()
     laps = info.get("lap_times") or []
+    how = f"braking for corners, up to {speed} m/s" if braking else f"at {speed} m/s"
+    happened = f"lap in {laps[0]:.3f} s {how}" if laps else f"stopped: {info.get('status')}"
+    if slid:
+        happened += f"; slid for {slid / car.config['control_hz']:.1f} s"
+    if info.get("resets"):
+        happened += f", left the track {info['resets']} time{'s' if info['resets'] > 1 else ''}"
     return (
-        f"{car.track.display_name} ({direction}, {car.track.length:.2f} m): "
-        + (f"lap in {laps[0]:.3f} s at {speed} m/s" if laps else f"stopped: {info.get('status')}")
-        + f"; video in {out}"
+        f"{car.track.display_name} ({direction}, {car.track.length:.2f} m): {happened}; "
+        f"video in {out}"
     )
 
 
@@ -60,13 +72,21 @@ def main(argv: list[str] | None = None) -> int:
     drive.add_argument("--track", required=True, help=f"one of: {', '.join(tracks.names())}")
     drive.add_argument("--direction", default="counterclockwise",
                        choices=["counterclockwise", "clockwise"])  # fmt: skip
-    drive.add_argument("--speed", type=float, default=1.5, help="[m/s] 0.1 to 4 (default 1.5)")
+    drive.add_argument(
+        "--speed",
+        type=float,
+        default=1.5,
+        help="[m/s] 0.1 to 4 (default 1.5); with --braking, the top speed",
+    )
+    drive.add_argument("--braking", action="store_true", help="brake for corners, as the grip asks")
     drive.add_argument("--out", type=Path, default=Path("demo.mp4"), help="the MP4 to write")
     arguments = parser.parse_args(argv)
     if not 0.1 <= arguments.speed <= 4:
         parser.error("--speed is 0.1 to 4 m/s")
     try:
-        print(demo(arguments.track, arguments.direction, arguments.speed, arguments.out))  # noqa: T201
+        line = demo(arguments.track, arguments.direction, arguments.speed, arguments.out,
+                    arguments.braking)  # fmt: skip
+        print(line)  # noqa: T201
     except (TrackError, ConfigError, OSError) as error:
         print(f"python -m simulator: {error}", file=sys.stderr)  # noqa: T201
         return 2

@@ -100,7 +100,7 @@ class BrakingDriver(CentreLineDriver):
     whose centripetal acceleration a share (``grip``) of mu * g covers, then limited by the
     acceleration (forward pass) and braking (backward pass) that the same share allows."""
 
-    def __init__(self, env: DeepRacerEnv, speed: float = 4.0, grip: float = 0.8, **kw) -> None:
+    def __init__(self, env: DeepRacerEnv, speed: float = 4.0, grip: float = 0.6, **kw) -> None:
         super().__init__(env, speed=speed, **kw)
         self.profile = speed_profile(env.track, env.car.spec, speed, grip,
                                      self.SPACING, self.WINDOW)  # fmt: skip

@@ -24,6 +24,7 @@ SKY = (236, 226, 212)  # BGR
 MAP_WIDTH = 200  # [px]
 TRAIL_POINTS = 900  # the last minute at 15 steps/s
 TRAIL_COLOUR = (60, 60, 230)
+SLIDE_COLOUR = (40, 120, 255)  # BGR: orange
 TEXT_COLOUR = (255, 255, 255)
 VIEWS = ("spectator", "camera")  # what a live viewer can watch (see ``view_image``)
 TYRE_SHADE = (30, 30, 30)  # BGR: dark on every shell colour
@@ -130,6 +131,10 @@ class Spectator:
         cv2.rectangle(frame, (0, SIZE[1] - 30), (SIZE[0], SIZE[1]), (30, 30, 30), -1)
         cv2.putText(frame, text, (10, SIZE[1] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55,
                     TEXT_COLOUR, 1, cv2.LINE_AA)  # fmt: skip
+        if env.car.sliding:  # the tyres at their grip: the car drifts, or spins
+            slide = f"SLIDING {abs(math.degrees(env.car.slip_angle)):3.0f} deg"
+            cv2.putText(frame, slide, (SIZE[0] - 150, SIZE[1] - 10), cv2.FONT_HERSHEY_SIMPLEX,
+                        0.55, SLIDE_COLOUR, 2, cv2.LINE_AA)  # fmt: skip
 
 
 def car_solids(car: Car, colour: tuple[int, int, int]) -> list[Solid]:
