@@ -1,19 +1,29 @@
-"""Simulator speed: `python -m bench.bench_simulator` (or `make bench`).
+"""Simulator speed and the car's grip: `python -m bench.bench_simulator [--no-grip]` (or `make
+bench`).
 
-One process, one core: environment steps per second with the camera on (the centre-line driver,
-the default reward function, every status and param computed), camera frames per second, and
-spectator frames per second. DeepRacer's Gazebo simulation runs at 15 steps per second.
+Speed, one process, one core: environment steps per second with the camera on (the centre-line
+driver, the default reward function, every status and param computed), what the car's dynamics
+cost, camera frames per second, and spectator frames per second. DeepRacer's Gazebo simulation
+runs at 15 steps per second.
+
+Grip, for each built-in track (its first direction): the highest constant speed, in steps of
+0.1 m/s, at which the scripted centre-line driver laps cleanly (no reset), and its lap time; the
+fastest clean lap of the braking driver (a speed profile from the track's curvature, planned on
+a share of the car's grip from 0.5 to 1.0, top speed 4 m/s), and the share that gave it.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 
 import gymnasium
 
 import simulator
-from simulator.controller import CentreLineDriver
+from simulator import tracks
+from simulator.car import Car
+from simulator.controller import BrakingDriver, CentreLineDriver
 
 DEEPRACER_STEPS_PER_SECOND = 15
 SECONDS = 3.0  # per measurement, after a warm-up
@@ -46,17 +56,89 @@ def environment_steps(**settings) -> float:
     return result
 
 
+def pybullet_vehicle():
+    """One control step of the alternative to our car: PyBullet's own rigid-body racecar
+    (pybullet_data's racecar.urdf: wheels and steering on joints, motors on them) on a plane, at
+    the 240 Hz its contact solver needs, 16 steps per 1/15 s."""
+    import pybullet
+    import pybullet_data
+    from pybullet_utils.bullet_client import BulletClient
+
+    client = BulletClient(connection_mode=pybullet.DIRECT)
+    client.setAdditionalSearchPath(pybullet_data.getDataPath())
+    client.setGravity(0, 0, -9.81)
+    client.setTimeStep(1 / 240)
+    client.loadURDF("plane.urdf")
+    body = client.loadURDF("racecar/racecar.urdf", [0, 0, 0.05])
+    for wheel in (2, 3, 5, 7):
+        client.setJointMotorControl2(body, wheel, pybullet.VELOCITY_CONTROL,
+                                     targetVelocity=30, force=10)  # fmt: skip
+    for hinge in (4, 6):
+        client.setJointMotorControl2(body, hinge, pybullet.POSITION_CONTROL, targetPosition=0.2)
+
+    def step() -> None:
+        for _ in range(16):
+            client.stepSimulation()
+
+    return step
+
+
+CONTINUOUS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.1, "high": 4}}
+
+
+def lap(track: str, driver) -> float | None:
+    """[s] the lap time of ``driver(env)`` on ``track``, None unless the lap was clean."""
+    env = gymnasium.make(simulator.ENV_ID, track=track, mode="evaluation", laps=1,
+                         action_space=CONTINUOUS)  # fmt: skip
+    env.reset(seed=0)
+    chosen = driver(env.unwrapped)
+    while True:
+        _, _, terminated, truncated, info = env.step(chosen.act())
+        if terminated or truncated or info["resets"]:
+            break
+    env.close()
+    clean = info["status"] == "lap_complete" and not info["resets"]
+    return info["lap_times"][0] if clean else None
+
+
+def grip_table() -> None:
+    print(f"\n{'track':<22}{'length':>8}{'best constant':>15}{'its lap':>9}"
+          f"{'braking lap':>13}{'grip share':>12}{'at 4 m/s':>10}")  # fmt: skip
+    for name in tracks.names():
+        best = next(
+            ((tenths / 10, time) for tenths in range(40, 4, -1)
+             if (time := lap(name, lambda env, v=tenths / 10: CentreLineDriver(env, speed=v)))),
+            (None, None),
+        )  # fmt: skip
+        braking = [
+            (time, share / 20) for share in range(10, 21)
+            if (time := lap(name, lambda env, g=share / 20: BrakingDriver(env, grip=g)))
+        ]  # fmt: skip
+        fastest, share = min(braking) if braking else (None, None)
+        at_four = "clean" if best[0] == 4.0 else "fails"
+        print(f"{name:<22}{tracks.load(name).length:>7.1f}m"
+              f"{best[0] or 0:>13.1f}/s{best[1] or 0:>8.2f}s"
+              f"{fastest or 0:>12.2f}s{share or 0:>12.2f}{at_four:>10}")  # fmt: skip
+
+
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--no-grip", action="store_true", help="the speed figures only")
+    arguments = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # one core, as promised
     env = gymnasium.make(simulator.ENV_ID, track="rookie-loop", render_mode="rgb_array")
     env.reset(seed=0)
     car = env.unwrapped
     camera = car._cameras[0]
+    dynamic = Car()  # a steady turn at 2 m/s
     figures = [
         ("environment steps/s, camera, time trial", environment_steps()),
         ("environment steps/s, stereo + lidar, 3 bot cars",
          environment_steps(sensors=["STEREO_CAMERAS", "LIDAR"], race_type="HEAD_TO_BOT")),
+        ("car dynamics steps/s (Car.step alone, 8 sub-steps)",
+         rate(lambda: dynamic.step(2.0, 10.0, 1 / 15))),
+        ("  PyBullet's racecar.urdf instead, 240 Hz physics", rate(pybullet_vehicle())),
         ("environment steps/s, camera, 3 boxes",
          environment_steps(race_type="OBJECT_AVOIDANCE")),
         ("camera frames/s (160 x 120 grayscale)",
@@ -68,6 +150,8 @@ def main() -> None:
     for name, value in figures:
         speedup = f"{value / DEEPRACER_STEPS_PER_SECOND:>12.0f}x" if "steps" in name else ""
         print(f"{name:<58}{value:>10,.0f}{speedup:>13}")
+    if not arguments.no_grip:
+        grip_table()
 
 
 if __name__ == "__main__":

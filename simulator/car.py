@@ -185,6 +185,11 @@ class CarSpec:
 SOLVER_ITERATIONS = 4  # Gauss-Seidel sweeps over the four axle constraints per sub-step
 
 
+def _clip(value: float, limit: float) -> float:
+    """``value`` within ±``limit``."""
+    return limit if value > limit else -limit if value < -limit else value
+
+
 class Car:
     """The car's state (pose, velocity, steering) and its motion over one control step.
 
@@ -202,7 +207,6 @@ class Car:
         self.x, self.y, self.yaw = x, y, yaw
         self.speed = self.lateral_speed = self.yaw_rate = 0.0
         self.steering = 0.0
-        self._velocity = [0.0, 0.0]  # [m/s] of the centre of mass, world frame
         self._impulses = [0.0, 0.0, 0.0, 0.0]  # the last sub-step's, to start the next solve
         self._accel = 0.0  # [m/s²] along the heading in the last sub-step: it moves the weight
         self.sliding = False  # whether an axle slid sideways in the last control step
@@ -230,81 +234,84 @@ class Car:
         soft_rear = 1.0 / (h * 2 * spec.rear_wheel_gain / radius**2)
         soft_front = 1.0 / (h * 2 * spec.front_wheel_gain / radius**2)
         inv_m, inv_i = 1.0 / m, 1.0 / inertia
+        k_rear_long = inv_m + soft_rear
         k_rear_lat = inv_m + b * b * inv_i
-        vx, vy = self._velocity
-        r = self.yaw_rate
-        # The centre of mass, from the rear axle's pose.
+        weight_rear, weight_front = m * GRAVITY * a / length, m * GRAVITY * b / length
+        # The solve runs in the car's frame: u along the heading, v to the left, at the centre
+        # of mass; r the yaw rate. The frame turns with the car, by r * h each sub-step.
         yaw = self.yaw
-        cx, cy = self.x + b * math.cos(yaw), self.y + b * math.sin(yaw)
+        cos_y, sin_y = math.cos(yaw), math.sin(yaw)
+        u, v = self.speed, self.lateral_speed
+        r = self.yaw_rate
+        cx, cy = self.x + b * cos_y, self.y + b * sin_y  # the centre of mass
         start_x, start_y = self.x, self.y
-        p_rl, p_rt, p_fl, p_ft = self._impulses
+        p_rl, p_rt, p_fl, p_ft = self._impulses  # rear/front, along/across the wheel [N s]
+        delta = self.steering
         slid = False
         for _ in range(self.substeps):
-            self.steering = steer_target + (self.steering - steer_target) * steer_keep
-            delta = self.steering
-            cos_y, sin_y = math.cos(yaw), math.sin(yaw)
-            cos_f, sin_f = math.cos(yaw + delta), math.sin(yaw + delta)
+            delta = steer_target + (delta - steer_target) * steer_keep
             sin_d, cos_d = math.sin(delta), math.cos(delta)
             # Each axle's load: its static share, moved forward under braking and back under
             # acceleration by the centre of mass's height.
             transfer = m * self._accel * height / length
-            limit_rear = mu * max(m * GRAVITY * a / length + transfer, 0.0) * h
-            limit_front = mu * max(m * GRAVITY * b / length - transfer, 0.0) * h
-            k_front_long = inv_m + (a * sin_d) ** 2 * inv_i
-            k_front_lat = inv_m + (a * cos_d) ** 2 * inv_i
-            # Start from the last sub-step's forces (warm start): the solve then converges in
-            # a few sweeps. Apply them, then correct.
-            p_rl, p_rt, p_fl, p_ft = (
-                min(max(p_rl, -limit_rear), limit_rear), min(max(p_rt, -limit_rear), limit_rear),
-                min(max(p_fl, -limit_front), limit_front),
-                min(max(p_ft, -limit_front), limit_front),
-            )  # fmt: skip
-            vx += (p_rl * cos_y - p_rt * sin_y + p_fl * cos_f - p_ft * sin_f) * inv_m
-            vy += (p_rl * sin_y + p_rt * cos_y + p_fl * sin_f + p_ft * cos_f) * inv_m
-            r += (-b * p_rt + a * (p_fl * sin_d + p_ft * cos_d)) * inv_i
+            limit_rear = mu * (weight_rear + transfer) * h
+            limit_front = mu * (weight_front - transfer) * h
+            limit_rear = limit_rear if limit_rear > 0.0 else 0.0
+            limit_front = limit_front if limit_front > 0.0 else 0.0
+            # How each front impulse moves u, v and r.
+            cu, su = cos_d * inv_m, sin_d * inv_m
+            ar_long, ar_lat = a * sin_d * inv_i, a * cos_d * inv_i
+            k_front_long = inv_m + a * sin_d * ar_long + soft_front
+            k_front_lat = inv_m + a * cos_d * ar_lat
+            # Start from the last sub-step's impulses (a warm start: the solve then converges
+            # in a few sweeps), each within this sub-step's friction.
+            p_rl = _clip(p_rl, limit_rear)
+            p_rt = _clip(p_rt, limit_rear)
+            p_fl = _clip(p_fl, limit_front)
+            p_ft = _clip(p_ft, limit_front)
+            u += p_rl * inv_m + p_fl * cu - p_ft * su
+            v += p_rt * inv_m + p_fl * su + p_ft * cu
+            r += -b * p_rt * inv_i + p_fl * ar_long + p_ft * ar_lat
             for _ in range(SOLVER_ITERATIONS):
-                # Rear, along the wheel: the controller's pull toward the target speed.
-                u = vx * cos_y + vy * sin_y
-                step = (target - u - soft_rear * p_rl) / (inv_m + soft_rear)
-                new = min(max(p_rl + step, -limit_rear), limit_rear)
-                step, p_rl = new - p_rl, new
-                vx += step * cos_y * inv_m
-                vy += step * sin_y * inv_m
-                # Rear, across the wheel: no sliding.
-                w = -vx * sin_y + vy * cos_y - r * b
-                new = min(max(p_rt - w / k_rear_lat, -limit_rear), limit_rear)
-                step, p_rt = new - p_rt, new
-                vx -= step * sin_y * inv_m
-                vy += step * cos_y * inv_m
-                r -= step * b * inv_i
-                # Front, along the wheel.
-                u = vx * cos_f + vy * sin_f + r * a * sin_d
-                step = (target - u - soft_front * p_fl) / (k_front_long + soft_front)
-                new = min(max(p_fl + step, -limit_front), limit_front)
-                step, p_fl = new - p_fl, new
-                vx += step * cos_f * inv_m
-                vy += step * sin_f * inv_m
-                r += step * a * sin_d * inv_i
-                # Front, across the wheel.
-                w = -vx * sin_f + vy * cos_f + r * a * cos_d
-                new = min(max(p_ft - w / k_front_lat, -limit_front), limit_front)
-                step, p_ft = new - p_ft, new
-                vx -= step * sin_f * inv_m
-                vy += step * cos_f * inv_m
-                r += step * a * cos_d * inv_i
+                # Rear, along the wheels: the controllers' pull toward the target speed.
+                new = _clip(p_rl + (target - u - soft_rear * p_rl) / k_rear_long, limit_rear)
+                u += (new - p_rl) * inv_m
+                p_rl = new
+                # Rear, across the wheels: no sliding.
+                new = _clip(p_rt - (v - r * b) / k_rear_lat, limit_rear)
+                change, p_rt = new - p_rt, new
+                v += change * inv_m
+                r -= change * b * inv_i
+                # Front, along the wheels.
+                along = u * cos_d + (v + r * a) * sin_d
+                new = _clip(p_fl + (target - along - soft_front * p_fl) / k_front_long,
+                            limit_front)  # fmt: skip
+                change, p_fl = new - p_fl, new
+                u += change * cu
+                v += change * su
+                r += change * ar_long
+                # Front, across the wheels.
+                across = -u * sin_d + (v + r * a) * cos_d
+                new = _clip(p_ft - across / k_front_lat, limit_front)
+                change, p_ft = new - p_ft, new
+                u -= change * su
+                v += change * cu
+                r += change * ar_lat
             slid = slid or abs(p_rt) >= limit_rear or abs(p_ft) >= limit_front
             self._accel = (p_rl + p_fl * cos_d - p_ft * sin_d) / (m * h)
-            cx += vx * h
-            cy += vy * h
-            yaw += r * h
-        yaw = math.atan2(math.sin(yaw), math.cos(yaw))
-        cos_y, sin_y = math.cos(yaw), math.sin(yaw)
-        self.yaw, self.yaw_rate = yaw, r
+            # Move, then turn the frame with the car.
+            cx += (u * cos_y - v * sin_y) * h
+            cy += (u * sin_y + v * cos_y) * h
+            turn = r * h
+            yaw += turn
+            cos_t, sin_t = math.cos(turn), math.sin(turn)
+            u, v = u * cos_t + v * sin_t, v * cos_t - u * sin_t
+            cos_y, sin_y = math.cos(yaw), math.sin(yaw)
+        yaw = math.atan2(sin_y, cos_y)
+        self.yaw, self.yaw_rate, self.steering = yaw, r, delta
         self.x, self.y = cx - b * cos_y, cy - b * sin_y
-        self._velocity = [vx, vy]
         self._impulses = [p_rl, p_rt, p_fl, p_ft]
-        self.speed = vx * cos_y + vy * sin_y
-        self.lateral_speed = -vx * sin_y + vy * cos_y
+        self.speed, self.lateral_speed = u, v
         self.sliding = slid
         return math.hypot(self.x - start_x, self.y - start_y)
 

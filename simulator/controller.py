@@ -35,7 +35,7 @@ class CentreLineDriver:
         env: DeepRacerEnv,
         speed: float = 1.0,
         gain: float = 2.0,
-        settle: float = 0.2,
+        settle: float = 0.15,
         anticipation: float = 0.3,
         overshoot: float = 2.0,
     ) -> None:
