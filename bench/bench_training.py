@@ -1,4 +1,4 @@
-"""Training throughput and time to qualify: `python -m bench.bench_training [--qualify]`.
+"""Training throughput and time to qualify: `python -m bench.bench_training [--qualify [--fast]]`.
 
 Starts the whole console as `make run` does (its Redis, a Celery worker with enough processes for
 a trainer and two rollout workers, the database in a scratch directory), creates models with all
@@ -10,6 +10,9 @@ defaults, the default discrete action space, the camera) and lets them train.
 - Time to qualify (--qualify): for each seed, train; every time a new checkpoint appears, drive
   it (deterministically, outside training) in an evaluation of 3 laps; the figure is the training
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
+- With --fast, a racer's model instead: a continuous action space up to 4 m/s and a speed-aware
+  reward (``FAST_REWARD``); besides the time to qualify, the fastest lap the checkpoint at
+  ``--lap-after`` training minutes drives, beside the braking driver's lap on the same track.
 """
 
 from __future__ import annotations
@@ -22,6 +25,17 @@ from bench.stack import running_console
 
 THROUGHPUT_MINUTES = 4.0
 QUALIFY_LIMIT_MINUTES = 30.0
+LAP_AFTER_MINUTES = 20.0
+FAST_ACTIONS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 4.0}}
+FAST_REWARD = """\
+def reward_function(params):
+    # Stay near the centre line, and go fast: the speed counts squared, so braking for a corner
+    # costs less than leaving the track.
+    if params["is_offtrack"] or not params["all_wheels_on_track"]:
+        return 1e-3
+    off_centre = params["distance_from_center"] / (params["track_width"] / 2)
+    return max(1.0 - off_centre**2, 0.0) * (params["speed"] / 4.0) ** 2 + 1e-3
+"""
 
 
 def bench_racer():
@@ -35,21 +49,21 @@ def bench_racer():
     return owner
 
 
-def default_model(owner, name: str, *, workers: int = 1, seed: int = 0):
+def default_model(owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False):
     from training.rewards import EXAMPLES
     from training.services import model_create
 
-    return model_create(
-        owner=owner,
-        settings={
-            "name": name,
-            "track": "rookie-loop",
-            "reward_function": EXAMPLES[0].source,
-            "workers": workers,
-            "seed": seed,
-            "max_minutes": 1440,
-        },
-    )
+    settings = {
+        "name": name,
+        "track": "rookie-loop",
+        "reward_function": EXAMPLES[0].source,
+        "workers": workers,
+        "seed": seed,
+        "max_minutes": 1440,
+    }
+    if fast:
+        settings.update(action_space=FAST_ACTIONS, reward_function=FAST_REWARD)
+    return model_create(owner=owner, settings=settings)
 
 
 def job_of(model):
@@ -101,11 +115,16 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
     return len(info["lap_times"]) == 3 and not info["resets"], info["lap_times"]
 
 
-def time_to_qualify(owner, seed: int, limit: float) -> float | None:
+def time_to_qualify(
+    owner, seed: int, limit: float, *, fast: bool = False, lap_after: float = LAP_AFTER_MINUTES
+) -> tuple[float | None, float | None]:
+    """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
+    after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies."""
     from training.services import training_stop
 
-    model = default_model(owner, f"qualify-{seed}", seed=seed)
+    model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast)
     tried = set()
+    qualified = None
     while True:
         job = job_of(model)
         minutes = job.training_seconds / 60
@@ -121,18 +140,45 @@ def time_to_qualify(owner, seed: int, limit: float) -> float | None:
                 ),
                 flush=True,
             )
-            if ok:
+            if ok and qualified is None:
+                qualified = minutes
+            if not fast and qualified is not None:
                 training_stop(job=job)
-                return minutes
-        if minutes > limit:
+                return qualified, None
+            if fast and minutes >= lap_after:
+                training_stop(job=job)
+                return qualified, (min(laps) if ok else None)
+        if minutes > max(limit, lap_after if fast else 0):
             training_stop(job=job)
-            return None
+            return qualified, None
         time.sleep(5)
+
+
+def braking_lap(track: str = "rookie-loop") -> float:
+    """[s] the braking driver's fastest clean lap of ``track`` (bench.bench_simulator's table)."""
+    from bench.bench_simulator import lap
+    from simulator.controller import BrakingDriver
+
+    times = [
+        lap(track, lambda env, g=share / 20: BrakingDriver(env, grip=g)) for share in range(10, 21)
+    ]
+    return min(time for time in times if time is not None)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--qualify", action="store_true", help="measure the time to qualify")
+    parser.add_argument(
+        "--fast",
+        action="store_true",
+        help="a continuous action space to 4 m/s and a speed-aware reward",
+    )
+    parser.add_argument(
+        "--lap-after",
+        type=float,
+        default=LAP_AFTER_MINUTES,
+        help="[min] of training after which --fast reports the best lap",
+    )
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument(
         "--limit",
@@ -150,9 +196,16 @@ def main() -> None:
         owner = bench_racer()
         if arguments.qualify:
             print("Time to qualify (3 clean consecutive laps), training minutes:")
+            if arguments.fast:
+                print(f"The braking driver's lap on the Rookie Loop: {braking_lap():.2f} s")
             for seed in arguments.seeds:
-                minutes = time_to_qualify(owner, seed, arguments.limit)
+                minutes, best = time_to_qualify(
+                    owner, seed, arguments.limit, fast=arguments.fast, lap_after=arguments.lap_after
+                )
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
+                if arguments.fast:
+                    shown += (f"; best lap after {arguments.lap_after:g} min: "
+                              + (f"{best:.2f} s" if best else "no 3 clean laps"))  # fmt: skip
                 print(f"seed {seed}: {shown}", flush=True)
         else:
             print(f"Training throughput over {THROUGHPUT_MINUTES:g} min, PPO defaults, camera:")
