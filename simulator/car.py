@@ -19,8 +19,9 @@ solve is implicit, so it stays stable at any step; collisions with boxes and bot
 detected by the PyBullet world (``simulator.world``).
 
 Every number below names its source: deepracer-simapp at 2fc2d75c, the last commit of the ROS 1 /
-Gazebo classic simulator that the DeepRacer console ran (its ROS 2 port, 01f5f01, keeps these
-numbers, see the notes on ``CarSpec``).
+Gazebo classic simulator that the DeepRacer console ran. Its ROS 2 port (01f5f01) keeps the URDF's
+numbers but imposes the wheels' speed directly and steers with a 0.17 s lag (gz_ros2_control's
+position emulation); we follow the simulator every console model trained in.
 """
 
 from __future__ import annotations
