@@ -102,8 +102,7 @@ class BrakingDriver(CentreLineDriver):
 
     def __init__(self, env: DeepRacerEnv, speed: float = 4.0, grip: float = 0.6, **kw) -> None:
         super().__init__(env, speed=speed, **kw)
-        self.profile = speed_profile(env.track, env.car.spec, speed, grip,
-                                     self.SPACING, self.WINDOW)  # fmt: skip
+        self.profile = speed_profile(self.curvature, env.car.spec, speed, grip, self.SPACING)
 
     def target_speed(self) -> float:
         env, car = self.env, self.env.car
@@ -127,11 +126,12 @@ def curvature(track, spacing: float, window: float) -> np.ndarray:
     return turn / window
 
 
-def speed_profile(track, spec, top: float, grip: float, spacing: float, window: float):
-    """[m/s] the commanded speed every ``spacing`` metres round the lap (see ``BrakingDriver``)."""
+def speed_profile(bends: np.ndarray, spec, top: float, grip: float, spacing: float):
+    """[m/s] the commanded speed at each point of ``bends`` (the centre line's curvature every
+    ``spacing`` metres round the lap; see ``BrakingDriver``)."""
     usable = grip * spec.friction * GRAVITY  # [m/s²]
     rolling = spec.wheel_target(1.0)  # [m/s] rolled per 1 m/s commanded
-    limit = np.sqrt(usable / np.maximum(np.abs(curvature(track, spacing, window)), 1e-6))
+    limit = np.sqrt(usable / np.maximum(np.abs(bends), 1e-6))
     speed = np.minimum(limit, spec.wheel_target(top))  # [m/s] rolled
     n = len(speed)
     for _ in range(2):  # twice round, so the limits carry over the start line
