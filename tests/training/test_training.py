@@ -368,8 +368,8 @@ def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
 def test_a_redis_restart_mid_job_is_recovered_or_fails_cleanly(
     alice, tracks, celery_worker_process
 ):
-    # This test runs last, after the browser tests, whose jobs' rollouts may still hold the
-    # worker's pool: give them a minute to end (some outlive it: see the closing note of issue 17).
+    # This test runs last, after the browser tests, whose jobs' rollouts may still be winding
+    # down (a rollout of a job whose row the flush removed sees it within 15 s): let them end.
     with contextlib.suppress(TimeoutError):
         wait_for(lambda: not sandbox_children(), "earlier tests' rollouts to end", timeout=60)
     model = model_create(owner=alice, settings=settings(name="restarted"), validate_reward=False)
