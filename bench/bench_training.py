@@ -120,7 +120,7 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
     learner = Learner(
         algorithm=model.algorithm,
         hyperparameters=model.hyperparameters,
-        network=model.network,
+        architecture=model.architecture,
         observation_space=env.observation_space,
         action_space=env.action_space,
     )

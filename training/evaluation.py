@@ -120,7 +120,7 @@ class Evaluator:
             raise EvaluationFailed("This model has no trained weights to evaluate.")
         env = gymnasium.make(simulator.ENV_ID, **evaluation.environment_settings())
         policy = Policy.build(
-            self.model.algorithm, self.model.network, env.observation_space, env.action_space
+            self.model.algorithm, self.model.architecture, env.observation_space, env.action_space
         )
         try:
             policy.load_checkpoint(artifacts.read(checkpoint))

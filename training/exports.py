@@ -1,22 +1,30 @@
-"""What a racer downloads (REFERENCE section 6): the archive for the physical car and the virtual
-model, both kept in storage under the model's prefix (``exports/``) once built.
+"""What a racer downloads (REFERENCE section 6): the archives for the physical car, for other
+runtimes (ONNX) and of the virtual model, each kept in storage under the model's prefix
+(``exports/``) once built.
 
-The physical car gets ``physicalmodel-<name>.tar.gz``: ``model_metadata.json`` at the root and,
-under ``agent/``, the policy as ONNX (``model.onnx``) and as OpenVINO IR (``model.xml`` +
-``model.bin``, written from the ONNX by OpenVINO's converter). The network takes the camera as
-the car gives it: grayscale bytes (0-255, as float32) of shape (1, 1, 120, 160), or (1, 2, 120,
-160) for stereo, named after the sensor (``FRONT_FACING_CAMERA`` or ``STEREO_CAMERAS``), plus the
-lidar (``LIDAR``: 64 distances in metres; ``SECTOR_LIDAR``: 8 bits) when the car has one. It gives
-``probabilities``, one per action of ``model_metadata.json`` (discrete), or ``action``, steering
-and speed each in [-1, 1] of its range (continuous), as the car's navigation scales it.
+The physical car gets ``physicalmodel-<name>.tar.gz`` as DeepRacer builds it:
+``model_metadata.json`` at the root and the policy as a TensorFlow frozen graph at
+``agent/model.pb`` (deepracer-simapp
+bundle/markov/boto/s3/files/checkpoint_files/tensorflow_model.py:355-371 and
+deepracer-for-cloud scripts/upload/upload-car.sh:53-57). The car's model loader takes the one
+``.pb`` in the archive and ``model_metadata.json`` from its root (aws-deepracer-systems-pkg
+model_loader_node.py:408-438, model_install_state.py:99-121); its model optimizer converts the
+graph with OpenVINO, feeding DeepRacer's input nodes and reading its output node (``car_graph``).
+
+``onnxmodel-<name>.tar.gz`` holds the same policy as ONNX (``model.onnx``, with
+``model_metadata.json``) for custom cars and other runtimes: inputs named after the sensors,
+grayscale bytes (0-255, as float32) of shape (1, 1, 120, 160), or (1, 2, 120, 160) for stereo,
+plus the lidar (``LIDAR``: 64 distances in metres; ``SECTOR_LIDAR``: 8 bits) when the car has one.
+It gives ``probabilities``, one per action of ``model_metadata.json`` (discrete), or ``action``,
+steering and speed each in [-1, 1] of its range (continuous), as the car's navigation scales it.
 
 The virtual model, ``virtualmodel-<name>.tar.gz``, holds what another Pitlane (or a DeepRacer
 toolchain) needs to go on training: ``model_metadata.json``, ``reward_function.py``,
 ``training_params.yaml``, ``hyperparameters.json`` (DeepRacer's names and spellings, also at
 ``ip/hyperparameters.json`` where DeepRacer keeps it), the best and the last
 checkpoints as safetensors under ``checkpoints/``, the metrics, and ``pitlane.json`` (the settings
-DeepRacer's files do not carry: track, direction, race type, network seed, workers; and the time
-the model trained, which its page shows).
+DeepRacer's files do not carry: track, direction, race type, network seed and layout, workers;
+and the time the model trained, which its page shows).
 """
 
 from __future__ import annotations
@@ -33,17 +41,20 @@ from pathlib import Path
 import torch
 from django.core.files.storage import default_storage
 from django.db.models import Sum
+from stable_baselines3.common.preprocessing import preprocess_obs
 from torch import nn
 
-from training import artifacts, hyperparameters, selectors
+from training import artifacts, hyperparameters, networks, selectors
+from training.cargraph import car_graph
 from training.models import RLModel
 from training.networks import CAMERAS, LIDARS
 from training.policies import Policy
 
 OPSET = 17
+CAR_GRAPH = "agent/model.pb"  # where simapp puts it (tensorflow_model.py:355-371, 01f5f01)
 PITLANE_SETTINGS = "pitlane.json"
 HYPERPARAMETERS = "ip/hyperparameters.json"  # simapp bundle/markov/boto/s3/constants.py:43
-FORMAT = 1  # of pitlane.json
+FORMAT = 2  # of pitlane.json; 2 added network_layout
 
 
 class ExportRefused(Exception):
@@ -76,7 +87,9 @@ class CarNetwork(nn.Module):
         network = self.network
         if self.ppo:
             # SB3 scales image inputs to [0, 1] in its preprocessing, inside the graph.
-            features = network.extract_features(observation)
+            features = network.pi_features_extractor(
+                preprocess_obs(observation, network.observation_space)
+            )
             latent = network.mlp_extractor.forward_actor(features)
             out = network.action_net(latent)
             return torch.softmax(out, dim=1) if self.discrete else out.clamp(-1.0, 1.0)
@@ -101,7 +114,9 @@ class CarNetwork(nn.Module):
 
 def car_network(model: RLModel, weights: bytes) -> CarNetwork:
     """The model's network with ``weights`` (a checkpoint), as the car runs it."""
-    policy = Policy.for_environment(model.algorithm, model.network, model.environment_settings())
+    policy = Policy.for_environment(
+        model.algorithm, model.architecture, model.environment_settings()
+    )
     policy.load_checkpoint(weights)
     network = CarNetwork(policy, model.action_space_type == "discrete")
     network.eval()
@@ -116,34 +131,43 @@ def onnx_model(network: CarNetwork, path: Path) -> None:
         )  # fmt: skip
 
 
-def openvino_model(onnx_path: Path, directory: Path) -> None:
-    """``model.xml`` and ``model.bin`` in ``directory``, read from the ONNX by OpenVINO's runtime
-    (its ONNX front end) and saved in fp32. Not ``openvino.convert_model``: that tool reports
-    usage to Intel over the network unless told otherwise, and a worker must not."""
-    import openvino
-
-    network = openvino.Core().read_model(str(onnx_path))
-    openvino.save_model(network, str(directory / "model.xml"), compress_to_fp16=False)
-
-
 def physical(model: RLModel, which: str = "best") -> Export:
     """The physical-car archive of the model's ``which`` checkpoint, built once per checkpoint."""
+    if model.network_layout != networks.LAYOUT:
+        raise ExportRefused(
+            "This model was trained before Pitlane's networks were DeepRacer's, so the car cannot "
+            "run it (nor a clone of it, which keeps its network): train a new model with the same "
+            "settings for the car, or download this one as ONNX."
+        )
     weights = _checkpoint(model, which)
     export = Export(
         artifacts.path(model, f"exports/physical-{_digest(weights)}.tar.gz"),
         f"physicalmodel-{model.name}.tar.gz",
     )
-    if default_storage.exists(export.name):
-        return export
-    network = car_network(model, weights)
-    with tempfile.TemporaryDirectory(prefix="pitlane-export-") as directory:
-        agent = Path(directory)
-        onnx_model(network, agent / "model.onnx")
-        openvino_model(agent / "model.onnx", agent)
-        members = {"model_metadata.json": _json(model.metadata())}
-        for name in ("model.onnx", "model.xml", "model.bin"):
-            members[f"agent/{name}"] = (agent / name).read_bytes()
-        _store(export.name, members)
+    if not default_storage.exists(export.name):
+        policy = Policy.for_environment(
+            model.algorithm, model.architecture, model.environment_settings()
+        )
+        policy.load_checkpoint(weights)
+        graph = car_graph(policy, model.action_space_type == "discrete")
+        _store(export.name, {"model_metadata.json": _json(model.metadata()), CAR_GRAPH: graph})
+    return export
+
+
+def onnx(model: RLModel, which: str = "best") -> Export:
+    """The ONNX archive of the model's ``which`` checkpoint, built once per checkpoint."""
+    weights = _checkpoint(model, which)
+    export = Export(
+        artifacts.path(model, f"exports/onnx-{_digest(weights)}.tar.gz"),
+        f"onnxmodel-{model.name}.tar.gz",
+    )
+    if not default_storage.exists(export.name):
+        network = car_network(model, weights)
+        with tempfile.TemporaryDirectory(prefix="pitlane-export-") as directory:
+            path = Path(directory) / "model.onnx"
+            onnx_model(network, path)
+            graph = path.read_bytes()
+        _store(export.name, {"model_metadata.json": _json(model.metadata()), "model.onnx": graph})
     return export
 
 
@@ -196,6 +220,7 @@ def pitlane_settings(model: RLModel) -> dict:
         "workers": model.workers,
         "extra_tracks": list(model.extra_tracks),
         "seed": model.seed,
+        "network_layout": model.network_layout,
         "shell_colour": model.shell_colour,
         "training_seconds": round(model.jobs.aggregate(s=Sum("training_seconds"))["s"] or 0, 1),
     }

@@ -590,9 +590,16 @@ def _import_trained(
     """A Pitlane virtual model: READY, with its checkpoints, after they load into our network,
     and its training history when the archive's metrics hold one."""
     clean = configuration.check(settings, owner=owner)
-    policy = Policy.for_environment(
-        clean["algorithm"], clean["network"], RLModel(**clean).environment_settings()
-    )
+    # Exports of pitlane.json format 1 came before the networks were DeepRacer's (layout 1).
+    clean["network_layout"] = ours.get("network_layout", 1)
+    if clean["network_layout"] not in (1, 2):
+        raise ImportRefused(
+            f"{exports.PITLANE_SETTINGS} names a network layout this console does not know "
+            f"({_shown(clean['network_layout'])}): it was exported by a newer Pitlane."
+        )
+    model = RLModel(**clean)
+    policy = Policy.for_environment(clean["algorithm"], model.architecture,
+                                    model.environment_settings())  # fmt: skip
     for path, data in weights.items():
         try:
             policy.load_checkpoint(data)

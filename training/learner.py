@@ -111,13 +111,13 @@ class Learner:
     """One job's model: built from its settings, trained on episodes, saved as safetensors."""
 
     def __init__(
-        self, *, algorithm: str, hyperparameters: dict, network: str,
+        self, *, algorithm: str, hyperparameters: dict, architecture: str,
         observation_space, action_space, seed: int = 0, device: str = "auto",
     ) -> None:  # fmt: skip
         self.algorithm = algorithm
         self.hyperparameters = hyperparameters
         env = DummyVecEnv([lambda: SpacesOnly(observation_space, action_space)])
-        kwargs = policy_kwargs(network)
+        kwargs = policy_kwargs(algorithm, architecture)
         h = hyperparameters
         if algorithm == hp.PPO:
             self.model = DeepRacerPPO(
@@ -127,7 +127,6 @@ class Learner:
                 value_loss=h["loss_type"], policy_kwargs=kwargs, seed=seed, device=device,
             )  # fmt: skip
         else:
-            kwargs["net_arch"] = {"pi": [64], "qf": [64]}
             self.model = SAC(
                 "MultiInputPolicy", env, learning_rate=h["lr"], buffer_size=REPLAY_SIZE,
                 learning_starts=0, batch_size=h["batch_size"], ent_coef=h["sac_alpha"],

@@ -155,6 +155,11 @@ class RLModel(models.Model):
     bots = models.JSONField(null=True, blank=True, help_text="{count, speed, lane_changes}.")
     sensors = models.JSONField(default=list)
     network = models.CharField(max_length=40, choices=Network.choices, default=Network.SHALLOW)
+    network_layout = models.PositiveSmallIntegerField(
+        default=2,  # training.networks.LAYOUT
+        help_text="2: DeepRacer's networks, layer for layer; 1: Pitlane's own, before (its weights "
+        "are for those).",
+    )
     action_space_type = models.CharField(
         max_length=10, choices=[("discrete", "Discrete"), ("continuous", "Continuous")],
         default="discrete",
@@ -202,6 +207,13 @@ class RLModel(models.Model):
             "bots": self.bots,
             "car_colour": ShellColour.bgr(self.shell_colour),
         }
+
+    @property
+    def architecture(self) -> str:
+        """What builds the model's network (``training.networks.architecture``)."""
+        from training.networks import architecture  # torch: imported where networks are built
+
+        return architecture(self.network, self.network_layout)
 
     def metadata(self) -> dict:
         """DeepRacer's model_metadata.json."""

@@ -1,10 +1,30 @@
-"""DeepRacer's networks as stable-baselines3 features extractors.
+"""DeepRacer's networks, layer for layer, as stable-baselines3 features extractors.
 
-The camera (one channel, or two for stereo) goes through a CNN: DeepRacer's "3-layer" network
-(conv 32@8x8/4, 64@4x4/2, 64@3x3/1, then dense 512) or its "5-layer" one (here: 32@5x5/2,
-32@3x3/1, 64@3x3/2, 64@3x3/1, 128@3x3/2, then dense 512). A lidar's 64 distances or 8 sector bits
-go through a dense layer of their own; the two are concatenated, and SB3's policy and value heads
-follow.
+Built as deepracer-simapp (01f5f01) builds them with rl_coach, so that a DeepRacer model's weights
+load here and ours run on the car:
+
+- Every sensor has an embedder of its own: convolutions for a camera, dense layers for a lidar
+  (``EMBEDDERS``), each followed by a ReLU. simapp's sensor tables also list batch-norm, dropout
+  and tanh, but its embedder factory reads only the layer sizes, and rl_coach's "scheme"
+  embedders apply ReLU alone (markov/architecture/embedder_factory.py:25-48, agents/utils.py:63-73;
+  rl_coach embedders/embedder.py:73-78). Convolutions are unpadded ('valid').
+- A dense layer after a camera's convolutions acts on each pixel's channels (rl_coach flattens
+  only at the end, embedder.py:115-121): here a 1x1 convolution.
+- Each embedding is flattened as TensorFlow lays it out (height, width, channels; embedder.py:121)
+  and the embeddings are concatenated in the sensors' alphabetical order
+  (rl_coach general_network.py:253,277).
+- The middleware, dense 512 with ReLU, follows (custom_architectures.py:34-38), and the heads sit
+  directly on it: SB3's policy and value layers for PPO, each with its own copy of the embedders
+  and middleware as DeepRacer's "separate networks per head" (rl_coach clipped_ppo_agent.py:43-49);
+  for SAC, the actor's dense 256 then mean and log-std (heads/sac_head.py:37,57-60) and two Q heads
+  of dense 256, 256 on the observation's embedding and the action (heads/sac_q_head.py;
+  head_parameters.py:24).
+
+Images arrive as bytes; SB3 scales them to [0, 1] first, as rl_coach divides by 255 inside its
+graph (embedder.py:107, embedder_parameters.py:33-36).
+
+Models trained before Pitlane's networks matched DeepRacer's (layout 1) keep theirs
+(``PitlaneV1Features``): their weights are for it.
 """
 
 from __future__ import annotations
@@ -14,32 +34,121 @@ import torch
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-SHALLOW = "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"
-DEEP = "DEEP_CONVOLUTIONAL_NETWORK"
+from training import hyperparameters as hp
+
+SHALLOW = "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"  # DeepRacer's "3-layer CNN"
+DEEP = "DEEP_CONVOLUTIONAL_NETWORK"  # DeepRacer's "5-layer CNN"
 CAMERAS = ("FRONT_FACING_CAMERA", "STEREO_CAMERAS")
 LIDARS = ("LIDAR", "SECTOR_LIDAR")
+LAYOUT = 2  # DeepRacer's networks; 1: Pitlane's own, before
+MIDDLEWARE = 512
 
-LAYERS = {
-    # (out channels, kernel, stride)
-    SHALLOW: ((32, 8, 4), (64, 4, 2), (64, 3, 1)),
-    DEEP: ((32, 5, 2), (32, 3, 1), (64, 3, 2), (64, 3, 1), (128, 3, 2)),
+# ("conv", filters, kernel, stride) or ("dense", units), per network and sensor, from simapp's
+# bundle/markov/sensors/utils.py:82-110 (camera), :174-194 (stereo), :199-212 (lidars).
+_SHALLOW_CAMERA = (("conv", 32, 8, 4), ("conv", 64, 4, 2), ("conv", 64, 3, 1))
+_LIDAR = (("dense", 256), ("dense", 256))
+EMBEDDERS = {
+    (SHALLOW, "FRONT_FACING_CAMERA"): _SHALLOW_CAMERA,
+    (DEEP, "FRONT_FACING_CAMERA"): (
+        ("conv", 32, 5, 2),
+        ("conv", 32, 3, 1),
+        ("conv", 64, 3, 2),
+        ("conv", 64, 3, 1),
+        ("dense", 64),
+    ),
+    (SHALLOW, "STEREO_CAMERAS"): _SHALLOW_CAMERA,
+    (DEEP, "STEREO_CAMERAS"): (
+        ("conv", 32, 3, 1),
+        ("conv", 64, 3, 2),
+        ("conv", 64, 3, 1),
+        ("conv", 128, 3, 2),
+        ("conv", 128, 3, 1),
+    ),
+    **{(network, lidar): _LIDAR for network in (SHALLOW, DEEP) for lidar in LIDARS},
 }
-CAMERA_FEATURES = 512
-LIDAR_FEATURES = {"LIDAR": 256, "SECTOR_LIDAR": 64}
+
+
+def architecture(network: str, layout: int = LAYOUT) -> str:
+    """What builds a model's network: its DeepRacer name, and the layout when it is an old one."""
+    return network if layout == LAYOUT else f"{network}:{layout}"
+
+
+def _parse(name: str) -> tuple[str, int]:
+    network, _, layout = name.partition(":")
+    return network, int(layout or LAYOUT)
+
+
+class Embedder(nn.Module):
+    """One sensor's embedder. ``tf_names`` are its layers' names in DeepRacer's graph: rl_coach
+    numbers the layers together with the activation block after each (Conv2d_0, Conv2d_2, ...;
+    embedder.py:115-119)."""
+
+    def __init__(self, layers: tuple, space: gymnasium.Space) -> None:
+        super().__init__()
+        self.image = len(space.shape) == 3
+        size = space.shape[0] if self.image else gymnasium.spaces.flatdim(space)
+        modules, self.tf_names = [], []
+        for index, (kind, units, *shape) in enumerate(layers):
+            if kind == "conv":
+                modules.append(nn.Conv2d(size, units, *shape))
+                self.tf_names.append(f"Conv2d_{2 * index}")
+            else:
+                modules.append(nn.Conv2d(size, units, 1) if self.image else nn.Linear(size, units))
+                self.tf_names.append(f"Dense_{2 * index}")
+            size = units
+        self.layers = nn.ModuleList(modules)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if not self.image:
+            x = x.flatten(start_dim=1)
+        for layer in self.layers:
+            x = torch.relu(layer(x))
+        if self.image:
+            x = x.permute(0, 2, 3, 1)  # flattened as TensorFlow's NHWC
+        return x.flatten(start_dim=1)
 
 
 class DeepRacerFeatures(BaseFeaturesExtractor):
-    """The camera's CNN, plus the lidar's dense layer when the car has one."""
+    """DeepRacer's embedders, one per sensor, and its middleware."""
+
+    def __init__(self, observation_space: gymnasium.spaces.Dict, network: str = SHALLOW) -> None:
+        sensors = sorted(observation_space.spaces)
+        embedders = {s: Embedder(EMBEDDERS[network, s], observation_space[s]) for s in sensors}
+        with torch.no_grad():
+            flat = sum(
+                embedder(torch.zeros((1, *observation_space[s].shape))).shape[1]
+                for s, embedder in embedders.items()
+            )
+        super().__init__(observation_space, features_dim=MIDDLEWARE)
+        self.sensors = sensors
+        self.embedders = nn.ModuleDict(embedders)
+        self.middleware = nn.Linear(flat, MIDDLEWARE)
+
+    def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
+        embedded = [self.embedders[s](observations[s].float()) for s in self.sensors]
+        return torch.relu(self.middleware(torch.cat(embedded, dim=1)))
+
+
+class PitlaneV1Features(BaseFeaturesExtractor):
+    """Layout 1, before the networks were DeepRacer's: a camera CNN (3-layer as DeepRacer's; the
+    "5-layer" 32@5x5/2, 32@3x3/1, 64@3x3/2, 64@3x3/1, 128@3x3/2) into dense 512, and the lidar
+    through a dense layer of its own, concatenated; heads of 64 on a shared extractor."""
+
+    V1_LAYERS = {
+        SHALLOW: ((32, 8, 4), (64, 4, 2), (64, 3, 1)),
+        DEEP: ((32, 5, 2), (32, 3, 1), (64, 3, 2), (64, 3, 1), (128, 3, 2)),
+    }
+    V1_LIDAR = {"LIDAR": 256, "SECTOR_LIDAR": 64}
 
     def __init__(self, observation_space: gymnasium.spaces.Dict, network: str = SHALLOW) -> None:
         camera = next(key for key in observation_space.spaces if key in CAMERAS)
         lidar = next((key for key in observation_space.spaces if key in LIDARS), None)
-        features = CAMERA_FEATURES + (LIDAR_FEATURES[lidar] if lidar else 0)
+        features = MIDDLEWARE + (self.V1_LIDAR[lidar] if lidar else 0)
         super().__init__(observation_space, features_dim=features)
         self.camera, self.lidar = camera, lidar
         channels = observation_space[camera].shape[0]
         layers: list[nn.Module] = []
-        for out_channels, kernel, stride in LAYERS[network]:
+        for out_channels, kernel, stride in self.V1_LAYERS[network]:
             layers += [nn.Conv2d(channels, out_channels, kernel, stride), nn.ReLU()]
             channels = out_channels
         layers.append(nn.Flatten())
@@ -47,13 +156,12 @@ class DeepRacerFeatures(BaseFeaturesExtractor):
         with torch.no_grad():
             sample = torch.as_tensor(observation_space[camera].sample()[None]).float()
             flat = self.cnn(sample).shape[1]
-        self.camera_head = nn.Sequential(nn.Linear(flat, CAMERA_FEATURES), nn.ReLU())
+        self.camera_head = nn.Sequential(nn.Linear(flat, MIDDLEWARE), nn.ReLU())
         if lidar:
             size = gymnasium.spaces.flatdim(observation_space[lidar])
-            self.lidar_head = nn.Sequential(nn.Linear(size, LIDAR_FEATURES[lidar]), nn.ReLU())
+            self.lidar_head = nn.Sequential(nn.Linear(size, self.V1_LIDAR[lidar]), nn.ReLU())
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
-        # SB3 has already scaled the camera's bytes to [0, 1].
         features = self.camera_head(self.cnn(observations[self.camera]))
         if self.lidar is None:
             return features
@@ -61,10 +169,20 @@ class DeepRacerFeatures(BaseFeaturesExtractor):
         return torch.cat([features, self.lidar_head(lidar)], dim=1)
 
 
-def policy_kwargs(network: str) -> dict:
-    """SB3 ``policy_kwargs`` for a DeepRacer network: our extractor, the heads straight on it."""
-    return {
+def policy_kwargs(algorithm: str, architecture: str) -> dict:
+    """SB3 ``policy_kwargs`` for ``algorithm`` with a network built as ``architecture`` says."""
+    network, layout = _parse(architecture)
+    if layout == 1:
+        heads = {"pi": [64], "vf": [64]} if algorithm == hp.PPO else {"pi": [64], "qf": [64]}
+        return {
+            "features_extractor_class": PitlaneV1Features,
+            "features_extractor_kwargs": {"network": network},
+            "net_arch": heads,
+        }
+    kwargs = {
         "features_extractor_class": DeepRacerFeatures,
         "features_extractor_kwargs": {"network": network},
-        "net_arch": {"pi": [64], "vf": [64]},
     }
+    if algorithm == hp.PPO:
+        return kwargs | {"net_arch": {"pi": [], "vf": []}, "share_features_extractor": False}
+    return kwargs | {"net_arch": {"pi": [256], "qf": [256, 256]}}

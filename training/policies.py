@@ -30,8 +30,9 @@ class Policy:
     weights_module: torch.nn.Module
 
     @classmethod
-    def build(cls, algorithm: str, network: str, observation_space, action_space) -> Policy:
-        kwargs = policy_kwargs(network)
+    def build(cls, algorithm: str, architecture: str, observation_space, action_space) -> Policy:
+        """``architecture``: the model's network as ``networks.architecture`` names it."""
+        kwargs = policy_kwargs(algorithm, architecture)
         spaces = (observation_space, action_space)
         if algorithm == PPO:
             from stable_baselines3.common.policies import MultiInputActorCriticPolicy
@@ -41,19 +42,18 @@ class Policy:
         else:
             from stable_baselines3.sac.policies import MultiInputPolicy
 
-            kwargs["net_arch"] = {"pi": [64], "qf": [64]}
             policy = MultiInputPolicy(*spaces, lambda _: 0.0, **kwargs)
             module = policy.actor
         policy.set_training_mode(False)
         return cls(algorithm, policy, module)
 
     @classmethod
-    def for_environment(cls, algorithm: str, network: str, environment: dict) -> Policy:
+    def for_environment(cls, algorithm: str, architecture: str, environment: dict) -> Policy:
         """The policy for the environment that ``environment`` (``gymnasium.make``'s keyword
         arguments) describes, built from its spaces."""
         env = gymnasium.make(simulator.ENV_ID, **environment)
         try:
-            return cls.build(algorithm, network, env.observation_space, env.action_space)
+            return cls.build(algorithm, architecture, env.observation_space, env.action_space)
         finally:
             env.close()
 

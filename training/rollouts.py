@@ -50,7 +50,11 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
     except SandboxUnavailable as error:
         channel.report_failure(str(error))
         return
-    policy = {"algorithm": model.algorithm, "network": model.network, "seed": model.seed + worker}
+    policy = {
+        "algorithm": model.algorithm,
+        "architecture": model.architecture,
+        "seed": model.seed + worker,
+    }
     name = f"Simulation worker {worker + 1}"
     printed = Printed(name if model.workers > 1 else "")
     try:

@@ -234,6 +234,8 @@ def model_create(
     weights = selectors.model_checkpoint(model=source) if source is not None else None
     if source is not None and weights is None:
         raise configuration.Invalid({"cloned_from": "This model has no trained weights to clone."})
+    if source is not None:  # its weights are for its source's network
+        clean["network_layout"] = source.network_layout
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.QUEUED, **clean)
     if weights is not None:
         artifacts.save(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))

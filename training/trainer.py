@@ -142,7 +142,7 @@ class Trainer:
         self.learner = Learner(
             algorithm=model.algorithm,
             hyperparameters=model.hyperparameters,
-            network=model.network,
+            architecture=model.architecture,
             observation_space=spaces[0],
             action_space=spaces[1],
             seed=model.seed,

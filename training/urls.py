@@ -20,7 +20,7 @@ urlpatterns = [
             {"kind": kind},
             name=f"model-export-{kind}",
         )
-        for kind in ("physical", "virtual")
+        for kind in ("physical", "onnx", "virtual")
     ),
     path("models/<int:pk>/delete/", views.model_delete, name="model-delete"),
     path("models/<int:pk>/evaluate/", views.evaluation_create, name="evaluation-create"),

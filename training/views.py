@@ -369,7 +369,7 @@ def model_file(request: HttpRequest, pk: int, relative: str) -> HttpResponse:
 @login_required
 @require_safe
 def model_export(request: HttpRequest, pk: int, kind: str) -> HttpResponse:
-    """The physical-car archive (of the ``checkpoint`` asked for, best by default) or the
+    """The physical-car or ONNX archive (of the ``checkpoint`` asked for, best by default) or the
     virtual-model archive, built on first request and kept in the model's storage."""
     model = _get_model_for_user(request, pk)
     which = request.GET.get("checkpoint", "best")
@@ -377,7 +377,10 @@ def model_export(request: HttpRequest, pk: int, kind: str) -> HttpResponse:
         messages.error(request, "Choose the best or the last checkpoint.")
         return redirect("training:model-detail", pk=model.pk)
     try:
-        export = exports.physical(model, which) if kind == "physical" else exports.virtual(model)
+        if kind == "virtual":
+            export = exports.virtual(model)
+        else:
+            export = {"physical": exports.physical, "onnx": exports.onnx}[kind](model, which)
     except exports.ExportRefused as refused:
         messages.error(request, str(refused))
         return redirect("training:model-detail", pk=model.pk)

@@ -43,12 +43,16 @@ def trained_model(owner, name: str, *, weights=None, **settings) -> RLModel:
         "reward_function": EXAMPLES[0].source,
         **settings,
     }
+    layout = settings.pop("network_layout", None)  # not a racer's setting
     clean = configuration.check(settings, owner=owner, validate_reward=False)
+    if layout is not None:
+        clean["network_layout"] = layout
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean)
     env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
     learner = Learner(
-        algorithm=model.algorithm, hyperparameters=model.hyperparameters, network=model.network,
-        observation_space=env.observation_space, action_space=env.action_space, seed=model.seed,
+        algorithm=model.algorithm, hyperparameters=model.hyperparameters,
+        architecture=model.architecture, observation_space=env.observation_space,
+        action_space=env.action_space, seed=model.seed,
     )  # fmt: skip
     env.close()
     if weights is not None:

@@ -1,9 +1,12 @@
-"""Downloads: the physical-car archive runs on ONNX Runtime and OpenVINO as the PyTorch policy
-does; the virtual model holds everything needed to go on training."""
+"""Downloads: the physical-car archive is what the car's model loader installs, and its graph
+chooses the PyTorch policy's action; ONNX runs as PyTorch does; the virtual model holds everything
+needed to go on training."""
 
 import io
 import json
+import os
 import tarfile
+from pathlib import Path
 
 import gymnasium
 import numpy as np
@@ -16,7 +19,7 @@ from django.urls import reverse
 
 import simulator
 from tests.training.factories import trained_model
-from training import artifacts, hyperparameters
+from training import artifacts, cargraph, hyperparameters
 from training.models import RLModel
 from training.policies import Policy
 
@@ -51,7 +54,9 @@ def observations(model: RLModel, count: int = 12) -> list[dict]:
 
 
 def torch_policy(model: RLModel) -> Policy:
-    policy = Policy.for_environment(model.algorithm, model.network, model.environment_settings())
+    policy = Policy.for_environment(
+        model.algorithm, model.architecture, model.environment_settings()
+    )
     policy.load_checkpoint(
         artifacts.read(artifacts.path(model, "checkpoints/iteration-1.safetensors"))
     )
@@ -69,70 +74,103 @@ def export(tmp_path, model: RLModel, *flags: str) -> dict[str, bytes]:
     return archive_members(output.read_bytes())
 
 
-def car_inputs(model: RLModel, observation: dict) -> dict[str, np.ndarray]:
-    """The car's inputs: camera bytes as float32, and the lidar, each with a batch axis."""
-    return {sensor: observation[sensor][None].astype(np.float32) for sensor in model.sensors}
+def car_loader(archive: bytes, into: Path) -> tuple[bytes, dict]:
+    """The car's model loader (aws-deepracer-systems-pkg model_loader_node.py:331-438 and
+    model_install_state.py:99-123): extract the archive; every file whose extension is "in" the
+    string ".pb" is a model (so a file without an extension is one too); exactly one may be there,
+    installed as model.pb; model_metadata.json is read from the root."""
+    with tarfile.open(fileobj=io.BytesIO(archive), mode="r:gz") as tar:
+        tar.extractall(into, filter="data")
+    found = [p for p in into.rglob("*") if p.is_file() and os.path.splitext(p.name)[1] in ".pb"]
+    assert len(found) == 1, f"the car ignores the archive: {len(found)} models in it"
+    return found[0].read_bytes(), json.loads((into / "model_metadata.json").read_text())
 
 
-def runtimes(members: dict[str, bytes], tmp_path):
-    onnx = onnxruntime.InferenceSession(members["agent/model.onnx"])
-    (tmp_path / "model.xml").write_bytes(members["agent/model.xml"])
-    (tmp_path / "model.bin").write_bytes(members["agent/model.bin"])
-    core = openvino.Core()
-    # fp32 throughout: the CPU plugin may otherwise compute in bf16 where the CPU has it.
-    ir = core.compile_model(core.read_model(str(tmp_path / "model.xml")), "CPU",
-                            {"INFERENCE_PRECISION_HINT": "f32"})  # fmt: skip
-    return (lambda inputs: onnx.run(None, inputs)[0]), (lambda inputs: ir(inputs)[0])
-
-
-def test_the_car_archive_chooses_the_pytorch_policys_action_on_camera_frames(
+def test_the_car_installs_the_archive_and_its_graph_chooses_the_pytorch_policys_action(
     alice, tracks, tmp_path
 ):
+    import tensorflow
+
     model = trained_model(alice, "discrete-camera", weights=decisive)
-    members = export(tmp_path, model, "--physical")
-    assert sorted(members) == [
-        "agent/model.bin", "agent/model.onnx", "agent/model.xml", "model_metadata.json",
-    ]  # fmt: skip
-    metadata = json.loads(members["model_metadata.json"])
+    output = tmp_path / "physicalmodel-discrete-camera.tar.gz"
+    call_command("exportmodel", model.name, "--physical", "-o", str(output), stdout=io.StringIO())
+    assert sorted(archive_members(output.read_bytes())) == ["agent/model.pb", "model_metadata.json"]
+    graph, metadata = car_loader(output.read_bytes(), tmp_path / "car")
     assert metadata == model.metadata()
     assert metadata["sensor"] == ["FRONT_FACING_CAMERA"] and metadata["version"] == "5"
 
-    policy, (onnx, ir) = torch_policy(model), runtimes(members, tmp_path)
-    chosen = []
-    for observation in observations(model):
-        action, _, _ = policy.act(observation, deterministic=True)
-        tensor, _ = policy.network.obs_to_tensor(observation)
-        with torch.no_grad():
-            expected = policy.network.get_distribution(tensor).distribution.probs.numpy()
-        inputs = car_inputs(model, observation)
-        assert inputs["FRONT_FACING_CAMERA"].shape == (1, 1, 120, 160)
-        for runtime in (onnx, ir):
-            probabilities = runtime(inputs)
+    graph_def = tensorflow.compat.v1.GraphDef.FromString(graph)
+    with tensorflow.Graph().as_default() as loaded:
+        tensorflow.compat.v1.import_graph_def(graph_def, name="")
+    camera, output_node = (
+        cargraph.input_name(True, "FRONT_FACING_CAMERA"),
+        cargraph.output_name(True),
+    )
+    assert camera == (
+        "main_level/agent/main/online/network_0/FRONT_FACING_CAMERA/FRONT_FACING_CAMERA"
+    )
+    policy, chosen = torch_policy(model), []
+    with tensorflow.compat.v1.Session(graph=loaded) as session:
+        for observation in observations(model):
+            action, _, _ = policy.act(observation, deterministic=True)
+            tensor, _ = policy.network.obs_to_tensor(observation)
+            with torch.no_grad():
+                expected = policy.network.get_distribution(tensor).distribution.probs.numpy()
+            frame = observation["FRONT_FACING_CAMERA"][None].astype(np.float32)
+            assert frame.shape == (1, 1, 120, 160)
+            probabilities = session.run(
+                f"{output_node}:0",
+                {f"{camera}:0": frame.transpose(0, 2, 3, 1)},  # NHWC, 0-255
+            )
             assert probabilities.shape == (1, len(model.action_space))
             np.testing.assert_allclose(probabilities, expected, atol=1e-4)
             assert int(probabilities.argmax()) == int(action)
-        chosen.append(int(action))
+            chosen.append(int(action))
     assert len(set(chosen)) > 1  # the frames are told apart: the comparison means something
 
 
-def test_a_continuous_stereo_lidar_car_gets_the_same_action_from_each_runtime(
+def test_a_continuous_stereo_lidar_policy_runs_as_onnx_on_onnx_runtime_and_openvino(
     alice, tracks, tmp_path
 ):
     model = trained_model(
         alice, "sac-stereo-lidar", weights=decisive, algorithm="sac", action_space=CONTINUOUS,
         sensors=["STEREO_CAMERAS", "LIDAR"],
     )  # fmt: skip
-    members = export(tmp_path, model, "--physical", "--checkpoint", "last")
-    policy, (onnx, ir) = torch_policy(model), runtimes(members, tmp_path)
+    members = export(tmp_path, model, "--onnx", "--checkpoint", "last")
+    assert sorted(members) == ["model.onnx", "model_metadata.json"]
+    onnx = onnxruntime.InferenceSession(members["model.onnx"])
+    core = openvino.Core()
+    (tmp_path / "model.onnx").write_bytes(members["model.onnx"])
+    # fp32 throughout: the CPU plugin may otherwise compute in bf16 where the CPU has it.
+    ir = core.compile_model(core.read_model(str(tmp_path / "model.onnx")), "CPU",
+                            {"INFERENCE_PRECISION_HINT": "f32"})  # fmt: skip
+    policy = torch_policy(model)
     for observation in observations(model, count=6):
         expected, _, _ = policy.act(observation, deterministic=True)
-        inputs = car_inputs(model, observation)
+        inputs = {s: observation[s][None].astype(np.float32) for s in model.sensors}
         assert inputs["STEREO_CAMERAS"].shape == (1, 2, 120, 160)
         assert inputs["LIDAR"].shape == (1, 64)
-        for runtime in (onnx, ir):
-            action = runtime(inputs)
+        for action in (onnx.run(None, inputs)[0], ir(inputs)[0]):
             assert action.shape == (1, 2)
             np.testing.assert_allclose(action[0], expected, atol=1e-4)
+
+
+def test_a_model_with_pitlanes_first_networks_goes_to_onnx_but_not_to_the_car(
+    alice, tracks, tmp_path
+):
+    model = trained_model(alice, "first-layout", network_layout=1)
+    assert model.architecture == "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW:1"
+    with pytest.raises(CommandError, match="trained before Pitlane's networks were DeepRacer's"):
+        call_command("exportmodel", model.name, "--physical", "-o", str(tmp_path / "x.tar.gz"))
+    members = export(tmp_path, model, "--onnx")
+    policy = torch_policy(model)
+    observation = observations(model, count=1)[0]
+    tensor, _ = policy.network.obs_to_tensor(observation)
+    with torch.no_grad():
+        expected = policy.network.get_distribution(tensor).distribution.probs.numpy()
+    frame = {"FRONT_FACING_CAMERA": observation["FRONT_FACING_CAMERA"][None].astype(np.float32)}
+    got = onnxruntime.InferenceSession(members["model.onnx"]).run(None, frame)[0]
+    np.testing.assert_allclose(got, expected, atol=1e-4)
 
 
 def test_the_virtual_model_holds_what_training_elsewhere_needs(alice, tracks, tmp_path):
@@ -164,18 +202,19 @@ def test_a_model_without_weights_has_nothing_to_download(alice, tracks, tmp_path
     assert "Downloads for the car and for another console appear" in response.text
 
 
-def test_the_model_page_offers_both_archives_to_its_owner_only(alice, bob, tracks, client):
+def test_the_model_page_offers_the_archives_to_its_owner_only(alice, bob, tracks, client):
     model = trained_model(alice, "downloadable")
     client.force_login(alice)
     page = client.get(reverse("training:model-detail", args=[model.pk])).text
-    assert (
-        "physicalmodel-downloadable.tar.gz" in page and "virtualmodel-downloadable.tar.gz" in page
-    )
+    for kind in ("physicalmodel", "onnxmodel", "virtualmodel"):
+        assert f"{kind}-downloadable.tar.gz" in page
     url = reverse("training:model-export-physical", args=[model.pk])
     response = client.get(url, {"checkpoint": "last"})
     assert response.status_code == 200
     assert 'filename="physicalmodel-downloadable.tar.gz"' in response["Content-Disposition"]
-    assert "agent/model.onnx" in archive_members(b"".join(response.streaming_content))
+    assert "agent/model.pb" in archive_members(b"".join(response.streaming_content))
+    onnx = client.get(reverse("training:model-export-onnx", args=[model.pk]))
+    assert "model.onnx" in archive_members(b"".join(onnx.streaming_content))
     assert client.get(url, {"checkpoint": "worst"}).status_code == 302  # with a message
 
     client.force_login(bob)

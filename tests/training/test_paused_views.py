@@ -27,7 +27,7 @@ class Publisher:
 
 @pytest.fixture(scope="module")
 def sandbox():
-    policy = {"algorithm": "clipped_ppo", "network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"}
+    policy = {"algorithm": "clipped_ppo", "architecture": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"}
     with Sandbox(
         env={"track": "pitlane-oval"}, policy=policy, memory_allowance=1024 * MiB
     ) as sandbox:

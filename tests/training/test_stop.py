@@ -124,7 +124,8 @@ def test_an_update_is_abandoned_as_soon_as_it_is_told_to(algorithm):
     env = gymnasium.make(simulator.ENV_ID, track="pitlane-oval", **settings)
     values = {**hyperparameters.defaults(algorithm), "batch_size": 32}
     learner = Learner(
-        algorithm=algorithm, hyperparameters=values, network="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+        algorithm=algorithm, hyperparameters=values,
+        architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
         observation_space=env.observation_space, action_space=env.action_space,
     )  # fmt: skip
     asked = []

@@ -307,7 +307,7 @@ def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
     model = RLModel.objects.create(owner=alice, status=RLModel.Status.TRAINING, **clean)
     env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
     learner = Learner(algorithm=model.algorithm, hyperparameters=model.hyperparameters,
-                      network=model.network, observation_space=env.observation_space,
+                      architecture=model.architecture, observation_space=env.observation_space,
                       action_space=env.action_space)  # fmt: skip
     checkpoint = artifacts.save(model, "checkpoints/iteration-1.safetensors", learner.checkpoint())
     now = timezone.now()
@@ -399,12 +399,12 @@ def test_sac_learns_from_random_episodes_driven_in_the_sandbox():
     learner = Learner(
         algorithm="sac",
         hyperparameters=sac,
-        network=model_network(),
+        architecture=model_network(),
         observation_space=env.observation_space,
         action_space=env.action_space,
     )
     before = learner.policy_weights()
-    policy = {"algorithm": "sac", "network": model_network()}
+    policy = {"algorithm": "sac", "architecture": model_network()}
     with Sandbox(
         env={"track": "pitlane-oval", "action_space": continuous},
         policy=policy,

@@ -87,7 +87,7 @@ class Sandbox:
     """One sandbox child. ``env``: settings for a simulator the child builds before sealing."""
 
     env: dict | None = None
-    policy: dict | None = None  # {"algorithm", "network", "seed"}: a policy to act with
+    policy: dict | None = None  # {"algorithm", "architecture", "seed"}: a policy to act with
     call_timeout: float = 1.0  # [s] per call of the reward function
     memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing
     start_timeout: float = 60.0  # [s]

@@ -118,7 +118,7 @@ class Child:
 
         torch.set_num_threads(1)
         self.policy = Policy.build(
-            settings["algorithm"], settings["network"],
+            settings["algorithm"], settings["architecture"],
             self.env.observation_space, self.env.action_space,
         )  # fmt: skip
         self.ppo = self.policy.ppo

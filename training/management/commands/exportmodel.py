@@ -10,9 +10,10 @@ from training.management.lookup import find_model
 class Command(BaseCommand):
     help = (
         "Write a model's archive: --physical for the car (model_metadata.json, and the network "
-        "as ONNX and OpenVINO IR under agent/), --virtual for another Pitlane or DeepRacer "
-        "toolchain (settings, reward function, checkpoints, metrics), --logs for log analysis "
-        "(simulation traces and metrics laid out as a DeepRacer model folder)."
+        "as DeepRacer's TensorFlow frozen graph, agent/model.pb), --onnx for custom cars and "
+        "other runtimes (model_metadata.json and model.onnx), --virtual for another Pitlane or "
+        "DeepRacer toolchain (settings, reward function, checkpoints, metrics), --logs for log "
+        "analysis (simulation traces and metrics laid out as a DeepRacer model folder)."
     )
 
     def add_arguments(self, parser) -> None:
@@ -20,11 +21,12 @@ class Command(BaseCommand):
         parser.add_argument("--owner", help="the racer who owns the model")
         kind = parser.add_mutually_exclusive_group(required=True)
         kind.add_argument("--physical", action="store_true", help="the archive for the car")
+        kind.add_argument("--onnx", action="store_true", help="the network as ONNX")
         kind.add_argument("--virtual", action="store_true", help="the archive to train on")
         kind.add_argument("--logs", action="store_true", help="the logs, for log analysis")
         parser.add_argument(
             "--checkpoint", choices=["best", "last"], default="best",
-            help="which checkpoint goes on the car (default: best)",
+            help="which checkpoint goes on the car or into ONNX (default: best)",
         )  # fmt: skip
         parser.add_argument("-o", "--output", help="where to write it (default: its own name)")
 
@@ -36,6 +38,8 @@ class Command(BaseCommand):
         try:
             if options["physical"]:
                 export = exports.physical(model, options["checkpoint"])
+            elif options["onnx"]:
+                export = exports.onnx(model, options["checkpoint"])
             else:
                 export = exports.virtual(model)
         except exports.ExportRefused as refused:
