@@ -165,8 +165,7 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     with tarfile.open(fileobj=io.BytesIO(open(download.value.path(), "rb").read())) as archive:
         names = sorted(archive.getnames())
         metadata = json.load(archive.extractfile("model_metadata.json"))
-    assert names == ["agent/model.bin", "agent/model.onnx", "agent/model.xml",
-                     "model_metadata.json"]  # fmt: skip
+    assert names == ["agent/model.pb", "model_metadata.json"]
     assert metadata["action_space"] == model.action_space
 
     # Clone, then delete the clone.

@@ -71,7 +71,7 @@ def test_the_help_page_says_how_to_get_a_model_onto_the_car(client):
     ).group(1)
     for words in ("physicalmodel-", "<strong>Models</strong>", "<strong>Upload</strong>",
                   "<strong>Start vehicle</strong>", "<code>model_metadata.json</code>",
-                  "<code>model.onnx</code>", "<code>model.xml</code>"):  # fmt: skip
+                  "<code>agent/model.pb</code>", "<code>model.onnx</code>"):  # fmt: skip
         assert words in section, words
 
 
