@@ -48,10 +48,10 @@ def build(algorithm, space, sensors, network):
     torch.manual_seed(5)
     policy = Policy.build(algorithm, network, env.observation_space, env.action_space)
     # Heads that tell frames apart: SB3 starts them near zero, which would give every frame
-    # almost the same action.
+    # almost the same action (and not so steep that a squashed action saturates at +-1).
     head = policy.network.action_net if policy.ppo else policy.network.actor.mu
     with torch.no_grad():
-        head.weight.mul_(200.0)
+        head.weight.mul_(200.0 if isinstance(space, list) else 20.0)
     frames = []
     observation, _ = env.reset(seed=3)
     rng = np.random.default_rng(7)
