@@ -38,10 +38,14 @@ def input_name(ppo: bool, sensor: str) -> str:
     return f"{ROOT}/{'main' if ppo else 'policy'}/online/network_0/{sensor}/{sensor}"
 
 
+def policy_scope(ppo: bool) -> str:
+    """Where the policy network sits: PPO's second network (the value's is the first), SAC's
+    policy wrapper's only one."""
+    return f"{ROOT}/main/online/network_1" if ppo else f"{ROOT}/policy/online/network_0"
+
+
 def output_name(ppo: bool) -> str:
-    if ppo:
-        return f"{ROOT}/main/online/network_1/ppo_head_0/policy"
-    return f"{ROOT}/policy/online/network_0/sac_policy_head_0/policy"
+    return f"{policy_scope(ppo)}/{'ppo_head_0' if ppo else 'sac_policy_head_0'}/policy"
 
 
 def input_shape(space) -> list[int]:
@@ -55,15 +59,14 @@ def input_shape(space) -> list[int]:
 def car_graph(policy: Policy, discrete: bool) -> bytes:
     """The serialized frozen graph (``GraphDef``) of ``policy``, a layout-2 network."""
     network, ppo = policy.network, policy.ppo
-    prefix = f"{ROOT}/main/online/network_1" if ppo else f"{ROOT}/policy/online/network_0"
+    prefix = policy_scope(ppo)
     extractor = network.pi_features_extractor if ppo else network.actor.features_extractor
     graph = tfgraph.Graph()
     embedded = []
     for sensor in extractor.sensors:
-        space = network.observation_space[sensor]
-        shape = input_shape(space)
+        shape = input_shape(network.observation_space[sensor])
         x = graph.placeholder(input_name(ppo, sensor), [-1, *shape[1:]])
-        embedded.append(_embed(graph, f"{prefix}/{sensor}", x, extractor.embedders[sensor], shape))
+        embedded.append(_embed(graph, f"{prefix}/{sensor}", x, extractor.embedders[sensor]))
     x = embedded[0] if len(embedded) == 1 else graph.concat(f"{prefix}/merger", embedded, -1)
     x = _dense(graph, f"{prefix}/middleware_fc_embedder/Dense_0", x, extractor.middleware)
     x = graph.unary(f"{prefix}/middleware_fc_embedder/Dense_0/Relu", "Relu", x)
@@ -84,7 +87,7 @@ def car_graph(policy: Policy, discrete: bool) -> bytes:
     return graph.serialize()
 
 
-def _embed(graph: tfgraph.Graph, scope: str, x: str, embedder: Embedder, shape) -> str:
+def _embed(graph: tfgraph.Graph, scope: str, x: str, embedder: Embedder) -> str:
     if embedder.image:
         x = graph.divide(f"{scope}/truediv", x, 255.0)
     for layer, name in zip(embedder.layers, embedder.tf_names, strict=True):
@@ -95,9 +98,7 @@ def _embed(graph: tfgraph.Graph, scope: str, x: str, embedder: Embedder, shape) 
             x = _dense(graph, f"{scope}/{name}", x, layer)
         x = graph.unary(f"{scope}/{name}/Relu", "Relu", x)
     if embedder.image:
-        with torch.no_grad():
-            flat = embedder(torch.zeros((1, shape[3], shape[1], shape[2]))).shape[1]
-        x = graph.reshape(f"{scope}/Flatten/flatten/Reshape", x, [-1, flat])
+        x = graph.reshape(f"{scope}/Flatten/flatten/Reshape", x, [-1, embedder.size])
     return x
 
 

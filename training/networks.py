@@ -79,7 +79,8 @@ def _parse(name: str) -> tuple[str, int]:
 
 
 class Embedder(nn.Module):
-    """One sensor's embedder. ``tf_names`` are its layers' names in DeepRacer's graph: rl_coach
+    """One sensor's embedder; ``size``: the length of its flattened embedding. ``tf_names`` are
+    its layers' names in DeepRacer's graph: rl_coach
     numbers the layers together with the activation block after each (Conv2d_0, Conv2d_2, ...;
     embedder.py:115-119)."""
 
@@ -97,6 +98,8 @@ class Embedder(nn.Module):
                 self.tf_names.append(f"Dense_{2 * index}")
             size = units
         self.layers = nn.ModuleList(modules)
+        with torch.no_grad():
+            self.size = self(torch.zeros((1, *space.shape))).shape[1]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         if not self.image:
@@ -114,15 +117,10 @@ class DeepRacerFeatures(BaseFeaturesExtractor):
     def __init__(self, observation_space: gymnasium.spaces.Dict, network: str = SHALLOW) -> None:
         sensors = sorted(observation_space.spaces)
         embedders = {s: Embedder(EMBEDDERS[network, s], observation_space[s]) for s in sensors}
-        with torch.no_grad():
-            flat = sum(
-                embedder(torch.zeros((1, *observation_space[s].shape))).shape[1]
-                for s, embedder in embedders.items()
-            )
         super().__init__(observation_space, features_dim=MIDDLEWARE)
         self.sensors = sensors
         self.embedders = nn.ModuleDict(embedders)
-        self.middleware = nn.Linear(flat, MIDDLEWARE)
+        self.middleware = nn.Linear(sum(e.size for e in embedders.values()), MIDDLEWARE)
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
         embedded = [self.embedders[s](observations[s].float()) for s in self.sensors]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gymnasium
+import numpy as np
 import torch
 
 import simulator
@@ -64,3 +65,20 @@ def trained_model(owner, name: str, *, weights=None, **settings) -> RLModel:
     )  # fmt: skip
     artifacts.write_model_files(model)
     return model
+
+
+def sensor_frames(environment: dict, count: int = 12) -> list[dict]:
+    """What the car's sensors see along the track (``environment``: ``gymnasium.make``'s keyword
+    arguments): ``count`` observations a few random steps apart."""
+    env = gymnasium.make(simulator.ENV_ID, **environment)
+    observation, _ = env.reset(seed=3)
+    seen = []
+    rng = np.random.default_rng(7)
+    while len(seen) < count:
+        for _ in range(4):
+            observation, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            if terminated or truncated:
+                observation, _ = env.reset(seed=int(rng.integers(1000)))
+        seen.append(observation)
+    env.close()
+    return seen

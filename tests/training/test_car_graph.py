@@ -9,6 +9,7 @@ import pytest
 import torch
 
 import simulator
+from tests.training.factories import sensor_frames
 from training import cargraph, tfgraph
 from training.networks import DEEP, SHALLOW
 from training.policies import Policy
@@ -52,17 +53,8 @@ def build(algorithm, space, sensors, network):
     head = policy.network.action_net if policy.ppo else policy.network.actor.mu
     with torch.no_grad():
         head.weight.mul_(200.0 if isinstance(space, list) else 20.0)
-    frames = []
-    observation, _ = env.reset(seed=3)
-    rng = np.random.default_rng(7)
-    while len(frames) < 4:
-        for _ in range(5):
-            observation, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            if terminated or truncated:
-                observation, _ = env.reset(seed=int(rng.integers(1000)))
-        frames.append(observation)
     env.close()
-    return policy, frames
+    return policy, sensor_frames(environment, count=4)
 
 
 def expected(policy, observation, discrete: bool) -> np.ndarray:

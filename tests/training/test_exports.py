@@ -8,7 +8,6 @@ import os
 import tarfile
 from pathlib import Path
 
-import gymnasium
 import numpy as np
 import onnxruntime
 import openvino
@@ -17,8 +16,7 @@ import torch
 from django.core.management import CommandError, call_command
 from django.urls import reverse
 
-import simulator
-from tests.training.factories import trained_model
+from tests.training.factories import sensor_frames, trained_model
 from training import artifacts, cargraph, hyperparameters, networks
 from training.models import RLModel
 from training.policies import Policy
@@ -35,22 +33,6 @@ def decisive(learner) -> None:
     head = policy.action_net if hasattr(policy, "action_net") else policy.actor.mu
     with torch.no_grad():
         head.weight.mul_(200.0)
-
-
-def observations(model: RLModel, count: int = 12) -> list[dict]:
-    """What the car's sensors see along the track: ``count`` observations a few steps apart."""
-    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-    observation, _ = env.reset(seed=3)
-    seen = []
-    rng = np.random.default_rng(7)
-    while len(seen) < count:
-        for _ in range(4):
-            observation, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            if terminated or truncated:
-                observation, _ = env.reset(seed=int(rng.integers(1000)))
-        seen.append(observation)
-    env.close()
-    return seen
 
 
 def torch_policy(model: RLModel) -> Policy:
@@ -111,7 +93,7 @@ def test_the_car_installs_the_archive_and_its_graph_chooses_the_pytorch_policys_
     )
     policy, chosen = torch_policy(model), []
     with tensorflow.compat.v1.Session(graph=loaded) as session:
-        for observation in observations(model):
+        for observation in sensor_frames(model.environment_settings()):
             action, _, _ = policy.act(observation, deterministic=True)
             tensor, _ = policy.network.obs_to_tensor(observation)
             with torch.no_grad():
@@ -145,7 +127,7 @@ def test_a_continuous_stereo_lidar_policy_runs_as_onnx_on_onnx_runtime_and_openv
     ir = core.compile_model(core.read_model(str(tmp_path / "model.onnx")), "CPU",
                             {"INFERENCE_PRECISION_HINT": "f32"})  # fmt: skip
     policy = torch_policy(model)
-    for observation in observations(model, count=6):
+    for observation in sensor_frames(model.environment_settings(), count=6):
         expected, _, _ = policy.act(observation, deterministic=True)
         inputs = {s: observation[s][None].astype(np.float32) for s in model.sensors}
         assert inputs["STEREO_CAMERAS"].shape == (1, 2, 120, 160)
@@ -165,7 +147,7 @@ def test_a_model_with_pitlanes_first_networks_goes_to_onnx_but_not_to_the_car(
         call_command("exportmodel", model.name, "--physical", "-o", str(tmp_path / "x.tar.gz"))
     members = export(tmp_path, model, "--onnx")
     policy = torch_policy(model)
-    observation = observations(model, count=1)[0]
+    observation = sensor_frames(model.environment_settings(), count=1)[0]
     tensor, _ = policy.network.obs_to_tensor(observation)
     with torch.no_grad():
         expected = policy.network.get_distribution(tensor).distribution.probs.numpy()
