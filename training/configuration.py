@@ -40,8 +40,12 @@ def name_problem(name: str, *, owner) -> str | None:
     return None
 
 
-def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
-    """The settings, complete and typed, ready for ``RLModel(**...)``; ``Invalid`` otherwise."""
+def check(
+    settings: dict, *, owner, validate_reward: bool = True, reward_required: bool = True
+) -> dict:
+    """The settings, complete and typed, ready for ``RLModel(**...)``; ``Invalid`` otherwise.
+    Only a model imported without a reward function (to evaluate and race, not to train) is
+    checked without ``reward_required``."""
     errors: dict[str, str] = {}
     clean: dict = {}
 
@@ -91,7 +95,8 @@ def check(settings: dict, *, owner, validate_reward: bool = True) -> dict:
 
     source = settings.get("reward_function") or ""
     if not source.strip():
-        errors["reward_function"] = "Write a reward function (or start from an example)."
+        if reward_required:
+            errors["reward_function"] = "Write a reward function (or start from an example)."
     elif validate_reward and track is not None and "direction" not in errors:
         result = reward_validate(source=source, track=track.name, direction=direction)
         if not result.valid:

@@ -1,12 +1,17 @@
-"""Importing a model from an archive: a Pitlane virtual model (``exports.virtual``), which arrives
-READY with its weights, or a DeepRacer export, whose settings and reward function arrive as a new
-model whose training is queued (its TensorFlow checkpoints cannot be loaded into our network).
+"""Importing a model from an archive: a Pitlane virtual model (``exports.virtual``), or a DeepRacer
+model as the DeepRacer console or DeepRacer for Cloud exports one. Either arrives READY with its
+weights: ours from safetensors, DeepRacer's from its TensorFlow checkpoint (``tfcheckpoint``) or,
+failing one, its frozen graph (``tfgraph``), into the same network (``tfweights``). A DeepRacer
+archive without weights arrives with its settings and reward function, its training queued. A
+car archive (``model.pb`` and model_metadata.json, no reward function) arrives as a model to
+evaluate, race and download, which cannot train.
 
 An archive is hostile until proven otherwise. Before anything is written: its size, the number
 of its members and their unpacked size are limited; only regular files under relative paths are
 read (no absolute paths, no ``..``, no links, devices or FIFOs); the settings are checked as the
 create-model page checks them, the reward function validated in the sandbox; weights are read
-only from safetensors, into our own network, every tensor and shape checked. A refused archive
+only from safetensors or TensorFlow's formats, never unpickled or executed, into our own network,
+every tensor and shape checked. A refused archive
 leaves nothing in the database or in storage.
 """
 
@@ -29,11 +34,24 @@ from django.core.files.storage import default_storage
 from django.core.files.uploadedfile import UploadedFile
 from django.db import transaction
 from django.utils import timezone
+from google.protobuf.message import DecodeError
 from safetensors import SafetensorError
 
 from simulator import config as sim
 from simulator import tracks as sim_tracks
-from training import artifacts, configuration, exports, history, hyperparameters, jobs, services
+from training import (
+    artifacts,
+    configuration,
+    exports,
+    history,
+    hyperparameters,
+    jobs,
+    networks,
+    services,
+    tfcheckpoint,
+    tfgraph,
+    tfweights,
+)
 from training.models import Algorithm, Network, RLModel, ShellColour, Track, TrainingJob
 from training.policies import Policy
 
@@ -58,14 +76,27 @@ WANTED = {
     *(path for paths in PLACES.values() for path in paths),
     exports.PITLANE_SETTINGS, artifacts.TRAINING_METRICS, *CHECKPOINTS,
 }  # fmt: skip
+# DeepRacer's checkpoint pointers, in the folder of its checkpoints, most telling first: best and
+# last by name (simapp checkpoint_files/deepracer_checkpoint_json.py:83-131), rl_coach's latest
+# (rl_coach_checkpoint.py:160-179), TensorFlow's latest ("model_checkpoint_path: ...").
+DEEPRACER_CHECKPOINTS, TF_CHECKPOINT = "deepracer_checkpoints.json", "checkpoint"
+COACH_CHECKPOINTS = (".coach_checkpoint", "coach_checkpoint")  # the second as racers copy it
+STEP = re.compile(r"(\d+)_Step-\d+\.ckpt$")  # rl_coach's checkpoint names: <N>_Step-<steps>.ckpt
+GRAPH = re.compile(r"model_(\d+)\.pb$")  # simapp's frozen graph of checkpoint N
+CAR_GRAPH = "agent/model.pb"  # the car archive's (exports.physical)
 KEPT_FOLDER = "imports/kept"  # in storage: archives kept between a racer's attempts
 KEPT_FOR = timedelta(hours=6)
 KEPT_SESSION_KEY = "training:kept-import"
 DEFAULT_TRACK = "rookie-loop"
+SENSOR_ALIASES = {"observation": "FRONT_FACING_CAMERA"}  # simapp < 2.0 (model_metadata.py:229-241)
 DEEPRACER_ALGORITHMS = {"clipped_ppo": Algorithm.PPO, "ppo": Algorithm.PPO, "sac": Algorithm.SAC}
 
 
-Members = dict[str, bytes | None]  # an archive's files: contents of those read, None for the rest
+class Members(dict[str, bytes | None]):
+    """An archive's files by relative path: the contents of those an import reads, None for the
+    others; ``top`` is the single top-level folder taken off their paths ('' when none)."""
+
+    top = ""
 
 
 NOT_AN_ARCHIVE = (
@@ -92,25 +123,46 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
     metadata = _json(members, _place(members, "model_metadata.json"))
     if metadata is None:
         raise ImportRefused("The archive has no model_metadata.json: is it a model's download?")
-    reward = _text(members, _place(members, "reward_function.py"))
-    if reward is None:
-        raise ImportRefused("The archive has no reward_function.py.")
+    reward = _text(members, _place(members, "reward_function.py")) or ""
     ours = _json(members, exports.PITLANE_SETTINGS) or {}
+    weights = {path: members[path] for path in CHECKPOINTS if members.get(path) is not None}
+    tensorflow = _TensorFlowFiles.find(members)
+    if not reward.strip() and not weights and not tensorflow:
+        raise ImportRefused(
+            "The archive has no reward_function.py, and no weights to evaluate the model with: "
+            "choose a model's download (with its reward function), or a car archive with its "
+            "model.pb."
+        )
     notes: list[str] = []
     settings = _settings(metadata, ours, members, reward, name, notes)
-    weights = {path: members[path] for path in CHECKPOINTS if members.get(path) is not None}
     if weights:
-        imported = _import_trained(owner, settings, weights, members, ours)
-        imported.notes = notes + imported.notes
-        return imported
-    if any(_is_tensorflow(path) for path in members):
-        notes.append(
-            "The archive's TensorFlow checkpoints were not carried over: this console trains "
-            "PyTorch networks. The settings and the reward function were; the model trains "
-            "from new weights."
+        layout = ours.get("network_layout", 1)  # format 1 came before DeepRacer's networks
+        if layout not in (1, 2):
+            raise ImportRefused(
+                f"{exports.PITLANE_SETTINGS} names a network layout this console does not know "
+                f"({_shown(layout)}): it was exported by a newer Pitlane."
+            )
+        imported = _import_trained(owner, settings, members, ours, layout=layout,
+                                   checkpoints=lambda _: weights)  # fmt: skip
+    elif tensorflow and _weights_fit(metadata, settings, notes):
+        imported = _import_trained(
+            owner, settings, members, ours, layout=networks.LAYOUT,
+            checkpoints=lambda policy: tensorflow.load(archive, members, policy, notes),
+        )  # fmt: skip
+    elif not reward.strip():
+        raise ImportRefused(
+            "The archive has no reward_function.py, and its weights are for a car this console "
+            "does not have (see model_metadata.json): there is nothing to train or to drive."
         )
-    model = services.model_create(owner=owner, settings=settings)
-    return Imported(model, notes)
+    else:
+        return Imported(services.model_create(owner=owner, settings=settings), notes)
+    imported.notes = notes + imported.notes
+    if not reward.strip():
+        imported.notes.append(
+            "The archive brings no reward function: the model can be evaluated, raced and "
+            "downloaded, but not trained on or cloned."
+        )
+    return imported
 
 
 @dataclass(frozen=True)
@@ -180,7 +232,7 @@ def read_archive(archive: IO[bytes]) -> Members:
     if archive.tell() > MAX_ARCHIVE:
         raise ImportRefused(f"The archive is over {size(MAX_ARCHIVE)}.")
     archive.seek(0)
-    members: Members = {}
+    members = Members()
     unpacked = 0
     try:
         with tarfile.open(fileobj=archive, mode="r:*") as tar:
@@ -207,8 +259,16 @@ def _place(members: Members, name: str) -> str:
 
 
 def _wanted(path: str) -> bool:
-    """Whether an import reads ``path``, at the root or under a single top-level folder."""
-    return path in WANTED or path.split("/", 1)[-1] in WANTED
+    """Whether an import reads ``path``, at the root or under a single top-level folder: ours,
+    or DeepRacer's checkpoint indexes, pointers and frozen graphs (their checkpoints' data is read
+    later, only the tensors wanted)."""
+    name = PurePosixPath(path).name
+    return (
+        path in WANTED
+        or path.split("/", 1)[-1] in WANTED
+        or name.endswith((tfcheckpoint.SUFFIX_INDEX, ".pb"))
+        or name in (DEEPRACER_CHECKPOINTS, TF_CHECKPOINT, *COACH_CHECKPOINTS)
+    )
 
 
 def _read(tar: tarfile.TarFile, member: tarfile.TarInfo) -> bytes:
@@ -241,7 +301,9 @@ def _safe_path(name: str) -> str:
 def _without_top_folder(members: Members) -> Members:
     tops = {path.split("/", 1)[0] for path in members}
     if len(tops) == 1 and all("/" in path for path in members):
-        return {path.split("/", 1)[1]: data for path, data in members.items()}
+        stripped = Members({path.split("/", 1)[1]: data for path, data in members.items()})
+        stripped.top = tops.pop()
+        return stripped
     return members
 
 
@@ -368,7 +430,7 @@ def _sensors(metadata: dict, notes: list[str]) -> list[str]:
     given = metadata.get("sensor") or ["FRONT_FACING_CAMERA"]
     if isinstance(given, str) or not isinstance(given, list):
         raise ImportRefused('model_metadata.json\'s "sensor" must be a list of sensors.')
-    given = [str(sensor) for sensor in given]
+    given = [SENSOR_ALIASES.get(str(sensor), str(sensor)) for sensor in given]
     camera = next((s for s in given if s in sim.CAMERAS), None)
     lidar = next((s for s in given if s in sim.LIDARS), None)
     kept = [camera or "FRONT_FACING_CAMERA"] + ([lidar] if lidar else [])
@@ -579,27 +641,153 @@ def _params_left_out(params: dict, notes: list[str]) -> None:
         )
 
 
-def _is_tensorflow(path: str) -> bool:
-    name = PurePosixPath(path).name
-    return ".ckpt" in name or name.endswith((".pb", ".index")) or name == "checkpoint"
+def _weights_fit(metadata: dict, settings: dict, notes: list[str]) -> bool:
+    """Whether DeepRacer's weights can be carried: the model has every sensor and the network
+    model_metadata.json names (else a note says why they stay behind)."""
+    given = metadata.get("sensor") or ["FRONT_FACING_CAMERA"]
+    given = sorted(SENSOR_ALIASES.get(sensor, sensor) for sensor in given)
+    network = metadata.get("neural_network") or Network.SHALLOW
+    if given == sorted(settings["sensors"]) and network == settings["network"]:
+        return True
+    notes.append(
+        "The archive's TensorFlow weights were not carried over: they are for sensors or a "
+        "network this console does not have (see above). The model trains from new weights."
+    )
+    return False
+
+
+@dataclass
+class _TensorFlowFiles:
+    """A DeepRacer model's weights in an archive: its checkpoints (path prefixes ``<N>_Step-<M>
+    .ckpt``, best then last) and its frozen graph (the policy alone)."""
+
+    checkpoints: list[str]
+    graph: str | None
+
+    @classmethod
+    def find(cls, members: Members) -> _TensorFlowFiles | None:
+        prefixes = sorted(
+            path.removesuffix(tfcheckpoint.SUFFIX_INDEX) for path in members
+            if path.endswith(tfcheckpoint.SUFFIX_INDEX)
+            and path.removesuffix(tfcheckpoint.SUFFIX_INDEX) + tfcheckpoint.SUFFIX_DATA in members
+        )  # fmt: skip
+        checkpoints = _chosen_checkpoints(members, prefixes)
+        graphs = sorted(path for path in members if path.endswith(".pb"))
+        if not checkpoints and not graphs:
+            return None
+        best = STEP.search(checkpoints[0]) if checkpoints else None
+        same = next((g for g in graphs if best and _number(GRAPH, g) == int(best[1])), None)
+        newest = max(graphs, key=lambda g: (g == CAR_GRAPH, _number(GRAPH, g)), default=None)
+        return cls(checkpoints, same or newest)
+
+    def load(
+        self, archive: IO[bytes], members: Members, policy: Policy, notes: list[str]
+    ) -> dict[str, bytes]:
+        """Our checkpoints (best, last) from the TensorFlow files, loaded into ``policy``: the
+        checkpoints' policy with its critics, or, without a checkpoint, the frozen graph's
+        policy."""
+        ours = {}
+        for path, prefix in zip(CHECKPOINTS, self.checkpoints or [None], strict=False):
+            what = prefix or self.graph
+            try:
+                if prefix is None:
+                    graph = tfgraph.constants(members[self.graph] or b"")
+                    tfweights.load(policy, graph, complete=False)
+                else:
+                    tensors = _checkpoint_tensors(archive, members, prefix, policy.ppo)
+                    tfweights.load(policy, tensors, complete=True)
+            except (tfcheckpoint.Unreadable, tfweights.Unfit, DecodeError, ValueError) as error:
+                raise ImportRefused(
+                    f"{what} cannot be read into the model's network: {error}. Its layers must "
+                    "be those the sensors, network and action space of model_metadata.json make."
+                ) from None
+            ours[path] = policy.checkpoint()
+        if self.checkpoints:
+            notes.append(
+                f"The weights are DeepRacer's, from {', '.join(dict.fromkeys(self.checkpoints))}."
+            )
+        else:
+            critics = "the value network" if policy.ppo else "the Q networks"
+            notes.append(
+                f"The policy's weights are DeepRacer's, from {self.graph}. A frozen graph holds "
+                f"the policy's choice alone: its exploration spread and {critics} start from new "
+                "weights if the model trains on."
+            )
+        return ours
+
+
+def _chosen_checkpoints(members: Members, prefixes: list[str]) -> list[str]:
+    """Of the checkpoints there are, the best and the last as DeepRacer's pointers name them
+    (one when they are the same); the one of the highest number when none names one."""
+    there = set(prefixes)
+    for folder in sorted({str(PurePosixPath(p).parent) for p in prefixes}):
+        at = "" if folder == "." else f"{folder}/"
+        chosen = _json(members, at + DEEPRACER_CHECKPOINTS) or {}
+        names = [
+            (chosen.get(key) or {}).get("name") if isinstance(chosen.get(key), dict) else None
+            for key in ("best_checkpoint", "last_checkpoint")
+        ]
+        names += [(_text(members, at + coach) or "").strip() for coach in COACH_CHECKPOINTS]
+        latest = re.search(r'model_checkpoint_path:\s*"([^"]+)"',
+                           _text(members, at + TF_CHECKPOINT) or "")  # fmt: skip
+        names.append(latest and PurePosixPath(latest[1]).name)
+        pointed = [at + name for name in names if isinstance(name, str) and at + name in there]
+        if pointed:
+            last = at + str(names[1])
+            return list(dict.fromkeys([pointed[0], last if last in there else pointed[0]]))
+    if not prefixes:
+        return []
+    return [max(prefixes, key=lambda p: (_number(STEP, p), p))]
+
+
+def _number(pattern: re.Pattern, path: str) -> int:
+    match = pattern.search(path)
+    return int(match[1]) if match else -1
+
+
+def _checkpoint_tensors(archive: IO[bytes], members: Members, prefix: str, ppo: bool) -> dict:
+    """The tensors ``tfweights`` reads, from the checkpoint at ``prefix``: its index lists them,
+    then only their bytes are read from its data file, in one forward pass over the archive."""
+    listed = tfcheckpoint.entries(members[prefix + tfcheckpoint.SUFFIX_INDEX] or b"")
+    names = tfweights.wanted(listed, ppo)
+    data_path = prefix + tfcheckpoint.SUFFIX_DATA
+    archive.seek(0)
+    with tarfile.open(fileobj=archive, mode="r:*") as tar:
+        for member in tar:
+            path = _safe_path(member.name)
+            if members.top:
+                path = path.removeprefix(f"{members.top}/")
+            if member.isfile() and path == data_path:
+                return tfcheckpoint.read(listed, names, _ranges(tar, member))
+    raise ImportRefused(f"{data_path} is missing from the archive.")
+
+
+def _ranges(tar: tarfile.TarFile, member: tarfile.TarInfo):
+    """``data(offset, size)``: that many bytes of ``member`` from ``offset``; none past its end."""
+    handle = tar.extractfile(member)
+
+    def data(offset: int, size: int) -> bytes:
+        if handle is None or offset + size > member.size:
+            return b""
+        handle.seek(offset)
+        return handle.read(size)
+
+    return data
 
 
 def _import_trained(
-    owner, settings: dict, weights: dict[str, bytes], members: Members, ours: dict
+    owner, settings: dict, members: Members, ours: dict, *, layout: int, checkpoints
 ) -> Imported:
-    """A Pitlane virtual model: READY, with its checkpoints, after they load into our network,
-    and its training history when the archive's metrics hold one."""
-    clean = configuration.check(settings, owner=owner)
-    # Exports of pitlane.json format 1 came before the networks were DeepRacer's (layout 1).
-    clean["network_layout"] = ours.get("network_layout", 1)
-    if clean["network_layout"] not in (1, 2):
-        raise ImportRefused(
-            f"{exports.PITLANE_SETTINGS} names a network layout this console does not know "
-            f"({_shown(clean['network_layout'])}): it was exported by a newer Pitlane."
-        )
+    """A READY model with its weights: ``checkpoints(policy)`` gives them ({path in
+    ``CHECKPOINTS``: safetensors}) for the model's ``policy``, and each is checked to load into
+    it; its training history comes too when the archive's metrics hold one."""
+    trainable = bool(settings["reward_function"].strip())
+    clean = configuration.check(settings, owner=owner, reward_required=trainable)
+    clean["network_layout"] = layout
     model = RLModel(**clean)
     policy = Policy.for_environment(clean["algorithm"], model.architecture,
                                     model.environment_settings())  # fmt: skip
+    weights = checkpoints(policy)
     for path, data in weights.items():
         try:
             policy.load_checkpoint(data)

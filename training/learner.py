@@ -144,11 +144,11 @@ class Learner:
     def policy_weights(self) -> bytes:
         """What the rollout workers need to act: the whole policy (PPO) or the actor (SAC)."""
         module = self.model.policy if self.algorithm == hp.PPO else self.model.policy.actor
-        return _to_bytes(module.state_dict())
+        return weights_bytes(module.state_dict())
 
     def checkpoint(self) -> bytes:
         """Everything needed to go on learning: the policy with its critics."""
-        return _to_bytes(self.model.policy.state_dict())
+        return weights_bytes(self.model.policy.state_dict())
 
     def restore(self, checkpoint: bytes) -> None:
         load_weights(self.model.policy, checkpoint)
@@ -242,7 +242,7 @@ def _gae(episode: Episode, gamma: float, lam: float) -> np.ndarray:
     return advantages
 
 
-def _to_bytes(state: dict) -> bytes:
+def weights_bytes(state: dict) -> bytes:
     """A state dict as safetensors; names that alias a tensor already saved are left out (PPO's
     policy reaches one features extractor by three names)."""
     seen, unique = set(), {}
@@ -255,7 +255,7 @@ def _to_bytes(state: dict) -> bytes:
 
 
 def load_weights(module: torch.nn.Module, data: bytes) -> None:
-    """Load safetensors ``data`` saved by ``_to_bytes`` into ``module``; every parameter must be
+    """Load safetensors ``data`` saved by ``weights_bytes`` into ``module``; every parameter must be
     there, under its own name or an alias of one."""
     tensors = load_tensors(data)
     missing, unexpected = module.load_state_dict(tensors, strict=False)

@@ -209,6 +209,12 @@ class RLModel(models.Model):
         }
 
     @property
+    def trainable(self) -> bool:
+        """Whether the model can train on (be cloned): not one imported from a car archive, which
+        brings its policy alone, with no reward function."""
+        return bool(self.reward_function.strip())
+
+    @property
     def architecture(self) -> str:
         """What builds the model's network (``training.networks.architecture``)."""
         from training.networks import architecture  # torch: imported where networks are built

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 import simulator
-from training.learner import load_weights
+from training.learner import load_weights, weights_bytes
 from training.networks import policy_kwargs
 
 PPO = "clipped_ppo"
@@ -68,6 +68,10 @@ class Policy:
     def load_checkpoint(self, data: bytes) -> None:
         """A checkpoint (the policy with its critics), as the trainer stores it."""
         load_weights(self.network, data)
+
+    def checkpoint(self) -> bytes:
+        """The policy with its critics as the trainer stores a checkpoint."""
+        return weights_bytes(self.network.state_dict())
 
     def act(
         self, observation: dict, deterministic: bool

@@ -4,7 +4,8 @@ The physical car loads a frozen graph (``model.pb``); a DeepRacer model brings o
 a gigabyte that neither the web tier nor the workers need for this: a frozen graph is a protobuf
 ``GraphDef`` whose weights are ``Const`` nodes. The messages below are TensorFlow's own
 (tensorflow/core/framework/graph.proto, node_def.proto, attr_value.proto, tensor.proto,
-tensor_shape.proto, types.proto, versions.proto), declared with the fields a frozen inference
+tensor_shape.proto, types.proto, versions.proto; and tensor_bundle.proto's checkpoint index
+entries, which ``training.tfcheckpoint`` reads), declared with the fields a frozen inference
 graph uses and under TensorFlow's field numbers, so that protobuf's runtime encodes and decodes
 them byte for byte as TensorFlow does. The tests load what this writes with TensorFlow itself and
 with OpenVINO's TensorFlow front end, as the car's model optimizer does.
@@ -27,6 +28,7 @@ _F = descriptor_pb2.FieldDescriptorProto
 _SCALARS = {
     "string": _F.TYPE_STRING, "bytes": _F.TYPE_BYTES, "int32": _F.TYPE_INT32,
     "int64": _F.TYPE_INT64, "float": _F.TYPE_FLOAT, "bool": _F.TYPE_BOOL,
+    "fixed32": _F.TYPE_FIXED32,
 }  # fmt: skip
 
 
@@ -88,15 +90,24 @@ def _declare():
     _message(file, "GraphDef", [
         ("node", 1, ".tensorflow.NodeDef", True), ("versions", 4, ".tensorflow.VersionDef", False),
     ])  # fmt: skip
+    # tensor_bundle.proto: a checkpoint's index entries (read by training.tfcheckpoint)
+    _message(file, "BundleEntryProto", [
+        ("dtype", 1, "int32", False), ("shape", 2, ".tensorflow.TensorShapeProto", False),
+        ("shard_id", 3, "int32", False), ("offset", 4, "int64", False),
+        ("size", 5, "int64", False), ("crc32c", 6, "fixed32", False), ("slices", 7, "bytes", True),
+    ])  # fmt: skip
+    _message(file, "BundleHeaderProto", [
+        ("num_shards", 1, "int32", False), ("endianness", 2, "int32", False),
+    ])  # fmt: skip
     pool = descriptor_pool.DescriptorPool()
     pool.Add(file)
     return [
         message_factory.GetMessageClass(pool.FindMessageTypeByName(f"tensorflow.{name}"))
-        for name in ("GraphDef", "TensorProto")
+        for name in ("GraphDef", "TensorProto", "BundleEntryProto", "BundleHeaderProto")
     ]
 
 
-GraphDef, TensorProto = _declare()
+GraphDef, TensorProto, BundleEntryProto, BundleHeaderProto = _declare()
 
 
 class Graph:

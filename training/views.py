@@ -239,6 +239,13 @@ def model_create(request: HttpRequest) -> HttpResponse:
     source = None
     if "clone" in request.GET:
         source = _get_model_for_user(request, _number(request.GET["clone"]))
+        if not source.trainable:
+            messages.error(
+                request,
+                f"{source.name} cannot be cloned: it came from a car archive, "
+                "with its policy alone (no reward function, no critics) to train on.",
+            )
+            return redirect("training:model-detail", pk=source.pk)
         initial = ModelCreateForm.initial_from(source)
     else:
         initial = {

@@ -8,9 +8,10 @@ from training.management.lookup import find_racer
 
 class Command(BaseCommand):
     help = (
-        "Import a model from a .tar.gz archive: a Pitlane virtual model (it arrives ready, with "
-        "its weights) or a DeepRacer export (its settings and reward function arrive as a new "
-        "model whose training is queued)."
+        "Import a model from a .tar.gz archive: a Pitlane virtual model or a DeepRacer model "
+        "(console or DeepRacer for Cloud export: it arrives ready, with its weights; without "
+        "weights, its training is queued), or a car archive (model.pb and model_metadata.json: "
+        "ready to evaluate and race, not to train)."
     )
 
     def add_arguments(self, parser) -> None:
