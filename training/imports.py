@@ -11,8 +11,7 @@ of its members and their unpacked size are limited; only regular files under rel
 read (no absolute paths, no ``..``, no links, devices or FIFOs); the settings are checked as the
 create-model page checks them, the reward function validated in the sandbox; weights are read
 only from safetensors or TensorFlow's formats, never unpickled or executed, into our own network,
-every tensor and shape checked. A refused archive
-leaves nothing in the database or in storage.
+every tensor and shape checked. A refused archive leaves nothing in the database or in storage.
 """
 
 from __future__ import annotations
@@ -88,7 +87,7 @@ KEPT_FOLDER = "imports/kept"  # in storage: archives kept between a racer's atte
 KEPT_FOR = timedelta(hours=6)
 KEPT_SESSION_KEY = "training:kept-import"
 DEFAULT_TRACK = "rookie-loop"
-SENSOR_ALIASES = {"observation": "FRONT_FACING_CAMERA"}  # simapp < 2.0 (model_metadata.py:229-241)
+SENSOR_ALIASES = {tfweights.LEGACY_CAMERA: "FRONT_FACING_CAMERA"}  # model_metadata.py:229-241
 DEEPRACER_ALGORITHMS = {"clipped_ppo": Algorithm.PPO, "ppo": Algorithm.PPO, "sac": Algorithm.SAC}
 
 

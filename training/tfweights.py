@@ -4,9 +4,10 @@ Our networks are DeepRacer's layer for layer (``training.networks``), so a DeepR
 weights load into them once each tensor is found under its name and laid out as PyTorch lays it:
 
 - names: the policy network and, for training on, PPO's value network and SAC's Q network; each
-  the ``online`` copy (rl_coach also saves ``target`` and ``global`` copies and Adam's slots, which
-  are not read). Under a network's scope: ``<SENSOR>/<layer>`` for the embedders,
-  ``middleware_fc_embedder/Dense_0``, then the heads (``cargraph`` names the scopes):
+  the ``online`` copy, which is all rl_coach's saver keeps in the checkpoints racers published
+  (anything else a checkpoint holds, such as ``gradients_from_head_*-rescalers``, target copies or
+  an optimizer's slots, is not read). Under a network's scope: ``<SENSOR>/<layer>`` for the
+  embedders, ``middleware_fc_embedder/Dense_0``, then the heads (``cargraph`` names the scopes):
 
   ==========  ===========================================================================
   PPO         ``network_1/ppo_head_0/policy_fc`` (discrete) or ``policy_mean`` and the variable
@@ -44,7 +45,8 @@ from training import cargraph
 from training.networks import DeepRacerFeatures
 from training.policies import Policy
 
-SENSOR_NAMES = {"FRONT_FACING_CAMERA": ("FRONT_FACING_CAMERA", "observation")}
+LEGACY_CAMERA = "observation"  # the front camera of models of simapp before 2.0
+SENSOR_NAMES = {"FRONT_FACING_CAMERA": ("FRONT_FACING_CAMERA", LEGACY_CAMERA)}
 MIDDLEWARE = "middleware_fc_embedder/Dense_0"
 PPO_VALUE_SCOPE = f"{cargraph.ROOT}/main/online/network_0"
 SAC_Q_SCOPE = f"{cargraph.ROOT}/q/online/network_0"

@@ -2,8 +2,9 @@
 
 Written here from rl_coach's and simapp's network code, not from Pitlane's importer, so that the
 importer is checked against DeepRacer's names rather than its own: in TensorFlow 1's graph mode,
-each network under ``main_level/agent/<wrapper>/<copy>/network_<i>`` with its ``online`` and
-``target`` copies and Adam's slots for every weight (as rl_coach's saver writes them all), the
+each network under ``main_level/agent/<wrapper>/<copy>/network_<i>``, the ``online`` copy that
+rl_coach's saver keeps and, to show that the importer leaves them alone, a ``target`` copy and
+Adam's slots that published checkpoints do not hold; the
 inputs as placeholders of the first network (general_network.py:245-262), the embedders' layers
 ``Conv2d_<2i>``/``Dense_<2i>`` (embedder.py:115-119), ``middleware_fc_embedder/Dense_0``, and the
 heads of ppo_head.py, v_head.py and simapp's sac_head.py and sac_q_head.py. The layers those leave
