@@ -62,9 +62,12 @@ def _safe_next(request: HttpRequest) -> str:
 @never_cache
 @require_safe
 def healthz(request: HttpRequest) -> JsonResponse:
-    """Reachability of the database, Redis and the workers: 200 when all are up, else 503."""
+    """Reachability of the database, Redis and the workers: 200 when all are up, else 503. A
+    load balancer or an uptime check (anyone) reads up or down; staff also read what was checked
+    and why it failed, which names hosts and workers."""
     health = system_health()
-    return JsonResponse(health, status=200 if health["status"] == "ok" else 503)
+    body = health if request.user.is_staff else {"status": health["status"]}
+    return JsonResponse(body, status=200 if health["status"] == "ok" else 503)
 
 
 @require_safe

@@ -58,6 +58,11 @@ MiB = 1024 * 1024
 MAX_ARCHIVE = 256 * MiB  # [bytes] as uploaded
 MAX_UNPACKED = 512 * MiB  # [bytes] all members together
 MAX_MEMBERS = 256
+MAX_NAME = 4096  # [characters] a member's path
+MAX_HEADER = 64 * 1024  # [bytes] one pax or GNU long-name header: a long name, a few attributes
+MAX_HEADERS = 1 * MiB  # [bytes] all of an archive's pax and long-name headers together
+EXTENDED = (tarfile.XHDTYPE, tarfile.XGLTYPE, tarfile.SOLARIS_XHDTYPE, tarfile.GNUTYPE_LONGNAME,
+            tarfile.GNUTYPE_LONGLINK)  # fmt: skip
 TEXT_LIMIT = 1 * MiB  # [bytes] each of the JSON, YAML and Python files
 METRICS_LIMIT = 32 * MiB  # [bytes] the training metrics: a row per episode
 CHECKPOINTS = ("checkpoints/best.safetensors", "checkpoints/last.safetensors")
@@ -234,10 +239,15 @@ def read_archive(archive: IO[bytes]) -> Members:
     members = Members()
     unpacked = 0
     try:
-        with tarfile.open(fileobj=archive, mode="r:*") as tar:
+        with tarfile.open(fileobj=archive, mode="r:*", tarinfo=_BoundedTarInfo) as tar:
             for count, member in enumerate(tar, start=1):
                 if count > MAX_MEMBERS:
                     raise ImportRefused(f"The archive holds over {MAX_MEMBERS} files.")
+                if len(member.name) > MAX_NAME:
+                    raise ImportRefused(
+                        f"A file in the archive has a name of {len(member.name):,} characters; "
+                        f"the limit is {MAX_NAME:,}."
+                    )
                 path = _safe_path(member.name)
                 if member.isdir():
                     continue
@@ -247,9 +257,26 @@ def read_archive(archive: IO[bytes]) -> Members:
                 if unpacked > MAX_UNPACKED:
                     raise ImportRefused(f"The archive unpacks to over {size(MAX_UNPACKED)}.")
                 members[path] = _read(tar, member) if _wanted(path) else None
-    except (tarfile.TarError, EOFError, OSError, ValueError, zlib.error):
+    except (tarfile.TarError, EOFError, OSError, ValueError, zlib.error, RecursionError):
         raise ImportRefused(NOT_AN_ARCHIVE) from None
     return _without_top_folder(members)
+
+
+class _BoundedTarInfo(tarfile.TarInfo):
+    """tarfile's member header, which refuses a pax or GNU long-name header over ``MAX_HEADER``
+    bytes, or over ``MAX_HEADERS`` with those before it, before tarfile reads it into memory: it
+    reads each whole, and they are not members, so their size escapes ``MAX_UNPACKED``."""
+
+    def _proc_member(self, tar: tarfile.TarFile):
+        if self.type in EXTENDED:
+            tar.extended_bytes = getattr(tar, "extended_bytes", 0) + self.size
+            if self.size > MAX_HEADER or tar.extended_bytes > MAX_HEADERS:
+                raise ImportRefused(
+                    "The archive has a long-name or extended header over "
+                    f"{size(MAX_HEADER if self.size > MAX_HEADER else MAX_HEADERS)}: "
+                    "model archives hold files with ordinary names."
+                )
+        return super()._proc_member(tar)
 
 
 def _place(members: Members, name: str) -> str:

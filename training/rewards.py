@@ -20,6 +20,10 @@ from training.sandbox import Sandbox, SandboxFailure, verified
 ALLOWED_IMPORTS = ("math", "random", "numpy", "scipy", "shapely")
 MAX_SOURCE_SIZE = 140_000  # [characters]
 SAMPLE_TIMEOUT = 5.0  # [s] per sample call
+NESTED_TOO_DEEP = (
+    "The code is nested too deeply for Python to read: split long expressions and deep blocks "
+    "into smaller parts."
+)
 EXAMPLES_DIR = Path(__file__).resolve().parent / "reward_examples"
 
 
@@ -226,6 +230,8 @@ def static_problems(source: str) -> tuple[list[Problem], list[Problem]]:
         tree = ast.parse(source, filename="<reward_function>")
     except SyntaxError as error:
         return [Problem("syntax", _syntax_message(error), error.lineno)], []
+    except (MemoryError, RecursionError):  # the parser's own limits, not Python's grammar
+        return [Problem("syntax", NESTED_TOO_DEEP)], []
     errors: list[Problem] = []
     warnings: list[Problem] = []
     for node in ast.walk(tree):

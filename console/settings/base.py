@@ -158,6 +158,10 @@ CELERY_BROKER_TRANSPORT_OPTIONS = {
 }
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
+# The largest request body (console.bodylimit): any page, and the model import's archive upload
+# (training.imports.MAX_ARCHIVE, 256 MiB, with room for the form around it).
+PITLANE_MAX_BODY = env.int("PITLANE_MAX_BODY", 10 * 2**20, minimum=2**20)  # [bytes]
+PITLANE_MAX_IMPORT_BODY = env.int("PITLANE_MAX_IMPORT_BODY", 257 * 2**20, minimum=2**20)  # [bytes]
 # The queues a complete deployment serves; /healthz reports any that no worker consumes.
 PITLANE_QUEUES = ("training", "simulation")
 PITLANE_TRAINER_THREADS = env.int(

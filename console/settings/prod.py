@@ -3,12 +3,19 @@ REDIS_URL. Optional: PITLANE_S3_BUCKET (with its region, endpoint and credential
 DJANGO_CSRF_TRUSTED_ORIGINS, PITLANE_HSTS_SECONDS. Run ``manage.py collectstatic`` when deploying.
 """
 
+from django.core.exceptions import ImproperlyConfigured
+
 from console.settings.base import *  # noqa: F403
 from console.settings.base import env
 
 DEBUG = False
 SECRET_KEY = env.secret_key("DJANGO_SECRET_KEY")
 ALLOWED_HOSTS = env.list("DJANGO_ALLOWED_HOSTS")
+if "*" in ALLOWED_HOSTS:  # any Host header: password-reset links and CSRF checks trust it
+    raise ImproperlyConfigured(
+        "The environment variable DJANGO_ALLOWED_HOSTS must name the console's hosts; "
+        "'*' accepts any Host header, which production refuses."
+    )
 # In production the database and Redis are named explicitly, never the one-machine defaults.
 env.str("DATABASE_URL")
 env.str("REDIS_URL")

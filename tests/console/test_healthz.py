@@ -9,6 +9,24 @@ from tests.services import RedisServer, wait_for
 pytestmark = pytest.mark.django_db
 
 
+@pytest.fixture
+def client(client, django_user_model):
+    """Staff, who read what /healthz checked; anyone else reads up or down alone."""
+    client.force_login(django_user_model.objects.create_user("ops", is_staff=True))
+    return client
+
+
+def test_anyone_else_reads_up_or_down_alone(client, settings, tmp_path):
+    client.logout()
+    redis_server = RedisServer(tmp_path / "redis")
+    settings.REDIS_URL = redis_server.url  # a Redis no worker reports to
+    try:
+        response = client.get(reverse("healthz"))
+    finally:
+        redis_server.stop()
+    assert (response.status_code, response.json()) == (503, {"status": "down"})
+
+
 def test_healthz_is_200_when_the_database_redis_and_a_worker_are_up(client, celery_worker_process):
     response = client.get(reverse("healthz"))
     assert response.status_code == 200

@@ -44,6 +44,12 @@ def test_production_settings_name_a_missing_secret_key():
     assert "The environment variable DJANGO_SECRET_KEY must be set." in result.stderr
 
 
+def test_production_settings_refuse_any_host():
+    result = manage("check", **{**PRODUCTION, "DJANGO_ALLOWED_HOSTS": "pitlane.example.org,*"})
+    assert result.returncode != 0
+    assert "DJANGO_ALLOWED_HOSTS must name the console's hosts" in result.stderr
+
+
 def printed_in_production(code: str) -> list[str]:
     """The words ``code`` prints in a shell under the production settings."""
     result = manage("shell", "--no-imports", "-c", code, **PRODUCTION)

@@ -181,6 +181,24 @@ def fifo(tar):
     tar.addfile(info)
 
 
+def pax_header(tar):
+    info = tarfile.TarInfo("notes.txt")
+    info.pax_headers = {"comment": "x" * 2_000_000}  # read whole by tarfile, never a member
+    tar.addfile(info, io.BytesIO(b""))
+
+
+def pax_headers(tar):
+    for n in range(40):  # each under the limit of one, over the archive's together
+        info = tarfile.TarInfo(f"notes-{n}.txt")
+        info.pax_headers = {"comment": "x" * 30_000}
+        tar.addfile(info, io.BytesIO(b""))
+
+
+def long_name(tar):
+    tar.format = tarfile.GNU_FORMAT  # a GNU long-name header
+    tar.addfile(tarfile.TarInfo("a/" * 5000 + "x"), io.BytesIO(b""))
+
+
 def wrong_shapes() -> bytes:
     return save_tensors({"action_net.weight": torch.zeros(7, 64), "action_net.bias": torch.ones(7)})
 
@@ -193,6 +211,9 @@ HOSTILE = {
     "hard link": (tar_gz(deepracer_export(), hardlink), "is a link or a device"),
     "device": (tar_gz(deepracer_export(), device), "is a link or a device"),
     "fifo": (tar_gz(deepracer_export(), fifo), "is a link or a device"),
+    "huge pax header": (tar_gz(deepracer_export(), pax_header), "header over 65,536 bytes"),
+    "many pax headers": (tar_gz(deepracer_export(), pax_headers), "extended header over 1 MiB"),
+    "long name": (tar_gz(deepracer_export(), long_name), "name of 10,001 characters"),
     "not an archive": (b"PK\x03\x04 a zip, or anything", "not a .tar.gz model archive"),
     "no metadata": (tar_gz({"reward_function.py": b"x"}), "no model_metadata.json"),
     "bad metadata": (tar_gz(deepracer_export(**{"model_metadata.json": b"{"})), "not valid JSON"),

@@ -2,13 +2,19 @@
 
 ``Sandbox`` starts ``training.sandbox.child`` as a fresh interpreter (fork and exec, not a fork of
 the worker) with an empty environment and only its three standard pipes, waits until it has sealed
-itself, then sends it the racer's code and requests. Each wait has a deadline; a child that misses
-one is killed, so no reward function can hang or take down a worker. This package imports no
-Django: the child imports it too.
+itself, then sends it the racer's code and requests. The racer's code runs in a process of its
+own beneath the child (``reward.py``), which times each call from outside and cannot be written
+to the worker by it. Here, every request has a deadline from the moment it is sent (an episode:
+a step at least every call's limit and ``GRACE``), every write to the child has one, the frames
+read ahead and the standard error kept are bounded, and a child that breaks the protocol is
+killed; so no reward function can hang, flood or take down a worker. The child dies with the
+worker. This package imports no Django: the child imports it too.
 """
 
 from __future__ import annotations
 
+import logging
+import os
 import queue
 import signal
 import socket
@@ -16,6 +22,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,12 +30,17 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-from training.sandbox.protocol import ProtocolError, pack, read_frame
+from simulator.rewards import RewardError, checked_reward
+from training.sandbox.protocol import Late, ProtocolError, pack, read_frame, write_by
 
+logger = logging.getLogger(__name__)
 ROOT = Path(__file__).resolve().parents[2]
 MiB = 1024 * 1024
 GRACE = 2.0  # [s] past a call's own time limit before the child is killed
 LOG_KEEP = 1000  # printed lines kept until taken; later ones are counted in ``logs_dropped``
+FRAMES_AHEAD = 64  # frames read from the child and not yet taken; the reader waits beyond
+STDERR_KEEP = 16 * 1024  # [bytes] the end of the child's standard error, kept for the log
+WEIGHTS_TIMEOUT = 30.0  # [s] to send a policy's weights (up to about 55 MB) and hear back
 CHILD_ENVIRONMENT = {
     # Nothing of the worker's: no secrets, no paths. Only one thread per numerical library.
     "OPENBLAS_NUM_THREADS": "1",
@@ -98,8 +110,9 @@ class Sandbox:
 
     def __post_init__(self) -> None:
         self._process: subprocess.Popen | None = None
-        self._frames: queue.Queue = queue.Queue()
-        self._stderr: deque = deque(maxlen=20)
+        self._frames: queue.Queue = queue.Queue(maxsize=FRAMES_AHEAD)
+        self._closed = threading.Event()
+        self.stderr_tail = b""
 
     def __enter__(self) -> Sandbox:
         self.start()
@@ -120,13 +133,13 @@ class Sandbox:
             close_fds=True,
             start_new_session=True,
         )
+        os.set_blocking(self._process.stdin.fileno(), False)
         threading.Thread(target=self._read_frames, daemon=True).start()
         threading.Thread(target=self._read_stderr, daemon=True).start()
-        self._send({
+        self.report = self._request({
             "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
-            "env": portable_env(self.env), "policy": self.policy,
-        })  # fmt: skip
-        self.report = self._wait({"ready"}, self.start_timeout, "start")
+            "env": portable_env(self.env), "policy": self.policy, "op": "start",
+        }, {"ready"}, self.start_timeout)  # fmt: skip
         return self.report
 
     def load(self, source: str) -> None:
@@ -134,12 +147,12 @@ class Sandbox:
         self._request({"op": "load", "source": source}, {"loaded"})
 
     def call(self, params: dict, timeout: float | None = None) -> float:
-        """The reward for ``params``, checked: a finite number within ±1e5."""
+        """The reward for ``params``, checked here: a finite number within ±1e5."""
         reply = self._request({"op": "call", "params": params}, {"reward"}, timeout)
-        value = reply.get("value")
-        if not isinstance(value, float | int) or isinstance(value, bool):
-            raise SandboxFailure("protocol", "The sandbox answered with something not a reward.")
-        return float(value)
+        try:
+            return checked_reward(reply.get("value"))
+        except RewardError as error:
+            raise SandboxFailure("value", str(error)) from None
 
     def rollout(
         self, steps: int, *, driver: str = "centre", seed: int = 0,
@@ -148,12 +161,13 @@ class Sandbox:
         """Drive the child's simulator for ``steps`` steps with the loaded reward function."""
         return self._request(
             {"op": "rollout", "steps": steps, "driver": driver, "seed": seed}, {"rollout"},
-            on_progress=on_progress,
+            None, on_progress or _ignore,
         )  # fmt: skip
 
     def set_weights(self, version: int, data: bytes) -> None:
         """Act with the policy weights of ``version`` from now on."""
-        self._request({"op": "weights", "version": version, "data": data}, {"weights"}, 30.0)
+        self._request({"op": "weights", "version": version, "data": data}, {"weights"},
+                      WEIGHTS_TIMEOUT)  # fmt: skip
 
     def episode(
         self, mode: str = "explore", worker: int = 0,
@@ -162,7 +176,7 @@ class Sandbox:
         """Drive one episode: ``summary`` (steps, reward, progress, status, lap_time) and, unless
         evaluating, ``payload``: the episode's experience, encoded for the experience buffer."""
         reply = self._request({"op": "episode", "mode": mode, "worker": worker}, {"episode"},
-                              on_progress=on_progress)  # fmt: skip
+                              None, on_progress or _ignore)  # fmt: skip
         if not isinstance(reply.get("summary"), dict):
             raise SandboxFailure("protocol", "The sandbox sent an episode without a summary.")
         return reply
@@ -170,7 +184,7 @@ class Sandbox:
     def watch(self, views: set[str]) -> None:
         """Have the child send these views (``"spectator"``, ``"camera"``) at 15 frames/s while
         it drives, to ``on_frame``; an empty set stops them. Takes effect within an episode."""
-        self._send({"op": "watch", "views": sorted(views)})
+        self._send({"op": "watch", "views": sorted(views)}, time.monotonic() + GRACE)
 
     def show(self, views: set[str]) -> None:
         """Have the child send these views once, as its car stands now, to ``on_frame``: for a
@@ -179,7 +193,9 @@ class Sandbox:
 
     def probe(self, secret_path: str, port: int) -> list[str]:
         """What the sealed child managed to do of the forbidden things; [] when it held."""
-        reply = self._request({"op": "probe", "secret_path": secret_path, "port": port}, {"probe"})
+        reply = self._request(
+            {"op": "probe", "secret_path": secret_path, "port": port}, {"probe"}, 30.0
+        )
         return [str(item) for item in reply.get("escaped", [])]
 
     def close(self) -> None:
@@ -188,10 +204,11 @@ class Sandbox:
             return
         if process.poll() is None:
             try:
-                self._send({"op": "exit"})
+                self._send({"op": "exit"}, time.monotonic() + 1.0)
                 process.wait(1.0)
-            except (OSError, subprocess.TimeoutExpired):
+            except (SandboxFailure, subprocess.TimeoutExpired):
                 self._kill()
+        self._closed.set()
         for stream in (process.stdin, process.stdout, process.stderr):
             if stream is not None:
                 stream.close()
@@ -203,31 +220,42 @@ class Sandbox:
         self, message: dict, expected: set[str], timeout: float | None = None,
         on_progress: Callable[[int], None] | None = None,
     ) -> dict:  # fmt: skip
-        self._send(message)
-        return self._wait(expected, (timeout or self.call_timeout) + GRACE, message["op"],
-                          on_progress)  # fmt: skip
+        """Send ``message`` and wait for its answer: by ``timeout`` (the call's limit where
+        None) and ``GRACE`` from now, or, with ``on_progress`` (an episode, a rollout), with a
+        step at least that often."""
+        deadline = time.monotonic() + (timeout or self.call_timeout) + GRACE
+        self._send(message, deadline)
+        stall = self.call_timeout + GRACE if on_progress is not None else None
+        return self._wait(expected, deadline, message["op"], on_progress, stall)
 
-    def _send(self, message: dict) -> None:
+    def _send(self, message: dict, deadline: float) -> None:
         if self._process is None:
             raise SandboxFailure("stopped", "The sandbox is not running.")
         try:
-            self._process.stdin.write(pack(message))
-            self._process.stdin.flush()
-        except (BrokenPipeError, OSError):
+            write_by(self._process.stdin.fileno(), pack(message), deadline)
+        except Late:
+            self._kill()
+            raise SandboxFailure(
+                "timeout", "The sandbox stopped taking requests; it was stopped."
+            ) from None
+        except OSError:
             raise self._died() from None
 
     def _wait(
         self, expected: set[str], deadline: float, what: str,
-        on_progress: Callable[[int], None] | None = None,
+        on_progress: Callable[[int], None] | None = None, stall: float | None = None,
     ) -> dict:  # fmt: skip
+        """The answer to ``what``, by ``deadline``; with ``stall``, a progress frame with more
+        steps than the last moves the deadline to ``stall`` seconds after it."""
+        steps = -1
         while True:
             try:
-                frame = self._frames.get(timeout=deadline)
+                frame = self._frames.get(timeout=max(deadline - time.monotonic(), 0.0))
             except queue.Empty:
                 self._kill()
                 if what == "start":
                     raise SandboxFailure(
-                        "timeout", f"The sandbox did not start in {deadline:g} s."
+                        "timeout", f"The sandbox did not start in {self.start_timeout:g} s."
                     ) from None
                 limit = f"{self.call_timeout:g} s"
                 message = f"The reward function took longer than {limit}; it was stopped."
@@ -239,11 +267,17 @@ class Sandbox:
                 raise SandboxFailure("protocol", f"The sandbox sent something unreadable: {frame}")
             self._keep_logs(frame.get("log"), frame.get("log_dropped"))
             kind = frame.get("type")
-            if kind == "progress":
-                if on_progress is not None:
-                    on_progress(int(frame.get("steps", 0)))
+            if kind == "progress" and stall is not None:
+                now = frame.get("steps")
+                if not isinstance(now, int) or isinstance(now, bool) or now <= steps:
+                    self._kill()
+                    raise SandboxFailure(
+                        "protocol", "The sandbox reported progress it had not made."
+                    )
+                steps, deadline = now, time.monotonic() + stall
+                on_progress(now)
                 continue
-            if kind == "frame":
+            if kind == "frame" and (stall is not None or what == "show"):
                 if self.on_frame is not None:
                     self.on_frame(frame)
                 continue
@@ -251,12 +285,14 @@ class Sandbox:
                 return frame
             if kind == "error":
                 raise SandboxFailure(
-                    str(frame.get("kind", "error")), str(frame.get("message", ""))[:500],
+                    str(frame.get("kind", "error"))[:20], str(frame.get("message", ""))[:500],
                     _int_or_none(frame.get("line")), _int_or_none(frame.get("step")),
                     str(frame["status"])[:20] if frame.get("status") else None,
                 )  # fmt: skip
             self._kill()
-            raise SandboxFailure("protocol", f"The sandbox answered {kind!r} to {what!r}.")
+            raise SandboxFailure(
+                "protocol", f"The sandbox answered {str(kind)[:20]!r} to {what!r}."
+            )
 
     def take_logs(self) -> tuple[list[str], int]:
         """The printed lines kept since the last take, and how many more were not kept."""
@@ -276,6 +312,9 @@ class Sandbox:
     def _died(self) -> SandboxFailure:
         process = self._process
         code = process.wait(5) if process is not None else None
+        if self.stderr_tail:
+            logger.warning("A sandbox child stopped (%s); its last words: %s", code,
+                           self.stderr_tail[-2000:].decode("utf-8", "replace"))  # fmt: skip
         if code is not None and code < 0:
             name = signal.Signals(-code).name
             reason = f"it was killed by {name}"
@@ -291,23 +330,43 @@ class Sandbox:
             self._process.wait()
 
     def _read_frames(self) -> None:
+        """Read the child's frames ahead into ``_frames``, at most ``FRAMES_AHEAD``; None at
+        the end, or the ``ProtocolError`` that ended them."""
         stream = self._process.stdout
         try:
             while (frame := read_frame(stream)) is not None:
-                self._frames.put(frame)
+                if not self._put(frame):
+                    return
         except ProtocolError as error:
-            self._frames.put(error)
+            self._put(error)
             return
         except (OSError, ValueError):
             pass
-        self._frames.put(None)
+        self._put(None)
+
+    def _put(self, item: Any) -> bool:
+        """Queue ``item`` once there is room; False if the sandbox was closed meanwhile."""
+        while not self._closed.is_set():
+            try:
+                self._frames.put(item, timeout=0.5)
+                return True
+            except queue.Full:
+                continue
+        return False
 
     def _read_stderr(self) -> None:
+        """Drain the child's standard error in fixed-size chunks, keeping its last
+        ``STDERR_KEEP`` bytes: a flood without a newline costs nothing here."""
+        fd = self._process.stderr.fileno()
         try:
-            for line in self._process.stderr:
-                self._stderr.append(line[:500].decode("utf-8", "replace").rstrip())
-        except (OSError, ValueError):
+            while chunk := os.read(fd, 65536):
+                self.stderr_tail = (self.stderr_tail + chunk)[-STDERR_KEEP:]
+        except OSError:
             pass
+
+
+def _ignore(steps: int) -> None:
+    """Progress nobody follows; it still proves the child is driving."""
 
 
 def _int_or_none(value: Any) -> int | None:

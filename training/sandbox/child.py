@@ -1,17 +1,17 @@
 """The sandbox child: ``python -s -m training.sandbox.child``, started by ``Sandbox``.
 
-It reads requests on standard input and answers on standard output, in protocol frames. It first
-loads everything user code may use (the allowed libraries, and the simulator when it is to drive
-a rollout), then seals itself (``seal.py``), and only then receives the racer's code. What the
-code prints becomes log messages; what it raises, returns or takes too long over becomes an error
-message naming the line. This module never imports Django.
+It reads requests on standard input and answers on standard output, in protocol frames. It runs
+only our code: it forks the reward process (``reward.py``), where the racer's code will run
+alone, then builds the simulator and the policy when a rollout is to drive, then seals itself
+(``seal.py``). Every call of the racer's code goes to the reward process and is timed from here;
+what it prints becomes log messages, what it raises, returns or takes too long over becomes an
+error message naming the line. Since the racer's code cannot write to the worker, the frames
+the worker reads (progress above all) are this module's. This module never imports Django.
 """
 
 from __future__ import annotations
 
-import importlib
-import io
-import linecache
+import ctypes
 import os
 import select
 import signal
@@ -24,25 +24,16 @@ import msgpack
 import numpy as np
 
 from simulator.controller import RolloutStats, drive
-from simulator.rewards import RewardError, checked_reward
+from simulator.rewards import RewardError
 from simulator.spectator import FRAME_INTERVAL, VIEWS, jpeg, view_image
 from training.experience import encode_arrays
 from training.sandbox import seal
 from training.sandbox.protocol import pack, read_frame
+from training.sandbox.reward import RewardFailure, RewardProcess
 
-FILENAME = "<reward_function>"
-PRELOADED = (
-    "math", "random", "numpy", "scipy", "scipy.spatial", "scipy.interpolate", "scipy.signal",
-    "scipy.stats", "scipy.optimize", "scipy.linalg", "scipy.special", "shapely",
-    "shapely.geometry", "shapely.ops", "shapely.affinity",
-)  # fmt: skip
 PROGRESS_EVERY = 0.25  # [s] between progress messages during a rollout
 LOOK_EVERY = 0.05  # [s] between looks for a watch request during an episode
-MAX_LOG = 200  # characters per printed line kept, and lines kept between two messages
-
-
-class CallTimeout(BaseException):
-    """A call ran past its time limit; a BaseException, which ``except Exception`` lets by."""
+PR_SET_PDEATHSIG = 1
 
 
 class Child:
@@ -57,19 +48,15 @@ class Child:
         self.worker = 0
         self._last_look = self._last_frame = 0.0
         self.reply_fd = 1
-        self.reward_function = None
+        self.reward: RewardProcess | None = None
         self.env = None
         self.policy = None
         self.ppo = True
-        self.call_timeout = 1.0
-        self.logs: list[str] = []
-        self.printed = _Printed(self.logs)
-        sys.stdout = self.printed
-        signal.signal(signal.SIGALRM, _alarm)
 
-    def send(self, message: dict[str, Any]) -> None:
-        if "log" in message and self.printed.dropped:  # lines printed past what is kept
-            message["log_dropped"], self.printed.dropped = self.printed.dropped, 0
+    def send(self, message: dict[str, Any], *, log: bool = False) -> None:
+        """Send ``message``; with ``log``, and what the reward process printed since the last."""
+        if log and self.reward is not None:
+            message["log"], message["log_dropped"] = self.reward.printed.take()
         data = pack(message)
         while data:
             data = data[os.write(self.reply_fd, data) :]
@@ -78,17 +65,21 @@ class Child:
         init = read_frame(self.requests)
         if init is None:
             return
-        self.call_timeout = float(init.get("call_timeout", 1.0))
-        for name in PRELOADED:
-            importlib.import_module(name)
+        # Before anything else: the reward process, forked while this one is still small and
+        # has no threads; then the simulator and the policy, which it never sees.
+        self.reward = RewardProcess(float(init["call_timeout"]), int(init["memory_allowance"]))
         if init.get("env") is not None:
             self.env = self._build_env(init["env"])
         if init.get("policy") is not None:
             self._build_policy(init["policy"])
+        self.reward.wait_ready(60.0)
         address_space = seal.current_address_space() + int(init["memory_allowance"])
         namespaces = seal.enter_namespaces()
         seal.limit_resources(address_space)
-        seal.install_seccomp(read_fd=0, write_fds=(self.reply_fd, 2))
+        seal.install_seccomp(
+            read_fds=(0, self.reward.replies), write_fds=(self.reply_fd, 2, self.reward.requests),
+            children=(self.reward.pid,),
+        )  # fmt: skip
         self.send({"type": "ready", "namespaces": namespaces, "address_space": address_space})
         while (request := read_frame(self.requests)) is not None:
             handler = getattr(self, f"op_{request.get('op')}", None)
@@ -104,7 +95,7 @@ class Child:
         import simulator
 
         cv2.setNumThreads(0)  # no worker threads: the sealed process cannot start any
-        env = gymnasium.make(simulator.ENV_ID, reward_fn=self._call_reward, **settings)
+        env = gymnasium.make(simulator.ENV_ID, reward_fn=self.reward.call, **settings)
         observation, _ = env.reset(seed=0)
         for view in VIEWS:  # the spectator's textures and the JPEG codec, before sealing
             jpeg(view_image(env.unwrapped, view, observation))
@@ -167,14 +158,11 @@ class Child:
                     break
                 self._live(observation)
                 if time.perf_counter() - last_report >= PROGRESS_EVERY:
-                    self.send({"type": "progress", "steps": len(rewards), "log": self._take_logs()})
+                    self.send({"type": "progress", "steps": len(rewards)}, log=True)
                     last_report = time.perf_counter()
-        except BaseException as error:  # user code may raise anything
-            where = {"step": env.unwrapped.steps, "status": env.unwrapped.status}
-            if isinstance(error, RewardError):
-                self.send(_error("value", str(error), None, **where))
-            else:
-                self.send(_exception("exception", error, self.call_timeout, **where))
+        except (RewardFailure, RewardError) as error:
+            self.send(_failure(error, step=env.unwrapped.steps, status=env.unwrapped.status),
+                      log=True)  # fmt: skip
             return
         summary = {
             "worker": int(request.get("worker", 0)), "version": self.version,
@@ -183,7 +171,7 @@ class Child:
             "lap_time": env.unwrapped.sim_time if info["status"] == "lap_complete" else None,
         }  # fmt: skip
         if mode == "evaluate":
-            self.send({"type": "episode", "summary": summary, "log": self._take_logs()})
+            self.send({"type": "episode", "summary": summary}, log=True)
             return
         final_value = 0.0
         if self.ppo and mode != "random" and not terminated:
@@ -201,8 +189,7 @@ class Child:
             {**summary, "final_value": final_value, "arrays": encode_arrays(arrays),
              "trace": trace}, use_bin_type=True,
         )  # fmt: skip
-        self.send({"type": "episode", "summary": summary, "payload": payload,
-                   "log": self._take_logs()})  # fmt: skip
+        self.send({"type": "episode", "summary": summary, "payload": payload}, log=True)
 
     def op_watch(self, request: dict) -> None:
         """Which views to send while driving; no answer."""
@@ -246,43 +233,26 @@ class Child:
         })  # fmt: skip
 
     def op_load(self, request: dict) -> None:
-        source = request["source"]
-        linecache.cache[FILENAME] = (len(source), None, source.splitlines(True), FILENAME)
-        namespace = {"__name__": "reward_function_module", "__builtins__": __builtins__}
         try:
-            code = compile(source, FILENAME, "exec")
-        except SyntaxError as error:
-            self.send(_error("syntax", f"{error.msg}", error.lineno))
-            return
-        try:
-            self._limited(exec, code, namespace)
-        except BaseException as error:  # whatever the module did is reported
-            kind = "import" if isinstance(error, ImportError) else "exception"
-            self.send(_exception(kind, error, self.call_timeout))
-            return
-        function = namespace.get("reward_function")
-        if not callable(function):
-            self.send(_error("definition", "The code must define reward_function(params).", None))
-            return
-        self.reward_function = function
-        self.send({"type": "loaded"})
+            self.reward.load(request["source"])
+        except RewardFailure as error:
+            self.send(_failure(error), log=True)
+        else:
+            self.send({"type": "loaded"}, log=True)
 
     def op_call(self, request: dict) -> None:
-        params = _params(request["params"])
         try:
-            reward = self._call_reward(params)
-        except RewardError as error:
-            self.send(_error("value", str(error), None))
-        except BaseException as error:  # user code may raise anything
-            self.send(_exception("exception", error, self.call_timeout))
+            reward = self.reward.call(request["params"])
+        except (RewardFailure, RewardError) as error:
+            self.send(_failure(error), log=True)
         else:
-            self.send({"type": "reward", "value": reward, "log": self._take_logs()})
+            self.send({"type": "reward", "value": reward}, log=True)
 
     def op_rollout(self, request: dict) -> None:
         """Drive ``steps`` steps of the environment with the reward function, reporting progress."""
 
         def report(stats: RolloutStats) -> None:
-            self.send({"type": "progress", "steps": stats.steps, "log": self._take_logs()})
+            self.send({"type": "progress", "steps": stats.steps}, log=True)
 
         started = time.perf_counter()
         try:
@@ -293,32 +263,27 @@ class Child:
                 seed=int(request.get("seed", 0)),
                 report=report,
             )
-        except BaseException as error:  # user code may raise anything
-            where = {"step": self.env.unwrapped.steps, "status": self.env.unwrapped.status}
-            if isinstance(error, RewardError):
-                self.send(_error("value", str(error), None, **where))
-            else:
-                self.send(_exception("exception", error, self.call_timeout, **where))
+        except (RewardFailure, RewardError) as error:
+            unwrapped = self.env.unwrapped
+            self.send(_failure(error, step=unwrapped.steps, status=unwrapped.status), log=True)
             return
         self.send({
             "type": "rollout", "steps": stats.steps, "episodes": stats.episodes,
             "reward": stats.reward, "statuses": dict(stats.statuses),
-            "elapsed": time.perf_counter() - started, "log": self._take_logs(),
-        })  # fmt: skip
+            "elapsed": time.perf_counter() - started,
+        }, log=True)  # fmt: skip
 
     def op_probe(self, request: dict) -> None:
-        """Try what sealed code must not be able to do; report what got through."""
-        escaped = []
-        attempts = {
-            "read a file": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
-            "connect to the network": lambda: __import__("socket").create_connection(
-                ("127.0.0.1", int(request["port"])), timeout=1
-            ),
-            "start a process": lambda: os.fork() == 0 and os._exit(0),
-            "run a program": lambda: os.execv("/bin/true", ["true"]),  # noqa: S606
-            "write a file": lambda: open("/tmp/pitlane-sandbox-probe", "w").write("x"),  # noqa: S108, SIM115
-        }
-        for name, attempt in attempts.items():
+        """What sealed code managed of the forbidden things: the racer's code in the reward
+        process, and this process's own seals."""
+        try:
+            escaped = self.reward.probe(request)
+        except RewardFailure as error:
+            escaped = [f"stop the probe ({error})"]
+        for name, attempt in {
+            "read a file (from the child)": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
+            "start a process (from the child)": lambda: os.fork() == 0 and os._exit(0),
+        }.items():
             try:
                 attempt()
             except OSError:
@@ -329,86 +294,21 @@ class Child:
     def op_exit(self, request: dict) -> None:
         os._exit(0)
 
-    # Calling user code
 
-    def _call_reward(self, params: dict) -> float:
-        return checked_reward(self._limited(self.reward_function, params))
-
-    def _limited(self, function, *args):
-        """``function(*args)`` within the per-call time limit."""
-        signal.setitimer(signal.ITIMER_REAL, self.call_timeout)
-        try:
-            return function(*args)
-        finally:
-            signal.setitimer(signal.ITIMER_REAL, 0)
-
-    def _take_logs(self) -> list[str]:
-        logs, self.logs[:] = self.logs[:MAX_LOG], []
-        return logs
-
-
-class _Printed(io.TextIOBase):
-    """Standard output for user code: each printed line becomes a log message. At most
-    ``MAX_LOG`` lines of ``MAX_LOG`` characters wait to be sent; lines past them are counted
-    (``dropped``), not kept, so that a print flood costs neither memory nor the pipe."""
-
-    def __init__(self, lines: list[str]) -> None:
-        self.lines = lines
-        self.partial = ""
-        self.dropped = 0
-
-    def writable(self) -> bool:
-        return True
-
-    def write(self, text: str) -> int:
-        room = max(MAX_LOG - len(self.lines), 0)
-        *complete, rest = (self.partial + str(text)).split("\n", room)
-        if len(complete) == room and "\n" in rest:  # no room for the lines in ``rest``
-            self.dropped += rest.count("\n")
-            rest = rest[rest.rindex("\n") + 1 :]
-        self.lines.extend(line[:MAX_LOG] for line in complete)
-        self.partial = rest[:MAX_LOG]
-        return len(text)
-
-
-def _alarm(signum, frame) -> None:
-    raise CallTimeout
-
-
-def _params(params: dict) -> dict:
-    """Params as the simulator makes them: waypoints and locations as tuples."""
-    for key in ("waypoints", "objects_location"):
-        if key in params:
-            params[key] = [tuple(point) for point in params[key]]
-    return params
-
-
-def _error(kind: str, message: str, line: int | None, **where: Any) -> dict[str, Any]:
-    return {"type": "error", "kind": kind, "message": message[:500], "line": line, **where}
-
-
-def _exception(kind: str, error: BaseException, timeout: float, **where: Any) -> dict[str, Any]:
-    """An error message for what user code raised, with the line in the racer's code."""
-    line = None
-    for frame in traceback.extract_tb(error.__traceback__):
-        if frame.filename == FILENAME:
-            line = frame.lineno
-    if isinstance(error, CallTimeout):
-        return _error("timeout", f"The reward function took longer than {timeout:g} s.", line,
-                      **where)  # fmt: skip
-    if isinstance(error, MemoryError):
-        return _error("memory", "The reward function ran out of memory.", line, **where)
-    if isinstance(error, SystemExit):
-        return _error(kind, "The reward function called exit(); it must return a reward.", line,
-                      **where)  # fmt: skip
-    try:
-        text = f"{type(error).__name__}: {error}"
-    except BaseException:  # a message that cannot be printed is still an error
-        text = type(error).__name__
-    return _error(kind, text, line, **where)
+def _failure(error: RewardFailure | RewardError, **where: Any) -> dict[str, Any]:
+    """The error frame for a reward call that failed, with the step and status where it did."""
+    if isinstance(error, RewardError):  # a value the reward process sent, refused here
+        return {"type": "error", "kind": "value", "message": str(error)[:500], "line": None,
+                **where}  # fmt: skip
+    return {**error.error, **where}
 
 
 def main() -> None:
+    # Die with the worker: a worker killed outright must leave no child behind.
+    parent = os.getppid()
+    ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:
+        os._exit(0)
     try:
         Child().run()
     except BaseException:  # the child's own failure: say it on stderr, then go

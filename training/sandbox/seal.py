@@ -3,9 +3,10 @@
 In order: user and network namespaces where the machine allows them (a network with no interfaces
 up, so nothing can be reached even by a syscall that slipped through); resource limits (address
 space, file size 0, no core dumps); then a seccomp allow-list with no_new_privs, after which the
-process can read its request pipe, write its reply pipe and standard error, manage its memory and
-time, and exit. Everything else (open, socket, fork, clone, execve, kill, ptrace, ...) fails with
-EPERM, which Python raises as PermissionError, so misbehaving code gets an ordinary exception.
+process can read its request pipes, write its reply pipes and standard error, manage its memory
+and time, signal and reap the children it names, and exit. Everything else (open, stat, socket,
+fork, clone, execve, kill, ptrace, ...) fails with EPERM, which Python raises as
+PermissionError, so misbehaving code gets an ordinary exception.
 
 Nothing here runs in the worker: it imports no Django and is only called in the child.
 """
@@ -20,16 +21,17 @@ import resource
 CLONE_NEWUSER = 0x10000000
 CLONE_NEWNET = 0x40000000
 
-# What the sealed child may do. Memory, time, signals for itself, and reading and writing the two
+# What a sealed process may do. Memory, time, signals for itself, and reading and writing its
 # pipes (checked by file descriptor in install_seccomp); nothing that reaches a file, another
-# process or the network.
+# process or the network. fstat on an open descriptor is here; newfstatat, which glibc also
+# uses for it but which takes a path, is not: a path is the file system.
 ALWAYS_ALLOWED = (
     "brk", "mmap", "munmap", "mremap", "mprotect", "madvise", "membarrier",
     "futex", "sched_yield", "sched_getaffinity", "getrandom",
     "clock_gettime", "clock_getres", "clock_nanosleep", "gettimeofday", "nanosleep", "time",
     "rt_sigaction", "rt_sigprocmask", "rt_sigreturn", "sigaltstack", "setitimer", "getitimer",
     "getpid", "gettid", "getppid", "getuid", "geteuid", "getgid", "getegid",
-    "fstat", "newfstatat", "lseek", "close", "ioctl", "fcntl", "poll", "ppoll",
+    "fstat", "lseek", "close", "ioctl", "fcntl", "poll", "ppoll",
     "exit", "exit_group", "restart_syscall", "getrusage", "sysinfo", "uname",
     "set_robust_list", "rseq",
 )  # fmt: skip
@@ -49,9 +51,12 @@ def limit_resources(address_space: int) -> None:
     resource.setrlimit(resource.RLIMIT_NPROC, (0, 0))
 
 
-def install_seccomp(*, read_fd: int, write_fds: tuple[int, ...]) -> None:
-    """Allow only ``ALWAYS_ALLOWED`` syscalls, reads from ``read_fd`` and writes to ``write_fds``;
-    anything else fails with EPERM. Sets no_new_privs, so the filter cannot be shed."""
+def install_seccomp(
+    *, read_fds: tuple[int, ...], write_fds: tuple[int, ...], children: tuple[int, ...] = ()
+) -> None:
+    """Allow only ``ALWAYS_ALLOWED`` syscalls, reads from ``read_fds``, writes to ``write_fds``,
+    and killing and reaping ``children``; anything else fails with EPERM. Sets no_new_privs, so
+    the filter cannot be shed."""
     import pyseccomp as seccomp
 
     rules = seccomp.SyscallFilter(defaction=seccomp.ERRNO(errno.EPERM))
@@ -60,7 +65,8 @@ def install_seccomp(*, read_fd: int, write_fds: tuple[int, ...]) -> None:
             rules.add_rule(seccomp.ALLOW, name)
         except (OSError, ValueError):
             continue  # a syscall this architecture does not have
-    rules.add_rule(seccomp.ALLOW, "read", seccomp.Arg(0, seccomp.EQ, read_fd))
+    for fd in read_fds:
+        rules.add_rule(seccomp.ALLOW, "read", seccomp.Arg(0, seccomp.EQ, fd))
     for fd in write_fds:
         rules.add_rule(seccomp.ALLOW, "write", seccomp.Arg(0, seccomp.EQ, fd))
     # Its own limits only, and signals only to itself (abort() and faulthandler use them).
@@ -68,6 +74,9 @@ def install_seccomp(*, read_fd: int, write_fds: tuple[int, ...]) -> None:
     pid = os.getpid()
     rules.add_rule(seccomp.ALLOW, "kill", seccomp.Arg(0, seccomp.EQ, pid))
     rules.add_rule(seccomp.ALLOW, "tgkill", seccomp.Arg(0, seccomp.EQ, pid))
+    for child in children:
+        rules.add_rule(seccomp.ALLOW, "kill", seccomp.Arg(0, seccomp.EQ, child))
+        rules.add_rule(seccomp.ALLOW, "wait4", seccomp.Arg(0, seccomp.EQ, child))
     rules.load()
 
 

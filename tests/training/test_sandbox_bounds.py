@@ -1,0 +1,254 @@
+"""The hostile suite, second part: racers' code that plays the protocol rather than the
+kernel. It forges frames, ignores its alarm, floods standard error, breaks off a frame, outlives
+its worker. Each test asserts the bound that holds: the call ends by its deadline, the worker's
+memory stays put, nothing outlives the worker, and the racer reads why."""
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from training.rewards import reward_validate, static_problems
+from training.sandbox import GRACE, STDERR_KEEP, Sandbox, SandboxFailure
+from training.sandbox.protocol import HEADER, Late, pack, read_frame_by, write_by
+from training.sandbox.reward import KILL_GRACE
+
+PARAMS = {"x": 1.0, "y": 2.0, "track_width": 0.76, "distance_from_center": 0.1}
+LIMIT = 0.5  # [s] the reward function's time limit in these tests
+DEADLINE = LIMIT + GRACE  # [s] the most a call may hold the worker
+SLACK = 1.5  # [s] for a machine busy with other tests
+
+# Code that finds every descriptor it may write to and writes ``DATA`` there: the worker's
+# protocol pipe, if the reward function could reach it, is among them.
+WRITE_EVERYWHERE = """
+import os, signal
+def everywhere(data):
+    for fd in range(0, 64):
+        try:
+            os.write(fd, data)
+        except OSError:
+            pass
+"""
+
+
+def reward(body: str, head: str = "") -> str:
+    return head + "def reward_function(params):\n" + textwrap.indent(textwrap.dedent(body), "    ")
+
+
+def timed(source: str, params: dict = PARAMS, **settings) -> tuple[float | SandboxFailure, float]:
+    """(what a call of ``source`` comes to, the seconds the call took)."""
+    with Sandbox(call_timeout=LIMIT, **settings) as sandbox:
+        try:
+            sandbox.load(source)
+        except SandboxFailure as failure:
+            return failure, 0.0
+        started = time.monotonic()
+        try:
+            result = sandbox.call(params)
+        except SandboxFailure as failure:
+            result = failure
+        return result, time.monotonic() - started
+
+
+def rss() -> int:
+    """[bytes] this process's resident memory."""
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) * 1024 for line in status if line.startswith("VmRSS"))
+
+
+def forged(message: dict) -> str:
+    return repr(pack(message))
+
+
+@pytest.mark.parametrize(
+    ("before", "during", "kind"),
+    [
+        ("pass", "pass", "timeout"),
+        # A reply header promising more than it sends.
+        (f"everywhere({HEADER.pack(1000)!r} + b'x')", "pass", "timeout"),
+        # Progress, over and over: each such frame once reset the worker's deadline.
+        ("pass", f"everywhere({forged({'type': 'progress', 'steps': 1})})", "protocol"),
+    ],
+    ids=["ignored-alarm", "broken-frame", "forged-progress"],
+)
+def test_code_that_ignores_its_alarm_is_stopped_by_its_deadline(before, during, kind):
+    source = reward(
+        f"signal.signal(signal.SIGALRM, signal.SIG_IGN)\n{before}\nwhile True:\n    {during}",
+        head=WRITE_EVERYWHERE,
+    )
+    result, took = timed(source)
+    assert isinstance(result, SandboxFailure), result
+    assert result.kind == kind, str(result)
+    if kind == "timeout":
+        assert f"took longer than {LIMIT:g} s" in str(result)
+    assert took < LIMIT + KILL_GRACE + SLACK
+
+
+def test_a_forged_reply_is_checked_as_a_reward():
+    source = reward(
+        f"everywhere({forged({'type': 'reward', 'value': float('inf')})})\nreturn 1.0",
+        head=WRITE_EVERYWHERE,
+    )
+    result, _ = timed(source)
+    assert isinstance(result, SandboxFailure), result
+    assert result.kind == "value", str(result)
+    assert "finite number" in str(result)
+
+
+def test_a_frame_over_the_size_limit_gets_the_process_killed():
+    source = reward(f"everywhere({HEADER.pack(1 << 30)!r})\nreturn 1.0", head=WRITE_EVERYWHERE)
+    result, took = timed(source)
+    assert isinstance(result, SandboxFailure), result
+    assert result.kind == "protocol", str(result)
+    assert "over the" in str(result)
+    assert took < DEADLINE + SLACK
+
+
+def test_an_endless_line_on_standard_error_costs_the_worker_nothing():
+    # About 1 GB written without a newline; read by lines, the worker once kept all of it.
+    source = reward("os.write(2, b'x' * 50_000_000)\nreturn 1.0", head="import os\n")
+    with Sandbox(call_timeout=5.0) as sandbox:
+        sandbox.load(source)
+        before = rss()
+        for _ in range(20):
+            assert sandbox.call(PARAMS) == 1.0
+        grown = rss() - before
+        assert len(sandbox.stderr_tail) <= STDERR_KEEP
+    assert grown < 100 * 1024 * 1024, f"the worker grew by {grown / 2**20:.0f} MiB"
+
+
+def test_floods_of_frames_and_prints_keep_the_worker_bounded():
+    source = reward(
+        """
+        for _ in range(2000):
+            everywhere(b'\\x00\\x00\\x10\\x00' + b'y' * 4096)
+            print('z' * 10_000)
+        return 1.0
+        """,
+        head=WRITE_EVERYWHERE,
+    )
+    with Sandbox(call_timeout=5.0) as sandbox:
+        sandbox.load(source)
+        before = rss()
+        with pytest.raises(SandboxFailure) as failed:
+            sandbox.call(PARAMS)
+        grown = rss() - before
+    assert failed.value.kind == "protocol", str(failed.value)
+    assert grown < 100 * 1024 * 1024, f"the worker grew by {grown / 2**20:.0f} MiB"
+
+
+def test_stat_of_a_path_is_refused():
+    result, _ = timed(reward("os.stat('/etc/passwd')\nreturn 1.0", head="import os\n"))
+    assert isinstance(result, SandboxFailure), result
+    assert "PermissionError" in str(result)
+
+
+def test_writing_to_the_workers_pipe_is_impossible():
+    # The worker's pipe is the child's alone: fd 1 is closed in the reward process.
+    result, _ = timed(reward("return float(os.write(1, b'hello'))", head="import os\n"))
+    assert isinstance(result, SandboxFailure), result
+    assert "Bad file descriptor" in str(result) or "PermissionError" in str(result)
+
+
+@pytest.mark.parametrize(
+    "source",
+    [
+        "x = " + "-" * 100_000 + "1\n",  # the parser runs out of memory
+        "x = " + "+".join(["1"] * 50_000) + "\n",  # the parser runs out of stack
+    ],
+    ids=["memory", "recursion"],
+)
+def test_code_nested_too_deep_for_the_parser_is_a_validation_error(source):
+    errors, _ = static_problems(source + reward("return 1.0"))
+    assert [problem.type for problem in errors] == ["syntax"]
+    assert "nested too deeply" in errors[0].message
+    result = reward_validate(source=source + reward("return 1.0"), track="rookie-loop")
+    assert not result.valid
+    # And the sandbox, which does not rely on the static checks, says the same.
+    with Sandbox() as sandbox, pytest.raises(SandboxFailure) as failed:
+        sandbox.load(source + reward("return 1.0"))
+    assert failed.value.kind == "syntax", str(failed.value)
+
+
+WORKER = """
+import sys, time
+from training.sandbox import Sandbox
+sandbox = Sandbox(env={"track": "pitlane-oval"})
+sandbox.start()
+sandbox.load("def reward_function(params):\\n    return 1.0\\n")
+print(sandbox._process.pid, flush=True)
+time.sleep(600)
+"""
+
+
+def children_of(pid: int) -> list[int]:
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as stat:
+                    fields = stat.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(entry))
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_nothing_outlives_a_worker_killed_outright():
+    worker = subprocess.Popen(
+        [sys.executable, "-c", WORKER], stdout=subprocess.PIPE, text=True, cwd=os.getcwd()
+    )
+    try:
+        child = int(worker.stdout.readline())
+        grandchildren = children_of(child)
+        assert len(grandchildren) == 1, "the child has its reward process"
+        worker.send_signal(signal.SIGKILL)
+        worker.wait()
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and (alive(child) or alive(grandchildren[0])):
+            time.sleep(0.1)
+        assert not alive(child), "the sandbox child outlived its worker"
+        assert not alive(grandchildren[0]), "the reward process outlived its worker"
+    finally:
+        worker.kill()
+        worker.wait()
+
+
+def test_a_frame_begun_and_never_finished_is_late_by_the_deadline():
+    read, write = os.pipe()
+    os.set_blocking(read, False)
+    try:
+        os.write(write, HEADER.pack(100) + b"partial")
+        started = time.monotonic()
+        with pytest.raises(Late):
+            read_frame_by(read, time.monotonic() + 0.3, 1000)
+        assert time.monotonic() - started < 0.3 + SLACK
+    finally:
+        os.close(read)
+        os.close(write)
+
+
+def test_a_reader_that_takes_nothing_makes_a_write_late_by_the_deadline():
+    read, write = os.pipe()
+    os.set_blocking(write, False)
+    try:
+        started = time.monotonic()
+        with pytest.raises(Late):
+            write_by(write, b"x" * 10_000_000, time.monotonic() + 0.3)
+        assert time.monotonic() - started < 0.3 + SLACK
+    finally:
+        os.close(read)
+        os.close(write)

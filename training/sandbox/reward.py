@@ -1,0 +1,379 @@
+"""The racer's code in a process of its own: the reward process, forked by the sandbox child.
+
+The child (``child.py``) runs only our code: the simulator, the policy and the protocol with the
+worker. It forks this process before it builds either, and the racer's module runs here alone,
+sealed more tightly than the child: it can read its request pipe, write its reply pipe and
+standard error, and nothing else. So whatever the racer's code writes, it cannot speak to the
+worker; and every call is timed by the child, from outside: a reply not whole by the call's
+deadline (an alarm ignored, a frame begun and never finished) gets this process killed, and the
+call fails with the reason. The child checks every reward it is sent (``checked_reward``): what
+this process says is never trusted.
+
+Messages are protocol frames: ``{"op": "load", "source"}``, ``{"op": "call", "params"}`` (the
+waypoints only when they change: ``{"op": "waypoints", "waypoints"}`` first) and
+``{"op": "probe", ...}``; each answered by one frame with ``log`` (the lines printed meanwhile).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import importlib
+import io
+import linecache
+import os
+import signal
+import sys
+import time
+import traceback
+from typing import Any
+
+from simulator.rewards import RewardError, checked_reward
+from training.sandbox import seal
+from training.sandbox.protocol import Late, ProtocolError, pack, read_frame, read_frame_by, write_by
+
+FILENAME = "<reward_function>"
+PRELOADED = (
+    "math", "random", "numpy", "scipy", "scipy.spatial", "scipy.interpolate", "scipy.signal",
+    "scipy.stats", "scipy.optimize", "scipy.linalg", "scipy.special", "shapely",
+    "shapely.geometry", "shapely.ops", "shapely.affinity",
+    "encodings.idna",  # so that code reaching for the network meets the seal, not a missing codec
+)  # fmt: skip
+MAX_LOG = 200  # characters per printed line kept, and lines kept between two messages
+KILL_GRACE = 0.5  # [s] past a call's time limit (which the process enforces on itself, to name
+# the line) before the child kills it from outside
+MAX_REPLY = 1024 * 1024  # [bytes] the largest reply frame: a reward and 200 printed lines
+PR_SET_PDEATHSIG = 1
+KINDS = {"syntax", "import", "exception", "definition", "value", "timeout", "memory"}
+
+
+class CallTimeout(BaseException):
+    """A call ran past its time limit; a BaseException, which ``except Exception`` lets by."""
+
+
+class RewardFailure(Exception):
+    """The racer's code failed, or its process misbehaved; ``error`` is the error frame
+    (``kind``, ``message``, ``line``) for the worker."""
+
+    def __init__(self, kind: str, message: str, line: int | None = None) -> None:
+        super().__init__(message)
+        self.error = _error(kind, message, line)
+
+
+# The child's side
+
+
+class Printed:
+    """Lines the reward process printed, waiting for the next message to the worker: at most
+    ``MAX_LOG`` of ``MAX_LOG`` characters; the rest are counted in ``dropped``."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.dropped = 0
+
+    def add(self, lines: Any, dropped: Any) -> None:
+        lines = lines if isinstance(lines, list) else []
+        room = max(MAX_LOG - len(self.lines), 0)
+        self.lines.extend(str(line)[:MAX_LOG] for line in lines[:room])
+        self.dropped += max(len(lines) - room, 0)
+        if isinstance(dropped, int) and not isinstance(dropped, bool) and dropped > 0:
+            self.dropped += min(dropped, 1 << 40)
+
+    def take(self) -> tuple[list[str], int]:
+        taken = (self.lines, self.dropped)
+        self.lines, self.dropped = [], 0
+        return taken
+
+
+class RewardProcess:
+    """The child's handle on the reward process: start it, load the racer's code, call it."""
+
+    def __init__(self, call_timeout: float, memory_allowance: int) -> None:
+        self.call_timeout = call_timeout
+        self.printed = Printed()
+        self._waypoints: list | None = None
+        parent = os.getpid()
+        request_read, self.requests = os.pipe()
+        self.replies, reply_write = os.pipe()
+        self.pid = os.fork()
+        if self.pid == 0:  # the reward process
+            try:
+                os.close(self.requests)
+                os.close(self.replies)
+                _serve(parent, request_read, reply_write, call_timeout, memory_allowance)
+            except BaseException:  # its own failure (the racer's are answered): say it, then go
+                traceback.print_exc(file=sys.stderr)
+            finally:
+                os._exit(70)
+        os.close(request_read)
+        os.close(reply_write)
+        os.set_blocking(self.requests, False)
+        os.set_blocking(self.replies, False)
+
+    def wait_ready(self, limit: float) -> None:
+        """Wait until the process has sealed itself (it imports the allowed libraries first,
+        while the child builds the simulator)."""
+        self._ask({"op": "hello"}, "ready", limit)
+
+    def load(self, source: str) -> None:
+        self._ask({"op": "load", "source": source}, "loaded", self.call_timeout + KILL_GRACE)
+
+    def call(self, params: dict) -> float:
+        """The reward for ``params``, checked here (``RewardError`` if it is not one)."""
+        params = dict(params)
+        waypoints = params.pop("waypoints", None)
+        if waypoints is not None and waypoints != self._waypoints:
+            self._ask({"op": "waypoints", "waypoints": waypoints}, "waypoints", 5.0)
+            self._waypoints = waypoints
+        reply = self._ask({"op": "call", "params": params}, "reward",
+                          self.call_timeout + KILL_GRACE)  # fmt: skip
+        return checked_reward(reply.get("value"))
+
+    def probe(self, request: dict) -> list[str]:
+        reply = self._ask({**request, "op": "probe"}, "probe", 30.0)
+        escaped = reply.get("escaped")
+        return [str(item)[:100] for item in escaped[:10]] if isinstance(escaped, list) else []
+
+    def stop(self) -> None:
+        if self.pid is None:
+            return
+        with contextlib.suppress(OSError):
+            os.kill(self.pid, signal.SIGKILL)
+        self._reap(block=True)
+
+    def _ask(self, request: dict, expected: str, limit: float) -> dict:
+        """Send ``request`` and take its answer, all within ``limit`` seconds from now."""
+        if self.pid is None:
+            raise RewardFailure("stopped", "The reward function is no longer running.")
+        deadline = time.monotonic() + limit
+        try:
+            write_by(self.requests, pack(request), deadline)
+            reply = read_frame_by(self.replies, deadline, MAX_REPLY)
+        except Late:
+            self.stop()
+            raise RewardFailure(
+                "timeout",
+                f"The reward function took longer than {self.call_timeout:g} s; it was stopped.",
+            ) from None
+        except ProtocolError as error:
+            self.stop()
+            raise RewardFailure(
+                "protocol", f"The reward function's process broke the protocol ({error})."
+            ) from None
+        except OSError:  # a broken pipe: the process is gone
+            reply = None
+        if reply is None:
+            raise RewardFailure("crashed", self._ended())
+        self.printed.add(reply.get("log"), reply.get("log_dropped"))
+        kind = reply.get("type")
+        if kind == expected:
+            return reply
+        if kind == "error" and reply.get("kind") in KINDS:
+            line = reply.get("line")
+            raise RewardFailure(
+                reply["kind"], str(reply.get("message", ""))[:500],
+                line if isinstance(line, int) and not isinstance(line, bool) else None,
+            )  # fmt: skip
+        self.stop()
+        raise RewardFailure("protocol", f"The reward function's process answered {kind!r}.")
+
+    def _ended(self) -> str:
+        status = self._reap(block=True)
+        if status is not None and os.WIFSIGNALED(status):
+            name = signal.Signals(os.WTERMSIG(status)).name
+            reason = f"it was killed by {name}"
+            if name == "SIGSEGV":
+                reason += " (a crash, for example from ctypes)"
+        else:
+            code = os.WEXITSTATUS(status) if status is not None else "unknown"
+            reason = f"it exited with status {code}; a reward function must return, not exit"
+        return f"The reward function's process stopped: {reason}."
+
+    def _reap(self, *, block: bool) -> int | None:
+        pid, self.pid = self.pid, None
+        if pid is None:
+            return None
+        try:
+            return os.waitpid(pid, 0 if block else os.WNOHANG)[1]
+        except ChildProcessError:
+            return None
+
+
+# The reward process's side
+
+
+def _serve(
+    parent: int, requests: int, replies: int, call_timeout: float, memory_allowance: int
+) -> None:
+    """Seal this process and answer the child's requests until it goes."""
+    libc = ctypes.CDLL(None, use_errno=True)
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:  # the child died before the line above
+        os._exit(0)
+    for fd in (0, 1):  # the worker's pipes are the child's alone
+        os.close(fd)
+    os.set_blocking(requests, True)
+    for name in PRELOADED:
+        importlib.import_module(name)
+    host = _Host(os.fdopen(requests, "rb", buffering=0), replies, call_timeout)
+    seal.enter_namespaces()
+    seal.limit_resources(seal.current_address_space() + memory_allowance)
+    seal.install_seccomp(read_fds=(requests,), write_fds=(replies, 2))
+    host.run()
+
+
+class _Host:
+    def __init__(self, requests, replies: int, call_timeout: float) -> None:
+        self.requests, self.replies = requests, replies
+        self.call_timeout = call_timeout
+        self.function = None
+        self.waypoints: tuple = ()
+        self.printed = _Printed()
+        sys.stdout = self.printed
+        signal.signal(signal.SIGALRM, _alarm)
+
+    def run(self) -> None:
+        while (request := read_frame(self.requests)) is not None:
+            handler = getattr(self, f"op_{request.get('op')}", None)
+            if handler is None:
+                self.send(_error("protocol", "unknown request", None))
+                continue
+            handler(request)
+
+    def send(self, message: dict[str, Any]) -> None:
+        message["log"], self.printed.lines = self.printed.lines, []
+        message["log_dropped"], self.printed.dropped = self.printed.dropped, 0
+        data = pack(message)
+        while data:
+            data = data[os.write(self.replies, data) :]
+
+    def op_hello(self, request: dict) -> None:
+        self.send({"type": "ready"})
+
+    def op_waypoints(self, request: dict) -> None:
+        self.waypoints = tuple(tuple(point) for point in request["waypoints"])
+        self.send({"type": "waypoints"})
+
+    def op_load(self, request: dict) -> None:
+        source = request["source"]
+        linecache.cache[FILENAME] = (len(source), None, source.splitlines(True), FILENAME)
+        namespace = {"__name__": "reward_function_module", "__builtins__": __builtins__}
+        try:
+            code = compile(source, FILENAME, "exec")
+        except SyntaxError as error:
+            self.send(_error("syntax", f"{error.msg}", error.lineno))
+            return
+        except (MemoryError, RecursionError):  # nested too deep for the parser
+            self.send(_error("syntax", "The code is nested too deeply for Python to read.", None))
+            return
+        try:
+            self._limited(exec, code, namespace)
+        except BaseException as error:  # whatever the module did is reported
+            kind = "import" if isinstance(error, ImportError) else "exception"
+            self.send(_exception(kind, error, self.call_timeout))
+            return
+        function = namespace.get("reward_function")
+        if not callable(function):
+            self.send(_error("definition", "The code must define reward_function(params).", None))
+            return
+        self.function = function
+        self.send({"type": "loaded"})
+
+    def op_call(self, request: dict) -> None:
+        params = _params(request["params"], self.waypoints)
+        try:
+            value = checked_reward(self._limited(self.function, params))
+        except RewardError as error:
+            self.send(_error("value", str(error), None))
+        except BaseException as error:  # user code may raise anything
+            self.send(_exception("exception", error, self.call_timeout))
+        else:
+            self.send({"type": "reward", "value": value})
+
+    def op_probe(self, request: dict) -> None:
+        """Try what sealed code must not be able to do; report what got through."""
+        escaped = []
+        attempts = {
+            "read a file": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
+            "connect to the network": lambda: (
+                __import__("socket").socket().connect(("127.0.0.1", int(request["port"])))
+            ),
+            "start a process": lambda: os.fork() == 0 and os._exit(0),
+            "run a program": lambda: os.execv("/bin/true", ["true"]),  # noqa: S606
+            "write a file": lambda: open("/tmp/pitlane-sandbox-probe", "w").write("x"),  # noqa: S108, SIM115
+            "write to the worker": lambda: os.write(1, b"\0\0\0\1\x80"),
+        }
+        for name, attempt in attempts.items():
+            try:
+                attempt()
+            except OSError:
+                continue
+            escaped.append(name)
+        self.send({"type": "probe", "escaped": escaped})
+
+    def _limited(self, function, *args):
+        """``function(*args)`` within the per-call time limit."""
+        signal.setitimer(signal.ITIMER_REAL, self.call_timeout)
+        try:
+            return function(*args)
+        finally:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+
+
+class _Printed(io.TextIOBase):
+    """Standard output for user code: each printed line becomes a log message. At most
+    ``MAX_LOG`` lines of ``MAX_LOG`` characters wait to be sent; lines past them are counted
+    (``dropped``), not kept, so that a print flood costs neither memory nor the pipe."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.partial = ""
+        self.dropped = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        room = max(MAX_LOG - len(self.lines), 0)
+        *complete, rest = (self.partial + str(text)).split("\n", room)
+        if len(complete) == room and "\n" in rest:  # no room for the lines in ``rest``
+            self.dropped += rest.count("\n")
+            rest = rest[rest.rindex("\n") + 1 :]
+        self.lines.extend(line[:MAX_LOG] for line in complete)
+        self.partial = rest[:MAX_LOG]
+        return len(text)
+
+
+def _alarm(signum, frame) -> None:
+    raise CallTimeout
+
+
+def _params(params: dict, waypoints: tuple) -> dict:
+    """Params as the simulator makes them: a fresh list of the waypoints, locations as tuples."""
+    params["waypoints"] = list(waypoints)
+    if "objects_location" in params:
+        params["objects_location"] = [tuple(point) for point in params["objects_location"]]
+    return params
+
+
+def _error(kind: str, message: str, line: int | None, **where: Any) -> dict[str, Any]:
+    return {"type": "error", "kind": kind, "message": message[:500], "line": line, **where}
+
+
+def _exception(kind: str, error: BaseException, timeout: float) -> dict[str, Any]:
+    """An error message for what user code raised, with the line in the racer's code."""
+    line = None
+    for frame in traceback.extract_tb(error.__traceback__):
+        if frame.filename == FILENAME:
+            line = frame.lineno
+    if isinstance(error, CallTimeout):
+        return _error("timeout", f"The reward function took longer than {timeout:g} s.", line)
+    if isinstance(error, MemoryError):
+        return _error("memory", "The reward function ran out of memory.", line)
+    if isinstance(error, SystemExit):
+        return _error(kind, "The reward function called exit(); it must return a reward.", line)
+    try:
+        text = f"{type(error).__name__}: {error}"
+    except BaseException:  # a message that cannot be printed is still an error
+        text = type(error).__name__
+    return _error(kind, text, line)
