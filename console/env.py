@@ -8,6 +8,7 @@ so a typo in a deployment stops the process at start-up instead of surfacing lat
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -85,6 +86,17 @@ class Env:
                 f"not {value}."
             )
         return value  # type: ignore[return-value]
+
+    def rate(self, name: str, default: str | object = _MISSING) -> str:
+        """A rate limit: a count per period, as ``5/15m`` (5 in 15 minutes) or ``30/h``; the
+        period in s, m, h or d."""
+        value = self._raw(name, default)
+        if not re.fullmatch(r"[1-9]\d*/[1-9]?\d*[smhd]", value):
+            raise ImproperlyConfigured(
+                f"The environment variable {name} must be a count per period, such as 5/15m or "
+                f"30/h (s, m, h or d), not {value!r}."
+            )
+        return value
 
     def list(self, name: str, default: list[str] | object = _MISSING) -> list[str]:
         """A comma-separated list; empty items are dropped."""

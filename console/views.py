@@ -1,13 +1,14 @@
 from django.contrib import messages
 from django.contrib.admin.views.decorators import staff_member_required
 from django.contrib.auth import login
+from django.contrib.auth.views import LoginView
 from django.http import HttpRequest, HttpResponse, JsonResponse
 from django.shortcuts import redirect, render
 from django.utils.http import url_has_allowed_host_and_scheme
 from django.views.decorators.cache import never_cache
 from django.views.decorators.http import require_safe
 
-from console import guidance
+from console import guidance, ratelimits
 from console.forms import SignUpForm
 from console.health import system_health
 from racing.models import RankingMethod
@@ -34,7 +35,13 @@ def signup(request: HttpRequest) -> HttpResponse:
     if request.user.is_authenticated:
         return redirect(next_url or "home")
     form = SignUpForm(request.POST or None)
-    if request.method == "POST" and form.is_valid():
+    limited = None
+    if request.method == "POST":
+        try:
+            ratelimits.count(request, "sign-up", ratelimits.address(request))
+        except ratelimits.Limited as over:
+            ratelimits.refuse(form, limited := over)
+    if request.method == "POST" and not limited and form.is_valid():
         user = form.save()
         login(request, user, backend="django.contrib.auth.backends.ModelBackend")
         if not next_url:
@@ -46,8 +53,24 @@ def signup(request: HttpRequest) -> HttpResponse:
         request,
         "registration/signup.html",
         {"form": form, "next": next_url},
-        status=400 if form.errors else 200,
+        status=429 if limited else 400 if form.errors else 200,
     )
+
+
+class SignInView(LoginView):
+    """Django's sign-in, limited per racer name and per address: past either limit the form
+    says how long to wait, and the password is not checked at all."""
+
+    def post(self, request: HttpRequest, *args, **kwargs) -> HttpResponse:
+        name = str(request.POST.get("username", "")).strip().lower()[:150]
+        try:
+            ratelimits.count(request, "sign-in-address", ratelimits.address(request))
+            ratelimits.count(request, "sign-in-account", f"name:{name}")
+        except ratelimits.Limited as limited:
+            form = self.get_form_class()(request, initial={"username": name})
+            context = self.get_context_data(form=form, limited=limited)
+            return self.render_to_response(context, status=429)
+        return super().post(request, *args, **kwargs)
 
 
 def _safe_next(request: HttpRequest) -> str:

@@ -8,6 +8,7 @@ from django.shortcuts import get_object_or_404, redirect, render
 from django.urls import reverse
 from django.views.decorators.http import require_POST
 
+from console import ratelimits
 from racing import selectors, services
 from racing.forms import CommunityRaceForm, SubmissionForm
 from racing.models import Division, Event, Ranking, Season, Submission
@@ -92,7 +93,13 @@ def submission_create(request: HttpRequest) -> HttpResponse:
     if slug := request.GET.get("event"):
         initial["event"] = Event.objects.filter(slug=slug).values_list("pk", flat=True).first()
     form = SubmissionForm(request.POST or None, racer=request.user, initial=initial)
-    if request.method == "POST" and form.is_valid():
+    limited = None
+    if request.method == "POST":
+        try:
+            ratelimits.count(request, "evaluate")
+        except ratelimits.Limited as over:
+            ratelimits.refuse(form, limited := over)
+    if request.method == "POST" and not limited and form.is_valid():
         try:
             submission = services.submission_create(
                 racer=request.user,
@@ -111,6 +118,7 @@ def submission_create(request: HttpRequest) -> HttpResponse:
         "racing/submission_create.html",
         {"form": form, "has_events": form.fields["event"].queryset.exists(),
          "has_models": form.fields["model"].queryset.exists()},
+        status=429 if limited else 200,
     )  # fmt: skip
 
 

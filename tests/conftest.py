@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import redis
 from django.conf import settings
 from django.contrib.auth.models import User
 
@@ -25,6 +26,20 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
             item.add_marker(pytest.mark.browser)
     items.sort(key=lambda item: (item.get_closest_marker("restarts_redis") is not None,
                                  item.path.is_relative_to(BROWSER_TESTS)))  # fmt: skip
+
+
+@pytest.fixture(autouse=True)
+def _fresh_rate_limits() -> Iterator[None]:
+    """Every test starts with no attempts counted: the counters live in the suite's Redis, and
+    racers' ids repeat from test to test."""
+    yield
+    try:
+        client = redis_client()
+        keys = list(client.scan_iter(match=f"{settings.CACHES['default']['KEY_PREFIX']}:*:rl:*"))
+        if keys:
+            client.delete(*keys)
+    except redis.RedisError:  # a test that stopped the suite's Redis has nothing to clear
+        return
 
 
 def _racer(username: str, **extra) -> User:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 
 import cv2
+from django.conf import settings as django_settings
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import IntegrityError, transaction
 from django.utils import timezone
@@ -319,6 +320,14 @@ def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJ
     marked ``purpose`` (EVALUATING, or SUBMITTING for a race) under a row lock, so that one model
     drives one evaluation at a time. ``EvaluationRefused`` unless it is ready and has weights."""
     model = RLModel.objects.select_for_update().get(pk=model.pk)
+    waiting = EvaluationJob.objects.filter(
+        model__owner_id=model.owner_id, status__in=EvaluationJob.ACTIVE
+    ).count()
+    if waiting >= django_settings.PITLANE_MAX_QUEUED_EVALUATIONS:
+        raise EvaluationRefused(
+            f"You have {waiting} evaluations and race entries waiting or driving, the most at "
+            "once here; start another when one has finished."
+        )
     if model.status != RLModel.Status.READY:
         raise EvaluationRefused(
             f"The model {model.name} is {model.get_status_display().lower()}; "

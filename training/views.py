@@ -19,6 +19,7 @@ from django.urls import reverse
 from django.utils.cache import patch_cache_control
 from django.views.decorators.http import require_POST, require_safe
 
+from console import ratelimits
 from simulator import config as sim_config
 from simulator import tracks as simulator_tracks
 from training import (
@@ -207,6 +208,10 @@ def reward_function_delete(request: HttpRequest, pk: int) -> HttpResponse:
 @require_POST
 def reward_validation(request: HttpRequest) -> JsonResponse:
     """Validate the posted reward function against the chosen track; JSON for the editor."""
+    try:
+        ratelimits.count(request, "validate")
+    except ratelimits.Limited as limited:
+        return JsonResponse({"message": str(limited)}, status=429)
     form = RewardValidationForm(request.POST)
     if not form.is_valid():
         return JsonResponse({"message": form.first_error()}, status=400)
@@ -219,6 +224,18 @@ def reward_validation(request: HttpRequest) -> JsonResponse:
     except SandboxFailure as error:
         return JsonResponse({"message": f"Validation could not run: {error}"}, status=503)
     return JsonResponse(result.as_dict())
+
+
+def _limited(request: HttpRequest, action: str) -> ratelimits.Limited | None:
+    """For a POST: count it against ``action``'s limit; the ``Limited`` when over it, else
+    None (and for anything but a POST)."""
+    if request.method != "POST":
+        return None
+    try:
+        ratelimits.count(request, action)
+    except ratelimits.Limited as limited:
+        return limited
+    return None
 
 
 def _number(text: str) -> int:
@@ -261,7 +278,9 @@ def model_create(request: HttpRequest) -> HttpResponse:
         initial["reward_function"] = chosen_reward.source
     reward_library = selectors.reward_functions_for_racer(racer=request.user)
     form = ModelCreateForm(request.POST or None, owner=request.user, initial=initial, source=source)
-    if request.method == "POST" and form.is_valid():
+    if limited := _limited(request, "create"):
+        ratelimits.refuse(form, limited)
+    elif request.method == "POST" and form.is_valid():
         try:
             inherited = (
                 {"cloned_from": source, "shell_colour": source.shell_colour} if source else {}
@@ -294,7 +313,7 @@ def model_create(request: HttpRequest) -> HttpResponse:
             "reward_library_sources": {f.pk: f.source for f in reward_library},
             "chosen_reward": chosen_reward,
         },
-        status=400 if form.errors else 200,
+        status=429 if limited else 400 if form.errors else 200,
     )
 
 
@@ -424,6 +443,10 @@ def model_import(request: HttpRequest) -> HttpResponse:
     kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
     form = ModelImportForm(request.POST, request.FILES, owner=request.user, kept=kept)
     refused = False
+    if limited := _limited(request, "import"):
+        ratelimits.refuse(form, limited)
+        form.keep(kept)  # the racer tries again later with the archive they chose
+        return render(request, "training/model_import.html", {"form": form}, status=429)
     if form.is_valid():
         upload = form.cleaned_data["archive"]
         try:
@@ -504,12 +527,14 @@ def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
         request.POST or None, initial=initial,
         checkpoints=selectors.model_checkpoint_choices(model=model),
     )  # fmt: skip
-    refusal = None
+    refusal = limited = None
     if model.status != RLModel.Status.READY:
         refusal = (
             f"{model.name} is {model.get_status_display().lower()}; "
             "it can be evaluated once it is ready."
         )
+    elif limited := _limited(request, "evaluate"):
+        refusal = str(limited)
     elif request.method == "POST" and form.is_valid():
         try:
             evaluation = services.evaluation_start(model=model, settings=form.settings())
@@ -524,7 +549,8 @@ def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
         "training/evaluation_create.html",
         {"model": model, "form": form, "refusal": refusal,
          "tracks": selectors.tracks_available()},
-        status=400 if form.errors or (refusal and request.method == "POST") else 200,
+        status=429 if limited else
+        400 if form.errors or (refusal and request.method == "POST") else 200,
     )  # fmt: skip
 
 

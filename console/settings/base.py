@@ -37,6 +37,7 @@ INSTALLED_APPS = [
     "django.contrib.staticfiles",
     "django.contrib.humanize",
     "channels",
+    "django_ratelimit",
     "console",
     "training",
     "racing",
@@ -158,6 +159,19 @@ CELERY_BROKER_TRANSPORT_OPTIONS = {
 }
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
+# Rate limits (console.ratelimits; README, "Limits"): a count per period, per racer unless
+# said: sign-in per racer name and per address, sign-up per address.
+PITLANE_RATES = {
+    action: env.rate(f"PITLANE_RATE_{action.upper().replace('-', '_')}", default)
+    for action, default in {
+        "sign-in-account": "10/15m", "sign-in-address": "30/15m", "sign-up": "5/h",
+        "validate": "30/10m", "import": "10/h", "create": "20/h", "evaluate": "30/h",
+    }.items()
+}  # fmt: skip
+RATELIMIT_USE_CACHE = "default"
+RATELIMIT_FAIL_OPEN = True  # a cache that cannot count lets attempts through (and logs it)
+# Evaluations and race entries a racer may have waiting or driving at once.
+PITLANE_MAX_QUEUED_EVALUATIONS = env.int("PITLANE_MAX_QUEUED_EVALUATIONS", 3, minimum=1)
 # The largest request body (console.bodylimit): any page, and the model import's archive upload
 # (training.imports.MAX_ARCHIVE, 256 MiB, with room for the form around it).
 PITLANE_MAX_BODY = env.int("PITLANE_MAX_BODY", 10 * 2**20, minimum=2**20)  # [bytes]

@@ -1,0 +1,116 @@
+"""Rate limits: past each, the page answers 429 and says how long to wait, and nothing is done.
+Counted in the suite's real Redis, as in production."""
+
+import pytest
+from django.contrib.auth.models import User
+from django.urls import reverse
+
+from tests.conftest import PASSWORD
+from tests.training.factories import trained_model
+from training import services
+from training.models import EvaluationJob, RLModel
+
+pytestmark = pytest.mark.django_db
+
+
+@pytest.fixture
+def rates(settings):
+    """Every rate at 2 per 15 minutes, for the test to change."""
+    settings.PITLANE_RATES = dict.fromkeys(settings.PITLANE_RATES, "2/15m")
+    return settings.PITLANE_RATES
+
+
+def sign_in(client, username: str, password: str):
+    return client.post(reverse("login"), {"username": username, "password": password})
+
+
+def test_wrong_passwords_for_one_racer_end_in_a_wait_even_for_the_right_one(alice, client, rates):
+    rates["sign-in-address"] = "100/15m"
+    for _ in range(2):
+        assert sign_in(client, "alice", "wrong password").status_code == 200
+    response = sign_in(client, "alice", PASSWORD)
+    assert response.status_code == 429
+    assert "Too many sign-in attempts for this racer for now: try again in" in response.text
+    assert "minute" in response.text
+    assert "_auth_user_id" not in client.session
+    # Another racer from elsewhere is not held up by alice's limit.
+    other = client_from("10.0.0.9")
+    assert sign_in(other, "bob", PASSWORD).status_code in (200, 302)
+
+
+def client_from(address: str):
+    from django.test import Client
+
+    return Client(REMOTE_ADDR=address)
+
+
+def test_one_address_trying_many_racers_ends_in_a_wait(alice, bob, stella, client, rates):
+    rates["sign-in-account"] = "100/15m"
+    assert sign_in(client, "alice", "wrong").status_code == 200
+    assert sign_in(client, "bob", "wrong").status_code == 200
+    response = sign_in(client, "stella", PASSWORD)
+    assert response.status_code == 429
+    assert "Too many sign-in attempts from your address" in response.text
+    assert sign_in(client_from("10.0.0.7"), "stella", PASSWORD).status_code == 302
+
+
+def test_sign_ups_from_one_address_are_limited(client, rates):
+    for n in range(2):
+        client.post(reverse("signup"), {"username": f"racer{n}", "password1": "x",
+                                        "password2": "y"})  # fmt: skip
+    response = client.post(reverse("signup"), {
+        "username": "racer9", "password1": PASSWORD, "password2": PASSWORD,
+    })  # fmt: skip
+    assert response.status_code == 429
+    assert "Too many new accounts from your address" in response.text
+    assert not User.objects.filter(username="racer9").exists()
+
+
+def test_reward_checks_are_limited_per_racer(alice, bob, client, rates):
+    client.force_login(alice)
+    for _ in range(2):
+        assert client.post(reverse("training:reward-validation"), {}).status_code == 400
+    response = client.post(reverse("training:reward-validation"), {})
+    assert response.status_code == 429
+    assert response.json()["message"].startswith("Too many reward function checks for now")
+    client.force_login(bob)  # each racer counts alone
+    assert client.post(reverse("training:reward-validation"), {}).status_code == 400
+
+
+def test_new_models_and_imports_are_limited_per_racer(alice, client, rates):
+    client.force_login(alice)
+    for page, what in (
+        ("training:model-create", "new models"),
+        ("training:model-import", "imports"),
+    ):
+        for _ in range(2):
+            assert client.post(reverse(page), {"name": ""}).status_code == 400
+        response = client.post(reverse(page), {"name": ""})
+        assert response.status_code == 429, page
+        assert f"Too many {what} for now: try again in" in response.text
+    assert not RLModel.objects.exists()
+
+
+def test_evaluations_and_race_entries_share_a_limit(alice, client, rates, tracks):
+    model = trained_model(alice, "limited")
+    client.force_login(alice)
+    page = reverse("training:evaluation-create", args=[model.pk])
+    assert client.post(page, {"track": ""}).status_code == 400
+    assert client.post(reverse("racing:submission-create"), {}).status_code == 200
+    response = client.post(page, {"track": ""})
+    assert response.status_code == 429
+    assert "Too many evaluations and race entries for now" in response.text
+    response = client.post(reverse("racing:submission-create"), {})
+    assert response.status_code == 429
+    assert not EvaluationJob.objects.exists()
+
+
+def test_a_racer_has_at_most_so_many_evaluations_waiting(alice, bob, settings, tracks):
+    settings.PITLANE_MAX_QUEUED_EVALUATIONS = 2
+    models = [trained_model(alice, f"model-{n}") for n in range(3)]
+    for model in models[:2]:
+        services.evaluation_start(model=model, settings={}, enqueue=False)
+    with pytest.raises(services.EvaluationRefused, match="You have 2 evaluations and race"):
+        services.evaluation_start(model=models[2], settings={}, enqueue=False)
+    # Another racer's queue is their own.
+    services.evaluation_start(model=trained_model(bob, "bobs"), settings={}, enqueue=False)
