@@ -10,13 +10,21 @@ its baseline (target: under 100 MiB).
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 
+import django
+
+from training import hyperparameters as hp
 from training.networks import SHALLOW
-from training.rollouts import MEMORY_ALLOWANCE, REWARD_CALL_LIMIT
 from training.sandbox import GRACE, Sandbox, SandboxFailure
 from training.sandbox.protocol import pack
+
+os.environ.setdefault("DJANGO_SETTINGS_MODULE", "console.settings.dev")
+django.setup()  # the rollout worker's limits are read from where it keeps them
+
+from training.rollouts import MEMORY_ALLOWANCE, REWARD_CALL_LIMIT  # noqa: E402
 
 EVERYWHERE = """
 import os, signal
@@ -54,7 +62,7 @@ def rss() -> int:
 
 def attack(body: str) -> tuple[str, float, float]:
     """(how the episode ended, seconds it held the worker, MiB above the baseline at peak)."""
-    policy = {"algorithm": "ppo", "architecture": SHALLOW, "seed": 0}
+    policy = {"algorithm": hp.PPO, "architecture": SHALLOW, "seed": 0}
     with Sandbox(
         env={"track": "rookie-loop"}, policy=policy, call_timeout=REWARD_CALL_LIMIT,
         memory_allowance=MEMORY_ALLOWANCE,
