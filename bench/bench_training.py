@@ -68,7 +68,9 @@ def bench_racer():
     return owner
 
 
-def default_model(owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False):
+def default_model(
+    owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False, steering: float = 30
+):
     from training.rewards import EXAMPLES
     from training.services import model_create
 
@@ -81,7 +83,8 @@ def default_model(owner, name: str, *, workers: int = 1, seed: int = 0, fast: bo
         "max_minutes": 1440,
     }
     if fast:
-        settings.update(action_space=FAST_ACTIONS, reward_function=FAST_REWARD)
+        actions = {**FAST_ACTIONS, "steering_angle": {"low": -steering, "high": steering}}
+        settings.update(action_space=actions, reward_function=FAST_REWARD)
     return model_create(owner=owner, settings=settings)
 
 
@@ -135,13 +138,20 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
 
 
 def time_to_qualify(
-    owner, seed: int, limit: float, *, fast: bool = False, lap_after: float = LAP_AFTER_MINUTES
+    owner,
+    seed: int,
+    limit: float,
+    *,
+    fast: bool = False,
+    lap_after: float = LAP_AFTER_MINUTES,
+    steering: float = 30,
 ) -> tuple[float | None, float | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
     after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies."""
     from training.services import training_stop
 
-    model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast)
+    model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast,
+                          steering=steering)  # fmt: skip
     tried = set()
     qualified = None
     while True:
@@ -198,6 +208,9 @@ def main() -> None:
         default=LAP_AFTER_MINUTES,
         help="[min] of training after which --fast reports the best lap",
     )
+    parser.add_argument(
+        "--steering", type=float, default=30, help="[deg] with --fast, the steering range's bound"
+    )
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument(
         "--limit",
@@ -219,8 +232,9 @@ def main() -> None:
                 print(f"The braking driver's lap on the Rookie Loop: {braking_lap():.2f} s")
             for seed in arguments.seeds:
                 minutes, best = time_to_qualify(
-                    owner, seed, arguments.limit, fast=arguments.fast, lap_after=arguments.lap_after
-                )
+                    owner, seed, arguments.limit, fast=arguments.fast,
+                    lap_after=arguments.lap_after, steering=arguments.steering,
+                )  # fmt: skip
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
                 if arguments.fast:
                     shown += (f"; best lap after {arguments.lap_after:g} min: "

@@ -12,7 +12,7 @@ from training import rollouts
 from training.experience import JobChannel, LogEntry
 from training.models import JobLogLine, TrainingJob
 from training.sandbox import LOG_KEEP, Sandbox
-from training.sandbox.child import MAX_LOG
+from training.sandbox.reward import MAX_LOG
 
 FLOOD = """\
 for i in range(20_000):
