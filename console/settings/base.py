@@ -37,7 +37,6 @@ INSTALLED_APPS = [
     "django.contrib.staticfiles",
     "django.contrib.humanize",
     "channels",
-    "django_ratelimit",
     "console",
     "training",
     "racing",
@@ -169,6 +168,9 @@ PITLANE_RATES = {
     }.items()
 }  # fmt: skip
 RATELIMIT_USE_CACHE = "default"
+# django_ratelimit is not an installed app: it would only add a system check whose list of
+# caches (django-redis, not Django's own RedisCache) predates Django's; RedisCache's incr is
+# Redis's atomic INCRBY, which the counters need.
 RATELIMIT_FAIL_OPEN = True  # a cache that cannot count lets attempts through (and logs it)
 # Evaluations and race entries a racer may have waiting or driving at once.
 PITLANE_MAX_QUEUED_EVALUATIONS = env.int("PITLANE_MAX_QUEUED_EVALUATIONS", 3, minimum=1)

@@ -333,7 +333,8 @@ def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
 
 
 def sandbox_children() -> dict[int, int]:
-    """The running sandbox children: {pid: parent pid}."""
+    """The running sandbox children: {pid: parent pid}. Their reward processes, forks of theirs
+    with the same command line, are left out."""
     found = {}
     for entry in Path("/proc").glob("[0-9]*"):
         try:
@@ -341,7 +342,7 @@ def sandbox_children() -> dict[int, int]:
                 found[int(entry.name)] = parent_of(int(entry.name))
         except OSError:
             continue
-    return found
+    return {pid: parent for pid, parent in found.items() if parent not in found}
 
 
 @pytest.mark.django_db(transaction=True)
