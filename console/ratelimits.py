@@ -2,7 +2,8 @@
 
 Attempts are counted by django-ratelimit in the shared cache (Redis), so every web process on
 every machine counts together, in fixed windows. An attempt over its rate is refused before any
-work, with a sentence that says how long to wait (``Limited``); the views answer 429 with it.
+work, with a sentence that says how long to wait (``over`` gives the ``Limited``); the views
+answer 429 with it.
 The rates are settings (``PITLANE_RATES``, from environment variables; README, "Limits").
 Where the cache cannot be reached, attempts are let through: the console says so in its log and
 goes on, as it does for what else Redis holds.
@@ -46,9 +47,11 @@ class Limited(Exception):
         self.action, self.wait = action, wait
 
 
-def count(request: HttpRequest, action: str, key: str | None = None) -> None:
-    """Count this attempt at ``action``, by ``key`` (the signed-in racer where None); raise
-    ``Limited`` when it is over the rate."""
+def over(request: HttpRequest, action: str, key: str | None = None) -> Limited | None:
+    """For a POST: count it as an attempt at ``action``, by ``key`` (the signed-in racer where
+    None); the ``Limited`` when that is over the rate, else None (and for anything else)."""
+    if request.method != "POST":
+        return None
     if key is None:
         key = f"racer:{request.user.pk}"
     try:
@@ -58,9 +61,10 @@ def count(request: HttpRequest, action: str, key: str | None = None) -> None:
         )  # fmt: skip
     except RedisError as error:
         logger.warning("Rate limit %s not counted: %s", action, error)
-        return
+        return None
     if usage is not None and usage["should_limit"]:
-        raise Limited(action, usage["time_left"])
+        return Limited(action, usage["time_left"])
+    return None
 
 
 def refuse(form: BaseForm, limited: Limited) -> None:

@@ -35,13 +35,9 @@ def signup(request: HttpRequest) -> HttpResponse:
     if request.user.is_authenticated:
         return redirect(next_url or "home")
     form = SignUpForm(request.POST or None)
-    limited = None
-    if request.method == "POST":
-        try:
-            ratelimits.count(request, "sign-up", ratelimits.address(request))
-        except ratelimits.Limited as over:
-            ratelimits.refuse(form, limited := over)
-    if request.method == "POST" and not limited and form.is_valid():
+    if limited := ratelimits.over(request, "sign-up", ratelimits.address(request)):
+        ratelimits.refuse(form, limited)
+    elif request.method == "POST" and form.is_valid():
         user = form.save()
         login(request, user, backend="django.contrib.auth.backends.ModelBackend")
         if not next_url:
@@ -63,10 +59,10 @@ class SignInView(LoginView):
 
     def post(self, request: HttpRequest, *args, **kwargs) -> HttpResponse:
         name = str(request.POST.get("username", "")).strip().lower()[:150]
-        try:
-            ratelimits.count(request, "sign-in-address", ratelimits.address(request))
-            ratelimits.count(request, "sign-in-account", f"name:{name}")
-        except ratelimits.Limited as limited:
+        limited = ratelimits.over(
+            request, "sign-in-address", ratelimits.address(request)
+        ) or ratelimits.over(request, "sign-in-account", f"name:{name}")
+        if limited:
             form = self.get_form_class()(request, initial={"username": name})
             context = self.get_context_data(form=form, limited=limited)
             return self.render_to_response(context, status=429)

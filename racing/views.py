@@ -93,13 +93,9 @@ def submission_create(request: HttpRequest) -> HttpResponse:
     if slug := request.GET.get("event"):
         initial["event"] = Event.objects.filter(slug=slug).values_list("pk", flat=True).first()
     form = SubmissionForm(request.POST or None, racer=request.user, initial=initial)
-    limited = None
-    if request.method == "POST":
-        try:
-            ratelimits.count(request, "evaluate")
-        except ratelimits.Limited as over:
-            ratelimits.refuse(form, limited := over)
-    if request.method == "POST" and not limited and form.is_valid():
+    if limited := ratelimits.over(request, "evaluate"):
+        ratelimits.refuse(form, limited)
+    elif request.method == "POST" and form.is_valid():
         try:
             submission = services.submission_create(
                 racer=request.user,

@@ -208,9 +208,7 @@ def reward_function_delete(request: HttpRequest, pk: int) -> HttpResponse:
 @require_POST
 def reward_validation(request: HttpRequest) -> JsonResponse:
     """Validate the posted reward function against the chosen track; JSON for the editor."""
-    try:
-        ratelimits.count(request, "validate")
-    except ratelimits.Limited as limited:
+    if limited := ratelimits.over(request, "validate"):
         return JsonResponse({"message": str(limited)}, status=429)
     form = RewardValidationForm(request.POST)
     if not form.is_valid():
@@ -224,18 +222,6 @@ def reward_validation(request: HttpRequest) -> JsonResponse:
     except SandboxFailure as error:
         return JsonResponse({"message": f"Validation could not run: {error}"}, status=503)
     return JsonResponse(result.as_dict())
-
-
-def _limited(request: HttpRequest, action: str) -> ratelimits.Limited | None:
-    """For a POST: count it against ``action``'s limit; the ``Limited`` when over it, else
-    None (and for anything but a POST)."""
-    if request.method != "POST":
-        return None
-    try:
-        ratelimits.count(request, action)
-    except ratelimits.Limited as limited:
-        return limited
-    return None
 
 
 def _number(text: str) -> int:
@@ -278,7 +264,7 @@ def model_create(request: HttpRequest) -> HttpResponse:
         initial["reward_function"] = chosen_reward.source
     reward_library = selectors.reward_functions_for_racer(racer=request.user)
     form = ModelCreateForm(request.POST or None, owner=request.user, initial=initial, source=source)
-    if limited := _limited(request, "create"):
+    if limited := ratelimits.over(request, "create"):
         ratelimits.refuse(form, limited)
     elif request.method == "POST" and form.is_valid():
         try:
@@ -443,7 +429,7 @@ def model_import(request: HttpRequest) -> HttpResponse:
     kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
     form = ModelImportForm(request.POST, request.FILES, owner=request.user, kept=kept)
     refused = False
-    if limited := _limited(request, "import"):
+    if limited := ratelimits.over(request, "import"):
         ratelimits.refuse(form, limited)
         form.keep(kept)  # the racer tries again later with the archive they chose
         return render(request, "training/model_import.html", {"form": form}, status=429)
@@ -533,7 +519,7 @@ def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
             f"{model.name} is {model.get_status_display().lower()}; "
             "it can be evaluated once it is ready."
         )
-    elif limited := _limited(request, "evaluate"):
+    elif limited := ratelimits.over(request, "evaluate"):
         refusal = str(limited)
     elif request.method == "POST" and form.is_valid():
         try:

@@ -16,14 +16,19 @@ def client(client, django_user_model):
     return client
 
 
-def test_anyone_else_reads_up_or_down_alone(client, settings, tmp_path):
-    client.logout()
+def healthz_without_workers(client, settings, tmp_path):
+    """/healthz's answer on a Redis no worker reports to."""
     redis_server = RedisServer(tmp_path / "redis")
-    settings.REDIS_URL = redis_server.url  # a Redis no worker reports to
+    settings.REDIS_URL = redis_server.url
     try:
-        response = client.get(reverse("healthz"))
+        return client.get(reverse("healthz"))
     finally:
         redis_server.stop()
+
+
+def test_anyone_else_reads_up_or_down_alone(client, settings, tmp_path):
+    client.logout()
+    response = healthz_without_workers(client, settings, tmp_path)
     assert (response.status_code, response.json()) == (503, {"status": "down"})
 
 
@@ -54,12 +59,7 @@ def test_healthz_is_503_naming_redis_when_redis_is_stopped(client, settings, tmp
 
 
 def test_healthz_is_503_naming_the_workers_when_none_runs(client, settings, tmp_path):
-    redis_server = RedisServer(tmp_path / "redis")
-    settings.REDIS_URL = redis_server.url  # a Redis no worker reports to
-    try:
-        response = client.get(reverse("healthz"))
-    finally:
-        redis_server.stop()
+    response = healthz_without_workers(client, settings, tmp_path)
     assert response.status_code == 503
     assert response.json()["down"] == ["workers"]
     assert response.json()["checks"]["workers"]["error"] == "no Celery worker is running"

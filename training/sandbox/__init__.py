@@ -315,14 +315,11 @@ class Sandbox:
         if self.stderr_tail:
             logger.warning("A sandbox child stopped (%s); its last words: %s", code,
                            self.stderr_tail[-2000:].decode("utf-8", "replace"))  # fmt: skip
-        if code is not None and code < 0:
-            name = signal.Signals(-code).name
-            reason = f"it was killed by {name}"
-            if name == "SIGSEGV":
-                reason += " (a crash, for example from ctypes)"
-        else:
-            reason = f"it exited with status {code}; a reward function must return, not exit"
-        return SandboxFailure("crashed", f"The reward function's process stopped: {reason}.")
+        # The child runs only our code (the racer's runs in its reward process, whose end the
+        # child reports): its own end is the simulation's, not the reward function's.
+        how = f"was killed by {signal.Signals(-code).name}" if code and code < 0 else (
+            f"exited with status {code}")  # fmt: skip
+        return SandboxFailure("crashed", f"The simulation's process stopped: it {how}.")
 
     def _kill(self) -> None:
         if self._process is not None and self._process.poll() is None:

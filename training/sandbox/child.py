@@ -11,10 +11,8 @@ the worker reads (progress above all) are this module's. This module never impor
 
 from __future__ import annotations
 
-import ctypes
 import os
 import select
-import signal
 import sys
 import time
 import traceback
@@ -33,7 +31,6 @@ from training.sandbox.reward import RewardFailure, RewardProcess
 
 PROGRESS_EVERY = 0.25  # [s] between progress messages during a rollout
 LOOK_EVERY = 0.05  # [s] between looks for a watch request during an episode
-PR_SET_PDEATHSIG = 1
 
 
 class Child:
@@ -280,15 +277,10 @@ class Child:
             escaped = self.reward.probe(request)
         except RewardFailure as error:
             escaped = [f"stop the probe ({error})"]
-        for name, attempt in {
+        escaped += seal.escapes({
             "read a file (from the child)": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
             "start a process (from the child)": lambda: os.fork() == 0 and os._exit(0),
-        }.items():
-            try:
-                attempt()
-            except OSError:
-                continue
-            escaped.append(name)
+        })  # fmt: skip
         self.send({"type": "probe", "escaped": escaped})
 
     def op_exit(self, request: dict) -> None:
@@ -305,10 +297,7 @@ def _failure(error: RewardFailure | RewardError, **where: Any) -> dict[str, Any]
 
 def main() -> None:
     # Die with the worker: a worker killed outright must leave no child behind.
-    parent = os.getppid()
-    ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    if os.getppid() != parent:
-        os._exit(0)
+    seal.die_with(os.getppid())
     try:
         Child().run()
     except BaseException:  # the child's own failure: say it on stderr, then go

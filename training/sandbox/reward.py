@@ -17,7 +17,6 @@ waypoints only when they change: ``{"op": "waypoints", "waypoints"}`` first) and
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import importlib
 import io
 import linecache
@@ -43,7 +42,6 @@ MAX_LOG = 200  # characters per printed line kept, and lines kept between two me
 KILL_GRACE = 0.5  # [s] past a call's time limit (which the process enforces on itself, to name
 # the line) before the child kills it from outside
 MAX_REPLY = 1024 * 1024  # [bytes] the largest reply frame: a reward and 200 printed lines
-PR_SET_PDEATHSIG = 1
 KINDS = {"syntax", "import", "exception", "definition", "value", "timeout", "memory"}
 
 
@@ -139,7 +137,7 @@ class RewardProcess:
             return
         with contextlib.suppress(OSError):
             os.kill(self.pid, signal.SIGKILL)
-        self._reap(block=True)
+        self._reap()
 
     def _ask(self, request: dict, expected: str, limit: float) -> dict:
         """Send ``request`` and take its answer, all within ``limit`` seconds from now."""
@@ -178,7 +176,7 @@ class RewardProcess:
         raise RewardFailure("protocol", f"The reward function's process answered {kind!r}.")
 
     def _ended(self) -> str:
-        status = self._reap(block=True)
+        status = self._reap()
         if status is not None and os.WIFSIGNALED(status):
             name = signal.Signals(os.WTERMSIG(status)).name
             reason = f"it was killed by {name}"
@@ -189,12 +187,12 @@ class RewardProcess:
             reason = f"it exited with status {code}; a reward function must return, not exit"
         return f"The reward function's process stopped: {reason}."
 
-    def _reap(self, *, block: bool) -> int | None:
+    def _reap(self) -> int | None:
         pid, self.pid = self.pid, None
         if pid is None:
             return None
         try:
-            return os.waitpid(pid, 0 if block else os.WNOHANG)[1]
+            return os.waitpid(pid, 0)[1]
         except ChildProcessError:
             return None
 
@@ -206,10 +204,7 @@ def _serve(
     parent: int, requests: int, replies: int, call_timeout: float, memory_allowance: int
 ) -> None:
     """Seal this process and answer the child's requests until it goes."""
-    libc = ctypes.CDLL(None, use_errno=True)
-    libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
-    if os.getppid() != parent:  # the child died before the line above
-        os._exit(0)
+    seal.die_with(parent)
     for fd in (0, 1):  # the worker's pipes are the child's alone
         os.close(fd)
     os.set_blocking(requests, True)
@@ -292,8 +287,7 @@ class _Host:
 
     def op_probe(self, request: dict) -> None:
         """Try what sealed code must not be able to do; report what got through."""
-        escaped = []
-        attempts = {
+        escaped = seal.escapes({
             "read a file": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
             "connect to the network": lambda: (
                 __import__("socket").socket().connect(("127.0.0.1", int(request["port"])))
@@ -302,13 +296,7 @@ class _Host:
             "run a program": lambda: os.execv("/bin/true", ["true"]),  # noqa: S606
             "write a file": lambda: open("/tmp/pitlane-sandbox-probe", "w").write("x"),  # noqa: S108, SIM115
             "write to the worker": lambda: os.write(1, b"\0\0\0\1\x80"),
-        }
-        for name, attempt in attempts.items():
-            try:
-                attempt()
-            except OSError:
-                continue
-            escaped.append(name)
+        })  # fmt: skip
         self.send({"type": "probe", "escaped": escaped})
 
     def _limited(self, function, *args):

@@ -17,9 +17,12 @@ import ctypes
 import errno
 import os
 import resource
+import signal
+from collections.abc import Callable
 
 CLONE_NEWUSER = 0x10000000
 CLONE_NEWNET = 0x40000000
+PR_SET_PDEATHSIG = 1
 
 # What a sealed process may do. Memory, time, signals for itself, and reading and writing its
 # pipes (checked by file descriptor in install_seccomp); nothing that reaches a file, another
@@ -35,6 +38,27 @@ ALWAYS_ALLOWED = (
     "exit", "exit_group", "restart_syscall", "getrusage", "sysinfo", "uname",
     "set_robust_list", "rseq",
 )  # fmt: skip
+
+
+def die_with(parent: int) -> None:
+    """Be killed when ``parent`` goes (the kernel sends SIGKILL); exit now if it has already
+    gone, before the request took effect."""
+    ctypes.CDLL(None).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    if os.getppid() != parent:
+        os._exit(0)
+
+
+def escapes(attempts: dict[str, Callable[[], object]]) -> list[str]:
+    """The names of ``attempts`` (each something a sealed process must not manage) that did not
+    fail with OSError: what got through the seals."""
+    escaped = []
+    for name, attempt in attempts.items():
+        try:
+            attempt()
+        except OSError:
+            continue
+        escaped.append(name)
+    return escaped
 
 
 def enter_namespaces() -> bool:
