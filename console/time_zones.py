@@ -13,6 +13,7 @@ import zoneinfo
 from collections.abc import Callable
 from datetime import datetime
 
+from asgiref.sync import iscoroutinefunction, markcoroutinefunction
 from django.http import HttpRequest, HttpResponse
 from django.utils import dateformat, timezone
 
@@ -34,16 +35,33 @@ def zone_named(name: str | None) -> zoneinfo.ZoneInfo | None:
 
 
 class TimeZoneMiddleware:
+    """Activates the request's zone; sync and async, so that an async view (``training.checks``)
+    is awaited on the server's event loop rather than run in one of its threads."""
+
+    sync_capable = async_capable = True
+
     def __init__(self, get_response: Callable[[HttpRequest], HttpResponse]) -> None:
         self.get_response = get_response
+        if iscoroutinefunction(get_response):
+            markcoroutinefunction(self)
 
-    def __call__(self, request: HttpRequest) -> HttpResponse:
-        zone = zone_named(request.COOKIES.get(COOKIE))
-        if zone is None:
-            timezone.deactivate()
-        else:
-            timezone.activate(zone)
+    def __call__(self, request: HttpRequest):
+        if iscoroutinefunction(self):
+            return self._acall(request)
+        _activate(request)
         return self.get_response(request)
+
+    async def _acall(self, request: HttpRequest) -> HttpResponse:
+        _activate(request)
+        return await self.get_response(request)
+
+
+def _activate(request: HttpRequest) -> None:
+    zone = zone_named(request.COOKIES.get(COOKIE))
+    if zone is None:
+        timezone.deactivate()
+    else:
+        timezone.activate(zone)
 
 
 def local_text(moment: datetime, style: str = "datetime") -> str:

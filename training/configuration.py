@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from simulator import config as sim
 from training import hyperparameters as hp
 from training.models import Algorithm, Network, RLModel, ShellColour, Track, Vehicle
-from training.rewards import reward_validate
+from training.rewards import Validation, reward_validate
 
 NAME = re.compile(r"^[A-Za-z0-9-]{1,64}$")
 MINUTES = (10, 1440)
@@ -41,11 +41,18 @@ def name_problem(name: str, *, owner) -> str | None:
 
 
 def check(
-    settings: dict, *, owner, validate_reward: bool = True, reward_required: bool = True
+    settings: dict,
+    *,
+    owner,
+    validate_reward: bool = True,
+    reward_required: bool = True,
+    validation: Validation | None = None,
 ) -> dict:
     """The settings, complete and typed, ready for ``RLModel(**...)``; ``Invalid`` otherwise.
     Only a model imported without a reward function (to evaluate and race, not to train) is
-    checked without ``reward_required``."""
+    checked without ``reward_required``. The reward function is validated here unless
+    ``validation`` is given: its result, found by a checker (``training.checks``) on
+    ``reward_sample_track(settings)``, for the same code."""
     errors: dict[str, str] = {}
     clean: dict = {}
 
@@ -98,7 +105,12 @@ def check(
         if reward_required:
             errors["reward_function"] = "Write a reward function (or start from an example)."
     elif validate_reward and track is not None and "direction" not in errors:
-        result = reward_validate(source=source, track=track.name, direction=direction)
+        if validation is None:
+            result = reward_validate(source=source, track=track.name, direction=direction)
+        elif validation.source != source:
+            raise ValueError("The validation given is of other code than the settings'.")
+        else:
+            result = validation
         if not result.valid:
             first = result.errors[0]
             line = f" (line {first.line})" if first.line else ""
@@ -182,6 +194,17 @@ def check_race(settings: dict) -> dict:
     if errors:
         raise Invalid(errors)
     return clean
+
+
+def reward_sample_track(settings: dict) -> tuple[str, str] | None:
+    """(track, direction): where ``check`` validates the reward function of ``settings``; None
+    when it will not, for the settings name no track (or a direction it is not driven in)."""
+    clean: dict = {}
+    errors: dict = {}
+    track = _check_track(settings, clean, errors)
+    if track is None or errors:
+        return None
+    return track.name, clean["direction"]
 
 
 def _check_track(settings: dict, clean: dict, errors: dict) -> Track | None:

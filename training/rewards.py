@@ -11,8 +11,10 @@ from __future__ import annotations
 import ast
 import difflib
 import re
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 from simulator.samples import situations
 from training.sandbox import Sandbox, SandboxFailure, verified
@@ -151,6 +153,7 @@ class Sample:
 
 @dataclass
 class Validation:
+    source: str = ""  # the code validated
     errors: list[Problem] = field(default_factory=list)
     warnings: list[Problem] = field(default_factory=list)
     samples: list[Sample] = field(default_factory=list)
@@ -170,9 +173,12 @@ class Validation:
         }
 
 
-def reward_validate(*, source: str, track: str, direction: str = "counterclockwise") -> Validation:
-    """Check ``source`` statically, then run it in the sandbox on sample situations of ``track``."""
-    result = Validation()
+def reward_validate(
+    *, source: str, track: str | Mapping[str, Any], direction: str = "counterclockwise"
+) -> Validation:
+    """Check ``source`` statically, then run it in the sandbox on sample situations of ``track``
+    (a name, or its inline form, ``simulator.tracks.inline``, which needs no database)."""
+    result = Validation(source)
     result.errors, result.warnings = static_problems(source)
     if result.errors:
         return result

@@ -221,13 +221,20 @@ def check_quota(*, owner: AbstractBaseUser, minutes: int) -> None:
 
 @transaction.atomic
 def model_create(
-    *, owner: AbstractBaseUser, settings: dict, validate_reward: bool = True
+    *,
+    owner: AbstractBaseUser,
+    settings: dict,
+    validate_reward: bool = True,
+    validation: rewards.Validation | None = None,
 ) -> RLModel:
     """Check every setting (``configuration.Invalid`` lists the problems), then save the model and
     its training job, QUEUED; the trainer task is enqueued once both are committed. A clone
     (``cloned_from``: the racer's own READY model) gets a copy of its source's best weights, which
-    its training starts from."""
-    clean = configuration.check(settings, owner=owner, validate_reward=validate_reward)
+    its training starts from. ``validation``: the reward function's, already found by a checker
+    (see ``configuration.check``)."""
+    clean = configuration.check(
+        settings, owner=owner, validate_reward=validate_reward, validation=validation
+    )
     check_quota(owner=owner, minutes=clean["max_minutes"])
     source = clean.get("cloned_from")
     if source is not None and source.owner_id != owner.pk:
@@ -359,14 +366,16 @@ def reward_function_save(
     source: str,
     track: str,
     reward_function: RewardFunction | None = None,
+    validation: rewards.Validation | None = None,
 ) -> RewardFunction:
     """Save the racer's code under ``name`` in their library: a new function, or their
     ``reward_function`` changed (renamed too). The code is validated first, on ``track``'s
-    samples; names are unique per racer, whatever their case (``RewardFunctionInvalid``)."""
+    samples, unless ``validation`` is that of a checker (``training.checks``) for the same code;
+    names are unique per racer, whatever their case (``RewardFunctionInvalid``)."""
     if reward_function is not None and reward_function.owner_id != owner.pk:
         raise RewardFunctionInvalid({"name": "You can change only your own reward functions."})
     name = " ".join(name.split())
-    source = source.replace("\r\n", "\n")  # a form's textarea sends CRLF; the editor has LF
+    source = reward_source(source)
     errors = {}
     max_length = RewardFunction._meta.get_field("name").max_length
     if not name:
@@ -378,11 +387,14 @@ def reward_function_save(
             f"You already have a reward function named “{name}”; choose another name, "
             "or open that one from your list to change it."
         )
-    validation = None
     if not source.strip():
+        validation = None
         errors["source"] = "Write a reward function first."
     else:
-        validation = rewards.reward_validate(source=source, track=track)
+        if validation is None:
+            validation = rewards.reward_validate(source=source, track=track)
+        elif validation.source != source:
+            raise ValueError("The validation given is of other code than the one to save.")
         if not validation.valid:
             count = len(validation.errors)
             errors["source"] = (
@@ -400,6 +412,11 @@ def reward_function_save(
             {"name": f"You already have a reward function named “{name}”; choose another name."}
         ) from None
     return function
+
+
+def reward_source(source: str) -> str:
+    """The code as it is saved: a form's textarea sends CRLF; the editor has LF."""
+    return source.replace("\r\n", "\n")
 
 
 def _reward_function_named(

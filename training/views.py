@@ -2,7 +2,9 @@ import json
 import tempfile
 from contextlib import nullcontext
 from copy import copy
+from functools import partial
 
+from asgiref.sync import sync_to_async
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.core.files.storage import default_storage
@@ -24,6 +26,7 @@ from simulator import config as sim_config
 from simulator import tracks as simulator_tracks
 from training import (
     artifacts,
+    checks,
     configuration,
     exports,
     imports,
@@ -138,16 +141,40 @@ def _get_reward_function_for_user(request: HttpRequest, pk: int) -> RewardFuncti
 
 
 @login_required
-def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResponse:
+async def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResponse:
     """Write, validate and save a reward function in the racer's library (``pk``: open a saved
-    one to change it); "Save and create a model" goes on to the create form with it."""
+    one to change it); "Save and create a model" goes on to the create form with it. The code is
+    validated by a checker (``training.checks``) before the page saves it."""
+    function, form = await sync_to_async(_reward_editor_form)(request, pk)
+    checked = None
+    if request.method == "POST" and await sync_to_async(form.is_valid)():
+        source = services.reward_source(form.cleaned_data["source"])
+        if source.strip():  # else the service says what is missing
+            checked = await _checked_reward(source, form.cleaned_data["track"].name)
+    return await sync_to_async(_reward_editor_page)(request, function, form, checked)
+
+
+def _reward_editor_form(
+    request: HttpRequest, pk: int | None
+) -> tuple[RewardFunction | None, RewardFunctionForm]:
     function = _get_reward_function_for_user(request, pk) if pk is not None else None
     form = RewardFunctionForm(
         request.POST or None,
         initial={"name": function.name if function else "", "track": "rookie-loop"},
     )
+    return function, form
+
+
+def _reward_editor_page(
+    request: HttpRequest,
+    function: RewardFunction | None,
+    form: RewardFunctionForm,
+    checked: rewards.Validation | Exception | None,
+) -> HttpResponse:
     validation = None
-    if request.method == "POST" and form.is_valid():
+    if isinstance(checked, Exception):
+        form.add_error("source", _check_failed(checked))
+    elif request.method == "POST" and form.is_valid():
         try:
             saved = services.reward_function_save(
                 owner=request.user,
@@ -155,13 +182,12 @@ def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResponse:
                 name=form.cleaned_data["name"],
                 source=form.cleaned_data["source"],
                 track=form.cleaned_data["track"].name,
+                validation=checked,
             )
         except services.RewardFunctionInvalid as invalid:
             for field, message in invalid.errors.items():
                 form.add_error(field, message)
             validation = invalid.validation
-        except (SandboxUnavailable, SandboxFailure) as error:
-            form.add_error("source", f"The reward function could not be checked: {error}")
         else:
             messages.success(request, f"Saved “{saved.name}”.")
             if request.POST.get("then") == "create":
@@ -172,7 +198,7 @@ def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResponse:
     else:
         source = function.source if function else rewards.EXAMPLES[0].source
     library = selectors.reward_functions_for_racer(racer=request.user)
-    return render(
+    response = render(
         request,
         "training/reward_editor.html",
         {
@@ -191,6 +217,40 @@ def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResponse:
         },
         status=400 if form.errors else 200,
     )
+    return _check_refused(response, checked) if isinstance(checked, Exception) else response
+
+
+async def _checked_reward(
+    source: str, track: str, direction: str = "counterclockwise"
+) -> rewards.Validation | Exception:
+    """``source`` validated on ``track`` by a checker; or why it could not be: ``checks.Busy``,
+    ``SandboxUnavailable`` or ``SandboxFailure``, for the page to show."""
+    where = await sync_to_async(simulator_tracks.inline)(track)  # an added track: its route
+    try:
+        return await checks.run(
+            partial(rewards.reward_validate, source=source, track=where, direction=direction)
+        )
+    except CHECK_FAILURES as error:
+        return error
+
+
+CHECK_FAILURES = (checks.Busy, SandboxUnavailable, SandboxFailure)
+
+
+def _check_failed(error: Exception) -> str:
+    """What a racer reads when a check could not run (one of ``CHECK_FAILURES``)."""
+    if isinstance(error, checks.Busy):
+        return str(error)
+    return f"The reward function could not be checked: {error}"
+
+
+def _check_refused(response: HttpResponse, error: Exception) -> HttpResponse:
+    """``response`` for a check that could not run: 503, for the racer's input is not at fault,
+    and when every checker was busy, when to try again."""
+    response.status_code = 503
+    if isinstance(error, checks.Busy):
+        response["Retry-After"] = str(checks.RETRY_AFTER)
+    return response
 
 
 @login_required
@@ -206,22 +266,22 @@ def reward_function_delete(request: HttpRequest, pk: int) -> HttpResponse:
 
 @login_required
 @require_POST
-def reward_validation(request: HttpRequest) -> JsonResponse:
-    """Validate the posted reward function against the chosen track; JSON for the editor."""
-    if limited := ratelimits.over(request, "validate"):
+async def reward_validation(request: HttpRequest) -> JsonResponse:
+    """Validate the posted reward function against the chosen track, in a checker; JSON for the
+    editor."""
+    if limited := await sync_to_async(ratelimits.over)(request, "validate"):
         return JsonResponse({"message": str(limited)}, status=429)
     form = RewardValidationForm(request.POST)
-    if not form.is_valid():
+    if not await sync_to_async(form.is_valid)():
         return JsonResponse({"message": form.first_error()}, status=400)
-    try:
-        result = rewards.reward_validate(
-            source=form.cleaned_data["source"], track=form.cleaned_data["track"].name
-        )
-    except SandboxUnavailable as error:
-        return JsonResponse({"message": str(error)}, status=503)
-    except SandboxFailure as error:
-        return JsonResponse({"message": f"Validation could not run: {error}"}, status=503)
-    return JsonResponse(result.as_dict())
+    checked = await _checked_reward(form.cleaned_data["source"], form.cleaned_data["track"].name)
+    if isinstance(checked, SandboxFailure):
+        message = f"Validation could not run: {checked}"
+    elif isinstance(checked, Exception):
+        message = str(checked)
+    else:
+        return JsonResponse(checked.as_dict())
+    return _check_refused(JsonResponse({"message": message}), checked)
 
 
 def _number(text: str) -> int:
@@ -236,71 +296,111 @@ def _get_model_for_user(request: HttpRequest, pk: int) -> RLModel:
 
 
 @login_required
-def model_create(request: HttpRequest) -> HttpResponse:
+async def model_create(request: HttpRequest) -> HttpResponse:
     """The create-model wizard; with ``?clone=<id>``, filled in from that model of the racer's,
-    whose best weights the new model starts from."""
-    source = None
-    if "clone" in request.GET:
-        source = _get_model_for_user(request, _number(request.GET["clone"]))
-        if not source.trainable:
-            messages.error(
-                request,
-                f"{source.name} cannot be cloned: it came from a car archive, "
-                "with its policy alone (no reward function, no critics) to train on.",
-            )
-            return redirect("training:model-detail", pk=source.pk)
-        initial = ModelCreateForm.initial_from(source)
-    else:
-        initial = {
-            "reward_function": rewards.EXAMPLES[0].source,
-            "actions": json.dumps(sim_config.DiscreteActions(
-                tuple((a["steering_angle"], a["speed"]) for a in sim_config.DEFAULT_ACTION_SPACE)
-            ).metadata()),
-            "track": "rookie-loop",
-        }  # fmt: skip
-    chosen_reward = None
-    if "reward" in request.GET:  # "Create a model" with a function of the racer's library
-        chosen_reward = _get_reward_function_for_user(request, _number(request.GET["reward"]))
-        initial["reward_function"] = chosen_reward.source
-    reward_library = selectors.reward_functions_for_racer(racer=request.user)
-    form = ModelCreateForm(request.POST or None, owner=request.user, initial=initial, source=source)
-    if limited := ratelimits.over(request, "create"):
-        ratelimits.refuse(form, limited)
-    elif request.method == "POST" and form.is_valid():
-        try:
-            inherited = (
-                {"cloned_from": source, "shell_colour": source.shell_colour} if source else {}
-            )
-            model = services.model_create(
-                owner=request.user, settings={**inherited, **form.settings()}
-            )
-        except configuration.Invalid as invalid:
-            form.add_setting_errors(invalid.errors)
-        except (SandboxUnavailable, SandboxFailure) as error:
-            form.add_error("reward_function", f"The reward function could not be checked: {error}")
+    whose best weights the new model starts from. The reward function is validated by a checker
+    (``training.checks``), then the model is saved."""
+    page = await sync_to_async(_ModelCreatePage)(request)
+    if page.reward_where is not None:
+        page.checked = await _checked_reward(page.settings["reward_function"], *page.reward_where)
+    return await sync_to_async(page.respond)()
+
+
+class _ModelCreatePage:
+    """The create-model page's work before its reward function is checked (the form, the
+    racer's limit) and after (saving the model, or the page again with what to correct)."""
+
+    def __init__(self, request: HttpRequest) -> None:
+        self.request = request
+        self.response: HttpResponse | None = None
+        self.settings: dict | None = None
+        self.reward_where: tuple[str, str] | None = None
+        self.checked: rewards.Validation | Exception | None = None
+        self.source = None
+        if "clone" in request.GET:
+            self.source = _get_model_for_user(request, _number(request.GET["clone"]))
+            if not self.source.trainable:
+                messages.error(
+                    request,
+                    f"{self.source.name} cannot be cloned: it came from a car archive, "
+                    "with its policy alone (no reward function, no critics) to train on.",
+                )
+                self.response = redirect("training:model-detail", pk=self.source.pk)
+                return
+            initial = ModelCreateForm.initial_from(self.source)
         else:
-            created = "cloned from " + source.name if source else "created"
-            messages.success(request, f"{model.name} is {created}; its training is queued.")
-            return redirect("training:model-detail", pk=model.pk)
-    return render(
-        request,
-        "training/model_create.html",
-        {
-            "form": form,
-            "source": source,
-            "allowance": selectors.allowance_for(racer=request.user),
-            "ppo_fields": form.hyperparameter_fields("clipped_ppo"),
-            "sac_fields": form.hyperparameter_fields("sac"),
-            "tracks": selectors.tracks_available(),
-            "examples": rewards.EXAMPLES,
-            "example_sources": {example.slug: example.source for example in rewards.EXAMPLES},
-            "params": rewards.PARAMS,
-            "reward_library": reward_library,
-            "reward_library_sources": {f.pk: f.source for f in reward_library},
-            "chosen_reward": chosen_reward,
-        },
-        status=429 if limited else 400 if form.errors else 200,
-    )
+            initial = {
+                "reward_function": rewards.EXAMPLES[0].source,
+                "actions": json.dumps(sim_config.DiscreteActions(
+                    tuple((a["steering_angle"], a["speed"])
+                          for a in sim_config.DEFAULT_ACTION_SPACE)
+                ).metadata()),
+                "track": "rookie-loop",
+            }  # fmt: skip
+        self.chosen_reward = None
+        if "reward" in request.GET:  # "Create a model" with a function of the racer's library
+            self.chosen_reward = _get_reward_function_for_user(
+                request, _number(request.GET["reward"])
+            )
+            initial["reward_function"] = self.chosen_reward.source
+        self.form = ModelCreateForm(
+            request.POST or None, owner=request.user, initial=initial, source=self.source
+        )
+        self.limited = ratelimits.over(request, "create")
+        if self.limited:
+            ratelimits.refuse(self.form, self.limited)
+        elif request.method == "POST" and self.form.is_valid():
+            inherited = (
+                {"cloned_from": self.source, "shell_colour": self.source.shell_colour}
+                if self.source
+                else {}
+            )
+            self.settings = {**inherited, **self.form.settings()}
+            if (self.settings.get("reward_function") or "").strip():
+                self.reward_where = configuration.reward_sample_track(self.settings)
+
+    def respond(self) -> HttpResponse:
+        if self.response is not None:
+            return self.response
+        form, source = self.form, self.source
+        if isinstance(self.checked, Exception):
+            form.add_error("reward_function", _check_failed(self.checked))
+        elif self.settings is not None:
+            try:
+                model = services.model_create(
+                    owner=self.request.user, settings=self.settings, validation=self.checked
+                )
+            except configuration.Invalid as invalid:
+                form.add_setting_errors(invalid.errors)
+            else:
+                created = "cloned from " + source.name if source else "created"
+                messages.success(
+                    self.request, f"{model.name} is {created}; its training is queued."
+                )
+                return redirect("training:model-detail", pk=model.pk)
+        reward_library = selectors.reward_functions_for_racer(racer=self.request.user)
+        response = render(
+            self.request,
+            "training/model_create.html",
+            {
+                "form": form,
+                "source": source,
+                "allowance": selectors.allowance_for(racer=self.request.user),
+                "ppo_fields": form.hyperparameter_fields("clipped_ppo"),
+                "sac_fields": form.hyperparameter_fields("sac"),
+                "tracks": selectors.tracks_available(),
+                "examples": rewards.EXAMPLES,
+                "example_sources": {example.slug: example.source for example in rewards.EXAMPLES},
+                "params": rewards.PARAMS,
+                "reward_library": reward_library,
+                "reward_library_sources": {f.pk: f.source for f in reward_library},
+                "chosen_reward": self.chosen_reward,
+            },
+            status=429 if self.limited else 400 if form.errors else 200,
+        )
+        if isinstance(self.checked, Exception):
+            return _check_refused(response, self.checked)
+        return response
 
 
 @login_required
@@ -419,52 +519,85 @@ def model_logs(request: HttpRequest, pk: int) -> HttpResponse:
 
 
 @login_required
-def model_import(request: HttpRequest) -> HttpResponse:
-    """The import form. An attempt that has to be corrected keeps the racer's archive (unless
-    the archive itself was refused), so the next one need not choose it again."""
+async def model_import(request: HttpRequest) -> HttpResponse:
+    """The import form. The archive is read, its weights loaded and its reward function
+    validated by a checker (``training.checks``). An attempt that has to be corrected keeps the
+    racer's archive (unless the archive itself was refused), so the next one need not choose it
+    again."""
     if request.method != "POST":
-        imports.upload_discard(session=request.session)
-        form = ModelImportForm(owner=request.user)
-        return render(request, "training/model_import.html", {"form": form})
-    kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
-    form = ModelImportForm(request.POST, request.FILES, owner=request.user, kept=kept)
-    refused = False
-    if limited := ratelimits.over(request, "import"):
-        ratelimits.refuse(form, limited)
-        form.keep(kept)  # the racer tries again later with the archive they chose
-        return render(request, "training/model_import.html", {"form": form}, status=429)
-    if form.is_valid():
-        upload = form.cleaned_data["archive"]
+        return await sync_to_async(_model_import_blank)(request)
+    attempt = await sync_to_async(_ModelImportAttempt)(request)  # the upload is read to disk here
+    if attempt.work is not None:
         try:
-            with nullcontext(upload) if upload else kept.open() as archive:
-                imported = imports.import_model(
-                    owner=request.user, archive=archive, name=form.cleaned_data["name"]
-                )
-        except imports.ImportRefused as refusal:
-            form.add_error("archive", str(refusal))
-            refused = True
-        except configuration.Invalid as invalid:
-            _import_errors(form, invalid.errors)
-            refused = not set(invalid.errors) <= RACERS_TO_FIX  # else the archive is at fault
-        except (SandboxUnavailable, SandboxFailure) as error:
-            form.add_error(None, f"The reward function could not be checked: {error}")
-        else:
+            attempt.outcome = await checks.run(attempt.work)
+        except (imports.ImportRefused, configuration.Invalid, *CHECK_FAILURES) as error:
+            attempt.outcome = error
+    return await sync_to_async(attempt.respond)()
+
+
+def _model_import_blank(request: HttpRequest) -> HttpResponse:
+    imports.upload_discard(session=request.session)
+    form = ModelImportForm(owner=request.user)
+    return render(request, "training/model_import.html", {"form": form})
+
+
+class _ModelImportAttempt:
+    """A posted import: the form and the racer's limit (``work``: the import, for a checker,
+    when both allow it), then the page its outcome makes."""
+
+    def __init__(self, request: HttpRequest) -> None:
+        self.request = request
+        self.work = None
+        self.outcome: imports.Imported | Exception | None = None
+        self.kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
+        self.form = ModelImportForm(request.POST, request.FILES, owner=request.user, kept=self.kept)
+        self.limited = ratelimits.over(request, "import")
+        if self.limited:
+            ratelimits.refuse(self.form, self.limited)
+        elif self.form.is_valid():
+            upload, kept = self.form.cleaned_data["archive"], self.kept
+            owner, name = request.user, self.form.cleaned_data["name"]
+
+            def work() -> imports.Imported:
+                with nullcontext(upload) if upload else kept.open() as archive:
+                    return imports.import_model(owner=owner, archive=archive, name=name)
+
+            self.work = work
+
+    def respond(self) -> HttpResponse:
+        request, form, outcome = self.request, self.form, self.outcome
+        if self.limited:
+            form.keep(self.kept)  # the racer tries again later with the archive they chose
+            return render(request, "training/model_import.html", {"form": form}, status=429)
+        refused = False
+        if isinstance(outcome, imports.Imported):
             imports.upload_discard(session=request.session)
-            model = imported.model
+            model = outcome.model
             ready = model.status == RLModel.Status.READY
             messages.success(request, f"Imported {model.name}" + (
                 ": it is ready to evaluate, clone or download." if ready
                 else "; its training is queued."))  # fmt: skip
-            for note in imported.notes:
+            for note in outcome.notes:
                 messages.warning(request, note)
             return redirect("training:model-detail", pk=model.pk)
-    upload = request.FILES.get("archive")
-    if refused or ("archive" in form.errors and upload is not None):
-        imports.upload_discard(session=request.session)  # the racer must choose another
-        form.keep(None)
-    elif upload is not None:
-        form.keep(imports.upload_keep(session=request.session, upload=upload))
-    return render(request, "training/model_import.html", {"form": form}, status=400)
+        if isinstance(outcome, imports.ImportRefused):
+            form.add_error("archive", str(outcome))
+            refused = True
+        elif isinstance(outcome, configuration.Invalid):
+            _import_errors(form, outcome.errors)
+            refused = not set(outcome.errors) <= RACERS_TO_FIX  # else the archive is at fault
+        elif isinstance(outcome, Exception):
+            form.add_error(None, _check_failed(outcome))
+        upload = request.FILES.get("archive")
+        if refused or ("archive" in form.errors and upload is not None):
+            imports.upload_discard(session=request.session)  # the racer must choose another
+            form.keep(None)
+        elif upload is not None:
+            form.keep(imports.upload_keep(session=request.session, upload=upload))
+        response = render(request, "training/model_import.html", {"form": form}, status=400)
+        if isinstance(outcome, CHECK_FAILURES):
+            return _check_refused(response, outcome)
+        return response
 
 
 RACERS_TO_FIX = {"name", "quota", "max_minutes"}  # an import's problems the racer can fix

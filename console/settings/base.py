@@ -45,7 +45,7 @@ INSTALLED_APPS = [
 
 MIDDLEWARE = [
     "django.middleware.security.SecurityMiddleware",
-    "whitenoise.middleware.WhiteNoiseMiddleware",
+    "console.staticfiles.StaticFilesMiddleware",  # WhiteNoise, async-capable
     "django.contrib.sessions.middleware.SessionMiddleware",
     "django.middleware.common.CommonMiddleware",
     "django.middleware.csrf.CsrfViewMiddleware",
@@ -174,6 +174,10 @@ RATELIMIT_USE_CACHE = "default"
 RATELIMIT_FAIL_OPEN = True  # a cache that cannot count lets attempts through (and logs it)
 # Evaluations and race entries a racer may have waiting or driving at once.
 PITLANE_MAX_QUEUED_EVALUATIONS = env.int("PITLANE_MAX_QUEUED_EVALUATIONS", 3, minimum=1)
+# Reward validations and imports run in each web process's pool of checkers (training.checks):
+# this many at once, and at most this many more waiting; past that a racer is asked to retry.
+PITLANE_CHECKERS = env.int("PITLANE_CHECKERS", 2, minimum=1)
+PITLANE_CHECKS_WAITING = env.int("PITLANE_CHECKS_WAITING", 8, minimum=0)
 # The largest request body (console.bodylimit): any page, and the model import's archive upload
 # (training.imports.MAX_ARCHIVE, 256 MiB, with room for the form around it).
 PITLANE_MAX_BODY = env.int("PITLANE_MAX_BODY", 10 * 2**20, minimum=2**20)  # [bytes]

@@ -41,11 +41,17 @@ input.addEventListener("input", () => {
   timer = setTimeout(check, 300);
 });
 input.addEventListener("blur", check);
+let checked = false; // the name was just checked: this submit goes through
 form.addEventListener("submit", async (event) => {
-  if (input.value.trim() !== asked) {
+  if (checked) {
+    checked = false;
+  } else if (input.value.trim() !== asked) {
     event.preventDefault();
     await check();
-    if (!problem) form.submit();
+    if (!problem) {
+      checked = true;
+      form.requestSubmit(); // a submit event again, for console/busy.js to hear
+    }
   } else if (problem) {
     event.preventDefault();
   }

@@ -52,7 +52,21 @@ def test_a_racer_saves_a_reward_function_and_creates_a_model_with_it(page: Page,
     assert editor.evaluate(GET_CODE) == TYPO
 
     editor.evaluate(SET_CODE, MINE)
-    page.get_by_role("button", name="Save", exact=True).click()
+    # While a checker runs the code, the page says so, and a second click sends nothing. (The
+    # test keeps the first submit on the page, the way a slow answer would.)
+    posts = []
+    page.on("request", lambda request: request.method == "POST" and posts.append(request.url))
+    page.evaluate("window.addEventListener('submit', (e) => e.preventDefault(), {once: true})")
+    save = page.get_by_role("button", name="Save", exact=True)
+    save.click()
+    waiting = page.get_by_role("status").filter(has_text="Checking the code in the sandbox")
+    expect(waiting).to_be_visible()
+    expect(save).to_have_attribute("aria-disabled", "true")
+    page.evaluate("document.querySelector('form[data-busy]').requestSubmit()")
+    assert posts == []
+    page.evaluate("window.dispatchEvent(new Event('pageshow'))")  # as when the racer comes back
+    expect(waiting).to_have_count(0)
+    save.click()
     expect(page.get_by_text("Saved “Speed on track”.")).to_be_visible(**SAVED)
     expect(page.get_by_role("heading", name="Reward function: Speed on track")).to_be_visible()
     assert editor.evaluate(GET_CODE) == MINE

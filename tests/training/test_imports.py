@@ -47,6 +47,10 @@ DEEPRACER_PARAMS = {
     "CAR_NAME": "my-deepracer-car",
 }  # fmt: skip
 
+# The import page hands the archive to a checker thread (training.checks), which writes with a
+# database connection of its own: what the test made must be committed for it to see.
+CHECKED_IMPORT = pytest.mark.django_db(transaction=True)
+
 
 def tar_gz(members: dict[str, bytes], tweak=None) -> bytes:
     """A .tar.gz of ``members``; ``tweak(tar)`` may add hostile entries."""
@@ -117,6 +121,7 @@ def test_a_virtual_model_imports_ready_with_the_same_weights(alice, bob, tracks,
     assert out.getvalue().count("lap_complete") == 3
 
 
+@CHECKED_IMPORT
 def test_the_import_page_takes_an_archive_and_a_new_name(alice, tracks, client):
     original = ready_model(alice)
     client.force_login(alice)
@@ -237,6 +242,7 @@ HOSTILE = {
 
 
 @pytest.mark.parametrize("case", HOSTILE)
+@CHECKED_IMPORT
 def test_a_bad_archive_is_refused_with_its_reason_and_leaves_nothing(case, alice, tracks, client):
     data, reason = HOSTILE[case]
     before = stored_objects()
@@ -306,6 +312,7 @@ def trained_with_history(owner) -> RLModel:
     return model
 
 
+@CHECKED_IMPORT
 def test_an_imported_virtual_model_keeps_its_training_history(alice, bob, tracks, client):
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(trained_with_history(alice)))
     client.force_login(bob)
@@ -399,6 +406,7 @@ def test_a_file_that_is_not_an_archive_is_refused_in_a_racers_words(alice, clien
     assert "you uploaded" not in response.text  # a refused file is not kept
 
 
+@CHECKED_IMPORT
 def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
     alice, tracks, client
 ):
@@ -447,6 +455,7 @@ def test_a_kept_archive_is_another_racers_to_use_never(alice, bob, tracks, clien
     assert response.status_code == 400 and not RLModel.objects.filter(owner=bob).exists()
 
 
+@CHECKED_IMPORT
 def test_an_archive_at_fault_is_not_kept_for_the_next_attempt(alice, tracks, client):
     client.force_login(alice)
     bad_reward = deepracer_export(**{"reward_function.py": b"def reward_function(params:\n"})
@@ -541,6 +550,7 @@ def test_world_name_finds_the_loaded_track_and_its_direction(params, expected, n
         assert notes == []
 
 
+@CHECKED_IMPORT
 def test_every_setting_that_is_not_carried_over_is_listed_on_the_result_page(alice, tracks, client):
     metadata = {**DEEPRACER_METADATA, "sensor": ["FRONT_FACING_CAMERA", "DISCRETIZED_SECTOR_LIDAR"],
                 "neural_network": "DEEP_CONVOLUTIONAL_NETWORK_DEEP",
