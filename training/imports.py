@@ -46,6 +46,7 @@ from training import (
     hyperparameters,
     jobs,
     networks,
+    rewards,
     services,
     tfcheckpoint,
     tfgraph,
@@ -158,8 +159,14 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
             "The archive has no reward_function.py, and its weights are for a car this console "
             "does not have (see model_metadata.json): there is nothing to train or to drive."
         )
-    else:
-        return Imported(services.model_create(owner=owner, settings=settings), notes)
+    else:  # the reward function is validated first, outside the transaction that saves
+        validation = None
+        if where := configuration.reward_sample_track(settings):
+            validation = rewards.reward_validate(
+                source=settings["reward_function"], track=where[0], direction=where[1]
+            )
+        model = services.model_create(owner=owner, settings=settings, validation=validation)
+        return Imported(model, notes)
     imported.notes = notes + imported.notes
     if not reward.strip():
         imported.notes.append(
