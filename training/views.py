@@ -145,9 +145,11 @@ async def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResp
     """Write, validate and save a reward function in the racer's library (``pk``: open a saved
     one to change it); "Save and create a model" goes on to the create form with it. The code is
     validated by a checker (``training.checks``) before the page saves it."""
-    function, form = await sync_to_async(_reward_editor_form)(request, pk)
+    function, form, limited = await sync_to_async(_reward_editor_form)(request, pk)
     checked = None
-    if request.method == "POST" and await sync_to_async(form.is_valid)():
+    if limited:
+        checked = limited
+    elif request.method == "POST" and await sync_to_async(form.is_valid)():
         source = services.reward_source(form.cleaned_data["source"])
         if source.strip():  # else the service says what is missing
             checked = await _checked_reward(source, form.cleaned_data["track"].name)
@@ -156,23 +158,27 @@ async def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResp
 
 def _reward_editor_form(
     request: HttpRequest, pk: int | None
-) -> tuple[RewardFunction | None, RewardFunctionForm]:
+) -> tuple[RewardFunction | None, RewardFunctionForm, ratelimits.Limited | None]:
+    """The racer's function (or None), the form, and whether a save is over the racer's rate of
+    checks (saving runs the same check as Validate, and counts with it)."""
     function = _get_reward_function_for_user(request, pk) if pk is not None else None
     form = RewardFunctionForm(
         request.POST or None,
         initial={"name": function.name if function else "", "track": "rookie-loop"},
     )
-    return function, form
+    return function, form, ratelimits.over(request, "validate")
 
 
 def _reward_editor_page(
     request: HttpRequest,
     function: RewardFunction | None,
     form: RewardFunctionForm,
-    checked: rewards.Validation | Exception | None,
+    checked: rewards.Validation | ratelimits.Limited | Exception | None,
 ) -> HttpResponse:
     validation = None
-    if isinstance(checked, Exception):
+    if isinstance(checked, ratelimits.Limited):
+        ratelimits.refuse(form, checked)
+    elif isinstance(checked, Exception):
         form.add_error("source", _check_failed(checked))
     elif request.method == "POST" and form.is_valid():
         try:
@@ -215,9 +221,11 @@ def _reward_editor_page(
             "source": source,
             "allowed_imports": rewards.ALLOWED_IMPORTS,
         },
-        status=400 if form.errors else 200,
+        status=429 if isinstance(checked, ratelimits.Limited) else 400 if form.errors else 200,
     )
-    return _check_refused(response, checked) if isinstance(checked, Exception) else response
+    if isinstance(checked, CHECK_FAILURES):
+        return _check_refused(response, checked)
+    return response
 
 
 async def _checked_reward(

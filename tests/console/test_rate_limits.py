@@ -8,7 +8,7 @@ from django.urls import reverse
 from tests.conftest import PASSWORD
 from tests.training.factories import trained_model
 from training import services
-from training.models import EvaluationJob, RLModel
+from training.models import EvaluationJob, RewardFunction, RLModel
 
 pytestmark = pytest.mark.django_db
 
@@ -75,6 +75,14 @@ def test_reward_checks_are_limited_per_racer(alice, bob, client, rates):
     assert response.json()["message"].startswith("Too many reward function checks for now")
     client.force_login(bob)  # each racer counts alone
     assert client.post(reverse("training:reward-validation"), {}).status_code == 400
+    # Saving runs the same check, and counts with Validate: bob has one left.
+    save = {"name": "mine", "source": "def reward_function(params):\n    return 1.0\n"}
+    assert client.post(reverse("training:reward-editor"), save).status_code == 400  # no track
+    response = client.post(reverse("training:reward-editor"), {**save, "track": "rookie-loop"})
+    assert response.status_code == 429
+    assert "Too many reward function checks for now: try again in" in response.text
+    assert "mine" in response.text  # what the racer typed stays
+    assert not RewardFunction.objects.exists()
 
 
 def test_new_models_and_imports_are_limited_per_racer(alice, client, rates):
