@@ -1,42 +1,20 @@
 """Request bodies over their limit are refused before Django reads them, in words, with 413."""
 
 import pytest
-from asgiref.testing import ApplicationCommunicator
 from django.urls import reverse
+
+from tests import asgi
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
 
-def scope(path: str, headers: dict[str, str]) -> dict:
-    return {
-        "type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": "POST",
-        "scheme": "http", "path": path, "raw_path": path.encode(), "query_string": b"",
-        "root_path": "", "headers": [(k.encode(), v.encode()) for k, v in headers.items()],
-        "client": ("127.0.0.1", 5000), "server": ("127.0.0.1", 8000),
-    }  # fmt: skip
-
-
 async def post(path: str, chunks: list[bytes], declared: int | None) -> tuple[int, bytes]:
     """(status, body) of a POST to the whole ASGI application, its body sent in ``chunks``."""
-    from console.asgi import application
-
     headers = {"host": "127.0.0.1", "content-type": "application/octet-stream"}
     if declared is not None:
         headers["content-length"] = str(declared)
-    communicator = ApplicationCommunicator(application, scope(path, headers))
-    for n, chunk in enumerate(chunks):
-        await communicator.send_input(
-            {"type": "http.request", "body": chunk, "more_body": n < len(chunks) - 1}
-        )
-    start = await communicator.receive_output(timeout=10)
-    body = b""
-    while True:
-        message = await communicator.receive_output(timeout=10)
-        body += message.get("body", b"")
-        if not message.get("more_body"):
-            break
-    await communicator.wait(timeout=10)
-    return start["status"], body
+    response = await asgi.request("POST", path, headers, chunks)
+    return response.status, response.body
 
 
 @pytest.fixture

@@ -6,10 +6,10 @@ import threading
 from urllib.parse import urlencode
 
 import pytest
-from asgiref.testing import ApplicationCommunicator
 from django.test import Client
 from django.urls import reverse
 
+from tests import asgi
 from training import checks
 
 # The ASGI application serves from its own threads, with connections of their own.
@@ -67,47 +67,27 @@ def test_every_middleware_runs_on_the_event_loop(caplog, settings):
 
 
 async def test_static_files_are_served_on_the_event_loop(browser):
-    status, response = await browser.request("GET", "/static/console/site.css")
-    assert status == 200
-    assert response["headers"]["content-type"].startswith("text/css")
+    response = await browser.request("GET", "/static/console/site.css")
+    assert response.status == 200
+    assert response.headers["content-type"].startswith("text/css")
 
 
 class Browser:
-    """Requests to the whole ASGI application, as Daphne hands them over, signed in as a racer."""
+    """A racer, signed in, sending forms to the whole ASGI application (``tests.asgi``)."""
 
     def __init__(self, user) -> None:
         client = Client()
         client.force_login(user)
         self.cookie = f"sessionid={client.cookies['sessionid'].value}; csrftoken={CSRF}"
 
-    async def request(self, method: str, path: str, form: dict | None = None) -> tuple[int, dict]:
-        from console.asgi import application
-
+    async def request(self, method: str, path: str, form: dict | None = None) -> asgi.Response:
         body = urlencode(form or {}).encode()
-        headers = [
-            (b"host", b"127.0.0.1"), (b"cookie", self.cookie.encode()),
-            (b"x-csrftoken", CSRF.encode()),
-            (b"content-type", b"application/x-www-form-urlencoded"),
-            (b"content-length", str(len(body)).encode()),
-        ]  # fmt: skip
-        scope = {
-            "type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1", "method": method,
-            "scheme": "http", "path": path, "raw_path": path.encode(), "query_string": b"",
-            "root_path": "", "headers": headers, "client": ("127.0.0.1", 5000),
-            "server": ("127.0.0.1", 8000),
+        headers = {
+            "host": "127.0.0.1", "cookie": self.cookie, "x-csrftoken": CSRF,
+            "content-type": "application/x-www-form-urlencoded",
+            "content-length": str(len(body)),
         }  # fmt: skip
-        communicator = ApplicationCommunicator(application, scope)
-        await communicator.send_input({"type": "http.request", "body": body})
-        start = await communicator.receive_output(timeout=60)
-        content = b""
-        while True:
-            message = await communicator.receive_output(timeout=60)
-            content += message.get("body", b"")
-            if not message.get("more_body"):
-                break
-        await communicator.wait(timeout=10)
-        headers = {k.decode().lower(): v.decode() for k, v in start.get("headers", [])}
-        return start["status"], {"headers": headers, "text": content.decode()}
+        return await asgi.request(method, path, headers, [body], timeout=60)
 
 
 @pytest.fixture
@@ -128,21 +108,22 @@ async def test_slow_validations_past_the_bound_are_refused_and_other_pages_still
 
     validations = [asyncio.create_task(validate(n)) for n in range(4)]
     await asyncio.sleep(0.5)  # all four are in: one checking, one waiting, two refused
-    status, page = await browser.request("GET", reverse("training:model-list"))
+    page = await browser.request("GET", reverse("training:model-list"))
     finished.append("models page")
-    assert status == 200
-    assert "Your models" in page["text"]
+    assert page.status == 200
+    assert "Your models" in page.text
     results = await asyncio.gather(*validations)
 
-    statuses = sorted(status for status, _ in results)
-    assert statuses == [200, 200, 503, 503]
-    for status, response in results:
-        if status == 503:
-            assert "Every checker is busy" in response["text"]
-            assert response["headers"]["retry-after"] == str(checks.RETRY_AFTER)
+    assert sorted(response.status for response in results) == [200, 200, 503, 503]
+    for response in results:
+        if response.status == 503:
+            assert "Every checker is busy" in response.text
+            assert response.headers["retry-after"] == str(checks.RETRY_AFTER)
         else:
-            assert '"valid": true' in response["text"]
+            assert '"valid": true' in response.text
     # The page was served while the checkers still worked on the two slow functions.
     assert finished.index("models page") < max(
-        finished.index(f"validation {n}") for n, (status, _) in enumerate(results) if status == 200
+        finished.index(f"validation {n}")
+        for n, response in enumerate(results)
+        if response.status == 200
     )
