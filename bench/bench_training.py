@@ -69,8 +69,9 @@ def bench_racer():
 
 
 def default_model(
-    owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False, steering: float = 30
-):
+    owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False,
+    steering: float = 30, algorithm: str = "clipped_ppo",
+):  # fmt: skip
     from training.rewards import EXAMPLES
     from training.services import model_create
 
@@ -84,7 +85,7 @@ def default_model(
     }
     if fast:
         actions = {**FAST_ACTIONS, "steering_angle": {"low": -steering, "high": steering}}
-        settings.update(action_space=actions, reward_function=FAST_REWARD)
+        settings.update(action_space=actions, reward_function=FAST_REWARD, algorithm=algorithm)
     return model_create(owner=owner, settings=settings)
 
 
@@ -145,13 +146,14 @@ def time_to_qualify(
     fast: bool = False,
     lap_after: float = LAP_AFTER_MINUTES,
     steering: float = 30,
+    algorithm: str = "clipped_ppo",
 ) -> tuple[float | None, float | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
     after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies."""
     from training.services import training_stop
 
     model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast,
-                          steering=steering)  # fmt: skip
+                          steering=steering, algorithm=algorithm)  # fmt: skip
     tried = set()
     qualified = None
     while True:
@@ -211,6 +213,10 @@ def main() -> None:
     parser.add_argument(
         "--steering", type=float, default=30, help="[deg] with --fast, the steering range's bound"
     )
+    parser.add_argument(
+        "--algorithm", choices=("clipped_ppo", "sac"), default="clipped_ppo",
+        help="with --fast, PPO (DeepRacer's default) or SAC",
+    )  # fmt: skip
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument(
         "--limit",
@@ -234,6 +240,7 @@ def main() -> None:
                 minutes, best = time_to_qualify(
                     owner, seed, arguments.limit, fast=arguments.fast,
                     lap_after=arguments.lap_after, steering=arguments.steering,
+                    algorithm=arguments.algorithm,
                 )  # fmt: skip
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
                 if arguments.fast:
