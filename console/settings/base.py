@@ -149,6 +149,7 @@ CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
 CELERY_WORKER_HIJACK_ROOT_LOGGER = False
 CELERY_BROKER_CONNECTION_RETRY_ON_STARTUP = True
+CELERY_WORKER_CONSUMER = "console.consumer:Consumer"  # lives through a Redis restart
 CELERY_BROKER_TRANSPORT_OPTIONS = {
     "global_keyprefix": "pitlane:celery:",
     # With late acknowledgement, Redis hands an unacknowledged task to another worker after this

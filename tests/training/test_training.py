@@ -366,30 +366,29 @@ def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
 
 @pytest.mark.restarts_redis
 @pytest.mark.django_db(transaction=True)
-def test_a_redis_restart_mid_job_is_recovered_or_fails_cleanly(
-    alice, tracks, celery_worker_process
-):
+def test_a_redis_restart_mid_job_is_recovered(alice, tracks, celery_worker_process):
     # This test runs last, after the browser tests, whose jobs' rollouts may still be winding
     # down (a rollout of a job whose row the flush removed sees it within 15 s): let them end.
     with contextlib.suppress(TimeoutError):
         wait_for(lambda: not sandbox_children(), "earlier tests' rollouts to end", timeout=60)
     model = model_create(owner=alice, settings=settings(name="restarted"), validate_reward=False)
     job = wait_for_job(model.jobs.get(), lambda j: j.iterations >= 1, "a first update")
-    services.SESSION_REDIS.restart()  # everything in Redis is gone: buffer, policy, queues
+    # Everything in Redis is gone: buffer, policy, queues, and the unacknowledged training task
+    # the worker holds, whose channel Celery 5.7 could not close (console.consumer).
+    services.SESSION_REDIS.restart()
 
     after = job.iterations
     wait_for(
         lambda: (current := reload(job)).iterations > after or current.status == "FAILED",
-        "the job to recover or fail", timeout=240,
+        "the job to go on", timeout=240,
     )  # fmt: skip
     job = reload(job)
+    assert job.status == TrainingJob.Status.IN_PROGRESS, job.failure_reason
     assert job.log_lines.filter(text__startswith="Redis is back").exists()
-    assert default_storage.exists(job.last_checkpoint)  # the last checkpoint is kept either way
-    if job.status == TrainingJob.Status.FAILED:
-        assert "simulation worker" in job.failure_reason
-    else:
-        training_stop(job=job)
-        job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "stop", 120)
+    assert default_storage.exists(job.last_checkpoint)
+    celery_worker_process.ensure_running()  # it reconnected, and took the new rollouts
+    training_stop(job=job)
+    job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "stop", 120)
     assert job.model.status == RLModel.Status.READY
 
 
