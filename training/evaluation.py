@@ -5,7 +5,8 @@ drives the evaluation's track deterministically, trial after trial, under its ru
 and crash penalties, resets, continuous laps or one lap per trial. No racer code runs. Every
 simulated 1/15 s becomes a frame of the recorded video (VP8 in WebM: Chromium and Firefox both
 play it); the frames someone watches live go to the ``evaluation_<id>`` group, and while someone
-watches, the simulation keeps to real time so that they see the race at its speed.
+watches, the simulation keeps to real time so that they see the race at its speed (an operator
+may speed it up: PITLANE_WATCHED_SPEEDUP).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from pathlib import Path
 
 import cv2
 import gymnasium
+from django.conf import settings
 from django.core.files import File
 from django.core.files.storage import default_storage
 from django.db import transaction
@@ -157,6 +159,7 @@ class Evaluator:
         unwrapped = env.unwrapped
         episodes = 1 if evaluation.continuous_laps else evaluation.trials
         last_live = last_step = 0.0
+        pace = unwrapped.dt / settings.PITLANE_WATCHED_SPEEDUP  # [s] of real time per step
         clock = 0.0
 
         def row(info):
@@ -197,8 +200,8 @@ class Evaluator:
                             status=unwrapped.status, progress=unwrapped.progress,
                             episode=len(self.results) + 1,
                         ))  # fmt: skip
-                if watched:  # keep to real time for those who watch
-                    time.sleep(max(0.0, unwrapped.dt - (time.monotonic() - last_step)))
+                if watched:  # keep to real time (or PITLANE_WATCHED_SPEEDUP times) for them
+                    time.sleep(max(0.0, pace - (time.monotonic() - last_step)))
                 last_step = time.monotonic()
                 while len(info["lap_times"]) > laps_done:
                     laps_done += 1

@@ -192,6 +192,9 @@ PITLANE_TRAINER_THREADS = env.int(
 # start (torch, the simulator and the sandbox load first).
 PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [s]
 PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # [s]
+# An evaluation or a race that someone watches keeps to this many times real time (1: as the
+# DeepRacer console shows it); nobody watching, it runs as fast as it can.
+PITLANE_WATCHED_SPEEDUP = env.int("PITLANE_WATCHED_SPEEDUP", 1, minimum=1, maximum=20)
 CELERY_TASK_ROUTES = {
     "training.train": {"queue": "training"},  # the trainer: a GPU machine, where there is one
     "training.rollout": {"queue": "simulation"},  # rollouts: any CPU machine

@@ -18,3 +18,5 @@ STORAGES["default"]["OPTIONS"]["location"] = MEDIA_ROOT  # noqa: F405
 # Dead rollout workers are given up on sooner, so that the tests that kill them stay short.
 PITLANE_ROLLOUT_SILENCE = 20
 PITLANE_ROLLOUT_STARTUP = 60
+# Watched evaluations and races (the browser tests watch them) run at five times real time.
+PITLANE_WATCHED_SPEEDUP = 5
