@@ -19,11 +19,8 @@ RACE_LIMIT = 3600  # [s] twenty laps of the longest track, in real time at worst
     time_limit=RACE_LIMIT + 60,
 )
 def race(submission_id: int) -> None:
-    import torch
-
     from racing import services
 
-    torch.set_num_threads(1)
     services.submission_run(submission_id=submission_id)
 
 

@@ -84,6 +84,17 @@ class Policy:
                 return actions[0].numpy(), float(values[0]), float(log_probs[0])
             return self.network.actor(tensor, deterministic=deterministic)[0].numpy(), None, None
 
+    def drive(self, observation: dict) -> np.ndarray:
+        """The deterministic action alone, as evaluations drive: PPO's critic, a network of its
+        own, is not run (it would double the time of a step)."""
+        tensor, _ = self.network.obs_to_tensor(observation)
+        with torch.inference_mode():
+            if self.ppo:
+                action = self.network.get_distribution(tensor).get_actions(deterministic=True)
+            else:
+                action = self.network.actor(tensor, deterministic=True)
+        return action[0].numpy()
+
     @staticmethod
     def command(action: np.ndarray, discrete: bool):
         """What the environment takes for an action: an index, or the clipped vector."""

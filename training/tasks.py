@@ -55,11 +55,8 @@ def rollout(job_id: int, worker: int, attempt: int, track: str) -> None:
     time_limit=EVALUATION_LIMIT + 60,
 )
 def evaluate(evaluation_id: int) -> None:
-    import torch
-
     from training import evaluation
 
-    torch.set_num_threads(1)
     evaluation.run(evaluation_id)
 
 

@@ -137,8 +137,10 @@ class Child:
             while True:
                 if mode == "random":
                     action, value, log_prob = env.action_space.sample(), 0.0, 0.0
+                elif mode == "evaluate":
+                    action, value, log_prob = self.policy.drive(observation), 0.0, 0.0
                 else:
-                    action, value, log_prob = self.policy.act(observation, mode == "evaluate")
+                    action, value, log_prob = self.policy.act(observation, deterministic=False)
                 observation, reward, terminated, truncated, info = env.step(
                     self.policy.command(action, discrete)
                 )

@@ -1,0 +1,36 @@
+"""The policy the rollout workers and evaluations drive with."""
+
+import gymnasium
+import numpy as np
+import pytest
+import torch
+
+import simulator
+from tests.training.factories import sensor_frames
+from training.networks import SHALLOW
+from training.policies import Policy
+
+DISCRETE = [{"steering_angle": a, "speed": 1.0} for a in (-30, 0, 30)]
+CONTINUOUS = {"steering_angle": {"low": -30.0, "high": 30.0}, "speed": {"low": 0.5, "high": 2.0}}
+
+
+@pytest.mark.parametrize(
+    ("algorithm", "space"),
+    [("clipped_ppo", DISCRETE), ("clipped_ppo", CONTINUOUS), ("sac", CONTINUOUS)],
+    ids=["PPO discrete", "PPO continuous", "SAC"],
+)
+def test_driving_chooses_the_deterministic_action_without_the_critic(algorithm, space):
+    environment = {"track": "rookie-loop", "action_space": space}
+    env = gymnasium.make(simulator.ENV_ID, **environment)
+    torch.manual_seed(3)
+    policy = Policy.build(algorithm, SHALLOW, env.observation_space, env.action_space)
+    env.close()
+    critic_ran = []
+    if policy.ppo:
+        policy.network.value_net.register_forward_hook(lambda *_: critic_ran.append(True))
+    for observation in sensor_frames(environment, count=4):
+        chosen, value, _ = policy.act(observation, deterministic=True)
+        assert policy.ppo == (value is not None)
+        critic_ran.clear()
+        np.testing.assert_array_equal(policy.drive(observation), chosen)
+        assert critic_ran == []
