@@ -16,7 +16,6 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from simulator.samples import situations
 from training.sandbox import Sandbox, SandboxFailure, verified
 
 ALLOWED_IMPORTS = ("math", "random", "numpy", "scipy", "shapely")
@@ -183,29 +182,27 @@ def reward_validate(
     if result.errors:
         return result
     verified()  # SandboxUnavailable where racers' code cannot be held safely
-    with Sandbox(call_timeout=SAMPLE_TIMEOUT) as sandbox:
+    where = {"track": track, "direction": direction}
+    with Sandbox(call_timeout=SAMPLE_TIMEOUT, samples=where) as sandbox:
         try:
             sandbox.load(source)
         except SandboxFailure as failure:
             result.errors.append(_problem_for(failure))
             return result
-        samples = situations(track, direction)
+        samples = sandbox.situations()
         failed: dict[tuple[str, str, int | None], list[str]] = {}
         for situation in samples:
+            name, description = situation["name"], situation["description"]
             try:
-                reward = sandbox.call(situation.params)
+                reward = sandbox.call(situation["params"])
             except SandboxFailure as failure:
                 problem = _problem_for(failure)
-                failed.setdefault((problem.type, problem.message, problem.line), []).append(
-                    situation.name
-                )
-                result.samples.append(
-                    Sample(situation.name, situation.description, None, problem.message)
-                )
+                failed.setdefault((problem.type, problem.message, problem.line), []).append(name)
+                result.samples.append(Sample(name, description, None, problem.message))
                 if failure.kind in ("crashed", "timeout", "protocol"):
                     break  # the sandbox is gone; the remaining samples cannot run
                 continue
-            result.samples.append(Sample(situation.name, situation.description, reward))
+            result.samples.append(Sample(name, description, reward))
         result.log = list(sandbox.logs)
     for (kind, message, line), names in failed.items():
         result.errors.append(Problem(kind, f"{_where(names, len(samples))}: {message}", line))

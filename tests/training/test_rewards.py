@@ -3,9 +3,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import gymnasium
 import pytest
 from django.urls import reverse
 
+import simulator.samples
 from tests.services import ROOT
 from training.rewards import EXAMPLES, MAX_SOURCE_SIZE, reward_validate, static_problems
 from training.sandbox import Sandbox
@@ -32,6 +34,17 @@ def test_the_corpus_runs_in_the_simulator_inside_the_sandbox():
             sandbox.load(path.read_text())
             result = sandbox.rollout(150, driver="random", seed=1)
             assert result["steps"] == 150, path.stem
+
+
+def test_the_samples_are_made_in_the_sandbox_and_no_simulator_is_built_here(monkeypatch):
+    def here(*args, **kwargs):
+        raise AssertionError("a simulator was built in the validating (web) process")
+
+    monkeypatch.setattr(gymnasium, "make", here)
+    monkeypatch.setattr(simulator.samples, "situations", here)
+    result = reward_validate(source=EXAMPLES[0].source, track="rookie-loop", direction="clockwise")
+    assert result.valid and [sample.situation for sample in result.samples] == SITUATIONS
+    assert all(sample.reward > 0 for sample in result.samples if sample.situation != "off-track")
 
 
 @pytest.mark.parametrize("example", EXAMPLES, ids=lambda example: example.slug)

@@ -100,6 +100,7 @@ class Sandbox:
 
     env: dict | None = None
     policy: dict | None = None  # {"algorithm", "architecture", "seed"}: a policy to act with
+    samples: dict | None = None  # {"track", "direction"}: sample situations, made before sealing
     call_timeout: float = 1.0  # [s] per call of the reward function
     memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing
     start_timeout: float = 60.0  # [s]
@@ -138,13 +139,23 @@ class Sandbox:
         threading.Thread(target=self._read_stderr, daemon=True).start()
         self.report = self._request({
             "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
-            "env": portable_env(self.env), "policy": self.policy, "op": "start",
+            "env": portable_env(self.env), "policy": self.policy,
+            "samples": portable_env(self.samples), "op": "start",
         }, {"ready"}, self.start_timeout)  # fmt: skip
         return self.report
 
     def load(self, source: str) -> None:
         """Run the racer's module; ``SandboxFailure`` if it does not define a reward function."""
         self._request({"op": "load", "source": source}, {"loaded"})
+
+    def situations(self) -> list[dict]:
+        """The sample situations of ``samples``' track (``simulator.samples``), as the child
+        made them: each a dict of name, description and the reward params there."""
+        reply = self._request({"op": "samples"}, {"samples"})
+        samples = reply.get("samples")
+        if not isinstance(samples, list) or not all(isinstance(s, dict) for s in samples):
+            raise SandboxFailure("protocol", "The sandbox sent samples that are not a list.")
+        return samples
 
     def call(self, params: dict, timeout: float | None = None) -> float:
         """The reward for ``params``, checked here: a finite number within ±1e5."""

@@ -18,6 +18,7 @@ import time
 import traceback
 from typing import Any
 
+import cv2
 import msgpack
 import numpy as np
 
@@ -49,6 +50,7 @@ class Child:
         self.env = None
         self.policy = None
         self.ppo = True
+        self.samples: list[dict] = []
 
     def send(self, message: dict[str, Any], *, log: bool = False) -> None:
         """Send ``message``; with ``log``, and what the reward process printed since the last."""
@@ -65,10 +67,13 @@ class Child:
         # Before anything else: the reward process, forked while this one is still small and
         # has no threads; then the simulator and the policy, which it never sees.
         self.reward = RewardProcess(float(init["call_timeout"]), int(init["memory_allowance"]))
+        cv2.setNumThreads(0)  # no worker threads: the sealed process cannot start any
         if init.get("env") is not None:
             self.env = self._build_env(init["env"])
         if init.get("policy") is not None:
             self._build_policy(init["policy"])
+        if init.get("samples") is not None:
+            self.samples = _situations(init["samples"])
         self.reward.wait_ready(60.0)
         address_space = seal.current_address_space() + int(init["memory_allowance"])
         namespaces = seal.enter_namespaces()
@@ -86,12 +91,10 @@ class Child:
             handler(request)
 
     def _build_env(self, settings: dict):
-        import cv2
         import gymnasium
 
         import simulator
 
-        cv2.setNumThreads(0)  # no worker threads: the sealed process cannot start any
         env = gymnasium.make(simulator.ENV_ID, reward_fn=self.reward.call, **settings)
         observation, _ = env.reset(seed=0)
         for view in VIEWS:  # the spectator's textures and the JPEG codec, before sealing
@@ -239,6 +242,9 @@ class Child:
         else:
             self.send({"type": "loaded"}, log=True)
 
+    def op_samples(self, request: dict) -> None:
+        self.send({"type": "samples", "samples": self.samples})
+
     def op_call(self, request: dict) -> None:
         try:
             reward = self.reward.call(request["params"])
@@ -287,6 +293,15 @@ class Child:
 
     def op_exit(self, request: dict) -> None:
         os._exit(0)
+
+
+def _situations(settings: dict) -> list[dict]:
+    """The reward function's sample situations on ``settings``' track, made in the child so that
+    the web processes that validate reward functions never build a simulator."""
+    from simulator.samples import situations
+
+    found = situations(settings["track"], settings.get("direction", "counterclockwise"))
+    return [{"name": s.name, "description": s.description, "params": s.params} for s in found]
 
 
 def _failure(error: RewardFailure | RewardError, **where: Any) -> dict[str, Any]:
