@@ -388,7 +388,7 @@ def _settings(
     that could not be carried over."""
     params = _yaml(members, _place(members, "training_params.yaml"))
     algorithm = DEEPRACER_ALGORITHMS.get(
-        str(metadata.get("training_algorithm", "clipped_ppo")).lower(), "unknown"
+        str(metadata.get("training_algorithm", Algorithm.PPO)).lower(), "unknown"
     )
     if algorithm == "unknown":
         raise ImportRefused(

@@ -6,6 +6,8 @@ from django.conf import settings
 from django.core.validators import RegexValidator
 from django.db import models
 
+from training import hyperparameters
+
 
 class Direction(models.TextChoices):
     COUNTERCLOCKWISE = "counterclockwise", "Counter-clockwise"
@@ -24,8 +26,8 @@ class Network(models.TextChoices):
 
 
 class Algorithm(models.TextChoices):
-    PPO = "clipped_ppo", "PPO"
-    SAC = "sac", "SAC"
+    PPO = hyperparameters.PPO, "PPO"
+    SAC = hyperparameters.SAC, "SAC"
 
 
 class ShellColour(models.TextChoices):

@@ -14,10 +14,9 @@ import numpy as np
 import torch
 
 import simulator
+from training.hyperparameters import PPO
 from training.learner import load_weights, weights_bytes
 from training.networks import policy_kwargs
-
-PPO = "clipped_ppo"
 
 
 @dataclass

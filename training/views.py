@@ -48,7 +48,7 @@ from training.forms import (
     RewardValidationForm,
     VehicleForm,
 )
-from training.models import EvaluationJob, JobLogLine, RewardFunction, RLModel, Vehicle
+from training.models import Algorithm, EvaluationJob, JobLogLine, RewardFunction, RLModel, Vehicle
 from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
@@ -394,8 +394,8 @@ class _ModelCreatePage:
                 "form": form,
                 "source": source,
                 "allowance": selectors.allowance_for(racer=self.request.user),
-                "ppo_fields": form.hyperparameter_fields("clipped_ppo"),
-                "sac_fields": form.hyperparameter_fields("sac"),
+                "ppo_fields": form.hyperparameter_fields(Algorithm.PPO),
+                "sac_fields": form.hyperparameter_fields(Algorithm.SAC),
                 "tracks": selectors.tracks_available(),
                 "examples": rewards.EXAMPLES,
                 "example_sources": {example.slug: example.source for example in rewards.EXAMPLES},

@@ -32,9 +32,8 @@ class Command(BaseCommand):
             raise CommandError(f"Cannot read the settings: {error}") from None
         if not isinstance(settings, dict):
             raise CommandError(f"{config} must hold a mapping of settings.")
-        settings.setdefault(
-            "hyperparameters", hyperparameters.defaults(settings.get("algorithm", "clipped_ppo"))
-        )
+        algorithm = settings.get("algorithm", hyperparameters.PPO)
+        settings.setdefault("hyperparameters", hyperparameters.defaults(algorithm))
         try:
             model = model_create(owner=owner_row, settings={**settings, "reward_function": source})
         except configuration.Invalid as invalid:
