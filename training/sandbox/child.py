@@ -2,10 +2,11 @@
 
 It reads requests on standard input and answers on standard output, in protocol frames. It runs
 only our code: it forks the reward process (``reward.py``), where the racer's code will run
-alone, then builds the simulator and the policy when a rollout is to drive, then seals itself
-(``seal.py``). Every call of the racer's code goes to the reward process and is timed from here;
-what it prints becomes log messages, what it raises, returns or takes too long over becomes an
-error message naming the line. Since the racer's code cannot write to the worker, the frames
+alone, then builds the simulator and the policy when a rollout is to drive (or places the car in
+the sample situations a validation tries the code on), then seals itself (``seal.py``). Every
+call of the racer's code goes to the reward process and is timed from here; what it prints
+becomes log messages, what it raises, returns or takes too long over becomes an error message
+naming the line. Since the racer's code cannot write to the worker, the frames
 the worker reads (progress above all) are this module's. This module never imports Django.
 """
 
