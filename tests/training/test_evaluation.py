@@ -7,6 +7,7 @@ import json
 import tempfile
 
 import cv2
+import numpy as np
 import pytest
 from asgiref.sync import sync_to_async
 from django.core.files.storage import default_storage
@@ -18,7 +19,7 @@ from tests.training.factories import ready_model
 from tests.training.test_deepracer_utils import assert_evaluation_logs_read_as_recorded
 from tests.training.test_live import frame_header, viewer
 from training import artifacts, configuration, services
-from training.evaluation import METRICS, TRACE, VIDEO, files_prefix
+from training.evaluation import METRICS, TRACE, VIDEO, EvaluationFailed, _VideoWriter, files_prefix
 from training.models import EvaluationJob, RLModel
 
 pytestmark = pytest.mark.usefixtures("tracks")
@@ -245,3 +246,22 @@ def test_an_evaluation_interrupted_by_a_dead_worker_starts_over_and_an_ended_one
 
     assert runner.run(evaluation.pk) is None  # a duplicate delivery of an ended evaluation
     assert evaluation.trial_rows.count() == 3
+
+
+def test_a_video_encoder_that_fails_never_holds_the_car_up(tmp_path):
+    writer = _VideoWriter(tmp_path / VIDEO)
+
+    class Broken:
+        def write(self, frame):
+            raise cv2.error("the encoder is gone")
+
+        def release(self):
+            pass
+
+    writer._writer.release()
+    writer._writer = Broken()  # before the first frame: the encoder thread has not touched it
+    frame = np.zeros((480, 640, 3), np.uint8)
+    for _ in range(3 * _VideoWriter.WAITING):  # more than may wait: none of these blocks
+        writer.write(frame)
+    with pytest.raises(EvaluationFailed, match="video could not be recorded"):
+        writer.close()
