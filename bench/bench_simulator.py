@@ -23,9 +23,9 @@ import gymnasium
 import simulator
 from simulator import tracks
 from simulator.car import Car
+from simulator.config import CONTROL_HZ
 from simulator.controller import BrakingDriver, CentreLineDriver
 
-DEEPRACER_STEPS_PER_SECOND = 15
 SECONDS = 3.0  # per measurement, after a warm-up
 
 
@@ -148,7 +148,7 @@ def main() -> None:
     env.close()
     print(f"{'figure':<58}{'value':>10}{'x DeepRacer':>13}")
     for name, value in figures:
-        speedup = f"{value / DEEPRACER_STEPS_PER_SECOND:>12.0f}x" if "steps" in name else ""
+        speedup = f"{value / CONTROL_HZ:>12.0f}x" if "steps" in name else ""
         print(f"{name:<58}{value:>10,.0f}{speedup:>13}")
     if not arguments.no_grip:
         grip_table()

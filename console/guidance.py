@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from simulator.env import default_config
+from simulator.config import CONTROL_HZ
 from training import hyperparameters
 from training.hyperparameters import Setting
 
@@ -128,4 +128,4 @@ def hyperparameter_help() -> dict[str, list[HyperparameterHelp]]:
 def lookahead(discount: float) -> tuple[int, float]:
     """(steps, simulated seconds) the car looks ahead with this discount factor."""
     steps = round(1 / (1 - discount))
-    return steps, steps / default_config()["control_hz"]
+    return steps, steps / CONTROL_HZ

@@ -10,6 +10,8 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+# DeepRacer's control rate: the car acts, and a step is traced, 15 times a simulated second.
+CONTROL_HZ = 15  # [Hz]
 CAMERAS = ("FRONT_FACING_CAMERA", "STEREO_CAMERAS")
 LIDARS = ("SECTOR_LIDAR", "LIDAR")
 RACE_TYPES = ("TIME_TRIAL", "OBJECT_AVOIDANCE", "HEAD_TO_BOT")

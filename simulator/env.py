@@ -28,7 +28,7 @@ from simulator.world import World
 def default_config() -> dict[str, Any]:
     """The physical constants of the simulation, with their units."""
     return {
-        "control_hz": 15,  # [Hz] DeepRacer's control rate: one step is 1/15 s
+        "control_hz": config.CONTROL_HZ,  # [Hz] one step is 1/15 s
         "physics_substeps": 8,  # per control step (120 Hz integration)
         # Per episode, the prepare step included, then time_up. DeepRacer's cap is 100,000
         # (simapp environments/deepracer_racetrack_env.py:33,182-184, 01f5f01); ours stays at

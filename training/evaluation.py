@@ -35,6 +35,7 @@ from django.utils import timezone
 import simulator
 from console.workers import redis_client
 from notifications import services as notifications
+from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
 from training import artifacts, live, selectors
@@ -67,7 +68,8 @@ class _VideoWriter:
     WAITING = 45  # [frames]
 
     def __init__(self, path: Path) -> None:
-        self._writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*VIDEO_CODEC), 15, SIZE)
+        codec = cv2.VideoWriter_fourcc(*VIDEO_CODEC)
+        self._writer = cv2.VideoWriter(str(path), codec, CONTROL_HZ, SIZE)  # a frame a step
         if not self._writer.isOpened():
             raise EvaluationFailed("This worker cannot record video (no VP8 encoder).")
         self._frames: queue.Queue = queue.Queue(maxsize=self.WAITING)

@@ -18,9 +18,9 @@ from statistics import mean
 
 from django.utils import timezone
 
+from simulator.config import CONTROL_HZ
 from training.models import Iteration, JobLogLine, TrainingJob
 
-STEPS_PER_SECOND = 15  # [Hz] DeepRacer's and our simulator's control rate
 LAP_COMPLETE = "lap_complete"  # statuses are read in the trace's spelling: "Lap complete" too
 
 
@@ -141,7 +141,7 @@ def _whole(value: object) -> int | None:
 
 
 def _steps(episode: Episode) -> int:
-    return round(episode.milliseconds * STEPS_PER_SECOND / 1000)
+    return round(episode.milliseconds * CONTROL_HZ / 1000)
 
 
 def _seconds(groups: list[Group]) -> float:

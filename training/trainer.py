@@ -25,6 +25,7 @@ from django.utils import timezone
 import simulator
 from console.workers import redis_client
 from notifications import services as notifications
+from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
 from training import artifacts, jobs, live
 from training import hyperparameters as hp
@@ -565,8 +566,6 @@ class Trainer:
 
 # The files DeepRacer's tools read
 
-STEP_SECONDS = 1 / 15  # [s] a step of the simulation, at DeepRacer's 15 Hz
-
 
 def training_metrics(episodes: list[Episode], *, before: int, now: float) -> list[dict]:
     """One iteration's training episodes as DeepRacer's metrics JSON lists them (simapp
@@ -576,7 +575,7 @@ def training_metrics(episodes: list[Episode], *, before: int, now: float) -> lis
     Times are in ms; ours are the wall clock's, DeepRacer's the simulator's."""
     entries = []
     for offset, episode in enumerate(episodes):
-        elapsed = round(episode.steps * STEP_SECONDS * 1000)
+        elapsed = round(episode.steps * 1000 / CONTROL_HZ)
         entries.append(
             {
                 "reward_score": round(float(episode.rewards.sum())),
@@ -598,7 +597,7 @@ def evaluation_metrics(results: list[dict], *, now: float) -> list[dict]:
     by ``with_evaluation``."""
     entries = []
     for result in results:
-        elapsed = round(result["steps"] * STEP_SECONDS * 1000)
+        elapsed = round(result["steps"] * 1000 / CONTROL_HZ)
         entries.append(
             {
                 "reward_score": 0,  # the evaluation drives no reward function
