@@ -22,6 +22,7 @@ import os
 import time
 
 from bench.stack import running_console
+from training.hyperparameters import PPO, SAC
 
 THROUGHPUT_MINUTES = 4.0
 QUALIFY_LIMIT_MINUTES = 30.0
@@ -70,7 +71,7 @@ def bench_racer():
 
 def default_model(
     owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False,
-    steering: float = 30, algorithm: str = "clipped_ppo",
+    steering: float = 30, algorithm: str = PPO,
 ):  # fmt: skip
     from training.rewards import EXAMPLES
     from training.services import model_create
@@ -146,7 +147,7 @@ def time_to_qualify(
     fast: bool = False,
     lap_after: float = LAP_AFTER_MINUTES,
     steering: float = 30,
-    algorithm: str = "clipped_ppo",
+    algorithm: str = PPO,
 ) -> tuple[float | None, float | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
     after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies."""
@@ -214,7 +215,7 @@ def main() -> None:
         "--steering", type=float, default=30, help="[deg] with --fast, the steering range's bound"
     )
     parser.add_argument(
-        "--algorithm", choices=("clipped_ppo", "sac"), default="clipped_ppo",
+        "--algorithm", choices=(PPO, SAC), default=PPO,
         help="with --fast, PPO (DeepRacer's default) or SAC",
     )  # fmt: skip
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])

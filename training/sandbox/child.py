@@ -6,8 +6,8 @@ alone, then builds the simulator and the policy when a rollout is to drive (or p
 the sample situations a validation tries the code on), then seals itself (``seal.py``). Every
 call of the racer's code goes to the reward process and is timed from here; what it prints
 becomes log messages, what it raises, returns or takes too long over becomes an error message
-naming the line. Since the racer's code cannot write to the worker, the frames
-the worker reads (progress above all) are this module's. This module never imports Django.
+naming the line. Since the racer's code cannot write to the worker, the frames the worker reads
+(progress above all) are this module's. This module never imports Django.
 """
 
 from __future__ import annotations
@@ -301,7 +301,7 @@ def _situations(settings: dict) -> list[dict]:
     the web processes that validate reward functions never build a simulator."""
     from simulator.samples import situations
 
-    found = situations(settings["track"], settings.get("direction", "counterclockwise"))
+    found = situations(settings["track"], settings["direction"])
     return [{"name": s.name, "description": s.description, "params": s.params} for s in found]
 
 
