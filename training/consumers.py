@@ -49,15 +49,20 @@ class LiveConsumer(AsyncWebsocketConsumer):
             await self.close(code=REFUSED_ANONYMOUS)
             return
         pk = self.scope["url_route"]["kwargs"]["pk"]
+        # The group is joined before the state is read: an update the worker stores and
+        # announces in between then reaches this viewer (after the state, which may already
+        # hold it), rather than falling between the two and leaving the page behind the job.
+        group = self.group_for(pk)
+        await self.channel_layer.group_add(group, self.channel_name)
         snapshot = await database_sync_to_async(self.snapshot_for)(user, pk)
         if snapshot is None:
+            await self.channel_layer.group_discard(group, self.channel_name)
             await self.close(code=REFUSED_FORBIDDEN)
             return
-        self.group = self.group_for(pk)
+        self.group = group
         self.stream = live.Stream(_viewers_redis(), self.group)
         self.worker, self.view = 0, "spectator"
         self.in_flight, self.pending = 0, None
-        await self.channel_layer.group_add(self.group, self.channel_name)
         await self._redis(self.stream.watch, self.channel_name, self.worker, self.view)
         await self.accept()
         await self.send(text_data=json.dumps(snapshot))

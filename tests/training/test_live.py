@@ -17,7 +17,7 @@ from django.test import Client
 from console.workers import redis_client
 from tests.training.factories import ready_model
 from training import live, selectors
-from training.consumers import WINDOW
+from training.consumers import WINDOW, TrainingConsumer
 from training.models import TrainingJob
 
 pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.usefixtures("tracks")]
@@ -274,3 +274,22 @@ async def test_status_and_iterations_from_the_trainer_reach_the_page(alice):
         "type": "iteration",
     }
     assert iteration["training_points"] == [[10.0, 30.0], [15.0, 50.0]]
+
+
+async def test_an_update_announced_while_the_viewer_connects_is_not_lost(alice, monkeypatch):
+    """The worker stores and announces a new status just after the viewer's state was read: the
+    viewer, already in the group, gets it next, and its page is not left behind the job."""
+    job = await sync_to_async(queued_job)(alice)
+    read_state = TrainingConsumer.snapshot_for
+
+    def state_then_the_worker_moves_on(consumer, user, pk):
+        state = read_state(consumer, user, pk)
+        TrainingJob.objects.filter(pk=pk).update(status=TrainingJob.Status.IN_PROGRESS)
+        live.announce_training(pk)
+        return state
+
+    monkeypatch.setattr(TrainingConsumer, "snapshot_for", state_then_the_worker_moves_on)
+    communicator = await watching(job, alice)
+    update = await communicator.receive_json_from(timeout=5)
+    await communicator.disconnect()
+    assert (update["type"], update["status"]) == ("status", "IN_PROGRESS")
