@@ -5,8 +5,11 @@ a trainer and two rollout workers, the database in a scratch directory), creates
 of DeepRacer's defaults (the beginner track, the follow-the-centre-line reward function, PPO
 defaults, the default discrete action space, the camera) and lets them train.
 
-- Throughput: environment steps per second over a fixed training time, policy updates included,
-  with 1 and with 2 rollout workers.
+- Throughput: environment steps per second over 20 minutes of training (``--minutes``), policy
+  updates included, with 1 and with 2 rollout workers, per iteration with where its time went,
+  and the mean over the iterations whose training episodes completed a lap.
+- With --update, the policy update alone: milliseconds per environment step, as Pitlane learns
+  and with PyTorch's stock layers, on one thread and on all.
 - Time to qualify (--qualify): for each seed, train; every time a new checkpoint appears, drive
   it (deterministically, outside training) in an evaluation of 3 laps; the figure is the training
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
@@ -24,7 +27,8 @@ import time
 from bench.stack import running_console
 from training.hyperparameters import PPO, SAC
 
-THROUGHPUT_MINUTES = 4.0
+THROUGHPUT_MINUTES = 20.0
+CHECK_LATE_EVALUATIONS = 5.0  # [s] after the stop, for the evaluation results still coming
 QUALIFY_LIMIT_MINUTES = 30.0
 LAP_AFTER_MINUTES = 20.0
 FAST_ACTIONS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 4.0}}
@@ -96,19 +100,104 @@ def job_of(model):
     return TrainingJob.objects.get(model=model)
 
 
-def throughput(owner, workers: int) -> tuple[float, int]:
+def throughput(owner, workers: int, minutes: float) -> None:
+    """Train a default model for ``minutes``; print each iteration's steps/s and where its time
+    went, then the mean over all iterations and over those whose training episodes lapped."""
+    from training.models import Iteration
     from training.services import training_stop
+    from training.stopwatch import PHASES
 
     model = default_model(owner, f"throughput-{workers}", workers=workers)
     while job_of(model).status != "IN_PROGRESS":
         time.sleep(1)
-    time.sleep(THROUGHPUT_MINUTES * 60)
+    time.sleep(minutes * 60)
     job = job_of(model)
     training_stop(job=job)
     while job_of(model).status != "COMPLETED":
         time.sleep(1)
-    job = job_of(model)
-    return job.steps / max(job.training_seconds, 1e-9), job.iterations
+    time.sleep(CHECK_LATE_EVALUATIONS)
+    rows = list(Iteration.objects.filter(job=job).order_by("number"))
+    print(f"{workers} rollout worker(s), {minutes:g} min, {len(rows)} iterations:")
+    print("  iter  steps  wall s  steps/s  lap  " + "  ".join(f"{p:>8}" for p in PHASES)
+          + "  eval s")  # fmt: skip
+    for row in rows:
+        split = "  ".join(f"{row.time_split.get(p, 0.0):8.1f}" for p in PHASES)
+        evaluation = f"{row.evaluation_seconds:6.1f}" if row.evaluation_seconds else "     —"
+        print(f"  {row.number:4d}  {row.steps:5d}  {row.wall_seconds:6.1f}  "
+              f"{row.steps / row.wall_seconds:7.1f}  {'yes' if row.best_lap_time else ' no'}  "
+              f"{split}  {evaluation}")  # fmt: skip
+
+    def rate(chosen: list) -> str:
+        wall = sum(row.wall_seconds for row in chosen)
+        return f"{sum(row.steps for row in chosen) / wall:.1f} steps/s" if wall else "—"
+
+    lapping = [row for row in rows if row.best_lap_time]
+    print(f"  mean: {rate(rows)}; over the {len(lapping)} iterations that lapped: "
+          f"{rate(lapping)}", flush=True)  # fmt: skip
+
+
+def update_speed(steps: int = 2000) -> None:
+    """[ms] a PPO update takes per environment step, DeepRacer's defaults (3-layer CNN, camera,
+    10 epochs of minibatches of 64) on random camera frames: as Pitlane learns, and with the
+    first convolution and Adam as PyTorch's stock layers run them, on one thread and on all."""
+    import gymnasium
+    import numpy as np
+    import torch
+    from torch import nn
+
+    import simulator
+    from training import hyperparameters, networks
+    from training.experience import Episode
+    from training.learner import Learner
+
+    env = gymnasium.make(simulator.ENV_ID, track="rookie-loop")
+    spaces = env.observation_space, env.action_space
+    env.close()
+    rng = np.random.default_rng(0)
+    per_episode = 100
+    frames = {
+        name: rng.integers(0, 256, (per_episode + 1, *space.shape), dtype=np.uint8)
+        for name, space in spaces[0].spaces.items()
+    }
+
+    def episode() -> Episode:
+        return Episode(
+            worker=0, version=0, observations=frames,
+            actions=rng.integers(0, spaces[1].n, per_episode),
+            rewards=rng.random(per_episode, dtype=np.float32),
+            values=rng.random(per_episode, dtype=np.float32),
+            log_probs=np.full(per_episode, -2.3, np.float32), terminated=True, final_value=0.0,
+            progress=10.0, status="off_track", lap_time=None, trace=[],
+        )  # fmt: skip
+
+    episodes = [episode() for _ in range(steps // per_episode)]
+
+    def learner(stock: bool) -> Learner:
+        built = Learner(
+            algorithm=PPO, hyperparameters=hyperparameters.defaults(PPO),
+            architecture=networks.SHALLOW, observation_space=spaces[0],
+            action_space=spaces[1],
+        )  # fmt: skip
+        if stock:
+            policy = built.model.policy
+            for module in policy.modules():
+                if isinstance(module, networks.CameraConv2d):
+                    module.__class__ = nn.Conv2d
+            policy.optimizer = torch.optim.Adam(policy.parameters(), lr=policy.optimizer.
+                                                param_groups[0]["lr"], eps=1e-5)  # fmt: skip
+        return built
+
+    print(f"PPO update, DeepRacer's defaults, {steps} steps [ms per step]:")
+    for threads in sorted({1, os.cpu_count() or 1}):
+        torch.set_num_threads(threads)
+        for stock in (True, False):
+            built = learner(stock)
+            built.learn(episodes[:2])  # warm up
+            started = time.perf_counter()
+            built.learn(episodes)
+            took = (time.perf_counter() - started) / steps * 1000
+            print(f"  {threads} thread(s), {'stock layers' if stock else 'Pitlane'}: "
+                  f"{took:.1f}", flush=True)  # fmt: skip
 
 
 def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
@@ -201,6 +290,18 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--qualify", action="store_true", help="measure the time to qualify")
     parser.add_argument(
+        "--update", action="store_true", help="time the policy update alone, without a console"
+    )
+    parser.add_argument(
+        "--minutes",
+        type=float,
+        default=THROUGHPUT_MINUTES,
+        help="[min] of training for the throughput",
+    )
+    parser.add_argument(
+        "--workers", type=int, nargs="+", default=[1, 2], help="rollout workers, for throughput"
+    )  # fmt: skip
+    parser.add_argument(
         "--fast",
         action="store_true",
         help="a continuous action space to 4 m/s and a speed-aware reward",
@@ -226,6 +327,13 @@ def main() -> None:
         help="[min] of training after which a seed is given up",
     )
     arguments = parser.parse_args()
+    if arguments.update:
+        os.environ.setdefault("DJANGO_SETTINGS_MODULE", "console.settings.dev")
+        import django
+
+        django.setup()
+        update_speed()
+        return
     with running_console(concurrency=3) as console:
         os.environ.update(console["env"])
         import django
@@ -249,13 +357,9 @@ def main() -> None:
                               + (f"{best:.2f} s" if best else "no 3 clean laps"))  # fmt: skip
                 print(f"seed {seed}: {shown}", flush=True)
         else:
-            print(f"Training throughput over {THROUGHPUT_MINUTES:g} min, PPO defaults, camera:")
-            for workers in (1, 2):
-                rate, iterations = throughput(owner, workers)
-                print(
-                    f"{workers} rollout worker(s): {rate:,.0f} steps/s ({iterations} updates)",
-                    flush=True,
-                )
+            print("Training throughput, DeepRacer's defaults (PPO, camera, Rookie Loop):")
+            for workers in arguments.workers:
+                throughput(owner, workers, arguments.minutes)
 
 
 if __name__ == "__main__":

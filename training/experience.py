@@ -99,14 +99,14 @@ class JobChannel:
         pipe.ltrim(self.experience, -MAX_QUEUED_EPISODES, -1)
         pipe.execute()
 
-    def pop_episodes(self, limit: int, wait: float) -> list[bytes]:
-        """Up to ``limit`` episodes, waiting at most ``wait`` seconds for the first."""
+    def wait_for_episode(self, wait: float) -> bytes | None:
+        """The oldest episode in the buffer, waiting at most ``wait`` seconds for one."""
         first = self.client.blpop([self.experience], timeout=wait)
-        if first is None:
-            return []
-        episodes = [first[1]]
-        more = self.client.lpop(self.experience, limit - 1) if limit > 1 else None
-        return episodes + list(more or [])
+        return None if first is None else first[1]
+
+    def pop_episodes(self, limit: int) -> list[bytes]:
+        """Up to ``limit`` more of the episodes in the buffer, without waiting."""
+        return list(self.client.lpop(self.experience, limit) or [])
 
     def push_evaluation(self, payload: bytes) -> None:
         self.client.rpush(self.evaluation, payload)

@@ -375,7 +375,17 @@ class Iteration(models.Model):
     best_lap_time = models.FloatField(null=True, blank=True, help_text="[s], when a lap was done.")
     episodes = models.PositiveIntegerField()
     steps = models.PositiveIntegerField()
-    wall_seconds = models.FloatField()
+    wall_seconds = models.FloatField(
+        help_text="[s] from the end of the previous iteration (or the start) to this one's end."
+    )
+    time_split = models.JSONField(
+        default=dict,
+        help_text="[s] of the wall time by phase (``training.trainer.PHASES``); they add up to it.",
+    )
+    evaluation_seconds = models.FloatField(
+        null=True, blank=True,
+        help_text="[s] the evaluation of this iteration's checkpoint took, beside the next one.",
+    )  # fmt: skip
     training_points = models.JSONField(
         default=list, help_text="[reward, progress %] of each training episode, for the graph."
     )

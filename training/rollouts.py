@@ -9,7 +9,9 @@ is reported to the trainer, which fails the job.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import threading
 import time
 
 import msgpack
@@ -56,19 +58,32 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
         "seed": model.seed + worker,
     }
     name = f"Simulation worker {worker + 1}"
-    printed = Printed(name if model.workers > 1 else "")
-    try:
-        with Sandbox(
+    label = name if model.workers > 1 else ""
+    printed = Printed(label)
+
+    def sandbox() -> Sandbox:
+        return Sandbox(
             env=model.environment_settings(track), policy=policy,
             call_timeout=REWARD_CALL_LIMIT, memory_allowance=MEMORY_ALLOWANCE,
-        ) as sandbox:  # fmt: skip
-            sandbox.load(model.reward_function)
+        )  # fmt: skip
+
+    try:
+        with contextlib.ExitStack() as stack:
+            driver = stack.enter_context(sandbox())
+            driver.load(model.reward_function)
+            evaluator = None
+            if worker == 0:  # DeepRacer's first worker evaluates (simapp
+                # bundle/markov/rollout_worker.py:327-329, 01f5f01)
+                evaluator = Evaluator(stack.enter_context(sandbox()), channel, job.attempt,
+                                      Printed(label))  # fmt: skip
+                evaluator.sandbox.load(model.reward_function)
+                stack.callback(evaluator.close)
             shown = Track.objects.filter(name=track).values_list("display_name", flat=True)
             channel.push_log([LogEntry("worker", f"{name} is driving {shown.first() or track}.")])
             with live.FramePublisher(channel.client, live.training_group(job_id)) as publisher:
+                viewing = Viewing(driver, publisher, worker)
                 try:
-                    why = _drive(sandbox, channel, job, worker, Viewing(sandbox, publisher, worker),
-                                 printed)  # fmt: skip
+                    why = _drive(driver, channel, job, worker, viewing, printed, evaluator)
                 except JobEnded:
                     why = "the training ended; the episode it was driving was abandoned"
                 channel.push_log([*printed.close(), LogEntry("worker", f"{name} stopped: {why}.")])
@@ -127,6 +142,74 @@ class Viewing:
         self.shown = None
 
 
+class Evaluator:
+    """The first worker's evaluations, in a sandbox of their own, on a thread of their own: the
+    evaluation episodes of checkpoint N drive while the training episodes of iteration N + 1 do,
+    rather than in turn with them (DeepRacer's first worker drives them after its share of an
+    iteration's episodes, while the trainer learns: simapp bundle/markov/rollout_worker.py:327-329,
+    01f5f01), and the trainer marks the best checkpoint when their results come. The newest checkpoint is evaluated: one that a
+    newer replaced while an evaluation ran is not. A failure of the racer's code here fails the
+    job as it would in training: ``check`` raises it on the worker's own thread."""
+
+    def __init__(self, sandbox: Sandbox, channel: JobChannel, attempt: int, printed: Printed):
+        self.sandbox, self.channel, self.attempt, self.printed = sandbox, channel, attempt, printed
+        self.evaluated = 0  # the newest version evaluated or being evaluated; 0 is never
+        self.thread: threading.Thread | None = None
+        self.failure: BaseException | None = None
+        self.ending = threading.Event()
+        self.looked = time.monotonic()
+
+    def offer(self, version: int, weights: bytes) -> None:
+        """Evaluate ``version`` (its ``weights``) unless it has been or one runs still."""
+        self.check()
+        if version <= self.evaluated or (self.thread is not None and self.thread.is_alive()):
+            return
+        self.evaluated = version
+        episodes = self.channel.evaluations_wanted()
+        self.thread = threading.Thread(
+            target=self._evaluate, args=(version, weights, episodes),
+            name=f"evaluation of {version}", daemon=True,
+        )  # fmt: skip
+        self.thread.start()
+
+    def check(self) -> None:
+        """Raise what ended the last evaluation, if it failed."""
+        failure, self.failure = self.failure, None
+        if failure is not None:
+            raise failure
+
+    def close(self) -> None:
+        """Abandon the evaluation under way (within a progress message, 0.25 s) and wait for it."""
+        self.ending.set()
+        if self.thread is not None:
+            self.thread.join()
+
+    def _evaluate(self, version: int, weights: bytes, episodes: int) -> None:
+        try:
+            self.sandbox.set_weights(version, weights)
+            for _ in range(episodes):
+                started = time.monotonic()
+                summary = self.sandbox.episode("evaluate", 0, self._beat)["summary"]
+                seconds = round(time.monotonic() - started, 3)
+                self.channel.push_evaluation(
+                    msgpack.packb({**summary, "version": version, "seconds": seconds})
+                )
+                self.channel.push_log(self.printed.take(self.sandbox, version + 1))
+            self.channel.push_log(self.printed.close())
+        except JobEnded:
+            pass
+        except Exception as error:  # the worker's thread raises it: see ``check``
+            self.failure = error
+
+    def _beat(self, steps: int) -> None:
+        if self.ending.is_set():
+            raise JobEnded
+        if time.monotonic() - self.looked >= STOP_LOOK:
+            self.looked = time.monotonic()
+            if self.channel.should_stop(self.attempt):
+                raise JobEnded
+
+
 class Printed:
     """What the reward function printed, as a worker files it: per iteration, the first
     ``PRINTED_LINES`` lines (``PRINTED_CHARACTERS`` at most); the rest is counted, and a note
@@ -166,12 +249,12 @@ class Printed:
 
 def _drive(
     sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int, viewing: Viewing,
-    printed: Printed,
+    printed: Printed, evaluator: Evaluator | None = None,
 ) -> str:  # fmt: skip
     """Drive episodes until the job ends; why it ended, in the racer's words."""
     algorithm, attempt = job.model.algorithm, job.attempt
     version = -1
-    evaluated = -1
+    weights = b""
     checked = looked = time.monotonic()
 
     def beat(steps: int) -> None:  # a long episode still shows the trainer this worker lives
@@ -195,21 +278,15 @@ def _drive(
             published, weights = channel.fetch_policy()
             sandbox.set_weights(published, weights)
             version = published
-        if worker == 0 and version > 0 and evaluated < version:
-            for _ in range(channel.evaluations_wanted()):
-                summary = sandbox.episode("evaluate", worker, beat)["summary"]
-                channel.push_evaluation(msgpack.packb({**summary, "version": version}))
-                channel.push_log(printed.take(sandbox, version + 1))
-                channel.beat(worker)
-            evaluated = version
-            continue
+        if evaluator is not None and version > 0:
+            evaluator.offer(version, weights)
         mode = "random" if version == 0 and algorithm == hp.SAC else "explore"
         reply = sandbox.episode(mode, worker, beat)
         channel.push_episode(reply["payload"])
         channel.push_log(printed.take(sandbox, version + 1))
         if channel.count_episode(version) >= channel.episodes_wanted():
             channel.push_log(printed.close())  # this worker's share of the iteration is done
-            if not _await_next_version(channel, job, version, worker, viewing):
+            if not _await_next_version(channel, job, version, worker, viewing, evaluator):
                 return "the training is over"
     return "the training ended"
 
@@ -223,8 +300,9 @@ def _still_wanted(job: TrainingJob) -> bool:
 
 
 def _await_next_version(
-    channel: JobChannel, job: TrainingJob, version: int, worker: int, viewing: Viewing
-) -> bool:
+    channel: JobChannel, job: TrainingJob, version: int, worker: int, viewing: Viewing,
+    evaluator: Evaluator | None = None,
+) -> bool:  # fmt: skip
     """The trainer has the episodes it wants of this version: wait while it learns, rather than
     drive episodes it would drop (and take the CPU it learns with). False when the job's row says
     it is over: a trainer that died, or a job deleted, without a word to Redis would otherwise
@@ -238,6 +316,8 @@ def _await_next_version(
         channel.beat(worker)
         viewing.update()
         viewing.hold()
+        if evaluator is not None:
+            evaluator.check()
         time.sleep(WAIT_POLL)
     viewing.resume()
     return True

@@ -14,6 +14,7 @@ from django.utils import timezone
 
 from training import artifacts, jobs
 from training.jobs import IMPORTED
+from training.stopwatch import PHASES
 from training.models import (
     EvaluationJob,
     EvaluationTrial,
@@ -200,7 +201,27 @@ def iteration_point(*, row: Iteration) -> dict:
         "steps": row.steps,
         "training_points": row.training_points,
         "evaluation_points": row.evaluation_points,
+        "wall_seconds": row.wall_seconds,
+        "time_split": time_split(row=row),
+        "evaluation_seconds": row.evaluation_seconds,
     }
+
+
+def time_split(*, row: Iteration) -> list[dict]:
+    """Where the iteration's wall time went, phase by phase, in the racer's words: ``phase``,
+    ``label``, ``seconds`` and ``share`` of the wall time [%]. Empty for an iteration recorded
+    without it (imported, or trained before the split was kept)."""
+    if not row.time_split or row.wall_seconds <= 0:
+        return []
+    return [
+        {
+            "phase": phase,
+            "label": label,
+            "seconds": row.time_split.get(phase, 0.0),
+            "share": round(100 * row.time_split.get(phase, 0.0) / row.wall_seconds, 1),
+        }
+        for phase, label in PHASES.items()
+    ]
 
 
 def training_snapshot(*, job: TrainingJob) -> dict:

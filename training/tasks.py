@@ -61,8 +61,8 @@ def evaluate(evaluation_id: int) -> None:
 
 
 def torch_threads() -> None:
-    """The trainer's share of the CPU: on a machine that also simulates, half of the cores, so that
-    PyTorch's threads do not fight the rollout workers for them."""
+    """The trainer's threads: every core by default, as it learns only while the rollout workers
+    wait for its new weights; the setting keeps a share for a machine that runs more."""
     import torch
     from django.conf import settings
 

@@ -34,6 +34,7 @@ from training.jobs import LeaseLost
 from training.learner import Interrupted, Learner
 from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 from training.sandbox.protocol import unpack
+from training.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stopwatch
 
 logger = logging.getLogger(__name__)
 
@@ -111,6 +112,7 @@ class Trainer:
             Slot(i, self.model.track.name) for i in range(len(self.slots), self.model.workers)
         ]
         self.metrics: list[dict] = []
+        self.evaluations: dict[int, list[dict]] = {}  # version: the results come so far
         self.best: tuple[float, float] | None = None  # (evaluation completion, -lap time)
         self.session_started: float | None = None  # when this run's clock started [monotonic]
         self.base_seconds = job.training_seconds  # the time used before this run
@@ -199,6 +201,7 @@ class Trainer:
     def _loop(self) -> None:
         self.collected: list[Episode] = []
         self.last_watch = 0.0
+        self.stopwatch = Stopwatch()
         while True:
             try:
                 if self._turn():
@@ -225,11 +228,16 @@ class Trainer:
             self._watch_workers()
             self._file_logs()
             self._take_evaluations()
-        for payload in self.channel.pop_episodes(limit=50, wait=1.0):
+        self.stopwatch.charge(CHECKS)
+        first = self.channel.wait_for_episode(wait=1.0)
+        self.stopwatch.charge(DRIVING)
+        payloads = [first, *self.channel.pop_episodes(limit=49)] if first is not None else []
+        for payload in payloads:
             episode = self._decode(payload)
             if episode is None or (self.ppo and episode.version != self.version):
                 continue  # PPO learns on-policy: episodes of older weights are dropped
             self.collected.append(episode)
+        self.stopwatch.charge(TRANSFER)
         wanted = model.hyperparameters["num_episodes_between_training"]
         if len(self.collected) >= wanted:
             # Exactly ``wanted`` episodes an iteration, as DeepRacer's workers play their shares
@@ -315,23 +323,24 @@ class Trainer:
     def _update(self, episodes: list[Episode]) -> bool:
         """Learn one iteration from ``episodes`` and record it; False when training ended
         meanwhile (the racer stopped it, or its time ran out) and the iteration was abandoned."""
-        started = time.monotonic()
         number = self.version + 1
         jobs.clock_write(
             self.job, self._spent(), message=f"Learning iteration {number} from "
             f"{len(episodes)} episode{'s' if len(episodes) != 1 else ''}",
         )  # fmt: skip
         live.announce_training(self.job.pk)
+        self.stopwatch.charge(CHECKS)
         try:
             update = self.learner.learn(episodes, interrupted=self._should_end)
         except Interrupted:
             self.abandoned = number
             return False
+        self.stopwatch.charge(UPDATE)
         self.version = number
         self._publish(evaluate=EVALUATION_EPISODES)
-        wall = time.monotonic() - started
+        self.stopwatch.charge(TRANSFER)
         with transaction.atomic():
-            Iteration.objects.create(
+            row = Iteration.objects.create(
                 job=self.job,
                 number=number,
                 reward=update.reward,
@@ -339,7 +348,7 @@ class Trainer:
                 best_lap_time=update.best_lap_time,
                 episodes=update.episodes,
                 steps=update.steps,
-                wall_seconds=wall,
+                wall_seconds=0.0,  # until the iteration is over, below
                 training_points=[
                     [round(float(e.rewards.sum()), 3), round(float(e.progress), 2)]
                     for e in episodes
@@ -355,13 +364,19 @@ class Trainer:
                 last_checkpoint=checkpoint,
             )
         self._record_training(number, episodes)
+        self.stopwatch.charge(SAVING)
         jobs.clock_write(self.job, self._spent(), message=self.training_message)
+        self.stopwatch.charge(CHECKS)
+        split = self.stopwatch.take()
+        wall = sum(split.values())
+        Iteration.objects.filter(pk=row.pk).update(wall_seconds=wall, time_split=split)
         live.announce_iteration(self.job.pk, number)
         live.announce_training(self.job.pk)
         jobs.log(
             self.job,
             f"Iteration {number}: {update.episodes} episodes, {update.steps} steps, "
-            f"average progress {update.completion:.1f}%, learnt in {wall:.1f} s.",
+            f"average progress {update.completion:.1f}%, {wall:.1f} s: "
+            + ", ".join(f"{phase} {split[phase]:.1f} s" for phase in PHASES),
         )
         return True
 
@@ -411,17 +426,23 @@ class Trainer:
                 progress = min(max(float(result["progress"]), 0.0), 100.0)
             except (ValueError, KeyError, TypeError):
                 continue
-            lap = result.get("lap_time")
+            lap, seconds = result.get("lap_time"), result.get("seconds")
             by_version.setdefault(version, []).append(
                 {
                     "progress": progress,
                     "lap_time": float(lap) if isinstance(lap, int | float) else None,
                     "status": str(result.get("status", ""))[:20],
                     "steps": int(result.get("steps", 0)),
+                    "seconds": float(seconds) if isinstance(seconds, int | float) else 0.0,
                 }
             )
+        # An evaluation's episodes come one at a time, beside the next iteration's: it is
+        # recorded once all are in (one cut short by the end of training never is).
         for version, results in by_version.items():
-            self._record_evaluation(version, results)
+            pending = self.evaluations.setdefault(version, [])
+            pending += results
+            if len(pending) >= EVALUATION_EPISODES:
+                self._record_evaluation(version, self.evaluations.pop(version))
 
     def _record_evaluation(self, version: int, results: list[dict]) -> None:
         completion = sum(r["progress"] for r in results) / len(results)
@@ -432,6 +453,7 @@ class Trainer:
         Iteration.objects.filter(pk=row.pk).update(
             evaluation_completion=completion,
             evaluation_points=[round(r["progress"], 2) for r in results],
+            evaluation_seconds=round(sum(r["seconds"] for r in results), 3),
         )
         live.announce_iteration(self.job.pk, version)
         learnt_from = Iteration.objects.filter(job=self.job, number__lte=version).aggregate(

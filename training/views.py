@@ -427,6 +427,7 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "job": job,
             "queue_position": jobs.queue_position(job) if job else None,
             "iterations": iterations,
+            "time_split": selectors.time_split(row=iterations[-1]) if iterations else [],
             "evaluations": selectors.evaluations_for_model(model=model)[:20],
             "races": selectors.races_for_model(model=model)[:20],
             "can_evaluate": model.status == RLModel.Status.READY,

@@ -185,9 +185,9 @@ PITLANE_MAX_BODY = env.int("PITLANE_MAX_BODY", 10 * 2**20, minimum=2**20)  # [by
 PITLANE_MAX_IMPORT_BODY = env.int("PITLANE_MAX_IMPORT_BODY", 257 * 2**20, minimum=2**20)  # [bytes]
 # The queues a complete deployment serves; /healthz reports any that no worker consumes.
 PITLANE_QUEUES = ("training", "simulation")
-PITLANE_TRAINER_THREADS = env.int(
-    "PITLANE_TRAINER_THREADS", max(1, (os.cpu_count() or 2) // 2), minimum=1
-)
+# A trainer learns while its rollout workers wait for the new weights (training.rollouts'
+# _await_next_version), so it may take every core then; idle, its threads take none.
+PITLANE_TRAINER_THREADS = env.int("PITLANE_TRAINER_THREADS", os.cpu_count() or 1, minimum=1)
 # A rollout worker silent this long is taken for dead and replaced; a new one may take longer to
 # start (torch, the simulator and the sandbox load first).
 PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [s]

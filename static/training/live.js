@@ -126,12 +126,16 @@ function receive(message) {
   if (message.type === "state") {
     setStatus(message);
     for (const row of message.history) (kind === "training" ? addIteration : addTrial)(row);
-    if (kind === "training") drawChart();
+    if (kind === "training") {
+      drawChart();
+      showTimeSplit();
+    }
   } else if (message.type === "status") {
     setStatus(message);
   } else if (message.type === "iteration") {
     addIteration(message);
     drawChart();
+    showTimeSplit();
   } else if (message.type === "trial") {
     addTrial(message);
   }
@@ -245,6 +249,38 @@ function addIteration(row) {
     body.prepend(line);
   }
   cells.forEach((value, index) => { line.children[index].textContent = value; });
+}
+
+// Where the newest iteration's time went (the same as the page's template draws it).
+function showTimeSplit() {
+  const panel = find("time-split");
+  const newest = Math.max(...iterations.keys());
+  const row = iterations.get(newest);
+  if (!panel || !row || !row.time_split || !row.time_split.length) return;
+  panel.hidden = false;
+  panel.querySelector("[data-split-number]").textContent = row.number;
+  panel.querySelector("[data-split-wall]").textContent = row.wall_seconds.toFixed(1);
+  const bar = panel.querySelector("[data-split-bar]");
+  const legend = panel.querySelector("[data-split-legend]");
+  bar.replaceChildren(...row.time_split.map((part) => {
+    const piece = document.createElement("span");
+    piece.className = `split-${part.phase}`;
+    piece.style.width = `${part.share}%`;
+    return piece;
+  }));
+  legend.replaceChildren(...row.time_split.map((part) => {
+    const item = document.createElement("li");
+    item.dataset.phase = part.phase;
+    const key = Object.assign(document.createElement("span"), { className: `split-key split-${part.phase}` });
+    const figures = Object.assign(document.createElement("span"), {
+      className: "num", textContent: `${part.seconds.toFixed(1)} s · ${Math.round(part.share)}%`,
+    });
+    item.append(key, `${part.label} `, figures);
+    return item;
+  }));
+  panel.querySelector("[data-split-evaluation]").textContent = row.evaluation_seconds === null
+    ? "Its evaluation drives beside the next iteration."
+    : `Its evaluation drove ${row.evaluation_seconds.toFixed(1)} s beside the next iteration.`;
 }
 
 // The completion axis ends at 100%, and points there are drawn whole (clip: false), not cut

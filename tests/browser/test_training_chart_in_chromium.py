@@ -1,10 +1,11 @@
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.browser.conftest import ARTIFACTS
+from tests.browser.conftest import ARTIFACTS, off_the_loop
 from tests.browser.test_accounts_in_chromium import log_in
 from tests.conftest import PASSWORD
 from tests.training.factories import ready_model
+from training import live
 from training.models import Iteration
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -88,3 +89,30 @@ def test_the_graph_shows_whole_points_at_100_percent_and_a_compact_legend_on_a_p
     )
     wide = canvas.evaluate(CHART)
     assert "Average completion (evaluation)" in wide["labels"]
+
+
+def test_where_the_newest_iterations_time_went_is_shown_beside_the_graph_and_follows_it(
+    page: Page, alice, tracks
+):
+    model = a_model_that_reached_the_finish(alice)
+    job = model.jobs.get()
+    split = {"driving": 4.0, "transfer": 0.5, "update": 5.0, "saving": 0.4, "checks": 0.1}
+    Iteration.objects.filter(job=job, number=4).update(
+        wall_seconds=10.0, time_split=split, evaluation_seconds=3.2
+    )
+    log_in(page, "alice", PASSWORD)
+    page.goto(f"/models/{model.pk}/")
+    shown = page.locator("[data-live-time-split]")
+    expect(shown).to_contain_text("in iteration 4: 10.0 s")
+    expect(shown.locator('[data-phase="update"]')).to_have_text("Policy update 5.0 s · 50%")
+    expect(shown.locator('[data-phase="driving"]')).to_have_text("Driving 4.0 s · 40%")
+    expect(shown).to_contain_text("Its evaluation drove 3.2 s beside the next iteration.")
+
+    Iteration.objects.create(
+        job=job, number=5, reward=100.0, completion=100.0, episodes=5, steps=500,
+        wall_seconds=8.0, time_split={**dict.fromkeys(split, 0.0), "driving": 2.0, "update": 6.0},
+    )  # fmt: skip
+    off_the_loop(live.announce_iteration, job.pk, 5)
+    expect(shown).to_contain_text("in iteration 5: 8.0 s")
+    expect(shown.locator('[data-phase="update"]')).to_have_text("Policy update 6.0 s · 75%")
+    expect(shown).to_contain_text("Its evaluation drives beside the next iteration.")

@@ -11,6 +11,7 @@ from datetime import timedelta
 from pathlib import Path
 
 import gymnasium
+import msgpack
 import pytest
 from django.core.files.storage import default_storage
 from django.core.management import call_command
@@ -28,6 +29,7 @@ from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
 from training.sandbox import MiB, Sandbox
 from training.services import model_create, training_stop
+from training.stopwatch import PHASES
 
 TINY_PPO = {"batch_size": 32, "num_epochs": 3, "num_episodes_between_training": 5}
 
@@ -83,8 +85,14 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     rows = list(Iteration.objects.filter(job=job).order_by("number"))
     assert [row.number for row in rows[:2]] == [1, 2]
     assert all(row.episodes >= 5 and row.steps > 0 for row in rows)
+    for row in rows:  # where each iteration's time went, adding up to its wall time
+        assert set(row.time_split) == set(PHASES)
+        assert sum(row.time_split.values()) == pytest.approx(row.wall_seconds, abs=1e-6)
+        assert row.time_split["driving"] > 0 and row.time_split["update"] > 0
     wait_for(lambda: Iteration.objects.filter(job=job, evaluation_completion__isnull=False)
              .exists(), "an evaluation after an update", timeout=120)  # fmt: skip
+    evaluated = Iteration.objects.filter(job=job, evaluation_completion__isnull=False).first()
+    assert evaluated.evaluation_seconds > 0 and len(evaluated.evaluation_points) == 5
 
     training_stop(job=job)
     job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
@@ -141,6 +149,38 @@ def queued_job(owner) -> TrainingJob:
     """A job saved without enqueueing its trainer: one still waiting for a free worker."""
     clean = configuration.check(settings(), owner=owner, validate_reward=False)
     return TrainingJob.objects.create(model=RLModel.objects.create(owner=owner, **clean))
+
+
+@pytest.mark.django_db(transaction=True)
+def test_evaluations_that_come_after_the_next_update_mark_their_own_checkpoint_best(alice, tracks):
+    """Evaluations drive beside the next iteration: checkpoint 1's results may come in pieces,
+    after iteration 2 was learnt; each is recorded on its own iteration once whole, and the best
+    checkpoint is the one that drove them."""
+    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    run = trainer.Trainer(job, start_rollouts=lambda *args: None)
+    for number in (1, 2):
+        Iteration.objects.create(job=job, number=number, reward=1.0, completion=10.0,
+                                 episodes=5, steps=50, wall_seconds=1.0)  # fmt: skip
+
+    def results(version: int, progress: float, count: int) -> None:
+        for _ in range(count):
+            run.channel.push_evaluation(msgpack.packb(
+                {"version": version, "progress": progress, "lap_time": None,
+                 "status": "off_track", "steps": 30, "seconds": 0.5}
+            ))  # fmt: skip
+
+    results(1, 80.0, 3)
+    results(2, 40.0, 5)
+    run._take_evaluations()
+    assert reload(job).best_checkpoint.endswith(artifacts.checkpoint(2))
+    first = Iteration.objects.get(job=job, number=1)
+    assert first.evaluation_completion is None  # 3 of its 5 results so far
+    results(1, 80.0, 2)
+    run._take_evaluations()
+    first.refresh_from_db()
+    assert (first.evaluation_completion, first.evaluation_seconds) == (80.0, 2.5)
+    assert first.evaluation_points == [80.0] * 5
+    assert reload(job).best_checkpoint.endswith(artifacts.checkpoint(1))
 
 
 @pytest.mark.django_db(transaction=True)
