@@ -14,7 +14,6 @@ from django.utils import timezone
 
 from training import artifacts, jobs
 from training.jobs import IMPORTED
-from training.stopwatch import PHASES
 from training.models import (
     EvaluationJob,
     EvaluationTrial,
@@ -27,6 +26,7 @@ from training.models import (
     TrainingJob,
     Vehicle,
 )
+from training.stopwatch import PHASES
 
 
 def models_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:
