@@ -148,8 +148,9 @@ class Evaluator:
     rather than in turn with them (DeepRacer's first worker drives them after its share of an
     iteration's episodes, while the trainer learns: simapp bundle/markov/rollout_worker.py:
     327-329, 01f5f01), and the trainer marks the best checkpoint when their results come. The
-    newest checkpoint is evaluated: one that a newer replaced while an evaluation ran is not. A failure of the racer's code here fails the
-    job as it would in training: ``check`` raises it on the worker's own thread."""
+    newest checkpoint is evaluated: one that a newer replaced while an evaluation ran is not. A
+    failure of the racer's code here fails the job as it would in training: ``check`` raises it
+    on the worker's own thread."""
 
     def __init__(self, sandbox: Sandbox, channel: JobChannel, attempt: int, printed: Printed):
         self.sandbox, self.channel, self.attempt, self.printed = sandbox, channel, attempt, printed
