@@ -380,7 +380,7 @@ class Iteration(models.Model):
     )
     time_split = models.JSONField(
         default=dict,
-        help_text="[s] of the wall time by phase (``training.trainer.PHASES``); they add up to it.",
+        help_text="[s] of the wall time by phase (training.stopwatch.PHASES); they add up to it.",
     )
     evaluation_seconds = models.FloatField(
         null=True, blank=True,

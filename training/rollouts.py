@@ -40,6 +40,21 @@ class JobEnded(Exception):
     """The trainer ended the job while an episode was being driven: the episode is abandoned."""
 
 
+class EndWatch:
+    """Raises ``JobEnded`` once the trainer has ended the job, looking in Redis at most once per
+    ``STOP_LOOK``: called as an episode drives (its progress messages come every 0.25 s)."""
+
+    def __init__(self, channel: JobChannel, attempt: int) -> None:
+        self.channel, self.attempt = channel, attempt
+        self.looked = time.monotonic()
+
+    def __call__(self) -> None:
+        if time.monotonic() - self.looked >= STOP_LOOK:
+            self.looked = time.monotonic()
+            if self.channel.should_stop(self.attempt):
+                raise JobEnded
+
+
 def run(job_id: int, worker: int, attempt: int, track: str) -> None:
     job = TrainingJob.objects.select_related("model").filter(pk=job_id).first()
     if job is None or not job.is_active or job.attempt != attempt:
@@ -153,12 +168,12 @@ class Evaluator:
     on the worker's own thread."""
 
     def __init__(self, sandbox: Sandbox, channel: JobChannel, attempt: int, printed: Printed):
-        self.sandbox, self.channel, self.attempt, self.printed = sandbox, channel, attempt, printed
+        self.sandbox, self.channel, self.printed = sandbox, channel, printed
         self.evaluated = 0  # the newest version evaluated or being evaluated; 0 is never
         self.thread: threading.Thread | None = None
         self.failure: BaseException | None = None
         self.ending = threading.Event()
-        self.looked = time.monotonic()
+        self.job_ended = EndWatch(channel, attempt)
 
     def offer(self, version: int, weights: bytes) -> None:
         """Evaluate ``version`` (its ``weights``) unless it has been or one runs still."""
@@ -205,10 +220,7 @@ class Evaluator:
     def _beat(self, steps: int) -> None:
         if self.ending.is_set():
             raise JobEnded
-        if time.monotonic() - self.looked >= STOP_LOOK:
-            self.looked = time.monotonic()
-            if self.channel.should_stop(self.attempt):
-                raise JobEnded
+        self.job_ended()
 
 
 class Printed:
@@ -256,16 +268,13 @@ def _drive(
     algorithm, attempt = job.model.algorithm, job.attempt
     version = -1
     weights = b""
-    checked = looked = time.monotonic()
+    checked = time.monotonic()
+    job_ended = EndWatch(channel, attempt)
 
     def beat(steps: int) -> None:  # a long episode still shows the trainer this worker lives
-        nonlocal looked
         channel.beat(worker)
         viewing.update()
-        if time.monotonic() - looked >= STOP_LOOK:
-            looked = time.monotonic()
-            if channel.should_stop(attempt):
-                raise JobEnded
+        job_ended()
 
     while not channel.should_stop(attempt):
         channel.beat(worker)
