@@ -1,9 +1,11 @@
 """The Redis side of a training job: the experience buffer, the published policy and control.
 
 Keys belong to one job and expire after it ends:
-``pitlane:job:<id>:experience`` (a list of episodes), ``pitlane:job:<id>:evaluation`` (a list of
+``pitlane:job:<id>:experience`` (a list of episodes), ``pitlane:job:<id>:counts`` (a hash:
+the training episodes pushed per policy version), ``pitlane:job:<id>:evaluation`` (a list of
 evaluation results), ``pitlane:job:<id>:policy`` (a hash: version, weights) and
-``pitlane:job:<id>:control`` (a hash: stop, attempt, and each rollout worker's heartbeat).
+``pitlane:job:<id>:control`` (a hash: stop, attempt, the run's token, and each rollout worker's
+heartbeat).
 Episodes travel as msgpack with their arrays as raw bytes: they come from a sandbox that ran a
 racer's code, so the trainer checks every field before it learns from one (``decode_episode``).
 """
@@ -11,6 +13,7 @@ racer's code, so the trainer checks every field before it learns from one (``dec
 from __future__ import annotations
 
 import json
+import secrets
 import time
 import zlib
 from dataclasses import dataclass
@@ -50,6 +53,7 @@ class JobChannel:
         self.client = client
         self.job_id = job_id
         self.experience = key(job_id, "experience")
+        self.counts = key(job_id, "counts")
         self.evaluation = key(job_id, "evaluation")
         self.policy = key(job_id, "policy")
         self.control = key(job_id, "control")
@@ -69,14 +73,6 @@ class JobChannel:
         value = self.client.hget(self.policy, "episodes")
         return int(value) if value is not None else 1
 
-    def count_episode(self, version: int) -> int:
-        """Count one more training episode driven with ``version``; the count so far."""
-        name = key(self.job_id, f"count:{version}")
-        pipe = self.client.pipeline()
-        pipe.incr(name)
-        pipe.expire(name, EXPIRE_AFTER)
-        return pipe.execute()[0]
-
     def policy_version(self) -> int:
         value = self.client.hget(self.policy, "version")
         return int(value) if value is not None else -1
@@ -93,11 +89,18 @@ class JobChannel:
 
     # Experience
 
-    def push_episode(self, payload: bytes) -> None:
-        pipe = self.client.pipeline()
+    def push_episode(self, payload: bytes, version: int) -> int:
+        """A training episode driven with ``version`` into the buffer; how many of that version's
+        have been pushed so far. The episode and its count go in one transaction, and ``start``
+        deletes both in one: a worker that outlived a Redis restart, whose client retries its
+        push on the new server, cannot leave a count the buffer does not hold (the other workers
+        would stop short of the episodes the trainer waits for)."""
+        pipe = self.client.pipeline(transaction=True)
         pipe.rpush(self.experience, payload)
         pipe.ltrim(self.experience, -MAX_QUEUED_EPISODES, -1)
-        pipe.execute()
+        pipe.hincrby(self.counts, str(version), 1)
+        pipe.expire(self.counts, EXPIRE_AFTER)
+        return pipe.execute()[2]
 
     def wait_for_episode(self, wait: float) -> bytes | None:
         """The oldest episode in the buffer, waiting at most ``wait`` seconds for one."""
@@ -117,19 +120,38 @@ class JobChannel:
     # Control
 
     def start(self, attempt: int) -> None:
-        self.client.delete(self.experience, self.evaluation, self.control, self.log)
-        self.client.hset(self.control, mapping={"stop": 0, "attempt": attempt})
+        """The job's keys, as new: nothing buffered or counted, and a run of ``attempt`` begun,
+        under a token of its own. The trainer starts one when the job starts and again when Redis
+        comes back from a restart; rollout workers join the run going when they start
+        (``join``), and one that outlived a restart sees the token change and stops, rather
+        than drive on beside its replacement."""
+        pipe = self.client.pipeline(transaction=True)
+        pipe.delete(self.experience, self.counts, self.evaluation, self.control, self.log)
+        pipe.hset(self.control, mapping={
+            "stop": 0, "attempt": attempt, "run": f"{attempt}:{secrets.token_hex(8)}",
+        })  # fmt: skip
+        pipe.execute()
 
     def is_set_up(self, attempt: int) -> bool:
         """Whether the job's control keys are there (a restarted Redis has lost them)."""
         return self.client.hget(self.control, "attempt") == str(attempt).encode()
 
+    def join(self, attempt: int) -> str | None:
+        """The token of the run of ``attempt`` going on, for a rollout worker to drive in; None
+        when none is."""
+        current, run = self.client.hmget(self.control, "attempt", "run")
+        if current != str(attempt).encode() or run is None:
+            return None
+        return run.decode()
+
     def request_stop(self) -> None:
         self.client.hset(self.control, "stop", 1)
 
-    def should_stop(self, attempt: int) -> bool:
-        stop, current = self.client.hmget(self.control, "stop", "attempt")
-        return stop == b"1" or current is None or int(current) != attempt
+    def should_stop(self, run: str) -> bool:
+        """Whether a rollout worker of ``run`` should stop: the trainer asked, or the run is over
+        (its job's keys are gone, or a new run began)."""
+        stop, current = self.client.hmget(self.control, "stop", "run")
+        return stop == b"1" or current is None or current.decode() != run
 
     def beat(self, worker: int) -> None:
         self.client.hset(self.control, f"worker:{worker}", time.time())
@@ -172,7 +194,8 @@ class JobChannel:
         return entries
 
     def expire(self) -> None:
-        for name in (self.experience, self.evaluation, self.policy, self.control, self.log):
+        for name in (self.experience, self.counts, self.evaluation, self.policy, self.control,
+                     self.log):  # fmt: skip
             self.client.expire(name, EXPIRE_AFTER)
 
 

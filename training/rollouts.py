@@ -41,17 +41,18 @@ class JobEnded(Exception):
 
 
 class EndWatch:
-    """Raises ``JobEnded`` once the trainer has ended the job, looking in Redis at most once per
-    ``STOP_LOOK``: called as an episode drives (its progress messages come every 0.25 s)."""
+    """Raises ``JobEnded`` once the trainer has ended the job's run (``JobChannel.should_stop``),
+    looking in Redis at most once per ``STOP_LOOK``: called as an episode drives (its progress
+    messages come every 0.25 s)."""
 
-    def __init__(self, channel: JobChannel, attempt: int) -> None:
-        self.channel, self.attempt = channel, attempt
+    def __init__(self, channel: JobChannel, run: str) -> None:
+        self.channel, self.run = channel, run
         self.looked = time.monotonic()
 
     def __call__(self) -> None:
         if time.monotonic() - self.looked >= STOP_LOOK:
             self.looked = time.monotonic()
-            if self.channel.should_stop(self.attempt):
+            if self.channel.should_stop(self.run):
                 raise JobEnded
 
 
@@ -66,6 +67,10 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
         verified()
     except SandboxUnavailable as error:
         channel.report_failure(str(error))
+        return
+    token = channel.join(attempt)  # the run this worker drives in; it stops when that ends
+    if token is None:
+        logger.info("Rollout %s/%s found no run of attempt %s going on", job_id, worker, attempt)
         return
     policy = {
         "algorithm": model.algorithm,
@@ -89,7 +94,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             evaluator = None
             if worker == 0:  # DeepRacer's first worker evaluates (simapp
                 # bundle/markov/rollout_worker.py:327-329, 01f5f01)
-                evaluator = Evaluator(stack.enter_context(sandbox()), channel, job.attempt,
+                evaluator = Evaluator(stack.enter_context(sandbox()), channel, token,
                                       Printed(label))  # fmt: skip
                 evaluator.sandbox.load(model.reward_function)
                 stack.callback(evaluator.close)
@@ -98,7 +103,8 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             with live.FramePublisher(channel.client, live.training_group(job_id)) as publisher:
                 viewing = Viewing(driver, publisher, worker)
                 try:
-                    why = _drive(driver, channel, job, worker, viewing, printed, evaluator)
+                    why = _drive(driver, channel, token, job, worker, viewing, printed,
+                                 evaluator)  # fmt: skip
                 except JobEnded:
                     why = "the training ended; the episode it was driving was abandoned"
                 channel.push_log([*printed.close(), LogEntry("worker", f"{name} stopped: {why}.")])
@@ -167,13 +173,13 @@ class Evaluator:
     failure of the racer's code here fails the job as it would in training: ``check`` raises it
     on the worker's own thread."""
 
-    def __init__(self, sandbox: Sandbox, channel: JobChannel, attempt: int, printed: Printed):
+    def __init__(self, sandbox: Sandbox, channel: JobChannel, run: str, printed: Printed):
         self.sandbox, self.channel, self.printed = sandbox, channel, printed
         self.evaluated = 0  # the newest version evaluated or being evaluated; 0 is never
         self.thread: threading.Thread | None = None
         self.failure: BaseException | None = None
         self.ending = threading.Event()
-        self.job_ended = EndWatch(channel, attempt)
+        self.job_ended = EndWatch(channel, run)
 
     def offer(self, version: int, weights: bytes) -> None:
         """Evaluate ``version`` (its ``weights``) unless it has been or one runs still."""
@@ -261,22 +267,22 @@ class Printed:
 
 
 def _drive(
-    sandbox: Sandbox, channel: JobChannel, job: TrainingJob, worker: int, viewing: Viewing,
-    printed: Printed, evaluator: Evaluator | None = None,
+    sandbox: Sandbox, channel: JobChannel, run: str, job: TrainingJob, worker: int,
+    viewing: Viewing, printed: Printed, evaluator: Evaluator | None = None,
 ) -> str:  # fmt: skip
-    """Drive episodes until the job ends; why it ended, in the racer's words."""
-    algorithm, attempt = job.model.algorithm, job.attempt
+    """Drive episodes until the job's run ends; why it ended, in the racer's words."""
+    algorithm = job.model.algorithm
     version = -1
     weights = b""
     checked = time.monotonic()
-    job_ended = EndWatch(channel, attempt)
+    job_ended = EndWatch(channel, run)
 
     def beat(steps: int) -> None:  # a long episode still shows the trainer this worker lives
         channel.beat(worker)
         viewing.update()
         job_ended()
 
-    while not channel.should_stop(attempt):
+    while not channel.should_stop(run):
         channel.beat(worker)
         viewing.update()
         if time.monotonic() - checked > JOB_CHECK:
@@ -292,11 +298,11 @@ def _drive(
             evaluator.offer(version, weights)
         mode = "random" if version == 0 and algorithm == hp.SAC else "explore"
         reply = sandbox.episode(mode, worker, beat)
-        channel.push_episode(reply["payload"])
+        pushed = channel.push_episode(reply["payload"], version)
         channel.push_log(printed.take(sandbox, version + 1))
-        if channel.count_episode(version) >= channel.episodes_wanted():
+        if pushed >= channel.episodes_wanted():
             channel.push_log(printed.close())  # this worker's share of the iteration is done
-            if not _await_next_version(channel, job, version, worker, viewing, evaluator):
+            if not _await_next_version(channel, run, job, version, worker, viewing, evaluator):
                 return "the training is over"
     return "the training ended"
 
@@ -310,15 +316,15 @@ def _still_wanted(job: TrainingJob) -> bool:
 
 
 def _await_next_version(
-    channel: JobChannel, job: TrainingJob, version: int, worker: int, viewing: Viewing,
-    evaluator: Evaluator | None = None,
+    channel: JobChannel, run: str, job: TrainingJob, version: int, worker: int,
+    viewing: Viewing, evaluator: Evaluator | None = None,
 ) -> bool:  # fmt: skip
     """The trainer has the episodes it wants of this version: wait while it learns, rather than
     drive episodes it would drop (and take the CPU it learns with). False when the job's row says
     it is over: a trainer that died, or a job deleted, without a word to Redis would otherwise
     leave this worker waiting for ever, holding a place in the pool."""
     checked = time.monotonic()
-    while channel.policy_version() <= version and not channel.should_stop(job.attempt):
+    while channel.policy_version() <= version and not channel.should_stop(run):
         if time.monotonic() - checked > JOB_CHECK:
             checked = time.monotonic()
             if not _still_wanted(job):

@@ -18,12 +18,13 @@ from django.core.management import call_command
 from django.utils import timezone
 
 import simulator
+from console.workers import redis_client
 from simulator.trace import SimTraceRow
 from tests import services
 from tests.services import parent_of, wait_for
 from tests.training.test_deepracer_utils import assert_training_logs_read_as_recorded
 from training import artifacts, configuration, hyperparameters, jobs, tasks, trainer
-from training.experience import decode_episode
+from training.experience import JobChannel, decode_episode
 from training.learner import Learner
 from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
@@ -404,6 +405,26 @@ def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
     wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
 
 
+def test_a_worker_that_outlived_a_redis_restart_neither_miscounts_nor_drives_on():
+    trainer = JobChannel(redis_client(), job_id=987_655)
+    trainer.start(attempt=1)
+    old = trainer.join(1)
+    assert old is not None and trainer.join(2) is None
+    # Redis restarts: the job's keys are gone. The old run's worker, whose client retried its
+    # push on the new server, files the episode it was driving before the trainer notices.
+    trainer.client.delete(trainer.experience, trainer.counts, trainer.control, trainer.policy)
+    assert trainer.should_stop(old)
+    trainer.push_episode(b"old", version=3)
+    trainer.start(attempt=1)  # the trainer's new run, as Redis came back
+    new = trainer.join(1)
+    assert new != old and trainer.should_stop(old) and not trainer.should_stop(new)
+    pushed = [trainer.push_episode(f"new {i}".encode(), version=3) for i in range(5)]
+    # The new run's worker stops at its share, which the buffer holds all of: nothing is counted
+    # that the trainer will not receive.
+    assert pushed == [1, 2, 3, 4, 5]
+    assert trainer.pop_episodes(limit=10) == [f"new {i}".encode() for i in range(5)]
+
+
 @pytest.mark.restarts_redis
 @pytest.mark.django_db(transaction=True)
 def test_a_redis_restart_mid_job_is_recovered(alice, tracks, celery_worker_process):
@@ -418,12 +439,8 @@ def test_a_redis_restart_mid_job_is_recovered(alice, tracks, celery_worker_proce
     services.SESSION_REDIS.restart()
 
     after = job.iterations
-    wait_for(
-        lambda: (current := reload(job)).iterations > after or current.status == "FAILED",
-        "the job to go on", timeout=240,
-    )  # fmt: skip
-    job = reload(job)
-    assert job.status == TrainingJob.Status.IN_PROGRESS, job.failure_reason
+    job = wait_for_job(job, lambda j: j.iterations > after, "the job to go on")
+    assert job.status == TrainingJob.Status.IN_PROGRESS
     assert job.log_lines.filter(text__startswith="Redis is back").exists()
     assert default_storage.exists(job.last_checkpoint)
     celery_worker_process.ensure_running()  # it reconnected, and took the new rollouts
