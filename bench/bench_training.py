@@ -8,8 +8,9 @@ defaults, the default discrete action space, the camera) and lets them train.
 - Throughput: environment steps per second over 20 minutes of training (``--minutes``), policy
   updates included, with 1 and with 2 rollout workers, per iteration with where its time went,
   and the mean over the iterations whose training episodes completed a lap.
-- With --update, the policy update alone: milliseconds per environment step, as Pitlane learns
-  and with PyTorch's stock layers, on one thread and on all.
+- With --update, the policy update alone: milliseconds per environment step, as Pitlane learns,
+  with PyTorch's stock layers, and with the changes tried and not adopted (channels-last
+  tensors, torch.compile), on one thread and on all.
 - Time to qualify (--qualify): for each seed, train; every time a new checkpoint appears, drive
   it (deterministically, outside training) in an evaluation of 3 laps; the figure is the training
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
@@ -172,32 +173,45 @@ def update_speed(steps: int = 2000) -> None:
 
     episodes = [episode() for _ in range(steps // per_episode)]
 
-    def learner(stock: bool) -> Learner:
-        built = Learner(
-            algorithm=PPO, hyperparameters=hyperparameters.defaults(PPO),
-            architecture=networks.SHALLOW, observation_space=spaces[0],
-            action_space=spaces[1],
-        )  # fmt: skip
-        if stock:
-            policy = built.model.policy
-            for module in policy.modules():
-                if isinstance(module, networks.CameraConv2d):
-                    module.__class__ = nn.Conv2d
-            policy.optimizer = torch.optim.Adam(policy.parameters(), lr=policy.optimizer.
-                                                param_groups[0]["lr"], eps=1e-5)  # fmt: skip
-        return built
+    def stock(built: Learner) -> None:
+        policy = built.model.policy
+        for module in policy.modules():
+            if isinstance(module, networks.CameraConv2d):
+                module.__class__ = nn.Conv2d
+        policy.optimizer = torch.optim.Adam(policy.parameters(), lr=policy.optimizer.
+                                            param_groups[0]["lr"], eps=1e-5)  # fmt: skip
 
-    print(f"PPO update, DeepRacer's defaults, {steps} steps [ms per step]:")
+    def channels_last(built: Learner) -> None:
+        built.model.policy.to(memory_format=torch.channels_last)
+
+    def compiled(built: Learner) -> None:
+        policy = built.model.policy
+        policy.pi_features_extractor = torch.compile(policy.pi_features_extractor)
+        policy.vf_features_extractor = torch.compile(policy.vf_features_extractor)
+
+    variants = {  # tried and measured; what Pitlane adopts is "Pitlane"
+        "stock layers": stock,
+        "Pitlane": lambda built: None,
+        "Pitlane, channels last": channels_last,
+        "Pitlane, torch.compile": compiled,
+    }
+    print(f"PPO update, DeepRacer's defaults, {steps} steps [ms per step; warm-up s]:")
     for threads in sorted({1, os.cpu_count() or 1}):
         torch.set_num_threads(threads)
-        for stock in (True, False):
-            built = learner(stock)
-            built.learn(episodes[:2])  # warm up
+        for name, change in variants.items():
+            built = Learner(
+                algorithm=PPO, hyperparameters=hyperparameters.defaults(PPO),
+                architecture=networks.SHALLOW, observation_space=spaces[0],
+                action_space=spaces[1],
+            )  # fmt: skip
+            change(built)
+            started = time.perf_counter()
+            built.learn(episodes[:2])  # warm up (and compile)
+            warm_up = time.perf_counter() - started
             started = time.perf_counter()
             built.learn(episodes)
             took = (time.perf_counter() - started) / steps * 1000
-            print(f"  {threads} thread(s), {'stock layers' if stock else 'Pitlane'}: "
-                  f"{took:.1f}", flush=True)  # fmt: skip
+            print(f"  {threads} thread(s), {name}: {took:.1f}; {warm_up:.1f}", flush=True)
 
 
 def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
