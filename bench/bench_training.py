@@ -307,6 +307,9 @@ def main() -> None:
         "--update", action="store_true", help="time the policy update alone, without a console"
     )
     parser.add_argument(
+        "--steps", type=int, default=2000, help="with --update, the steps learnt from"
+    )
+    parser.add_argument(
         "--minutes",
         type=float,
         default=THROUGHPUT_MINUTES,
@@ -346,7 +349,7 @@ def main() -> None:
         import django
 
         django.setup()
-        update_speed()
+        update_speed(arguments.steps)
         return
     with running_console(concurrency=3) as console:
         os.environ.update(console["env"])
