@@ -139,8 +139,9 @@ def throughput(owner, workers: int, minutes: float) -> None:
 
 def update_speed(steps: int = 2000) -> None:
     """[ms] a PPO update takes per environment step, DeepRacer's defaults (3-layer CNN, camera,
-    10 epochs of minibatches of 64) on random camera frames: as Pitlane learns, and with the
-    first convolution and Adam as PyTorch's stock layers run them, on one thread and on all."""
+    10 epochs of minibatches of 64) on random camera frames: as Pitlane learns, with the first
+    convolution and Adam as PyTorch's stock layers run them, and with the changes tried and not
+    adopted (channels-last tensors, torch.compile), on one thread and on all."""
     import gymnasium
     import numpy as np
     import torch

@@ -134,7 +134,7 @@ class JobChannel:
 
     def is_set_up(self, attempt: int) -> bool:
         """Whether the job's control keys are there (a restarted Redis has lost them)."""
-        return self.client.hget(self.control, "attempt") == str(attempt).encode()
+        return self.join(attempt) is not None
 
     def join(self, attempt: int) -> str | None:
         """The token of the run of ``attempt`` going on, for a rollout worker to drive in; None

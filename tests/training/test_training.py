@@ -406,23 +406,23 @@ def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
 
 
 def test_a_worker_that_outlived_a_redis_restart_neither_miscounts_nor_drives_on():
-    trainer = JobChannel(redis_client(), job_id=987_655)
-    trainer.start(attempt=1)
-    old = trainer.join(1)
-    assert old is not None and trainer.join(2) is None
+    channel = JobChannel(redis_client(), job_id=987_655)
+    channel.start(attempt=1)
+    old = channel.join(1)
+    assert old is not None and channel.join(2) is None
     # Redis restarts: the job's keys are gone. The old run's worker, whose client retried its
     # push on the new server, files the episode it was driving before the trainer notices.
-    trainer.client.delete(trainer.experience, trainer.counts, trainer.control, trainer.policy)
-    assert trainer.should_stop(old)
-    trainer.push_episode(b"old", version=3)
-    trainer.start(attempt=1)  # the trainer's new run, as Redis came back
-    new = trainer.join(1)
-    assert new != old and trainer.should_stop(old) and not trainer.should_stop(new)
-    pushed = [trainer.push_episode(f"new {i}".encode(), version=3) for i in range(5)]
+    channel.client.delete(channel.experience, channel.counts, channel.control, channel.policy)
+    assert channel.should_stop(old)
+    channel.push_episode(b"old", version=3)
+    channel.start(attempt=1)  # the trainer's new run, as Redis came back
+    new = channel.join(1)
+    assert new != old and channel.should_stop(old) and not channel.should_stop(new)
+    pushed = [channel.push_episode(f"new {i}".encode(), version=3) for i in range(5)]
     # The new run's worker stops at its share, which the buffer holds all of: nothing is counted
     # that the trainer will not receive.
     assert pushed == [1, 2, 3, 4, 5]
-    assert trainer.pop_episodes(limit=10) == [f"new {i}".encode() for i in range(5)]
+    assert channel.pop_episodes(limit=10) == [f"new {i}".encode() for i in range(5)]
 
 
 @pytest.mark.restarts_redis
