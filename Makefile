@@ -14,16 +14,15 @@ run: $(VENV)/.run-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	$(BIN)/python manage.py runconsole
 
-test: $(VENV)/.test-installed
+test: lint
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	@scripts/ensure-system-package.sh chromium command -v chromium
-	$(BIN)/ruff check .
-	$(BIN)/ruff format --check .
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
 lint: $(VENV)/.test-installed
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
+	$(BIN)/lint-imports --no-cache
 
 format: $(VENV)/.test-installed
 	$(BIN)/ruff check --fix .

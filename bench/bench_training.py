@@ -14,9 +14,10 @@ defaults, the default discrete action space, the camera) and lets them train.
 - Time to qualify (--qualify): for each seed, train; every time a new checkpoint appears, drive
   it (deterministically, outside training) in an evaluation of 3 laps; the figure is the training
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
-- With --fast, a racer's model instead: a continuous action space up to 4 m/s and a speed-aware
-  reward (``FAST_REWARD``); besides the time to qualify, the fastest lap the checkpoint at
-  ``--lap-after`` training minutes drives, beside the braking driver's lap on the same track.
+- With --fast, a racer's model instead: a continuous action space up to 4 m/s (``--speed``) and a
+  speed-aware reward (``FAST_REWARD``); besides the time to qualify, the fastest lap the
+  checkpoint at ``--lap-after`` training minutes drives, beside the braking driver's lap on the
+  same track. ``--under`` asks for 3 clean laps each under a time: the time to a lap time.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ THROUGHPUT_MINUTES = 20.0
 CHECK_LATE_EVALUATIONS = 5.0  # [s] after the stop, for the evaluation results still coming
 QUALIFY_LIMIT_MINUTES = 30.0
 LAP_AFTER_MINUTES = 20.0
-FAST_ACTIONS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 4.0}}
+FAST_SPEED = (0.5, 4.0)  # [m/s] the --fast model's speed range, unless --speed says otherwise
 FAST_REWARD = """\
 import math
 
@@ -76,7 +77,7 @@ def bench_racer():
 
 def default_model(
     owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False,
-    steering: float = 30, algorithm: str = PPO,
+    steering: float = 30, speed: tuple[float, float] = FAST_SPEED, algorithm: str = PPO,
 ):  # fmt: skip
     from training.rewards import EXAMPLES
     from training.services import model_create
@@ -90,7 +91,10 @@ def default_model(
         "max_minutes": 1440,
     }
     if fast:
-        actions = {**FAST_ACTIONS, "steering_angle": {"low": -steering, "high": steering}}
+        actions = {
+            "steering_angle": {"low": -steering, "high": steering},
+            "speed": {"low": speed[0], "high": speed[1]},
+        }
         settings.update(action_space=actions, reward_function=FAST_REWARD, algorithm=algorithm)
     return model_create(owner=owner, settings=settings)
 
@@ -251,14 +255,17 @@ def time_to_qualify(
     fast: bool = False,
     lap_after: float = LAP_AFTER_MINUTES,
     steering: float = 30,
+    speed: tuple[float, float] = FAST_SPEED,
+    under: float | None = None,
     algorithm: str = PPO,
 ) -> tuple[float | None, float | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
-    after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies."""
+    after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies.
+    With ``under``, qualifying takes 3 clean laps each under that many seconds."""
     from training.services import training_stop
 
     model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast,
-                          steering=steering, algorithm=algorithm)  # fmt: skip
+                          steering=steering, speed=speed, algorithm=algorithm)  # fmt: skip
     tried = set()
     qualified = None
     while True:
@@ -267,24 +274,27 @@ def time_to_qualify(
         if job.last_checkpoint and job.last_checkpoint not in tried and job.iterations > 0:
             tried.add(job.last_checkpoint)
             ok, laps = qualifies(model, job.last_checkpoint)
+            ok = ok and (under is None or max(laps) < under)
             print(
                 f"  seed {seed}: iteration {job.iterations} after {minutes:.1f} min: "
                 + (
                     "qualified, laps " + ", ".join(f"{t:.2f}" for t in laps)
                     if ok
-                    else f"not yet ({len(laps)} clean laps)"
+                    else f"not yet ({len(laps)} clean laps"
+                    + (": " + ", ".join(f"{t:.2f}" for t in laps) if laps else "")
+                    + ")"
                 ),
                 flush=True,
             )
             if ok and qualified is None:
                 qualified = minutes
-            if not fast and qualified is not None:
-                training_stop(job=job)
-                return qualified, None
+            if qualified is not None and (not fast or under is not None):
+                training_stop(job=job)  # the time to qualify (or to the lap time) is known
+                return qualified, (min(laps) if fast else None)
             if fast and minutes >= lap_after:
                 training_stop(job=job)
                 return qualified, (min(laps) if ok else None)
-        if minutes > max(limit, lap_after if fast else 0):
+        if minutes > max(limit, lap_after if fast and under is None else 0):
             training_stop(job=job)
             return qualified, None
         time.sleep(5)
@@ -334,6 +344,14 @@ def main() -> None:
         "--steering", type=float, default=30, help="[deg] with --fast, the steering range's bound"
     )
     parser.add_argument(
+        "--speed", type=float, nargs=2, default=FAST_SPEED, metavar=("LOW", "HIGH"),
+        help="[m/s] with --fast, the speed range",
+    )  # fmt: skip
+    parser.add_argument(
+        "--under", type=float, default=None,
+        help="[s] qualifying takes 3 clean laps each under this time",
+    )  # fmt: skip
+    parser.add_argument(
         "--algorithm", choices=(PPO, SAC), default=PPO,
         help="with --fast, PPO (DeepRacer's default) or SAC",
     )  # fmt: skip
@@ -360,17 +378,21 @@ def main() -> None:
 
         owner = bench_racer()
         if arguments.qualify:
-            print("Time to qualify (3 clean consecutive laps), training minutes:")
+            under = f", each under {arguments.under:g} s" if arguments.under else ""
+            print(f"Time to qualify (3 clean consecutive laps{under}), training minutes:")
             if arguments.fast:
                 print(f"The braking driver's lap on the Rookie Loop: {braking_lap():.2f} s")
             for seed in arguments.seeds:
                 minutes, best = time_to_qualify(
                     owner, seed, arguments.limit, fast=arguments.fast,
                     lap_after=arguments.lap_after, steering=arguments.steering,
+                    speed=tuple(arguments.speed), under=arguments.under,
                     algorithm=arguments.algorithm,
                 )  # fmt: skip
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
-                if arguments.fast:
+                if arguments.fast and arguments.under:
+                    shown += f"; its best lap: {best:.2f} s" if best else ""
+                elif arguments.fast:
                     shown += (f"; best lap after {arguments.lap_after:g} min: "
                               + (f"{best:.2f} s" if best else "no 3 clean laps"))  # fmt: skip
                 print(f"seed {seed}: {shown}", flush=True)

@@ -10,7 +10,8 @@ import redis
 from django.conf import settings
 from django.db import DatabaseError, connection
 
-from console.workers import live_workers, redis_client
+from common.redis_client import redis_client
+from console.workers import live_workers
 
 
 class Down(Exception):

@@ -29,8 +29,9 @@ import redis
 from django.conf import settings
 from django.core.management import call_command
 
+from common.redis_client import redis_client
 from console.env import env
-from console.workers import live_workers, redis_client
+from console.workers import live_workers
 
 STOP_GRACE = 15.0  # [s] between SIGTERM and SIGKILL
 START_TIMEOUT = 60.0  # [s] for Redis and the web server to answer

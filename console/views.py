@@ -8,7 +8,8 @@ from django.utils.http import url_has_allowed_host_and_scheme
 from django.views.decorators.cache import never_cache
 from django.views.decorators.http import require_safe
 
-from console import guidance, ratelimits
+from common import ratelimits
+from console import guidance
 from console.forms import SignUpForm
 from console.health import system_health
 from racing.models import RankingMethod

@@ -16,7 +16,8 @@ import time
 
 import redis
 from celery import signals
-from django.conf import settings
+
+from common.redis_client import redis_client
 
 logger = logging.getLogger(__name__)
 
@@ -25,14 +26,6 @@ HEARTBEAT_INTERVAL = 5.0  # [s]
 HEARTBEAT_TTL = 15  # [s] a worker silent this long is gone
 
 _stop = threading.Event()
-
-
-def redis_client(timeout: float = 1.0) -> redis.Redis:
-    """A Redis client for Pitlane's own keys, failing fast when Redis is unreachable; commands
-    that block (such as BLPOP) need a ``timeout`` longer than they wait."""
-    return redis.Redis.from_url(
-        settings.REDIS_URL, socket_connect_timeout=2.0, socket_timeout=timeout
-    )
 
 
 def live_workers(client: redis.Redis) -> list[dict]:

@@ -19,7 +19,7 @@ from django.db import transaction
 from django.urls import reverse
 from django.utils import timezone
 
-from console.templatetags.pitlane import clock, laptime
+from common.formatting import clock, laptime
 from notifications.models import Notification
 
 logger = logging.getLogger(__name__)

@@ -11,7 +11,7 @@ from django.db import models
 from django.db.models import QuerySet
 from django.http import HttpRequest
 
-from console.templatetags.pitlane import laptime
+from common.formatting import laptime
 from racing import services
 from racing.forms import LOCAL, RaceObstaclesForm
 from racing.models import Event, Lap, Racer, Ranking, Season, Submission

@@ -8,7 +8,7 @@ from django import forms
 from django.core.exceptions import ValidationError
 from django.utils import timezone
 
-from console.time_zones import local_text
+from common.time_zones import local_text
 from racing import selectors
 from racing.models import Event, RaceType, RankingMethod
 from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS

@@ -9,7 +9,7 @@ from django.core.paginator import Page, Paginator
 from django.db.models import Count, Min, Prefetch, Q, QuerySet
 from django.utils import timezone
 
-from console.time_zones import local_text
+from common.time_zones import local_text
 from racing.models import (
     RANKING_ORDER,
     Division,

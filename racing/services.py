@@ -15,6 +15,7 @@ from django.utils import timezone
 from django.utils.crypto import get_random_string
 from django.utils.text import slugify
 
+from common.refusals import Refused
 from notifications import services as notifications
 from racing import live, scoring, selectors, tasks
 from racing.models import (
@@ -37,7 +38,7 @@ PROMOTED_SHARE = 0.10  # the top 10% of a month's Open time trials move up to Pr
 VIDEO = "video.webm"
 
 
-class SubmissionRefused(Exception):
+class SubmissionRefused(Refused):
     """The racer cannot submit this model to this event; the message says why."""
 
 

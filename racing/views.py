@@ -8,7 +8,7 @@ from django.shortcuts import get_object_or_404, redirect, render
 from django.urls import reverse
 from django.views.decorators.http import require_POST
 
-from console import ratelimits
+from common import ratelimits
 from racing import selectors, services
 from racing.forms import CommunityRaceForm, SubmissionForm
 from racing.models import Division, Event, Ranking, Season, Submission

@@ -13,9 +13,13 @@ from dataclasses import dataclass
 # DeepRacer's control rate: the car acts, and a step is traced, 15 times a simulated second.
 CONTROL_HZ = 15  # [Hz]
 CAMERAS = ("FRONT_FACING_CAMERA", "STEREO_CAMERAS")
+# The front camera's name in models of simapp before 2.0 (simapp
+# bundle/markov/boto/s3/files/model_metadata.py:229-241, 01f5f01).
+LEGACY_CAMERA = "observation"
 LIDARS = ("SECTOR_LIDAR", "LIDAR")
 RACE_TYPES = ("TIME_TRIAL", "OBJECT_AVOIDANCE", "HEAD_TO_BOT")
 MODES = ("training", "evaluation")
+VIEWS = ("spectator", "camera")  # what a live viewer can watch (simulator.spectator.view_image)
 MAX_STEERING = 30.0  # [deg]
 SPEED_RANGE = (0.1, 4.0)  # [m/s]
 MAX_OBJECTS = 6

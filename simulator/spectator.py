@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from simulator.camera import Lens, Mount, PerspectiveView, Solid
+from simulator.config import VIEWS
 from simulator.texture import preview_texture, render
 from simulator.tracks import Track
 
@@ -26,7 +27,6 @@ TRAIL_POINTS = 900  # the last minute at 15 steps/s
 TRAIL_COLOUR = (60, 60, 230)
 SLIDE_COLOUR = (40, 120, 255)  # BGR: orange
 TEXT_COLOUR = (255, 255, 255)
-VIEWS = ("spectator", "camera")  # what a live viewer can watch (see ``view_image``)
 TYRE_SHADE = (30, 30, 30)  # BGR: dark on every shell colour
 GLASS_SHADE = (78, 56, 40)  # BGR: tinted windows
 WHEEL = (0.066, 0.034)  # [m] diameter and width of a 1/18 car's wheel

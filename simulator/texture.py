@@ -102,6 +102,16 @@ def preview(track: Track, *, width: int = 480) -> np.ndarray:
     return preview_texture(track, width=width).image
 
 
+def preview_png(track: Track, *, width: int = 480) -> bytes:
+    """``preview`` as a PNG file's bytes."""
+    encoded, png = cv2.imencode(
+        ".png", preview(track, width=width), [cv2.IMWRITE_PNG_COMPRESSION, 9]
+    )
+    if not encoded:
+        raise ValueError("the track's preview could not be encoded")
+    return png.tobytes()
+
+
 def preview_texture(track: Track, *, width: int = 480) -> TrackTexture:
     """``preview``'s picture with its world-to-pixel transform, for drawing on it."""
     low, high = track.bounds

@@ -11,7 +11,8 @@ import redis
 from django.conf import settings
 from django.contrib.auth.models import User
 
-from console.workers import live_workers, redis_client
+from common.redis_client import redis_client
+from console.workers import live_workers
 from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
 
 PASSWORD = "correct-horse-battery-staple"

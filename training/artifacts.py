@@ -12,10 +12,14 @@ from django.core.files.storage import FileSystemStorage, default_storage
 from django.http import FileResponse, HttpResponse, HttpResponseRedirect
 
 from training.hyperparameters import deepracer_json
-from training.models import RLModel
+from training.models import EvaluationJob, RLModel
 
 TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE section 5
 CLONED_WEIGHTS = "checkpoints/cloned.safetensors"  # a clone's start: its source's best weights
+# An evaluation's files, under ``evaluation_prefix``.
+EVALUATION_VIDEO = "video.webm"
+EVALUATION_TRACE = "evaluation-simtrace/0-iteration.csv"
+EVALUATION_METRICS = "metrics/evaluation_metrics.json"
 
 
 # simapp bundle/markov/metrics/constants.py:118-129 (01f5f01): the labels the metrics JSON gives
@@ -57,6 +61,11 @@ def checkpoint_iteration(name: str) -> int | None:
     came otherwise (an import)."""
     found = re.search(r"/checkpoints/iteration-(\d+)\.safetensors$", name)
     return int(found.group(1)) if found else None
+
+
+def evaluation_prefix(evaluation: EvaluationJob) -> str:
+    """Where an evaluation's files live, relative to its model's prefix."""
+    return f"evaluations/{evaluation.pk}/"
 
 
 def path(model: RLModel, relative: str) -> str:

@@ -11,6 +11,7 @@ import math
 import re
 from collections.abc import Mapping
 
+from common.refusals import Refused
 from simulator import config as sim
 from training import hyperparameters as hp
 from training.models import Algorithm, Network, RLModel, ShellColour, Track, Vehicle
@@ -23,12 +24,8 @@ TRIALS = (3, 5)
 PENALTY_MAX = 10.0  # [s]
 
 
-class Invalid(Exception):
+class Invalid(Refused):
     """Settings with problems: ``errors`` maps each setting to what is wrong with it."""
-
-    def __init__(self, errors: dict[str, str]) -> None:
-        super().__init__("; ".join(f"{name}: {message}" for name, message in errors.items()))
-        self.errors = errors
 
 
 def name_problem(name: str, *, owner) -> str | None:

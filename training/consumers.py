@@ -23,7 +23,7 @@ from asgiref.sync import sync_to_async
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncWebsocketConsumer
 
-from console.workers import redis_client
+from common.redis_client import redis_client
 from training import live, selectors
 from training.models import EvaluationJob, TrainingJob
 

@@ -33,7 +33,7 @@ from django.db import transaction
 from django.utils import timezone
 
 import simulator
-from console.workers import redis_client
+from common.redis_client import redis_client
 from notifications import services as notifications
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
@@ -49,10 +49,7 @@ RUNNABLE = (
     EvaluationJob.Status.INITIALIZING,
     EvaluationJob.Status.IN_PROGRESS,
 )
-VIDEO = "video.webm"
 VIDEO_CODEC = "VP80"
-TRACE = "evaluation-simtrace/0-iteration.csv"
-METRICS = "metrics/evaluation_metrics.json"
 
 
 class EvaluationFailed(Exception):
@@ -109,11 +106,6 @@ def _one_torch_thread() -> Iterator[None]:
         yield
     finally:
         torch.set_num_threads(threads)
-
-
-def files_prefix(evaluation: EvaluationJob) -> str:
-    """Where an evaluation's files live: under its model's prefix."""
-    return f"evaluations/{evaluation.pk}/"
 
 
 def run(evaluation_id: int) -> EvaluationJob | None:
@@ -196,7 +188,7 @@ class Evaluator:
         _update(evaluation, status=EvaluationJob.Status.IN_PROGRESS, message="Racing")
         _announce(evaluation)
         with tempfile.TemporaryDirectory(prefix="pitlane-evaluation-") as directory:
-            video_path = Path(directory) / VIDEO
+            video_path = Path(directory) / artifacts.EVALUATION_VIDEO
             writer = _VideoWriter(video_path)
             group = live.evaluation_group(evaluation.pk)
             try:
@@ -321,10 +313,12 @@ class Evaluator:
     # Files
 
     def _save(self, video_path: Path) -> None:
-        prefix = files_prefix(self.evaluation)
-        artifacts.save(self.model, prefix + TRACE, to_csv(self.trace))
-        artifacts.save(self.model, prefix + METRICS, json.dumps({"metrics": self.metrics}))
-        name = artifacts.path(self.model, prefix + VIDEO)
+        prefix = artifacts.evaluation_prefix(self.evaluation)
+        artifacts.save(self.model, prefix + artifacts.EVALUATION_TRACE, to_csv(self.trace))
+        artifacts.save(
+            self.model, prefix + artifacts.EVALUATION_METRICS, json.dumps({"metrics": self.metrics})
+        )
+        name = artifacts.path(self.model, prefix + artifacts.EVALUATION_VIDEO)
         if default_storage.exists(name):
             default_storage.delete(name)
         with video_path.open("rb") as handle:

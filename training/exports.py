@@ -36,28 +36,21 @@ import tarfile
 import tempfile
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
-import torch
 from django.core.files.storage import default_storage
 from django.db.models import Sum
-from stable_baselines3.common.preprocessing import preprocess_obs
-from torch import nn
 
-from training import artifacts, hyperparameters, networks, selectors
-from training.cargraph import car_graph
+from common.refusals import Refused
+from training import artifacts, hyperparameters, selectors
 from training.models import RLModel
-from training.networks import CAMERAS, LIDARS
-from training.policies import Policy
 
-OPSET = 17
 CAR_GRAPH = "agent/model.pb"  # where simapp puts it (tensorflow_model.py:355-371, 01f5f01)
 PITLANE_SETTINGS = "pitlane.json"
 HYPERPARAMETERS = "ip/hyperparameters.json"  # simapp bundle/markov/boto/s3/constants.py:43
 FORMAT = 2  # of pitlane.json; 2 added network_layout
 
 
-class ExportRefused(Exception):
+class ExportRefused(Refused):
     """The model has nothing to export yet; the message says why."""
 
 
@@ -69,71 +62,9 @@ class Export:
     filename: str
 
 
-class CarNetwork(nn.Module):
-    """The policy as the car runs it: sensor inputs in, the action's distribution out."""
-
-    def __init__(self, policy: Policy, discrete: bool) -> None:
-        super().__init__()
-        self.network = policy.network  # a submodule: its weights go into the graph
-        self.ppo, self.discrete = policy.ppo, discrete
-        space = policy.network.observation_space
-        self.camera = next(key for key in space.spaces if key in CAMERAS)
-        self.lidar = next((key for key in space.spaces if key in LIDARS), None)
-
-    def forward(self, camera: torch.Tensor, lidar: torch.Tensor | None = None) -> torch.Tensor:
-        observation = {self.camera: camera}
-        if self.lidar is not None:
-            observation[self.lidar] = lidar
-        network = self.network
-        if self.ppo:
-            # SB3 scales image inputs to [0, 1] in its preprocessing, inside the graph.
-            features = network.pi_features_extractor(
-                preprocess_obs(observation, network.observation_space)
-            )
-            latent = network.mlp_extractor.forward_actor(features)
-            out = network.action_net(latent)
-            return torch.softmax(out, dim=1) if self.discrete else out.clamp(-1.0, 1.0)
-        mean, _, _ = network.actor.get_action_dist_params(observation)
-        return torch.tanh(mean)
-
-    def sample_inputs(self) -> tuple[torch.Tensor, ...]:
-        space = self.network.observation_space
-        inputs = [torch.zeros((1, *space[self.camera].shape), dtype=torch.float32)]
-        if self.lidar is not None:
-            inputs.append(torch.zeros((1, *space[self.lidar].shape), dtype=torch.float32))
-        return tuple(inputs)
-
-    @property
-    def input_names(self) -> list[str]:
-        return [self.camera] + ([self.lidar] if self.lidar else [])
-
-    @property
-    def output_name(self) -> str:
-        return "probabilities" if self.discrete else "action"
-
-
-def car_network(model: RLModel, weights: bytes) -> CarNetwork:
-    """The model's network with ``weights`` (a checkpoint), as the car runs it."""
-    policy = Policy.for_environment(
-        model.algorithm, model.architecture, model.environment_settings()
-    )
-    policy.load_checkpoint(weights)
-    network = CarNetwork(policy, model.action_space_type == "discrete")
-    network.eval()
-    return network
-
-
-def onnx_model(network: CarNetwork, path: Path) -> None:
-    with torch.no_grad():
-        torch.onnx.export(
-            network, network.sample_inputs(), str(path), dynamo=False, opset_version=OPSET,
-            input_names=network.input_names, output_names=[network.output_name],
-        )  # fmt: skip
-
-
 def physical(model: RLModel, which: str = "best") -> Export:
     """The physical-car archive of the model's ``which`` checkpoint, built once per checkpoint."""
-    if model.network_layout != networks.LAYOUT:
+    if model.network_layout != hyperparameters.NETWORK_LAYOUT:
         raise ExportRefused(
             "This model was trained before Pitlane's networks were DeepRacer's, so the car cannot "
             "run it (nor a clone of it, which keeps its network): train a new model with the same "
@@ -145,11 +76,9 @@ def physical(model: RLModel, which: str = "best") -> Export:
         f"physicalmodel-{model.name}.tar.gz",
     )
     if not default_storage.exists(export.name):
-        policy = Policy.for_environment(
-            model.algorithm, model.architecture, model.environment_settings()
-        )
-        policy.load_checkpoint(weights)
-        graph = car_graph(policy, model.action_space_type == "discrete")
+        from training.cargraph import car_graph  # torch: loaded by a process's first export
+
+        graph = car_graph(_policy(model, weights), model.action_space_type == "discrete")
         _store(export.name, {"model_metadata.json": _json(model.metadata()), CAR_GRAPH: graph})
     return export
 
@@ -162,11 +91,9 @@ def onnx(model: RLModel, which: str = "best") -> Export:
         f"onnxmodel-{model.name}.tar.gz",
     )
     if not default_storage.exists(export.name):
-        network = car_network(model, weights)
-        with tempfile.TemporaryDirectory(prefix="pitlane-export-") as directory:
-            path = Path(directory) / "model.onnx"
-            onnx_model(network, path)
-            graph = path.read_bytes()
+        from training.onnxgraph import onnx_graph  # torch: loaded by a process's first export
+
+        graph = onnx_graph(_policy(model, weights), model.action_space_type == "discrete")
         _store(export.name, {"model_metadata.json": _json(model.metadata()), "model.onnx": graph})
     return export
 
@@ -224,6 +151,17 @@ def pitlane_settings(model: RLModel) -> dict:
         "shell_colour": model.shell_colour,
         "training_seconds": round(model.jobs.aggregate(s=Sum("training_seconds"))["s"] or 0, 1),
     }
+
+
+def _policy(model: RLModel, weights: bytes):
+    """The model's policy with ``weights`` (a checkpoint)."""
+    from training.policies import Policy  # torch: loaded by a process's first export
+
+    policy = Policy.for_environment(
+        model.algorithm, model.architecture, model.environment_settings()
+    )
+    policy.load_checkpoint(weights)
+    return policy
 
 
 def _checkpoint(model: RLModel, which: str) -> bytes:

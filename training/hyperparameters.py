@@ -14,6 +14,9 @@ from dataclasses import dataclass, field
 
 PPO = "clipped_ppo"
 SAC = "sac"
+# How a new model's network is laid out (training.networks): 2 is DeepRacer's, layer for layer;
+# 1 was Pitlane's own. A model keeps the layout it was created with.
+NETWORK_LAYOUT = 2
 
 # simapp bundle/markov/constants.py:65-69 (01f5f01): DeepRacer's spellings of the loss type.
 HUBER = "huber"

@@ -24,7 +24,7 @@ import zlib
 from dataclasses import dataclass, field
 from datetime import timedelta
 from pathlib import PurePosixPath
-from typing import IO
+from typing import IO, TYPE_CHECKING
 
 import yaml
 from django.contrib.auth.models import AbstractBaseUser
@@ -36,6 +36,7 @@ from django.utils import timezone
 from google.protobuf.message import DecodeError
 from safetensors import SafetensorError
 
+from common.refusals import Refused
 from simulator import config as sim
 from simulator import tracks as sim_tracks
 from training import (
@@ -45,15 +46,14 @@ from training import (
     history,
     hyperparameters,
     jobs,
-    networks,
-    rewards,
     services,
     tfcheckpoint,
     tfgraph,
-    tfweights,
 )
 from training.models import Algorithm, Network, RLModel, ShellColour, Track, TrainingJob
-from training.policies import Policy
+
+if TYPE_CHECKING:
+    from training.policies import Policy
 
 MiB = 1024 * 1024
 MAX_ARCHIVE = 256 * MiB  # [bytes] as uploaded
@@ -93,7 +93,7 @@ KEPT_FOLDER = "imports/kept"  # in storage: archives kept between a racer's atte
 KEPT_FOR = timedelta(hours=6)
 KEPT_SESSION_KEY = "training:kept-import"
 DEFAULT_TRACK = "rookie-loop"
-SENSOR_ALIASES = {tfweights.LEGACY_CAMERA: "FRONT_FACING_CAMERA"}  # model_metadata.py:229-241
+SENSOR_ALIASES = {sim.LEGACY_CAMERA: "FRONT_FACING_CAMERA"}
 DEEPRACER_ALGORITHMS = {"clipped_ppo": Algorithm.PPO, "ppo": Algorithm.PPO, "sac": Algorithm.SAC}
 
 
@@ -111,7 +111,7 @@ NOT_AN_ARCHIVE = (
 )
 
 
-class ImportRefused(Exception):
+class ImportRefused(Refused):
     """The archive cannot be imported; the message says why, in a racer's words."""
 
 
@@ -151,7 +151,7 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
                                    checkpoints=lambda _: weights)  # fmt: skip
     elif tensorflow and _weights_fit(metadata, settings, notes):
         imported = _import_trained(
-            owner, settings, members, ours, layout=networks.LAYOUT,
+            owner, settings, members, ours, layout=hyperparameters.NETWORK_LAYOUT,
             checkpoints=lambda policy: tensorflow.load(archive, members, policy, notes),
         )  # fmt: skip
     elif not reward.strip():
@@ -159,14 +159,8 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
             "The archive has no reward_function.py, and its weights are for a car this console "
             "does not have (see model_metadata.json): there is nothing to train or to drive."
         )
-    else:  # the reward function is validated first, outside the transaction that saves
-        validation = None
-        if where := configuration.reward_sample_track(settings):
-            validation = rewards.reward_validate(
-                source=settings["reward_function"], track=where[0], direction=where[1]
-            )
-        model = services.model_create(owner=owner, settings=settings, validation=validation)
-        return Imported(model, notes)
+    else:
+        return Imported(services.model_create(owner=owner, settings=settings), notes)
     imported.notes = notes + imported.notes
     if not reward.strip():
         imported.notes.append(
@@ -719,6 +713,8 @@ class _TensorFlowFiles:
         """Our checkpoints (best, last) from the TensorFlow files, loaded into ``policy``: the
         checkpoints' policy with its critics, or, without a checkpoint, the frozen graph's
         policy."""
+        from training import tfweights  # torch: loaded by a process's first import of weights
+
         ours = {}
         for path, prefix in zip(CHECKPOINTS, self.checkpoints or [None], strict=False):
             what = prefix or self.graph
@@ -781,6 +777,8 @@ def _number(pattern: re.Pattern, path: str) -> int:
 def _checkpoint_tensors(archive: IO[bytes], members: Members, prefix: str, ppo: bool) -> dict:
     """The tensors ``tfweights`` reads, from the checkpoint at ``prefix``: its index lists them,
     then only their bytes are read from its data file, in one forward pass over the archive."""
+    from training import tfweights  # torch: loaded by a process's first import of weights
+
     listed = tfcheckpoint.entries(members[prefix + tfcheckpoint.SUFFIX_INDEX] or b"")
     names = tfweights.wanted(listed, ppo)
     data_path = prefix + tfcheckpoint.SUFFIX_DATA
@@ -818,6 +816,8 @@ def _import_trained(
     clean = configuration.check(settings, owner=owner, reward_required=trainable)
     clean["network_layout"] = layout
     model = RLModel(**clean)
+    from training.policies import Policy  # torch: loaded by a process's first import of weights
+
     policy = Policy.for_environment(clean["algorithm"], model.architecture,
                                     model.environment_settings())  # fmt: skip
     weights = checkpoints(policy)

@@ -8,11 +8,17 @@ value loss (Huber or MSE) is honoured; SAC's is SB3's. Weights go out as safeten
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import functools
+import json
+import subprocess
+import tomllib
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 import gymnasium
 import numpy as np
+import stable_baselines3
 import torch
 from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
@@ -52,7 +58,18 @@ class SpacesOnly(gymnasium.Env):
 
 
 class DeepRacerPPO(PPO):
-    """SB3's PPO with DeepRacer's choice of value loss."""
+    """SB3's PPO with DeepRacer's update (rl_coach's ClippedPPO, as simapp configures it).
+
+    Two things differ from SB3's ``PPO.train``: the advantages are standardised once over the
+    whole batch, as rl_coach does (bundle/rl_coach/.../agents/clipped_ppo_agent.py:184-185,
+    01f5f01), not per minibatch; and the value loss is Huber when DeepRacer's ``loss_type`` is
+    "huber", mean squared error for anything else, "mse" included (simapp
+    bundle/markov/sagemaker_graph_manager.py:139-140). SB3's options keep their meaning:
+    ``normalize_advantage`` (False leaves the advantages as estimated), ``clip_range_vf`` (the
+    value moves at most that far from the rollout's), ``target_kl`` (the update stops before a
+    step whose minibatch is past 1.5 times it, from the policy the episodes were driven with),
+    ``max_grad_norm``, ``ent_coef`` and ``vf_coef``.
+    """
 
     def __init__(self, *args, value_loss: str = hp.HUBER, **kwargs) -> None:
         self.value_loss = value_loss
@@ -62,40 +79,57 @@ class DeepRacerPPO(PPO):
     def train(self) -> None:
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
-        clip = self.clip_range(self._current_progress_remaining)
-        # As simapp: Huber when loss_type is "huber", mean squared error for anything else
-        # (bundle/markov/sagemaker_graph_manager.py:139-140, 01f5f01), "mse" included.
-        value_loss_of = (
-            functional.smooth_l1_loss if self.value_loss == hp.HUBER else functional.mse_loss
-        )
-        discrete = isinstance(self.action_space, gymnasium.spaces.Discrete)
+        if self.normalize_advantage:
+            advantages = self.rollout_buffer.advantages
+            advantages[:] = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
         losses = []
-        for _ in range(self.n_epochs):
-            for batch in self.rollout_buffer.get(self.batch_size):
-                if self.interrupted():
-                    raise Interrupted
-                actions = batch.actions.long().flatten() if discrete else batch.actions
-                values, log_prob, entropy = self.policy.evaluate_actions(
-                    batch.observations, actions
-                )
-                advantages = batch.advantages
-                if len(advantages) > 1:
-                    advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-                ratio = torch.exp(log_prob - batch.old_log_prob)
-                policy_loss = -torch.min(
-                    advantages * ratio, advantages * torch.clamp(ratio, 1 - clip, 1 + clip)
-                ).mean()
-                value_loss = value_loss_of(values.flatten(), batch.returns)
-                entropy_loss = -(entropy if entropy is not None else -log_prob).mean()
-                loss = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
-                self.policy.optimizer.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
-                self.policy.optimizer.step()
-                losses.append((policy_loss.item(), value_loss.item(), entropy_loss.item()))
-        self._n_updates += self.n_epochs
+        for batch in self._minibatches():
+            if self.interrupted():
+                raise Interrupted
+            loss, terms, kl = self._loss(batch)
+            if self.target_kl is not None and kl > 1.5 * self.target_kl:
+                break
+            self.policy.optimizer.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            self.policy.optimizer.step()
+            losses.append(terms)
         self.last_losses = dict(zip(("policy", "value", "entropy"), np.mean(losses, axis=0),
                                     strict=True)) if losses else {}  # fmt: skip
+
+    def _minibatches(self) -> Iterator:
+        """The rollout's minibatches, shuffled anew in each of ``n_epochs`` passes."""
+        for _ in range(self.n_epochs):
+            yield from self.rollout_buffer.get(self.batch_size)
+            self._n_updates += 1
+
+    def _loss(self, batch) -> tuple[torch.Tensor, tuple[float, float, float], float]:
+        """(the loss of ``batch``, its policy, value and entropy terms, the approximate KL
+        divergence of the policy from the one that drove)."""
+        progress = self._current_progress_remaining
+        actions = batch.actions
+        if isinstance(self.action_space, gymnasium.spaces.Discrete):
+            actions = actions.long().flatten()
+        values, log_prob, entropy = self.policy.evaluate_actions(batch.observations, actions)
+        values = values.flatten()
+        log_ratio = log_prob - batch.old_log_prob
+        ratio = torch.exp(log_ratio)
+        clip = self.clip_range(progress)
+        surrogate = torch.min(
+            batch.advantages * ratio, batch.advantages * torch.clamp(ratio, 1 - clip, 1 + clip)
+        )
+        policy_loss = -surrogate.mean()
+        if self.clip_range_vf is not None:
+            reach = self.clip_range_vf(progress)
+            values = batch.old_values + torch.clamp(values - batch.old_values, -reach, reach)
+        value_loss = (
+            functional.smooth_l1_loss if self.value_loss == hp.HUBER else functional.mse_loss
+        )(values, batch.returns)
+        entropy_loss = -(entropy if entropy is not None else -log_prob).mean()
+        loss = policy_loss + self.ent_coef * entropy_loss + self.vf_coef * value_loss
+        with torch.no_grad():
+            kl = float(((ratio - 1) - log_ratio).mean())
+        return loss, (policy_loss.item(), value_loss.item(), entropy_loss.item()), kl
 
 
 @dataclass
@@ -116,6 +150,7 @@ class Learner:
     ) -> None:  # fmt: skip
         self.algorithm = algorithm
         self.hyperparameters = hyperparameters
+        self.seed = seed
         env = DummyVecEnv([lambda: SpacesOnly(observation_space, action_space)])
         kwargs = policy_kwargs(algorithm, architecture)
         h = hyperparameters
@@ -147,8 +182,20 @@ class Learner:
         return weights_bytes(module.state_dict())
 
     def checkpoint(self) -> bytes:
-        """Everything needed to go on learning: the policy with its critics."""
-        return weights_bytes(self.model.policy.state_dict())
+        """Everything needed to go on learning: the policy with its critics, and in the file's
+        metadata what made it (``provenance``)."""
+        return weights_bytes(self.model.policy.state_dict(), metadata=self.provenance())
+
+    def provenance(self) -> dict[str, str]:
+        """What a checkpoint was made with, written into it: the algorithm, the network's seed,
+        the code (``code_version``) and the versions of PyTorch and stable-baselines3."""
+        return {
+            "algorithm": self.algorithm,
+            "seed": str(self.seed),
+            "code": code_version(),
+            "torch": torch.__version__,
+            "stable_baselines3": stable_baselines3.__version__,
+        }
 
     def restore(self, checkpoint: bytes) -> None:
         load_weights(self.model.policy, checkpoint)
@@ -242,16 +289,40 @@ def _gae(episode: Episode, gamma: float, lam: float) -> np.ndarray:
     return advantages
 
 
-def weights_bytes(state: dict) -> bytes:
-    """A state dict as safetensors; names that alias a tensor already saved are left out (PPO's
-    policy reaches one features extractor by three names)."""
+def weights_bytes(state: dict, metadata: dict[str, str] | None = None) -> bytes:
+    """A state dict as safetensors, with ``metadata`` in its header; names that alias a tensor
+    already saved are left out (PPO's policy reaches one features extractor by three names)."""
     seen, unique = set(), {}
     for name, tensor in state.items():
         pointer = (tensor.data_ptr(), tensor.dtype, tuple(tensor.shape))
         if pointer not in seen:
             seen.add(pointer)
             unique[name] = tensor.detach().cpu().contiguous()
-    return save_tensors(unique)
+    return save_tensors(unique, metadata=metadata)
+
+
+def weights_metadata(data: bytes) -> dict[str, str]:
+    """The metadata in the header of safetensors ``data`` (empty when it has none)."""
+    size = int.from_bytes(data[:8], "little")
+    if len(data) < 8 + size:
+        raise ValueError("not a safetensors file")
+    return json.loads(data[8 : 8 + size]).get("__metadata__") or {}
+
+
+@functools.cache
+def code_version() -> str:
+    """The code running: Pitlane's version and, in a git checkout, its commit (``git
+    describe``), marked "dirty" when the checkout has changes not committed."""
+    root = Path(__file__).resolve().parent.parent
+    version = tomllib.loads((root / "pyproject.toml").read_text())["project"]["version"]
+    try:
+        described = subprocess.run(
+            ["git", "describe", "--always", "--dirty", "--abbrev=12"],
+            cwd=root, capture_output=True, text=True, timeout=10, check=True,
+        ).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        return version
+    return f"{version}+{described.replace('-', '.')}" if described else version
 
 
 def load_weights(module: torch.nn.Module, data: bytes) -> None:

@@ -32,7 +32,7 @@ from asgiref.sync import async_to_sync
 from channels import DEFAULT_CHANNEL_LAYER
 from channels.layers import channel_layers, get_channel_layer
 
-from simulator.spectator import VIEWS
+from simulator.config import VIEWS
 
 logger = logging.getLogger(__name__)
 

@@ -28,10 +28,8 @@ from typing import BinaryIO
 
 from django.core.files.storage import default_storage
 
+from common.refusals import Refused
 from training import artifacts, selectors
-from training.evaluation import METRICS as EVALUATION_METRICS
-from training.evaluation import TRACE as EVALUATION_TRACE
-from training.evaluation import files_prefix
 from training.models import EvaluationJob, RLModel
 
 TRAINING_METRICS = "metrics/TrainingMetrics.json"
@@ -43,7 +41,7 @@ NO_LOGS = (
 TIMESTAMP = "%Y%m%d%H%M%S"  # 14 digits: what deepracer-utils looks for in evaluation-<...>
 
 
-class LogsRefused(Exception):
+class LogsRefused(Refused):
     """There are no logs to download yet; the message says so, for the racer."""
 
 
@@ -90,12 +88,16 @@ def _stored_files(model: RLModel) -> list[tuple[str, str]]:
     stamps: set[str] = set()
     evaluations = model.evaluations.filter(status=EvaluationJob.Status.COMPLETED).order_by("pk")
     for evaluation in evaluations:
-        trace = artifacts.path(model, files_prefix(evaluation) + EVALUATION_TRACE)
+        trace = artifacts.path(
+            model, artifacts.evaluation_prefix(evaluation) + artifacts.EVALUATION_TRACE
+        )
         if not default_storage.exists(trace):
             continue
         stamp = _stamp(evaluation, stamps)
         files.append((f"evaluation-{stamp}/evaluation-simtrace/0-iteration.csv", trace))
-        metrics = artifacts.path(model, files_prefix(evaluation) + EVALUATION_METRICS)
+        metrics = artifacts.path(
+            model, artifacts.evaluation_prefix(evaluation) + artifacts.EVALUATION_METRICS
+        )
         if default_storage.exists(metrics):
             files.append((f"metrics/EvaluationMetrics-{stamp}.json", metrics))
     return files

@@ -158,7 +158,7 @@ class RLModel(models.Model):
     sensors = models.JSONField(default=list)
     network = models.CharField(max_length=40, choices=Network.choices, default=Network.SHALLOW)
     network_layout = models.PositiveSmallIntegerField(
-        default=2,  # training.networks.LAYOUT
+        default=hyperparameters.NETWORK_LAYOUT,
         help_text="2: DeepRacer's networks, layer for layer; 1: Pitlane's own, before (its weights "
         "are for those).",
     )

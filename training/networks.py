@@ -37,13 +37,11 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 from torch.nn import functional
 
+from simulator.config import CAMERAS, LIDARS
 from training import hyperparameters as hp
 
 SHALLOW = "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"  # DeepRacer's "3-layer CNN"
 DEEP = "DEEP_CONVOLUTIONAL_NETWORK"  # DeepRacer's "5-layer CNN"
-CAMERAS = ("FRONT_FACING_CAMERA", "STEREO_CAMERAS")
-LIDARS = ("LIDAR", "SECTOR_LIDAR")
-LAYOUT = 2  # DeepRacer's networks; 1: Pitlane's own, before
 MIDDLEWARE = 512
 
 # ("conv", filters, kernel, stride) or ("dense", units), per network and sensor, from simapp's
@@ -71,14 +69,14 @@ EMBEDDERS = {
 }
 
 
-def architecture(network: str, layout: int = LAYOUT) -> str:
+def architecture(network: str, layout: int = hp.NETWORK_LAYOUT) -> str:
     """What builds a model's network: its DeepRacer name, and the layout when it is an old one."""
-    return network if layout == LAYOUT else f"{network}:{layout}"
+    return network if layout == hp.NETWORK_LAYOUT else f"{network}:{layout}"
 
 
 def _parse(name: str) -> tuple[str, int]:
     network, _, layout = name.partition(":")
-    return network, int(layout or LAYOUT)
+    return network, int(layout or hp.NETWORK_LAYOUT)
 
 
 class CameraConv2d(nn.Conv2d):

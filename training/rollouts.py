@@ -17,7 +17,7 @@ import time
 import msgpack
 import redis
 
-from console.workers import redis_client
+from common.redis_client import redis_client
 from training import hyperparameters as hp
 from training import live
 from training.experience import JobChannel, LogEntry

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import re
 
-import cv2
 from django.conf import settings as django_settings
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import IntegrityError, transaction
 from django.utils import timezone
 
-from simulator import texture
+from common.refusals import Refused
 from simulator import tracks as simulator_tracks
 from training import artifacts, configuration, jobs, live, rewards, selectors, tasks
 from training.models import (
@@ -58,11 +57,11 @@ TRACK_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")
 ROUTE_MAX_BYTES = 8 * 1024 * 1024  # a DeepRacer route file is a few kilobytes
 
 
-class TrackRefused(Exception):
+class TrackRefused(Refused):
     """A track that cannot be added; ``field`` is the input at fault ("route", "name", ...)."""
 
     def __init__(self, field: str, message: str) -> None:
-        super().__init__(message)
+        super().__init__({field: message})
         self.field, self.message = field, message
 
 
@@ -145,9 +144,13 @@ def track_add(
     )  # fmt: skip
     # The preview shows the track as first offered, with its arrow in that direction.
     shown = track.with_direction(next(iter(directions)))
-    encoded, png = cv2.imencode(".png", texture.preview(shown), [cv2.IMWRITE_PNG_COMPRESSION, 9])
-    if not encoded:
-        raise TrackRefused("route", "The track's preview could not be drawn.")
+    # Drawn with OpenCV, which only adding a track needs: imported here, not when the web starts.
+    from simulator import texture
+
+    try:
+        png = texture.preview_png(shown)
+    except ValueError as error:
+        raise TrackRefused("route", "The track's preview could not be drawn.") from error
     existing = Track.objects.select_for_update().filter(name=name).first()
     row = existing or Track(name=name)
     if existing is None:
@@ -157,7 +160,7 @@ def track_add(
     row.length_m, row.width_m = round(track.length, 2), round(track.width, 3)
     row.counterclockwise = Direction.COUNTERCLOCKWISE in directions
     row.clockwise = Direction.CLOCKWISE in directions
-    row.route, row.preview = bytes(route), png.tobytes()
+    row.route, row.preview = bytes(route), png
     if added_by is not None or existing is None:
         row.added_by = added_by
     row.added_at = timezone.now()
@@ -174,7 +177,7 @@ def vehicle_create(
     return vehicle
 
 
-class VehicleSensorsLocked(Exception):
+class VehicleSensorsLocked(Refused):
     """The vehicle's sensors cannot change: models were trained on them."""
 
 
@@ -219,7 +222,6 @@ def check_quota(*, owner: AbstractBaseUser, minutes: int) -> None:
         )})  # fmt: skip
 
 
-@transaction.atomic
 def model_create(
     *,
     owner: AbstractBaseUser,
@@ -231,7 +233,29 @@ def model_create(
     its training job, QUEUED; the trainer task is enqueued once both are committed. A clone
     (``cloned_from``: the racer's own READY model) gets a copy of its source's best weights, which
     its training starts from. ``validation``: the reward function's, already found by a checker
-    (see ``configuration.check``)."""
+    (see ``configuration.check``); without it, the reward function is validated here, in the
+    sandbox, before the transaction that saves opens, so no other writer waits on it (SQLite
+    takes its write lock when the transaction begins)."""
+    if validation is None and validate_reward:
+        validation = _reward_validation(settings)
+    with transaction.atomic():
+        return _model_save(owner, settings, validate_reward, validation)
+
+
+def _reward_validation(settings: dict) -> rewards.Validation | None:
+    """The validation ``configuration.check`` would run for ``settings``; None where it runs
+    none (no reward function, or no track to validate it on)."""
+    source = settings.get("reward_function") or ""
+    where = configuration.reward_sample_track(settings) if source.strip() else None
+    if where is None:
+        return None
+    return rewards.reward_validate(source=source, track=where[0], direction=where[1])
+
+
+def _model_save(
+    owner: AbstractBaseUser, settings: dict, validate_reward: bool,
+    validation: rewards.Validation | None,
+) -> RLModel:  # fmt: skip
     clean = configuration.check(
         settings, owner=owner, validate_reward=validate_reward, validation=validation
     )
@@ -280,7 +304,7 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
     return job
 
 
-class ModelBusy(Exception):
+class ModelBusy(Refused):
     """The model is training, evaluating or racing; the message says what to wait for."""
 
 
@@ -306,7 +330,7 @@ def model_delete(*, model: RLModel) -> int:
     return removed
 
 
-class EvaluationRefused(Exception):
+class EvaluationRefused(Refused):
     """The model cannot be evaluated now; the message says why."""
 
 
@@ -350,13 +374,13 @@ def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJ
     return evaluation
 
 
-class RewardFunctionInvalid(Exception):
+class RewardFunctionInvalid(Refused):
     """The reward function was not saved: ``errors`` says why, by field (``name``, ``source``);
     ``validation`` holds the code's problems, line by line, when the code was run."""
 
     def __init__(self, errors: dict[str, str], validation: rewards.Validation | None = None):
-        super().__init__("; ".join(errors.values()))
-        self.errors, self.validation = errors, validation
+        super().__init__(errors)
+        self.validation = validation
 
 
 def reward_function_save(

@@ -41,11 +41,11 @@ import numpy as np
 import torch
 from torch import nn
 
+from simulator.config import LEGACY_CAMERA
 from training import cargraph
 from training.networks import DeepRacerFeatures
 from training.policies import Policy
 
-LEGACY_CAMERA = "observation"  # the front camera of models of simapp before 2.0
 SENSOR_NAMES = {"FRONT_FACING_CAMERA": ("FRONT_FACING_CAMERA", LEGACY_CAMERA)}
 MIDDLEWARE = "middleware_fc_embedder/Dense_0"
 PPO_VALUE_SCOPE = f"{cargraph.ROOT}/main/online/network_0"

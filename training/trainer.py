@@ -23,7 +23,7 @@ from django.db.models import Sum
 from django.utils import timezone
 
 import simulator
-from console.workers import redis_client
+from common.redis_client import redis_client
 from notifications import services as notifications
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv

@@ -21,7 +21,8 @@ from django.urls import reverse
 from django.utils.cache import patch_cache_control
 from django.views.decorators.http import require_POST, require_safe
 
-from console import ratelimits
+from common import ratelimits
+from common.refusals import Refused
 from simulator import config as sim_config
 from simulator import tracks as simulator_tracks
 from training import (
@@ -36,10 +37,6 @@ from training import (
     selectors,
     services,
 )
-from training.evaluation import METRICS as EVALUATION_METRICS
-from training.evaluation import TRACE as EVALUATION_TRACE
-from training.evaluation import VIDEO as EVALUATION_VIDEO
-from training.evaluation import files_prefix
 from training.forms import (
     EvaluationForm,
     ModelCreateForm,
@@ -539,7 +536,7 @@ async def model_import(request: HttpRequest) -> HttpResponse:
     if attempt.work is not None:
         try:
             attempt.outcome = await checks.run(attempt.work)
-        except (imports.ImportRefused, configuration.Invalid, *CHECK_FAILURES) as error:
+        except (Refused, *CHECK_FAILURES) as error:
             attempt.outcome = error
     return await sync_to_async(attempt.respond)()
 
@@ -668,7 +665,7 @@ def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
             evaluation = services.evaluation_start(model=model, settings=form.settings())
         except configuration.Invalid as invalid:
             form.add_setting_errors(invalid.errors)
-        except services.EvaluationRefused as refused:
+        except Refused as refused:
             refusal = str(refused)
         else:  # no message: the page's status line says queued, then follows the evaluation
             return redirect("training:evaluation-detail", pk=model.pk, evaluation=evaluation.pk)
@@ -690,16 +687,16 @@ def _get_evaluation_for_user(request: HttpRequest, pk: int, evaluation: int) -> 
 
 
 EVALUATION_FILES = {
-    EVALUATION_VIDEO: "Video (WebM)",
-    EVALUATION_TRACE: "Simulation trace (CSV)",
-    EVALUATION_METRICS: "Evaluation metrics (JSON)",
+    artifacts.EVALUATION_VIDEO: "Video (WebM)",
+    artifacts.EVALUATION_TRACE: "Simulation trace (CSV)",
+    artifacts.EVALUATION_METRICS: "Evaluation metrics (JSON)",
 }
 
 
 @login_required
 def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpResponse:
     job = _get_evaluation_for_user(request, pk, evaluation)
-    prefix = artifacts.path(job.model, files_prefix(job))
+    prefix = artifacts.path(job.model, artifacts.evaluation_prefix(job))
     files = [
         (name, label) for name, label in EVALUATION_FILES.items()
         if job.status == EvaluationJob.Status.COMPLETED and default_storage.exists(prefix + name)
@@ -720,10 +717,10 @@ def evaluation_file(request: HttpRequest, pk: int, evaluation: int, name: str) -
     job = _get_evaluation_for_user(request, pk, evaluation)
     if name not in EVALUATION_FILES:
         raise Http404("No such file")
-    stored = artifacts.path(job.model, files_prefix(job) + name)
+    stored = artifacts.path(job.model, artifacts.evaluation_prefix(job) + name)
     if not default_storage.exists(stored):
         raise Http404("No such file")
-    video = name == EVALUATION_VIDEO
+    video = name == artifacts.EVALUATION_VIDEO
     filename = f"{job.model.name}-evaluation-{job.pk}-{name.replace('/', '-')}"
     return artifacts.download(
         stored, filename, attachment=not video, content_type="video/webm" if video else None

@@ -50,7 +50,7 @@ MIDDLEWARE = [
     "django.middleware.common.CommonMiddleware",
     "django.middleware.csrf.CsrfViewMiddleware",
     "django.contrib.auth.middleware.AuthenticationMiddleware",
-    "console.time_zones.TimeZoneMiddleware",
+    "common.time_zones.TimeZoneMiddleware",
     "django.contrib.messages.middleware.MessageMiddleware",
     "django.middleware.clickjacking.XFrameOptionsMiddleware",
 ]
@@ -70,7 +70,7 @@ TEMPLATES = [
                 "django.contrib.auth.context_processors.auth",
                 "django.contrib.messages.context_processors.messages",
                 "console.context_processors.navigation",
-                "console.time_zones.time_zone",
+                "common.time_zones.time_zone",
                 "notifications.context_processors.bell",
             ],
         },
@@ -159,7 +159,7 @@ CELERY_BROKER_TRANSPORT_OPTIONS = {
 }
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
-# Rate limits (console.ratelimits; README, "Limits"): a count per period, per racer unless
+# Rate limits (common.ratelimits; README, "Limits"): a count per period, per racer unless
 # said: sign-in per racer name and per address, sign-up per address.
 PITLANE_RATES = {
     action: env.rate(f"PITLANE_RATE_{action.upper().replace('-', '_')}", default)

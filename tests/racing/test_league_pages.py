@@ -6,7 +6,7 @@ from django.core.management import call_command
 from django.urls import reverse
 from django.utils import timezone
 
-from console.templatetags.pitlane import gap, laptime
+from common.formatting import gap, laptime
 from racing.forms import SubmissionForm
 from racing.models import Event, Season
 from racing.services import demo_season_load

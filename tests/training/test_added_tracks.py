@@ -86,7 +86,9 @@ def test_an_added_track_is_never_clobbered_by_the_built_in_sync(tracks):
     tracks_sync()
     kept = Track.objects.get(name="s-bend")
     assert (kept.display_name, kept.builtin) == ("Mine", False)
-    with pytest.raises(TrackRefused, match=r"^s-bend is a built-in track; choose another name"):
+    with pytest.raises(
+        TrackRefused, match=r"^name: s-bend is a built-in track; choose another name"
+    ):
         track_add(name="s-bend", display_name="", route=routes.route_bytes("clockwise"),
                   directions=["clockwise"])  # fmt: skip
 

@@ -19,7 +19,10 @@ from tests.training.factories import ready_model
 from tests.training.test_deepracer_utils import assert_evaluation_logs_read_as_recorded
 from tests.training.test_live import frame_header, viewer
 from training import artifacts, configuration, services
-from training.evaluation import METRICS, TRACE, VIDEO, EvaluationFailed, _VideoWriter, files_prefix
+from training.artifacts import EVALUATION_METRICS as METRICS
+from training.artifacts import EVALUATION_TRACE as TRACE
+from training.artifacts import EVALUATION_VIDEO as VIDEO
+from training.evaluation import EvaluationFailed, _VideoWriter
 from training.models import EvaluationJob, RLModel
 
 pytestmark = pytest.mark.usefixtures("tracks")
@@ -28,7 +31,9 @@ STEP_MS = 1000 / 15
 
 
 def stored(evaluation: EvaluationJob, name: str) -> bytes:
-    return artifacts.read(artifacts.path(evaluation.model, files_prefix(evaluation) + name))
+    return artifacts.read(
+        artifacts.path(evaluation.model, artifacts.evaluation_prefix(evaluation) + name)
+    )
 
 
 def decoded_frames(data: bytes) -> tuple[int, tuple[int, int]]:

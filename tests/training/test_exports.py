@@ -17,7 +17,7 @@ from django.core.management import CommandError, call_command
 from django.urls import reverse
 
 from tests.training.factories import sensor_frames, trained_model
-from training import artifacts, cargraph, hyperparameters, networks
+from training import artifacts, cargraph, hyperparameters
 from training.models import RLModel
 from training.policies import Policy
 
@@ -140,7 +140,8 @@ def test_a_continuous_stereo_lidar_policy_runs_as_onnx_on_onnx_runtime_and_openv
 def test_a_model_with_pitlanes_first_networks_goes_to_onnx_but_not_to_the_car(
     alice, tracks, tmp_path
 ):
-    assert RLModel._meta.get_field("network_layout").default == networks.LAYOUT  # new: DeepRacer's
+    new = RLModel._meta.get_field("network_layout").default
+    assert new == hyperparameters.NETWORK_LAYOUT  # DeepRacer's
     model = trained_model(alice, "first-layout", network_layout=1)
     assert model.architecture == "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW:1"
     with pytest.raises(CommandError, match="trained before Pitlane's networks were DeepRacer's"):

@@ -14,7 +14,7 @@ from channels.testing import WebsocketCommunicator
 from django.conf import settings
 from django.test import Client
 
-from console.workers import redis_client
+from common.redis_client import redis_client
 from tests.training.factories import ready_model
 from training import live, selectors
 from training.consumers import WINDOW, TrainingConsumer

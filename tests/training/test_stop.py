@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import simulator
-from console.workers import redis_client
+from common.redis_client import redis_client
 from tests.services import wait_for
 from tests.training.test_training import (
     TINY_PPO,

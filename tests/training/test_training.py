@@ -15,15 +15,16 @@ import msgpack
 import pytest
 from django.core.files.storage import default_storage
 from django.core.management import call_command
+from django.db import connection
 from django.utils import timezone
 
 import simulator
-from console.workers import redis_client
+from common.redis_client import redis_client
 from simulator.trace import SimTraceRow
 from tests import services
 from tests.services import parent_of, wait_for
 from tests.training.test_deepracer_utils import assert_training_logs_read_as_recorded
-from training import artifacts, configuration, hyperparameters, jobs, tasks, trainer
+from training import artifacts, configuration, hyperparameters, jobs, rewards, tasks, trainer
 from training.experience import JobChannel, decode_episode
 from training.learner import Learner
 from training.models import Iteration, RLModel, TrainingJob
@@ -337,6 +338,31 @@ def test_the_createmodel_command_creates_a_queued_model(alice, tracks, tmp_path,
     model = RLModel.objects.get(name="from-yaml")
     assert (model.max_minutes, model.jobs.get().status) == (30, "QUEUED")
     assert "its training is queued" in capsys.readouterr().out
+
+
+@pytest.mark.django_db(transaction=True)
+def test_creating_a_model_validates_its_reward_function_before_any_transaction(
+    alice, tracks, monkeypatch
+):
+    validate = rewards.reward_validate
+    in_transaction = []
+
+    def watched(**kwargs):  # the real validation, noting whether a transaction was open
+        in_transaction.append(connection.in_atomic_block)
+        return validate(**kwargs)
+
+    monkeypatch.setattr(rewards, "reward_validate", watched)
+    model = model_create(owner=alice, settings=settings(name="validated-first"))
+    assert in_transaction == [False]
+    assert model.jobs.get().status == TrainingJob.Status.QUEUED
+
+    with pytest.raises(configuration.Invalid) as invalid:
+        model_create(owner=alice, settings=settings(
+            name="refused", reward_function="def reward_function(params):\n    return 'fast'\n"
+        ))  # fmt: skip
+    assert in_transaction == [False, False]
+    assert "reward_function" in invalid.value.errors
+    assert not RLModel.objects.filter(name="refused").exists()
 
 
 @pytest.mark.django_db(transaction=True)

@@ -5,7 +5,7 @@ each line with its source; the model page filters it, and the whole log download
 import pytest
 from django.urls import reverse
 
-from console.workers import redis_client
+from common.redis_client import redis_client
 from tests.training.factories import ready_model
 from tests.training.test_sandbox import PARAMS, reward
 from training import rollouts

@@ -23,9 +23,10 @@ import cv2
 import msgpack
 import numpy as np
 
+from simulator.config import VIEWS
 from simulator.controller import RolloutStats, drive
 from simulator.rewards import RewardError
-from simulator.spectator import FRAME_INTERVAL, VIEWS, jpeg, view_image
+from simulator.spectator import FRAME_INTERVAL, jpeg, view_image
 from training.experience import encode_arrays
 from training.sandbox import seal
 from training.sandbox.protocol import pack, read_frame

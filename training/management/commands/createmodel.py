@@ -4,7 +4,8 @@ import yaml
 from django.contrib.auth import get_user_model
 from django.core.management.base import BaseCommand, CommandError
 
-from training import configuration, hyperparameters
+from common.refusals import Refused
+from training import hyperparameters
 from training.services import model_create
 
 
@@ -36,7 +37,6 @@ class Command(BaseCommand):
         settings.setdefault("hyperparameters", hyperparameters.defaults(algorithm))
         try:
             model = model_create(owner=owner_row, settings={**settings, "reward_function": source})
-        except configuration.Invalid as invalid:
-            lines = "\n".join(f"  {name}: {message}" for name, message in invalid.errors.items())
-            raise CommandError(f"The model was not created:\n{lines}") from None
+        except Refused as refused:
+            raise CommandError(refused.told("The model was not created")) from None
         self.stdout.write(f"Created model {model.name} (#{model.pk}); its training is queued.")

@@ -1,7 +1,8 @@
 from django.core.management.base import BaseCommand, CommandError
 
-from console.templatetags.pitlane import laptime
-from training import configuration, evaluation, services
+from common.formatting import laptime
+from common.refusals import Refused
+from training import evaluation, services
 from training.management.lookup import find_model
 from training.models import EvaluationJob
 
@@ -50,11 +51,8 @@ class Command(BaseCommand):
             settings["bots"] = {"count": options["bots"]}
         try:
             job = services.evaluation_start(model=model, settings=settings, enqueue=False)
-        except configuration.Invalid as invalid:
-            lines = "\n".join(f"  {name}: {message}" for name, message in invalid.errors.items())
-            raise CommandError(f"The evaluation was not started:\n{lines}") from None
-        except services.EvaluationRefused as refused:
-            raise CommandError(str(refused)) from None
+        except Refused as refused:
+            raise CommandError(refused.told("The evaluation was not started")) from None
         self.stdout.write(
             f"Evaluating {model.name} on {job.track} ({job.direction}), {job.trials} trials…"
         )

@@ -2,7 +2,8 @@ from pathlib import Path
 
 from django.core.management.base import BaseCommand, CommandError
 
-from training import configuration, imports
+from common.refusals import Refused
+from training import imports
 from training.management.lookup import find_racer
 
 
@@ -26,11 +27,8 @@ class Command(BaseCommand):
                 imported = imports.import_model(owner=racer, archive=archive, name=name)
         except OSError as error:
             raise CommandError(f"Cannot read {file}: {error.strerror or error}") from None
-        except imports.ImportRefused as refused:
-            raise CommandError(f"The model was not imported: {refused}") from None
-        except configuration.Invalid as invalid:
-            lines = "\n".join(f"  {key}: {message}" for key, message in invalid.errors.items())
-            raise CommandError(f"The model was not imported:\n{lines}") from None
+        except Refused as refused:
+            raise CommandError(refused.told("The model was not imported")) from None
         model = imported.model
         state = "ready" if model.status == model.Status.READY else "queued for training"
         self.stdout.write(f"Imported {model.name} (#{model.pk}), {state}.")
