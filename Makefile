@@ -23,6 +23,7 @@ lint: $(VENV)/.test-installed
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/lint-imports --no-cache
+	$(BIN)/python scripts/check_sizes.py
 
 format: $(VENV)/.test-installed
 	$(BIN)/ruff check --fix .

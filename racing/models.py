@@ -16,7 +16,7 @@ from django.utils import timezone
 from racing import scoring
 from training import configuration
 from training.configuration import PENALTY_MAX
-from training.models import Direction, EvaluationJob, RaceType, RLModel, Track
+from training.models import EvaluationJob, RaceConditions, RaceType, RLModel, Track
 
 
 class Division(models.TextChoices):
@@ -69,7 +69,7 @@ class Season(models.Model):
         return self.name
 
 
-class Event(models.Model):
+class Event(RaceConditions):
     class State(models.TextChoices):
         UPCOMING = "upcoming", "Upcoming"
         OPEN = "open", "Open"
@@ -82,19 +82,6 @@ class Event(models.Model):
     name = models.CharField(max_length=100)
     slug = models.SlugField(max_length=100, unique=True)
     track = models.ForeignKey(Track, on_delete=models.PROTECT, related_name="events")
-    direction = models.CharField(
-        max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE
-    )
-    race_type = models.CharField(
-        max_length=16, choices=RaceType.choices, default=RaceType.TIME_TRIAL
-    )
-    boxes = models.JSONField(
-        null=True, blank=True, help_text='Object avoidance: {"count": 1-6, "randomize": false}.'
-    )
-    bots = models.JSONField(
-        null=True, blank=True,
-        help_text='Head-to-bot: {"count": 1-6, "speed": 0.2-6, "lane_changes": false}.',
-    )  # fmt: skip
     division = models.CharField(max_length=8, choices=Division.choices, default=Division.OPEN)
     opens_at = models.DateTimeField()
     closes_at = models.DateTimeField()

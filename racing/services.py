@@ -1,4 +1,9 @@
-"""Writes for the league: submissions and their scores, rankings, events, divisions."""
+"""Writes for the league: submissions and their scores, rankings, events, divisions.
+
+Long because the league's writes are kept in one module, as HackSoft's styleguide keeps an
+app's services: entering a race, scoring its laps, ranking, the monthly promotion and the race
+staff's actions call one another, and a reader follows a submission through them in order.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,10 @@
-"""The DeepRacer environment: ``gymnasium.make("Pitlane/DeepRacer-v0", ...)``."""
+"""The DeepRacer environment: ``gymnasium.make("Pitlane/DeepRacer-v0", ...)``.
+
+Long because it is DeepRacer's environment as one Gymnasium class, as Gymnasium's own are:
+reset and step, the reward params, the episode statuses and resets, the trace and the render
+hooks. What it is made of lives apart: the car (``car``), the tracks, the PyBullet world
+(``world``), the sensors (``camera``, ``lidar``) and the spectator.
+"""
 
 from __future__ import annotations
 
@@ -177,15 +183,7 @@ class DeepRacerEnv(gym.Env):
         self._car_body = self._world.add_car(spec.length, spec.width, spec.height)
         self._actor_bodies = []
         self._waypoints = tuple(self.track.waypoints)
-        # Each waypoint's distance along the centre line, the last one the full lap: simapp
-        # track_geom/track_data.py:47-48 (01f5f01) normalises by the length, which orders alike.
-        # Computed as Track.project_points computes distances, so a car exactly on a waypoint
-        # projects to exactly that waypoint's distance.
-        steps = np.diff(self.track.centre, axis=0)
-        cumulative = np.concatenate(
-            [[0.0], np.cumsum(np.sqrt(np.maximum((steps**2).sum(axis=1), 1e-12)))]
-        )
-        self._waypoint_distances = [*cumulative[:-1].tolist(), math.inf]
+        self._waypoint_distances = self._distances_along()
         self._spectator = None
         self._episode = -1
         self._seed = seed
@@ -193,6 +191,17 @@ class DeepRacerEnv(gym.Env):
         # Gazebo's clock does in simapp (rollout_agent_ctrl.py:245, 01f5f01). The trace's tstamp and
         # params["sim_time"] read it; deepracer-utils sums its differences (log_utils.py:349).
         self.clock = 0.0
+
+    def _distances_along(self) -> list[float]:
+        """Each waypoint's distance along the centre line, the last one the full lap: simapp
+        track_geom/track_data.py:47-48 (01f5f01) normalises by the length, which orders alike.
+        Computed as Track.project_points computes distances, so a car exactly on a waypoint
+        projects to exactly that waypoint's distance."""
+        steps = np.diff(self.track.centre, axis=0)
+        cumulative = np.concatenate(
+            [[0.0], np.cumsum(np.sqrt(np.maximum((steps**2).sum(axis=1), 1e-12)))]
+        )
+        return [*cumulative[:-1].tolist(), math.inf]
 
     # Gymnasium API
 

@@ -52,7 +52,31 @@ def check(
     ``reward_sample_track(settings)``, for the same code."""
     errors: dict[str, str] = {}
     clean: dict = {}
+    _check_identity(settings, clean, errors, owner)
+    track = _check_track(settings, clean, errors)
+    _check_race(settings, clean, errors)
+    _check_car(settings, clean, errors, owner)
+    _check_algorithm(settings, clean, errors)
+    _check_schedule(settings, clean, errors)
+    source = settings.get("reward_function") or ""
+    if not source.strip():
+        if reward_required:
+            errors["reward_function"] = "Write a reward function (or start from an example)."
+    elif validate_reward and track is not None and "direction" not in errors:
+        problem = _reward_problem(source, track, clean["direction"], validation)
+        if problem is not None:
+            errors["reward_function"] = problem
+    clean["reward_function"] = source
+    source_model = settings.get("cloned_from")
+    if isinstance(source_model, RLModel):
+        errors.update(_clone_errors(source_model, clean))
+        clean["cloned_from"] = source_model
+    if errors:
+        raise Invalid(errors)
+    return clean
 
+
+def _check_identity(settings: dict, clean: dict, errors: dict, owner) -> None:
     name = str(settings.get("name", "")).strip()
     if problem := name_problem(name, owner=owner):
         errors["name"] = problem
@@ -62,11 +86,8 @@ def check(
         errors["description"] = "The description is at most 255 characters."
     clean["description"] = description
 
-    track = _check_track(settings, clean, errors)
-    direction = clean["direction"]
-    _check_race(settings, clean, errors)
-    _check_car(settings, clean, errors, owner)
 
+def _check_algorithm(settings: dict, clean: dict, errors: dict) -> None:
     algorithm = settings.get("algorithm") or Algorithm.PPO
     if algorithm not in Algorithm.values:
         errors["algorithm"] = "The algorithm is PPO or SAC."
@@ -78,6 +99,9 @@ def check(
         clean["hyperparameters"] = values
     clean["algorithm"] = algorithm
 
+
+def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
+    """How long and on how many simulations (and extra tracks) the model trains, and its seed."""
     minutes = _integer(settings.get("max_minutes", 60))
     if minutes is None or not MINUTES[0] <= minutes <= MINUTES[1]:
         errors["max_minutes"] = (
@@ -97,31 +121,23 @@ def check(
     clean["extra_tracks"] = extra
     clean["seed"] = _integer(settings.get("seed", 0)) or 0
 
-    source = settings.get("reward_function") or ""
-    if not source.strip():
-        if reward_required:
-            errors["reward_function"] = "Write a reward function (or start from an example)."
-    elif validate_reward and track is not None and "direction" not in errors:
-        if validation is None:
-            result = reward_validate(source=source, track=track.name, direction=direction)
-        elif validation.source != source:
-            raise ValueError("The validation given is of other code than the settings'.")
-        else:
-            result = validation
-        if not result.valid:
-            first = result.errors[0]
-            line = f" (line {first.line})" if first.line else ""
-            errors["reward_function"] = f"{first.type}{line}: {first.message}"
-    clean["reward_function"] = source
 
-    source_model = settings.get("cloned_from")
-    if isinstance(source_model, RLModel):
-        errors.update(_clone_errors(source_model, clean))
-        clean["cloned_from"] = source_model
-
-    if errors:
-        raise Invalid(errors)
-    return clean
+def _reward_problem(
+    source: str, track: Track, direction: str, validation: Validation | None
+) -> str | None:
+    """What is wrong with the reward function ``source`` (its first error), or None: validated
+    here on ``track`` unless ``validation`` (of the same code) is given."""
+    if validation is None:
+        result = reward_validate(source=source, track=track.name, direction=direction)
+    elif validation.source != source:
+        raise ValueError("The validation given is of other code than the settings'.")
+    else:
+        result = validation
+    if result.valid:
+        return None
+    first = result.errors[0]
+    line = f" (line {first.line})" if first.line else ""
+    return f"{first.type}{line}: {first.message}"
 
 
 def _clone_errors(source: RLModel, clean: dict) -> dict[str, str]:

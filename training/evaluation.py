@@ -239,17 +239,7 @@ class Evaluator:
                 now = time.monotonic()
                 if watched and now - last_live >= FRAME_INTERVAL:
                     last_live = now
-                    for view in watched:
-                        image = (
-                            frame
-                            if view == "spectator"
-                            else view_image(unwrapped, view, observation)
-                        )
-                        publisher.offer(live.frame_event(
-                            0, view, jpeg(image), step=unwrapped.steps,
-                            status=unwrapped.status, progress=unwrapped.progress,
-                            episode=len(self.results) + 1,
-                        ))  # fmt: skip
+                    self._show(publisher, watched, unwrapped, frame, observation)
                 if watched:  # keep to real time (or PITLANE_WATCHED_SPEEDUP times) for them
                     time.sleep(max(0.0, pace - (time.monotonic() - last_step)))
                 last_step = time.monotonic()
@@ -262,6 +252,16 @@ class Evaluator:
             if truncated and len(self.results) < evaluation.trials:
                 seconds = unwrapped.sim_time - counts.started
                 self._record(unwrapped, info, counts, seconds, completed=False)
+
+    def _show(self, publisher: live.FramePublisher, views, unwrapped, frame, observation) -> None:
+        """Offer this step's ``views`` (the spectator's is the video's ``frame``) to the live
+        viewers."""
+        for view in views:
+            image = frame if view == "spectator" else view_image(unwrapped, view, observation)
+            publisher.offer(live.frame_event(
+                0, view, jpeg(image), step=unwrapped.steps, status=unwrapped.status,
+                progress=unwrapped.progress, episode=len(self.results) + 1,
+            ))  # fmt: skip
 
     def _record(
         self, env, info: dict, before: LapCounts, seconds: float, *, completed: bool

@@ -110,8 +110,7 @@ def virtual(model: RLModel) -> Export:
     members["hyperparameters.json"] = members[HYPERPARAMETERS] = deepracer_hyperparameters(model)
     members.update({
         PITLANE_SETTINGS: _json(pitlane_settings(model)),
-        "checkpoints/best.safetensors": _checkpoint(model, "best"),
-        "checkpoints/last.safetensors": _checkpoint(model, "last"),
+        **{name: _checkpoint(model, kept) for kept, name in artifacts.EXPORTED_CHECKPOINTS.items()},
     })  # fmt: skip
     if metrics is not None:
         members[artifacts.TRAINING_METRICS] = metrics

@@ -1,3 +1,11 @@
+"""The training app's forms: the create-model page, the evaluation, the garage, the reward
+function library and the import.
+
+Long because the create-model form alone carries every setting DeepRacer's console has (sensors,
+the action space's table or ranges, each algorithm's hyperparameters, the race type and its
+obstacles), each with its own words for what is wrong.
+"""
+
 import json
 import re
 

@@ -12,6 +12,10 @@ read (no absolute paths, no ``..``, no links, devices or FIFOs); the settings ar
 create-model page checks them, the reward function validated in the sandbox; weights are read
 only from safetensors or TensorFlow's formats, never unpickled or executed, into our own network,
 every tensor and shape checked. A refused archive leaves nothing in the database or in storage.
+
+Long because a DeepRacer archive's every setting is mapped here, field by field, with a note for
+each one this console reads differently or leaves out (``_deepracer_*``), beside the archive's
+hostile-input checks; the weights' formats have their own modules.
 """
 
 from __future__ import annotations
@@ -66,7 +70,7 @@ EXTENDED = (tarfile.XHDTYPE, tarfile.XGLTYPE, tarfile.SOLARIS_XHDTYPE, tarfile.G
             tarfile.GNUTYPE_LONGLINK)  # fmt: skip
 TEXT_LIMIT = 1 * MiB  # [bytes] each of the JSON, YAML and Python files
 METRICS_LIMIT = 32 * MiB  # [bytes] the training metrics: a row per episode
-CHECKPOINTS = ("checkpoints/best.safetensors", "checkpoints/last.safetensors")
+CHECKPOINTS = tuple(artifacts.EXPORTED_CHECKPOINTS.values())  # best, last
 # Where each of DeepRacer's files is looked for, first found first: at the root (a Pitlane
 # export, a folder of DeepRacer's files packed as they are), or where DeepRacer's training keeps
 # it under the model's prefix, as DeepRacer for Cloud uploads a model: model/model_metadata.json,
@@ -94,7 +98,8 @@ KEPT_FOR = timedelta(hours=6)
 KEPT_SESSION_KEY = "training:kept-import"
 DEFAULT_TRACK = "rookie-loop"
 SENSOR_ALIASES = {sim.LEGACY_CAMERA: "FRONT_FACING_CAMERA"}
-DEEPRACER_ALGORITHMS = {"clipped_ppo": Algorithm.PPO, "ppo": Algorithm.PPO, "sac": Algorithm.SAC}
+DEEPRACER_ALGORITHMS = {hyperparameters.PPO: Algorithm.PPO, "ppo": Algorithm.PPO,
+                        hyperparameters.SAC: Algorithm.SAC}  # fmt: skip
 
 
 class Members(dict[str, bytes | None]):

@@ -1,4 +1,8 @@
-"""A racer's models, and the tracks they train on."""
+"""A racer's models, and the tracks they train on.
+
+Long because Django finds an app's models in one module: the training app has its tracks,
+models, reward functions, vehicles, jobs, iterations, log lines, evaluations, trials and quotas.
+"""
 
 from __future__ import annotations
 
@@ -113,7 +117,29 @@ class Track(models.Model):
         return self.added_at is None
 
 
-class RLModel(models.Model):
+class RaceConditions(models.Model):
+    """Where and how a car races, as a model trains, an evaluation drives and an event runs: the
+    direction of travel and DeepRacer's race type with its obstacles (boxes) or bot cars."""
+
+    direction = models.CharField(
+        max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE
+    )
+    race_type = models.CharField(
+        max_length=16, choices=RaceType.choices, default=RaceType.TIME_TRIAL
+    )
+    boxes = models.JSONField(
+        null=True, blank=True, help_text='Object avoidance: {"count": 1-6, "randomize": false}.'
+    )
+    bots = models.JSONField(
+        null=True, blank=True,
+        help_text='Head-to-bot: {"count": 1-6, "speed": 0.2-6, "lane_changes": false}.',
+    )  # fmt: skip
+
+    class Meta:
+        abstract = True
+
+
+class RLModel(RaceConditions):
     """A racer's reinforcement-learning model: what a DeepRacer user calls "a model"."""
 
     class Status(models.TextChoices):
@@ -147,14 +173,6 @@ class RLModel(models.Model):
     updated_at = models.DateTimeField(auto_now=True)
 
     # The training configuration, in the vocabulary of DeepRacer's model_metadata.json.
-    direction = models.CharField(
-        max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE
-    )
-    race_type = models.CharField(
-        max_length=16, choices=RaceType.choices, default=RaceType.TIME_TRIAL
-    )
-    boxes = models.JSONField(null=True, blank=True, help_text="{count, randomize}.")
-    bots = models.JSONField(null=True, blank=True, help_text="{count, speed, lane_changes}.")
     sensors = models.JSONField(default=list)
     network = models.CharField(max_length=40, choices=Network.choices, default=Network.SHALLOW)
     network_layout = models.PositiveSmallIntegerField(
@@ -429,7 +447,7 @@ class JobLogLine(models.Model):
         return self.text
 
 
-class EvaluationJob(models.Model):
+class EvaluationJob(RaceConditions):
     """An evaluation of a ready model (DeepRacer's "Evaluate"): the policy drives the chosen
     track deterministically for a number of trials, under race rules. No racer code runs: the
     policy is loaded from its weights only, and the reward function is not used."""
@@ -443,14 +461,6 @@ class EvaluationJob(models.Model):
 
     model = models.ForeignKey(RLModel, on_delete=models.CASCADE, related_name="evaluations")
     track = models.ForeignKey(Track, on_delete=models.PROTECT, related_name="evaluations")
-    direction = models.CharField(
-        max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE
-    )
-    race_type = models.CharField(
-        max_length=16, choices=RaceType.choices, default=RaceType.TIME_TRIAL
-    )
-    boxes = models.JSONField(null=True, blank=True, help_text="{count, randomize}.")
-    bots = models.JSONField(null=True, blank=True, help_text="{count, speed, lane_changes}.")
     trials = models.PositiveSmallIntegerField(default=3)
     continuous_laps = models.BooleanField(
         default=False, help_text="Drive the trials as consecutive laps, without stopping."

@@ -1,4 +1,8 @@
-"""Writes for the training app."""
+"""Writes for the training app.
+
+Long because the app's writes are kept in one module, as HackSoft's styleguide keeps an app's
+services: tracks, vehicles, models, clones, deletes, evaluations and reward functions.
+"""
 
 from __future__ import annotations
 

@@ -4,6 +4,10 @@ It holds the job's lease, builds the learner, publishes weights, starts the roll
 then learns from the episodes they push to Redis, one policy update at a time, recording each
 iteration, checkpointing and watching its workers, until the racer stops it, the time limit
 comes, or something fails. It is the only writer of the job's rows while it holds the lease.
+
+Long because the loop and each of its ways out (a stop, the time limit, a lost lease, a worker
+that died, Redis that went away, an evaluation that came late) are one state machine, read
+together.
 """
 
 from __future__ import annotations
@@ -139,33 +143,7 @@ class Trainer:
         RLModel.objects.filter(pk=model.pk).update(status=RLModel.Status.TRAINING)
         live.announce_training(job.pk)
         live.announce_queue()
-        env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-        spaces = env.observation_space, env.action_space
-        env.close()
-        self.learner = Learner(
-            algorithm=model.algorithm,
-            hyperparameters=model.hyperparameters,
-            architecture=model.architecture,
-            observation_space=spaces[0],
-            action_space=spaces[1],
-            seed=model.seed,
-        )
-        self.spaces = spaces
-        if job.last_checkpoint:
-            self.learner.restore(artifacts.read(job.last_checkpoint))
-            self._recall_progress()
-            jobs.log(
-                job,
-                f"Resumed from the checkpoint of iteration {job.iterations} "
-                f"(attempt {job.attempt}).",
-            )
-        else:
-            artifacts.write_model_files(model)
-            cloned = artifacts.path(model, artifacts.CLONED_WEIGHTS)
-            if model.cloned_from_id is not None and default_storage.exists(cloned):
-                self.learner.restore(artifacts.read(cloned))
-                jobs.log(job, "Starting from the weights of the model this one was cloned from.")
-            self._checkpoint(0)
+        self._build_learner()
         self.version = job.weights_version
         self.channel.start(job.attempt)
         self._publish()
@@ -191,6 +169,37 @@ class Trainer:
             )
         self._loop()
         self.finish(TrainingJob.Status.COMPLETED)
+
+    def _build_learner(self) -> None:
+        """The learner, with the weights the job goes on from: its last checkpoint when it
+        resumes, else its clone source's best or fresh ones (saved as iteration 0)."""
+        job, model = self.job, self.model
+        env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+        self.spaces = env.observation_space, env.action_space
+        env.close()
+        self.learner = Learner(
+            algorithm=model.algorithm,
+            hyperparameters=model.hyperparameters,
+            architecture=model.architecture,
+            observation_space=self.spaces[0],
+            action_space=self.spaces[1],
+            seed=model.seed,
+        )
+        if job.last_checkpoint:
+            self.learner.restore(artifacts.read(job.last_checkpoint))
+            self._recall_progress()
+            jobs.log(
+                job,
+                f"Resumed from the checkpoint of iteration {job.iterations} "
+                f"(attempt {job.attempt}).",
+            )
+            return
+        artifacts.write_model_files(model)
+        cloned = artifacts.path(model, artifacts.CLONED_WEIGHTS)
+        if model.cloned_from_id is not None and default_storage.exists(cloned):
+            self.learner.restore(artifacts.read(cloned))
+            jobs.log(job, "Starting from the weights of the model this one was cloned from.")
+        self._checkpoint(0)
 
     def _tracks(self) -> str:
         """The tracks of the job's workers, by the names racers know them by."""
@@ -595,45 +604,57 @@ def training_metrics(episodes: list[Episode], *, before: int, now: float) -> lis
     training episodes from 1, ``trial`` counts them within the iteration from 1, the reward is
     rounded to a whole number, the completion truncated, the status labelled ("Lap complete").
     Times are in ms; ours are the wall clock's, DeepRacer's the simulator's."""
-    entries = []
-    for offset, episode in enumerate(episodes):
-        elapsed = round(episode.steps * 1000 / CONTROL_HZ)
-        entries.append(
-            {
-                "reward_score": round(float(episode.rewards.sum())),
-                "metric_time": int(now * 1000),
-                "start_time": int(now * 1000) - elapsed,
-                "elapsed_time_in_milliseconds": elapsed,
-                "episode": before + offset + 1,
-                "trial": offset + 1,
-                "phase": "training",
-                "completion_percentage": int(min(max(float(episode.progress), 0.0), 100.0)),
-                "episode_status": artifacts.status_label(episode.status),
-            }
+    return [
+        _metric(
+            "training",
+            steps=episode.steps,
+            reward=round(float(episode.rewards.sum())),
+            progress=episode.progress,
+            status=episode.status,
+            now=now,
+            episode=before + offset + 1,
+            trial=offset + 1,
         )
-    return entries
+        for offset, episode in enumerate(episodes)
+    ]
 
 
 def evaluation_metrics(results: list[dict], *, now: float) -> list[dict]:
-    """The evaluation episodes of one policy, in the same form; ``episode`` and ``trial`` are set
-    by ``with_evaluation``."""
-    entries = []
-    for result in results:
-        elapsed = round(result["steps"] * 1000 / CONTROL_HZ)
-        entries.append(
-            {
-                "reward_score": 0,  # the evaluation drives no reward function
-                "metric_time": int(now * 1000),
-                "start_time": int(now * 1000) - elapsed,
-                "elapsed_time_in_milliseconds": elapsed,
-                "episode": 0,
-                "trial": 0,
-                "phase": "evaluation",
-                "completion_percentage": int(result["progress"]),
-                "episode_status": artifacts.status_label(result["status"]),
-            }
+    """The evaluation episodes of one policy, in the same form (no reward: the evaluation drives
+    no reward function); ``episode`` and ``trial`` are set by ``with_evaluation``."""
+    return [
+        _metric(
+            "evaluation",
+            steps=result["steps"],
+            reward=0,
+            progress=result["progress"],
+            status=result["status"],
+            now=now,
+            episode=0,
+            trial=0,
         )
-    return entries
+        for result in results
+    ]
+
+
+def _metric(
+    phase: str, *, steps: int, reward: int, progress: float, status: str, now: float,
+    episode: int, trial: int,
+) -> dict:  # fmt: skip
+    """One entry of DeepRacer's metrics JSON: the episode's time is its steps at the control
+    rate, ending ``now``; the completion is truncated to a whole percentage."""
+    elapsed = round(steps * 1000 / CONTROL_HZ)
+    return {
+        "reward_score": reward,
+        "metric_time": int(now * 1000),
+        "start_time": int(now * 1000) - elapsed,
+        "elapsed_time_in_milliseconds": elapsed,
+        "episode": episode,
+        "trial": trial,
+        "phase": phase,
+        "completion_percentage": int(min(max(float(progress), 0.0), 100.0)),
+        "episode_status": artifacts.status_label(status),
+    }
 
 
 def with_evaluation(metrics: list[dict], evaluation: list[dict], *, episodes: int) -> list[dict]:

@@ -1,3 +1,10 @@
+"""The training app's pages: the garage, reward functions, models (create, detail, clone,
+delete, downloads, import), training and evaluations.
+
+Long because these are the app's pages, thin over its services and selectors, in one module as
+Django apps keep them; each view is short.
+"""
+
 import json
 import tempfile
 from contextlib import nullcontext

@@ -7,6 +7,9 @@ outer x, outer y, in metres. A loop repeats its first row at the end. Built-in t
 mapping with the file's bytes, which crosses to a sandbox child), or by name through a resolver
 the application registers (the training app's reads its Track table). Routes load as DeepRacer's
 loader takes them: repeated points dropped, the file's own direction read from it.
+
+Long because the loader follows DeepRacer's (track_data.py) check by check, beside the geometry
+every part of the simulator reads (projection onto the centre line, borders, closest waypoints).
 """
 
 from __future__ import annotations
@@ -352,8 +355,13 @@ def _sanitized(array: np.ndarray) -> np.ndarray:
                 "should lead back to the first."
             )
     route = np.vstack([body, body[:1]])
-    # DeepRacer does not check the borders (the report's "no is_valid check"); a border that
-    # crosses itself or the other one has no inside, so we refuse it with the waypoint it is at.
+    _check_borders(route)
+    return route
+
+
+def _check_borders(route: np.ndarray) -> None:
+    """DeepRacer does not check the borders (the report's "no is_valid check"); a border that
+    crosses itself or the other one has no inside, so we refuse it with the waypoint it is at."""
     for column, border in ((2, "inner"), (4, "outer")):
         crossing = _first_crossing(route[:, column : column + 2], None)
         if crossing is not None:
@@ -367,7 +375,6 @@ def _sanitized(array: np.ndarray) -> np.ndarray:
             "The inner and outer borders of this track cross each other (inner border near "
             f"waypoint {crossing[0]}, outer border near waypoint {crossing[1]})."
         )
-    return route
 
 
 def _from_array(array: np.ndarray, **metadata: Any) -> Track:

@@ -9,6 +9,8 @@ a step at least every call's limit and ``GRACE``), every write to the child has 
 read ahead and the standard error kept are bounded, and a child that breaks the protocol is
 killed; so no reward function can hang, flood or take down a worker. The child dies with the
 worker. This package imports no Django: the child imports it too.
+
+Long because every bound above lives in the one client class, where a reader checks them all.
 """
 
 from __future__ import annotations

@@ -168,12 +168,7 @@ class Child:
             self.send(_failure(error, step=env.unwrapped.steps, status=env.unwrapped.status),
                       log=True)  # fmt: skip
             return
-        summary = {
-            "worker": int(request.get("worker", 0)), "version": self.version,
-            "steps": len(rewards), "reward": float(sum(rewards)), "progress": info["progress"],
-            "status": info["status"], "terminated": bool(terminated),
-            "lap_time": env.unwrapped.sim_time if info["status"] == "lap_complete" else None,
-        }  # fmt: skip
+        summary = self._summary(rewards, info, terminated)
         if mode == "evaluate":
             self.send({"type": "episode", "summary": summary}, log=True)
             return
@@ -181,19 +176,36 @@ class Child:
         if self.ppo and mode != "random" and not terminated:
             final_value = self.policy.act(observation, deterministic=True)[1]
         arrays = {f"obs:{name}": np.stack(frames) for name, frames in observations.items()}
-        if discrete:
-            arrays["actions"] = np.array(actions, dtype=np.int64)
-        else:
-            arrays["actions"] = np.array(actions, dtype=np.float32).reshape(len(actions), -1)
-        arrays["rewards"] = np.array(rewards, dtype=np.float32)
-        if self.ppo:
-            arrays["values"] = np.array(values, dtype=np.float32)
-            arrays["log_probs"] = np.array(log_probs, dtype=np.float32)
+        arrays.update(self._experience(discrete, actions, rewards, values, log_probs))
         payload = msgpack.packb(
             {**summary, "final_value": final_value, "arrays": encode_arrays(arrays),
              "trace": trace}, use_bin_type=True,
         )  # fmt: skip
         self.send({"type": "episode", "summary": summary, "payload": payload}, log=True)
+
+    def _summary(self, rewards: list, info: dict, terminated: bool) -> dict:
+        """What the trainer and the job's page read of an episode without its experience."""
+        return {
+            "worker": self.worker, "version": self.version, "steps": len(rewards),
+            "reward": float(sum(rewards)), "progress": info["progress"], "status": info["status"],
+            "terminated": bool(terminated),
+            "lap_time": self.env.unwrapped.sim_time if info["status"] == "lap_complete" else None,
+        }  # fmt: skip
+
+    def _experience(
+        self, discrete: bool, actions: list, rewards: list, values: list, log_probs: list
+    ) -> dict[str, np.ndarray]:
+        """An episode's actions and rewards as the trainer reads them, with PPO's values and
+        log-probabilities of the actions."""
+        arrays = {
+            "actions": np.array(actions, dtype=np.int64) if discrete
+            else np.array(actions, dtype=np.float32).reshape(len(actions), -1),
+            "rewards": np.array(rewards, dtype=np.float32),
+        }  # fmt: skip
+        if self.ppo:
+            arrays["values"] = np.array(values, dtype=np.float32)
+            arrays["log_probs"] = np.array(log_probs, dtype=np.float32)
+        return arrays
 
     def op_watch(self, request: dict) -> None:
         """Which views to send while driving; no answer."""
