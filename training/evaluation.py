@@ -38,7 +38,7 @@ from notifications import services as notifications
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, live, selectors
+from training import artifacts, lifecycle, live, selectors
 from training.models import EvaluationJob, EvaluationTrial, RLModel
 from training.policies import Policy
 
@@ -336,10 +336,8 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
     _update(
         evaluation, status=status, failure_reason=reason, message="", finished_at=timezone.now()
     )
-    RLModel.objects.filter(
-        pk=evaluation.model_id,
-        status__in=(RLModel.Status.EVALUATING, RLModel.Status.SUBMITTING),
-    ).update(status=RLModel.Status.READY)
+    driving = frozenset({RLModel.Status.EVALUATING, RLModel.Status.SUBMITTING})
+    lifecycle.move(evaluation.model_id, RLModel.Status.READY, only_from=driving)
     _announce(evaluation)
     notifications.evaluation_ended(evaluation=evaluation)
 

@@ -15,7 +15,7 @@ from django.utils import timezone
 
 from common.refusals import Refused
 from simulator import tracks as simulator_tracks
-from training import artifacts, configuration, jobs, live, rewards, selectors, tasks
+from training import artifacts, configuration, jobs, lifecycle, live, rewards, selectors, tasks
 from training.models import (
     Direction,
     EvaluationJob,
@@ -292,7 +292,7 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
             job.finished_at = timezone.now()
             job.failure_reason = "Stopped before training began."
             job.save(update_fields=["status", "finished_at", "failure_reason"])
-            RLModel.objects.filter(pk=job.model_id).update(status=RLModel.Status.ERROR)
+            lifecycle.move(job.model_id, RLModel.Status.ERROR)
         elif job.is_active and not job.stop_requested:
             clock = selectors.training_clock(job=job)  # frozen here: the time billed
             job.training_seconds, job.clock_at = clock.seconds, clock.at
@@ -301,7 +301,7 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
             job.message = jobs.saving_message(job.iterations)
             job.save(update_fields=["stop_requested", "status", "message", "training_seconds",
                                     "clock_at"])  # fmt: skip
-            RLModel.objects.filter(pk=job.model_id).update(status=RLModel.Status.STOPPING)
+            lifecycle.move(job.model_id, RLModel.Status.STOPPING)
     live.announce_training(job.pk)
     if job.status == TrainingJob.Status.CANCELED:
         live.announce_queue()
@@ -317,18 +317,18 @@ def model_delete(*, model: RLModel) -> int:
     many is returned). The model is DELETING meanwhile, so nothing starts on it."""
     with transaction.atomic():
         locked = RLModel.objects.select_for_update().get(pk=model.pk)
-        if locked.status not in RLModel.DELETABLE:
+        was = locked.status
+        deletable = frozenset(RLModel.DELETABLE)
+        if not lifecycle.move(locked, RLModel.Status.DELETING, only_from=deletable):
             raise ModelBusy(
                 f"The model is {locked.get_status_display().lower()}; it can be deleted once it "
                 "is ready (stop its training first) or has failed."
             )
-        was, locked.status = locked.status, RLModel.Status.DELETING
-        locked.save(update_fields=["status", "updated_at"])
     try:
         removed = artifacts.delete_all(model)
     except Exception:
         # Storage failed part-way: the model stays, as it was, for the racer to delete again.
-        RLModel.objects.filter(pk=model.pk).update(status=was)
+        lifecycle.move(model.pk, was)
         raise
     model.delete()
     return removed
@@ -373,8 +373,7 @@ def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJ
             f"The model {model.name} has no trained weights yet; train it first."
         )
     evaluation = EvaluationJob.objects.create(model=model, **fields)
-    model.status = purpose
-    model.save(update_fields=["status", "updated_at"])
+    lifecycle.move(model, purpose, only_from=frozenset({RLModel.Status.READY}))
     return evaluation
 
 

@@ -31,7 +31,7 @@ from common.redis_client import redis_client
 from notifications import services as notifications
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, jobs, live
+from training import artifacts, jobs, lifecycle, live
 from training import hyperparameters as hp
 from training.experience import Episode, JobChannel, decode_episode
 from training.jobs import LeaseLost
@@ -140,7 +140,7 @@ class Trainer:
             started_at=job.started_at or timezone.now(),
             message="Preparing the trainer",
         )
-        RLModel.objects.filter(pk=model.pk).update(status=RLModel.Status.TRAINING)
+        lifecycle.move(model.pk, RLModel.Status.TRAINING)  # not back from STOPPING: a stop won
         live.announce_training(job.pk)
         live.announce_queue()
         self._build_learner()
@@ -588,9 +588,7 @@ class Trainer:
             jobs.log(job, reason, "error")
         has_checkpoint = bool(job.last_checkpoint)
         ready = status == TrainingJob.Status.COMPLETED or has_checkpoint
-        RLModel.objects.filter(pk=self.model.pk).update(
-            status=RLModel.Status.READY if ready else RLModel.Status.ERROR
-        )
+        lifecycle.move(self.model.pk, RLModel.Status.READY if ready else RLModel.Status.ERROR)
         live.announce_training(job.pk)
         notifications.training_ended(job=job)
 
