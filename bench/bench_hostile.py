@@ -16,10 +16,10 @@ import time
 
 import django
 
-from training import hyperparameters as hp
-from training.networks import SHALLOW
-from training.sandbox import GRACE, Sandbox, SandboxFailure
-from training.sandbox.protocol import pack
+from rl import hyperparameters as hp
+from rl.networks import SHALLOW
+from sandbox import GRACE, Sandbox, SandboxFailure
+from sandbox.protocol import pack
 
 os.environ.setdefault("DJANGO_SETTINGS_MODULE", "console.settings.dev")
 django.setup()  # the rollout worker's limits are read from where it keeps them

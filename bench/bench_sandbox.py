@@ -15,9 +15,9 @@ import time
 import gymnasium
 
 import simulator
+from sandbox import Sandbox
 from simulator.controller import drive
 from training.rewards import EXAMPLES
-from training.sandbox import Sandbox
 
 STEPS = 6000
 ROUNDS = 3

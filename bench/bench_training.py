@@ -27,7 +27,7 @@ import os
 import time
 
 from bench.stack import running_console
-from training.hyperparameters import PPO, SAC
+from rl.hyperparameters import PPO, SAC
 
 THROUGHPUT_MINUTES = 20.0
 CHECK_LATE_EVALUATIONS = 5.0  # [s] after the stop, for the evaluation results still coming
@@ -108,9 +108,9 @@ def job_of(model):
 def throughput(owner, workers: int, minutes: float) -> None:
     """Train a default model for ``minutes``; print each iteration's steps/s and where its time
     went, then the mean over all iterations and over those whose training episodes lapped."""
+    from rl.stopwatch import PHASES
     from training.models import Iteration
     from training.services import training_stop
-    from training.stopwatch import PHASES
 
     model = default_model(owner, f"throughput-{workers}", workers=workers)
     while job_of(model).status != "IN_PROGRESS":
@@ -152,9 +152,9 @@ def update_speed(steps: int = 2000) -> None:
     from torch import nn
 
     import simulator
-    from training import hyperparameters, networks
-    from training.experience import Episode
-    from training.learner import Learner
+    from rl import hyperparameters, networks
+    from rl.experience import Episode
+    from rl.learner import Learner
 
     env = gymnasium.make(simulator.ENV_ID, track="rookie-loop")
     spaces = env.observation_space, env.action_space
@@ -224,8 +224,8 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
     import gymnasium
 
     import simulator
+    from rl.learner import Learner
     from training import artifacts
-    from training.learner import Learner
 
     env = gymnasium.make(
         simulator.ENV_ID, mode="evaluation", laps=3, **model.environment_settings()

@@ -1,14 +1,14 @@
 """The help page's guidance: what each hyperparameter does, and what raising or lowering it
 changes, in the spirit of DeepRacer's own advice. Ranges and defaults are read from
-``training.hyperparameters``, so the page cannot disagree with the form."""
+``rl.hyperparameters``, so the page cannot disagree with the form."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from rl import hyperparameters
+from rl.hyperparameters import Setting
 from simulator.config import CONTROL_HZ
-from training import hyperparameters
-from training.hyperparameters import Setting
 
 # name: (what it is, raising it, lowering it)
 GUIDANCE = {

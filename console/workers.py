@@ -74,7 +74,7 @@ def _beat(record: dict) -> None:
 
 def _check_sandbox() -> dict:
     """The sandbox self-test, logged: a worker whose sandbox does not hold refuses racers' code."""
-    from training.sandbox import self_test
+    from sandbox import self_test
 
     result = self_test()
     if result.ok:

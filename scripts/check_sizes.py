@@ -13,7 +13,16 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("common", "console", "notifications", "racing", "simulator", "training")
+PACKAGES = (
+    "common",
+    "console",
+    "notifications",
+    "racing",
+    "rl",
+    "sandbox",
+    "simulator",
+    "training",
+)
 MODULE_LINES = 400
 FUNCTION_LINES = 60
 MODULE_REASON = "Long because"

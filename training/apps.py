@@ -9,7 +9,7 @@ class TrainingConfig(AppConfig):
         from simulator import tracks
 
         # Tracks staff added live in the Track table: let the simulator find them by name in this
-        # process (web, workers). A sandbox child gets them inline (training.sandbox).
+        # process (web, workers). A sandbox child gets them inline (sandbox).
         tracks.register_resolver(added_track)
 
 

@@ -11,7 +11,7 @@ from django.core.files.base import ContentFile
 from django.core.files.storage import FileSystemStorage, default_storage
 from django.http import FileResponse, HttpResponse, HttpResponseRedirect
 
-from training.hyperparameters import deepracer_json
+from rl.hyperparameters import deepracer_json
 from training.models import EvaluationJob, RLModel
 
 TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE section 5

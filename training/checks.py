@@ -9,7 +9,7 @@ every other page. At most ``PITLANE_CHECKS_WAITING`` more checks wait for a chec
 racer is told at once to try again (``Busy``), rather than queueing without end behind a flood.
 
 A check's thread waits on the sandbox's pipes; the racer's code itself runs in the sandbox's
-processes, under their own limits (``training.sandbox``). A check keeps running to its end when
+processes, under their own limits (``sandbox``). A check keeps running to its end when
 its racer leaves, which those limits bound.
 """
 

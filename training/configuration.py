@@ -12,8 +12,8 @@ import re
 from collections.abc import Mapping
 
 from common.refusals import Refused
+from rl import hyperparameters as hp
 from simulator import config as sim
-from training import hyperparameters as hp
 from training.models import Algorithm, Network, RLModel, ShellColour, Track, Vehicle
 from training.rewards import Validation, reward_validate
 

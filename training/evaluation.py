@@ -35,12 +35,12 @@ from django.utils import timezone
 import simulator
 from common.redis_client import redis_client
 from notifications import services as notifications
+from rl.policies import Policy
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
 from training import artifacts, lifecycle, live, selectors
 from training.models import EvaluationJob, EvaluationTrial, RLModel
-from training.policies import Policy
 
 logger = logging.getLogger(__name__)
 

@@ -41,7 +41,8 @@ from django.core.files.storage import default_storage
 from django.db.models import Sum
 
 from common.refusals import Refused
-from training import artifacts, hyperparameters, selectors
+from rl import hyperparameters
+from training import artifacts, selectors
 from training.models import RLModel
 
 CAR_GRAPH = "agent/model.pb"  # where simapp puts it (tensorflow_model.py:355-371, 01f5f01)
@@ -76,7 +77,7 @@ def physical(model: RLModel, which: str = "best") -> Export:
         f"physicalmodel-{model.name}.tar.gz",
     )
     if not default_storage.exists(export.name):
-        from training.cargraph import car_graph  # torch: loaded by a process's first export
+        from rl.cargraph import car_graph  # torch: loaded by a process's first export
 
         graph = car_graph(_policy(model, weights), model.action_space_type == "discrete")
         _store(export.name, {"model_metadata.json": _json(model.metadata()), CAR_GRAPH: graph})
@@ -91,7 +92,7 @@ def onnx(model: RLModel, which: str = "best") -> Export:
         f"onnxmodel-{model.name}.tar.gz",
     )
     if not default_storage.exists(export.name):
-        from training.onnxgraph import onnx_graph  # torch: loaded by a process's first export
+        from rl.onnxgraph import onnx_graph  # torch: loaded by a process's first export
 
         graph = onnx_graph(_policy(model, weights), model.action_space_type == "discrete")
         _store(export.name, {"model_metadata.json": _json(model.metadata()), "model.onnx": graph})
@@ -154,7 +155,7 @@ def pitlane_settings(model: RLModel) -> dict:
 
 def _policy(model: RLModel, weights: bytes):
     """The model's policy with ``weights`` (a checkpoint)."""
-    from training.policies import Policy  # torch: loaded by a process's first export
+    from rl.policies import Policy  # torch: loaded by a process's first export
 
     policy = Policy.for_environment(
         model.algorithm, model.architecture, model.environment_settings()

@@ -11,8 +11,9 @@ import re
 
 from django import forms
 
+from rl import hyperparameters
 from simulator import config as sim
-from training import configuration, hyperparameters, imports, selectors
+from training import configuration, imports, selectors
 from training.models import Algorithm, EvaluationJob, Network, RaceType, Track, Vehicle
 from training.rewards import MAX_SOURCE_SIZE
 

@@ -41,23 +41,14 @@ from google.protobuf.message import DecodeError
 from safetensors import SafetensorError
 
 from common.refusals import Refused
+from rl import hyperparameters, tfcheckpoint, tfgraph
 from simulator import config as sim
 from simulator import tracks as sim_tracks
-from training import (
-    artifacts,
-    configuration,
-    exports,
-    history,
-    hyperparameters,
-    jobs,
-    services,
-    tfcheckpoint,
-    tfgraph,
-)
+from training import artifacts, configuration, exports, history, jobs, services
 from training.models import Algorithm, Network, RLModel, ShellColour, Track, TrainingJob
 
 if TYPE_CHECKING:
-    from training.policies import Policy
+    from rl.policies import Policy
 
 MiB = 1024 * 1024
 MAX_ARCHIVE = 256 * MiB  # [bytes] as uploaded
@@ -718,7 +709,7 @@ class _TensorFlowFiles:
         """Our checkpoints (best, last) from the TensorFlow files, loaded into ``policy``: the
         checkpoints' policy with its critics, or, without a checkpoint, the frozen graph's
         policy."""
-        from training import tfweights  # torch: loaded by a process's first import of weights
+        from rl import tfweights
 
         ours = {}
         for path, prefix in zip(CHECKPOINTS, self.checkpoints or [None], strict=False):
@@ -782,7 +773,7 @@ def _number(pattern: re.Pattern, path: str) -> int:
 def _checkpoint_tensors(archive: IO[bytes], members: Members, prefix: str, ppo: bool) -> dict:
     """The tensors ``tfweights`` reads, from the checkpoint at ``prefix``: its index lists them,
     then only their bytes are read from its data file, in one forward pass over the archive."""
-    from training import tfweights  # torch: loaded by a process's first import of weights
+    from rl import tfweights
 
     listed = tfcheckpoint.entries(members[prefix + tfcheckpoint.SUFFIX_INDEX] or b"")
     names = tfweights.wanted(listed, ppo)
@@ -821,7 +812,7 @@ def _import_trained(
     clean = configuration.check(settings, owner=owner, reward_required=trainable)
     clean["network_layout"] = layout
     model = RLModel(**clean)
-    from training.policies import Policy  # torch: loaded by a process's first import of weights
+    from rl.policies import Policy  # torch: loaded by a process's first import of weights
 
     policy = Policy.for_environment(clean["algorithm"], model.architecture,
                                     model.environment_settings())  # fmt: skip

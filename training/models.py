@@ -10,7 +10,7 @@ from django.conf import settings
 from django.core.validators import RegexValidator
 from django.db import models
 
-from training import hyperparameters
+from rl import hyperparameters
 
 
 class Direction(models.TextChoices):
@@ -236,8 +236,8 @@ class RLModel(RaceConditions):
 
     @property
     def architecture(self) -> str:
-        """What builds the model's network (``training.networks.architecture``)."""
-        from training.networks import architecture  # torch: imported where networks are built
+        """What builds the model's network (``rl.networks.architecture``)."""
+        from rl.networks import architecture  # torch: imported where networks are built
 
         return architecture(self.network, self.network_layout)
 
@@ -398,7 +398,7 @@ class Iteration(models.Model):
     )
     time_split = models.JSONField(
         default=dict,
-        help_text="[s] of the wall time by phase (training.stopwatch.PHASES); they add up to it.",
+        help_text="[s] of the wall time by phase (rl.stopwatch.PHASES); they add up to it.",
     )
     evaluation_seconds = models.FloatField(
         null=True, blank=True,

@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from training.sandbox import Sandbox, SandboxFailure, verified
+from sandbox import Sandbox, SandboxFailure, verified
 
 ALLOWED_IMPORTS = ("math", "random", "numpy", "scipy", "shapely")
 MAX_SOURCE_SIZE = 140_000  # [characters]

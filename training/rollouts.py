@@ -18,11 +18,11 @@ import msgpack
 import redis
 
 from common.redis_client import redis_client
-from training import hyperparameters as hp
+from rl import hyperparameters as hp
+from rl.experience import JobChannel, LogEntry
+from sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
 from training import live
-from training.experience import JobChannel, LogEntry
 from training.models import Track, TrainingJob
-from training.sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
 
 logger = logging.getLogger(__name__)
 

@@ -12,6 +12,7 @@ from django.db.models import Count, F, FloatField, Prefetch, QuerySet, Sum
 from django.db.models.functions import Least, Lower
 from django.utils import timezone
 
+from rl.stopwatch import PHASES
 from training import artifacts, jobs
 from training.jobs import IMPORTED
 from training.models import (
@@ -26,7 +27,6 @@ from training.models import (
     TrainingJob,
     Vehicle,
 )
-from training.stopwatch import PHASES
 
 
 def models_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:

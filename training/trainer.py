@@ -29,16 +29,16 @@ from django.utils import timezone
 import simulator
 from common.redis_client import redis_client
 from notifications import services as notifications
+from rl import hyperparameters as hp
+from rl.experience import Episode, JobChannel, decode_episode
+from rl.learner import Interrupted, Learner
+from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stopwatch
+from sandbox.protocol import unpack
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
 from training import artifacts, jobs, lifecycle, live
-from training import hyperparameters as hp
-from training.experience import Episode, JobChannel, decode_episode
 from training.jobs import LeaseLost
-from training.learner import Interrupted, Learner
 from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
-from training.sandbox.protocol import unpack
-from training.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stopwatch
 
 logger = logging.getLogger(__name__)
 

@@ -30,6 +30,7 @@ from django.views.decorators.http import require_POST, require_safe
 
 from common import ratelimits
 from common.refusals import Refused
+from sandbox import SandboxFailure, SandboxUnavailable
 from simulator import config as sim_config
 from simulator import tracks as simulator_tracks
 from training import (
@@ -53,7 +54,6 @@ from training.forms import (
     VehicleForm,
 )
 from training.models import Algorithm, EvaluationJob, JobLogLine, RewardFunction, RLModel, Vehicle
-from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
 @login_required

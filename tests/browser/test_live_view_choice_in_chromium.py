@@ -1,10 +1,10 @@
 import pytest
 from playwright.sync_api import Page, expect
 
+from rl import hyperparameters
 from tests.browser.test_accounts_in_chromium import log_in
 from tests.conftest import PASSWORD
 from tests.training.test_training import TINY_PPO, settings
-from training import hyperparameters
 from training.models import TrainingJob
 from training.services import model_create
 

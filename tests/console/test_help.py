@@ -3,7 +3,7 @@ import re
 import pytest
 from django.urls import reverse
 
-from training.hyperparameters import SETTINGS
+from rl.hyperparameters import SETTINGS
 from training.rewards import PARAMS
 
 pytestmark = pytest.mark.django_db

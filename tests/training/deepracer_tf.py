@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from training.networks import EMBEDDERS, MIDDLEWARE
+from rl.networks import EMBEDDERS, MIDDLEWARE
 
 ROOT = "main_level/agent"
 

@@ -7,8 +7,9 @@ import numpy as np
 import torch
 
 import simulator
-from training import artifacts, configuration, hyperparameters
-from training.learner import Learner
+from rl import hyperparameters
+from rl.learner import Learner
+from training import artifacts, configuration
 from training.models import RLModel, TrainingJob
 from training.rewards import EXAMPLES
 

@@ -10,10 +10,10 @@ from django.core.files.uploadedfile import SimpleUploadedFile
 from django.core.management import CommandError, call_command
 from django.urls import reverse
 
+from sandbox import Sandbox
 from tests import routes
 from tests.training.test_model_pages import form_data
 from training.models import RLModel, Track
-from training.sandbox import Sandbox
 from training.services import TrackRefused, track_add, tracks_sync
 
 pytestmark = pytest.mark.django_db

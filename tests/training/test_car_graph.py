@@ -9,10 +9,10 @@ import pytest
 import torch
 
 import simulator
+from rl import cargraph, tfgraph
+from rl.networks import DEEP, SHALLOW
+from rl.policies import Policy
 from tests.training.factories import sensor_frames
-from training import cargraph, tfgraph
-from training.networks import DEEP, SHALLOW
-from training.policies import Policy
 
 DISCRETE = [
     {"steering_angle": -30, "speed": 0.6}, {"steering_angle": 0, "speed": 1.0},

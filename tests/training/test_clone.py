@@ -6,12 +6,12 @@ import json
 import pytest
 from django.urls import reverse
 
+from rl.learner import load_tensors
 from tests.training.factories import STRAIGHT_AHEAD, ready_model
 from tests.training.test_model_pages import form_data
 from tests.training.test_training import settings as training_settings
 from tests.training.test_training import wait_for_job
 from training import artifacts
-from training.learner import load_tensors
 from training.models import RLModel
 from training.services import model_create, training_stop
 

@@ -27,10 +27,10 @@ from django.core.management import CommandError, call_command
 from django.urls import reverse
 
 import simulator
+from rl.experience import Episode
 from simulator.controller import CentreLineDriver
 from tests.training.factories import trained_model
 from training import artifacts, history, logs_archive, trainer
-from training.experience import Episode
 from training.models import EvaluationJob, Iteration, RLModel
 
 STEP = 1 / 15  # [s]

@@ -14,13 +14,14 @@ from django.core.management import call_command
 from django.urls import reverse
 
 import simulator
+from rl import tfcheckpoint, tfweights
+from rl.networks import SHALLOW
+from rl.policies import Policy
 from tests.training.deepracer_tf import build, checkpoints_json
 from tests.training.factories import ready_model, sensor_frames
 from tests.training.test_imports import DEEPRACER_METADATA, deepracer_export, drfc_layout, tar_gz
-from training import artifacts, exports, imports, services, tfcheckpoint, tfweights
+from training import artifacts, exports, imports, services
 from training.models import RLModel
-from training.networks import SHALLOW
-from training.policies import Policy
 
 pytestmark = pytest.mark.django_db
 

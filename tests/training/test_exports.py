@@ -16,10 +16,11 @@ import torch
 from django.core.management import CommandError, call_command
 from django.urls import reverse
 
+from rl import cargraph, hyperparameters
+from rl.policies import Policy
 from tests.training.factories import sensor_frames, trained_model
-from training import artifacts, cargraph, hyperparameters
+from training import artifacts
 from training.models import RLModel
-from training.policies import Policy
 
 pytestmark = pytest.mark.django_db
 

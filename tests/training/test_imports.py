@@ -16,9 +16,9 @@ from django.core.management import CommandError, call_command
 from django.urls import reverse
 from safetensors.torch import save as save_tensors
 
+from rl.learner import load_tensors
 from tests.training.factories import ready_model
 from training import artifacts, exports, history, imports, selectors
-from training.learner import load_tensors
 from training.models import RLModel, ShellColour, Track, TrainingJob
 from training.rewards import EXAMPLES
 

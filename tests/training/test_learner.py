@@ -9,9 +9,9 @@ import torch
 from stable_baselines3.common.utils import FloatSchedule
 
 import simulator
+from rl import hyperparameters
+from rl.learner import Learner, code_version, weights_metadata
 from tests.training.test_stop import synthetic_episode
-from training import hyperparameters
-from training.learner import Learner, code_version, weights_metadata
 
 CONTINUOUS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}}
 

@@ -4,7 +4,7 @@ import re
 import pytest
 from django.urls import reverse
 
-from training import hyperparameters
+from rl import hyperparameters
 from training.models import RLModel, TrainingJob
 from training.rewards import EXAMPLES
 from training.services import model_create

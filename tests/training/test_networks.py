@@ -4,7 +4,7 @@ import pytest
 import torch
 from torch import nn
 
-from training.networks import CameraConv2d
+from rl.networks import CameraConv2d
 
 
 @pytest.mark.parametrize(

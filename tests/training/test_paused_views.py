@@ -5,10 +5,10 @@ import time
 
 import pytest
 
+from sandbox import MiB, Sandbox
 from simulator.spectator import FRAME_INTERVAL
 from training.rewards import EXAMPLES
 from training.rollouts import Viewing
-from training.sandbox import MiB, Sandbox
 
 
 class Publisher:

@@ -8,9 +8,9 @@ import pytest
 from django.urls import reverse
 
 import simulator.samples
+from sandbox import Sandbox
 from tests.services import ROOT
 from training.rewards import EXAMPLES, MAX_SOURCE_SIZE, reward_validate, static_problems
-from training.sandbox import Sandbox
 
 CORPUS = sorted((Path(__file__).parent / "reward_corpus").glob("*.py"))
 SITUATIONS = ["start", "mid-lap", "off-track", "finish", "near-object"]

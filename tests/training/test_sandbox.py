@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from training.sandbox import CHILD_ENVIRONMENT, Sandbox, SandboxFailure, self_test
+from sandbox import CHILD_ENVIRONMENT, Sandbox, SandboxFailure, self_test
 
 PARAMS = {"x": 1.0, "y": 2.0, "track_width": 0.76, "distance_from_center": 0.1}
 

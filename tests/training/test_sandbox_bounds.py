@@ -12,10 +12,10 @@ import time
 
 import pytest
 
+from sandbox import GRACE, STDERR_KEEP, Sandbox, SandboxFailure
+from sandbox.protocol import HEADER, Late, pack, read_frame_by, write_by
+from sandbox.reward import KILL_GRACE
 from training.rewards import reward_validate, static_problems
-from training.sandbox import GRACE, STDERR_KEEP, Sandbox, SandboxFailure
-from training.sandbox.protocol import HEADER, Late, pack, read_frame_by, write_by
-from training.sandbox.reward import KILL_GRACE
 
 PARAMS = {"x": 1.0, "y": 2.0, "track_width": 0.76, "distance_from_center": 0.1}
 LIMIT = 0.5  # [s] the reward function's time limit in these tests
@@ -176,7 +176,7 @@ def test_code_nested_too_deep_for_the_parser_is_a_validation_error(source):
 
 WORKER = """
 import sys, time
-from training.sandbox import Sandbox
+from sandbox import Sandbox
 sandbox = Sandbox(env={"track": "pitlane-oval"})
 sandbox.start()
 sandbox.load("def reward_function(params):\\n    return 1.0\\n")

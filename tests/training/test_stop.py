@@ -9,6 +9,9 @@ import pytest
 
 import simulator
 from common.redis_client import redis_client
+from rl import hyperparameters
+from rl.experience import Episode, JobChannel
+from rl.learner import Interrupted, Learner
 from tests.services import wait_for
 from tests.training.test_training import (
     TINY_PPO,
@@ -16,9 +19,7 @@ from tests.training.test_training import (
     settings,
     wait_for_job,
 )
-from training import configuration, hyperparameters, rollouts, tasks
-from training.experience import Episode, JobChannel
-from training.learner import Interrupted, Learner
+from training import configuration, rollouts, tasks
 from training.models import Iteration, JobLogLine, RLModel, TrainingJob
 from training.services import training_stop
 

@@ -20,18 +20,19 @@ from django.utils import timezone
 
 import simulator
 from common.redis_client import redis_client
+from rl import hyperparameters
+from rl.experience import JobChannel, decode_episode
+from rl.learner import Learner
+from rl.stopwatch import PHASES
+from sandbox import MiB, Sandbox
 from simulator.trace import SimTraceRow
 from tests import services
 from tests.services import parent_of, wait_for
 from tests.training.test_deepracer_utils import assert_training_logs_read_as_recorded
-from training import artifacts, configuration, hyperparameters, jobs, rewards, tasks, trainer
-from training.experience import JobChannel, decode_episode
-from training.learner import Learner
+from training import artifacts, configuration, jobs, rewards, tasks, trainer
 from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
-from training.sandbox import MiB, Sandbox
 from training.services import model_create, training_stop
-from training.stopwatch import PHASES
 
 TINY_PPO = {"batch_size": 32, "num_epochs": 3, "num_episodes_between_training": 5}
 
@@ -405,7 +406,7 @@ def sandbox_children() -> dict[int, int]:
     found = {}
     for entry in Path("/proc").glob("[0-9]*"):
         try:
-            if b"training.sandbox.child" in (entry / "cmdline").read_bytes():
+            if b"sandbox.child" in (entry / "cmdline").read_bytes():
                 found[int(entry.name)] = parent_of(int(entry.name))
         except OSError:
             continue

@@ -6,13 +6,13 @@ import pytest
 from django.urls import reverse
 
 from common.redis_client import redis_client
+from rl.experience import JobChannel, LogEntry
+from sandbox import LOG_KEEP, Sandbox
+from sandbox.reward import MAX_LOG
 from tests.training.factories import ready_model
 from tests.training.test_sandbox import PARAMS, reward
 from training import rollouts
-from training.experience import JobChannel, LogEntry
 from training.models import JobLogLine, TrainingJob
-from training.sandbox import LOG_KEEP, Sandbox
-from training.sandbox.reward import MAX_LOG
 
 FLOOD = """\
 for i in range(20_000):

@@ -23,7 +23,7 @@ class Migration(migrations.Migration):
             name="time_split",
             field=models.JSONField(
                 default=dict,
-                help_text="[s] of the wall time by phase (training.stopwatch.PHASES); they add up to it.",
+                help_text="[s] of the wall time by phase (rl.stopwatch.PHASES); they add up to it.",
             ),
         ),
         migrations.AlterField(

@@ -5,7 +5,7 @@ from django.contrib.auth import get_user_model
 from django.core.management.base import BaseCommand, CommandError
 
 from common.refusals import Refused
-from training import hyperparameters
+from rl import hyperparameters
 from training.services import model_create
 
 

@@ -3,9 +3,9 @@ from pathlib import Path
 
 from django.core.management.base import BaseCommand, CommandError
 
+from sandbox import SandboxFailure, SandboxUnavailable
 from simulator import tracks
 from training.rewards import reward_validate
-from training.sandbox import SandboxFailure, SandboxUnavailable
 
 
 class Command(BaseCommand):

@@ -37,8 +37,8 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 from torch.nn import functional
 
+from rl import hyperparameters as hp
 from simulator.config import CAMERAS, LIDARS
-from training import hyperparameters as hp
 
 SHALLOW = "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"  # DeepRacer's "3-layer CNN"
 DEEP = "DEEP_CONVOLUTIONAL_NETWORK"  # DeepRacer's "5-layer CNN"

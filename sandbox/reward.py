@@ -27,9 +27,9 @@ import time
 import traceback
 from typing import Any
 
+from sandbox import seal
+from sandbox.protocol import Late, ProtocolError, pack, read_frame, read_frame_by, write_by
 from simulator.rewards import RewardError, checked_reward
-from training.sandbox import seal
-from training.sandbox.protocol import Late, ProtocolError, pack, read_frame, read_frame_by, write_by
 
 FILENAME = "<reward_function>"
 PRELOADED = (

@@ -28,9 +28,9 @@ from stable_baselines3.common.logger import configure as configure_logger
 from stable_baselines3.common.vec_env import DummyVecEnv
 from torch.nn import functional
 
-from training import hyperparameters as hp
-from training.experience import Episode
-from training.networks import policy_kwargs
+from rl import hyperparameters as hp
+from rl.experience import Episode
+from rl.networks import policy_kwargs
 
 GAE_LAMBDA = 0.95
 CLIP_RANGE = 0.2

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 PPO = "clipped_ppo"
 SAC = "sac"
-# How a new model's network is laid out (training.networks): 2 is DeepRacer's, layer for layer;
+# How a new model's network is laid out (rl.networks): 2 is DeepRacer's, layer for layer;
 # 1 was Pitlane's own. A model keeps the layout it was created with.
 NETWORK_LAYOUT = 2
 

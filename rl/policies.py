@@ -14,9 +14,9 @@ import numpy as np
 import torch
 
 import simulator
-from training.hyperparameters import PPO
-from training.learner import load_weights, weights_bytes
-from training.networks import policy_kwargs
+from rl.hyperparameters import PPO
+from rl.learner import load_weights, weights_bytes
+from rl.networks import policy_kwargs
 
 
 @dataclass

@@ -13,14 +13,11 @@ import struct
 import time
 from typing import Any, BinaryIO
 
-import msgpack
+from rl.wire import ProtocolError, encode
+from rl.wire import decode as unpack
 
 HEADER = struct.Struct("!I")
 MAX_FRAME = 256 * 1024 * 1024  # [bytes]: the 5-layer network's weights are about 55 MB
-
-
-class ProtocolError(ValueError):
-    """The other side sent something that is not a frame of ours."""
 
 
 class Late(TimeoutError):
@@ -28,18 +25,8 @@ class Late(TimeoutError):
 
 
 def pack(message: dict[str, Any]) -> bytes:
-    body = msgpack.packb(message, use_bin_type=True)
+    body = encode(message)
     return HEADER.pack(len(body)) + body
-
-
-def unpack(body: bytes) -> dict[str, Any]:
-    try:
-        message = msgpack.unpackb(body, raw=False, strict_map_key=True)
-    except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError) as error:
-        raise ProtocolError(f"not a message: {error}") from None
-    if not isinstance(message, dict):
-        raise ProtocolError("a message is a map")
-    return message
 
 
 def read_frame(stream: BinaryIO) -> dict[str, Any] | None:

@@ -12,8 +12,8 @@ import torch
 from stable_baselines3.common.preprocessing import preprocess_obs
 from torch import nn
 
+from rl.policies import Policy
 from simulator.config import CAMERAS, LIDARS
-from training.policies import Policy
 
 OPSET = 17
 

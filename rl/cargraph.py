@@ -27,9 +27,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from training import tfgraph
-from training.networks import Embedder
-from training.policies import Policy
+from rl import tfgraph
+from rl.networks import Embedder
+from rl.policies import Policy
 
 ROOT = "main_level/agent"
 

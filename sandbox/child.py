@@ -1,4 +1,4 @@
-"""The sandbox child: ``python -s -m training.sandbox.child``, started by ``Sandbox``.
+"""The sandbox child: ``python -s -m sandbox.child``, started by ``Sandbox``.
 
 It reads requests on standard input and answers on standard output, in protocol frames. It runs
 only our code: it forks the reward process (``reward.py``), where the racer's code will run
@@ -23,14 +23,14 @@ import cv2
 import msgpack
 import numpy as np
 
+from rl.experience import encode_arrays
+from sandbox import seal
+from sandbox.protocol import pack, read_frame
+from sandbox.reward import RewardFailure, RewardProcess
 from simulator.config import VIEWS
 from simulator.controller import RolloutStats, drive
 from simulator.rewards import RewardError
 from simulator.spectator import FRAME_INTERVAL, jpeg, view_image
-from training.experience import encode_arrays
-from training.sandbox import seal
-from training.sandbox.protocol import pack, read_frame
-from training.sandbox.reward import RewardFailure, RewardProcess
 
 PROGRESS_EVERY = 0.25  # [s] between progress messages during a rollout
 LOOK_EVERY = 0.05  # [s] between looks for a watch request during an episode
@@ -107,7 +107,7 @@ class Child:
         """The policy network the rollout acts with, built and run once before sealing."""
         import torch
 
-        from training.policies import Policy
+        from rl.policies import Policy
 
         torch.set_num_threads(1)
         self.policy = Policy.build(

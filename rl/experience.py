@@ -21,8 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 import redis
 
+from rl.wire import decode
 from simulator.rewards import MAX_REWARD
-from training.sandbox.protocol import unpack
 
 EXPIRE_AFTER = 3600  # [s] the keys live after the job ends
 MAX_QUEUED_EPISODES = 2000  # the buffer is trimmed beyond this, oldest first
@@ -249,7 +249,7 @@ class Episode:
 
 def decode_episode(payload: bytes, observation_space, action_space, ppo: bool) -> Episode:
     """An episode from a rollout worker, every field checked; ValueError for anything amiss."""
-    message = unpack(payload)  # ProtocolError, a ValueError, when it is no message
+    message = decode(payload)  # ProtocolError, a ValueError, when it is no message
     arrays = message.get("arrays") or {}
     rewards = decode_array(arrays.get("rewards"), "float32", (None,))
     steps = len(rewards)

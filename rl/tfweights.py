@@ -1,6 +1,6 @@
 """A DeepRacer model's weights, by their TensorFlow names, into our networks (layout 2).
 
-Our networks are DeepRacer's layer for layer (``training.networks``), so a DeepRacer model's
+Our networks are DeepRacer's layer for layer (``rl.networks``), so a DeepRacer model's
 weights load into them once each tensor is found under its name and laid out as PyTorch lays it:
 
 - names: the policy network and, for training on, PPO's value network and SAC's Q network; each
@@ -41,10 +41,10 @@ import numpy as np
 import torch
 from torch import nn
 
+from rl import cargraph
+from rl.networks import DeepRacerFeatures
+from rl.policies import Policy
 from simulator.config import LEGACY_CAMERA
-from training import cargraph
-from training.networks import DeepRacerFeatures
-from training.policies import Policy
 
 SENSOR_NAMES = {"FRONT_FACING_CAMERA": ("FRONT_FACING_CAMERA", LEGACY_CAMERA)}
 MIDDLEWARE = "middleware_fc_embedder/Dense_0"

@@ -5,7 +5,7 @@ a gigabyte that neither the web tier nor the workers need for this: a frozen gra
 ``GraphDef`` whose weights are ``Const`` nodes. The messages below are TensorFlow's own
 (tensorflow/core/framework/graph.proto, node_def.proto, attr_value.proto, tensor.proto,
 tensor_shape.proto, types.proto, versions.proto; and tensor_bundle.proto's checkpoint index
-entries, which ``training.tfcheckpoint`` reads), declared with the fields a frozen inference
+entries, which ``rl.tfcheckpoint`` reads), declared with the fields a frozen inference
 graph uses and under TensorFlow's field numbers, so that protobuf's runtime encodes and decodes
 them byte for byte as TensorFlow does. The tests load what this writes with TensorFlow itself and
 with OpenVINO's TensorFlow front end, as the car's model optimizer does.
@@ -90,7 +90,7 @@ def _declare():
     _message(file, "GraphDef", [
         ("node", 1, ".tensorflow.NodeDef", True), ("versions", 4, ".tensorflow.VersionDef", False),
     ])  # fmt: skip
-    # tensor_bundle.proto: a checkpoint's index entries (read by training.tfcheckpoint)
+    # tensor_bundle.proto: a checkpoint's index entries (read by rl.tfcheckpoint)
     _message(file, "BundleEntryProto", [
         ("dtype", 1, "int32", False), ("shape", 2, ".tensorflow.TensorShapeProto", False),
         ("shard_id", 3, "int32", False), ("offset", 4, "int64", False),

@@ -1,6 +1,6 @@
 """Running racers' code: a sandbox child per use, and the worker's self-test of the sandbox.
 
-``Sandbox`` starts ``training.sandbox.child`` as a fresh interpreter (fork and exec, not a fork of
+``Sandbox`` starts ``sandbox.child`` as a fresh interpreter (fork and exec, not a fork of
 the worker) with an empty environment and only its three standard pipes, waits until it has sealed
 itself, then sends it the racer's code and requests. The racer's code runs in a process of its
 own beneath the child (``reward.py``), which times each call from outside and cannot be written
@@ -32,11 +32,11 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from sandbox.protocol import Late, ProtocolError, pack, read_frame, write_by
 from simulator.rewards import RewardError, checked_reward
-from training.sandbox.protocol import Late, ProtocolError, pack, read_frame, write_by
 
 logger = logging.getLogger(__name__)
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 MiB = 1024 * 1024
 GRACE = 2.0  # [s] past a call's own time limit before the child is killed
 LOG_KEEP = 1000  # printed lines kept until taken; later ones are counted in ``logs_dropped``
@@ -127,7 +127,7 @@ class Sandbox:
     def start(self) -> dict:
         """Start the child and wait until it is sealed; what it reports of its seals."""
         self._process = subprocess.Popen(
-            [sys.executable, "-s", "-m", "training.sandbox.child"],
+            [sys.executable, "-s", "-m", "sandbox.child"],
             cwd=ROOT,
             env=CHILD_ENVIRONMENT,
             stdin=subprocess.PIPE,

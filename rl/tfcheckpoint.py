@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from google.protobuf.message import DecodeError
 
-from training import tfgraph
+from rl import tfgraph
 
 MAGIC = 0xDB4775248B80FB57  # LevelDB's table magic (format.h kTableMagicNumber)
 FOOTER = 48  # two block handles padded to 40 bytes, then the magic
