@@ -167,16 +167,6 @@ class Sandbox:
         except RewardError as error:
             raise SandboxFailure("value", str(error)) from None
 
-    def rollout(
-        self, steps: int, *, driver: str = "centre", seed: int = 0,
-        on_progress: Callable[[int], None] | None = None,
-    ) -> dict:  # fmt: skip
-        """Drive the child's simulator for ``steps`` steps with the loaded reward function."""
-        return self._request(
-            {"op": "rollout", "steps": steps, "driver": driver, "seed": seed}, {"rollout"},
-            None, on_progress or _ignore,
-        )  # fmt: skip
-
     def set_weights(self, version: int, data: bytes) -> None:
         """Act with the policy weights of ``version`` from now on."""
         self._request({"op": "weights", "version": version, "data": data}, {"weights"},

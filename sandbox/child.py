@@ -21,14 +21,13 @@ from typing import Any
 
 import cv2
 import msgpack
-import numpy as np
 
+from rl import episode
 from rl.experience import encode_arrays
 from sandbox import seal
 from sandbox.protocol import pack, read_frame
 from sandbox.reward import RewardFailure, RewardProcess
 from simulator.config import VIEWS
-from simulator.controller import RolloutStats, drive
 from simulator.rewards import RewardError
 from simulator.spectator import FRAME_INTERVAL, jpeg, view_image
 
@@ -127,59 +126,44 @@ class Child:
         self.send({"type": "weights", "version": self.version})
 
     def op_episode(self, request: dict) -> None:
-        """One episode: ``mode`` "explore" (the policy, sampling), "random" (uniform actions) or
-        "evaluate" (the policy, deterministic: only a summary comes back)."""
-        env, mode = self.env, request.get("mode", "explore")
+        """One episode (``rl.episode.drive``): ``mode`` "explore" (the policy, sampling),
+        "random" (uniform actions) or "evaluate" (the policy, deterministic: only a summary
+        comes back). Between steps, live frames and progress go out."""
+        mode = request.get("mode", "explore")
+        if mode not in episode.MODES:
+            self.send({"type": "error", "kind": "protocol", "message": "unknown episode mode"})
+            return
         self.worker = int(request.get("worker", 0))
-        discrete = hasattr(env.action_space, "n")
-        observation, info = env.reset()
-        observations = {name: [value] for name, value in observation.items()}
-        actions, rewards, values, log_probs, trace = [], [], [], [], []
-        if mode != "evaluate":
-            trace.append(list(info["trace"]))  # the prepare row, step 1, as DeepRacer's trace
-        last_report = time.perf_counter()
+        reported = [time.perf_counter()]
+
+        def stepped(observation: dict, info: dict, done: bool) -> None:
+            self.observation = observation
+            if done:
+                return
+            self._live(observation)
+            if time.perf_counter() - reported[0] >= PROGRESS_EVERY:
+                self.send({"type": "progress", "steps": self.env.unwrapped.steps}, log=True)
+                reported[0] = time.perf_counter()
+
+        env = self.env
         try:
-            while True:
-                if mode == "random":
-                    action, value, log_prob = env.action_space.sample(), 0.0, 0.0
-                elif mode == "evaluate":
-                    action, value, log_prob = self.policy.drive(observation), 0.0, 0.0
-                else:
-                    action, value, log_prob = self.policy.act(observation, deterministic=False)
-                observation, reward, terminated, truncated, info = env.step(
-                    self.policy.command(action, discrete)
-                )
-                actions.append(action)
-                rewards.append(reward)
-                values.append(value or 0.0)
-                log_probs.append(log_prob or 0.0)
-                if mode != "evaluate":
-                    for name, value_now in observation.items():
-                        observations[name].append(value_now)
-                    trace.append(list(info["trace"]))
-                self.observation = observation
-                if terminated or truncated:
-                    break
-                self._live(observation)
-                if time.perf_counter() - last_report >= PROGRESS_EVERY:
-                    self.send({"type": "progress", "steps": len(rewards)}, log=True)
-                    last_report = time.perf_counter()
+            driven = episode.drive(env, self.policy, mode, record=mode != "evaluate",
+                                   on_step=stepped)  # fmt: skip
         except (RewardFailure, RewardError) as error:
             self.send(_failure(error, step=env.unwrapped.steps, status=env.unwrapped.status),
                       log=True)  # fmt: skip
             return
-        summary = self._summary(rewards, info, terminated)
+        summary = self._summary(driven.rewards, driven.info, driven.terminated)
         if mode == "evaluate":
             self.send({"type": "episode", "summary": summary}, log=True)
             return
         final_value = 0.0
-        if self.ppo and mode != "random" and not terminated:
-            final_value = self.policy.act(observation, deterministic=True)[1]
-        arrays = {f"obs:{name}": np.stack(frames) for name, frames in observations.items()}
-        arrays.update(self._experience(discrete, actions, rewards, values, log_probs))
+        if self.ppo and mode != "random" and not driven.terminated:
+            final_value = self.policy.act(driven.last_observation, deterministic=True)[1]
+        arrays = episode.experience(driven, hasattr(env.action_space, "n"), self.ppo)
         payload = msgpack.packb(
             {**summary, "final_value": final_value, "arrays": encode_arrays(arrays),
-             "trace": trace}, use_bin_type=True,
+             "trace": driven.trace}, use_bin_type=True,
         )  # fmt: skip
         self.send({"type": "episode", "summary": summary, "payload": payload}, log=True)
 
@@ -191,21 +175,6 @@ class Child:
             "terminated": bool(terminated),
             "lap_time": self.env.unwrapped.sim_time if info["status"] == "lap_complete" else None,
         }  # fmt: skip
-
-    def _experience(
-        self, discrete: bool, actions: list, rewards: list, values: list, log_probs: list
-    ) -> dict[str, np.ndarray]:
-        """An episode's actions and rewards as the trainer reads them, with PPO's values and
-        log-probabilities of the actions."""
-        arrays = {
-            "actions": np.array(actions, dtype=np.int64) if discrete
-            else np.array(actions, dtype=np.float32).reshape(len(actions), -1),
-            "rewards": np.array(rewards, dtype=np.float32),
-        }  # fmt: skip
-        if self.ppo:
-            arrays["values"] = np.array(values, dtype=np.float32)
-            arrays["log_probs"] = np.array(log_probs, dtype=np.float32)
-        return arrays
 
     def op_watch(self, request: dict) -> None:
         """Which views to send while driving; no answer."""
@@ -266,31 +235,6 @@ class Child:
             self.send(_failure(error), log=True)
         else:
             self.send({"type": "reward", "value": reward}, log=True)
-
-    def op_rollout(self, request: dict) -> None:
-        """Drive ``steps`` steps of the environment with the reward function, reporting progress."""
-
-        def report(stats: RolloutStats) -> None:
-            self.send({"type": "progress", "steps": stats.steps}, log=True)
-
-        started = time.perf_counter()
-        try:
-            stats = drive(
-                self.env,
-                int(request["steps"]),
-                random_actions=request.get("driver") == "random",
-                seed=int(request.get("seed", 0)),
-                report=report,
-            )
-        except (RewardFailure, RewardError) as error:
-            unwrapped = self.env.unwrapped
-            self.send(_failure(error, step=unwrapped.steps, status=unwrapped.status), log=True)
-            return
-        self.send({
-            "type": "rollout", "steps": stats.steps, "episodes": stats.episodes,
-            "reward": stats.reward, "statuses": dict(stats.statuses),
-            "elapsed": time.perf_counter() - started,
-        }, log=True)  # fmt: skip
 
     def op_probe(self, request: dict) -> None:
         """What sealed code managed of the forbidden things: the racer's code in the reward

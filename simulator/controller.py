@@ -4,10 +4,6 @@ that every track can be driven."""
 from __future__ import annotations
 
 import math
-import time
-from collections import Counter
-from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -142,41 +138,3 @@ def speed_profile(bends: np.ndarray, spec, top: float, grip: float, spacing: flo
             j, k = i % n, (i + 1) % n
             speed[j] = min(speed[j], math.sqrt(speed[k] ** 2 + 2 * usable * spacing))
     return np.clip(speed / rolling, spec.min_speed, top)
-
-
-@dataclass
-class RolloutStats:
-    steps: int = 0
-    episodes: int = 0
-    reward: float = 0.0
-    statuses: Counter = field(default_factory=Counter)
-
-
-def drive(
-    env,
-    steps: int,
-    *,
-    random_actions: bool = False,
-    seed: int = 0,
-    report: Callable[[RolloutStats], None] | None = None,
-    every: float = 0.25,
-) -> RolloutStats:
-    """Step ``env`` (reset already) ``steps`` times with the centre-line driver or random actions,
-    resetting after each episode; ``report`` is called at most every ``every`` seconds."""
-    driver = CentreLineDriver(env.unwrapped, speed=1.0)
-    env.action_space.seed(seed)
-    stats = RolloutStats()
-    last_report = time.perf_counter()
-    while stats.steps < steps:
-        action = env.action_space.sample() if random_actions else driver.act()
-        _, reward, terminated, truncated, info = env.step(action)
-        stats.steps += 1
-        stats.reward += reward
-        if terminated or truncated:
-            stats.statuses[info["status"]] += 1
-            stats.episodes += 1
-            env.reset()
-        if report is not None and time.perf_counter() - last_report >= every:
-            report(stats)
-            last_report = time.perf_counter()
-    return stats

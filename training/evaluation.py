@@ -35,6 +35,7 @@ from django.utils import timezone
 import simulator
 from common.redis_client import redis_client
 from notifications import services as notifications
+from rl import episode
 from rl.policies import Policy
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
@@ -204,54 +205,53 @@ class Evaluator:
     def _drive(
         self, env, policy: Policy, writer: _VideoWriter, publisher: live.FramePublisher
     ) -> None:
+        """The trials, each an episode of the one episode loop (``rl.episode.drive``; continuous
+        laps are one episode): each step's trace row, video frame and live frames, and each lap
+        recorded as it ends (``_stepped``)."""
         evaluation = self.evaluation
-        discrete = hasattr(env.action_space, "n")
-        unwrapped = env.unwrapped
-        episodes = 1 if evaluation.continuous_laps else evaluation.trials
-        last_live = last_step = 0.0
-        pace = unwrapped.dt / settings.PITLANE_WATCHED_SPEEDUP  # [s] of real time per step
-        clock = 0.0
+        self._unwrapped, self._writer, self._publisher = env.unwrapped, writer, publisher
+        self._pace = env.unwrapped.dt / settings.PITLANE_WATCHED_SPEEDUP  # [s] of real time a step
+        self._last_live = self._last_step = 0.0
+        for number in range(1 if evaluation.continuous_laps else evaluation.trials):
+            self._counts, self._laps_done = LapCounts(), 0
+            driven = episode.drive(
+                env, policy, "evaluate", record=False, seed=number,
+                on_reset=self._started, on_step=self._stepped,
+            )  # fmt: skip
+            if driven.truncated and len(self.results) < evaluation.trials:
+                seconds = self._unwrapped.sim_time - self._counts.started
+                self._record(self._unwrapped, driven.info, self._counts, seconds, completed=False)
 
-        def row(info):
-            trace = info["trace"]
-            return trace._replace(
-                episode=len(self.results), tstamp=clock + trace.tstamp, wall_clock=time.time()
-            )
+    def _started(self, observation: dict, info: dict) -> None:
+        # Trace rows are numbered by trials done, so each lap of continuous laps is its own
+        # episode, as DeepRacer's evaluation numbers them (simapp rollout_agent_ctrl.py:819);
+        # the seeded reset restarts the env's clock, so tstamp runs on from the last row.
+        self._clock = self.trace[-1].tstamp if self.trace else 0.0
+        self.trace.append(self._row(info))  # the prepare row
 
-        for episode in range(episodes):
-            observation, info = env.reset(seed=episode)
-            # Trace rows are numbered by trials done, so each lap of continuous laps is its own
-            # episode, as DeepRacer's evaluation numbers them (simapp rollout_agent_ctrl.py:819);
-            # the seeded reset restarts the env's clock, so tstamp runs on from the last row.
-            clock = self.trace[-1].tstamp if self.trace else 0.0
-            self.trace.append(row(info))  # the prepare row
-            counts = LapCounts()
-            laps_done = 0
-            while True:
-                action = policy.drive(observation)
-                observation, _, terminated, truncated, info = env.step(
-                    policy.command(action, discrete)
-                )
-                self.trace.append(row(info))
-                frame = unwrapped.spectator.render(unwrapped)
-                writer.write(frame)
-                watched = publisher.watched(0)
-                now = time.monotonic()
-                if watched and now - last_live >= FRAME_INTERVAL:
-                    last_live = now
-                    self._show(publisher, watched, unwrapped, frame, observation)
-                if watched:  # keep to real time (or PITLANE_WATCHED_SPEEDUP times) for them
-                    time.sleep(max(0.0, pace - (time.monotonic() - last_step)))
-                last_step = time.monotonic()
-                while len(info["lap_times"]) > laps_done:
-                    laps_done += 1
-                    lap_time = info["lap_times"][laps_done - 1]
-                    counts = self._record(unwrapped, info, counts, lap_time, completed=True)
-                if terminated or truncated:
-                    break
-            if truncated and len(self.results) < evaluation.trials:
-                seconds = unwrapped.sim_time - counts.started
-                self._record(unwrapped, info, counts, seconds, completed=False)
+    def _row(self, info: dict) -> SimTraceRow:
+        trace = info["trace"]
+        return trace._replace(
+            episode=len(self.results), tstamp=self._clock + trace.tstamp, wall_clock=time.time()
+        )
+
+    def _stepped(self, observation: dict, info: dict, done: bool) -> None:
+        unwrapped = self._unwrapped
+        self.trace.append(self._row(info))
+        frame = unwrapped.spectator.render(unwrapped)
+        self._writer.write(frame)
+        watched = self._publisher.watched(0)
+        now = time.monotonic()
+        if watched and now - self._last_live >= FRAME_INTERVAL:
+            self._last_live = now
+            self._show(self._publisher, watched, unwrapped, frame, observation)
+        if watched:  # keep to real time (or PITLANE_WATCHED_SPEEDUP times) for them
+            time.sleep(max(0.0, self._pace - (time.monotonic() - self._last_step)))
+        self._last_step = time.monotonic()
+        while len(info["lap_times"]) > self._laps_done:
+            self._laps_done += 1
+            lap_time = info["lap_times"][self._laps_done - 1]
+            self._counts = self._record(unwrapped, info, self._counts, lap_time, completed=True)
 
     def _show(self, publisher: live.FramePublisher, views, unwrapped, frame, observation) -> None:
         """Offer this step's ``views`` (the spectator's is the video's ``frame``) to the live

@@ -10,7 +10,15 @@ from pathlib import Path
 
 import pytest
 
-from sandbox import CHILD_ENVIRONMENT, Sandbox, SandboxFailure, self_test
+from sandbox import CHILD_ENVIRONMENT, MiB, Sandbox, SandboxFailure, self_test
+
+POLICY = {"algorithm": "clipped_ppo", "architecture": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"}
+
+
+def driving(env: dict) -> Sandbox:
+    """A sandbox that drives episodes in ``env`` as a rollout worker's does: with a policy."""
+    return Sandbox(env=env, policy=POLICY, memory_allowance=1024 * MiB)
+
 
 PARAMS = {"x": 1.0, "y": 2.0, "track_width": 0.76, "distance_from_center": 0.1}
 
@@ -203,23 +211,26 @@ def test_code_without_a_reward_function_is_reported():
                    "must define reward_function(params)")  # fmt: skip
 
 
-def test_a_rollout_runs_the_simulator_and_the_reward_inside_the_sandbox():
-    with Sandbox(env={"track": "pitlane-oval"}) as sandbox:
+def test_an_episode_runs_the_simulator_and_the_reward_inside_the_sandbox():
+    with driving({"track": "pitlane-oval"}) as sandbox:
         sandbox.load(reward("return 1.0 if params['all_wheels_on_track'] else 0.0"))
-        result = sandbox.rollout(300)
-    assert result["steps"] == 300
-    assert result["reward"] == pytest.approx(300.0, abs=20)
-    assert result["elapsed"] > 0
+        episodes = [sandbox.episode(mode) for mode in ("random", "explore", "evaluate")]
+    for episode in episodes:
+        summary = episode["summary"]
+        assert summary["steps"] >= 1
+        assert 0 < summary["reward"] <= summary["steps"]  # a point for each step on the track
+    assert all(isinstance(episode.get("payload"), bytes) for episode in episodes[:2])
+    assert "payload" not in episodes[2]  # an evaluation sends its summary alone
 
 
-def test_a_rollout_names_the_step_and_status_where_the_reward_function_failed():
-    with Sandbox(env={"track": "pitlane-oval"}) as sandbox:
-        sandbox.load(reward("if params['steps'] == 40:\n    return {}['missing']\nreturn 1.0"))
+def test_an_episode_names_the_step_and_status_where_the_reward_function_failed():
+    with driving({"track": "pitlane-oval"}) as sandbox:
+        sandbox.load(reward("if params['steps'] == 3:\n    return {}['missing']\nreturn 1.0"))
         with pytest.raises(SandboxFailure) as failed:
-            sandbox.rollout(100)
+            sandbox.episode("random")
     failure = failed.value
-    assert (failure.step, failure.status, failure.line) == (40, "in_progress", 3)
-    assert str(failure) == "at step 40 (in_progress), line 3: KeyError: 'missing'"
+    assert (failure.step, failure.status, failure.line) == (3, "in_progress", 3)
+    assert str(failure) == "at step 3 (in_progress), line 3: KeyError: 'missing'"
 
 
 def test_nothing_was_left_behind_in_tmp():
