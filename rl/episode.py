@@ -11,10 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from rl.policies import Policy
+if TYPE_CHECKING:  # the loop only calls the policy: a child that validates loads no torch
+    from rl.policies import Policy
 
 MODES = ("explore", "random", "evaluate")
 
