@@ -35,9 +35,29 @@ from racing.models import (
     Submission,
 )
 from training import services as training_services
+from training.lifecycle import Lifecycle
 from training.models import EvaluationJob, EvaluationTrial, RLModel, Track
 
 logger = logging.getLogger(__name__)
+
+_S = Submission.Status
+# A race entry's status and its moves (see training.lifecycle): every write of it is a move.
+SUBMISSION = Lifecycle(
+    Submission,
+    {
+        # The race task drives it (a redelivered task drives an interrupted one again), then
+        # scores it; scoring the same laps again changes nothing.
+        _S.QUEUED: frozenset({_S.IN_PROGRESS}),
+        _S.IN_PROGRESS: frozenset({_S.COMPLETED, _S.FAILED}),
+        _S.COMPLETED: frozenset(),
+        _S.FAILED: frozenset(),
+        # A training job's statuses a race entry never takes.
+        _S.INITIALIZING: frozenset(),
+        _S.STOPPING: frozenset(),
+        _S.CANCELED: frozenset(),
+    },
+    born=frozenset({_S.QUEUED}),
+)
 
 PROMOTED_SHARE = 0.10  # the top 10% of a month's Open time trials move up to Pro
 VIDEO = "video.webm"
@@ -99,18 +119,15 @@ def submission_run(*, submission_id: int) -> Submission | None:
     if submission is None or not submission.is_active:
         logger.info("Submission %s is not waiting; nothing to do", submission_id)
         return None
-    _update(submission, status=Submission.Status.IN_PROGRESS)
+    SUBMISSION.move(submission, Submission.Status.IN_PROGRESS)
     live.announce_submission(submission)
     if submission.evaluation_id is not None:
         evaluations.run(submission.evaluation_id)
     evaluation = EvaluationJob.objects.filter(pk=submission.evaluation_id).first()
     if evaluation is None or evaluation.status != EvaluationJob.Status.COMPLETED:
         reason = (evaluation.failure_reason if evaluation else "") or "The race did not finish."
-        _update(
-            submission,
-            status=Submission.Status.FAILED,
-            failure_reason=reason,
-            finished_at=timezone.now(),
+        SUBMISSION.move(
+            submission, Submission.Status.FAILED, failure_reason=reason, finished_at=timezone.now()
         )
         live.announce_submission(submission)
         return submission
@@ -136,9 +153,9 @@ def submission_score(
     with transaction.atomic():
         submission.laps.all().delete()
         Lap.objects.bulk_create(laps)
-        _update(
+        SUBMISSION.move(
             submission,
-            status=Submission.Status.COMPLETED,
+            Submission.Status.COMPLETED,
             finished_at=submission.finished_at or timezone.now(),
             score_ms=score,
             qualified=score is not None,
@@ -175,6 +192,7 @@ def _keep_video(submission: Submission, video: str) -> str:
 
 
 def _update(submission: Submission, **fields) -> None:
+    """Write ``fields`` (not the status: ``SUBMISSION`` moves that); mirror them."""
     Submission.objects.filter(pk=submission.pk).update(**fields)
     for name, value in fields.items():
         setattr(submission, name, value)

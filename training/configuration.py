@@ -7,9 +7,11 @@ hyperparameters under the names of ``hyperparameters.json``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from collections.abc import Mapping
+from typing import TypedDict
 
 from common.refusals import Refused
 from rl import hyperparameters as hp
@@ -28,6 +30,91 @@ class Invalid(Refused):
     """Settings with problems: ``errors`` maps each setting to what is wrong with it."""
 
 
+class Draft(TypedDict, total=False):
+    """A model's settings as a racer gives them, unchecked: from the create-model page
+    (``ModelCreateForm.settings``), ``manage.py createmodel``'s JSON or an imported archive's
+    model_metadata.json. ``check`` makes them ``ModelSettings``; what is left out takes
+    DeepRacer's default."""
+
+    name: str
+    description: str
+    track: str
+    direction: str
+    race_type: str
+    boxes: dict | None
+    bots: dict | None
+    vehicle: Vehicle | None
+    shell_colour: str
+    sensors: list[str]
+    network: str
+    action_space: list | dict | str  # "unreadable": a discrete table that is not JSON
+    algorithm: str
+    hyperparameters: dict
+    max_minutes: int | float | str
+    workers: int | float | str
+    extra_tracks: list[str]
+    seed: int | str
+    reward_function: str
+    cloned_from: RLModel | None
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ModelSettings:
+    """A model's settings, checked and complete: what ``check`` returns, ``model_create`` saves
+    (``row``), and the clone page shows again (``of`` a saved model). Sensors and action space
+    are in the vocabulary of DeepRacer's model_metadata.json, hyperparameters under the names of
+    its hyperparameters.json."""
+
+    name: str
+    description: str
+    track: Track
+    direction: str
+    race_type: str
+    boxes: dict | None
+    bots: dict | None
+    vehicle: Vehicle | None
+    shell_colour: str
+    sensors: list[str]
+    network: str
+    action_space_type: str
+    action_space: list[dict] | dict
+    algorithm: str
+    hyperparameters: dict
+    max_minutes: int
+    workers: int
+    extra_tracks: list[str]
+    seed: int
+    reward_function: str
+    cloned_from: RLModel | None = None
+    # a clone's weights are for its source's network, whatever this console's layout now is
+    network_layout: int = hp.NETWORK_LAYOUT
+
+    @classmethod
+    def of(cls, model: RLModel) -> ModelSettings:
+        """A saved model's settings."""
+        return cls(**{field.name: getattr(model, field.name) for field in dataclasses.fields(cls)})
+
+    def row(self) -> dict:
+        """The settings as ``RLModel`` fields: ``RLModel(owner=..., **settings.row())``."""
+        return {field.name: getattr(self, field.name) for field in dataclasses.fields(self)}
+
+    def draft(self) -> Draft:
+        """The settings as a racer would give them: ``check`` of these gives them back."""
+        return Draft(
+            name=self.name, description=self.description, track=self.track.name,
+            direction=self.direction, race_type=self.race_type, boxes=self.boxes,
+            bots=self.bots, vehicle=self.vehicle, shell_colour=self.shell_colour,
+            sensors=list(self.sensors), network=self.network, action_space=self.action_space,
+            algorithm=self.algorithm, hyperparameters=dict(self.hyperparameters),
+            max_minutes=self.max_minutes, workers=self.workers,
+            extra_tracks=list(self.extra_tracks), seed=self.seed,
+            reward_function=self.reward_function, cloned_from=self.cloned_from,
+        )  # fmt: skip
+
+    def replace(self, **changes) -> ModelSettings:
+        return dataclasses.replace(self, **changes)
+
+
 def name_problem(name: str, *, owner) -> str | None:
     """What is wrong with ``name`` for a new model of ``owner``'s, or None."""
     if not NAME.match(name):
@@ -38,14 +125,14 @@ def name_problem(name: str, *, owner) -> str | None:
 
 
 def check(
-    settings: dict,
+    settings: Draft,
     *,
     owner,
     validate_reward: bool = True,
     reward_required: bool = True,
     validation: Validation | None = None,
-) -> dict:
-    """The settings, complete and typed, ready for ``RLModel(**...)``; ``Invalid`` otherwise.
+) -> ModelSettings:
+    """The settings, complete and typed; ``Invalid`` otherwise, with every problem found.
     Only a model imported without a reward function (to evaluate and race, not to train) is
     checked without ``reward_required``. The reward function is validated here unless
     ``validation`` is given: its result, found by a checker (``training.checks``) on
@@ -73,7 +160,7 @@ def check(
         clean["cloned_from"] = source_model
     if errors:
         raise Invalid(errors)
-    return clean
+    return ModelSettings(**clean)
 
 
 def _check_identity(settings: dict, clean: dict, errors: dict, owner) -> None:
@@ -209,7 +296,7 @@ def check_race(settings: dict) -> dict:
     return clean
 
 
-def reward_sample_track(settings: dict) -> tuple[str, str] | None:
+def reward_sample_track(settings: Draft) -> tuple[str, str] | None:
     """(track, direction): where ``check`` validates the reward function of ``settings``; None
     when it will not, for the settings name no track (or a direction it is not driven in)."""
     clean: dict = {}

@@ -122,12 +122,10 @@ def run(evaluation_id: int) -> EvaluationJob | None:
         if evaluation.status != EvaluationJob.Status.QUEUED:
             logger.warning("Evaluation %s was interrupted; starting it over", evaluation_id)
             evaluation.trial_rows.all().delete()
-        _update(
-            evaluation,
-            status=EvaluationJob.Status.INITIALIZING,
-            started_at=timezone.now(),
+        lifecycle.EVALUATION.move(
+            evaluation, EvaluationJob.Status.INITIALIZING, started_at=timezone.now(),
             message="Loading the model",
-        )
+        )  # fmt: skip
     evaluation = EvaluationJob.objects.select_related("model", "track").get(pk=evaluation_id)
     _announce(evaluation)
     try:
@@ -186,7 +184,7 @@ class Evaluator:
             checkpoint_name=checkpoint,
             checkpoint_iteration=artifacts.checkpoint_iteration(checkpoint),
         )
-        _update(evaluation, status=EvaluationJob.Status.IN_PROGRESS, message="Racing")
+        lifecycle.EVALUATION.move(evaluation, EvaluationJob.Status.IN_PROGRESS, message="Racing")
         _announce(evaluation)
         with tempfile.TemporaryDirectory(prefix="pitlane-evaluation-") as directory:
             video_path = Path(directory) / artifacts.EVALUATION_VIDEO
@@ -327,17 +325,18 @@ class Evaluator:
 
 
 def _update(evaluation: EvaluationJob, **fields) -> None:
+    """Write ``fields`` (not the status: ``lifecycle.EVALUATION`` moves that); mirror them."""
     EvaluationJob.objects.filter(pk=evaluation.pk).update(**fields)
     for name, value in fields.items():
         setattr(evaluation, name, value)
 
 
 def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
-    _update(
-        evaluation, status=status, failure_reason=reason, message="", finished_at=timezone.now()
+    lifecycle.EVALUATION.move(
+        evaluation, status, failure_reason=reason, message="", finished_at=timezone.now()
     )
     driving = frozenset({RLModel.Status.EVALUATING, RLModel.Status.SUBMITTING})
-    lifecycle.move(evaluation.model_id, RLModel.Status.READY, only_from=driving)
+    lifecycle.MODEL.move(evaluation.model_id, RLModel.Status.READY, only_from=driving)
     _announce(evaluation)
     notifications.evaluation_ended(evaluation=evaluation)
 

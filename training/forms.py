@@ -371,8 +371,8 @@ class ModelCreateForm(TrackAndRaceFields):
             )
 
     @staticmethod
-    def initial_from(model) -> dict:
-        """The page filled in with ``model``'s settings: what Clone starts from."""
+    def initial_from(model: configuration.ModelSettings) -> dict:
+        """The page filled in with a model's settings: what Clone starts from."""
         initial = {
             "name": f"{model.name}-clone"[:64],
             "description": model.description,
@@ -381,7 +381,7 @@ class ModelCreateForm(TrackAndRaceFields):
             "race_type": model.race_type,
             "camera": next((s for s in model.sensors if s in Vehicle.Camera.values), ""),
             "lidar": next((s for s in model.sensors if s in ("LIDAR", "SECTOR_LIDAR")), ""),
-            "vehicle": model.vehicle_id,
+            "vehicle": model.vehicle.pk if model.vehicle else None,
             "network": model.network,
             "action_space_type": model.action_space_type,
             "algorithm": model.algorithm,
@@ -415,8 +415,8 @@ class ModelCreateForm(TrackAndRaceFields):
     def hyperparameter_fields(self, algorithm: str) -> list:
         return [self[f"{algorithm}__{s.name}"] for s in hyperparameters.SETTINGS[algorithm]]
 
-    def settings(self) -> dict:
-        """The model's settings, in ``training.configuration``'s vocabulary."""
+    def settings(self) -> configuration.Draft:
+        """The model's settings as the racer gave them, for ``configuration.check``."""
         data = self.cleaned_data
         vehicle = data.get("vehicle")
         sensors = (
@@ -438,7 +438,7 @@ class ModelCreateForm(TrackAndRaceFields):
             except json.JSONDecodeError:
                 action_space = "unreadable"
         algorithm = data["algorithm"]
-        return {
+        draft: configuration.Draft = {
             "name": data["name"],
             "description": data.get("description", ""),
             **self.race_settings(),
@@ -461,6 +461,7 @@ class ModelCreateForm(TrackAndRaceFields):
             "extra_tracks": [track.name for track in data.get("extra_tracks") or []],
             "reward_function": data["reward_function"],
         }
+        return draft
 
     def _kept_hyperparameters(self, algorithm: str) -> dict:
         if self.source is None or self.source.algorithm != algorithm:

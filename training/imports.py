@@ -372,10 +372,9 @@ def _yaml(members: Members, path: str) -> dict:
 
 def _settings(
     metadata: dict, ours: dict, members: Members, reward: str, name: str, notes: list[str]
-) -> dict:
-    """The create-model settings the archive describes, in ``training.configuration``'s
-    vocabulary; what it leaves out takes the defaults, and ``notes`` lists every setting it has
-    that could not be carried over."""
+) -> configuration.Draft:
+    """The create-model settings the archive describes, unchecked; what it leaves out takes the
+    defaults, and ``notes`` lists every setting it has that could not be carried over."""
     params = _yaml(members, _place(members, "training_params.yaml"))
     algorithm = DEEPRACER_ALGORITHMS.get(
         str(metadata.get("training_algorithm", Algorithm.PPO)).lower(), "unknown"
@@ -386,7 +385,7 @@ def _settings(
             "this console trains PPO (clipped_ppo) and SAC."
         )
     given = _json(members, _place(members, "hyperparameters.json")) or {}
-    settings = {
+    settings: configuration.Draft = {
         "name": name or ours.get("name") or _model_name(params),
         "description": str(ours.get("description") or "Imported."),
         "sensors": _sensors(metadata, notes),
@@ -664,7 +663,7 @@ def _params_left_out(params: dict, notes: list[str]) -> None:
         )
 
 
-def _weights_fit(metadata: dict, settings: dict, notes: list[str]) -> bool:
+def _weights_fit(metadata: dict, settings: configuration.Draft, notes: list[str]) -> bool:
     """Whether DeepRacer's weights can be carried: the model has every sensor and the network
     model_metadata.json names (else a note says why they stay behind)."""
     given = metadata.get("sensor") or ["FRONT_FACING_CAMERA"]
@@ -803,18 +802,18 @@ def _ranges(tar: tarfile.TarFile, member: tarfile.TarInfo):
 
 
 def _import_trained(
-    owner, settings: dict, members: Members, ours: dict, *, layout: int, checkpoints
+    owner, settings: configuration.Draft, members: Members, ours: dict, *, layout: int, checkpoints
 ) -> Imported:
     """A READY model with its weights: ``checkpoints(policy)`` gives them ({path in
     ``CHECKPOINTS``: safetensors}) for the model's ``policy``, and each is checked to load into
     it; its training history comes too when the archive's metrics hold one."""
     trainable = bool(settings["reward_function"].strip())
-    clean = configuration.check(settings, owner=owner, reward_required=trainable)
-    clean["network_layout"] = layout
-    model = RLModel(**clean)
+    checked = configuration.check(settings, owner=owner, reward_required=trainable)
+    checked = checked.replace(network_layout=layout)
+    model = RLModel(**checked.row())
     from rl.policies import Policy  # torch: loaded by a process's first import of weights
 
-    policy = Policy.for_environment(clean["algorithm"], model.architecture,
+    policy = Policy.for_environment(checked.algorithm, model.architecture,
                                     model.environment_settings())  # fmt: skip
     weights = checkpoints(policy)
     for path, data in weights.items():
@@ -829,7 +828,7 @@ def _import_trained(
     last = weights.get(CHECKPOINTS[1]) or best
     with transaction.atomic():
         services.check_quota(owner=owner, minutes=0)
-        model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean)
+        model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **checked.row())
         try:
             artifacts.write_model_files(model)
             best_name = artifacts.save(model, "checkpoints/imported-best.safetensors", best)

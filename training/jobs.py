@@ -14,6 +14,7 @@ from datetime import timedelta
 from django.db import transaction
 from django.utils import timezone
 
+from training import lifecycle
 from training.models import JobLogLine, TrainingJob
 
 LEASE = timedelta(seconds=45)
@@ -57,23 +58,43 @@ def _mirror(job: TrainingJob, fields: dict) -> None:
 
 
 def write(job: TrainingJob, **fields) -> None:
-    """Update the job's row, only while ``job``'s attempt holds the lease; mirror on ``job``."""
+    """Update the job's row, only while ``job``'s attempt holds the lease; mirror on ``job``.
+    Its status changes by ``move`` alone."""
+    if "status" in fields:
+        raise ValueError("A job's status changes by jobs.move, as training.lifecycle allows.")
     if _held(job).update(**fields) != 1:
         raise LeaseLost(f"training job {job.pk} is held by another run")
     _mirror(job, fields)
 
 
-def clock_write(job: TrainingJob, seconds: float, **fields) -> bool:
-    """Write the training time used, measured now (``clock_at``), with ``fields``, unless the
-    racer has asked to stop: the stop froze the clock at the time it was asked (what is billed),
-    and the trainer's later measurements must not move it. False when the stop was asked (``job``
-    then mirrors the frozen clock); ``LeaseLost`` when another run holds the job."""
+def move(job: TrainingJob, to: str, **fields) -> bool:
+    """Move the job to status ``to`` with ``fields`` as ``lifecycle.TRAINING_JOB`` allows, only
+    while ``job``'s attempt holds the lease; whether it moved (False: its status, which ``job``
+    then mirrors, does not allow it). ``LeaseLost`` when another run holds the job."""
     held = _held(job)
+    if lifecycle.TRAINING_JOB.move(job, to, within=held, **fields):
+        return True
+    now = held.values("status", "stop_requested").first()
+    if now is None:
+        raise LeaseLost(f"training job {job.pk} is held by another run")
+    _mirror(job, now)
+    return False
+
+
+def clock_write(job: TrainingJob, seconds: float, to: str | None = None, **fields) -> bool:
+    """Write the training time used, measured now (``clock_at``), with ``fields`` (and the
+    status ``to``, if lifecycle allows it), unless the racer has asked to stop: the stop froze
+    the clock at the time it was asked (what is billed), and the trainer's later measurements
+    must not move it. False when the stop was asked (``job`` then mirrors the frozen clock);
+    ``LeaseLost`` when another run holds the job."""
+    held = _held(job).filter(stop_requested=False)
     fields = {**fields, "training_seconds": seconds, "clock_at": timezone.now()}
-    if held.filter(stop_requested=False).update(**fields):
+    if to is None and held.update(**fields):
         _mirror(job, fields)
         return True
-    frozen = held.values("training_seconds", "clock_at", "stop_requested").first()
+    if to is not None and lifecycle.TRAINING_JOB.move(job, to, within=held, **fields):
+        return True
+    frozen = _held(job).values("status", "training_seconds", "clock_at", "stop_requested").first()
     if frozen is None:
         raise LeaseLost(f"training job {job.pk} is held by another run")
     _mirror(job, frozen)

@@ -1,53 +1,123 @@
-"""A model's status and the moves between its values: after a model is created, every write of
-``RLModel.status`` is a ``move`` here, which makes only the moves ``MOVES`` lists.
+"""The statuses of a model, a training job and an evaluation, and the moves between their values:
+after a row is created (in one of its ``born`` statuses), every write of its status is a ``move``
+here, which makes only the moves its table lists. (A race entry's table is racing's,
+``racing.services.SUBMISSION``, made the same way.)
 
 A move is one conditional UPDATE (the status changes only from a value it may change from), so two
-writers racing cannot take a model where neither meant: a racer's stop that lands while the
-trainer starts leaves the model STOPPING, not TRAINING; an evaluation that ends after the model
-was deleted writes nothing.
+writers racing cannot take a row where neither meant: a racer's stop that lands while the trainer
+starts leaves the model STOPPING, not TRAINING; an evaluation that ends after the model was deleted
+writes nothing; a trainer that prepares a job the racer has just stopped finds it STOPPING.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
+from django.db import models
 from django.utils import timezone
 
-from training.models import RLModel
-
-Status = RLModel.Status
-
-# Where a model may go from each status, and why.
-MOVES: dict[str, frozenset[str]] = {
-    # The trainer takes it up; the racer stops it before or while it starts; the trainer ends it.
-    Status.QUEUED: frozenset({Status.TRAINING, Status.STOPPING, Status.READY, Status.ERROR}),
-    # The racer stops it; the trainer ends it (READY with a checkpoint, ERROR without).
-    Status.TRAINING: frozenset({Status.STOPPING, Status.READY, Status.ERROR}),
-    Status.STOPPING: frozenset({Status.READY, Status.ERROR}),
-    # An evaluation or a race entry drives it; the racer deletes it.
-    Status.READY: frozenset({Status.EVALUATING, Status.SUBMITTING, Status.DELETING}),
-    Status.ERROR: frozenset({Status.DELETING}),
-    Status.EVALUATING: frozenset({Status.READY}),
-    Status.SUBMITTING: frozenset({Status.READY}),
-    # A delete whose storage failed part-way gives the model back as it was.
-    Status.DELETING: frozenset({Status.READY, Status.ERROR}),
-    Status.IMPORTING: frozenset({Status.READY, Status.ERROR}),
-}
-# Where a model's life begins: a new model queued for training, an import with its weights.
-BORN = frozenset({Status.QUEUED, Status.READY})
+from training.models import EvaluationJob, RLModel, TrainingJob
 
 
-def sources(to: str) -> frozenset[str]:
-    """The statuses a model may move to ``to`` from (``to`` itself: a move that was made)."""
-    return frozenset({origin for origin, targets in MOVES.items() if to in targets} | {to})
+class Lifecycle:
+    """The moves a status field may make: ``moves`` maps each status to where it may go,
+    ``born`` lists those a row may be created with."""
+
+    def __init__(
+        self, model: type[models.Model], moves: Mapping[str, frozenset[str]], born: frozenset[str]
+    ) -> None:
+        self.model = model
+        self.moves = dict(moves)
+        self.born = born
+        self._touch = any(field.name == "updated_at" for field in model._meta.fields)
+
+    def sources(self, to: str) -> frozenset[str]:
+        """The statuses a row may move to ``to`` from (``to`` itself: a move that was made)."""
+        return frozenset({origin for origin, ends in self.moves.items() if to in ends} | {to})
+
+    def move(
+        self,
+        row: models.Model | int,
+        to: str,
+        *,
+        only_from: frozenset[str] | None = None,
+        within: models.QuerySet | None = None,
+        **fields,
+    ) -> bool:
+        """Move the row to ``to``, writing ``fields`` with it, if its status now allows it (and
+        is one of ``only_from``, when given: ``to`` itself then only if listed) and it is one of
+        ``within`` (a job's rows while a run holds its lease, say); whether it moved (or was at
+        ``to`` already). The instance given, if any, follows."""
+        allowed = self.sources(to) if only_from is None else self.sources(to) & only_from
+        pk = row if isinstance(row, int) else row.pk
+        rows = (self.model.objects.all() if within is None else within).filter(pk=pk)
+        changes = {**fields, "status": to}
+        if self._touch:
+            changes["updated_at"] = timezone.now()
+        moved = rows.filter(status__in=allowed).update(**changes) > 0
+        if moved and not isinstance(row, int):
+            for name, value in changes.items():
+                setattr(row, name, value)
+        return moved
 
 
-def move(model: RLModel | int, to: str, *, only_from: frozenset[str] | None = None) -> bool:
-    """Move the model to ``to`` if its status now allows it (and is one of ``only_from``, when
-    given: ``to`` itself then only if listed); whether it moved (or was at ``to`` already). The
-    model instance given, if any, follows."""
-    allowed = sources(to) if only_from is None else sources(to) & only_from
-    pk = model if isinstance(model, int) else model.pk
-    rows = RLModel.objects.filter(pk=pk, status__in=allowed)
-    moved = rows.update(status=to, updated_at=timezone.now()) > 0
-    if moved and isinstance(model, RLModel):
-        model.status = to
-    return moved
+_M = RLModel.Status
+MODEL = Lifecycle(
+    RLModel,
+    {
+        # The trainer takes it up; the racer stops it before or while it starts; the trainer
+        # ends it.
+        _M.QUEUED: frozenset({_M.TRAINING, _M.STOPPING, _M.READY, _M.ERROR}),
+        # The racer stops it; the trainer ends it (READY with a checkpoint, ERROR without).
+        _M.TRAINING: frozenset({_M.STOPPING, _M.READY, _M.ERROR}),
+        _M.STOPPING: frozenset({_M.READY, _M.ERROR}),
+        # An evaluation or a race entry drives it; the racer deletes it.
+        _M.READY: frozenset({_M.EVALUATING, _M.SUBMITTING, _M.DELETING}),
+        _M.ERROR: frozenset({_M.DELETING}),
+        _M.EVALUATING: frozenset({_M.READY}),
+        _M.SUBMITTING: frozenset({_M.READY}),
+        # A delete whose storage failed part-way gives the model back as it was.
+        _M.DELETING: frozenset({_M.READY, _M.ERROR}),
+        _M.IMPORTING: frozenset({_M.READY, _M.ERROR}),
+    },
+    # A new model queued for training, an import with its weights.
+    born=frozenset({_M.QUEUED, _M.READY}),
+)
+
+_J = TrainingJob.Status
+TRAINING_JOB = Lifecycle(
+    TrainingJob,
+    {
+        # A trainer run takes it up; the racer stops it before any run did (canceled) or after
+        # one took its lease (stopping); a run that fails before it starts ends it, stopping.
+        _J.QUEUED: frozenset({_J.INITIALIZING, _J.CANCELED, _J.STOPPING}),
+        # The run starts training; the racer stops it; a run that took over prepares it again.
+        _J.INITIALIZING: frozenset({_J.IN_PROGRESS, _J.STOPPING}),
+        _J.IN_PROGRESS: frozenset({_J.STOPPING, _J.INITIALIZING}),
+        # The run saves the model from its last iteration, then ends the job.
+        _J.STOPPING: frozenset({_J.COMPLETED, _J.FAILED}),
+        _J.COMPLETED: frozenset(),
+        _J.FAILED: frozenset(),
+        _J.CANCELED: frozenset(),
+    },
+    # A job created with its model; a model imported with its weights comes with a finished one.
+    born=frozenset({_J.QUEUED, _J.COMPLETED}),
+)
+
+_E = EvaluationJob.Status
+EVALUATION = Lifecycle(
+    EvaluationJob,
+    {
+        # A run loads the model and drives it. A run redelivered after its worker died starts an
+        # interrupted evaluation over (INITIALIZING again), so the racer gets a whole one.
+        _E.QUEUED: frozenset({_E.INITIALIZING}),
+        _E.INITIALIZING: frozenset({_E.IN_PROGRESS, _E.FAILED}),
+        _E.IN_PROGRESS: frozenset({_E.INITIALIZING, _E.COMPLETED, _E.FAILED}),
+        _E.COMPLETED: frozenset(),
+        _E.FAILED: frozenset(),
+        # A training job's statuses an evaluation never takes: it runs to its end.
+        _E.STOPPING: frozenset(),
+        _E.CANCELED: frozenset(),
+    },
+    born=frozenset({_E.QUEUED}),
+)

@@ -229,7 +229,7 @@ def check_quota(*, owner: AbstractBaseUser, minutes: int) -> None:
 def model_create(
     *,
     owner: AbstractBaseUser,
-    settings: dict,
+    settings: configuration.Draft,
     validate_reward: bool = True,
     validation: rewards.Validation | None = None,
 ) -> RLModel:
@@ -246,7 +246,7 @@ def model_create(
         return _model_save(owner, settings, validate_reward, validation)
 
 
-def _reward_validation(settings: dict) -> rewards.Validation | None:
+def _reward_validation(settings: configuration.Draft) -> rewards.Validation | None:
     """The validation ``configuration.check`` would run for ``settings``; None where it runs
     none (no reward function, or no track to validate it on)."""
     source = settings.get("reward_function") or ""
@@ -257,22 +257,22 @@ def _reward_validation(settings: dict) -> rewards.Validation | None:
 
 
 def _model_save(
-    owner: AbstractBaseUser, settings: dict, validate_reward: bool,
+    owner: AbstractBaseUser, draft: configuration.Draft, validate_reward: bool,
     validation: rewards.Validation | None,
 ) -> RLModel:  # fmt: skip
-    clean = configuration.check(
-        settings, owner=owner, validate_reward=validate_reward, validation=validation
+    settings = configuration.check(
+        draft, owner=owner, validate_reward=validate_reward, validation=validation
     )
-    check_quota(owner=owner, minutes=clean["max_minutes"])
-    source = clean.get("cloned_from")
+    check_quota(owner=owner, minutes=settings.max_minutes)
+    source = settings.cloned_from
     if source is not None and source.owner_id != owner.pk:
         raise configuration.Invalid({"cloned_from": "You can clone only your own models."})
     weights = selectors.model_checkpoint(model=source) if source is not None else None
     if source is not None and weights is None:
         raise configuration.Invalid({"cloned_from": "This model has no trained weights to clone."})
     if source is not None:  # its weights are for its source's network
-        clean["network_layout"] = source.network_layout
-    model = RLModel.objects.create(owner=owner, status=RLModel.Status.QUEUED, **clean)
+        settings = settings.replace(network_layout=source.network_layout)
+    model = RLModel.objects.create(owner=owner, status=RLModel.Status.QUEUED, **settings.row())
     if weights is not None:
         artifacts.save(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))
     job = TrainingJob.objects.create(model=model)
@@ -288,20 +288,19 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
     with transaction.atomic():
         job = TrainingJob.objects.select_for_update().get(pk=job.pk)
         if job.status == TrainingJob.Status.QUEUED and job.attempt == 0:
-            job.status = TrainingJob.Status.CANCELED
-            job.finished_at = timezone.now()
-            job.failure_reason = "Stopped before training began."
-            job.save(update_fields=["status", "finished_at", "failure_reason"])
-            lifecycle.move(job.model_id, RLModel.Status.ERROR)
+            lifecycle.TRAINING_JOB.move(
+                job, TrainingJob.Status.CANCELED, finished_at=timezone.now(),
+                failure_reason="Stopped before training began.",
+            )  # fmt: skip
+            lifecycle.MODEL.move(job.model_id, RLModel.Status.ERROR)
         elif job.is_active and not job.stop_requested:
             clock = selectors.training_clock(job=job)  # frozen here: the time billed
-            job.training_seconds, job.clock_at = clock.seconds, clock.at
-            job.stop_requested = True
-            job.status = TrainingJob.Status.STOPPING
-            job.message = jobs.saving_message(job.iterations)
-            job.save(update_fields=["stop_requested", "status", "message", "training_seconds",
-                                    "clock_at"])  # fmt: skip
-            lifecycle.move(job.model_id, RLModel.Status.STOPPING)
+            lifecycle.TRAINING_JOB.move(
+                job, TrainingJob.Status.STOPPING, stop_requested=True,
+                message=jobs.saving_message(job.iterations), training_seconds=clock.seconds,
+                clock_at=clock.at,
+            )  # fmt: skip
+            lifecycle.MODEL.move(job.model_id, RLModel.Status.STOPPING)
     live.announce_training(job.pk)
     if job.status == TrainingJob.Status.CANCELED:
         live.announce_queue()
@@ -319,7 +318,7 @@ def model_delete(*, model: RLModel) -> int:
         locked = RLModel.objects.select_for_update().get(pk=model.pk)
         was = locked.status
         deletable = frozenset(RLModel.DELETABLE)
-        if not lifecycle.move(locked, RLModel.Status.DELETING, only_from=deletable):
+        if not lifecycle.MODEL.move(locked, RLModel.Status.DELETING, only_from=deletable):
             raise ModelBusy(
                 f"The model is {locked.get_status_display().lower()}; it can be deleted once it "
                 "is ready (stop its training first) or has failed."
@@ -328,7 +327,7 @@ def model_delete(*, model: RLModel) -> int:
         removed = artifacts.delete_all(model)
     except Exception:
         # Storage failed part-way: the model stays, as it was, for the racer to delete again.
-        lifecycle.move(model.pk, was)
+        lifecycle.MODEL.move(model.pk, was)
         raise
     model.delete()
     return removed
@@ -373,7 +372,7 @@ def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJ
             f"The model {model.name} has no trained weights yet; train it first."
         )
     evaluation = EvaluationJob.objects.create(model=model, **fields)
-    lifecycle.move(model, purpose, only_from=frozenset({RLModel.Status.READY}))
+    lifecycle.MODEL.move(model, purpose, only_from=frozenset({RLModel.Status.READY}))
     return evaluation
 
 

@@ -130,17 +130,16 @@ class Trainer:
     def train(self) -> None:
         job, model = self.job, self.model
         first_run = job.started_at is None
-        if job.stop_requested:  # asked while this run waited to resume the job
+        preparing = not job.stop_requested and jobs.move(
+            job, TrainingJob.Status.INITIALIZING, started_at=job.started_at or timezone.now(),
+            message="Preparing the trainer",
+        )  # fmt: skip
+        if not preparing:  # the racer stopped it before this run took it up, or as it did
             jobs.log(job, "Stopped by the racer.")
             self.finish(TrainingJob.Status.COMPLETED)
             return
-        jobs.write(
-            job,
-            status=TrainingJob.Status.INITIALIZING,
-            started_at=job.started_at or timezone.now(),
-            message="Preparing the trainer",
-        )
-        lifecycle.move(model.pk, RLModel.Status.TRAINING)  # not back from STOPPING: a stop won
+        # never back from STOPPING: a stop that lands now wins
+        lifecycle.MODEL.move(model.pk, RLModel.Status.TRAINING)
         live.announce_training(job.pk)
         live.announce_queue()
         self._build_learner()
@@ -152,7 +151,7 @@ class Trainer:
         self.training_message = f"Training with {_workers(len(self.slots))} on {self._tracks()}"
         self.session_started, self.base_seconds = time.monotonic(), job.training_seconds
         started = jobs.clock_write(
-            job, self.base_seconds, status=TrainingJob.Status.IN_PROGRESS,
+            job, self.base_seconds, to=TrainingJob.Status.IN_PROGRESS,
             message=self.training_message,
         )  # fmt: skip
         live.announce_training(job.pk)
@@ -571,12 +570,12 @@ class Trainer:
             if self.session_started is not None:
                 jobs.clock_write(job, min(self._spent(), self.model.max_minutes * 60))
             message = jobs.saving_message(job.iterations)
-            jobs.write(job, status=TrainingJob.Status.STOPPING, message=message)
+            jobs.move(job, TrainingJob.Status.STOPPING, message=message)
             if status == TrainingJob.Status.COMPLETED:
                 artifacts.write_model_files(self.model)
-            jobs.write(
+            jobs.move(
                 job,
-                status=status,
+                status,
                 finished_at=timezone.now(),
                 failure_reason=reason,
                 message="",
@@ -588,7 +587,7 @@ class Trainer:
             jobs.log(job, reason, "error")
         has_checkpoint = bool(job.last_checkpoint)
         ready = status == TrainingJob.Status.COMPLETED or has_checkpoint
-        lifecycle.move(self.model.pk, RLModel.Status.READY if ready else RLModel.Status.ERROR)
+        lifecycle.MODEL.move(self.model.pk, RLModel.Status.READY if ready else RLModel.Status.ERROR)
         live.announce_training(job.pk)
         notifications.training_ended(job=job)
 

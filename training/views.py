@@ -325,7 +325,7 @@ class _ModelCreatePage:
     def __init__(self, request: HttpRequest) -> None:
         self.request = request
         self.response: HttpResponse | None = None
-        self.settings: dict | None = None
+        self.settings: configuration.Draft | None = None
         self.reward_where: tuple[str, str] | None = None
         self.checked: rewards.Validation | Exception | None = None
         self.source = None
@@ -339,7 +339,7 @@ class _ModelCreatePage:
                 )
                 self.response = redirect("training:model-detail", pk=self.source.pk)
                 return
-            initial = ModelCreateForm.initial_from(self.source)
+            initial = ModelCreateForm.initial_from(configuration.ModelSettings.of(self.source))
         else:
             initial = {
                 "reward_function": rewards.EXAMPLES[0].source,
@@ -362,12 +362,9 @@ class _ModelCreatePage:
         if self.limited:
             ratelimits.refuse(self.form, self.limited)
         elif request.method == "POST" and self.form.is_valid():
-            inherited = (
-                {"cloned_from": self.source, "shell_colour": self.source.shell_colour}
-                if self.source
-                else {}
-            )
-            self.settings = {**inherited, **self.form.settings()}
+            self.settings = self.form.settings()
+            if self.source is not None:
+                self.settings.update(cloned_from=self.source, shell_colour=self.source.shell_colour)
             if (self.settings.get("reward_function") or "").strip():
                 self.reward_where = configuration.reward_sample_track(self.settings)
 

@@ -22,7 +22,7 @@ SHOWN = "() => Number(document.querySelector('[data-live-time]').dataset.shownSe
 def training_job(owner, *, seconds: float, ago: float) -> TrainingJob:
     """A job in progress whose trainer, busy learning, last measured ``seconds`` ``ago``."""
     clean = configuration.check(settings(name="clocked"), owner=owner, validate_reward=False)
-    model = RLModel.objects.create(owner=owner, status=RLModel.Status.TRAINING, **clean)
+    model = RLModel.objects.create(owner=owner, status=RLModel.Status.TRAINING, **clean.row())
     return TrainingJob.objects.create(
         model=model, status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="trainer:1",
         lease_expires=timezone.now() + timedelta(minutes=5), iterations=3,

@@ -48,8 +48,8 @@ def trained_model(owner, name: str, *, weights=None, **settings) -> RLModel:
     layout = settings.pop("network_layout", None)  # not a racer's setting
     clean = configuration.check(settings, owner=owner, validate_reward=False)
     if layout is not None:
-        clean["network_layout"] = layout
-    model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean)
+        clean = clean.replace(network_layout=layout)
+    model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean.row())
     env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
     learner = Learner(
         algorithm=model.algorithm, hyperparameters=model.hyperparameters,

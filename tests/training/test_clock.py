@@ -21,7 +21,7 @@ pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 def training_job(owner, *, seconds: float, ago: float, **fields) -> TrainingJob:
     """A job in progress whose trainer last measured ``seconds`` used, ``ago`` seconds ago."""
     clean = configuration.check(settings(name="clocked"), owner=owner, validate_reward=False)
-    model = RLModel.objects.create(owner=owner, status=RLModel.Status.TRAINING, **clean)
+    model = RLModel.objects.create(owner=owner, status=RLModel.Status.TRAINING, **clean.row())
     return TrainingJob.objects.create(
         model=model, status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="trainer:1",
         training_seconds=seconds, clock_at=timezone.now() - timedelta(seconds=ago),

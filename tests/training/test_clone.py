@@ -7,11 +7,13 @@ import pytest
 from django.urls import reverse
 
 from rl.learner import load_tensors
-from tests.training.factories import STRAIGHT_AHEAD, ready_model
+from tests.training.factories import STRAIGHT_AHEAD, ready_model, trained_model
 from tests.training.test_model_pages import form_data
 from tests.training.test_training import settings as training_settings
 from tests.training.test_training import wait_for_job
 from training import artifacts
+from training.configuration import ModelSettings
+from training.forms import ModelCreateForm
 from training.models import RLModel
 from training.services import model_create, training_stop
 
@@ -49,6 +51,32 @@ def test_a_clone_starts_from_the_sources_best_weights(alice, tracks, client):
     assert clone.status == RLModel.Status.QUEUED
     best = source.jobs.get().best_checkpoint
     assert artifacts.read(artifacts.path(clone, artifacts.CLONED_WEIGHTS)) == artifacts.read(best)
+
+
+@pytest.mark.parametrize("settings", [
+    {},
+    {"algorithm": "sac", "hyperparameters": {}, "race_type": "OBJECT_AVOIDANCE",
+     "action_space": {"steering_angle": {"low": -25, "high": 20}, "speed": {"low": 0.5,
+                                                                           "high": 3.5}},
+     "boxes": {"count": 4, "randomize": True}, "description": "boxes ahead", "max_minutes": 45},
+    {"race_type": "HEAD_TO_BOT", "bots": {"count": 2, "speed": 0.8, "lane_changes": True},
+     "sensors": ["STEREO_CAMERAS", "SECTOR_LIDAR"], "network": "DEEP_CONVOLUTIONAL_NETWORK"},
+])  # fmt: skip
+def test_a_clone_posted_as_the_page_shows_it_has_every_setting_of_its_source(
+    settings, alice, tracks, client
+):
+    # The settings make one round: the page shows them (initial_from), the form gives them back
+    # (settings), configuration checks them and the service saves them.
+    source = trained_model(alice, "source", **settings)
+    shown = ModelCreateForm.initial_from(ModelSettings.of(source))
+    client.force_login(alice)
+    posted = {name: "" if value is None else value for name, value in shown.items()}
+    response = client.post(clone_url(source), {**form_data(), **posted})
+    assert response.status_code == 302, response.context["form"].errors
+    clone = RLModel.objects.get(cloned_from=source)
+    assert ModelSettings.of(clone) == ModelSettings.of(source).replace(
+        name="source-clone", cloned_from=source
+    )
 
 
 @pytest.mark.parametrize(

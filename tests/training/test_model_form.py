@@ -106,7 +106,24 @@ def test_every_bad_cell_is_reported_at_once(alice, tracks):
 
 def test_a_missing_action_space_still_means_deepracers_default(alice, tracks):
     clean = configuration.check(training_settings(), owner=alice, validate_reward=False)
-    assert len(clean["action_space"]) == len(sim.DEFAULT_ACTION_SPACE)
+    assert len(clean.action_space) == len(sim.DEFAULT_ACTION_SPACE)
+
+
+def test_a_saved_models_settings_check_back_to_themselves(alice, tracks):
+    # What a model keeps is what its settings were: its draft (as a racer, an export or the clone
+    # page gives them) checks back to the same settings.
+    space = {"steering_angle": {"low": -20, "high": 30}, "speed": {"low": 0.8, "high": 2.5}}
+    checked = configuration.check(training_settings(
+        algorithm="sac", hyperparameters={"sac_alpha": 0.3}, action_space=space,
+        race_type="HEAD_TO_BOT", bots={"count": 2, "speed": 1.5, "lane_changes": True},
+        workers=2, extra_tracks=["rookie-loop"], seed=7,
+    ), owner=alice, validate_reward=False)  # fmt: skip
+    model = RLModel.objects.create(owner=alice, **checked.row())
+    saved = configuration.ModelSettings.of(model)
+    assert saved.row()["track"] == model.track and saved.hyperparameters["sac_alpha"] == 0.3
+    again = configuration.check({**saved.draft(), "name": "again"}, owner=alice,
+                                validate_reward=False)  # fmt: skip
+    assert again == saved.replace(name="again")
 
 
 def field_html(page: str, name: str) -> str:

@@ -38,10 +38,10 @@ def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_
         settings(name="long-update", reward_function=PRINTING), owner=alice, validate_reward=False
     )
     # An update that would take hours: far more epochs than a racer may choose.
-    clean["hyperparameters"] = {
+    clean = clean.replace(hyperparameters={
         **hyperparameters.defaults("clipped_ppo"), **TINY_PPO, "num_epochs": 100_000,
-    }  # fmt: skip
-    model = RLModel.objects.create(owner=alice, **clean)
+    })  # fmt: skip
+    model = RLModel.objects.create(owner=alice, **clean.row())
     job = TrainingJob.objects.create(model=model)
     tasks.train.delay(job.pk)
     job = wait_for_job(
@@ -86,10 +86,10 @@ def test_a_job_deleted_in_the_middle_of_an_update_frees_its_rollout_worker(
     # its rollout worker, waiting for the next policy, must still end and give back its place.
     before = set(sandbox_children())
     clean = configuration.check(settings(name="vanishing"), owner=alice, validate_reward=False)
-    clean["hyperparameters"] = {
+    clean = clean.replace(hyperparameters={
         **hyperparameters.defaults("clipped_ppo"), **TINY_PPO, "num_epochs": 100_000,
-    }  # fmt: skip
-    model = RLModel.objects.create(owner=alice, **clean)
+    })  # fmt: skip
+    model = RLModel.objects.create(owner=alice, **clean.row())
     job = TrainingJob.objects.create(model=model)
     tasks.train.delay(job.pk)
     wait_for_job(

@@ -151,7 +151,7 @@ def test_a_second_delivery_of_the_trainer_task_does_not_train_twice(alice, track
 def queued_job(owner) -> TrainingJob:
     """A job saved without enqueueing its trainer: one still waiting for a free worker."""
     clean = configuration.check(settings(), owner=owner, validate_reward=False)
-    return TrainingJob.objects.create(model=RLModel.objects.create(owner=owner, **clean))
+    return TrainingJob.objects.create(model=RLModel.objects.create(owner=owner, **clean.row()))
 
 
 @pytest.mark.django_db(transaction=True)
@@ -205,10 +205,10 @@ class TestSettings:
         clean = configuration.check(
             settings(hyperparameters={}), owner=alice, validate_reward=False
         )
-        assert clean["hyperparameters"] == hyperparameters.defaults("clipped_ppo")
-        assert clean["action_space_type"] == "discrete"
-        assert clean["action_space"][0] == {"steering_angle": -30.0, "speed": 0.5, "index": 0}
-        assert clean["direction"] == "counterclockwise" and clean["workers"] == 1
+        assert clean.hyperparameters == hyperparameters.defaults("clipped_ppo")
+        assert clean.action_space_type == "discrete"
+        assert clean.action_space[0] == {"steering_angle": -30.0, "speed": 0.5, "index": 0}
+        assert clean.direction == "counterclockwise" and clean.workers == 1
 
     @pytest.mark.parametrize(
         ("changes", "field", "message"),
@@ -257,7 +257,7 @@ class TestSettings:
         clean = configuration.check(
             settings(hyperparameters={"loss_type": given}), owner=alice, validate_reward=False
         )
-        assert clean["hyperparameters"]["loss_type"] == stored
+        assert clean.hyperparameters["loss_type"] == stored
 
     def test_deepracers_keys_pitlane_does_not_use_are_kept_with_the_model(self, alice, tracks):
         kept = {"stack_size": 2, "exploration_type": "E-Greedy", "e_greedy_value": 0.1,
@@ -274,7 +274,7 @@ class TestSettings:
         }
         # A new model has DeepRacer's defaults (discount 0.999 as simapp falls back to) for all.
         defaults = configuration.check(settings(name="new", hyperparameters={}), owner=alice,
-                                       validate_reward=False)["hyperparameters"]  # fmt: skip
+                                       validate_reward=False).hyperparameters  # fmt: skip
         assert defaults["discount_factor"] == 0.999 and defaults["stack_size"] == 1
         assert defaults["term_cond_avg_score"] == 100000 and "sac_alpha" not in defaults
 
@@ -301,8 +301,8 @@ class TestSettings:
             settings(algorithm="sac", action_space=continuous, hyperparameters={}),
             owner=alice, validate_reward=False,
         )  # fmt: skip
-        assert clean["hyperparameters"]["sac_alpha"] == 0.2
-        assert clean["action_space_type"] == "continuous"
+        assert clean.hyperparameters["sac_alpha"] == 0.2
+        assert clean.action_space_type == "continuous"
 
     def test_a_name_already_used_by_the_racer_is_refused_but_not_another_racers(
         self, alice, bob, tracks
@@ -372,7 +372,7 @@ def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
 ):
     # The state a dead trainer leaves: in progress, a lapsed lease, a checkpoint of iteration 1.
     clean = configuration.check(settings(name="resumed"), owner=alice, validate_reward=False)
-    model = RLModel.objects.create(owner=alice, status=RLModel.Status.TRAINING, **clean)
+    model = RLModel.objects.create(owner=alice, status=RLModel.Status.TRAINING, **clean.row())
     env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
     learner = Learner(algorithm=model.algorithm, hyperparameters=model.hyperparameters,
                       architecture=model.architecture, observation_space=env.observation_space,
