@@ -1,11 +1,13 @@
 # Pitlane: two commands set up everything.
 #   make run   serve the console on http://127.0.0.1:8000 (Redis, a Celery worker and Daphne included)
 #   make test  lint and run the whole test suite against real Redis, Celery, Channels and Chromium
+#   make cluster  serve the console as several machines would (PostgreSQL, Redis, S3, one web, one
+#              training and two simulation machines, each with its own code and var/) on :8000
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test lint format bench lock clean help
+.PHONY: run test cluster lint format bench lock clean help
 
 help:
 	@sed -n 's/^#   //p' $(firstword $(MAKEFILE_LIST))
@@ -17,7 +19,13 @@ run: $(VENV)/.run-installed
 test: lint
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	@scripts/ensure-system-package.sh chromium command -v chromium
+	@scripts/ensure-system-package.sh postgresql sh -c 'command -v initdb || ls /usr/lib/postgresql/*/bin/initdb'
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
+
+cluster: $(VENV)/.test-installed
+	@scripts/ensure-system-package.sh redis-server command -v redis-server
+	@scripts/ensure-system-package.sh postgresql sh -c 'command -v initdb || ls /usr/lib/postgresql/*/bin/initdb'
+	$(BIN)/python -m tests.cluster
 
 lint: $(VENV)/.test-installed
 	$(BIN)/ruff check .

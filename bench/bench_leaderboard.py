@@ -15,18 +15,14 @@ afterwards): Debian's ``postgresql`` package provides it (``make bench`` install
 from __future__ import annotations
 
 import argparse
-import glob
 import os
 import random
-import shutil
-import socket
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from contextlib import contextmanager
-from pathlib import Path
 
 RACERS = 20_000
 SUBMISSIONS_PER_RACER = 5
@@ -60,52 +56,16 @@ def run_child(url: str, requests: int, label: str) -> None:
 # PostgreSQL
 
 
-def _free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-def _pg_binary(name: str) -> str:
-    found = shutil.which(name) or next(
-        iter(sorted(glob.glob(f"/usr/lib/postgresql/*/bin/{name}"))), None
-    )
-    if found is None:
-        sys.exit(
-            "PostgreSQL is not installed: `apt-get install postgresql` (or `make bench`), then "
-            "run again."
-        )
-    return found
-
-
 @contextmanager
 def postgresql():
-    """A throwaway PostgreSQL cluster on a free local port; its URL. PostgreSQL refuses to run
-    as root, so as root the cluster runs as ``nobody``."""
-    folder = Path(tempfile.mkdtemp(prefix="pitlane-pg-"))
-    as_user = ["runuser", "-u", "nobody", "--"] if os.geteuid() == 0 else []
-    if as_user:
-        shutil.chown(folder, "nobody")
-    data, port = folder / "data", _free_port()
-    subprocess.run(
-        [*as_user, _pg_binary("initdb"), "-D", str(data), "-U", "postgres", "--auth=trust",
-         "--no-sync", "-E", "UTF8"],
-        check=True, stdout=subprocess.DEVNULL,
-    )  # fmt: skip
-    options = f"-p {port} -k {folder} -c listen_addresses=127.0.0.1 -c fsync=off"
-    subprocess.run(
-        [*as_user, _pg_binary("pg_ctl"), "-D", str(data), "-o", options, "-l",
-         str(folder / "log"), "-w", "start"],
-        check=True, stdout=subprocess.DEVNULL,
-    )  # fmt: skip
+    """A throwaway PostgreSQL cluster (``tests.cluster.Postgres``); its URL."""
+    from tests.cluster import Postgres
+
+    server = Postgres()
     try:
-        yield f"postgres://postgres@127.0.0.1:{port}/postgres"
+        yield server.url
     finally:
-        subprocess.run(
-            [*as_user, _pg_binary("pg_ctl"), "-D", str(data), "-m", "immediate", "stop"],
-            check=False, stdout=subprocess.DEVNULL,
-        )  # fmt: skip
-        shutil.rmtree(folder, ignore_errors=True)
+        server.remove()
 
 
 # The measurement, in a process of its own per database
