@@ -28,6 +28,8 @@ urlpatterns = [
     path("admin/", admin.site.urls),
 ]
 
+handler500 = "console.views.server_error"
+
 admin.site.site_header = "Pitlane administration"
 admin.site.site_title = "Pitlane"
 admin.site.index_title = "League staff and site administration"

@@ -24,6 +24,7 @@ logger = logging.getLogger(__name__)
 KEY_PREFIX = "pitlane:worker:"
 HEARTBEAT_INTERVAL = 5.0  # [s]
 HEARTBEAT_TTL = 15  # [s] a worker silent this long is gone
+RESUME_EVERY = 10.0  # [s] between looks for training jobs whose trainer died
 
 _stop = threading.Event()
 
@@ -60,16 +61,39 @@ def _beat(record: dict) -> None:
     client = redis_client()
     key = KEY_PREFIX + record["hostname"]
     checked = False
+    resumed_at = 0.0
     while not _stop.is_set():
         try:
             client.set(key, json.dumps(record), ex=HEARTBEAT_TTL)
         except redis.RedisError as error:
             logger.warning("Worker heartbeat failed: %s", error)
+        if time.monotonic() - resumed_at >= RESUME_EVERY:
+            resumed_at = time.monotonic()
+            _resume_lapsed()
         if not checked:
             record["sandbox"] = _check_sandbox()
             checked = True
             continue  # report the result at once
         _stop.wait(HEARTBEAT_INTERVAL)
+
+
+def _resume_lapsed() -> None:
+    """Send trainers for the jobs whose trainer died (``training.tasks.resume_lapsed``). Any
+    worker may: whichever looks first claims a job, so it is sent for once, and a job goes on as
+    long as one worker of either queue is alive."""
+    from django.db import DatabaseError, close_old_connections
+    from kombu.exceptions import OperationalError
+
+    from training.tasks import resume_lapsed
+
+    close_old_connections()
+    try:
+        for job_id in resume_lapsed():
+            logger.warning("Training job %s lost its trainer; another is sent for", job_id)
+    except (DatabaseError, redis.RedisError, OperationalError) as error:
+        logger.warning("Could not look for training jobs that lost their trainer: %s", error)
+    finally:
+        close_old_connections()
 
 
 def _check_sandbox() -> dict:

@@ -30,6 +30,7 @@ from tests.services import RedisServer, free_port, wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
 PYTHON = sys.executable
+BIN = Path(sys.executable).parent  # the virtualenv's commands: .venv/bin/daphne, .venv/bin/celery
 BUCKET = "pitlane-cluster"
 SECRET_KEY = "cluster-" + "k" * 50  # every web machine shares it; a throwaway cluster's own
 OURS = ("DJANGO_", "PITLANE_", "DATABASE_", "REDIS_", "AWS_")  # the settings' variables
@@ -136,7 +137,7 @@ class Machine:
         ))  # fmt: skip
 
     def run(self, *args: str) -> str:
-        """A command on this machine, to its end; its output."""
+        """``python ARGS`` on this machine, to its end; its output."""
         done = subprocess.run(
             [PYTHON, *args], cwd=self.code, env=self.env, capture_output=True, text=True
         )
@@ -144,12 +145,12 @@ class Machine:
             raise RuntimeError(f"{self.name}: {' '.join(args)} failed:\n{done.stdout}{done.stderr}")
         return done.stdout
 
-    def start(self, *args: str) -> subprocess.Popen:
+    def start(self, command: Path, *args: str) -> subprocess.Popen:
         """A long-running command on this machine, in a process group of its own."""
         log = open(self.folder / "log", "ab")  # noqa: SIM115 (the process holds it)
         process = subprocess.Popen(
-            [PYTHON, *args], cwd=self.code, env=self.env, stdout=log, stderr=subprocess.STDOUT,
-            start_new_session=True,
+            [str(command), *args], cwd=self.code, env=self.env, stdout=log,
+            stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
         log.close()
         self.processes.append(process)
@@ -211,23 +212,27 @@ def _copy_code(destination: Path) -> None:
 
 
 class Cluster:
-    """PostgreSQL, Redis and S3, a web machine, a training machine and ``simulation`` simulation
-    machines, each started as the README's "Running on several machines" says."""
+    """PostgreSQL, Redis and S3, a web machine, ``training`` training machines and
+    ``simulation`` simulation machines, each started as the README's "Running on several
+    machines" says. ``settings``: more environment variables for every machine."""
 
     def __init__(
-        self, folder: Path, *, simulation: int = 2, port: int | None = None, proxied: bool = True
-    ) -> None:
+        self, folder: Path, *, simulation: int = 2, training: int = 1, port: int | None = None,
+        proxied: bool = True, settings: dict[str, str] | None = None,
+    ) -> None:  # fmt: skip
         self.folder = folder
         self.postgres = Postgres()
         self.redis = RedisServer(folder / "redis")
         self.s3 = S3Server()
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
-        env = cluster_env(self.postgres.url, self.redis.url, self.s3.url)
+        env = {**cluster_env(self.postgres.url, self.redis.url, self.s3.url), **(settings or {})}
         if not proxied:  # a browser straight at Daphne: no redirect to the HTTPS it lacks
             env["PITLANE_SSL_REDIRECT"] = "false"
         self.web = Machine("web", folder / "web", env)
-        self.training = Machine("training", folder / "training", env)
+        self.training = [
+            Machine(f"training-{n}", folder / f"training-{n}", env) for n in range(1, training + 1)
+        ]
         self.simulation = [
             Machine(f"simulation-{n}", folder / f"simulation-{n}", env)
             for n in range(1, simulation + 1)
@@ -235,7 +240,7 @@ class Cluster:
 
     @property
     def machines(self) -> list[Machine]:
-        return [self.web, self.training, *self.simulation]
+        return [self.web, *self.training, *self.simulation]
 
     def start(self) -> None:
         # once per release, on one machine
@@ -244,37 +249,38 @@ class Cluster:
         self.web.run("manage.py", "loadtracks")
         self.web.run("manage.py", "loaddemoseason")
         self.start_web()
-        self.start_training(self.training)
+        for machine in self.training:
+            self.start_training(machine)
         for machine in self.simulation:
             self.start_simulation(machine)
         wait_for(self.listening, "the web machine to listen", timeout=120)
 
     def start_web(self) -> None:
         self.web.start(
-            "-m", "daphne", "-b", "127.0.0.1", "-p", str(self.port), "--proxy-headers",
+            BIN / "daphne", "-b", "127.0.0.1", "-p", str(self.port), "--proxy-headers",
             "console.asgi:application",
         )  # fmt: skip
+        # exactly one scheduler, here on the web machine
+        self.web.start(BIN / "celery", "-A", "console", "beat")
 
     @staticmethod
     def start_training(machine: Machine) -> None:
         machine.start(
-            "-m", "celery", "-A", "console", "worker", "-Q", "training", "--hostname",
-            f"trainer@{machine.name}", "--concurrency", "1", "--without-mingle",
-            "--without-gossip",
+            BIN / "celery", "-A", "console", "worker", "-Q", "training", "--hostname",
+            f"trainer@{machine.name}", "--concurrency", "1", "--loglevel", "INFO",
         )  # fmt: skip
 
     @staticmethod
-    def start_simulation(machine: Machine, concurrency: int = 2) -> None:
+    def start_simulation(machine: Machine) -> None:
         machine.start(
-            "-m", "celery", "-A", "console", "worker", "-Q", "simulation", "--hostname",
-            f"sim@{machine.name}", "--concurrency", str(concurrency), "--without-mingle",
-            "--without-gossip",
+            BIN / "celery", "-A", "console", "worker", "-Q", "simulation", "--hostname",
+            f"sim@{machine.name}", "--concurrency", "2", "--loglevel", "INFO",
         )  # fmt: skip
 
     def listening(self) -> bool:
         for process in self.web.processes:
             if process.poll() is not None:
-                raise RuntimeError(f"the web machine's Daphne exited:\n{self.web.log()[-4000:]}")
+                raise RuntimeError(f"the web machine stopped:\n{self.web.log()[-4000:]}")
         try:
             socket.create_connection(("127.0.0.1", self.port), timeout=0.5).close()
             return True

@@ -20,13 +20,11 @@ BROWSER_TESTS = Path(__file__).parent / "browser"
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Browser tests are marked, and run last: the slowest, and the ones that need everything;
-    after them only the test that restarts the suite's Redis, which no other test should follow."""
+    """Browser tests are marked, and run last: the slowest, and the ones that need everything."""
     for item in items:
         if item.path.is_relative_to(BROWSER_TESTS):
             item.add_marker(pytest.mark.browser)
-    items.sort(key=lambda item: (item.get_closest_marker("restarts_redis") is not None,
-                                 item.path.is_relative_to(BROWSER_TESTS)))  # fmt: skip
+    items.sort(key=lambda item: item.path.is_relative_to(BROWSER_TESTS))
 
 
 @pytest.fixture(autouse=True)

@@ -20,7 +20,6 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-SESSION_REDIS: RedisServer | None = None  # the suite's Redis, once started
 
 
 def free_port() -> int:
@@ -134,8 +133,6 @@ def pytest_load_initial_conftests(early_config, parser, args):
     os.environ["PITLANE_VAR_DIR"] = str(scratch / "var")
     os.environ["PITLANE_TEST_DB"] = str(scratch / "test.sqlite3")
     redis_server = RedisServer(scratch / "redis")
-    global SESSION_REDIS  # the suite's one Redis, for the test that restarts it
-    SESSION_REDIS = redis_server
     os.environ["REDIS_URL"] = redis_server.url
     early_config.add_cleanup(lambda: shutil.rmtree(scratch, ignore_errors=True))
     early_config.add_cleanup(redis_server.stop)

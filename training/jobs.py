@@ -11,14 +11,19 @@ from __future__ import annotations
 
 from datetime import timedelta
 
+from django.conf import settings
 from django.db import transaction
 from django.utils import timezone
 
 from training import lifecycle
 from training.models import JobLogLine, TrainingJob
 
-LEASE = timedelta(seconds=45)
 IMPORTED = "import"  # the lease owner of a job an import recorded: it never ran on this console
+RESUMING = "resuming"  # the lease owner of a job whose run died, while another is sent for
+LAPSED = (
+    "The trainer stopped answering (its machine may have stopped); another training worker takes "
+    "the job up from its last checkpoint."
+)
 
 
 class LeaseLost(Exception):
@@ -38,13 +43,40 @@ def lease_acquire(*, job_id: int, owner: str) -> TrainingJob | None:
         )
         if job is None or not job.is_active:
             return None
-        if job.lease_owner and job.lease_expires and job.lease_expires > now:
+        held = job.lease_owner not in ("", RESUMING)
+        if held and job.lease_expires and job.lease_expires > now:
             return None
         job.attempt += 1
         job.lease_owner = owner
-        job.lease_expires = now + LEASE
+        job.lease_expires = now + lease()
         job.save(update_fields=["attempt", "lease_owner", "lease_expires"])
     return job
+
+
+def lease() -> timedelta:
+    """How long a run's lease lasts unrenewed (``PITLANE_TRAINER_LEASE``)."""
+    return timedelta(seconds=settings.PITLANE_TRAINER_LEASE)
+
+
+def lapsed_claim() -> list[TrainingJob]:
+    """The jobs whose run died (its lease lapsed while the job was under way), each claimed for
+    one new run: the caller enqueues a ``training.train`` task for each. A job is claimed once
+    per lapse (by one caller, whichever worker looks first), and again a lease later if no run
+    has taken it up by then (the task was lost with a Redis restart, say)."""
+    now = timezone.now()
+    lapsed = TrainingJob.objects.filter(
+        status__in=TrainingJob.ACTIVE, attempt__gt=0, lease_expires__lt=now
+    ).exclude(lease_owner__in=("", IMPORTED))
+    claimed = []
+    for job in lapsed:
+        rows = TrainingJob.objects.filter(
+            pk=job.pk, attempt=job.attempt, lease_owner=job.lease_owner, lease_expires__lt=now
+        )
+        if rows.update(lease_owner=RESUMING, lease_expires=now + lease()):
+            if job.lease_owner != RESUMING:
+                log(job, LAPSED, "warning")
+            claimed.append(job)
+    return claimed
 
 
 def _held(job: TrainingJob):

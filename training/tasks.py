@@ -11,7 +11,6 @@ import os
 from celery import shared_task
 
 LONGEST_JOB = 24 * 3600  # [s] the longest training time a racer may ask for
-LEASE_CHECK = 50  # [s] a little longer than a trainer's lease
 EVALUATION_LIMIT = 3600  # [s] five trials of at most 10,000 steps each, in real time at worst
 
 
@@ -31,7 +30,9 @@ def train(self, job_id: int) -> None:
     if not trainer.run(job_id, owner=owner, start_rollouts=start_rollout):
         # Another run holds the job: a duplicate delivery, or a redelivery after that run's
         # worker died. Look again when its lease would have lapsed; never train twice.
-        raise self.retry(countdown=LEASE_CHECK, max_retries=None)
+        from django.conf import settings
+
+        raise self.retry(countdown=settings.PITLANE_TRAINER_LEASE + 5, max_retries=None)
 
 
 @shared_task(
@@ -58,6 +59,18 @@ def evaluate(evaluation_id: int) -> None:
     from training import evaluation
 
     evaluation.run(evaluation_id)
+
+
+def resume_lapsed() -> list[int]:
+    """Send a trainer for each job whose run died (``jobs.lapsed_claim``); their ids. Every
+    worker calls it every few seconds (``console.workers``), so a job goes on whichever machines
+    are left."""
+    from training import jobs
+
+    claimed = [job.pk for job in jobs.lapsed_claim()]
+    for job_id in claimed:
+        train.delay(job_id)
+    return claimed
 
 
 def torch_threads() -> None:

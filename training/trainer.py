@@ -279,7 +279,7 @@ class Trainer:
         spent = min(self._spent(), max_seconds)
         if now - self.last_check >= CHECK_EVERY:
             self.last_check = now
-            jobs.write(self.job, lease_expires=timezone.now() + jobs.LEASE)
+            jobs.write(self.job, lease_expires=timezone.now() + jobs.lease())
             if not jobs.clock_write(self.job, spent):
                 self.ending = "stop"
             live.announce_training(self.job.pk)

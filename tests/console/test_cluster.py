@@ -1,7 +1,8 @@
 """The console spread over machines that share no disk (``tests.cluster``: PostgreSQL, Redis, an
-S3 API, a web machine, a training machine and two simulation machines, each with its own code and
-``var/``), used through the web as a browser behind an HTTPS proxy would: nothing a machine needs
-may come from another's disk."""
+S3 API, a web machine, two training machines and two simulation machines, each with its own code
+and ``var/``), used through the web as a browser behind an HTTPS proxy would: nothing a machine
+needs may come from another's disk, and a job rides out a machine's death, a Redis restart and a
+database outage."""
 
 from __future__ import annotations
 
@@ -29,9 +30,11 @@ REWARD = """def reward_function(params):
 """
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def cluster(tmp_path_factory) -> Cluster:
-    cluster = Cluster(tmp_path_factory.mktemp("cluster"), simulation=2)
+    # Leases and silences short enough to see a machine die within a test: 10 s each.
+    quick = {"PITLANE_TRAINER_LEASE": "10", "PITLANE_ROLLOUT_SILENCE": "10"}
+    cluster = Cluster(tmp_path_factory.mktemp("cluster"), simulation=2, training=2, settings=quick)
     try:
         cluster.start()
         yield cluster
@@ -106,7 +109,7 @@ class Browser:
         for _ in range(10):
             response = self.session.request(
                 method, self.base + path, allow_redirects=False, timeout=300,
-                headers={"Cookie": self._cookies(), "Referer": self.origin + path}, **kwargs,
+                headers={"Cookie": self.cookies(), "Referer": self.origin + path}, **kwargs,
             )  # fmt: skip
             if response.status_code not in (301, 302, 303):
                 assert response.status_code < 400, (
@@ -135,10 +138,10 @@ class Browser:
     def websocket(self, path: str):
         url = "ws://" + self.base.split("://", 1)[1] + path
         return connect(url, additional_headers={
-            "Cookie": self._cookies(), "Origin": self.origin, "X-Forwarded-Proto": "https",
+            "Cookie": self.cookies(), "Origin": self.origin, "X-Forwarded-Proto": "https",
         }, open_timeout=30, max_size=2**24)  # fmt: skip
 
-    def _cookies(self) -> str:
+    def cookies(self) -> str:
         return "; ".join(f"{cookie.name}={cookie.value}" for cookie in self.session.cookies)
 
 
@@ -182,27 +185,81 @@ def _wait_page(browser: Browser, path: str, attribute: str, ends: set[str], time
     return page
 
 
-def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk(cluster: Cluster):
+def _racer_training(cluster: Cluster, racer: str, model: str) -> tuple[Browser, int, int]:
+    """A new racer's browser, and their new model (id, and its job's) training on two
+    simulation workers."""
     browser = Browser(cluster)
-
-    # Sign up, create a model that trains on both simulation machines.
-    browser.submit("/accounts/signup/", {"username": "remote", "password1": "a-long-passphrase",
+    browser.submit("/accounts/signup/", {"username": racer, "password1": "a-long-passphrase",
                                          "password2": "a-long-passphrase"})  # fmt: skip
     created = browser.submit("/models/create/", {
-        "name": "spread-out", "track": "pitlane-oval", "workers": "2", "max_minutes": "10",
+        "name": model, "track": "pitlane-oval", "workers": "2", "max_minutes": "15",
         "reward_function": REWARD, "clipped_ppo__num_episodes_between_training": "5",
         "clipped_ppo__batch_size": "32", "clipped_ppo__num_epochs": "3",
     })  # fmt: skip
-    model = int(re.search(r"/models/(\d+)/", created.url)[1])
-    job = int(re.search(r'data-live-url="/ws/jobs/(\d+)/"', created.text)[1])
+    model_id = int(re.search(r"/models/(\d+)/", created.url)[1])
+    return browser, model_id, int(re.search(r'data-live-url="/ws/jobs/(\d+)/"', created.text)[1])
+
+
+def _iterations(browser: Browser, model: int) -> list[int]:
+    """The iterations the job's log reports, in order."""
+    log = browser.get(f"/models/{model}/log.txt").text
+    return [int(number) for number in re.findall(r"Iteration (\d+): ", log)]
+
+
+def _wait_iterations(browser: Browser, model: int, count: int, timeout: float = 300) -> None:
+    wait_for(lambda: len(_iterations(browser, model)) >= count, f"{count} iterations", timeout)
+
+
+def _log(browser: Browser, model: int) -> str:
+    return browser.get(f"/models/{model}/log.txt").text
+
+
+def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk_through_faults(
+    cluster: Cluster,
+):
+    # Sign up, create a model that trains on both simulation machines.
+    browser, model, job = _racer_training(cluster, "remote", "spread-out")
 
     # Watch both machines' frames arrive, then the first iteration the trainer learns.
     with browser.websocket(f"/ws/jobs/{job}/") as live:
         state = json.loads(live.recv(timeout=30))
         assert state["type"] == "state"
         assert set(_frames(live, {0, 1}, timeout=240)) == {0, 1}
-    wait_for(lambda: "Iteration 1:" in browser.get(f"/models/{model}/log.txt").text,
-             "the first iteration", timeout=300)  # fmt: skip
+    _wait_iterations(browser, model, 1)
+
+    # A simulation machine dies: its worker is replaced on the other, and the log says so.
+    cluster.simulation[1].kill()
+    wait_for(lambda: "stopped answering; starting a replacement" in _log(browser, model),
+             "the dead machine's worker to be replaced", timeout=120)  # fmt: skip
+    cluster.start_simulation(cluster.simulation[1])
+
+    # Redis restarts with nothing kept: workers reconnect, and the job goes on by itself.
+    cluster.redis.restart()
+    _wait_iterations(browser, model, len(_iterations(browser, model)) + 1)
+    assert "Redis is back" in _log(browser, model)
+
+    # The training machine dies: the other takes the job up from its last checkpoint.
+    trainer = next(m for m in cluster.training if "training.train[" in m.log())
+    trainer.kill()
+    wait_for(lambda: "Resumed from the checkpoint of iteration" in _log(browser, model),
+             "another training machine to resume the job", timeout=180)  # fmt: skip
+    assert "The trainer stopped answering" in _log(browser, model)
+    _wait_iterations(browser, model, len(_iterations(browser, model)) + 1)
+
+    # The database stops for 20 s: pages say so, the job waits, then goes on.
+    cluster.postgres.stop()
+    try:
+        down = browser.session.get(cluster.url + f"/models/{model}/", timeout=60,
+                                   headers={"Cookie": browser.cookies()})  # fmt: skip
+        assert down.status_code == 503, down.status_code
+        assert "The console cannot reach its database" in down.text
+        time.sleep(20)
+    finally:
+        cluster.postgres.start()
+    _wait_iterations(browser, model, len(_iterations(browser, model)) + 1)
+
+    numbers = _iterations(browser, model)
+    assert numbers == list(range(1, len(numbers) + 1))  # none lost, none counted twice
 
     # Stop; the model is saved from its last iteration by the training machine.
     browser.submit(f"/models/{model}/stop/", {})
@@ -248,6 +305,9 @@ def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk(cluster:
 
     # No machine kept on its own disk what another needed: every artifact went to S3.
     for machine in cluster.machines:
-        kept = [name for name in machine.files() if not name.startswith("static/")]
+        kept = [
+            name for name in machine.files()  # collected static files, beat's schedule
+            if not name.startswith(("static/", "celerybeat-schedule"))
+        ]  # fmt: skip
         assert kept == [], f"{machine.name} keeps {kept}"
     assert all(Path(machine.var, "media").exists() is False for machine in cluster.machines)

@@ -71,6 +71,15 @@ def test_a_server_error_gets_a_readable_500_without_a_traceback():
     assert "ZeroDivisionError" not in response.text
 
 
+@pytest.mark.urls("tests.console.broken_urls")
+def test_a_database_that_does_not_answer_gets_a_readable_503():
+    client = Client(raise_request_exception=False)
+    response = client.get("/database-down/")
+    assert response.status_code == 503 and response["Retry-After"] == "30"
+    assert "The console cannot reach its database" in response.text
+    assert "10.0.0.5" not in response.text and "Traceback" not in response.text
+
+
 def test_an_expired_form_gets_a_readable_403(alice):
     client = Client(enforce_csrf_checks=True)
     response = client.post(reverse("login"), {"username": "alice", "password": "x"})

@@ -2,9 +2,11 @@
 evaluation; racing.services.SUBMISSION: a race entry), one conditional write at a time."""
 
 import ast
+from datetime import timedelta
 from pathlib import Path
 
 import pytest
+from django.utils import timezone
 
 from racing.models import Submission
 from racing.services import SUBMISSION
@@ -156,3 +158,25 @@ def test_a_race_entry_is_scored_again_but_a_failed_one_stays_failed(alice, track
     assert SUBMISSION.move(failed, Job.IN_PROGRESS)
     assert SUBMISSION.move(failed, Job.FAILED)
     assert not SUBMISSION.move(failed, Job.COMPLETED)
+
+
+def test_a_job_whose_trainer_died_is_claimed_once_for_a_new_run(alice, tracks):
+    # What every worker's heartbeat does: a lapsed lease is claimed by one look, and the job is
+    # sent for again only if no run took it up within another lease.
+    model = model_create(owner=alice, settings=settings(), validate_reward=False)
+    run = jobs.lease_acquire(job_id=model.jobs.get().pk, owner="trainer:dead")
+    assert jobs.move(run, Job.INITIALIZING)
+    assert jobs.lapsed_claim() == []  # its lease is alive
+    past = timezone.now() - timedelta(seconds=1)
+    TrainingJob.objects.filter(pk=run.pk).update(lease_expires=past)
+    assert [job.pk for job in jobs.lapsed_claim()] == [run.pk]
+    assert jobs.lapsed_claim() == []  # claimed once: one new run is sent for
+    assert TrainingJob.objects.get(pk=run.pk).log_lines.filter(text=jobs.LAPSED).count() == 1
+    with pytest.raises(LeaseLost):  # the old run, were it alive, no longer writes
+        jobs.write(run, message="still here")
+    TrainingJob.objects.filter(pk=run.pk).update(lease_expires=past)  # that run never came
+    assert [job.pk for job in jobs.lapsed_claim()] == [run.pk]
+    resumed = jobs.lease_acquire(job_id=run.pk, owner="trainer:new")
+    assert resumed.attempt == 2 and resumed.lease_owner == "trainer:new"
+    assert jobs.lapsed_claim() == []
+    assert TrainingJob.objects.get(pk=run.pk).log_lines.filter(text=jobs.LAPSED).count() == 1

@@ -1,12 +1,9 @@
 """Training end to end on the real parts: a Celery worker, Redis, the sandbox, SB3."""
 
-import contextlib
 import csv
 import importlib
 import io
 import json
-import os
-import signal
 from datetime import timedelta
 from pathlib import Path
 
@@ -26,7 +23,6 @@ from rl.learner import Learner
 from rl.stopwatch import PHASES
 from sandbox import MiB, Sandbox
 from simulator.trace import SimTraceRow
-from tests import services
 from tests.services import parent_of, wait_for
 from tests.training.test_deepracer_utils import assert_training_logs_read_as_recorded
 from training import artifacts, configuration, jobs, rewards, tasks, trainer
@@ -414,24 +410,6 @@ def sandbox_children() -> dict[int, int]:
 
 
 @pytest.mark.django_db(transaction=True)
-def test_a_rollout_worker_that_dies_is_replaced_and_training_goes_on(
-    alice, tracks, celery_worker_process
-):
-    before = set(sandbox_children())  # other tests' rollouts may still be winding down
-    model = model_create(owner=alice, settings=settings(name="survivor"), validate_reward=False)
-    job = wait_for_job(model.jobs.get(), lambda j: j.iterations >= 1, "a first update")
-    ours = {pid: parent for pid, parent in sandbox_children().items() if pid not in before}
-    (rollout_process,) = set(ours.values())  # the pool process running this job's rollout
-    os.kill(rollout_process, signal.SIGKILL)
-
-    after = job.iterations  # one update from the new worker's episodes shows training goes on
-    job = wait_for_job(job, lambda j: j.iterations >= after + 1, "an update after the worker died")
-    assert job.status == TrainingJob.Status.IN_PROGRESS
-    assert rollout_process not in set(sandbox_children().values())
-    training_stop(job=job)
-    wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
-
-
 def test_a_worker_that_outlived_a_redis_restart_neither_miscounts_nor_drives_on():
     channel = JobChannel(redis_client(), job_id=987_655)
     channel.start(attempt=1)
@@ -450,30 +428,6 @@ def test_a_worker_that_outlived_a_redis_restart_neither_miscounts_nor_drives_on(
     # that the trainer will not receive.
     assert pushed == [1, 2, 3, 4, 5]
     assert channel.pop_episodes(limit=10) == [f"new {i}".encode() for i in range(5)]
-
-
-@pytest.mark.restarts_redis
-@pytest.mark.django_db(transaction=True)
-def test_a_redis_restart_mid_job_is_recovered(alice, tracks, celery_worker_process):
-    # This test runs last, after the browser tests, whose jobs' rollouts may still be winding
-    # down (a rollout of a job whose row the flush removed sees it within 15 s): let them end.
-    with contextlib.suppress(TimeoutError):
-        wait_for(lambda: not sandbox_children(), "earlier tests' rollouts to end", timeout=60)
-    model = model_create(owner=alice, settings=settings(name="restarted"), validate_reward=False)
-    job = wait_for_job(model.jobs.get(), lambda j: j.iterations >= 1, "a first update")
-    # Everything in Redis is gone: buffer, policy, queues, and the unacknowledged training task
-    # the worker holds, whose channel Celery 5.7 could not close (console.consumer).
-    services.SESSION_REDIS.restart()
-
-    after = job.iterations
-    job = wait_for_job(job, lambda j: j.iterations > after, "the job to go on")
-    assert job.status == TrainingJob.Status.IN_PROGRESS
-    assert job.log_lines.filter(text__startswith="Redis is back").exists()
-    assert default_storage.exists(job.last_checkpoint)
-    celery_worker_process.ensure_running()  # it reconnected, and took the new rollouts
-    training_stop(job=job)
-    job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "stop", 120)
-    assert job.model.status == RLModel.Status.READY
 
 
 def test_sac_learns_from_random_episodes_driven_in_the_sandbox():
