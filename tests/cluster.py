@@ -213,14 +213,15 @@ def _copy_code(destination: Path) -> None:
 
 class Cluster:
     """PostgreSQL, Redis and S3, a web machine, ``training`` training machines and
-    ``simulation`` simulation machines, each started as the README's "Running on several
-    machines" says. ``settings``: more environment variables for every machine."""
+    ``simulation`` simulation machines (of ``processes`` worker processes each), each started as
+    the README's "Running on several machines" says. ``settings``: more environment variables
+    for every machine."""
 
     def __init__(
         self, folder: Path, *, simulation: int = 2, training: int = 1, port: int | None = None,
-        proxied: bool = True, settings: dict[str, str] | None = None,
+        proxied: bool = True, settings: dict[str, str] | None = None, processes: int = 2,
     ) -> None:  # fmt: skip
-        self.folder = folder
+        self.folder, self.processes = folder, processes
         self.postgres = Postgres()
         self.redis = RedisServer(folder / "redis")
         self.s3 = S3Server()
@@ -252,7 +253,7 @@ class Cluster:
         for machine in self.training:
             self.start_training(machine)
         for machine in self.simulation:
-            self.start_simulation(machine)
+            self.start_simulation(machine, self.processes)
         wait_for(self.listening, "the web machine to listen", timeout=120)
 
     def start_web(self) -> None:
@@ -271,10 +272,10 @@ class Cluster:
         )  # fmt: skip
 
     @staticmethod
-    def start_simulation(machine: Machine) -> None:
+    def start_simulation(machine: Machine, processes: int = 2) -> None:
         machine.start(
             BIN / "celery", "-A", "console", "worker", "-Q", "simulation", "--hostname",
-            f"sim@{machine.name}", "--concurrency", "2", "--loglevel", "INFO",
+            f"sim@{machine.name}", "--concurrency", str(processes), "--loglevel", "INFO",
         )  # fmt: skip
 
     def listening(self) -> bool:

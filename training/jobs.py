@@ -4,7 +4,9 @@ A trainer run takes the lease by raising the job's attempt counter, and renews i
 every write it makes is conditional on that attempt. A second delivery of the same task finds the
 lease held and returns; a run whose worker died leaves the lease to expire, and the next delivery
 takes the job over with a higher attempt (and resumes from its last checkpoint), after which the
-old run, were it still alive, can no longer write.
+old run, were it still alive, can no longer write. That delivery is sent for by whichever worker
+looks first (``lapsed_claim``, from every worker's heartbeat), so a job whose training machine
+died goes on on another, rather than when the broker would hand its task out again.
 """
 
 from __future__ import annotations

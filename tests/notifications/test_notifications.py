@@ -16,7 +16,7 @@ from notifications.models import Notification
 from tests.racing import factories as racing
 from tests.training.factories import ready_model
 from tests.training.test_training import queued_job
-from training import evaluation, jobs, trainer
+from training import evaluation, jobs, lifecycle, trainer
 from training.models import EvaluationJob, EvaluationTrial, TrainingJob
 
 pytestmark = pytest.mark.django_db
@@ -29,6 +29,13 @@ def finished_by_the_trainer(job: TrainingJob, status: str, reason: str = "") -> 
     leased.iterations, leased.training_seconds = 3, 95
     trainer.Trainer(leased, start_rollouts=lambda *args: None).finish(status, reason=reason)
     return TrainingJob.objects.select_related("model").get(pk=job.pk)
+
+
+def driven(evaluation_job: EvaluationJob) -> EvaluationJob:
+    """The evaluation as its run leaves it before it ends: loaded, then driving."""
+    lifecycle.EVALUATION.move(evaluation_job, EvaluationJob.Status.INITIALIZING)
+    lifecycle.EVALUATION.move(evaluation_job, EvaluationJob.Status.IN_PROGRESS)
+    return evaluation_job
 
 
 def test_a_trained_jobs_end_tells_its_racer_with_a_link_to_the_model(alice, tracks):
@@ -63,7 +70,7 @@ def test_an_evaluations_end_is_told_but_a_races_evaluation_waits_for_the_score(a
     EvaluationTrial.objects.create(
         evaluation=done, number=2, time_ms=9_000, progress=40, status="off_track"
     )
-    evaluation._finish(done, EvaluationJob.Status.COMPLETED)
+    evaluation._finish(driven(done), EvaluationJob.Status.COMPLETED)
     told = Notification.objects.get(recipient=alice)
     assert told.text == (
         "straight-ahead's evaluation on Pitlane Oval is done: 1 of 2 laps completed, "
@@ -76,7 +83,7 @@ def test_an_evaluations_end_is_told_but_a_races_evaluation_waits_for_the_score(a
     racing.Submission.objects.create(
         event=event, racer=alice, model=model, model_name=model.name, evaluation=race
     )
-    evaluation._finish(race, EvaluationJob.Status.COMPLETED)
+    evaluation._finish(driven(race), EvaluationJob.Status.COMPLETED)
     assert Notification.objects.filter(recipient=alice).count() == 1
 
 
