@@ -32,6 +32,7 @@ WHAT = {
     "import": "imports",
     "create": "new models",
     "evaluate": "evaluations and race entries",
+    "rescore": "re-scorings",
 }
 
 

@@ -24,6 +24,7 @@ urlpatterns = [
     ),
     path("", include("training.urls")),
     path("", include("racing.urls")),
+    path("", include("analysis.urls")),
     path("notifications/", include("notifications.urls")),
     path("admin/", admin.site.urls),
 ]

@@ -167,6 +167,22 @@ class Sandbox:
         except RewardError as error:
             raise SandboxFailure("value", str(error)) from None
 
+    def rescore(self, waypoints: list, params: list[dict]) -> list[float]:
+        """The reward for each of ``params`` (reward params without their ``waypoints``, which
+        each is given): ``SandboxFailure`` at the first that fails, its ``step`` the failing
+        one's index in ``params``. Each call is timed as ``call`` times one."""
+        timeout = self.call_timeout * max(len(params), 1)
+        reply = self._request(
+            {"op": "rescore", "waypoints": waypoints, "params": params}, {"rewards"}, timeout
+        )
+        values = reply.get("values")
+        if not isinstance(values, list) or len(values) != len(params):
+            raise SandboxFailure("protocol", "The sandbox sent rewards that do not match.")
+        try:
+            return [checked_reward(value) for value in values]
+        except RewardError as error:
+            raise SandboxFailure("value", str(error)) from None
+
     def set_weights(self, version: int, data: bytes) -> None:
         """Act with the policy weights of ``version`` from now on."""
         self._request({"op": "weights", "version": version, "data": data}, {"weights"},

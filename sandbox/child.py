@@ -236,6 +236,19 @@ class Child:
         else:
             self.send({"type": "reward", "value": reward}, log=True)
 
+    def op_rescore(self, request: dict) -> None:
+        """The reward for each of ``params`` (recorded steps, replayed), each given
+        ``waypoints``; the first failure names its place in the list as its step."""
+        waypoints = request["waypoints"]
+        values = []
+        for index, params in enumerate(request["params"]):
+            try:
+                values.append(self.reward.call({**params, "waypoints": waypoints}))
+            except (RewardFailure, RewardError) as error:
+                self.send(_failure(error, step=index), log=True)
+                return
+        self.send({"type": "rewards", "values": values}, log=True)
+
     def op_probe(self, request: dict) -> None:
         """What sealed code managed of the forbidden things: the racer's code in the reward
         process, and this process's own seals."""

@@ -8,7 +8,6 @@ hooks. What it is made of lives apart: the car (``car``), the tracks, the PyBull
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -24,6 +23,7 @@ from simulator.actors import Traffic
 from simulator.camera import Lens, Mount, PerspectiveView
 from simulator.car import Car, CarSpec
 from simulator.config import ContinuousActions, DiscreteActions
+from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
 from simulator.rewards import checked_reward, follow_centre_line
 from simulator.texture import render
 from simulator.trace import SimTraceRow
@@ -65,31 +65,6 @@ def default_config() -> dict[str, Any]:
 
 
 TERMINAL = ("off_track", "crashed", "reversed", "immobilized", "lap_complete")
-
-
-def object_param_defaults() -> dict:
-    """The object keys as DeepRacer gives them when there are no objects: every race has them.
-    simapp bundle/markov/agent_ctrl/constants.py:110-136, track_geom/track_data.py:380-381
-    (01f5f01)."""
-    return {
-        "closest_objects": [0, 0],
-        "objects_location": [],
-        "objects_distance": [],
-        "objects_distance_from_center": [],
-        "objects_heading": [],
-        "objects_left_of_center": [],
-        "objects_speed": [],
-        "object_in_camera": False,
-    }
-
-
-def _prev_next(distances: Sequence[float], x: float) -> tuple[int, int]:
-    """The indices before and after ``x`` in the ascending ``distances``: after is the first
-    greater one (so ``x`` equal to entry i gives (i, i + 1)), wrapping past either end. simapp
-    bundle/markov/track_geom/utils.py:140-147 find_prev_next (01f5f01)."""
-    after = bisect.bisect_right(distances, x)
-    before = after - 1 if after > 0 else len(distances) - 1
-    return before, after if after < len(distances) else 0
 
 
 class DeepRacerEnv(gym.Env):
@@ -183,7 +158,7 @@ class DeepRacerEnv(gym.Env):
         self._car_body = self._world.add_car(spec.length, spec.width, spec.height)
         self._actor_bodies = []
         self._waypoints = tuple(self.track.waypoints)
-        self._waypoint_distances = self._distances_along()
+        self._waypoint_distances = waypoint_distances(self.track)
         self._spectator = None
         self._episode = -1
         self._seed = seed
@@ -191,17 +166,6 @@ class DeepRacerEnv(gym.Env):
         # Gazebo's clock does in simapp (rollout_agent_ctrl.py:245, 01f5f01). The trace's tstamp and
         # params["sim_time"] read it; deepracer-utils sums its differences (log_utils.py:349).
         self.clock = 0.0
-
-    def _distances_along(self) -> list[float]:
-        """Each waypoint's distance along the centre line, the last one the full lap: simapp
-        track_geom/track_data.py:47-48 (01f5f01) normalises by the length, which orders alike.
-        Computed as Track.project_points computes distances, so a car exactly on a waypoint
-        projects to exactly that waypoint's distance."""
-        steps = np.diff(self.track.centre, axis=0)
-        cumulative = np.concatenate(
-            [[0.0], np.cumsum(np.sqrt(np.maximum((steps**2).sum(axis=1), 1e-12)))]
-        )
-        return [*cumulative[:-1].tolist(), math.inf]
 
     # Gymnasium API
 
@@ -483,7 +447,7 @@ class DeepRacerEnv(gym.Env):
             "all_wheels_on_track": bool(on_track.all()),
             "x": x,
             "y": y,
-            "heading": math.degrees(c.yaw) if c.yaw > -math.pi else 180.0,
+            "heading": heading(math.degrees(c.yaw)),
             "distance_from_center": float(projection.offset[4]),
             "is_left_of_center": bool(projection.is_left[4]),
             "is_offtrack": status == "off_track",
@@ -515,7 +479,7 @@ class DeepRacerEnv(gym.Env):
         [N - 2, N - 1] (the repeated closing point, no wrap to 0). simapp
         track_geom/track_data.py:47-48 (ndists) and track_geom/utils.py:140-147 (find_prev_next),
         agent_ctrl/utils.py:76-77 (01f5f01)."""
-        return _prev_next(self._waypoint_distances, distance)
+        return prev_next(self._waypoint_distances, distance)
 
     def _object_params(self, car_distance: float) -> dict:
         """The objects_* params as simapp track_geom/track_data.py:372-441 (01f5f01) makes them:
@@ -526,7 +490,7 @@ class DeepRacerEnv(gym.Env):
         locations = np.array([[a.x, a.y] for a in actors])
         projection = self.track.project_points(locations)
         order = np.argsort(projection.distance, kind="stable")
-        behind, ahead = _prev_next(projection.distance[order].tolist(), car_distance)
+        behind, ahead = prev_next(projection.distance[order].tolist(), car_distance)
         bots = self.traffic.bots
         return {
             "closest_objects": [int(order[behind]), int(order[ahead])],

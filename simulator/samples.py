@@ -9,7 +9,8 @@ from dataclasses import dataclass
 import gymnasium
 
 import simulator
-from simulator.env import DeepRacerEnv, object_param_defaults
+from simulator.env import DeepRacerEnv
+from simulator.params import object_param_defaults
 
 LAP_SPEED = 1.0  # [m/s] the pace the samples' step counts assume
 

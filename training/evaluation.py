@@ -40,7 +40,7 @@ from rl.policies import Policy
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, lifecycle, live, selectors
+from training import artifacts, lifecycle, live, selectors, signals
 from training.models import EvaluationJob, EvaluationTrial, RLModel
 
 logger = logging.getLogger(__name__)
@@ -312,7 +312,9 @@ class Evaluator:
 
     def _save(self, video_path: Path) -> None:
         prefix = artifacts.evaluation_prefix(self.evaluation)
-        artifacts.save(self.model, prefix + artifacts.EVALUATION_TRACE, to_csv(self.trace))
+        trace = to_csv(self.trace)
+        artifacts.save(self.model, prefix + artifacts.EVALUATION_TRACE, trace)
+        signals.trace_recorded.send(EvaluationJob, document=trace, evaluation=self.evaluation)
         artifacts.save(
             self.model, prefix + artifacts.EVALUATION_METRICS, json.dumps({"metrics": self.metrics})
         )

@@ -36,7 +36,7 @@ from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stop
 from sandbox.protocol import unpack
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, jobs, lifecycle, live
+from training import artifacts, jobs, lifecycle, live, signals
 from training.jobs import LeaseLost
 from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 
@@ -418,9 +418,9 @@ class Trainer:
         before = self.job.episodes - len(episodes)  # training episodes of earlier iterations
         self.metrics += training_metrics(episodes, before=before, now=time.time())
         self._save_metrics()
-        artifacts.save(
-            self.model, artifacts.training_trace(number), training_trace(episodes, before=before)
-        )
+        trace = training_trace(episodes, before=before)
+        artifacts.save(self.model, artifacts.training_trace(number), trace)
+        signals.trace_recorded.send(TrainingJob, document=trace, job=self.job, iteration=number)
 
     def _save_metrics(self) -> None:
         artifacts.save(self.model, artifacts.TRAINING_METRICS, metrics_document(self.metrics))

@@ -40,6 +40,7 @@ INSTALLED_APPS = [
     "console",
     "training",
     "racing",
+    "analysis",
     "notifications",
 ]
 
@@ -166,6 +167,7 @@ PITLANE_RATES = {
     for action, default in {
         "sign-in-account": "10/15m", "sign-in-address": "30/15m", "sign-up": "5/h",
         "validate": "30/10m", "import": "10/h", "create": "20/h", "evaluate": "30/h",
+        "rescore": "20/h",
     }.items()
 }  # fmt: skip
 RATELIMIT_USE_CACHE = "default"
@@ -204,6 +206,7 @@ CELERY_TASK_ROUTES = {
     "training.evaluate": {"queue": "simulation"},  # evaluations: no racer code
     "racing.race": {"queue": "simulation"},  # a race submission is an evaluation
     "racing.promote": {"queue": "simulation"},
+    "analysis.rescore": {"queue": "simulation"},  # a racer's reward function, in the sandbox
 }
 # Celery beat (run inside the worker by `make run`; one `celery -A console beat` when scaled out).
 CELERY_BEAT_SCHEDULE = {

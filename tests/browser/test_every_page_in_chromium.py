@@ -12,12 +12,15 @@ from playwright.sync_api import Page, expect
 
 from racing.models import Season
 from racing.services import demo_season_load
+from simulator.trace import to_csv
+from tests.analysis.test_summaries import HAND_WRITTEN
 from tests.browser.checks import page_problems
 from tests.browser.conftest import ARTIFACTS, off_the_loop
 from tests.browser.test_accounts_in_chromium import log_in
 from tests.conftest import PASSWORD
 from tests.racing.factories import event, scored
 from tests.training.factories import ready_model
+from training import artifacts
 from training.models import Vehicle
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -35,6 +38,7 @@ def racer_pages(alice) -> list[str]:
     submission = off_the_loop(scored, trial, alice, 10_000, 11_000, 12_000, model_name=model.name)
     season = Season.objects.get(name="Test season")
     vehicle = Vehicle.objects.create(owner=alice, name="page-car", shell_colour="#f5f5f5")
+    artifacts.save(model, artifacts.training_trace(1), to_csv(HAND_WRITTEN))  # for its Analysis
     return [
         "/models/", f"/models/{model.pk}/", f"/models/{model.pk}/evaluate/",
         f"/models/{model.pk}/delete/", "/models/create/", f"/models/create/?clone={model.pk}",
@@ -42,7 +46,7 @@ def racer_pages(alice) -> list[str]:
         f"/garage/{vehicle.pk}/delete/", "/races/", "/races/submit/",
         "/races/submissions/", submission.get_absolute_url(), "/leaderboards/",
         trial.get_absolute_url(), f"/seasons/{season.pk}/", "/races/community/new/",
-        "/notifications/", "/accounts/password/",
+        "/notifications/", "/accounts/password/", f"/models/{model.pk}/analysis/",
     ]  # fmt: skip
 
 

@@ -14,6 +14,7 @@ from django.core.files.storage import default_storage
 from django.core.management import CommandError, call_command
 from django.urls import reverse
 
+from analysis.models import TraceSummary
 from tests.services import wait_for
 from tests.training.factories import ready_model
 from tests.training.test_deepracer_utils import assert_evaluation_logs_read_as_recorded
@@ -91,6 +92,9 @@ def test_the_evaluate_command_prints_the_results_and_records_every_step(alice, c
     assert metrics[0]["off_track_count"] == trials[0].off_tracks
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
     assert_evaluation_logs_read_as_recorded(evaluation)  # in the model's logs archive
+    summary = TraceSummary.objects.get(evaluation=evaluation)  # for its Analysis tab
+    assert [e[0] for e in summary.episodes] == [0, 1, 2]
+    assert [e[5] == 0 for e in summary.episodes] == [t.status == "lap_complete" for t in trials]
 
 
 @pytest.mark.django_db

@@ -16,6 +16,7 @@ from django.db import connection
 from django.utils import timezone
 
 import simulator
+from analysis.models import TraceSummary
 from common.redis_client import redis_client
 from rl import hyperparameters
 from rl.experience import JobChannel, decode_episode
@@ -119,6 +120,12 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     assert job.log_lines.filter(text__startswith="Iteration 1: ").exists()
     assert all(row.episodes == 5 for row in rows)  # DeepRacer's: exactly those of an iteration
     assert_training_logs_read_as_recorded(job.model)
+    # Each iteration's trace was summarised for the Analysis tab as the trainer recorded it.
+    summaries = {s.iteration: s for s in TraceSummary.objects.filter(job=job)}
+    assert sorted(summaries) == [row.number for row in rows]
+    for row in rows:
+        assert len(summaries[row.number].episodes) == row.episodes
+        assert summaries[row.number].steps == row.steps
 
 
 @pytest.mark.django_db(transaction=True)

@@ -1,0 +1,176 @@
+"""What the analysis pages read: a source's summaries combined over the iterations and outcomes a
+racer picks, and single episodes read back from their trace."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis import summaries, traces
+from analysis.models import Rescoring
+from analysis.records import Source
+from simulator import params as reward_params
+
+EPISODE_COLUMNS = ("iteration", "episode", "start", "steps", "progress", "seconds", "outcome",
+                   "reward")  # fmt: skip
+MAP_POINTS = 60_000  # the most steps one map draws: evenly spread over what was picked
+ROUND = 3  # decimals of a metre sent to the browser: a millimetre
+
+
+@dataclass(frozen=True)
+class Choice:
+    """The iterations (``first``..``last``) and episode outcomes a racer picked."""
+
+    first: int
+    last: int
+    outcomes: tuple[str, ...]
+
+    @classmethod
+    def parse(cls, query, *, iterations: list[int]) -> Choice:
+        """From the page's query string; what is missing or wrong falls back to everything."""
+        low, high = (min(iterations), max(iterations)) if iterations else (0, 0)
+        first, last = _whole(query.get("first"), low), _whole(query.get("last"), high)
+        first, last = sorted((min(max(first, low), high), min(max(last, low), high)))
+        picked = [name for name in query.get("outcomes", "").split(",") if name in traces.OUTCOMES]
+        return cls(first, last, tuple(picked) or traces.OUTCOMES)
+
+
+def _whole(text: str | None, default: int) -> int:
+    try:
+        return int(text) if text is not None else default
+    except ValueError:
+        return default
+
+
+def overview(source: Source) -> dict:
+    """What the page needs before any choice: the track, the action space, the iterations and
+    each one's figures (for the per-iteration chart), and the labels."""
+    track = source.track
+    rows = source.summaries().order_by("iteration").values_list("iteration", "episodes", "steps")
+    iterations = [
+        {"iteration": iteration, "steps": steps, **summaries.iteration_figures(episodes)}
+        for iteration, episodes, steps in rows
+    ]
+    return {
+        "track": {
+            "name": track.display_name,
+            "centre": np.round(track.centre, ROUND).tolist(),
+            "inner": np.round(track.inner, ROUND).tolist(),
+            "outer": np.round(track.outer, ROUND).tolist(),
+            "direction": track.direction,
+        },
+        "actions": _action_labels(source),
+        "continuous": source.actions is None,
+        "iterations": iterations,
+        "evaluation": source.evaluation is not None,
+        "outcomes": [[name, traces.OUTCOME_LABELS[name]] for name in traces.OUTCOMES],
+        "sections": summaries.SECTIONS,
+        "steer_bins": _centres(summaries.STEER_EDGES),
+        "speed_bins": _centres(summaries.SPEED_EDGES),
+        "point_columns": [*summaries.POINT_COLUMNS, "iteration"],
+    }
+
+
+def _centres(edges: np.ndarray) -> list[float]:
+    return np.round((edges[:-1] + edges[1:]) / 2, 3).tolist()
+
+
+def _action_labels(source: Source) -> list[str]:
+    if source.actions is None:
+        return []
+    return [
+        f"{index}: {float(a.get('steering_angle', 0)):g}°, {float(a.get('speed', 0)):g} m/s"
+        for index, a in enumerate(source.model.action_space)
+    ]
+
+
+def picked(source: Source, choice: Choice) -> dict:
+    """The episodes, off-track marks and action counts of what ``choice`` picked, and its
+    fastest lap."""
+    rows = (
+        source.summaries()
+        .filter(iteration__range=(choice.first, choice.last))
+        .order_by("iteration")
+        .values_list("iteration", "episodes", "marks", "actions")
+    )
+    codes = set(summaries.outcome_codes(list(choice.outcomes)))
+    episodes, marks, actions = [], [], []
+    for iteration, their_episodes, their_marks, their_actions in rows:
+        episodes += [[iteration, *e] for e in their_episodes if e[5] in codes]
+        marks += [[*m, iteration] for m in their_marks if m[2] in codes]
+        actions.append(their_actions)
+    laps = [e for e in episodes if e[6] == 0]  # [iteration, number, ..., outcome at 6]
+    fastest = min(laps, key=lambda e: e[5]) if laps else None
+    return {
+        "first": choice.first,
+        "last": choice.last,
+        "outcomes": list(choice.outcomes),
+        "episode_columns": EPISODE_COLUMNS,
+        "episodes": episodes,
+        "marks": marks,
+        "actions": summaries.combine_actions(actions, list(choice.outcomes), source.actions),
+        "fastest": fastest[:2] if fastest else None,
+    }
+
+
+def points(source: Source, choice: Choice, rescoring: Rescoring | None = None) -> bytes:
+    """The map's points for ``choice``: float32 columns (``overview``'s ``point_columns``, then
+    the re-scored reward when ``rescoring`` is given), one after another, little-endian."""
+    rows = list(
+        source.summaries()
+        .filter(iteration__range=(choice.first, choice.last))
+        .order_by("iteration")
+        .values_list("iteration", "points")
+    )
+    extra = rescored_points(rescoring, [(i, bytes(p)) for i, p in rows]) if rescoring else None
+    combined = summaries.combine_points(
+        [(i, bytes(p)) for i, p in rows], list(choice.outcomes), MAP_POINTS, extra=extra
+    )
+    return combined.astype("<f4").tobytes()
+
+
+def rescored_points(rescoring: Rescoring, rows: list[tuple[int, bytes]]) -> dict[int, np.ndarray]:
+    """The re-scored reward of each summary point of ``rows`` that ``rescoring`` scored."""
+    new = np.frombuffer(bytes(rescoring.points), dtype=np.float32)
+    offsets, at = {}, 0
+    for iteration in range(rescoring.first, rescoring.last + 1):
+        offsets[iteration] = at
+        at += rescoring.point_counts.get(str(iteration), 0)
+    found = {}
+    for iteration, data in rows:
+        count = summaries.points_array(data).shape[1]
+        start = offsets.get(iteration)
+        if start is not None and rescoring.point_counts.get(str(iteration)) == count:
+            found[iteration] = new[start : start + count]
+    return found
+
+
+def episode(source: Source, iteration: int, number: int) -> dict | None:
+    """One episode's steps, with the reward params it was given at each (rebuilt from the trace:
+    ``simulator.params.replayed``); None when it is not in the trace."""
+    steps = source.read(iteration)
+    found = [e for e in steps.episodes() if e.number == number]
+    if not found:
+        return None
+    (chosen,) = found[:1]
+    rows = slice(chosen.first, chosen.last + 1)
+    track = source.track
+    recorded = steps.recorded(rows)
+    shown = ("x", "y", "heading", "speed", "steering_angle", "progress", "steps",
+             "distance_from_center", "is_left_of_center", "track_width", "closest_waypoints",
+             "all_wheels_on_track", "is_offtrack", "is_crashed")  # fmt: skip
+    params = [{name: p[name] for name in shown} for p in reward_params.replayed(track, recorded)]
+    return {
+        "iteration": iteration,
+        "episode": number,
+        "outcome": chosen.outcome,
+        "status": chosen.status,
+        "seconds": round(chosen.seconds, 3),
+        "reward": round(chosen.reward, 4),
+        "path": np.round(np.column_stack([steps.x[rows], steps.y[rows]]), ROUND).tolist(),
+        "rewards": np.round(steps.reward[rows], 4).tolist(),
+        "actions": steps.action[rows].tolist(),
+        "statuses": steps.status[rows].tolist(),
+        "params": params,
+    }

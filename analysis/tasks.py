@@ -1,0 +1,15 @@
+"""Celery tasks of the analysis: adapters that load ids and call the runner."""
+
+from __future__ import annotations
+
+from celery import shared_task
+
+RESCORE_LIMIT = 15 * 60  # [s] a re-scoring is stopped after this
+
+
+@shared_task(name="analysis.rescore", acks_late=True, ignore_result=True,
+             soft_time_limit=RESCORE_LIMIT, time_limit=RESCORE_LIMIT + 60)  # fmt: skip
+def rescore(rescoring_id: int) -> None:
+    from analysis import rescoring
+
+    rescoring.run(rescoring_id)

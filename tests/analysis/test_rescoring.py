@@ -1,0 +1,113 @@
+"""Another reward function run over recorded driving, in the sandbox, step by step with the params
+each step was given; a hostile one fails with words that say where, and touches nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from django.urls import reverse
+
+from analysis import rescoring, services, summaries
+from analysis.models import Rescoring, TraceSummary
+from analysis.records import Source
+from tests.analysis.test_summaries import recorded_by_hand
+
+pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
+
+# Twice the speed, and 100 for a step off the track: read from the replayed params.
+SPEED_AND_OFF_TRACK = """
+def reward_function(params):
+    if params["steps"] == 2:
+        print("waypoints:", len(params["waypoints"]))
+    return 2.0 * params["speed"] + (100.0 if params["is_offtrack"] else 0.0)
+"""
+
+
+def rescored(owner, source_code: str) -> Rescoring:
+    job = recorded_by_hand(owner)
+    asked = services.rescoring_create(
+        source=Source.of_job(job), owner=owner, reward_function=source_code, first=None, last=None
+    )
+    rescoring.run(asked.pk)
+    asked.refresh_from_db()
+    return asked
+
+
+def test_a_reward_function_scores_every_recorded_step_with_its_params(alice):
+    done = rescored(alice, SPEED_AND_OFF_TRACK)
+    assert done.status == Rescoring.Status.DONE, done.failure
+    assert (done.first, done.last, done.steps, done.total_steps) == (1, 1, 5, 5)
+    # Speeds 1, 2, 2 on the lap; 0.5, 0.5 off the track, its last step off it.
+    assert done.episodes == {"1": [[0, 10.0], [1, 102.0]]}
+    new = np.frombuffer(bytes(done.points), dtype=np.float32)
+    assert new.tolist() == [2.0, 4.0, 4.0, 1.0, 101.0]  # the map's points, in their order
+    assert done.point_counts == {"1": 5}
+    assert done.log == ["waypoints: 111", "waypoints: 111"]  # printed at each episode's step 2
+
+
+@pytest.mark.parametrize(
+    ("code", "said"),
+    [
+        (
+            "def reward_function(params):\n    return float(open('/etc/hostname').read())\n",
+            "Iteration 1, episode 0, step 2, line 2:",
+        ),
+        ("def reward_function(params):\n    while True:\n        pass\n", "took longer than 1 s"),
+        (
+            "def reward_function(params):\n    return params['no_such_param']\n",
+            "Iteration 1, episode 0, step 2, line 2: KeyError",
+        ),
+        ("def reward_function(params)\n    return 1.0\n", "did not load"),
+    ],
+    ids=["reads a file", "never returns", "a param DeepRacer has not", "not Python"],
+)
+def test_a_reward_function_that_fails_says_where(alice, code, said):
+    failed = rescored(alice, code)
+    assert failed.status == Rescoring.Status.FAILED
+    assert said in failed.failure
+    assert failed.episodes == {} and bytes(failed.points) == b""
+
+
+def test_a_rescoring_runs_once_however_often_it_is_delivered(alice):
+    done = rescored(alice, SPEED_AND_OFF_TRACK)
+    finished = done.finished_at
+    rescoring.run(done.pk)  # a redelivery: nothing happens
+    done.refresh_from_db()
+    assert done.status == Rescoring.Status.DONE and done.finished_at == finished
+
+
+def test_the_page_asks_for_a_rescoring_and_refuses_what_cannot_run(alice, client, monkeypatch):
+    job = recorded_by_hand(alice)
+    client.force_login(alice)
+    base = reverse("analysis:model", args=[job.model.pk])
+    empty = client.post(f"{base}rescore/", {"reward_function": ""})
+    assert empty.status_code == 400
+    assert empty.json()["errors"]["reward_function"][0]["message"].startswith("Paste a reward")
+    past = client.post(f"{base}rescore/", {"reward_function": SPEED_AND_OFF_TRACK, "first": 4})
+    assert past.status_code == 400
+    assert past.json()["errors"]["first"][0]["message"] == (
+        "No iteration from 4 to 4 was recorded; iterations 1 to 1 were."
+    )
+    backwards = {"reward_function": SPEED_AND_OFF_TRACK, "first": 3, "last": 2}
+    assert "comes before" in str(client.post(f"{base}rescore/", backwards).json())
+    monkeypatch.setattr(services, "MAX_RESCORE_STEPS", 4)
+    big = client.post(f"{base}rescore/", {"reward_function": SPEED_AND_OFF_TRACK, "first": 1})
+    assert "hold 5 steps; a re-scoring takes at most 4" in str(big.json())
+    monkeypatch.undo()
+    asked = client.post(f"{base}rescore/", {"reward_function": SPEED_AND_OFF_TRACK})
+    assert asked.status_code == 202
+    assert asked.json()["status"] == "QUEUED"
+    followed = client.get(asked.json()["url"]).json()
+    assert followed["id"] == asked.json()["id"] and followed["total_steps"] == 5
+
+
+def test_the_map_colours_by_the_new_reward_beside_the_old(alice, client):
+    done = rescored(alice, SPEED_AND_OFF_TRACK)
+    client.force_login(alice)
+    base = reverse("analysis:model", args=[done.job.model.pk])
+    data = client.get(f"{base}points.bin?rescoring={done.pk}").content
+    points = np.frombuffer(data, dtype="<f4").reshape(len(summaries.POINT_COLUMNS) + 2, -1)
+    old = points[summaries.POINT_COLUMNS.index("reward")]
+    assert old.tolist() == pytest.approx([1.0, 2.0, 3.0, 0.5, 0.001])
+    assert points[-1].tolist() == [2.0, 4.0, 4.0, 1.0, 101.0]
+    assert TraceSummary.objects.filter(job=done.job).count() == 1

@@ -1,0 +1,261 @@
+"""The analysis reads recorded traces as the community's notebooks do: a trace written by hand is
+summarised as counted by hand, a driven job's as deepracer-utils reads it, and the pages give a
+racer their own model's driving and nobody else's."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import gymnasium
+import numpy as np
+import pytest
+from deepracer.logs import AnalysisUtils, DeepRacerLog
+from django.conf import settings as django_settings
+from django.urls import reverse
+
+import simulator
+from analysis import records, selectors, summaries, traces
+from analysis.models import TraceSummary
+from rl import hyperparameters
+from simulator.controller import CentreLineDriver
+from simulator.params import replayed
+from simulator.trace import SimTraceRow, to_csv
+from tests.training.test_deepracer_utils import EPISODES, extracted, new_model, train_on_paper
+from training import artifacts, configuration, signals
+from training.models import EvaluationJob, RLModel, TrainingJob
+from training.rewards import EXAMPLES
+
+pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
+
+STEP = 1 / 15  # [s]
+
+
+def row(episode, steps, x, y, steer, speed, action, reward, progress, waypoint, tstamp, status):
+    return SimTraceRow(
+        episode=episode, steps=float(steps), X=x, Y=y, yaw=90.0, steer=steer, throttle=speed,
+        action=action, reward=reward, done=status not in ("prepare", "in_progress"),
+        all_wheels_on_track=status != "off_track", progress=progress, closest_waypoint=waypoint,
+        track_len=16.5, tstamp=tstamp, episode_status=status, pause_duration=0.0,
+        obstacle_crash_counter=0, wall_clock=1_700_000_000.0,
+    )  # fmt: skip
+
+
+# Two episodes on the Pitlane Oval (111 waypoints: a tenth of the lap is 11 of them). The first
+# laps in three steps, the second leaves the track at its second step.
+HAND_WRITTEN = [
+    row(0, 1, 0.0, -1.49, 0.0, 0.0, -1, 0.0, 0.0, 0, 10.0, "prepare"),
+    row(0, 2, 0.2, -1.49, -30.0, 1.0, 0, 1.0, 30.0, 0, 10.0667, "in_progress"),
+    row(0, 3, 1.0, 1.49, 0.0, 2.0, 2, 2.0, 60.0, 55, 10.1333, "in_progress"),
+    row(0, 4, -0.2, -1.49, 0.0, 2.0, 2, 3.0, 100.0, 109, 10.2, "lap_complete"),
+    row(1, 1, 0.5, -1.49, 0.0, 0.0, -1, 0.0, 0.0, 5, 10.2, "prepare"),
+    row(1, 2, 0.6, -1.49, 15.0, 0.5, 1, 0.5, 2.0, 5, 10.2667, "in_progress"),
+    row(1, 3, 1.5, 2.5, 15.0, 0.5, 1, 0.001, 3.5, 6, 10.3333, "off_track"),
+]
+
+
+def untrained(owner, name: str) -> RLModel:
+    """A model with a job and no files (no weights either: the analysis never reads them)."""
+    settings = {"name": name, "track": "pitlane-oval", "reward_function": EXAMPLES[0].source,
+                "hyperparameters": hyperparameters.defaults("clipped_ppo")}  # fmt: skip
+    clean = configuration.check(settings, owner=owner, validate_reward=False)
+    model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean.row())
+    TrainingJob.objects.create(model=model, status=TrainingJob.Status.COMPLETED, iterations=1)
+    shutil.rmtree(django_settings.MEDIA_ROOT / "models" / str(model.pk), ignore_errors=True)
+    return model
+
+
+def recorded_by_hand(owner) -> TrainingJob:
+    model = untrained(owner, "by-hand")
+    job = model.jobs.get()
+    document = to_csv(HAND_WRITTEN)
+    artifacts.save(model, artifacts.training_trace(1), document)
+    signals.trace_recorded.send(TrainingJob, document=document, job=job, iteration=1)
+    return job
+
+
+def test_a_hand_written_trace_is_summarised_as_counted_by_hand(alice):
+    job = recorded_by_hand(alice)
+    summary = TraceSummary.objects.get(job=job, iteration=1)  # made as it was recorded
+    assert summary.version == summaries.VERSION
+    # [number, start waypoint, steps, progress, seconds, outcome, total reward]
+    assert summary.episodes == [[0, 0, 4, 100.0, 0.2, 0, 6.0], [1, 5, 3, 3.5, 0.133, 1, 0.501]]
+    assert summary.marks == [[1.5, 2.5, 1, 1]]  # where it left the track: its second episode
+    assert summary.steps == 5  # the prepare rows are not driven steps
+    lap, off = summary.actions["lap_complete"], summary.actions["off_track"]
+    assert set(summary.actions) == {"lap_complete", "off_track"}
+    # Sections: waypoints 0-10 are the first tenth, 55 the sixth, 109 the last.
+    assert _cells(lap["actions"]) == {(0, 0): 1, (5, 2): 1, (9, 2): 1}
+    assert _cells(off["actions"]) == {(0, 1): 2}
+    # Steering bins of 5° from -30°; speed bins of 0.25 m/s from 0.
+    assert _cells(lap["steer"]) == {(0, 0): 1, (5, 6): 1, (9, 6): 1}
+    assert _cells(off["steer"]) == {(0, 9): 2}
+    assert _cells(lap["speed"]) == {(0, 4): 1, (5, 8): 1, (9, 8): 1}
+    assert _cells(off["speed"]) == {(0, 2): 2}
+    points = summaries.points_array(bytes(summary.points))
+    assert points.shape == (len(summaries.POINT_COLUMNS), 5)
+    column = dict(zip(summaries.POINT_COLUMNS, points, strict=True))
+    assert column["reward"].tolist() == pytest.approx([1.0, 2.0, 3.0, 0.5, 0.001])
+    assert column["outcome"].tolist() == [0, 0, 0, 1, 1]
+    assert column["row"].tolist() == [1, 2, 3, 5, 6]
+    assert summaries.iteration_figures(summary.episodes) == {
+        "episodes": 2, "reward": pytest.approx(3.2505), "progress": pytest.approx(51.75),
+        "completion": 50.0, "best_lap": 0.2, "median_lap": 0.2,
+    }  # fmt: skip
+
+
+def _cells(table: list[list[int]]) -> dict[tuple[int, int], int]:
+    return {(i, j): count for i, line in enumerate(table) for j, count in enumerate(line) if count}
+
+
+def test_a_driven_job_is_summarised_as_deepracer_utils_reads_it(alice, tracks):
+    model = new_model(alice, "driven")
+    train_on_paper(model)  # two iterations of 4 episodes: laps and straight off the track
+    source = records.Source.of_job(model.jobs.get())
+    assert source.ensure() == []  # recorded before any summary: made when first asked for
+    rows = {s.iteration: s for s in source.summaries()}
+    assert sorted(rows) == [1, 2]
+    with tempfile.TemporaryDirectory() as directory:
+        log = DeepRacerLog(str(extracted(model, Path(directory))))
+        log.load_training_trace()
+        agg = AnalysisUtils.simulation_agg(log.dataframe(), secondgroup="unique_episode")
+    for iteration, summary in rows.items():
+        theirs = agg[agg["iteration"] == iteration - 1].sort_values("unique_episode")
+        assert len(summary.episodes) == len(theirs) == EPISODES
+        for ours, (_, their) in zip(summary.episodes, theirs.iterrows(), strict=True):
+            _, start, steps, progress, seconds, outcome, reward = ours
+            assert steps == their["steps"]
+            assert start == their["start_at"]
+            assert progress == pytest.approx(their["progress"], abs=0.01)
+            assert seconds == pytest.approx(their["time"], abs=1e-3)
+            assert reward == pytest.approx(their["reward"], abs=1e-3 * steps)
+            assert (outcome == 0) == bool(their["complete"])
+    laps = [e for s in rows.values() for e in s.episodes if e[5] == 0]
+    assert laps and all(e[4] == pytest.approx((e[2] - 1) * STEP, abs=1e-3) for e in laps)
+
+
+def test_the_params_replayed_from_a_trace_are_those_the_car_was_given(tracks):
+    env = gymnasium.make(simulator.ENV_ID, track="pitlane-oval")
+    _, info = env.reset(seed=0)
+    driver = CentreLineDriver(env.unwrapped)
+    given, rows = [], []
+    while True:
+        _, _, terminated, truncated, info = env.step(driver.act())
+        given.append(info["params"])
+        rows.append(info["trace"])
+        if terminated or truncated or len(rows) == 60:
+            break
+    env.close()
+    steps = traces.read(to_csv(rows))  # through the CSV, rounded as it is stored
+    recorded = steps.recorded(slice(None))
+    track = records.track_of("pitlane-oval", "counterclockwise")
+    for theirs, ours in zip(given, replayed(track, recorded), strict=True):
+        assert set(ours) == set(theirs) - {"waypoints"}
+        for name in ("x", "y", "heading", "distance_from_center", "track_width", "progress",
+                     "speed", "steering_angle", "projection_distance", "sim_time"):  # fmt: skip
+            assert ours[name] == pytest.approx(theirs[name], abs=2e-3), name
+        for name in ("steps", "closest_waypoints", "all_wheels_on_track", "is_offtrack",
+                     "is_crashed", "is_reversed", "track_length"):  # fmt: skip
+            assert ours[name] == theirs[name], name
+        if theirs["distance_from_center"] > 1e-3:  # on the line, the stored digits pick a side
+            assert ours["is_left_of_center"] == theirs["is_left_of_center"]
+
+
+def test_the_pages_pick_iterations_and_outcomes_and_show_one_episode(alice, client):
+    job = recorded_by_hand(alice)
+    model = job.model
+    client.force_login(alice)
+    base = reverse("analysis:model", args=[model.pk])
+    page = client.get(base)
+    assert page.status_code == 200
+    overview = page.context["overview"]
+    assert [row["iteration"] for row in overview["iterations"]] == [1]
+    assert len(overview["track"]["centre"]) == 111
+
+    everything = client.get(f"{base}data.json").json()
+    assert [e[:2] for e in everything["episodes"]] == [[1, 0], [1, 1]]
+    assert everything["fastest"] == [1, 0]
+    assert everything["marks"] == [[1.5, 2.5, 1, 1, 1]]
+    laps = client.get(f"{base}data.json?outcomes=lap_complete").json()
+    assert [e[:2] for e in laps["episodes"]] == [[1, 0]] and laps["marks"] == []
+    assert laps["actions"]["speed"][5][8] == 1 and sum(map(sum, laps["actions"]["speed"])) == 3
+
+    data = client.get(f"{base}points.bin?outcomes=off_track").content
+    columns = len(summaries.POINT_COLUMNS) + 1  # and the iteration
+    points = np.frombuffer(data, dtype="<f4").reshape(columns, -1)
+    assert points.shape[1] == 2 and points[-1].tolist() == [1, 1]
+
+    shown = client.get(f"{base}episode.json?iteration=1&episode=1").json()
+    assert shown["outcome"] == "off_track" and len(shown["path"]) == 3
+    assert shown["params"][2]["is_offtrack"] is True
+    assert shown["params"][1]["distance_from_center"] == pytest.approx(0.0, abs=0.01)
+    missing = client.get(f"{base}episode.json?iteration=1&episode=7")
+    assert missing.status_code == 404 and "has no episode 7" in missing.json()["error"]
+    assert client.get(f"{base}episode.json?iteration=one").status_code == 400
+    # Wrong choices fall back to everything, never to an error.
+    assert client.get(f"{base}data.json?first=x&last=-4&outcomes=nope").json()["episodes"]
+
+
+def test_only_the_owner_sees_a_models_analysis(alice, bob, client):
+    job = recorded_by_hand(alice)
+    client.force_login(bob)
+    base = reverse("analysis:model", args=[job.model.pk])
+    for url in (
+        base,
+        f"{base}data.json",
+        f"{base}points.bin",
+        f"{base}episode.json?iteration=1&episode=0",
+    ):
+        assert client.get(url).status_code == 404
+
+
+def test_a_model_with_nothing_recorded_says_so(alice, client):
+    model = untrained(alice, "quiet")
+    client.force_login(alice)
+    page = client.get(reverse("analysis:model", args=[model.pk]))
+    assert page.status_code == 200
+    assert b"Nothing recorded yet" in page.content
+
+
+def test_a_broken_trace_is_left_out_with_a_word(alice, client):
+    job = recorded_by_hand(alice)
+    artifacts.save(job.model, artifacts.training_trace(2), "episode,steps\n1,2\n")
+    client.force_login(alice)
+    page = client.get(reverse("analysis:model", args=[job.model.pk]))
+    assert page.context["unreadable"] == [2]
+    assert b"could not be read" in page.content
+    with pytest.raises(traces.Unreadable, match="no column"):
+        traces.read(b"episode,steps\n1,2\n")
+    with pytest.raises(traces.Unreadable, match="not a number"):
+        traces.read(to_csv(HAND_WRITTEN).replace("10.067", "soon"))
+
+
+def test_the_overview_is_json_for_the_page(alice):
+    job = recorded_by_hand(alice)
+    overview = selectors.overview(records.Source.of_job(job))
+    assert json.loads(json.dumps(overview)) == overview
+    assert overview["actions"][0].startswith("0: ")
+
+
+def test_an_evaluations_trials_have_their_analysis_tab(alice, client):
+    model = untrained(alice, "evaluated")
+    evaluation = EvaluationJob.objects.create(
+        model=model, track=model.track, trials=2, status=EvaluationJob.Status.COMPLETED
+    )
+    document = to_csv(HAND_WRITTEN)  # its two episodes stand for two trials
+    artifacts.save(model, artifacts.evaluation_prefix(evaluation) + artifacts.EVALUATION_TRACE,
+                   document)  # fmt: skip
+    client.force_login(alice)
+    detail = client.get(reverse("training:evaluation-detail", args=[model.pk, evaluation.pk]))
+    base = reverse("analysis:evaluation", args=[model.pk, evaluation.pk])
+    assert base.encode() in detail.content  # the tab beside the results
+    page = client.get(base)
+    assert page.status_code == 200 and page.context["evaluation"] == evaluation
+    assert TraceSummary.objects.get(evaluation=evaluation).steps == 5  # made when first asked
+    picked = client.get(f"{base}data.json").json()
+    assert [e[:2] for e in picked["episodes"]] == [[0, 0], [0, 1]]
+    assert client.get(f"{base}episode.json?iteration=0&episode=1").json()["outcome"] == "off_track"
+    stranger = reverse("analysis:evaluation", args=[model.pk + 1000, evaluation.pk])
+    assert client.get(stranger).status_code == 404

@@ -1,0 +1,88 @@
+"""The Analysis tab in Chromium: a trained model's driving on the track, coloured and filtered,
+one episode followed step by step, and another reward function scored by a real worker."""
+
+from __future__ import annotations
+
+import pytest
+from playwright.sync_api import Page, expect
+
+from tests.analysis.test_rescoring import SPEED_AND_OFF_TRACK
+from tests.analysis.test_summaries import untrained
+from tests.browser.conftest import ARTIFACTS
+from tests.browser.test_accounts_in_chromium import log_in
+from tests.conftest import PASSWORD
+from tests.training.test_deepracer_utils import train_on_paper
+
+pytestmark = pytest.mark.django_db(transaction=True)
+
+# How many different colours the map's canvas holds: a drawn track and coloured steps give many.
+COLOURS = """canvas => {
+  const data = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height).data;
+  const seen = new Set();
+  const step = 4 * 97;
+  for (let i = 0; i < data.length; i += step) seen.add(`${data[i]},${data[i + 1]},${data[i + 2]}`);
+  return seen.size;
+}"""
+
+
+def test_a_racer_reads_their_models_driving_and_tries_another_reward_function(
+    page: Page, alice, tracks, celery_worker_process
+):
+    model = untrained(alice, "analysed")
+    train_on_paper(model)  # two iterations: laps, and episodes straight off the track
+    log_in(page, "alice", PASSWORD)
+    page.goto(f"/models/{model.pk}/")
+    page.get_by_role("link", name="Analysis").click()
+    root = page.locator("[data-analysis]")
+    expect(root).to_have_attribute("data-loaded", "1", timeout=30_000)
+    expect(page.locator("[data-map-caption]")).to_contain_text("where a car left the track (4)")
+    expect(page.locator("[data-fastest]")).to_contain_text("Fastest picked: iteration")
+    canvas = page.locator("[data-map]")
+    assert canvas.evaluate(COLOURS) > 8
+    expect(page.locator("[data-episode-count]")).to_contain_text("8 episodes")
+
+    # Colour by speed: the legend's scale is in m/s; by action: a label per action.
+    page.get_by_label("Colour by").select_option("speed")
+    expect(page.locator("[data-map-legend]")).to_contain_text("m/s")
+    page.get_by_label("Colour by").select_option("action")
+    expect(page.locator("[data-map-legend]")).to_contain_text("0: ")
+
+    # Only the episodes that left the track, of iteration 2.
+    page.get_by_label("Lap complete").uncheck()
+    page.get_by_label("From iteration", exact=True).fill("2")
+    page.get_by_label("From iteration", exact=True).dispatch_event("change")
+    expect(page.locator("[data-episode-count]")).to_contain_text("2 episodes")
+    rows = page.locator("[data-episode-table] tbody tr")
+    expect(rows).to_have_count(2)
+    assert set(rows.evaluate_all("rows => rows.map((r) => r.dataset.iteration)")) == {"2"}
+
+    # One episode, step by step: its params at each.
+    rows.first.get_by_role("button", name="Show").click()
+    viewer = page.locator("[data-episode-viewer]")
+    expect(viewer).to_be_visible()
+    expect(viewer).to_contain_text("Off track")
+    expect(viewer.locator("[data-episode-params]")).to_contain_text("distance_from_center")
+    slider = viewer.locator("[data-episode-step]")
+    last = slider.get_attribute("max")
+    slider.fill(last)
+    expect(viewer.locator("[data-episode-step-label]")).to_contain_text("(off_track)")
+    canvas.screenshot(path=ARTIFACTS / "analysis-one-episode.png")
+    viewer.get_by_role("button", name="Back to all steps").click()
+
+    # Another reward function, scored by the simulation worker.
+    page.get_by_label("Reward function").fill(SPEED_AND_OFF_TRACK)
+    page.get_by_role("button", name="Score the recorded driving").click()
+    expect(page.locator("[data-rescore-status]")).to_contain_text("Scored", timeout=60_000)
+    expect(page.get_by_label("Colour by")).to_have_value("rescored")
+    expect(page.locator("[data-rescored-column]")).to_be_visible()
+    expect(page.locator("[data-rescore-figure]")).to_be_visible()
+    first_rescored = rows.first.locator("td").nth(8)
+    expect(first_rescored).not_to_have_text("—")
+    page.screenshot(path=ARTIFACTS / "analysis-rescored.png", full_page=True)
+
+    # A phone: nothing wider than the screen.
+    page.set_viewport_size({"width": 390, "height": 844})
+    page.reload()
+    expect(root).to_have_attribute("data-loaded", "1", timeout=30_000)
+    assert page.evaluate("document.documentElement.scrollWidth") <= 391
+    assert canvas.evaluate(COLOURS) > 8
