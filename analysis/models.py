@@ -22,7 +22,7 @@ class TraceSummary(models.Model):
     version = models.PositiveSmallIntegerField(help_text="Of the summary's format.")
     episodes = models.JSONField(default=list)
     marks = models.JSONField(default=list)
-    actions = models.JSONField(default=dict)
+    actions = models.BinaryField(default=b"")
     points = models.BinaryField(default=b"")
     steps = models.PositiveIntegerField(default=0)
     created_at = models.DateTimeField(auto_now_add=True)

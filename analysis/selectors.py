@@ -99,7 +99,7 @@ def picked(source: Source, choice: Choice) -> dict:
     for iteration, their_episodes, their_marks, their_actions in rows:
         episodes += [[iteration, *e] for e in their_episodes if e[5] in codes]
         marks += [[*m, iteration] for m in their_marks if m[2] in codes]
-        actions.append(their_actions)
+        actions.append(bytes(their_actions))
     laps = [e for e in episodes if e[6] == 0]  # [iteration, number, ..., outcome at 6]
     fastest = min(laps, key=lambda e: e[5]) if laps else None
     return {
@@ -109,7 +109,7 @@ def picked(source: Source, choice: Choice) -> dict:
         "episode_columns": EPISODE_COLUMNS,
         "episodes": episodes,
         "marks": marks,
-        "actions": summaries.combine_actions(actions, list(choice.outcomes), source.actions),
+        "actions": summaries.combine_actions(actions, list(choice.outcomes)),
         "fastest": fastest[:2] if fastest else None,
     }
 

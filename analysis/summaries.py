@@ -23,6 +23,7 @@ POINT_COLUMNS = ("x", "y", "reward", "speed", "steer", "action", "outcome", "row
 # Histograms of the chosen steering and speed: DeepRacer's whole ranges (±30°, up to 4 m/s).
 STEER_EDGES = np.linspace(-32.5, 32.5, 14)  # 13 bins centred on -30, -25, ..., 30 [deg]
 SPEED_EDGES = np.linspace(0.0, 4.0, 17)  # 16 bins of 0.25 m/s
+STEER_BINS, SPEED_BINS = len(STEER_EDGES) - 1, len(SPEED_EDGES) - 1
 
 
 @dataclass(frozen=True)
@@ -30,8 +31,8 @@ class Summary:
     # [number, start waypoint, steps, progress %, seconds, outcome index, total reward]
     episodes: list[list]
     marks: list[list]  # [x, y, outcome index, episode number] where the car left or crashed
-    # outcome -> {"steer": SECTIONS x 13, "speed": SECTIONS x 16, "actions": SECTIONS x n}
-    actions: dict[str, dict[str, list[list[int]]]]
+    # int32 counts, (outcome, section, steering bin | speed bin | action): ``action_tables``
+    actions: bytes
     points: bytes  # float32, POINT_COLUMNS, one column after another
     steps: int  # driven steps (prepare rows not counted)
 
@@ -44,8 +45,7 @@ def summarize(steps: Steps, *, waypoints: int, actions: int | None) -> Summary:
     lengths = np.array([e.last - e.first + 1 for e in episodes], dtype=np.int64)
     row_outcome = np.repeat(codes, lengths) if len(episodes) else np.zeros(0, np.int64)
     driven = steps.driven
-    section = np.minimum(steps.closest_waypoint * SECTIONS // max(waypoints - 1, 1), SECTIONS - 1)
-    section = np.clip(section, 0, SECTIONS - 1)
+    section = np.clip(steps.closest_waypoint * SECTIONS // max(waypoints - 1, 1), 0, SECTIONS - 1)
     leaving = steps.leaving()
     return Summary(
         episodes=[
@@ -69,35 +69,35 @@ def summarize(steps: Steps, *, waypoints: int, actions: int | None) -> Summary:
             ]
             for i in leaving
         ],
-        actions={
-            name: _action_counts(steps, section, driven & (row_outcome == code), actions)
-            for code, name in enumerate(OUTCOMES)
-            if (driven & (row_outcome == code)).any()
-        },
+        actions=_action_counts(steps, section, driven, row_outcome, actions),
         points=_points(steps, driven, row_outcome),
         steps=int(driven.sum()),
     )
 
 
 def _action_counts(
-    steps: Steps, section: np.ndarray, mask: np.ndarray, actions: int | None
-) -> dict[str, list[list[int]]]:
-    def counts(bins: np.ndarray, width: int) -> list[list[int]]:
-        table = np.zeros((SECTIONS, width), dtype=np.int64)
-        np.add.at(table, (section[mask], bins), 1)
-        return table.tolist()
-
-    steer = np.clip(np.digitize(steps.steer[mask], STEER_EDGES) - 1, 0, len(STEER_EDGES) - 2)
-    speed = np.clip(np.digitize(steps.speed[mask], SPEED_EDGES) - 1, 0, len(SPEED_EDGES) - 2)
-    result = {"steer": counts(steer, len(STEER_EDGES) - 1),
-              "speed": counts(speed, len(SPEED_EDGES) - 1)}  # fmt: skip
+    steps: Steps, section: np.ndarray, driven: np.ndarray, row_outcome: np.ndarray,
+    actions: int | None,
+) -> bytes:  # fmt: skip
+    """How often each steering bin, speed bin and action was chosen, per outcome and section."""
+    table = np.zeros((len(OUTCOMES), SECTIONS, STEER_BINS + SPEED_BINS + (actions or 0)), np.int32)
+    rows = np.flatnonzero(driven)
+    steer = np.clip(np.digitize(steps.steer[rows], STEER_EDGES) - 1, 0, STEER_BINS - 1)
+    speed = np.clip(np.digitize(steps.speed[rows], SPEED_EDGES) - 1, 0, SPEED_BINS - 1)
+    where = (row_outcome[rows], section[rows])
+    np.add.at(table, (*where, steer), 1)
+    np.add.at(table, (*where, STEER_BINS + speed), 1)
     if actions:
-        chosen = steps.action[mask]
+        chosen = steps.action[rows]
         known = (chosen >= 0) & (chosen < actions)
-        table = np.zeros((SECTIONS, actions), dtype=np.int64)
-        np.add.at(table, (section[mask][known], chosen[known]), 1)
-        result["actions"] = table.tolist()
-    return result
+        kept = (where[0][known], where[1][known], STEER_BINS + SPEED_BINS + chosen[known])
+        np.add.at(table, kept, 1)
+    return table.tobytes()
+
+
+def action_tables(data: bytes) -> np.ndarray:
+    """A summary's action counts as an (outcome, section, column) array."""
+    return np.frombuffer(data, dtype=np.int32).reshape(len(OUTCOMES), SECTIONS, -1)
 
 
 def _points(steps: Steps, driven: np.ndarray, row_outcome: np.ndarray) -> bytes:
@@ -138,20 +138,22 @@ def iteration_figures(episodes: list[list]) -> dict:
     }
 
 
-def combine_actions(
-    summaries: list[dict[str, dict]], outcomes: list[str], actions: int | None
-) -> dict[str, list[list[int]]]:
-    """The action counts per section of ``summaries`` (their ``actions``), over ``outcomes``."""
-    shapes = {"steer": len(STEER_EDGES) - 1, "speed": len(SPEED_EDGES) - 1}
-    if actions:
-        shapes["actions"] = actions
-    total = {name: np.zeros((SECTIONS, width), dtype=np.int64) for name, width in shapes.items()}
-    for summary in summaries:
-        for name in outcomes:
-            for kind, table in summary.get(name, {}).items():
-                if kind in total and np.shape(table) == total[kind].shape:
-                    total[kind] += np.asarray(table, dtype=np.int64)
-    return {kind: table.tolist() for kind, table in total.items()}
+def combine_actions(blobs: list[bytes], outcomes: list[str]) -> dict[str, list[list[int]]]:
+    """The action counts per section of ``blobs`` (summaries' ``actions``) over ``outcomes``:
+    ``steer`` and ``speed`` (SECTIONS x bins), and ``actions`` (SECTIONS x actions, empty for a
+    continuous action space)."""
+    codes = outcome_codes(outcomes)
+    total = None
+    for data in blobs:
+        counts = action_tables(data)[codes].sum(axis=0, dtype=np.int64)
+        total = counts if total is None or total.shape != counts.shape else total + counts
+    if total is None:
+        total = np.zeros((SECTIONS, STEER_BINS + SPEED_BINS), np.int64)
+    return {
+        "steer": total[:, :STEER_BINS].tolist(),
+        "speed": total[:, STEER_BINS : STEER_BINS + SPEED_BINS].tolist(),
+        "actions": total[:, STEER_BINS + SPEED_BINS :].tolist(),
+    }
 
 
 def combine_points(
