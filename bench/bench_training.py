@@ -78,7 +78,11 @@ def bench_racer():
 def default_model(
     owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False,
     steering: float = 30, speed: tuple[float, float] = FAST_SPEED, algorithm: str = PPO,
+    hyperparameters: dict | None = None,
 ):  # fmt: skip
+    """A model with DeepRacer's defaults on the Rookie Loop; ``hyperparameters``: the racer's
+    own values of some (DeepRacer's names), over the algorithm's defaults."""
+    from rl.hyperparameters import defaults
     from training.rewards import EXAMPLES
     from training.services import model_create
 
@@ -96,6 +100,8 @@ def default_model(
             "speed": {"low": speed[0], "high": speed[1]},
         }
         settings.update(action_space=actions, reward_function=FAST_REWARD, algorithm=algorithm)
+    if hyperparameters:
+        settings["hyperparameters"] = {**defaults(algorithm if fast else PPO), **hyperparameters}
     return model_create(owner=owner, settings=settings)
 
 
@@ -258,6 +264,7 @@ def time_to_qualify(
     speed: tuple[float, float] = FAST_SPEED,
     under: float | None = None,
     algorithm: str = PPO,
+    hyperparameters: dict | None = None,
 ) -> tuple[float | None, float | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
     after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies.
@@ -265,7 +272,8 @@ def time_to_qualify(
     from training.services import training_stop
 
     model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast,
-                          steering=steering, speed=speed, algorithm=algorithm)  # fmt: skip
+                          steering=steering, speed=speed, algorithm=algorithm,
+                          hyperparameters=hyperparameters)  # fmt: skip
     tried = set()
     qualified = None
     while True:
@@ -309,6 +317,14 @@ def braking_lap(track: str = "rookie-loop") -> float:
         lap(track, lambda env, g=share / 20: BrakingDriver(env, grip=g)) for share in range(10, 21)
     ]
     return min(time for time in times if time is not None)
+
+
+def _setting(text: str) -> tuple[str, float]:
+    name, _, value = text.partition("=")
+    try:
+        return name, float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=NUMBER") from None
 
 
 def main() -> None:
@@ -355,6 +371,10 @@ def main() -> None:
         "--algorithm", choices=(PPO, SAC), default=PPO,
         help="with --fast, PPO (DeepRacer's default) or SAC",
     )  # fmt: skip
+    parser.add_argument(
+        "--hyperparameter", type=_setting, action="extend", nargs="+", default=[],
+        metavar="NAME=VALUE", help="with --qualify, a racer's own value (DeepRacer's names)",
+    )  # fmt: skip
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument(
         "--limit",
@@ -388,6 +408,7 @@ def main() -> None:
                     lap_after=arguments.lap_after, steering=arguments.steering,
                     speed=tuple(arguments.speed), under=arguments.under,
                     algorithm=arguments.algorithm,
+                    hyperparameters=dict(arguments.hyperparameter),
                 )  # fmt: skip
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
                 if arguments.fast and arguments.under:

@@ -78,9 +78,9 @@ def _beat(record: dict) -> None:
 
 
 def _resume_lapsed() -> None:
-    """Send trainers for the jobs whose trainer died (``training.tasks.resume_lapsed``). Any
-    worker may: whichever looks first claims a job, so it is sent for once, and a job goes on as
-    long as one worker of either queue is alive."""
+    """Send for the jobs whose trainer died, and the evaluations whose simulation worker died
+    (``training.tasks.resume_lapsed``). Any worker may: whichever looks first claims each, so it
+    is sent for once, and the work goes on as long as one worker of either queue is alive."""
     from django.db import DatabaseError, close_old_connections
     from kombu.exceptions import OperationalError
 
@@ -88,10 +88,10 @@ def _resume_lapsed() -> None:
 
     close_old_connections()
     try:
-        for job_id in resume_lapsed():
-            logger.warning("Training job %s lost its trainer; another is sent for", job_id)
+        for sent in resume_lapsed():
+            logger.warning("The %s", sent)
     except (DatabaseError, redis.RedisError, OperationalError) as error:
-        logger.warning("Could not look for training jobs that lost their trainer: %s", error)
+        logger.warning("Could not look for work that lost its worker: %s", error)
     finally:
         close_old_connections()
 

@@ -4,3 +4,9 @@ from django.apps import AppConfig
 class RacingConfig(AppConfig):
     name = "racing"
     verbose_name = "League racing"
+
+    def ready(self) -> None:
+        from racing import services
+        from training.signals import evaluation_lapsed
+
+        evaluation_lapsed.connect(services.submission_resend, dispatch_uid="racing.resend")

@@ -124,6 +124,9 @@ def submission_run(*, submission_id: int) -> Submission | None:
     if submission.evaluation_id is not None:
         evaluations.run(submission.evaluation_id)
     evaluation = EvaluationJob.objects.filter(pk=submission.evaluation_id).first()
+    if evaluation is not None and evaluation.is_active:
+        logger.info("Submission %s is raced by another run", submission_id)
+        return None  # a duplicate delivery: the run holding the evaluation's lease scores it
     if evaluation is None or evaluation.status != EvaluationJob.Status.COMPLETED:
         reason = (evaluation.failure_reason if evaluation else "") or "The race did not finish."
         SUBMISSION.move(
@@ -458,3 +461,16 @@ def demo_season_load(*, today: date | None = None) -> Season:
 
 def _start_of(day: date) -> datetime:
     return timezone.make_aware(datetime.combine(day, time.min))
+
+
+def submission_resend(sender, *, evaluation: EvaluationJob, **kwargs) -> bool:
+    """On ``training.signals.evaluation_lapsed``: a race entry's evaluation lost its simulation
+    worker, so the race is sent again (it drives the evaluation from the start, then scores
+    it); False when the evaluation is no race's."""
+    from racing.tasks import race
+
+    submission = Submission.objects.filter(evaluation=evaluation).only("pk").first()
+    if submission is None:
+        return False
+    transaction.on_commit(lambda: race.delay(submission.pk))
+    return True

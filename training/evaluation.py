@@ -14,7 +14,10 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import queue
+import secrets
+import socket
 import tempfile
 import threading
 import time
@@ -29,7 +32,7 @@ import torch
 from django.conf import settings
 from django.core.files import File
 from django.core.files.storage import default_storage
-from django.db import transaction
+from django.db import DatabaseError, transaction
 from django.utils import timezone
 
 import simulator
@@ -40,7 +43,7 @@ from rl.policies import Policy
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, lifecycle, live, selectors, signals
+from training import artifacts, jobs, lifecycle, live, selectors, signals
 from training.models import EvaluationJob, EvaluationTrial, RLModel
 
 logger = logging.getLogger(__name__)
@@ -51,6 +54,7 @@ RUNNABLE = (
     EvaluationJob.Status.IN_PROGRESS,
 )
 VIDEO_CODEC = "VP80"
+LEASE_RENEWAL = 3.0  # [s] between renewals of a run's lease while it drives
 
 
 class EvaluationFailed(Exception):
@@ -110,27 +114,40 @@ def _one_torch_thread() -> Iterator[None]:
 
 
 def run(evaluation_id: int) -> EvaluationJob | None:
-    """Run evaluation ``evaluation_id`` if it is waiting; None when it has ended or vanished.
+    """Run evaluation ``evaluation_id`` if it is waiting; None when it has ended or vanished, or
+    another run drives it.
 
-    One that is under way again is a redelivery after its worker died (Celery acknowledges the
-    task late): it starts over, so the racer gets a whole evaluation, not half of one."""
+    The run holds a lease on the evaluation while it drives (renewed every few seconds), as a
+    trainer holds its job's. One that is under way with a lapsed lease lost its worker (the
+    heartbeat's ``jobs.lapsed_evaluations`` sent for this run, or Celery redelivered the task,
+    which it acknowledges late): it starts over, so the racer gets a whole evaluation, not half
+    of one. One whose lease is alive is a duplicate delivery, and is left to its run."""
+    owner = f"{socket.gethostname()}:{os.getpid()}:{secrets.token_hex(4)}"
     with transaction.atomic():
         evaluation = EvaluationJob.objects.select_for_update().filter(pk=evaluation_id).first()
         if evaluation is None or evaluation.status not in RUNNABLE:
             logger.info("Evaluation %s is not waiting; nothing to do", evaluation_id)
             return None
+        now = timezone.now()
         if evaluation.status != EvaluationJob.Status.QUEUED:
+            held = evaluation.lease_owner not in ("", jobs.RESUMING)
+            if held and evaluation.lease_expires and evaluation.lease_expires > now:
+                logger.info("Evaluation %s is being driven by another run", evaluation_id)
+                return None
             logger.warning("Evaluation %s was interrupted; starting it over", evaluation_id)
             evaluation.trial_rows.all().delete()
         lifecycle.EVALUATION.move(
-            evaluation, EvaluationJob.Status.INITIALIZING, started_at=timezone.now(),
-            message="Loading the model",
+            evaluation, EvaluationJob.Status.INITIALIZING, started_at=now,
+            message="Loading the model", lease_owner=owner, lease_expires=now + jobs.lease(),
         )  # fmt: skip
     evaluation = EvaluationJob.objects.select_related("model", "track").get(pk=evaluation_id)
     _announce(evaluation)
     try:
         with _one_torch_thread():
             Evaluator(evaluation).run()
+    except jobs.LeaseLost:
+        logger.warning("Evaluation %s was taken over by another run; this one stops", evaluation_id)
+        return None
     except EvaluationFailed as failure:
         _finish(evaluation, EvaluationJob.Status.FAILED, str(failure))
     except Exception:
@@ -165,6 +182,7 @@ class Evaluator:
         self.trace: list[SimTraceRow] = []
         self.metrics: list[dict] = []
         self.results: list[EvaluationTrial] = []
+        self._renewed = time.monotonic()
 
     def run(self) -> None:
         evaluation = self.evaluation
@@ -234,6 +252,7 @@ class Evaluator:
         )
 
     def _stepped(self, observation: dict, info: dict, done: bool) -> None:
+        self._renew()
         unwrapped = self._unwrapped
         self.trace.append(self._row(info))
         frame = unwrapped.spectator.render(unwrapped)
@@ -250,6 +269,24 @@ class Evaluator:
             self._laps_done += 1
             lap_time = info["lap_times"][self._laps_done - 1]
             self._counts = self._record(unwrapped, info, self._counts, lap_time, completed=True)
+
+    def _renew(self) -> None:
+        """Hold the lease while driving; ``jobs.LeaseLost`` once another run has it. A database
+        that does not answer is tried again at the next renewal, within the lease."""
+        now = time.monotonic()
+        if now - self._renewed < LEASE_RENEWAL:
+            return
+        self._renewed = now
+        evaluation = self.evaluation
+        try:
+            held = EvaluationJob.objects.filter(
+                pk=evaluation.pk, lease_owner=evaluation.lease_owner
+            ).update(lease_expires=timezone.now() + jobs.lease())
+        except DatabaseError as error:
+            logger.warning("Evaluation %s could not renew its lease: %s", evaluation.pk, error)
+            return
+        if not held:
+            raise jobs.LeaseLost(f"evaluation {evaluation.pk}")
 
     def _show(self, publisher: live.FramePublisher, views, unwrapped, frame, observation) -> None:
         """Offer this step's ``views`` (the spectator's is the video's ``frame``) to the live
@@ -334,9 +371,11 @@ def _update(evaluation: EvaluationJob, **fields) -> None:
 
 
 def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
+    held = EvaluationJob.objects.filter(lease_owner=evaluation.lease_owner)  # not taken over
     lifecycle.EVALUATION.move(
-        evaluation, status, failure_reason=reason, message="", finished_at=timezone.now()
-    )
+        evaluation, status, within=held, failure_reason=reason, message="",
+        finished_at=timezone.now(), lease_owner="", lease_expires=None,
+    )  # fmt: skip
     driving = frozenset({RLModel.Status.EVALUATING, RLModel.Status.SUBMITTING})
     lifecycle.MODEL.move(evaluation.model_id, RLModel.Status.READY, only_from=driving)
     _announce(evaluation)

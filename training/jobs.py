@@ -18,13 +18,19 @@ from django.db import transaction
 from django.utils import timezone
 
 from training import lifecycle
-from training.models import JobLogLine, TrainingJob
+from training.models import EvaluationJob, JobLogLine, TrainingJob
 
 IMPORTED = "import"  # the lease owner of a job an import recorded: it never ran on this console
 RESUMING = "resuming"  # the lease owner of a job whose run died, while another is sent for
 LAPSED = (
     "The trainer stopped answering (its machine may have stopped); another training worker takes "
     "the job up from its last checkpoint."
+)
+
+
+EVALUATION_LAPSED = (
+    "The simulation machine driving it stopped answering; another one drives the evaluation "
+    "again from the start."
 )
 
 
@@ -78,6 +84,27 @@ def lapsed_claim() -> list[TrainingJob]:
             if job.lease_owner != RESUMING:
                 log(job, LAPSED, "warning")
             claimed.append(job)
+    return claimed
+
+
+def lapsed_evaluations() -> list[EvaluationJob]:
+    """The evaluations (race entries' too) whose run died while driving, each claimed once per
+    lapse, as ``lapsed_claim`` claims jobs: the caller sends each to be driven again."""
+    now = timezone.now()
+    lapsed = EvaluationJob.objects.filter(
+        status__in=(EvaluationJob.Status.INITIALIZING, EvaluationJob.Status.IN_PROGRESS),
+        lease_expires__lt=now,
+    ).exclude(lease_owner="")
+    claimed = []
+    for evaluation in lapsed:
+        rows = EvaluationJob.objects.filter(
+            pk=evaluation.pk, lease_owner=evaluation.lease_owner, lease_expires__lt=now
+        )
+        fields = {"lease_owner": RESUMING, "lease_expires": now + lease()}
+        if evaluation.lease_owner != RESUMING:
+            fields["message"] = EVALUATION_LAPSED
+        if rows.update(**fields):
+            claimed.append(evaluation)
     return claimed
 
 

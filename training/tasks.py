@@ -61,16 +61,24 @@ def evaluate(evaluation_id: int) -> None:
     evaluation.run(evaluation_id)
 
 
-def resume_lapsed() -> list[int]:
-    """Send a trainer for each job whose run died (``jobs.lapsed_claim``); their ids. Every
-    worker calls it every few seconds (``console.workers``), so a job goes on whichever machines
-    are left."""
-    from training import jobs
+def resume_lapsed() -> list[str]:
+    """Send a trainer for each job whose run died (``jobs.lapsed_claim``), and a simulation
+    worker for each evaluation or race whose run died (``jobs.lapsed_evaluations``); what was
+    sent for, in words for the log. Every worker calls it every few seconds
+    (``console.workers``), so the work goes on whichever machines are left."""
+    from training import jobs, signals
+    from training.models import EvaluationJob
 
-    claimed = [job.pk for job in jobs.lapsed_claim()]
-    for job_id in claimed:
-        train.delay(job_id)
-    return claimed
+    sent = []
+    for job in jobs.lapsed_claim():
+        train.delay(job.pk)
+        sent.append(f"training job {job.pk} lost its trainer; another is sent for")
+    for evaluation in jobs.lapsed_evaluations():
+        answers = signals.evaluation_lapsed.send(EvaluationJob, evaluation=evaluation)
+        if not any(answered for _, answered in answers):
+            evaluate.delay(evaluation.pk)
+        sent.append(f"evaluation {evaluation.pk} lost its simulation worker; it is driven again")
+    return sent
 
 
 def torch_threads() -> None:

@@ -193,8 +193,9 @@ PITLANE_TRAINER_THREADS = env.int("PITLANE_TRAINER_THREADS", os.cpu_count() or 1
 # A rollout worker silent this long is taken for dead and replaced; a new one may take longer to
 # start (torch, the simulator and the sandbox load first).
 PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [s]
-# A trainer renews its job's lease every 3 s; a job whose lease lapses this long (its training
-# machine died) is taken up by another training worker, from its last checkpoint.
+# A trainer renews its job's lease every 3 s, and an evaluation's run its own; a job whose lease
+# lapses this long (its training machine died) is taken up by another training worker, from its
+# last checkpoint, and an evaluation or race is driven again by another simulation worker.
 PITLANE_TRAINER_LEASE = env.int("PITLANE_TRAINER_LEASE", 45, minimum=10)  # [s]
 PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # [s]
 # An evaluation or a race that someone watches keeps to this many times real time (1: as the

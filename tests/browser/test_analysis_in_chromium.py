@@ -40,6 +40,10 @@ def test_a_racer_reads_their_models_driving_and_tries_another_reward_function(
     canvas = page.locator("[data-map]")
     assert canvas.evaluate(COLOURS) > 8
     expect(page.locator("[data-episode-count]")).to_contain_text("8 episodes")
+    with page.expect_download() as saved:
+        page.locator('[data-download="map"]').click()
+    assert saved.value.suggested_filename.endswith("-map.png")
+    assert saved.value.path().read_bytes().startswith(b"\x89PNG")
 
     # Colour by speed: the legend's scale is in m/s; by action: a label per action.
     page.get_by_label("Colour by").select_option("speed")

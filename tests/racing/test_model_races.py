@@ -6,6 +6,7 @@ from django.urls import reverse
 from racing.models import Submission
 from tests.racing.factories import event, race_evaluation
 from tests.training.factories import ready_model
+from training import signals
 from training.models import EvaluationJob, Track
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
@@ -41,3 +42,22 @@ def test_a_model_that_never_raced_shows_no_races_section(client, alice):
     client.force_login(alice)
     page = client.get(reverse("training:model-detail", args=[model.pk]))
     assert "data-model-races" not in page.text
+
+
+def test_a_race_whose_simulation_worker_died_is_raced_again_and_an_evaluation_evaluated(
+    alice, django_capture_on_commit_callbacks
+):
+    # The heartbeat's resend (training.tasks.resume_lapsed): a race entry's evaluation is driven
+    # by its race task, which scores it after; any other evaluation by its own task.
+    model = ready_model(alice)
+    cup = event("August cup")
+    raced = Submission.objects.create(
+        event=cup, racer=alice, model=model, model_name=model.name,
+        evaluation=race_evaluation(model, cup), status=Submission.Status.IN_PROGRESS,
+    )  # fmt: skip
+    plain = EvaluationJob.objects.create(model=model, track=Track.objects.get(name="kidney-bean"))
+    with django_capture_on_commit_callbacks() as sent:
+        answers = signals.evaluation_lapsed.send(EvaluationJob, evaluation=raced.evaluation)
+    assert [answer for _, answer in answers] == [True] and len(sent) == 1
+    answers = signals.evaluation_lapsed.send(EvaluationJob, evaluation=plain)
+    assert not any(answer for _, answer in answers)

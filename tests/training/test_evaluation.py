@@ -5,6 +5,7 @@ import io
 import itertools
 import json
 import tempfile
+from datetime import timedelta
 
 import cv2
 import numpy as np
@@ -13,13 +14,15 @@ from asgiref.sync import sync_to_async
 from django.core.files.storage import default_storage
 from django.core.management import CommandError, call_command
 from django.urls import reverse
+from django.utils import timezone
 
 from analysis.models import TraceSummary
 from tests.services import wait_for
-from tests.training.factories import ready_model
+from tests.training.factories import ready_model, trained_model
 from tests.training.test_deepracer_utils import assert_evaluation_logs_read_as_recorded
 from tests.training.test_live import frame_header, viewer
-from training import artifacts, configuration, services
+from training import artifacts, configuration, jobs, services, signals
+from training import evaluation as evaluations
 from training.artifacts import EVALUATION_METRICS as METRICS
 from training.artifacts import EVALUATION_TRACE as TRACE
 from training.artifacts import EVALUATION_VIDEO as VIDEO
@@ -274,3 +277,40 @@ def test_a_video_encoder_that_fails_never_holds_the_car_up(tmp_path):
         writer.write(frame)
     with pytest.raises(EvaluationFailed, match="video could not be recorded"):
         writer.close()
+
+
+def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_again(
+    alice, tracks, monkeypatch
+):
+    # What every worker's heartbeat does for evaluations (training.tasks.resume_lapsed), as for
+    # training jobs: the driving itself is the other tests' business.
+    monkeypatch.setattr(evaluations.Evaluator, "_drive", lambda *args: None)
+    monkeypatch.setattr(evaluations.Evaluator, "_save", lambda *args: None)
+    model = trained_model(alice, "lapsing")
+    started = services.evaluation_start(model=model, settings={"trials": 3}, enqueue=False)
+    dead = "simulation-1:4242:cafe"
+    EvaluationJob.objects.filter(pk=started.pk).update(
+        status=EvaluationJob.Status.IN_PROGRESS, lease_owner=dead,
+        lease_expires=timezone.now() + timedelta(seconds=30),
+    )  # fmt: skip
+    assert evaluations.run(started.pk) is None  # a second delivery leaves a live run alone
+    assert jobs.lapsed_evaluations() == []
+    assert EvaluationJob.objects.get(pk=started.pk).lease_owner == dead
+
+    past = timezone.now() - timedelta(seconds=1)
+    EvaluationJob.objects.filter(pk=started.pk).update(lease_expires=past)  # its machine died
+    assert [e.pk for e in jobs.lapsed_evaluations()] == [started.pk]
+    assert jobs.lapsed_evaluations() == []  # claimed once: one new run is sent for
+    claimed = EvaluationJob.objects.get(pk=started.pk)
+    assert claimed.message == jobs.EVALUATION_LAPSED and claimed.lease_owner == jobs.RESUMING
+    answers = signals.evaluation_lapsed.send(EvaluationJob, evaluation=claimed)
+    assert not any(sent for _, sent in answers)  # no race's: its own task is sent
+
+    assert evaluations.run(started.pk) is not None  # driven again, from the start
+    done = EvaluationJob.objects.get(pk=started.pk)
+    assert done.status == EvaluationJob.Status.COMPLETED and done.lease_owner == ""
+    # The dead run, were it alive, stops at its next renewal rather than write.
+    stale = evaluations.Evaluator(EvaluationJob.objects.get(pk=started.pk))
+    stale.evaluation.lease_owner, stale._renewed = dead, float("-inf")
+    with pytest.raises(jobs.LeaseLost):
+        stale._renew()
