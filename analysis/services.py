@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from django.conf import settings
 from django.db import transaction
 
 from analysis.models import Rescoring
@@ -10,6 +9,7 @@ from analysis.records import Source
 from common.refusals import Refused
 
 MAX_RESCORE_STEPS = 200_000  # recorded steps one re-scoring may score (about a minute of work)
+MAX_RESCORINGS_AT_ONCE = 3  # a racer's re-scorings waiting or running
 
 
 class RescoringRefused(Refused):
@@ -25,7 +25,7 @@ def rescoring_create(*, source: Source, owner, reward_function: str, first: int 
         raise RescoringRefused("There is no recorded driving to score yet.")
     busy = Rescoring.objects.filter(owner=owner, status__in=(Rescoring.Status.QUEUED,
                                                             Rescoring.Status.RUNNING))  # fmt: skip
-    if busy.count() >= settings.PITLANE_MAX_QUEUED_EVALUATIONS:
+    if busy.count() >= MAX_RESCORINGS_AT_ONCE:
         raise RescoringRefused("Wait for your re-scorings running now to finish.")
     first, last = _range(steps, first, last)
     total = sum(count for iteration, count in steps.items() if first <= iteration <= last)
