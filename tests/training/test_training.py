@@ -121,6 +121,8 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     assert all(row.episodes == 5 for row in rows)  # DeepRacer's: exactly those of an iteration
     assert_training_logs_read_as_recorded(job.model)
     # Each iteration's trace was summarised for the Analysis tab as the trainer recorded it.
+    # The iterations finished between the first look and the stop count too.
+    rows = list(Iteration.objects.filter(job=job).order_by("number"))
     summaries = {s.iteration: s for s in TraceSummary.objects.filter(job=job)}
     assert sorted(summaries) == [row.number for row in rows]
     for row in rows:
