@@ -214,6 +214,7 @@ class Evaluator:
             finally:
                 writer.close()
                 env.close()
+            self._renew()  # the uploads below may take a while: hold the lease through them
             self._save(video_path)
 
     # Driving
@@ -352,6 +353,7 @@ class Evaluator:
         trace = to_csv(self.trace)
         artifacts.save(self.model, prefix + artifacts.EVALUATION_TRACE, trace)
         signals.trace_recorded.send(EvaluationJob, document=trace, evaluation=self.evaluation)
+        self._renew()
         artifacts.save(
             self.model, prefix + artifacts.EVALUATION_METRICS, json.dumps({"metrics": self.metrics})
         )
@@ -371,11 +373,15 @@ def _update(evaluation: EvaluationJob, **fields) -> None:
 
 
 def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
+    """End the evaluation, free its model and tell the racer; nothing if another run took the
+    evaluation over meanwhile (its lease lapsed): that run ends it."""
     held = EvaluationJob.objects.filter(lease_owner=evaluation.lease_owner)  # not taken over
-    lifecycle.EVALUATION.move(
+    if not lifecycle.EVALUATION.move(
         evaluation, status, within=held, failure_reason=reason, message="",
         finished_at=timezone.now(), lease_owner="", lease_expires=None,
-    )  # fmt: skip
+    ):  # fmt: skip
+        logger.warning("Evaluation %s was taken over by another run; it ends it", evaluation.pk)
+        return
     driving = frozenset({RLModel.Status.EVALUATING, RLModel.Status.SUBMITTING})
     lifecycle.MODEL.move(evaluation.model_id, RLModel.Status.READY, only_from=driving)
     _announce(evaluation)

@@ -314,3 +314,25 @@ def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_a
     stale.evaluation.lease_owner, stale._renewed = dead, float("-inf")
     with pytest.raises(jobs.LeaseLost):
         stale._renew()
+
+
+def test_a_run_overtaken_while_it_saves_leaves_the_evaluation_and_its_model_to_the_new_run(
+    alice, tracks, monkeypatch
+):
+    # A slow upload outlived the lease; the heartbeat sent the evaluation to another run, which
+    # drives it now. The old run's end must not free the model nor tell the racer it is done.
+    taker = "simulation-2:77:beef"
+
+    def overtaken(self, video_path):
+        EvaluationJob.objects.filter(pk=self.evaluation.pk).update(lease_owner=taker)
+
+    monkeypatch.setattr(evaluations.Evaluator, "_drive", lambda *args: None)
+    monkeypatch.setattr(evaluations.Evaluator, "_save", overtaken)
+    model = trained_model(alice, "overtaken")
+    started = services.evaluation_start(model=model, settings={"trials": 3}, enqueue=False)
+    assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.EVALUATING
+    evaluations.run(started.pk)
+    after = EvaluationJob.objects.get(pk=started.pk)
+    assert after.status == EvaluationJob.Status.IN_PROGRESS and after.lease_owner == taker
+    assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.EVALUATING
+    assert not alice.notifications.exists()
