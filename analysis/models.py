@@ -67,6 +67,7 @@ class Rescoring(models.Model):
     last = models.PositiveIntegerField(default=0)
     status = models.CharField(max_length=8, choices=Status.choices, default=Status.QUEUED)
     created_at = models.DateTimeField(auto_now_add=True)
+    started_at = models.DateTimeField(null=True, blank=True, help_text="When a worker took it up.")
     finished_at = models.DateTimeField(null=True, blank=True)
     failure = models.TextField(blank=True, help_text="Why it failed, in the racer's words.")
     steps = models.PositiveIntegerField(default=0, help_text="Steps scored so far.")

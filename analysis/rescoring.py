@@ -36,7 +36,7 @@ def run(rescoring_id: int) -> None:
         .first()
     )
     if rescoring is None or not lifecycle.RESCORING.move(
-        rescoring, _R.RUNNING, only_from={_R.QUEUED}
+        rescoring, _R.RUNNING, only_from={_R.QUEUED}, started_at=timezone.now()
     ):
         return  # deleted with its model, or already taken up (a redelivery)
     source = (

@@ -134,9 +134,9 @@ def rescored_points(rescoring: Rescoring, rows: list[tuple[int, bytes]]) -> dict
     """The re-scored reward of each summary point of ``rows`` that ``rescoring`` scored."""
     new = np.frombuffer(bytes(rescoring.points), dtype=np.float32)
     offsets, at = {}, 0
-    for iteration in range(rescoring.first, rescoring.last + 1):
+    for iteration in sorted(int(i) for i in rescoring.point_counts):  # as the runner wrote them
         offsets[iteration] = at
-        at += rescoring.point_counts.get(str(iteration), 0)
+        at += rescoring.point_counts[str(iteration)]
     found = {}
     for iteration, data in rows:
         count = summaries.points_array(data).shape[1]

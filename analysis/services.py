@@ -2,14 +2,21 @@
 
 from __future__ import annotations
 
-from django.db import transaction
+from datetime import timedelta
 
+from django.contrib.auth import get_user_model
+from django.db import transaction
+from django.utils import timezone
+
+from analysis import lifecycle
 from analysis.models import Rescoring
 from analysis.records import Source
 from common.refusals import Refused
 
 MAX_RESCORE_STEPS = 200_000  # recorded steps one re-scoring may score (about a minute of work)
 MAX_RESCORINGS_AT_ONCE = 3  # a racer's re-scorings waiting or running
+LAPSE_MARGIN = 60  # [s] past the task's hard time limit before a running re-scoring is dead
+_R = Rescoring.Status
 
 
 class RescoringRefused(Refused):
@@ -23,10 +30,6 @@ def rescoring_create(*, source: Source, owner, reward_function: str, first: int 
     steps = dict(source.summaries().values_list("iteration", "steps"))
     if not steps:
         raise RescoringRefused("There is no recorded driving to score yet.")
-    busy = Rescoring.objects.filter(owner=owner, status__in=(Rescoring.Status.QUEUED,
-                                                            Rescoring.Status.RUNNING))  # fmt: skip
-    if busy.count() >= MAX_RESCORINGS_AT_ONCE:
-        raise RescoringRefused("Wait for your re-scorings running now to finish.")
     first, last = _range(steps, first, last)
     total = sum(count for iteration, count in steps.items() if first <= iteration <= last)
     if total > MAX_RESCORE_STEPS:
@@ -34,12 +37,35 @@ def rescoring_create(*, source: Source, owner, reward_function: str, first: int 
             "first": f"Iterations {first} to {last} hold {total:,} steps; a re-scoring takes at "
             f"most {MAX_RESCORE_STEPS:,}. Choose fewer iterations."
         })  # fmt: skip
-    rescoring = Rescoring.objects.create(
-        owner=owner, job=source.job, evaluation=source.evaluation,
-        reward_function=reward_function, first=first, last=last, total_steps=total,
-    )  # fmt: skip
+    rescorings_lapsed(owner=owner)
+    with transaction.atomic():
+        # One request at a time per racer counts and adds (PostgreSQL locks the racer's row).
+        get_user_model().objects.select_for_update().filter(pk=owner.pk).first()
+        busy = Rescoring.objects.filter(owner=owner, status__in=(_R.QUEUED, _R.RUNNING))
+        if busy.count() >= MAX_RESCORINGS_AT_ONCE:
+            raise RescoringRefused("Wait for your re-scorings running now to finish.")
+        rescoring = Rescoring.objects.create(
+            owner=owner, job=source.job, evaluation=source.evaluation,
+            reward_function=reward_function, first=first, last=last, total_steps=total,
+        )  # fmt: skip
     transaction.on_commit(lambda: _enqueue(rescoring.pk))
     return rescoring
+
+
+def rescorings_lapsed(*, owner) -> int:
+    """Fail ``owner``'s re-scorings whose worker died: running for longer than the task may
+    (its hard time limit would have stopped it), so no run will ever end them; how many."""
+    from analysis.tasks import RESCORE_HARD_LIMIT
+
+    since = timezone.now() - timedelta(seconds=RESCORE_HARD_LIMIT + LAPSE_MARGIN)
+    lapsed = Rescoring.objects.filter(owner=owner, status=_R.RUNNING, started_at__lt=since)
+    failed = 0
+    for pk in lapsed.values_list("pk", flat=True):
+        failed += lifecycle.RESCORING.move(
+            pk, _R.FAILED, only_from={_R.RUNNING}, finished_at=timezone.now(),
+            failure="The worker scoring it stopped answering; ask for it again.",
+        )  # fmt: skip
+    return failed
 
 
 def _range(steps: dict[int, int], first: int | None, last: int | None) -> tuple[int, int]:
@@ -60,7 +86,7 @@ def _range(steps: dict[int, int], first: int | None, last: int | None) -> tuple[
             "first": f"No iteration from {first} to {last} was recorded; iterations "
             f"{known[0]} to {known[-1]} were."
         })  # fmt: skip
-    return first, last
+    return max(first, known[0]), min(last, known[-1])  # what was recorded of first..last
 
 
 def _enqueue(pk: int) -> None:

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from celery import shared_task
 
-RESCORE_LIMIT = 15 * 60  # [s] a re-scoring is stopped after this
+RESCORE_LIMIT = 15 * 60  # [s] a re-scoring is stopped after this, and told so
+RESCORE_HARD_LIMIT = RESCORE_LIMIT + 60  # [s] its worker process is killed after this
 
 
 @shared_task(name="analysis.rescore", acks_late=True, ignore_result=True,
-             soft_time_limit=RESCORE_LIMIT, time_limit=RESCORE_LIMIT + 60)  # fmt: skip
+             soft_time_limit=RESCORE_LIMIT, time_limit=RESCORE_HARD_LIMIT)  # fmt: skip
 def rescore(rescoring_id: int) -> None:
     from analysis import rescoring
 

@@ -80,9 +80,10 @@ def data(request: HttpRequest, pk: int, evaluation: int | None = None) -> JsonRe
 def points(request: HttpRequest, pk: int, evaluation: int | None = None) -> HttpResponse:
     source = _source(request, pk, evaluation)
     rescoring = None
-    if request.GET.get("rescoring", "").isdigit():
+    asked = request.GET.get("rescoring", "")
+    if asked.isascii() and asked.isdecimal() and len(asked) <= 18:  # a row's id, or nothing
         rescoring = Rescoring.objects.filter(
-            pk=int(request.GET["rescoring"]), owner=request.user, status=Rescoring.Status.DONE,
+            pk=int(asked), owner=request.user, status=Rescoring.Status.DONE,
             job=source.job, evaluation=source.evaluation,
         ).first()  # fmt: skip
     body = selectors.points(source, _choice(request, source), rescoring)
@@ -104,6 +105,9 @@ def episode(request: HttpRequest, pk: int, evaluation: int | None = None) -> Jso
         iteration, number = int(request.GET["iteration"]), int(request.GET["episode"])
     except (KeyError, ValueError):
         return JsonResponse({"error": "Choose an episode from the table."}, status=400)
+    known = 0 <= iteration < 2**31 and source.summaries().filter(iteration=iteration).exists()
+    if not known:  # before its name reaches the storage
+        return JsonResponse({"error": "That iteration was not recorded."}, status=404)
     try:
         found = selectors.episode(source, iteration, number)
     except traces.Unreadable as error:
@@ -140,6 +144,7 @@ def rescore(request: HttpRequest, pk: int, evaluation: int | None = None) -> Jso
 def rescoring(request: HttpRequest, pk: int, rescoring: int,
               evaluation: int | None = None) -> JsonResponse:  # fmt: skip
     source = _source(request, pk, evaluation)
+    services.rescorings_lapsed(owner=request.user)
     found = get_object_or_404(
         Rescoring, pk=rescoring, owner=request.user, job=source.job, evaluation=source.evaluation
     )

@@ -283,7 +283,7 @@ async function load() {
   const parameters = query();
   if (!parameters.get("outcomes")) {
     state.points = { n: 0, column: () => new Float32Array(0) };
-    state.picked = { episodes: [], marks: [], actions: {}, fastest: null };
+    state.picked = { episodes: [], marks: [], actions: { steer: [], speed: [], actions: [] }, fastest: null };
     render();
     return;
   }
@@ -466,7 +466,12 @@ async function follow(data) {
       ? "Waiting for a simulation worker…"
       : `Scoring: ${data.steps.toLocaleString()} of ${data.total_steps.toLocaleString()} steps.`;
     await new Promise((resolve) => setTimeout(resolve, 1000));
-    data = await (await fetch(data.url)).json();
+    const response = await fetch(data.url).catch(() => null);
+    if (response?.status === 404) {
+      status.textContent = "This re-scoring is gone: its model or its training was deleted.";
+      return;
+    }
+    if (response?.ok) data = await response.json(); // else the console is busy: ask again
   }
   if (data.status === "FAILED") {
     status.innerHTML = `<p class="field-error"></p>`;
@@ -488,7 +493,7 @@ async function follow(data) {
 
 function drawComparison() {
   const pairs = [];
-  for (const row of state.picked.episodes) {
+  for (const row of state.picked?.episodes ?? []) {
     const total = rescoredTotal(row);
     if (total !== null) pairs.push({ x: row[7], y: total });
   }

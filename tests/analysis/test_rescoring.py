@@ -3,13 +3,17 @@ each step was given; a hostile one fails with words that say where, and touches 
 
 from __future__ import annotations
 
+from datetime import timedelta
+
 import numpy as np
 import pytest
 from django.urls import reverse
+from django.utils import timezone
 
 from analysis import rescoring, services, summaries
 from analysis.models import Rescoring, TraceSummary
 from analysis.records import Source
+from analysis.tasks import RESCORE_HARD_LIMIT
 from tests.analysis.test_summaries import recorded_by_hand
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
@@ -99,6 +103,41 @@ def test_the_page_asks_for_a_rescoring_and_refuses_what_cannot_run(alice, client
     assert asked.json()["status"] == "QUEUED"
     followed = client.get(asked.json()["url"]).json()
     assert followed["id"] == asked.json()["id"] and followed["total_steps"] == 5
+    # A range past what was recorded scores what was: iteration 1 alone.
+    wide = {"reward_function": SPEED_AND_OFF_TRACK, "first": 0, "last": 2**40}
+    scored = client.post(f"{base}rescore/", wide).json()
+    assert (scored["first"], scored["last"], scored["total_steps"]) == (1, 1, 5)
+
+
+def test_a_rescoring_whose_worker_died_fails_and_frees_its_place(alice, client):
+    source = Source.of_job(recorded_by_hand(alice))
+
+    def ask() -> Rescoring:
+        return services.rescoring_create(
+            source=source, owner=alice, reward_function=SPEED_AND_OFF_TRACK, first=None, last=None
+        )
+
+    dead, alive, _ = (ask() for _ in range(services.MAX_RESCORINGS_AT_ONCE))
+    with pytest.raises(services.RescoringRefused, match="Wait for your re-scorings"):
+        ask()
+    # One's worker was killed past the task's time limit; the other's is still scoring.
+    long_ago = timezone.now() - timedelta(seconds=RESCORE_HARD_LIMIT + services.LAPSE_MARGIN + 1)
+    Rescoring.objects.filter(pk=dead.pk).update(
+        status=Rescoring.Status.RUNNING, started_at=long_ago
+    )
+    Rescoring.objects.filter(pk=alive.pk).update(
+        status=Rescoring.Status.RUNNING, started_at=timezone.now()
+    )  # fmt: skip
+    client.force_login(alice)
+    base = reverse("analysis:model", args=[source.model.pk])
+    told = client.get(f"{base}rescorings/{dead.pk}/").json()
+    assert told["status"] == "FAILED" and told["failure"] == (
+        "The worker scoring it stopped answering; ask for it again."
+    )
+    assert client.get(f"{base}rescorings/{alive.pk}/").json()["status"] == "RUNNING"
+    assert ask().status == Rescoring.Status.QUEUED  # the dead one's place is free again
+    rescoring.run(dead.pk)  # its task, delivered again at last: nothing happens
+    assert Rescoring.objects.get(pk=dead.pk).status == Rescoring.Status.FAILED
 
 
 def test_the_map_colours_by_the_new_reward_beside_the_old(alice, client):

@@ -200,8 +200,16 @@ def test_the_pages_pick_iterations_and_outcomes_and_show_one_episode(alice, clie
     missing = client.get(f"{base}episode.json?iteration=1&episode=7")
     assert missing.status_code == 404 and "has no episode 7" in missing.json()["error"]
     assert client.get(f"{base}episode.json?iteration=one").status_code == 400
+    for unknown in ("4", "-1", "9" * 300):  # never read from the storage by such a name
+        lost = client.get(f"{base}episode.json?iteration={unknown}&episode=0")
+        assert (
+            lost.status_code == 404 and lost.json()["error"] == "That iteration was not recorded."
+        )
     # Wrong choices fall back to everything, never to an error.
     assert client.get(f"{base}data.json?first=x&last=-4&outcomes=nope").json()["episodes"]
+    alone = client.get(f"{base}points.bin").content
+    for rescoring in ("²", "9" * 40, "-1"):  # no re-scoring's id: the points alone
+        assert client.get(f"{base}points.bin?rescoring={rescoring}").content == alone
 
 
 def test_only_the_owner_sees_a_models_analysis(alice, bob, client):

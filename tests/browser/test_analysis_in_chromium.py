@@ -30,6 +30,8 @@ def test_a_racer_reads_their_models_driving_and_tries_another_reward_function(
 ):
     model = untrained(alice, "analysed")
     train_on_paper(model)  # two iterations: laps, and episodes straight off the track
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
     log_in(page, "alice", PASSWORD)
     page.goto(f"/models/{model.pk}/")
     page.get_by_role("link", name="Analysis").click()
@@ -83,6 +85,13 @@ def test_a_racer_reads_their_models_driving_and_tries_another_reward_function(
     first_rescored = rows.first.locator("td").nth(8)
     expect(first_rescored).not_to_have_text("—")
     page.screenshot(path=ARTIFACTS / "analysis-rescored.png", full_page=True)
+
+    # No outcome ticked: nothing is picked, and the page says so.
+    for box in page.locator("[data-outcome]").all():
+        box.uncheck()
+    expect(page.locator("[data-episode-count]")).to_contain_text("0 episodes")
+    expect(rows).to_have_count(0)
+    assert errors == []
 
     # A phone: nothing wider than the screen.
     page.set_viewport_size({"width": 390, "height": 844})
