@@ -89,8 +89,12 @@ class Source:
         current = set(
             self.summaries().filter(version=summaries.VERSION).values_list("iteration", flat=True)
         )
+        found = self.iterations()
+        run = self.evaluation or self.job
+        if run is not None and run.is_active:  # its newest trace may be half-written still:
+            found = found[:-1]  # the trainer (or evaluation) summarises it once it is whole
         unreadable = []
-        for iteration in self.iterations():
+        for iteration in found:
             if iteration in current:
                 continue
             try:

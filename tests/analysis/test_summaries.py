@@ -246,6 +246,25 @@ def test_a_broken_trace_is_left_out_with_a_word(alice, client):
         traces.read(to_csv(HAND_WRITTEN).replace("10.067", "soon"))
 
 
+def test_a_job_still_training_leaves_its_newest_trace_to_the_trainer(alice):
+    # A page view may come while the trainer writes its newest trace: that one is not read, so a
+    # half-written trace never becomes a summary; once the job has ended, every one is read.
+    job = recorded_by_hand(alice)
+    TraceSummary.objects.filter(job=job).delete()
+    half = to_csv(HAND_WRITTEN)
+    artifacts.save(job.model, artifacts.training_trace(2), half[: len(half) * 2 // 3])
+    TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.IN_PROGRESS)
+    training = records.Source.of_job(TrainingJob.objects.get(pk=job.pk))
+    assert training.ensure() == []
+    assert list(training.summaries().values_list("iteration", flat=True)) == [1]
+    TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.COMPLETED)
+    artifacts.save(job.model, artifacts.training_trace(2), half)  # whole now
+    ended = records.Source.of_job(TrainingJob.objects.get(pk=job.pk))
+    assert ended.ensure() == []
+    assert sorted(ended.summaries().values_list("iteration", flat=True)) == [1, 2]
+    assert ended.summaries().get(iteration=2).steps == 5
+
+
 def test_the_overview_is_json_for_the_page(alice):
     job = recorded_by_hand(alice)
     overview = selectors.overview(records.Source.of_job(job))
