@@ -266,7 +266,7 @@ def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk_through_
     _wait_page(browser, f"/models/{model}/", "data-job-status", {"COMPLETED"}, timeout=120)
 
     # Evaluate on a simulation machine; its video and trace come from S3.
-    evaluated = browser.submit(f"/models/{model}/evaluate/", {"trials": "1"})
+    evaluated = browser.submit(f"/models/{model}/evaluate/", {"trials": "3"})
     page = _wait_page(browser, evaluated.url.split(cluster.url, 1)[1], "data-job-status",
                       {"COMPLETED", "FAILED"}, timeout=300)  # fmt: skip
     assert _status(page, "data-job-status") == "COMPLETED", _errors(page)
