@@ -45,6 +45,7 @@ def page(request: HttpRequest, pk: int, evaluation: int | None = None) -> HttpRe
     unreadable = source.ensure()
     overview = selectors.overview(source)
     numbers = [row["iteration"] for row in overview["iterations"]] or [0]
+    services.rescorings_lapsed(owner=request.user)
     rescorings = Rescoring.objects.filter(
         job=source.job, evaluation=source.evaluation, owner=request.user
     ).order_by("-created_at")[:5]
