@@ -24,7 +24,7 @@ from safetensors.torch import load as load_tensors
 from safetensors.torch import save as save_tensors
 from stable_baselines3 import PPO, SAC
 from stable_baselines3.common.buffers import DictRolloutBuffer
-from stable_baselines3.common.logger import configure as configure_logger
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv
 from torch.nn import functional
 
@@ -167,7 +167,9 @@ class Learner:
                 learning_starts=0, batch_size=h["batch_size"], ent_coef=h["sac_alpha"],
                 gamma=h["discount_factor"], policy_kwargs=kwargs, seed=seed, device=device,
             )  # fmt: skip
-        self.model.set_logger(configure_logger(None, []))  # the job's metrics are ours
+        # The job's metrics are ours: a logger that writes nothing (SB3's configure(None) would
+        # leave an empty SB3-<time> folder in the temporary directory for every learner built).
+        self.model.set_logger(Logger(folder=None, output_formats=[]))
         self.observation_space, self.action_space = observation_space, action_space
 
     @property

@@ -1,6 +1,8 @@
 """DeepRacer's PPO update: each of SB3's options keeps its meaning in it, and a checkpoint says
 what made it."""
 
+import getpass
+
 import gymnasium
 import numpy as np
 import pytest
@@ -126,3 +128,15 @@ def test_a_checkpoint_says_what_made_it(env):
     }
     assert code_version().startswith("0.1.0")
     learner.restore(learner.checkpoint())  # the metadata is no obstacle to loading
+
+
+def test_building_and_training_a_learner_writes_nothing_outside_the_job(env, tmp_path, monkeypatch):
+    # SB3 writes its log to a new SB3-<time> folder in the temporary directory unless told where;
+    # a trainer builds a learner per job (and per resume), so they would pile up on the machine.
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    monkeypatch.setattr("tempfile.tempdir", None)  # read TMPDIR again
+    learner = learner_for(env)
+    learner.learn([driven(learner, env)])
+    compile_cache = f"torchinductor_{getpass.getuser()}"  # one per user, reused by every job
+    assert [path.name for path in tmp_path.iterdir() if path.name != compile_cache] == []
