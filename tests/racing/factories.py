@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from datetime import timedelta
 
 from django.utils import timezone
@@ -37,8 +38,11 @@ def event(name: str = "Time trial", *, opens=-DAY, closes=DAY, **fields) -> Even
     return event
 
 
-def scored(event: Event, racer, *times: int | None, model_name: str = "m", at=None) -> Submission:
-    """A submission scored from lap times in ms (None: a lap cut short by time)."""
+def scored(
+    event: Event, racer, *times: int | None, model_name: str = "m", at=None, off_tracks=()
+) -> Submission:
+    """A submission scored from lap times in ms (None: a lap cut short by time), with each lap's
+    ``off_tracks`` when given."""
     submission = Submission.objects.create(event=event, racer=racer, model_name=model_name)
     services.SUBMISSION.move(submission, Submission.Status.IN_PROGRESS)  # as its race task does
     if at is not None:
@@ -46,8 +50,10 @@ def scored(event: Event, racer, *times: int | None, model_name: str = "m", at=No
         submission.refresh_from_db()
     trials = [
         EvaluationTrial(number=number, time_ms=time or 5_000, progress=100 if time else 40,
-                        status="lap_complete" if time else "time_up")
-        for number, time in enumerate(times, start=1)
+                        status="lap_complete" if time else "time_up", off_tracks=off)
+        for number, (time, off) in enumerate(
+            itertools.zip_longest(times, off_tracks[: len(times)], fillvalue=0), start=1
+        )
     ]  # fmt: skip
     return services.submission_score(submission=submission, trials=trials)
 

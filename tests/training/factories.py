@@ -14,14 +14,14 @@ from training.models import RLModel, TrainingJob
 from training.rewards import EXAMPLES
 
 STRAIGHT_AHEAD = [
-    {"steering_angle": -20.0, "speed": 1.0},
-    {"steering_angle": 0.0, "speed": 1.0},
-    {"steering_angle": 20.0, "speed": 1.0},
+    {"steering_angle": -20.0, "speed": 4.0},
+    {"steering_angle": 0.0, "speed": 4.0},
+    {"steering_angle": 20.0, "speed": 4.0},
 ]
 
 
 def ready_model(owner, name: str = "straight-ahead", track: str = "pitlane-oval") -> RLModel:
-    """A READY model with one checkpoint whose policy always chooses to drive straight at 1 m/s:
+    """A READY model with one checkpoint whose policy always chooses to drive straight at 4 m/s:
     on a loop it leaves the track at each bend and is put back, so it finishes its laps, with
     penalties, in a predictable number of steps."""
 
