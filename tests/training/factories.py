@@ -24,15 +24,15 @@ def ready_model(owner, name: str = "straight-ahead", track: str = "pitlane-oval"
     """A READY model with one checkpoint whose policy always chooses to drive straight at 4 m/s:
     on a loop it leaves the track at each bend and is put back, so it finishes its laps, with
     penalties, in a predictable number of steps."""
-
-    def straight_ahead(learner: Learner) -> None:
-        head = learner.model.policy.action_net
-        with torch.no_grad():
-            head.weight.zero_()
-            head.bias.copy_(torch.tensor([0.0, 10.0, 0.0]))
-
-    return trained_model(owner, name, weights=straight_ahead, track=track,
+    return trained_model(owner, name, weights=_straight_ahead, track=track,
                          action_space=STRAIGHT_AHEAD)  # fmt: skip
+
+
+def _straight_ahead(learner: Learner) -> None:
+    head = learner.model.policy.action_net
+    with torch.no_grad():
+        head.weight.zero_()
+        head.bias.copy_(torch.tensor([0.0, 10.0, 0.0]))
 
 
 def trained_model(owner, name: str, *, weights=None, **settings) -> RLModel:
@@ -50,22 +50,37 @@ def trained_model(owner, name: str, *, weights=None, **settings) -> RLModel:
     if layout is not None:
         clean = clean.replace(network_layout=layout)
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean.row())
-    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-    learner = Learner(
-        algorithm=model.algorithm, hyperparameters=model.hyperparameters,
-        architecture=model.architecture, observation_space=env.observation_space,
-        action_space=env.action_space, seed=model.seed,
-    )  # fmt: skip
-    env.close()
-    if weights is not None:
-        weights(learner)
-    name = artifacts.save(model, "checkpoints/iteration-1.safetensors", learner.checkpoint())
+    checkpoint = _first_checkpoint(model, weights)
+    name = artifacts.save(model, "checkpoints/iteration-1.safetensors", checkpoint)
     TrainingJob.objects.create(
         model=model, status=TrainingJob.Status.COMPLETED, iterations=1, weights_version=1,
         last_checkpoint=name, best_checkpoint=name,
     )  # fmt: skip
     artifacts.write_model_files(model)
     return model
+
+
+_CHECKPOINTS: dict[tuple, bytes] = {}
+
+
+def _first_checkpoint(model: RLModel, weights) -> bytes:
+    """The learner's first weights for ``model``'s settings, changed by ``weights(learner)``:
+    the same bytes each time, so built once a session (a learner takes about a second). The key
+    holds ``weights`` itself, so a function's address is never taken by another while cached."""
+    settings = (model.algorithm, model.architecture, model.hyperparameters, model.seed)
+    key = (repr(settings), repr(model.environment_settings()), weights)
+    if key not in _CHECKPOINTS:
+        env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+        learner = Learner(
+            algorithm=model.algorithm, hyperparameters=model.hyperparameters,
+            architecture=model.architecture, observation_space=env.observation_space,
+            action_space=env.action_space, seed=model.seed,
+        )  # fmt: skip
+        env.close()
+        if weights is not None:
+            weights(learner)
+        _CHECKPOINTS[key] = learner.checkpoint()
+    return _CHECKPOINTS[key]
 
 
 def sensor_frames(environment: dict, count: int = 12) -> list[dict]:
