@@ -135,7 +135,7 @@ def test_a_clone_shows_what_it_keeps_locked_and_is_created_with_it(page: Page, a
     expect(page.get_by_text("straight-ahead-clone is cloned from straight-ahead")).to_be_visible()
     clone = RLModel.objects.get(name="straight-ahead-clone")
     assert (clone.network, clone.sensors) == (source.network, source.sensors)
-    assert [a["speed"] for a in clone.action_space] == [1.0, 1.5, 1.0]
+    assert [a["speed"] for a in clone.action_space] == [4.0, 1.5, 4.0]
 
 
 def test_the_evaluate_page_shows_only_the_chosen_race_types_settings(page: Page, alice, tracks):
