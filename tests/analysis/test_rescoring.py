@@ -130,6 +130,9 @@ def test_a_rescoring_whose_worker_died_fails_and_frees_its_place(alice, client):
     )  # fmt: skip
     client.force_login(alice)
     base = reverse("analysis:model", args=[source.model.pk])
+    page = client.get(base).text  # its list says the dead one failed, before any poll
+    listed = page.split(f'rescorings/{dead.pk}/">', 1)[1].split("</li>", 1)[0]
+    assert "· Failed ·" in listed, listed
     told = client.get(f"{base}rescorings/{dead.pk}/").json()
     assert told["status"] == "FAILED" and told["failure"] == (
         "The worker scoring it stopped answering; ask for it again."
