@@ -61,6 +61,7 @@ def trained_model(owner, name: str, *, weights=None, **settings) -> RLModel:
 
 
 _CHECKPOINTS: dict[tuple, bytes] = {}
+_KEPT = 8  # kinds of model (a camera's checkpoint is 47 MB): the test process stays small
 
 
 def _first_checkpoint(model: RLModel, weights) -> bytes:
@@ -79,6 +80,8 @@ def _first_checkpoint(model: RLModel, weights) -> bytes:
         env.close()
         if weights is not None:
             weights(learner)
+        while len(_CHECKPOINTS) >= _KEPT:
+            del _CHECKPOINTS[next(iter(_CHECKPOINTS))]  # the first built
         _CHECKPOINTS[key] = learner.checkpoint()
     return _CHECKPOINTS[key]
 
