@@ -33,6 +33,7 @@ THROUGHPUT_MINUTES = 20.0
 CHECK_LATE_EVALUATIONS = 5.0  # [s] after the stop, for the evaluation results still coming
 QUALIFY_LIMIT_MINUTES = 30.0
 LAP_AFTER_MINUTES = 20.0
+LATE_CHECKPOINT = 5.0  # [min] past --lap-after, the longest an iteration's checkpoint takes
 FAST_SPEED = (0.5, 4.0)  # [m/s] the --fast model's speed range, unless --speed says otherwise
 FAST_REWARD = """\
 import math
@@ -253,6 +254,22 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
     return len(info["lap_times"]) == 3 and not info["resets"], info["lap_times"]
 
 
+def spread(model, checkpoint: str) -> str:
+    """A continuous policy's exploration: each action's standard deviation, as a share of half
+    its range (1 at the start); empty for a discrete one."""
+    from rl.policies import Policy
+    from training import artifacts
+
+    policy = Policy.for_environment(model.algorithm, model.architecture,
+                                    model.environment_settings())  # fmt: skip
+    log_std = getattr(policy.network, "log_std", None)
+    if log_std is None:
+        return ""
+    policy.load_checkpoint(artifacts.read(checkpoint))
+    steering, speed = log_std.detach().exp().tolist()
+    return f"; spread: steering {steering:.2f}, speed {speed:.2f}"
+
+
 def time_to_qualify(
     owner,
     seed: int,
@@ -291,7 +308,8 @@ def time_to_qualify(
                     else f"not yet ({len(laps)} clean laps"
                     + (": " + ", ".join(f"{t:.2f}" for t in laps) if laps else "")
                     + ")"
-                ),
+                )
+                + spread(model, job.last_checkpoint),
                 flush=True,
             )
             if ok and qualified is None:
@@ -302,7 +320,10 @@ def time_to_qualify(
             if fast and minutes >= lap_after:
                 training_stop(job=job)
                 return qualified, (min(laps) if ok else None)
-        if minutes > max(limit, lap_after if fast and under is None else 0):
+        # With --fast the lap is the first checkpoint's after lap_after, which may land a whole
+        # iteration after it: wait for it (up to LATE_CHECKPOINT more minutes).
+        lapping = fast and under is None
+        if minutes > (max(limit, lap_after + LATE_CHECKPOINT) if lapping else limit):
             training_stop(job=job)
             return qualified, None
         time.sleep(5)
