@@ -21,7 +21,9 @@ GUIDANCE = {
     "num_epochs": (
         "How many passes the update makes over the experience gathered since the last update.",
         "More stable learning from the same experience, but slower training.",
-        "Faster training; use fewer epochs with a small batch size.",
+        "Faster training; use fewer epochs with a small batch size. Without a GPU the update "
+        "is most of the training time: with 3, a fast continuous model drove 3 clean laps "
+        "after about 5 minutes of training instead of 30 (the README's training figures).",
     ),
     "lr": (
         "How big a step each update takes toward better behaviour.",
