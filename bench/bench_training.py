@@ -15,9 +15,10 @@ defaults, the default discrete action space, the camera) and lets them train.
   it (deterministically, outside training) in an evaluation of 3 laps; the figure is the training
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
 - With --fast, a racer's model instead: a continuous action space up to 4 m/s (``--speed``) and a
-  speed-aware reward (``FAST_REWARD``); besides the time to qualify, the fastest lap the
-  checkpoint at ``--lap-after`` training minutes drives, beside the braking driver's lap on the
-  same track. ``--under`` asks for 3 clean laps each under a time: the time to a lap time.
+  speed-aware reward (``FAST_REWARD``); besides the time to qualify, the fastest lap the first
+  checkpoint past ``--lap-after`` training minutes drives, beside the braking driver's lap on the
+  same track, and each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each
+  under a time: the time to a lap time.
 """
 
 from __future__ import annotations
@@ -256,7 +257,8 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
 
 def spread(model, checkpoint: str) -> str:
     """A continuous policy's exploration: each action's standard deviation, as a share of half
-    its range (1 at the start); empty for a discrete one."""
+    its range (1 at the start); empty for a discrete one, and for SAC's (its spread depends on
+    what the car sees)."""
     from rl.policies import Policy
     from training import artifacts
 
