@@ -227,8 +227,9 @@ def update_speed(steps: int = 2000) -> None:
             print(f"  {threads} thread(s), {name}: {took:.1f}; {warm_up:.1f}", flush=True)
 
 
-def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
-    """Drive ``checkpoint`` for 3 laps in an evaluation; (no off-track or crash, the lap times)."""
+def qualifies(model, checkpoint: str) -> tuple[bool, list[float], str]:
+    """Drive ``checkpoint`` for 3 laps in an evaluation; (no off-track or crash, the lap times,
+    its policy's spread as ``spread`` words it)."""
     import gymnasium
 
     import simulator
@@ -252,22 +253,17 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float]]:
         observation, _, terminated, truncated, info = env.step(action)
         if info["resets"] or terminated or truncated:
             break  # a reset (off track, crash, reversed, stuck) ends the consecutive laps
-    return len(info["lap_times"]) == 3 and not info["resets"], info["lap_times"]
+    clean = len(info["lap_times"]) == 3 and not info["resets"]
+    return clean, info["lap_times"], spread(learner.model.policy)
 
 
-def spread(model, checkpoint: str) -> str:
+def spread(policy) -> str:
     """A continuous policy's exploration: each action's standard deviation, as a share of half
     its range (1 at the start); empty for a discrete one, and for SAC's (its spread depends on
     what the car sees)."""
-    from rl.policies import Policy
-    from training import artifacts
-
-    policy = Policy.for_environment(model.algorithm, model.architecture,
-                                    model.environment_settings())  # fmt: skip
-    log_std = getattr(policy.network, "log_std", None)
+    log_std = getattr(policy, "log_std", None)
     if log_std is None:
         return ""
-    policy.load_checkpoint(artifacts.read(checkpoint))
     steering, speed = log_std.detach().exp().tolist()
     return f"; spread: steering {steering:.2f}, speed {speed:.2f}"
 
@@ -300,7 +296,7 @@ def time_to_qualify(
         minutes = job.training_seconds / 60
         if job.last_checkpoint and job.last_checkpoint not in tried and job.iterations > 0:
             tried.add(job.last_checkpoint)
-            ok, laps = qualifies(model, job.last_checkpoint)
+            ok, laps, spread_words = qualifies(model, job.last_checkpoint)
             ok = ok and (under is None or max(laps) < under)
             print(
                 f"  seed {seed}: iteration {job.iterations} after {minutes:.1f} min: "
@@ -311,7 +307,7 @@ def time_to_qualify(
                     + (": " + ", ".join(f"{t:.2f}" for t in laps) if laps else "")
                     + ")"
                 )
-                + spread(model, job.last_checkpoint),
+                + spread_words,
                 flush=True,
             )
             if ok and qualified is None:
