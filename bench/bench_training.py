@@ -15,7 +15,8 @@ defaults, the default discrete action space, the camera) and lets them train.
   it (deterministically, outside training) in an evaluation of 3 laps; the figure is the training
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
 - With --fast, a racer's model instead: a continuous action space up to 4 m/s (``--speed``) and a
-  speed-aware reward (``FAST_REWARD``); besides the time to qualify, the fastest lap the first
+  speed-aware reward (``FAST_REWARD``, or with ``--reward steady`` the same with steady hands,
+  ``STEADY_REWARD``); besides the time to qualify, the fastest lap the first
   checkpoint past ``--lap-after`` training minutes drives, beside the braking driver's lap on the
   same track, and each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each
   under a time: the time to a lap time.
@@ -64,6 +65,27 @@ def reward_function(params):
     off_centre = params["distance_from_center"] / (params["track_width"] / 2)
     return max(1.0 - off_centre**2, 0.0) * pace + 1e-3
 """
+# The road-ahead reward with steady hands: a racer's stateful reward (its module lives as long as
+# the worker, as DeepRacer's does) that also pays less the more the steering command changed since
+# the last step. The car's steering lags its command by half a second, so a shaken command moves
+# the car little but throws it off the line in the end, and too late for the road-ahead reward to
+# say which command did it; this factor says so at once.
+STEADY_REWARD = (
+    FAST_REWARD
+    + """
+
+_last = {"steps": None, "steering": 0.0}
+_road_ahead = reward_function
+
+
+def reward_function(params):
+    steps, steering = params["steps"], params["steering_angle"]
+    change = abs(steering - _last["steering"]) if _last["steps"] == steps - 1 else 0.0
+    _last.update(steps=steps, steering=steering)
+    return _road_ahead(params) * max(1.0 - (change / 30.0) ** 2, 0.0) + 1e-3
+"""
+)
+REWARDS = {"road-ahead": FAST_REWARD, "steady": STEADY_REWARD}
 
 
 def bench_racer():
@@ -80,10 +102,11 @@ def bench_racer():
 def default_model(
     owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False,
     steering: float = 30, speed: tuple[float, float] = FAST_SPEED, algorithm: str = PPO,
-    hyperparameters: dict | None = None,
+    hyperparameters: dict | None = None, reward: str = "road-ahead",
 ):  # fmt: skip
     """A model with DeepRacer's defaults on the Rookie Loop; ``hyperparameters``: the racer's
-    own values of some (DeepRacer's names), over the algorithm's defaults."""
+    own values of some (DeepRacer's names), over the algorithm's defaults; with ``fast``,
+    ``reward`` names the reward function (``REWARDS``)."""
     from rl.hyperparameters import defaults
     from training.rewards import EXAMPLES
     from training.services import model_create
@@ -101,7 +124,7 @@ def default_model(
             "steering_angle": {"low": -steering, "high": steering},
             "speed": {"low": speed[0], "high": speed[1]},
         }
-        settings.update(action_space=actions, reward_function=FAST_REWARD, algorithm=algorithm)
+        settings.update(action_space=actions, reward_function=REWARDS[reward], algorithm=algorithm)
     if hyperparameters:
         settings["hyperparameters"] = {**defaults(algorithm if fast else PPO), **hyperparameters}
     return model_create(owner=owner, settings=settings)
@@ -280,6 +303,7 @@ def time_to_qualify(
     under: float | None = None,
     algorithm: str = PPO,
     hyperparameters: dict | None = None,
+    reward: str = "road-ahead",
 ) -> tuple[float | None, float | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
     after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies.
@@ -288,7 +312,7 @@ def time_to_qualify(
 
     model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast,
                           steering=steering, speed=speed, algorithm=algorithm,
-                          hyperparameters=hyperparameters)  # fmt: skip
+                          hyperparameters=hyperparameters, reward=reward)  # fmt: skip
     tried = set()
     qualified = None
     while True:
@@ -383,6 +407,10 @@ def main() -> None:
         help="[m/s] with --fast, the speed range",
     )  # fmt: skip
     parser.add_argument(
+        "--reward", choices=tuple(REWARDS), default="road-ahead",
+        help="with --fast, the reward function: the road ahead's speed, or that with steady hands",
+    )  # fmt: skip
+    parser.add_argument(
         "--under", type=float, default=None,
         help="[s] qualifying takes 3 clean laps each under this time",
     )  # fmt: skip
@@ -427,7 +455,7 @@ def main() -> None:
                     lap_after=arguments.lap_after, steering=arguments.steering,
                     speed=tuple(arguments.speed), under=arguments.under,
                     algorithm=arguments.algorithm,
-                    hyperparameters=dict(arguments.hyperparameter),
+                    hyperparameters=dict(arguments.hyperparameter), reward=arguments.reward,
                 )  # fmt: skip
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
                 if arguments.fast and arguments.under:
