@@ -40,7 +40,11 @@ GUIDANCE = {
         "ahead about 1 / (1 - discount) steps (see the table below).",
         "The car plans further ahead (braking before a bend, lining up a turn); training is "
         "slower.",
-        "The car cares about the next few steps only: quicker to train, more short-sighted.",
+        "The car cares about the next few steps only: quicker to train, more short-sighted. "
+        "Without a GPU a fast continuous model learnt its speed far sooner with 0.97 than "
+        "with 0.999: 3 clean laps within 13% of a braking driver's after 15 minutes of "
+        "training, where 0.999 drove 11-17 s laps; below 0.97 it left the track more often "
+        "(the README's training figures).",
     ),
     "loss_type": (
         "How the size of a prediction error is turned into an update. Huber and mean squared "
