@@ -16,10 +16,10 @@ defaults, the default discrete action space, the camera) and lets them train.
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
 - With --fast, a racer's model instead: a continuous action space up to 4 m/s (``--speed``) and a
   speed-aware reward (``FAST_REWARD``, or with ``--reward steady`` the same with steady hands,
-  ``STEADY_REWARD``); besides the time to qualify, the fastest lap the first
-  checkpoint past ``--lap-after`` training minutes drives, beside the braking driver's lap on the
-  same track, and each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each
-  under a time: the time to a lap time.
+  ``STEADY_REWARD``); besides the time to qualify, the fastest lap the first checkpoint past
+  ``--lap-after`` training minutes drives, beside the braking driver's lap on the same track, and
+  each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each under a time: the
+  time to a lap time.
 """
 
 from __future__ import annotations
