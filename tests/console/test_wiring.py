@@ -42,6 +42,7 @@ async def test_only_staff_may_open_the_probe_socket(who, alice):
     user = AnonymousUser() if who == "anonymous" else alice
     communicator = communicator_for(user)
     connected, code = await communicator.connect()
+    await communicator.disconnect()
     assert not connected
     assert code == 4403
 
@@ -64,6 +65,7 @@ async def test_a_websocket_from_another_site_is_refused_before_anything_else(ste
         application, "/ws/system/probe/", headers=[(b"origin", b"https://evil.example")]
     )
     connected, code = await communicator.connect()
+    await communicator.disconnect()
     assert not connected
     assert code != 4403  # the origin check answered; the consumer never saw it
 
@@ -75,5 +77,6 @@ async def test_a_websocket_from_the_site_itself_reaches_the_consumer():
         application, "/ws/system/probe/", headers=[(b"origin", b"http://127.0.0.1:8000")]
     )
     connected, code = await communicator.connect()
+    await communicator.disconnect()
     assert not connected
     assert code == 4403  # refused by the consumer (anonymous), not by the origin check

@@ -102,6 +102,7 @@ async def test_another_racer_and_anonymous_are_refused(who, code, alice, bob):
     job = await sync_to_async(queued_job)(alice)
     communicator = await viewer(f"/ws/jobs/{job.pk}/", bob if who == "another racer" else None)
     connected, refused_with = await communicator.connect()
+    await communicator.disconnect()
     assert not connected
     assert refused_with == code
 
@@ -109,6 +110,7 @@ async def test_another_racer_and_anonymous_are_refused(who, code, alice, bob):
 async def test_a_job_that_does_not_exist_is_refused_like_one_of_another_racer(alice):
     communicator = await viewer("/ws/jobs/999999/", alice)
     connected, code = await communicator.connect()
+    await communicator.disconnect()
     assert (connected, code) == (False, 4403)
 
 
@@ -118,6 +120,10 @@ async def test_a_bad_origin_is_refused_even_for_the_owner(alice):
         f"/ws/jobs/{job.pk}/", alice, origin=(b"origin", b"https://evil.example")
     )
     connected, code = await communicator.connect()
+    # A refused socket's consumer still listens on the channel layer until the client goes:
+    # disconnecting ends it here, not in the event loop's teardown, where cancelling its Redis
+    # read once hung for the test's whole timeout.
+    await communicator.disconnect()
     assert not connected
     assert code not in (4401, 4403)  # the origin check answered before the consumer
 
