@@ -17,9 +17,10 @@ defaults, the default discrete action space, the camera) and lets them train.
 - With --fast, a racer's model instead: a continuous action space up to 4 m/s (``--speed``) and a
   speed-aware reward (``FAST_REWARD``, or with ``--reward steady`` the same with steady hands,
   ``STEADY_REWARD``); besides the time to qualify, the fastest lap the first checkpoint past
-  ``--lap-after`` training minutes drives, beside the braking driver's lap on the same track, and
-  each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each under a time: the
-  time to a lap time.
+  ``--lap-after`` training minutes drives, and the model's then (training stopped there, its
+  best checkpoint: what DeepRacer races and downloads), beside the braking driver's lap on the
+  same track, and each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each
+  under a time: the time to a lap time.
 """
 
 from __future__ import annotations
@@ -280,6 +281,29 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float], str]:
     return clean, info["lap_times"], spread(learner.model.policy)
 
 
+def laps_words(laps: list[float]) -> str:
+    return ", ".join(f"{t:.2f}" for t in laps) or "none"
+
+
+def lap_words(lap: float | None) -> str:
+    return f"{lap:.2f} s" if lap else "no 3 clean laps"
+
+
+def racers_model(model) -> tuple[bool, list[float], int | None]:
+    """Drive what the racer's model is once its training has stopped: its job's best checkpoint,
+    the one DeepRacer races and downloads. simapp (01f5f01): a race drives the best checkpoint
+    (bundle/markov/virtual_event/virtual_event_agent_data.py:230), and the model.pb a finished
+    training leaves is the best's (bundle/markov/boto/s3/files/checkpoint_files/
+    tensorflow_model.py:329-365). (no off-track or crash in 3 laps, the lap times, the
+    checkpoint's iteration)."""
+    from training import artifacts
+
+    while (job := job_of(model)).status in job.ACTIVE:
+        time.sleep(1)
+    ok, laps, _ = qualifies(model, job.best_checkpoint)
+    return ok, laps, artifacts.checkpoint_iteration(job.best_checkpoint)
+
+
 def spread(policy) -> str:
     """A continuous policy's exploration: each action's standard deviation, as a share of half
     its range (1 at the start); empty for a discrete one, and for SAC's (its spread depends on
@@ -304,9 +328,10 @@ def time_to_qualify(
     algorithm: str = PPO,
     hyperparameters: dict | None = None,
     reward: str = "road-ahead",
-) -> tuple[float | None, float | None]:
+) -> tuple[float | None, float | None, float | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
-    after ``lap_after`` minutes); a fast model trains on to ``lap_after`` once it qualifies.
+    after ``lap_after`` minutes and that of the model then, its best checkpoint; a lap only where
+    3 were clean); a fast model trains on to ``lap_after`` once it qualifies.
     With ``under``, qualifying takes 3 clean laps each under that many seconds."""
     from training.services import training_stop
 
@@ -325,11 +350,10 @@ def time_to_qualify(
             print(
                 f"  seed {seed}: iteration {job.iterations} after {minutes:.1f} min: "
                 + (
-                    "qualified, laps " + ", ".join(f"{t:.2f}" for t in laps)
+                    f"qualified, laps {laps_words(laps)}"
                     if ok
                     else f"not yet ({len(laps)} clean laps"
-                    + (": " + ", ".join(f"{t:.2f}" for t in laps) if laps else "")
-                    + ")"
+                    + (f": {laps_words(laps)})" if laps else ")")
                 )
                 + spread_words,
                 flush=True,
@@ -338,16 +362,24 @@ def time_to_qualify(
                 qualified = minutes
             if qualified is not None and (not fast or under is not None):
                 training_stop(job=job)  # the time to qualify (or to the lap time) is known
-                return qualified, (min(laps) if fast else None)
+                return qualified, (min(laps) if fast else None), None
             if fast and minutes >= lap_after:
                 training_stop(job=job)
-                return qualified, (min(laps) if ok else None)
+                model_ok, model_laps, iteration = racers_model(model)
+                print(f"  seed {seed}: the model, its best checkpoint (iteration {iteration}): "
+                      f"{'3' if model_ok else 'not 3'} clean laps: {laps_words(model_laps)}",
+                      flush=True)  # fmt: skip
+                best_lap, model_lap = (
+                    min(laps) if ok else None,
+                    min(model_laps) if model_ok else None,
+                )
+                return qualified, best_lap, model_lap
         # With --fast the lap is the first checkpoint's after lap_after, which may land a whole
         # iteration after it: wait for it (up to LATE_CHECKPOINT more minutes).
         lapping = fast and under is None
         if minutes > (max(limit, lap_after + LATE_CHECKPOINT) if lapping else limit):
             training_stop(job=job)
-            return qualified, None
+            return qualified, None, None
         time.sleep(5)
 
 
@@ -450,7 +482,7 @@ def main() -> None:
             if arguments.fast:
                 print(f"The braking driver's lap on the Rookie Loop: {braking_lap():.2f} s")
             for seed in arguments.seeds:
-                minutes, best = time_to_qualify(
+                minutes, best, model_best = time_to_qualify(
                     owner, seed, arguments.limit, fast=arguments.fast,
                     lap_after=arguments.lap_after, steering=arguments.steering,
                     speed=tuple(arguments.speed), under=arguments.under,
@@ -461,8 +493,10 @@ def main() -> None:
                 if arguments.fast and arguments.under:
                     shown += f"; its best lap: {best:.2f} s" if best else ""
                 elif arguments.fast:
-                    shown += (f"; best lap after {arguments.lap_after:g} min: "
-                              + (f"{best:.2f} s" if best else "no 3 clean laps"))  # fmt: skip
+                    shown += (
+                        f"; best lap after {arguments.lap_after:g} min: {lap_words(best)}; "
+                        f"the model's (its best checkpoint): {lap_words(model_best)}"
+                    )
                 print(f"seed {seed}: {shown}", flush=True)
         else:
             print("Training throughput, DeepRacer's defaults (PPO, camera, Rookie Loop):")
