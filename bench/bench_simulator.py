@@ -9,7 +9,8 @@ runs at 15 steps per second.
 Grip, for each built-in track (its first direction): the highest constant speed, in steps of
 0.1 m/s, at which the scripted centre-line driver laps cleanly (no reset), and its lap time; the
 fastest clean lap of the braking driver (a speed profile from the track's curvature, planned on
-a share of the car's grip from 0.5 to 1.0, top speed 4 m/s), and the share that gave it.
+a share of the car's grip from 0.5 to 1.0 in steps of 0.025, top speed 4 m/s), and the share
+that gave it.
 """
 
 from __future__ import annotations
@@ -101,6 +102,19 @@ def lap(track: str, driver) -> float | None:
     return info["lap_times"][0] if clean else None
 
 
+GRIP_SHARES = [share / 40 for share in range(20, 41)]  # 0.5 to 1.0 in steps of 0.025
+
+
+def braking_lap(track: str) -> tuple[float | None, float | None]:
+    """([s] the braking driver's fastest clean lap of ``track``, the grip share that gave it),
+    over ``GRIP_SHARES``; (None, None) when none lapped clean."""
+    laps = [
+        (time, share) for share in GRIP_SHARES
+        if (time := lap(track, lambda env, g=share: BrakingDriver(env, grip=g)))
+    ]  # fmt: skip
+    return min(laps) if laps else (None, None)
+
+
 def grip_table() -> None:
     print(f"\n{'track':<22}{'length':>8}{'best constant':>15}{'its lap':>9}"
           f"{'braking lap':>13}{'grip share':>12}{'at 4 m/s':>10}")  # fmt: skip
@@ -110,15 +124,11 @@ def grip_table() -> None:
              if (time := lap(name, lambda env, v=tenths / 10: CentreLineDriver(env, speed=v)))),
             (None, None),
         )  # fmt: skip
-        braking = [
-            (time, share / 20) for share in range(10, 21)
-            if (time := lap(name, lambda env, g=share / 20: BrakingDriver(env, grip=g)))
-        ]  # fmt: skip
-        fastest, share = min(braking) if braking else (None, None)
+        fastest, share = braking_lap(name)
         at_four = "clean" if best[0] == 4.0 else "fails"
         print(f"{name:<22}{tracks.load(name).length:>7.1f}m"
               f"{best[0] or 0:>13.1f}/s{best[1] or 0:>8.2f}s"
-              f"{fastest or 0:>12.2f}s{share or 0:>12.2f}{at_four:>10}")  # fmt: skip
+              f"{fastest or 0:>12.2f}s{share or 0:>12.3f}{at_four:>10}")  # fmt: skip
 
 
 def main() -> None:

@@ -29,6 +29,7 @@ import argparse
 import os
 import time
 
+from bench.bench_simulator import braking_lap
 from bench.stack import running_console
 from rl.hyperparameters import PPO, SAC
 
@@ -383,17 +384,6 @@ def time_to_qualify(
         time.sleep(5)
 
 
-def braking_lap(track: str = "rookie-loop") -> float:
-    """[s] the braking driver's fastest clean lap of ``track`` (bench.bench_simulator's table)."""
-    from bench.bench_simulator import lap
-    from simulator.controller import BrakingDriver
-
-    times = [
-        lap(track, lambda env, g=share / 20: BrakingDriver(env, grip=g)) for share in range(10, 21)
-    ]
-    return min(time for time in times if time is not None)
-
-
 def _setting(text: str) -> tuple[str, float]:
     name, _, value = text.partition("=")
     try:
@@ -480,7 +470,8 @@ def main() -> None:
             under = f", each under {arguments.under:g} s" if arguments.under else ""
             print(f"Time to qualify (3 clean consecutive laps{under}), training minutes:")
             if arguments.fast:
-                print(f"The braking driver's lap on the Rookie Loop: {braking_lap():.2f} s")
+                print(f"The braking driver's lap on the Rookie Loop: "
+                      f"{braking_lap('rookie-loop')[0]:.2f} s")  # fmt: skip
             for seed in arguments.seeds:
                 minutes, best, model_best = time_to_qualify(
                     owner, seed, arguments.limit, fast=arguments.fast,
