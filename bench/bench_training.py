@@ -16,7 +16,8 @@ defaults, the default discrete action space, the camera) and lets them train.
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
 - With --fast, a racer's model instead: a continuous action space up to 4 m/s (``--speed``) and a
   speed-aware reward (``FAST_REWARD``, or with ``--reward steady`` the same with steady hands,
-  ``STEADY_REWARD``); besides the time to qualify, the fastest lap the first checkpoint past
+  ``STEADY_REWARD``, or with ``--reward aligned`` that with a steady heading too,
+  ``ALIGNED_REWARD``); besides the time to qualify, the fastest lap the first checkpoint past
   ``--lap-after`` training minutes drives, and the model's then (training stopped there, its
   best checkpoint: what DeepRacer races and downloads), beside the braking driver's lap on the
   same track, and each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each
@@ -87,7 +88,24 @@ def reward_function(params):
     return _road_ahead(params) * max(1.0 - (change / 30.0) ** 2, 0.0) + 1e-3
 """
 )
-REWARDS = {"road-ahead": FAST_REWARD, "steady": STEADY_REWARD}
+# Steady hands and a steady heading: the car's heading against the track's direction at the
+# closest waypoints (DeepRacer's own example reward 3 reads the same params) also lowers the
+# reward, so weaving costs at once what it costs later in distance from the centre.
+ALIGNED_REWARD = (
+    STEADY_REWARD
+    + """
+
+_steady = reward_function
+
+
+def reward_function(params):
+    waypoints, (behind, ahead) = params["waypoints"], params["closest_waypoints"]
+    dx, dy = (waypoints[ahead][k] - waypoints[behind][k] for k in (0, 1))
+    off = abs((math.degrees(math.atan2(dy, dx)) - params["heading"] + 180) % 360 - 180)
+    return _steady(params) * max(1.0 - (off / 30.0) ** 2, 0.0) + 1e-3
+"""
+)
+REWARDS = {"road-ahead": FAST_REWARD, "steady": STEADY_REWARD, "aligned": ALIGNED_REWARD}
 
 
 def bench_racer():
@@ -430,7 +448,8 @@ def main() -> None:
     )  # fmt: skip
     parser.add_argument(
         "--reward", choices=tuple(REWARDS), default="road-ahead",
-        help="with --fast, the reward function: the road ahead's speed, or that with steady hands",
+        help="with --fast, the reward function: the road ahead's speed, that with steady hands, "
+        "or that with a steady heading too",
     )  # fmt: skip
     parser.add_argument(
         "--under", type=float, default=None,

@@ -117,7 +117,7 @@ class Trainer:
         ]
         self.metrics: list[dict] = []
         self.evaluations: dict[int, list[dict]] = {}  # version: the results come so far
-        self.best: tuple[float, float] | None = None  # (evaluation completion, -lap time)
+        self.best: tuple[float, int] | None = None  # (evaluation completion, iteration)
         self.session_started: float | None = None  # when this run's clock started [monotonic]
         self.base_seconds = job.training_seconds  # the time used before this run
         self.ending: str | None = None  # why the loop ends: "stop" or "limit"
@@ -400,9 +400,9 @@ class Trainer:
         if default_storage.exists(metrics):
             self.metrics = json.loads(artifacts.read(metrics))["metrics"]
         evaluated = Iteration.objects.filter(job=self.job, evaluation_completion__isnull=False)
-        best = evaluated.order_by("-evaluation_completion").first()
+        best = evaluated.order_by("-evaluation_completion", "-number").first()
         if best is not None:
-            self.best = (best.evaluation_completion, float("-inf"))
+            self.best = (best.evaluation_completion, best.number)
 
     # Checkpoints, metrics, traces
 
@@ -454,7 +454,6 @@ class Trainer:
 
     def _record_evaluation(self, version: int, results: list[dict]) -> None:
         completion = sum(r["progress"] for r in results) / len(results)
-        laps = [r["lap_time"] for r in results if r["lap_time"]]
         row = Iteration.objects.filter(job=self.job, number=version).first()
         if row is None:
             return
@@ -471,7 +470,10 @@ class Trainer:
             self.metrics, evaluation_metrics(results, now=time.time()), episodes=learnt_from or 0
         )
         self._save_metrics()
-        score = (completion, -min(laps) if laps else float("-inf"))
+        # DeepRacer's best model: the highest mean progress of the evaluation episodes, a tie
+        # going to the newer checkpoint (simapp 01f5f01, bundle/markov/metrics/s3_metrics.py:
+        # 430-442, ">=" over evaluations that come in order; ours may come out of order).
+        score = (completion, version)
         if self.best is None or score > self.best:
             self.best = score
             jobs.write(

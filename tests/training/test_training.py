@@ -193,6 +193,37 @@ def test_evaluations_that_come_after_the_next_update_mark_their_own_checkpoint_b
 
 
 @pytest.mark.django_db(transaction=True)
+def test_of_checkpoints_that_evaluate_alike_the_newer_is_best_as_in_deepracer(alice, tracks):
+    """DeepRacer's best model is the highest mean evaluation progress, a tie going to the newer
+    checkpoint whatever its laps (simapp's s3_metrics.py); so it stays when the trainer resumes."""
+    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    run = trainer.Trainer(job, start_rollouts=lambda *args: None)
+    for number in (1, 2, 3):
+        Iteration.objects.create(job=job, number=number, reward=1.0, completion=10.0,
+                                 episodes=5, steps=50, wall_seconds=1.0)  # fmt: skip
+
+    def results(version: int, progress: float, lap_time: float | None) -> None:
+        for _ in range(5):
+            run.channel.push_evaluation(msgpack.packb(
+                {"version": version, "progress": progress, "lap_time": lap_time,
+                 "status": "lap_complete" if lap_time else "off_track", "steps": 30,
+                 "seconds": 0.5}
+            ))  # fmt: skip
+
+    results(2, 100.0, 7.5)
+    results(1, 100.0, 7.0)  # faster, but older and recorded later
+    run._take_evaluations()
+    assert reload(job).best_checkpoint.endswith(artifacts.checkpoint(2))
+    results(3, 100.0, 9.0)
+    run._take_evaluations()
+    assert reload(job).best_checkpoint.endswith(artifacts.checkpoint(3))
+
+    resumed = trainer.Trainer(reload(job), start_rollouts=lambda *args: None)
+    resumed._recall_progress()
+    assert resumed.best == (100.0, 3)
+
+
+@pytest.mark.django_db(transaction=True)
 def test_a_queued_job_that_is_stopped_is_canceled(alice, tracks):
     job = training_stop(job=queued_job(alice))
     model = job.model
