@@ -42,9 +42,10 @@ GUIDANCE = {
         "slower.",
         "The car cares about the next few steps only: quicker to train, more short-sighted. "
         "Without a GPU a fast continuous model learnt its speed far sooner with 0.97 than "
-        "with 0.999: it drove 3 clean laps of 8.1-9.5 s after 8 and 15 minutes of training "
-        "(two seeds; a braking driver laps in 7.5 s), where 0.999 drove 11-17 s laps; below "
-        "0.97 it left the track more often (the README's training figures).",
+        "with 0.999: in 6 of 8 runs of 20 minutes it drove 3 clean laps of 8-11 s (a braking "
+        "driver laps in 7.3 s), where 0.999 drove 11-17 s laps, though the next checkpoint "
+        "often left the track; below 0.97 it left the track more often (the README's training "
+        "figures).",
     ),
     "loss_type": (
         "How the size of a prediction error is turned into an update. Huber and mean squared "
