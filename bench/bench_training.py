@@ -30,7 +30,6 @@ import argparse
 import os
 import time
 
-from bench.bench_simulator import braking_lap
 from bench.stack import running_console
 from rl.hyperparameters import PPO, SAC
 
@@ -489,6 +488,8 @@ def main() -> None:
             under = f", each under {arguments.under:g} s" if arguments.under else ""
             print(f"Time to qualify (3 clean consecutive laps{under}), training minutes:")
             if arguments.fast:
+                from bench.bench_simulator import braking_lap
+
                 print(f"The braking driver's lap on the Rookie Loop: "
                       f"{braking_lap('rookie-loop')[0]:.2f} s")  # fmt: skip
             for seed in arguments.seeds:
