@@ -21,7 +21,8 @@ defaults, the default discrete action space, the camera) and lets them train.
   ``--lap-after`` training minutes drives, and the model's then (training stopped there, its
   best checkpoint: what DeepRacer races and downloads), beside the braking driver's lap on the
   same track, and each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each
-  under a time: the time to a lap time.
+  under a time: the time to a lap time. ``--workers N`` trains with N rollout workers (1 unless
+  said), as a racer's model may.
 """
 
 from __future__ import annotations
@@ -346,16 +347,19 @@ def time_to_qualify(
     algorithm: str = PPO,
     hyperparameters: dict | None = None,
     reward: str = "road-ahead",
+    workers: int = 1,
 ) -> tuple[float | None, float | None, float | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
     after ``lap_after`` minutes and that of the model then, its best checkpoint; a lap only where
     3 were clean); a fast model trains on to ``lap_after`` once it qualifies.
-    With ``under``, qualifying takes 3 clean laps each under that many seconds."""
+    With ``under``, qualifying takes 3 clean laps each under that many seconds; ``workers``: the
+    model's rollout workers."""
     from training.services import training_stop
 
     model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast,
                           steering=steering, speed=speed, algorithm=algorithm,
-                          hyperparameters=hyperparameters, reward=reward)  # fmt: skip
+                          hyperparameters=hyperparameters, reward=reward,
+                          workers=workers)  # fmt: skip
     tried = set()
     qualified = None
     while True:
@@ -425,7 +429,9 @@ def main() -> None:
         help="[min] of training for the throughput",
     )
     parser.add_argument(
-        "--workers", type=int, nargs="+", default=[1, 2], help="rollout workers, for throughput"
+        "--workers", type=int, nargs="+", default=None,
+        help="rollout workers: for throughput, each count in turn (default 1 and 2); with "
+        "--qualify, the model's (one count, default 1)",
     )  # fmt: skip
     parser.add_argument(
         "--fast",
@@ -470,6 +476,8 @@ def main() -> None:
         help="[min] of training after which a seed is given up",
     )
     arguments = parser.parse_args()
+    if arguments.qualify and arguments.workers and len(arguments.workers) > 1:
+        parser.error("with --qualify, --workers takes one count: the model's rollout workers")
     if arguments.update:
         os.environ.setdefault("DJANGO_SETTINGS_MODULE", "console.settings.dev")
         import django
@@ -495,6 +503,7 @@ def main() -> None:
             for seed in arguments.seeds:
                 minutes, best, model_best = time_to_qualify(
                     owner, seed, arguments.limit, fast=arguments.fast,
+                    workers=(arguments.workers or [1])[0],
                     lap_after=arguments.lap_after, steering=arguments.steering,
                     speed=tuple(arguments.speed), under=arguments.under,
                     algorithm=arguments.algorithm,
@@ -511,7 +520,7 @@ def main() -> None:
                 print(f"seed {seed}: {shown}", flush=True)
         else:
             print("Training throughput, DeepRacer's defaults (PPO, camera, Rookie Loop):")
-            for workers in arguments.workers:
+            for workers in arguments.workers or [1, 2]:
                 throughput(owner, workers, arguments.minutes)
 
 

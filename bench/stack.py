@@ -17,6 +17,21 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
+@contextlib.contextmanager
+def _sigterm_exits() -> Iterator[None]:
+    """Within the block, SIGTERM (``kill``) raises SystemExit as Ctrl-C raises KeyboardInterrupt,
+    so that the ``finally`` clauses run: a benchmark stopped either way stops its console."""
+
+    def stop(signum: int, frame) -> None:
+        raise SystemExit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def free_port() -> int:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
@@ -27,7 +42,7 @@ def free_port() -> int:
 def running_console(concurrency: int = 2) -> Iterator[dict]:
     """Serve the console (its own Redis, one Celery worker, Daphne) until the block ends; yields
     {"url", "var_dir", "ready_seconds", "env"}; ``env`` points Django at the same database."""
-    with tempfile.TemporaryDirectory(prefix="pitlane-bench-") as var_dir:
+    with _sigterm_exits(), tempfile.TemporaryDirectory(prefix="pitlane-bench-") as var_dir:
         port = free_port()
         env = {k: v for k, v in os.environ.items() if not k.startswith(("DJANGO_", "PITLANE_"))}
         env.pop("REDIS_URL", None)
