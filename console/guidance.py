@@ -42,7 +42,7 @@ GUIDANCE = {
         "slower.",
         "The car cares about the next few steps only: quicker to train, more short-sighted. "
         "Without a GPU a fast continuous model learnt its speed far sooner with 0.97 than "
-        "with 0.999: in 6 of 8 runs of 20 minutes it drove 3 clean laps of 8-11 s (a braking "
+        "with 0.999: in 8 of 13 runs of 20 minutes it drove 3 clean laps of 8-12.5 s (a braking "
         "driver laps in 7.3 s), where 0.999 drove 11-17 s laps, though the next checkpoint "
         "often left the track; below 0.97 it left the track more often (the README's training "
         "figures).",
