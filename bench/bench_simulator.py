@@ -1,8 +1,9 @@
 """Simulator speed and the car's grip: `python -m bench.bench_simulator [--no-grip]` (or `make
 bench`).
 
-Speed, one process, one core: environment steps per second with the camera on (the centre-line
-driver, the default reward function, every status and param computed), what the car's dynamics
+Speed, one process, one core: environment steps per second with the camera on (the time in
+``env.step`` as the centre-line driver drives, the default reward function, every status and
+param computed; the driver's own planning is not counted), what the car's dynamics
 cost, camera frames per second, and spectator frames per second. DeepRacer's Gazebo simulation
 runs at 15 steps per second.
 
@@ -43,18 +44,24 @@ def rate(work, seconds: float = SECONDS) -> float:
 
 
 def environment_steps(**settings) -> float:
+    """Environment steps per second: the time in ``env.step`` (and the resets it calls for) alone,
+    not the driver's, which plans each command on a model of the steering (a policy's forward
+    pass stands there in training, and is measured by bench_sandbox)."""
     env = gymnasium.make(simulator.ENV_ID, track="rookie-loop", **settings)
     env.reset(seed=0)
     driver = CentreLineDriver(env.unwrapped, speed=1.0)
-
-    def step() -> None:
-        _, _, terminated, truncated, _ = env.step(driver.act())
+    count, spent = -50, 0.0  # the first 50 steps warm up
+    while spent < SECONDS:
+        action = driver.act()
+        started = time.perf_counter()
+        _, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             env.reset()
-
-    result = rate(step)
+        if count >= 0:
+            spent += time.perf_counter() - started
+        count += 1
     env.close()
-    return result
+    return count / spent
 
 
 def pybullet_vehicle():

@@ -9,8 +9,9 @@ do not slip while the force they need stays within ``mu * N`` along and across t
 friction pyramid), and slide with that force once it does not. Within the grip limit the car
 follows the kinematic bicycle's arc exactly; beyond it the front slides (understeer) or the rear
 steps out (oversteer, a spin). The wheel controllers push the car toward the wheel speed they are
-asked for, as hard as the friction allows, so how fast the car speeds up, brakes and turns comes
-from the controllers' gains and the grip, not from a lag constant.
+asked for, as hard as the friction allows, and the steering hinges turn as their controller
+drives them, so how fast the car speeds up, brakes and turns comes from the controllers' gains,
+the parts' inertia and the grip, not from a lag constant.
 
 Each sub-step solves the contact forces as ODE's solver does: velocity constraints at the two
 axles (no sliding across a wheel; along it, the wheel controller's pull toward its target),
@@ -19,7 +20,16 @@ solve is implicit, so it stays stable at any step; collisions with boxes and bot
 detected by the PyBullet world (``simulator.world``).
 
 Every number below names its source: deepracer-simapp at 2fc2d75c, the last commit of the ROS 1 /
-Gazebo classic simulator that the DeepRacer console ran. Its ROS 2 port (01f5f01) keeps the URDF's
+Gazebo classic simulator that the DeepRacer console ran. Its car is the "kinematics" car of
+physics version 5, the version every model's metadata carries (ours too) and every virtual event
+forces (bundle/markov/agent_ctrl/rollout_agent_ctrl.py:103-106): for it racecar.launch:55 and
+bundle/markov/spawn/models/agent_model.py:51-55,74 load
+bundle/src/deepracer_simulation_environment/config/racecar_control_kinematics.yaml, whose
+controllers pass the commands through to gazebo_ros_control's own PID loops (its
+``gazebo_ros_control/pid_gains``), run at every 1 ms physics step. Older versions' car
+(racecar_control.yaml's effort controllers) differs in one thing that matters: its steering PD
+damps the hinge's velocity, a smooth 0.5 s lag, where version 5's differentiates the error, which
+kicks the hinge toward every new command (``steer``). Its ROS 2 port (01f5f01) keeps the URDF's
 numbers but imposes the wheels' speed directly and steers with a 0.17 s lag (gz_ros2_control's
 position emulation); we follow the simulator every console model trained in.
 """
@@ -108,16 +118,29 @@ class CarSpec:
     # [rad/s] the wheel joints' velocity limit, URDF:89-91; ros_control's saturation handle stops
     # driving a wheel past it, so the car rolls at most 100 * 0.036 = 3.6 m/s.
     wheel_speed_limit: float = 100.0
-    # [N m per rad/s] the wheel velocity controllers' proportional gains, the same on both wheels
-    # of an axle: config/racecar_control.yaml:11,15 (rear), 19,23 (front); torque is capped at
-    # 10 N m (URDF:89-91), 280 N at the tread, far beyond the grip, so the cap never binds.
+    # [N m per rad/s] the wheels' velocity loops, gazebo_ros_control's VELOCITY_PID (the
+    # transmissions are VelocityJointInterface, urdf/deepracer_kinematics/macros.xacro), the same
+    # on both wheels of an axle: racecar_control_kinematics.yaml:37-38 (rear), 39-40 (front); the
+    # torque is capped at 10 N m (URDF:89-91), 280 N at the tread, far beyond the grip, so the cap
+    # never binds.
     rear_wheel_gain: float = 1.0
     front_wheel_gain: float = 0.5
-    # The steering hinges' PD controllers, racecar_control.yaml:30,34: torque 1.0 * error - 0.5 *
-    # rate. The hinge with its wheel weighs so little (2.6e-4 kg m²) that the angle follows
-    # d(angle)/dt = (p / d) * error: a first-order lag of d / p = 0.5 s.
-    steering_p: float = 1.0
-    steering_d: float = 0.5
+    # The steering hinges (PositionJointInterface, the same macros.xacro): ros_control's
+    # PositionJointSaturationHandle moves the command at most at the joint's velocity limit
+    # (gazebo_ros_control default_robot_hw_sim.cpp, registerJointLimits), then gazebo_ros_control's
+    # POSITION_PID loop (racecar_control_kinematics.yaml:41-42) turns the hinge with a torque of
+    # p * error + d * d(error)/dt, the derivative taken between control periods (control_toolbox
+    # Pid::computeCommand(error, dt)), clipped to the joint's effort limit. Limits: URDF:186-190.
+    steering_p: float = 1.0  # [N m/rad]
+    steering_d: float = 0.5  # [N m s/rad]
+    steering_effort: float = 10.0  # [N m]
+    steering_rate_limit: float = 100.0  # [rad/s]
+    # [kg m²] what the hinge turns: its own link and the wheel about the vertical axis through the
+    # wheel's centre, where the wheel's joint sits (URDF:160, 206, 230-233).
+    steering_inertia: float = HINGE_IZZ + WHEEL_IZZ
+    # [s] Gazebo's physics step (its default max_step_size: no world in bundle/worlds sets one);
+    # gazebo_ros_control, given no controlPeriod (racecar.gazebo:47-53), updates at every step.
+    control_period: float = 0.001
 
     @cached_property
     def mass(self) -> float:
@@ -163,7 +186,8 @@ class CarSpec:
 
     @property
     def steering_time_constant(self) -> float:
-        """[s] of the steering's first-order response."""
+        """[s] how a steering error left once the hinge has stopped closes: a first-order lag of
+        d / p (the damping, d * d(error)/dt, then balances the pull, p * error)."""
         return self.steering_d / self.steering_p
 
     @property
@@ -191,6 +215,63 @@ def _clip(value: float, limit: float) -> float:
     return limit if value > limit else -limit if value < -limit else value
 
 
+class Hinge:
+    """The front wheels' steering hinge under its controller, one control period at a time, as
+    Gazebo computes it: the command moves toward its target at most at the rate limit, the PID
+    torque (the derivative of the error over one period) is clipped to the effort limit, and the
+    hinge's velocity, then its angle, take one semi-implicit Euler step, as ODE's do.
+
+    The derivative acts on the error, not on the hinge's velocity, so a new command kicks the
+    hinge toward it within a few milliseconds, as far as the effort limit lets it; what is left
+    closes with ``CarSpec.steering_time_constant``. With this hinge's small inertia the loop runs
+    close to its stability limit (d / inertia * period = 1.89 of 2), so how far a change is met at
+    once varies with its size: a 15° change is two thirds met after 3 ms, a 30° one at once."""
+
+    def __init__(self, spec: CarSpec) -> None:
+        self.spec = spec
+        self.angle = 0.0  # [rad] left positive
+        self.rate = 0.0  # [rad/s]
+        self.command = 0.0  # [rad] after the rate limit
+        self.error = 0.0  # [rad] at the last control period
+
+    def turn(self, target: float, periods: int) -> float:
+        """Run ``periods`` control periods toward ``target`` [rad]; the angle then."""
+        spec = self.spec
+        period = spec.control_period
+        most = spec.steering_rate_limit * period
+        kp, kd, effort = spec.steering_p, spec.steering_d / period, spec.steering_effort
+        gain = period / spec.steering_inertia
+        angle, rate, command, last = self.angle, self.rate, self.command, self.error
+        for _ in range(periods):
+            change = target - command
+            command += most if change > most else -most if change < -most else change
+            error = command - angle
+            torque = kp * error + kd * (error - last)
+            last = error
+            torque = effort if torque > effort else -effort if torque < -effort else torque
+            rate += torque * gain
+            angle += rate * period
+        self.angle, self.rate, self.command, self.error = angle, rate, command, last
+        return angle
+
+    def command_for(self, angle: float, periods: int, limit: float) -> float:
+        """The target within ±``limit`` [rad] that brings the hinge nearest ``angle`` [rad] after
+        ``periods``, from where it is now (it is left there): a bisection, since a larger target
+        turns it further."""
+        low, high = -limit, limit
+        for _ in range(12):
+            middle = (low + high) / 2
+            trial = Hinge(self.spec)
+            trial.angle, trial.rate, trial.command, trial.error = (
+                self.angle, self.rate, self.command, self.error
+            )
+            if trial.turn(middle, periods) < angle:
+                low = middle
+            else:
+                high = middle
+        return (low + high) / 2
+
+
 class Car:
     """The car's state (pose, velocity, steering) and its motion over one control step.
 
@@ -207,10 +288,28 @@ class Car:
         """Put the car at rest at a pose."""
         self.x, self.y, self.yaw = x, y, yaw
         self.speed = self.lateral_speed = self.yaw_rate = 0.0
-        self.steering = 0.0
+        self.hinge = Hinge(self.spec)
         self._impulses = [0.0, 0.0, 0.0, 0.0]  # the last sub-step's, to start the next solve
         self._accel = 0.0  # [m/s²] along the heading in the last sub-step: it moves the weight
-        self.sliding = False  # whether an axle slid sideways in the last control step
+        # Whether an axle slid sideways through most of the last control step: a slide lasts,
+        # where a new steering command saturates the front tyres for a sub-step as it kicks.
+        self.sliding = False
+
+    @property
+    def steering(self) -> float:
+        """[rad] the front wheels' angle, left positive."""
+        return self.hinge.angle
+
+    def periods(self, dt: float) -> int:
+        """The hinge's control periods in ``dt`` seconds (1/15 s: 67 of 1 ms)."""
+        return max(1, round(dt / self.spec.control_period))
+
+    def _periods(self, dt: float) -> list[int]:
+        """The hinge's control periods in each of a step's sub-steps: ``dt`` rounded to whole
+        periods (1/15 s: 67 of 1 ms), shared out as evenly as they go."""
+        total = self.periods(dt)
+        n = self.substeps
+        return [(i + 1) * total // n - i * total // n for i in range(n)]
 
     @property
     def slip_angle(self) -> float:
@@ -229,7 +328,7 @@ class Car:
         length, height, mu = spec.wheelbase, spec.centre_height, spec.friction
         target = spec.wheel_target(speed_command)
         steer_target = math.radians(steering_command_deg)
-        steer_keep = math.exp(-h / spec.steering_time_constant)
+        hinge = self.hinge
         # The wheel controllers, as dampers at the tread toward the target speed: a torque of
         # gain * (target - speed) / radius per wheel, two wheels an axle. In the solve this is a
         # soft constraint whose softness is 1 / (h * stiffness) [Catto, "Soft Constraints"].
@@ -249,10 +348,9 @@ class Car:
         cx, cy = self.x + b * cos_y, self.y + b * sin_y  # the centre of mass
         start_x, start_y = self.x, self.y
         p_rl, p_rt, p_fl, p_ft = self._impulses  # rear/front, along/across the wheel [N s]
-        delta = self.steering
-        slid = False
-        for _ in range(self.substeps):
-            delta = steer_target + (delta - steer_target) * steer_keep
+        saturated = 0  # sub-steps in which an axle's tyres slid sideways
+        for periods in self._periods(dt):
+            delta = hinge.turn(steer_target, periods)
             sin_d, cos_d = math.sin(delta), math.cos(delta)
             # Each axle's load: its static share, moved forward under braking and back under
             # acceleration by the centre of mass's height.
@@ -300,7 +398,7 @@ class Car:
                 u -= change * su
                 v += change * cu
                 r += change * ar_lat
-            slid = slid or abs(p_rt) >= limit_rear or abs(p_ft) >= limit_front
+            saturated += abs(p_rt) >= limit_rear or abs(p_ft) >= limit_front
             self._accel = (p_rl + p_fl * cos_d - p_ft * sin_d) / (m * h)
             # Move, then turn the frame with the car.
             cx += (u * cos_y - v * sin_y) * h
@@ -311,11 +409,11 @@ class Car:
             u, v = u * cos_t + v * sin_t, v * cos_t - u * sin_t
             cos_y, sin_y = math.cos(yaw), math.sin(yaw)
         yaw = math.atan2(sin_y, cos_y)
-        self.yaw, self.yaw_rate, self.steering = yaw, r, delta
+        self.yaw, self.yaw_rate = yaw, r
         self.x, self.y = cx - b * cos_y, cy - b * sin_y
         self._impulses = [p_rl, p_rt, p_fl, p_ft]
         self.speed, self.lateral_speed = u, v
-        self.sliding = slid
+        self.sliding = 2 * saturated > self.substeps
         return math.hypot(self.x - start_x, self.y - start_y)
 
     def point_ahead(self, distance: float) -> tuple[float, float]:

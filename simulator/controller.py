@@ -16,12 +16,12 @@ class CentreLineDriver:
     """A scripted driver that follows the centre line at ``speed``.
 
     It steers as a path-following controller does (Stanley's, with the curvature ahead fed
-    forward): the front axle is turned toward the centre line's heading, corrected by how far it
-    is off the line, plus the steering that the curvature of the line ahead needs. The steering
-    answers its command with a first-order lag (``CarSpec.steering_time_constant``, 0.5 s), so
-    the driver looks for the curvature where the car will be once the wheels have turned, and
-    commands past the angle it wants, enough for the wheels to reach it within ``settle``
-    seconds, as a racing policy learns to."""
+    forward): the front axle is turned toward the centre line's heading (half the heading error:
+    the whole of it, with the steering's kick, sets the car weaving), corrected by how far it is
+    off the line, plus the steering that the curvature of the line ahead needs, read where the
+    car will be ``anticipation`` seconds on. It commands what turns the wheels to that angle
+    by the end of the step, as DeepRacer's steering loop moves them (``simulator.car.Hinge``),
+    as a racing policy learns to."""
 
     SPACING = 0.05  # [m] between the points where the centre line's curvature is known
     WINDOW = 0.25  # [m] on either side of a point, over which its curvature is measured
@@ -31,16 +31,14 @@ class CentreLineDriver:
         env: DeepRacerEnv,
         speed: float = 1.0,
         gain: float = 2.0,
-        settle: float = 0.15,
+        heading_gain: float = 0.5,
         anticipation: float = 0.3,
-        overshoot: float = 2.0,
     ) -> None:
         self.env = env
         self.speed = speed
         self.gain = gain  # [1/s] how fast an offset from the line is steered out
-        self.settle = settle  # [s]
+        self.heading_gain = heading_gain  # of the heading error, steered out at once
         self.anticipation = anticipation  # [s] ahead, where the curvature is read
-        self.overshoot = overshoot  # the command's limit, in multiples of the grip's angle
         self.curvature = curvature(env.track, self.SPACING, self.WINDOW)
 
     def steering(self) -> float:
@@ -56,15 +54,15 @@ class CentreLineDriver:
         ahead = here + speed * self.anticipation
         bend = float(self.curvature[int(ahead / self.SPACING) % len(self.curvature)])
         error = math.atan2(math.sin(float(heading) - car.yaw), math.cos(float(heading) - car.yaw))
-        wanted = math.atan(spec.wheelbase * bend) + error + math.atan2(-self.gain * offset, speed)
+        wanted = (math.atan(spec.wheelbase * bend) + self.heading_gain * error
+                  + math.atan2(-self.gain * offset, speed))  # fmt: skip
         # Beyond the angle whose turn the grip can hold, the front tyres only slide.
         grip = math.atan(spec.wheelbase * spec.friction * GRAVITY / speed**2)
         wanted = max(-grip, min(grip, wanted))
-        now = car.steering
-        reached = 1.0 - math.exp(-self.settle / spec.steering_time_constant)
-        command = now + (wanted - now) / reached
-        limit = min(math.radians(spec.max_steering), self.overshoot * grip)
-        return math.degrees(max(-limit, min(limit, command)))
+        # The command that turns the wheels to that angle by the end of the step: the steering
+        # loop kicks the hinge at each change and closes the rest slowly (``Hinge``).
+        limit = math.radians(spec.max_steering)
+        return math.degrees(car.hinge.command_for(wanted, car.periods(env.dt), limit))
 
     def target_speed(self) -> float:
         """[m/s] the speed to command now."""

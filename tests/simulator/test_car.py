@@ -1,6 +1,6 @@
 """The dynamic car's physics: invariants that hold whatever the numbers, not figures copied from a
 run. The car is DeepRacer's Gazebo car (simulator/car.py): friction-limited tyres, a wheel speed
-controller, a steering servo that lags."""
+controller, a steering hinge turned by DeepRacer's PID loop."""
 
 import itertools
 import math
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import simulator
-from simulator.car import GRAVITY, Car, CarSpec
+from simulator.car import GRAVITY, Car, CarSpec, Hinge
 
 DT = 1 / 15  # [s] one control step
 
@@ -70,12 +70,47 @@ def test_braking_takes_the_time_the_grip_asks():
     assert speeds[-1] == pytest.approx(spec.wheel_target(0.1), rel=1e-3)
 
 
-def test_the_steering_turns_as_its_controller_lets_it():
+@pytest.mark.parametrize("degrees", [30.0, -12.0, 4.0, 0.5])
+def test_the_steering_hinge_reaches_its_command_and_holds_it(degrees):
+    hinge = Hinge(CarSpec())
+    hinge.turn(math.radians(degrees), 5000)  # 5 s: ten of the residual's time constants
+    assert math.degrees(hinge.angle) == pytest.approx(degrees, abs=0.01)
+    held = hinge.angle
+    hinge.turn(math.radians(degrees), 1000)
+    assert hinge.angle == pytest.approx(held, abs=1e-4)
+
+
+@pytest.mark.parametrize("degrees", [15.0, 30.0])
+def test_a_new_command_kicks_the_hinge_on_at_once(degrees):
+    # The loop differentiates the error, so a change's first periods push the hinge as hard as
+    # the effort limit allows: within one control step it is past half the change, where a servo
+    # damped on the hinge's own velocity (d / p = 0.5 s) would be 1 - exp(-DT / 0.5) = 12% there.
     spec = CarSpec()
-    car = Car(spec)
-    car.step(0.5, 30.0, spec.steering_time_constant)
-    # A first-order lag: 63% of the way after one time constant (PD gains p = 1, d = 0.5).
-    assert math.degrees(car.steering) == pytest.approx(30.0 * (1 - math.exp(-1)), rel=1e-6)
+    hinge = Hinge(spec)
+    hinge.turn(math.radians(degrees), round(DT / spec.control_period))
+    assert hinge.angle / math.radians(degrees) > 0.5
+    assert 1 - math.exp(-DT / spec.steering_time_constant) < 0.13
+
+
+def test_the_hinge_is_pushed_no_harder_than_its_joint_allows():
+    spec = CarSpec()
+    hinge = Hinge(spec)
+    rng = np.random.default_rng(0)
+    most_rate_change = spec.steering_effort * spec.control_period / spec.steering_inertia
+    most_command_change = spec.steering_rate_limit * spec.control_period
+    for target in rng.uniform(-0.5, 0.5, 300):
+        rate, command = hinge.rate, hinge.command
+        hinge.turn(float(target), 1)
+        assert abs(hinge.rate - rate) <= most_rate_change * (1 + 1e-9)
+        assert abs(hinge.command - command) <= most_command_change * (1 + 1e-9)
+
+
+def test_the_car_steers_with_its_hinge():
+    car = Car()
+    car.step(0.5, 30.0, DT)
+    hinge = Hinge(car.spec)
+    hinge.turn(math.radians(30.0), round(DT / car.spec.control_period))
+    assert car.steering == pytest.approx(hinge.angle, abs=1e-12)
 
 
 @pytest.mark.parametrize("steering", [10.0, 20.0, 30.0])
