@@ -36,6 +36,7 @@ position emulation); we follow the simulator every console model trained in.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -261,11 +262,7 @@ class Hinge:
         low, high = -limit, limit
         for _ in range(12):
             middle = (low + high) / 2
-            trial = Hinge(self.spec)
-            trial.angle, trial.rate, trial.command, trial.error = (
-                self.angle, self.rate, self.command, self.error
-            )
-            if trial.turn(middle, periods) < angle:
+            if copy.copy(self).turn(middle, periods) < angle:
                 low = middle
             else:
                 high = middle
