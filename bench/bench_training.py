@@ -70,9 +70,9 @@ def reward_function(params):
 """
 # The road-ahead reward with steady hands: a racer's stateful reward (its module lives as long as
 # the worker, as DeepRacer's does) that also pays less the more the steering command changed since
-# the last step. The car's steering lags its command by half a second, so a shaken command moves
-# the car little but throws it off the line in the end, and too late for the road-ahead reward to
-# say which command did it; this factor says so at once.
+# the last step. Each new command kicks the steering hinge and the rest of it closes over half a
+# second, so a shaken command throws the car off the line a little late for the road-ahead reward
+# to say which command did it; this factor says so at once.
 STEADY_REWARD = (
     FAST_REWARD
     + """

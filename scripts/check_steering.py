@@ -1,4 +1,4 @@
-"""Check ``simulator.car.Hinge`` against a full rigid-body car: DeepRacer's own URDF and wheel
+"""Check ``simulator.steering.Hinge`` against a full rigid-body car: DeepRacer's own URDF and wheel
 meshes in PyBullet on a plane, its wheels and steering hinges driven by the loops that
 gazebo_ros_control runs for a version-5 car, at Gazebo's 1 ms step. It prints, for steering
 changes of 2° to 30° made while the car rolls at 1.5 m/s, the hinge's angle after 1, 3, 10, 67
@@ -23,7 +23,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from simulator.car import CarSpec, Hinge  # noqa: E402
+from simulator.car import CarSpec  # noqa: E402
+from simulator.steering import Hinge  # noqa: E402
 
 URDF = "bundle/urdf/deepracer/deepracer_single_cam.urdf"
 MESHES = "bundle/meshes/deepracer"

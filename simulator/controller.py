@@ -20,7 +20,7 @@ class CentreLineDriver:
     the whole of it, with the steering's kick, sets the car weaving), corrected by how far it is
     off the line, plus the steering that the curvature of the line ahead needs, read where the
     car will be ``anticipation`` seconds on. It commands what turns the wheels to that angle
-    by the end of the step, as DeepRacer's steering loop moves them (``simulator.car.Hinge``),
+    by the end of the step, as DeepRacer's steering loop moves them (``simulator.steering.Hinge``),
     as a racing policy learns to."""
 
     SPACING = 0.05  # [m] between the points where the centre line's curvature is known

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import simulator
-from simulator.car import GRAVITY, Car, CarSpec, Hinge
+from simulator.car import GRAVITY, Car, CarSpec
+from simulator.steering import Hinge
 
 DT = 1 / 15  # [s] one control step
 
