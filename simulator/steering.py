@@ -20,7 +20,7 @@ class Hinge:
     hinge toward it within a few milliseconds, as far as the effort limit lets it; what is left
     closes with ``CarSpec.steering_time_constant``. With this hinge's small inertia the loop runs
     close to its stability limit (d / inertia * period = 1.89 of 2), so how far a change is met at
-    once varies with its size: a 15° change is two thirds met after 3 ms, a 30° one at once."""
+    once varies with its size: a 15° change is 62% met after 3 ms, a 30° one wholly after 10 ms."""
 
     def __init__(self, spec: CarSpec) -> None:
         self.spec = spec
