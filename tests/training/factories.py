@@ -9,6 +9,7 @@ import torch
 import simulator
 from rl import hyperparameters
 from rl.learner import Learner
+from simulator.controller import CentreLineDriver
 from training import artifacts, configuration
 from training.models import RLModel, TrainingJob
 from training.rewards import EXAMPLES
@@ -88,15 +89,18 @@ def _first_checkpoint(model: RLModel, weights) -> bytes:
 
 def sensor_frames(environment: dict, count: int = 12) -> list[dict]:
     """What the car's sensors see along the track (``environment``: ``gymnasium.make``'s keyword
-    arguments): ``count`` observations a few random steps apart."""
+    arguments): ``count`` observations a few steps apart, the centre-line driver at the wheel with
+    one action in three a random one, so the views run round the track and off its line."""
     env = gymnasium.make(simulator.ENV_ID, **environment)
     observation, _ = env.reset(seed=3)
     env.action_space.seed(7)  # the same frames every run, whatever ran before
+    driver = CentreLineDriver(env.unwrapped, speed=1.5)
     seen = []
     rng = np.random.default_rng(7)
     while len(seen) < count:
         for _ in range(4):
-            observation, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            action = env.action_space.sample() if rng.random() < 1 / 3 else driver.act()
+            observation, _, terminated, truncated, _ = env.step(action)
             if terminated or truncated:
                 observation, _ = env.reset(seed=int(rng.integers(1000)))
         seen.append(observation)
