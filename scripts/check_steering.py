@@ -67,7 +67,7 @@ class Rig:
             p.changeDynamics(car, j, lateralFriction=0.5 if wheel else 0.0, jointDamping=0.0,
                              linearDamping=0.0, angularDamping=0.0)  # fmt: skip
         p.changeDynamics(car, -1, linearDamping=0.0, angularDamping=0.0)
-        spec = CarSpec()
+        self.spec = spec = CarSpec()
         self.wheels = {f"{side}_{axle}_wheel_joint": gain for side in ("left", "right")
                        for axle, gain in (("rear", spec.rear_wheel_gain),
                                           ("front", spec.front_wheel_gain))}  # fmt: skip
@@ -80,7 +80,7 @@ class Rig:
         )
 
     def tick(self, speed: float, steering: float) -> None:
-        p, spec = self.p, CarSpec()
+        p, spec = self.p, self.spec
         for name, gain in self.wheels.items():
             rate = p.getJointState(self.car, self.joints[name])[1]
             torque = gain * (speed / spec.command_radius - rate)
@@ -93,8 +93,9 @@ class Rig:
             error = command - p.getJointState(self.car, self.joints[name])[0]
             torque = spec.steering_p * error + spec.steering_d * (error - last) / STEP
             state[:] = command, error
+            effort = spec.steering_effort
             p.setJointMotorControl2(self.car, self.joints[name], p.TORQUE_CONTROL,
-                                    force=max(-10.0, min(10.0, torque)))  # fmt: skip
+                                    force=max(-effort, min(effort, torque)))  # fmt: skip
         p.stepSimulation()
 
 
