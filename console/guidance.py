@@ -41,9 +41,9 @@ GUIDANCE = {
         "The car plans further ahead (braking before a bend, lining up a turn); training is "
         "slower.",
         "The car cares about the next few steps only: quicker to train, more short-sighted. "
-        "Without a GPU a fast continuous model (up to 4 m/s) with 0.97 drove 3 clean laps "
-        "within 3.5 minutes in each of 4 runs, and after 20 minutes lapped in 6.8-8.8 s (a "
-        "braking driver laps in 6.7 s; the README's training figures).",
+        "Without a GPU a fast continuous model (1-4 m/s) with 0.97 drove 3 clean laps within "
+        "2 minutes in each of 3 runs, and after 20 minutes lapped in 6.7-7.3 s (a braking "
+        "driver laps in 6.7 s; the README's training figures).",
     ),
     "loss_type": (
         "How the size of a prediction error is turned into an update. Huber and mean squared "
