@@ -42,7 +42,7 @@ GUIDANCE = {
         "slower.",
         "The car cares about the next few steps only: quicker to train, more short-sighted. "
         "Without a GPU a fast continuous model (1-4 m/s) with 0.97 drove 3 clean laps within "
-        "2 minutes in each of 3 runs, and after 20 minutes lapped in 6.7-7.3 s (a braking "
+        "2.5 minutes in each of 4 runs, and after 20 minutes lapped in 6.5-7.3 s (a braking "
         "driver laps in 6.7 s; the README's training figures).",
     ),
     "loss_type": (
