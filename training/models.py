@@ -204,6 +204,11 @@ class RLModel(RaceConditions):
         max_length=7, choices=ShellColour.choices, default=ShellColour.BLACK,
         help_text="The car's colour in the video: its vehicle's when it was created.",
     )  # fmt: skip
+    import_notes = models.JSONField(
+        default=list, blank=True,
+        help_text="What an import rebuilt or left out, in a racer's words: shown on the model's "
+        "page for as long as the model lives.",
+    )  # fmt: skip
 
     class Meta:
         verbose_name = "model"
