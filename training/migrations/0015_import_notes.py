@@ -4,15 +4,18 @@ from django.db import migrations, models
 
 
 class Migration(migrations.Migration):
-
     dependencies = [
-        ('training', '0014_evaluation_lease'),
+        ("training", "0014_evaluation_lease"),
     ]
 
     operations = [
         migrations.AddField(
-            model_name='rlmodel',
-            name='import_notes',
-            field=models.JSONField(blank=True, default=list, help_text="What an import rebuilt or left out, in a racer's words: shown on the model's page for as long as the model lives."),
+            model_name="rlmodel",
+            name="import_notes",
+            field=models.JSONField(
+                blank=True,
+                default=list,
+                help_text="What an import rebuilt or left out, in a racer's words: shown on the model's page for as long as the model lives.",
+            ),
         ),
     ]
