@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+import secrets
 from datetime import timedelta
 
 from django import forms
@@ -16,6 +18,7 @@ from training.models import RLModel, Track
 
 LOCAL = "%Y-%m-%dT%H:%M"  # what <input type="datetime-local"> sends
 RACE_LENGTH = timedelta(days=7)  # a new community race closes a week after it opens
+FORM_TOKEN = re.compile(r"[A-Za-z0-9_-]{32,43}")  # secrets.token_urlsafe(32) makes 43
 
 
 class SubmissionForm(forms.Form):
@@ -145,8 +148,18 @@ class CommunityRaceForm(RaceObstaclesForm):
             "closes_at": "In your time zone. The invitation works until then.",
         }
 
+    form_token = forms.CharField(widget=forms.HiddenInput, required=False)
+
     def __init__(self, *args, organiser, **kwargs) -> None:
         super().__init__(*args, **kwargs)
+        # A one-time token per form shown: the same form sent twice creates one race.
+        self.fields["form_token"].initial = secrets.token_urlsafe(32)
+        self.stale = False
+        name = self.add_prefix("form_token")
+        if self.is_bound and not FORM_TOKEN.fullmatch(self.data.get(name) or ""):
+            self.data = self.data.copy()
+            self.data[name] = self.fields["form_token"].initial
+            self.stale = True
         self.fields["ranking_method"].initial = RankingMethod.FIRST_CONSECUTIVE
         self.fields["track"].initial = Track.objects.values_list("name", flat=True).first()
         now = timezone.localtime().replace(second=0, microsecond=0)
@@ -154,6 +167,14 @@ class CommunityRaceForm(RaceObstaclesForm):
         self.fields["closes_at"].initial = now + RACE_LENGTH
         self.instance.organiser = organiser
         self.instance.public = False
+
+    def clean(self) -> dict:
+        data = super().clean()
+        if self.stale:
+            raise ValidationError(
+                "This page was out of date: check the race below, then create it again."
+            )
+        return data
 
     def fields_for_service(self) -> dict:
         data = {name: self.cleaned_data[name] for name in self.Meta.fields}

@@ -128,9 +128,21 @@ class Event(RaceConditions):
         verbose_name="racers taken out",
         help_text="Racers the organiser took out: the invitation no longer lets them back in.",
     )  # fmt: skip
+    form_token = models.CharField(
+        max_length=43, blank=True, editable=False,
+        help_text="The one-time token of the form that created this community race: the same "
+        "form sent twice (Back and submit again, a double click) gives back this race.",
+    )  # fmt: skip
+    created_at = models.DateTimeField(auto_now_add=True, null=True, editable=False)
 
     class Meta:
         ordering = ["opens_at", "name"]
+        constraints = [
+            models.UniqueConstraint(
+                fields=["organiser", "form_token"], condition=~models.Q(form_token=""),
+                name="one_race_per_form",
+            )
+        ]  # fmt: skip
 
     def __str__(self) -> str:
         return self.name

@@ -226,6 +226,18 @@ def invitation_refusal(*, event: Event, racer: AbstractBaseUser) -> str | None:
     return None
 
 
+def race_deletion_refusal(*, event: Event) -> str | None:
+    """Why the organiser cannot delete their community race; None if they can (nobody has
+    submitted to it yet)."""
+    runs = event.submissions.count()
+    if not runs:
+        return None
+    return (
+        f"{event.name} has {runs} submission{'s' if runs != 1 else ''}, so it stays: its racers' "
+        "runs and places are kept. Close it instead if it should take no more."
+    )
+
+
 def community_races_for(*, racer: AbstractBaseUser) -> QuerySet[Event]:
     """Community races the racer organises or joined, newest first."""
     return (

@@ -15,7 +15,7 @@ from datetime import date, datetime, time, timedelta
 from django.contrib.auth import get_user_model
 from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
-from django.db import transaction
+from django.db import IntegrityError, transaction
 from django.utils import timezone
 from django.utils.crypto import get_random_string
 from django.utils.text import slugify
@@ -60,6 +60,12 @@ SUBMISSION = Lifecycle(
 )
 
 PROMOTED_SHARE = 0.10  # the top 10% of a month's Open time trials move up to Pro
+RESUBMIT_WINDOW = timedelta(minutes=10)  # a community race made again this soon is the same
+SAME_RACE = (  # what makes a community race the same race as one made a moment ago
+    "name", "track_id", "direction", "race_type", "boxes", "bots", "ranking_method",
+    "laps_required", "laps_to_drive", "off_track_penalty_s", "crash_penalty_s",
+    "max_off_tracks_per_lap", "submissions_per_racer",
+)  # fmt: skip
 VIDEO = "video.webm"
 
 
@@ -304,16 +310,63 @@ def event_close(*, event: Event) -> Event:
     return event
 
 
-def community_race_create(*, organiser: AbstractBaseUser, fields: dict) -> Event:
+def community_race_create(
+    *, organiser: AbstractBaseUser, fields: dict, form_token: str = ""
+) -> tuple[Event, bool]:
     """A private event that ``organiser`` runs (a community race), entered through its
-    invitation link; ``ValidationError`` lists what is wrong with ``fields``."""
+    invitation link; ``ValidationError`` lists what is wrong with ``fields``. The form's
+    one-time ``form_token`` makes it idempotent: the same form sent again (Back and submit, a
+    double click) gives back the race it created. The race, and whether it is new."""
+    if form_token and (made := _race_from_form(organiser, form_token)):
+        return made, False
     event = Event(**fields, organiser=organiser, public=False, season=None, division=Division.OPEN)
     event.slug = _free_slug(fields.get("name") or "race")
+    event.form_token = form_token
     event.ensure_invite()
     event.full_clean()
-    event.save()
-    event.participants.add(organiser)
-    return event
+    if made := _same_race_just_made(organiser, event):
+        return made, False
+    try:
+        with transaction.atomic():
+            event.save()
+            event.participants.add(organiser)
+    except IntegrityError:  # the same form, sent twice at once: the other request made it
+        if made := _race_from_form(organiser, form_token):
+            return made, False
+        raise
+    return event, True
+
+
+def _race_from_form(organiser: AbstractBaseUser, form_token: str) -> Event | None:
+    return Event.objects.filter(organiser=organiser, form_token=form_token).first()
+
+
+def _same_race_just_made(organiser: AbstractBaseUser, event: Event) -> Event | None:
+    """The organiser's race with ``event``'s name and rules made within ``RESUBMIT_WINDOW``,
+    its times within that much of ``event``'s: the form sent again after Back, when the
+    browser fetched the form anew (with a new token) but kept what was typed in it."""
+    since = timezone.now() - RESUBMIT_WINDOW
+    for made in Event.objects.filter(organiser=organiser, public=False, created_at__gte=since):
+        if all(getattr(made, name) == getattr(event, name) for name in SAME_RACE) and all(
+            abs(getattr(made, name) - getattr(event, name)) <= RESUBMIT_WINDOW
+            for name in ("opens_at", "closes_at")
+        ):
+            return made
+    return None
+
+
+class RaceNotDeleted(Refused):
+    """The organiser cannot delete this community race; the message says why."""
+
+
+def community_race_delete(*, event: Event) -> None:
+    """Delete a community race nobody has raced in yet (``RaceNotDeleted`` once it has
+    submissions: their racers' runs and places stay; the organiser may close it instead)."""
+    with transaction.atomic():
+        reason = selectors.race_deletion_refusal(event=event)
+        if reason:
+            raise RaceNotDeleted(reason)
+        event.delete()
 
 
 def _free_slug(name: str) -> str:

@@ -12,6 +12,8 @@ urlpatterns = [
     path("races/community/new/", views.community_race_create, name="community-race-create"),
     path("races/community/<slug:slug>/", views.community_race_manage,
          name="community-race-manage"),
+    path("races/community/<slug:slug>/delete", views.community_race_delete,
+         name="community-race-delete"),
     path("races/community/<slug:slug>/close", views.community_race_close,
          name="community-race-close"),
     path("races/community/<slug:slug>/remove/<int:user_pk>", views.community_race_remove,

@@ -176,13 +176,24 @@ def community_race_create(request: HttpRequest) -> HttpResponse:
     form = CommunityRaceForm(request.POST or None, organiser=request.user)
     if request.method == "POST" and form.is_valid():
         try:
-            event = services.community_race_create(
-                organiser=request.user, fields=form.fields_for_service()
+            event, created = services.community_race_create(
+                organiser=request.user,
+                fields=form.fields_for_service(),
+                form_token=form.cleaned_data["form_token"],
             )
         except ValidationError as invalid:
             form.add_error(None, invalid)
         else:
-            messages.success(request, "Your race is set up: send its invitation link to racers.")
+            if created:
+                messages.success(
+                    request, "Your race is set up: send its invitation link to racers."
+                )
+            else:
+                messages.info(
+                    request,
+                    f"You created {event.name} with these settings a moment ago, so here it "
+                    "is: no second race. To organise another, give it another name.",
+                )
             return redirect("racing:community-race-manage", slug=event.slug)
     return render(
         request,
@@ -211,6 +222,25 @@ def community_race_manage(request: HttpRequest, slug: str) -> HttpResponse:
             "participants": event.participants.order_by("username"),
             "removed": event.removed.order_by("username"),
         },
+    )
+
+
+@login_required
+def community_race_delete(request: HttpRequest, slug: str) -> HttpResponse:
+    """Asks first (GET), then deletes a race nobody has submitted to (POST)."""
+    event = _get_organised_event(request, slug)
+    if request.method == "POST":
+        try:
+            services.community_race_delete(event=event)
+        except services.RaceNotDeleted as refused:
+            messages.error(request, str(refused))
+            return redirect("racing:community-race-manage", slug=event.slug)
+        messages.success(request, f"{event.name} is deleted.")
+        return redirect("racing:race-list")
+    return render(
+        request,
+        "racing/community_race_delete.html",
+        {"event": event, "refusal": selectors.race_deletion_refusal(event=event)},
     )
 
 

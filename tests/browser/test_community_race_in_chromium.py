@@ -1,5 +1,6 @@
 """A community race in Chromium: the organiser copies the invitation and is asked before taking
-a racer out or closing the race; an invitee without an account signs up and comes back to it."""
+a racer out or closing the race; going Back and sending the form again, or a double click, makes
+one race; an invitee without an account signs up and comes back to it."""
 
 import re
 
@@ -97,3 +98,21 @@ def test_the_race_form_shows_only_the_fields_of_the_race_type(page: Page, alice,
     expect(page.get_by_label("Bot cars", exact=True)).to_be_visible()
     expect(page.locator(".track-choice img").first).to_be_visible()
     assert User.objects.count() == 1
+
+
+def test_back_and_submit_again_or_a_double_click_makes_one_race(page: Page, alice, tracks):
+    log_in(page, "alice", PASSWORD)
+    race = organise(page)
+    page.go_back()
+    expect(page.get_by_label("Name")).to_have_value("Friday night")
+    page.get_by_role("button", name="Create the race").click()
+    same = page.get_by_text("You created Friday night with these settings a moment ago")
+    expect(same).to_be_visible()
+    expect(page).to_have_url(re.compile(f"/races/community/{race.slug}/$"))
+    assert Event.objects.filter(name="Friday night").count() == 1
+
+    page.goto("/races/community/new/")
+    page.get_by_label("Name").fill("Saturday")
+    page.get_by_role("button", name="Create the race").dblclick()
+    expect(page.get_by_role("heading", name=re.compile("Saturday"))).to_be_visible()
+    assert Event.objects.filter(name="Saturday").count() == 1

@@ -1,5 +1,7 @@
 """Fixtures of the league tests: a community race that alice organises."""
 
+import secrets
+
 import pytest
 from django.urls import reverse
 
@@ -7,8 +9,9 @@ from racing.models import Event
 
 
 def race_form(**fields) -> dict:
-    """The community race form as the page posts it."""
+    """The community race form as the page posts it, with a one-time token of its own."""
     return {
+        "form_token": secrets.token_urlsafe(32),
         "name": "Friday night", "track": "pitlane-oval", "direction": "counterclockwise",
         "race_type": "TIME_TRIAL", "opens_at": "2026-01-01T00:00", "closes_at": "2099-01-01T00:00",
         "ranking_method": "BEST_LAP", "laps_required": 1, "laps_to_drive": 3,

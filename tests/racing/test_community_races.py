@@ -119,3 +119,83 @@ def test_a_head_to_bot_race_without_its_bot_cars_says_so_and_keeps_them_shown(
     assert response.context["form"].errors["bot_count"] == ["Say how many bot cars the race has."]
     assert '<div data-race-fields="HEAD_TO_BOT" >' in response.text
     assert 'value="1.5"' in response.text
+
+
+def test_the_same_race_form_sent_twice_creates_one_race(client, alice, tracks):
+    client.force_login(alice)
+    form = race_form()
+    first = client.post(reverse("racing:community-race-create"), form)
+    again = client.post(reverse("racing:community-race-create"), form, follow=True)
+    race = Event.objects.get()
+    assert first.url == reverse("racing:community-race-manage", args=[race.slug])
+    assert again.redirect_chain[-1][0] == first.url
+    assert "You created Friday night with these settings a moment ago" in again.text
+
+
+def test_the_same_race_sent_again_from_a_fresh_form_gives_back_the_race_just_made(
+    client, alice, tracks
+):
+    """Back may fetch the form anew (a new token) while the browser keeps what was typed."""
+    client.force_login(alice)
+    client.post(reverse("racing:community-race-create"), race_form())
+    again = client.post(reverse("racing:community-race-create"), race_form())
+    race = Event.objects.get()
+    assert again.url == reverse("racing:community-race-manage", args=[race.slug])
+
+    client.post(reverse("racing:community-race-create"), race_form(name="Saturday"))
+    client.post(reverse("racing:community-race-create"), race_form(laps_to_drive=5))
+    assert Event.objects.count() == 3
+
+
+def test_a_race_form_without_its_token_asks_to_check_and_send_it_again(client, alice, tracks):
+    client.force_login(alice)
+    response = client.post(reverse("racing:community-race-create"), race_form(form_token=""))
+    assert response.status_code == 200 and not Event.objects.exists()
+    assert "This page was out of date: check the race below, then create it again." in (
+        response.text
+    )
+    token = re.search(r'name="form_token" value="([\w-]+)"', response.text)[1]
+    client.post(reverse("racing:community-race-create"), race_form(form_token=token))
+    assert Event.objects.get().form_token == token
+
+
+def test_the_organiser_deletes_a_race_nobody_has_entered_after_being_asked(
+    client, community_race, alice
+):
+    client.force_login(alice)
+    delete = reverse("racing:community-race-delete", args=[community_race.slug])
+    assert (
+        delete
+        in client.get(reverse("racing:community-race-manage", args=[community_race.slug])).text
+    )
+    asked = client.get(delete)
+    assert "Delete Friday night?" in asked.text and "Nobody has submitted to it yet" in asked.text
+    assert Event.objects.filter(pk=community_race.pk).exists()  # asking deletes nothing
+    done = client.post(delete, follow=True)
+    assert done.redirect_chain[-1][0] == reverse("racing:race-list")
+    assert "Friday night is deleted." in done.text
+    assert not Event.objects.filter(pk=community_race.pk).exists()
+
+
+def test_a_race_with_submissions_is_not_deleted_and_the_organiser_is_told_why(
+    client, community_race, alice, bob
+):
+    community_race.participants.add(bob)
+    scored(community_race, bob, 10_000)
+    client.force_login(alice)
+    delete = reverse("racing:community-race-delete", args=[community_race.slug])
+    reason = "Friday night has 1 submission, so it stays"
+    asked = client.get(delete)
+    assert reason in asked.text and "Delete Friday night</button>" not in asked.text
+    refused = client.post(delete, follow=True)
+    assert reason in refused.text
+    assert Event.objects.filter(pk=community_race.pk).exists()
+
+
+def test_only_the_organiser_deletes_their_race(client, community_race, bob):
+    community_race.participants.add(bob)
+    client.force_login(bob)
+    delete = reverse("racing:community-race-delete", args=[community_race.slug])
+    assert client.get(delete).status_code == 404
+    assert client.post(delete).status_code == 404
+    assert Event.objects.filter(pk=community_race.pk).exists()
