@@ -15,6 +15,7 @@ from racing import selectors
 from racing.models import Event, RaceType, RankingMethod
 from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
 from training.models import RLModel, Track
+from training import selectors as training_selectors
 
 LOCAL = "%Y-%m-%dT%H:%M"  # what <input type="datetime-local"> sends
 RACE_LENGTH = timedelta(days=7)  # a new community race closes a week after it opens
@@ -42,6 +43,7 @@ class SubmissionForm(forms.Form):
         self.fields["event"].label_from_instance = _event_label
         self.fields["model"].queryset = selectors.models_ready_for(racer=racer)
 
+        self.fields["model"].label_from_instance = _model_label
     def clean(self) -> dict:
         data = super().clean()
         if data.get("event") and data.get("model"):
@@ -54,6 +56,13 @@ class SubmissionForm(forms.Form):
 
 
 def _event_label(event: Event) -> str:
+def _model_label(model: RLModel) -> str:
+    """A ready model by name, said to be untrained where it is (its entry would be refused)."""
+    if training_selectors.model_untrained(model=model):
+        return f"{model.name} (Ready: {training_selectors.UNTRAINED})"
+    return model.name
+
+
     rule = f"{event.get_race_type_display().lower()} on {event.track}"
     return f"{event.name} ({rule}, closes {local_text(event.closes_at)})"
 

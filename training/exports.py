@@ -168,6 +168,8 @@ def _checkpoint(model: RLModel, which: str) -> bytes:
     name = selectors.model_checkpoint(model=model, which=which)
     if name is None:
         raise ExportRefused("This model has no trained weights yet: train it first.")
+    if not selectors.checkpoint_trained(model=model, name=name):
+        raise ExportRefused(selectors.untrained_refusal(model=model, doing="download"))
     return artifacts.read(name)
 
 

@@ -35,8 +35,8 @@ def models_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:
 
 def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
     """The racer's models, each with ``training``: its latest job (or None) and, on that job,
-    ``queue_position`` (None unless it waits) and ``clock``: two queries, and one per waiting
-    job."""
+    ``queue_position`` (None unless it waits) and ``clock``; and ``status_text``, its status
+    in words (``model_status_display``): two queries, and one per waiting job."""
     now = timezone.now()
     newest_first = TrainingJob.objects.order_by("-created_at")
     models = list(
@@ -46,6 +46,11 @@ def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
     )
     for model in models:
         model.training = model.jobs_newest_first[0] if model.jobs_newest_first else None
+        saved = [job.last_checkpoint for job in model.jobs_newest_first if job.last_checkpoint]
+        model.status_text = model_status_display(
+            model=model,
+            untrained=model_untrained(model=model, last_checkpoint=saved[0] if saved else ""),
+        )
         if model.training is not None:
             model.training.queue_position = jobs.queue_position(model.training)
             model.training.clock = training_clock(job=model.training, now=now)
@@ -183,7 +188,7 @@ def training_status(*, job: TrainingJob) -> dict:
         "episodes": job.episodes,
         "steps": job.steps,
         "model_status": model.status,
-        "model_status_display": model.get_status_display(),
+        "model_status_display": model_status_display(model=model),
         "workers": model.workers,
     }
 
@@ -251,7 +256,66 @@ def model_checkpoint(*, model: RLModel, which: str = "best") -> str | None:
 
 
 def _checkpoint_of(job: TrainingJob, which: str) -> str:
-    return (job.best_checkpoint if which == "best" else "") or job.last_checkpoint
+    best = job.best_checkpoint if which == "best" else ""
+    if best and artifacts.checkpoint_iteration(best) == 0:
+        # The weights training started from stand for the best only until an iteration's
+        # evaluation comes in (iteration 0 is never evaluated): a job stopped before that has
+        # the last iteration's as its best, as nothing was measured better.
+        best = ""
+    return best or job.last_checkpoint
+
+
+UNTRAINED = "not trained yet (stopped before its first policy update)"
+
+
+def checkpoint_trained(*, model: RLModel, name: str) -> bool:
+    """Whether the stored checkpoint ``name`` of ``model`` holds trained weights: the one
+    definition of "trained" that races, downloads, clones and the model's status go by.
+
+    Weights saved after a policy update (iteration 1 on) are trained, and so are those an import
+    brought and a clone's starting weights (its source's trained best). The weights a new model
+    starts from (iteration 0) are not: a model stopped before its first policy update has only
+    those, random ones."""
+    if artifacts.checkpoint_iteration(name) != 0:
+        return True
+    return default_storage.exists(artifacts.path(model, artifacts.CLONED_WEIGHTS))
+
+
+def model_trained_checkpoint(*, model: RLModel, which: str = "best") -> str | None:
+    """The model's ``which`` checkpoint (as ``model_checkpoint``) when it holds trained weights
+    (``checkpoint_trained``); None when the model has none."""
+    name = model_checkpoint(model=model, which=which)
+    return name if name and checkpoint_trained(model=model, name=name) else None
+
+
+def model_untrained(*, model: RLModel, last_checkpoint: str | None = None) -> bool:
+    """Whether a READY model has no trained checkpoint: stopped before its first policy update,
+    it would drive with the weights training started from. ``last_checkpoint``: its newest
+    training's, when the caller has it (a list's prefetched jobs), else looked up."""
+    if model.status != RLModel.Status.READY:
+        return False
+    if last_checkpoint is None:
+        last_checkpoint = model_checkpoint(model=model, which="last") or ""
+    return not (last_checkpoint and checkpoint_trained(model=model, name=last_checkpoint))
+
+
+def untrained_refusal(*, model: RLModel, doing: str) -> str:
+    """Why a model with no trained checkpoint cannot be raced or downloaded (``doing``: "race",
+    "download"), in a racer's words."""
+    return (
+        f"{model.name} is {UNTRAINED}: its weights are the random ones training starts from, so "
+        f"there is nothing to {doing} yet. You may still evaluate it; to {doing} a model, train "
+        "one past its first policy update."
+    )
+
+
+def model_status_display(*, model: RLModel, untrained: bool | None = None) -> str:
+    """The model's status in the racer's words: "Ready: not trained yet (...)" for a ready
+    model with no trained checkpoint (``untrained``, when the caller knows it)."""
+    if untrained is None:
+        untrained = model_untrained(model=model)
+    text = model.get_status_display()
+    return f"{text}: {UNTRAINED}" if untrained else text
 
 
 @dataclass(frozen=True)
@@ -261,6 +325,7 @@ class CheckpointChoice:
     which: str  # "best" or "last"
     iteration: int | None  # None: weights that came with an import
     evaluation_completion: float | None  # [%] in that iteration's evaluation episodes
+    trained: bool = True  # ``checkpoint_trained``
 
     @property
     def label(self) -> str:
@@ -268,7 +333,8 @@ class CheckpointChoice:
             return EvaluationJob.Checkpoint(self.which).label
         name = "Best" if self.which == EvaluationJob.Checkpoint.BEST else "Last"
         if self.iteration == 0:
-            return f"{name}: the weights training started from"
+            started = f"{name}: the weights training started from"
+            return started if self.trained else f"{started}, {UNTRAINED}"
         text = f"{name}: iteration {self.iteration}"
         if self.evaluation_completion is not None:
             text += f", {self.evaluation_completion:.0f}% evaluation completion"
@@ -281,17 +347,20 @@ def model_checkpoint_choices(*, model: RLModel) -> list[CheckpointChoice]:
     job = _newest_trained_job(model)
     if job is None:
         return []
-    iterations = {
-        which: artifacts.checkpoint_iteration(_checkpoint_of(job, which))
-        for which in EvaluationJob.Checkpoint.values
-    }
+    names = {which: _checkpoint_of(job, which) for which in EvaluationJob.Checkpoint.values}
+    iterations = {which: artifacts.checkpoint_iteration(name) for which, name in names.items()}
     completions = dict(
         Iteration.objects.filter(job=job, number__in=iterations.values()).values_list(
             "number", "evaluation_completion"
         )
     )
     return [
-        CheckpointChoice(which, number, completions.get(number))
+        CheckpointChoice(
+            which,
+            number,
+            completions.get(number),
+            trained=number != 0 or checkpoint_trained(model=model, name=names[which]),
+        )
         for which, number in iterations.items()
     ]
 

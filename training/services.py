@@ -267,9 +267,11 @@ def _model_save(
     source = settings.cloned_from
     if source is not None and source.owner_id != owner.pk:
         raise configuration.Invalid({"cloned_from": "You can clone only your own models."})
-    weights = selectors.model_checkpoint(model=source) if source is not None else None
+    weights = selectors.model_trained_checkpoint(model=source) if source is not None else None
     if source is not None and weights is None:
-        raise configuration.Invalid({"cloned_from": "This model has no trained weights to clone."})
+        raise configuration.Invalid({"cloned_from": (
+            f"{source.name} is {selectors.UNTRAINED}: it has no trained weights to clone."
+        )})  # fmt: skip
     if source is not None:  # its weights are for its source's network
         settings = settings.replace(network_layout=source.network_layout)
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.QUEUED, **settings.row())
@@ -371,6 +373,8 @@ def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJ
         raise EvaluationRefused(
             f"The model {model.name} has no trained weights yet; train it first."
         )
+    if purpose == RLModel.Status.SUBMITTING and selectors.model_untrained(model=model):
+        raise EvaluationRefused(selectors.untrained_refusal(model=model, doing="race"))
     evaluation = EvaluationJob.objects.create(model=model, **fields)
     lifecycle.MODEL.move(model, purpose, only_from=frozenset({RLModel.Status.READY}))
     return evaluation

@@ -422,6 +422,7 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
         log_source = ""
     return render(
         request,
+    untrained = selectors.model_untrained(model=model)
         "training/model_detail.html",
         {
             "model": model,
@@ -435,6 +436,9 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "can_delete": model.status in RLModel.DELETABLE,
             "checkpoints": selectors.model_checkpoint_choices(model=model),
             "workers_range": range(model.workers),
+            "untrained": untrained,
+            "untrained_words": selectors.UNTRAINED,
+            "model_status_text": selectors.model_status_display(model=model, untrained=untrained),
             "clock": selectors.training_clock(job=job) if job else None,
             "log_lines": selectors.job_log(job=job, source=log_source) if job else [],
             "log_source": log_source,
@@ -677,7 +681,9 @@ def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
         request,
         "training/evaluation_create.html",
         {"model": model, "form": form, "refusal": refusal,
-         "tracks": selectors.tracks_available()},
+         "tracks": selectors.tracks_available(),
+         "untrained": selectors.model_untrained(model=model),
+         "untrained_words": selectors.UNTRAINED},
         status=429 if limited else
         400 if form.errors or (refusal and request.method == "POST") else 200,
     )  # fmt: skip
