@@ -249,7 +249,11 @@ def read_archive(archive: IO[bytes]) -> Members:
                 if member.isdir():
                     continue
                 if not member.isfile():
-                    raise ImportRefused(f"{member.name} is a link or a device: models hold files.")
+                    raise ImportRefused(
+                        f"{member.name!r} is a link or a device: models hold files."
+                    )
+                if not path:
+                    raise ImportRefused(f"{member.name!r} is a file without a name.")
                 unpacked += member.size
                 if unpacked > MAX_UNPACKED:
                     raise ImportRefused(f"The archive unpacks to over {size(MAX_UNPACKED)}.")
@@ -307,6 +311,10 @@ def size(limit: int) -> str:
 
 
 def _safe_path(name: str) -> str:
+    """``name`` as a relative path inside the archive, its ``.`` parts taken off: '' for the
+    archive's own folder (``./``, as ``tar -C folder .`` packs it), which only a folder may be;
+    ``ImportRefused`` for a name that is empty, absolute, climbs out (``..``) or is written for
+    another system (backslashes, a drive, NUL)."""
     path = PurePosixPath(name)
     if (
         not name
@@ -315,10 +323,10 @@ def _safe_path(name: str) -> str:
         or ".." in path.parts
         or "\\" in name
         or "\x00" in name
-        or ":" in path.parts[0]
+        or any(":" in part for part in path.parts[:1])
     ):
         raise ImportRefused(f"{name!r} is not a relative path inside the archive.")
-    return "/".join(part for part in path.parts if part != ".")
+    return "/".join(path.parts)  # PurePosixPath leaves out "." and empty parts
 
 
 def _without_top_folder(members: Members) -> Members:
