@@ -59,6 +59,17 @@ def event_visible_to(*, event: Event, user: AbstractBaseUser) -> bool:
     )
 
 
+def submission_visible_to(*, submission: Submission, user: AbstractBaseUser) -> bool:
+    """A run's page and video are for its racer and staff, and for everyone who may see its
+    event once the run stands on the leaderboard (as the racer's best)."""
+    if user.is_authenticated and (user.pk == submission.racer_id or user.is_staff):
+        return True
+    return (
+        event_visible_to(event=submission.event, user=user)
+        and Ranking.objects.filter(submission=submission).exists()
+    )
+
+
 # Leaderboards
 
 

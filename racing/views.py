@@ -11,7 +11,7 @@ from django.views.decorators.http import require_POST
 from common import ratelimits
 from racing import selectors, services
 from racing.forms import CommunityRaceForm, SubmissionForm
-from racing.models import Division, Event, Ranking, Season, Submission
+from racing.models import Division, Event, Season, Submission
 from training import artifacts
 from training import selectors as training_selectors
 
@@ -128,16 +128,27 @@ def submission_list(request: HttpRequest) -> HttpResponse:
 
 
 def _get_submission_for_user(request: HttpRequest, pk: int) -> Submission:
-    """The racer's own submission (any, for staff); 404 otherwise."""
-    submissions = Submission.objects.select_related("event", "event__track", "racer")
-    if request.user.is_staff:
-        return get_object_or_404(submissions, pk=pk)
-    return get_object_or_404(submissions, pk=pk, racer=request.user)
+    """The submission, if this user may see it (``selectors.submission_visible_to``); 404
+    otherwise."""
+    submission = get_object_or_404(
+        Submission.objects.select_related("event", "event__track", "event__season", "racer"),
+        pk=pk,
+    )
+    if not selectors.submission_visible_to(submission=submission, user=request.user):
+        raise Http404("No such submission.")
+    return submission
 
 
-@login_required
 def submission_detail(request: HttpRequest, pk: int) -> HttpResponse:
-    submission = _get_submission_for_user(request, pk)
+    """A run's page: its racer's own while it races, and everyone's once it stands on the
+    leaderboard (the leaderboard's "Watch" opens it)."""
+    try:
+        submission = _get_submission_for_user(request, pk)
+    except Http404:
+        if request.user.is_authenticated:
+            raise
+        return redirect_to_login(request.get_full_path())  # a racer's link, logged out
+    ranking = selectors.ranking_of(event=submission.event, racer=submission.racer)
     return render(
         request,
         "racing/submission_detail.html",
@@ -145,22 +156,16 @@ def submission_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "submission": submission,
             "event": submission.event,
             "laps": list(submission.laps.all()),
-            "ranking": selectors.ranking_of(event=submission.event, racer=submission.racer),
+            "ranking": ranking,
+            "own": request.user.pk == submission.racer_id,
         },
     )
 
 
 def submission_video(request: HttpRequest, pk: int) -> HttpResponse:
-    """A race's video: for its racer and staff, and for everyone who may see the event once
-    the submission stands on its leaderboard."""
-    submission = get_object_or_404(Submission.objects.select_related("event"), pk=pk)
-    user = request.user
-    own = user.is_authenticated and (user.pk == submission.racer_id or user.is_staff)
-    on_board = (
-        selectors.event_visible_to(event=submission.event, user=user)
-        and Ranking.objects.filter(submission=submission).exists()
-    )
-    if not submission.video or not (own or on_board):
+    """A race's video, for whoever may see its submission."""
+    submission = _get_submission_for_user(request, pk)
+    if not submission.video:
         raise Http404("No such video.")
     filename = f"{submission.event.slug}-{submission.model_name}-{submission.pk}.webm"
     return artifacts.download(

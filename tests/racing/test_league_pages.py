@@ -99,3 +99,51 @@ def test_the_submit_form_names_when_events_close_in_the_racers_time_zone(alice, 
     with timezone.override(ZoneInfo("Asia/Tokyo")):
         tokyo = timezone.localtime(trial.closes_at)
         assert label(trial).endswith(f"closes {tokyo:%-d %b %Y, %H:%M})")
+
+
+def test_a_visitor_is_offered_to_sign_up_and_never_to_manage_a_race(client, ranked_event):
+    page = client.get(ranked_event.get_absolute_url())
+    assert "Manage this race" not in page.text
+    signup = f'href="{reverse("signup")}?next={ranked_event.get_absolute_url()}"'
+    assert signup in page.text and "Sign up to race" in page.text
+    assert "Sign up to race" in client.get(reverse("racing:race-list")).text
+
+
+def test_only_the_organiser_of_a_community_race_is_offered_to_manage_it(
+    client, community_race, alice, bob
+):
+    community_race.participants.add(bob)
+    manage = reverse("racing:community-race-manage", args=[community_race.slug])
+    client.force_login(bob)
+    page = client.get(community_race.get_absolute_url())
+    assert manage not in page.text and "Sign up to race" not in page.text
+    client.force_login(alice)
+    assert manage in client.get(community_race.get_absolute_url()).text
+
+
+def test_watch_opens_the_runs_page_for_everyone_once_it_is_on_the_leaderboard(
+    client, ranked_event, alice, bob
+):
+    fastest = ranked_event.rankings.get(racer=bob).submission
+    board = client.get(ranked_event.get_absolute_url())
+    assert f'href="{fastest.get_absolute_url()}#video"' in board.text
+
+    page = client.get(fastest.get_absolute_url())  # a visitor, not logged in
+    assert page.status_code == 200
+    assert "<strong data-racer>bob</strong>" in page.text and "b1 in " in page.text
+    assert "place on the leaderboard: <strong data-place>1</strong>" in page.text
+    assert "your place" not in page.text
+    assert "data-score>0:29.450</strong>" in page.text and page.text.count("0:29.450") >= 4
+    assert "Ranked by <strong>average of the first 3 consecutive laps</strong>" in page.text
+    assert "No video was kept of this run." in page.text
+
+
+def test_a_run_off_the_leaderboard_stays_its_racers_own(client, ranked_event, alice, bob):
+    slower = scored(ranked_event, bob, 40_000, 40_000, 40_000, model_name="b2")
+    assert client.get(slower.get_absolute_url()).status_code == 302  # to log in
+    client.force_login(alice)
+    assert client.get(slower.get_absolute_url()).status_code == 404
+    assert client.get(reverse("racing:submission-video", args=[slower.pk])).status_code == 404
+    client.force_login(bob)
+    page = client.get(slower.get_absolute_url())
+    assert "your place on the leaderboard" in page.text and "an earlier, better run" in page.text
