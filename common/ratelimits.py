@@ -30,6 +30,7 @@ WHAT = {
     "sign-up": "new accounts from your address",
     "validate": "reward function checks",
     "import": "imports",
+    "import-refused": "refused or unconfirmed imports",
     "create": "new models",
     "evaluate": "evaluations and race entries",
     "rescore": "re-scorings",
@@ -51,21 +52,40 @@ class Limited(Exception):
 def over(request: HttpRequest, action: str, key: str | None = None) -> Limited | None:
     """For a POST: count it as an attempt at ``action``, by ``key`` (the signed-in racer where
     None); the ``Limited`` when that is over the rate, else None (and for anything else)."""
+    usage = _usage(request, action, key, increment=True)
+    if usage is not None and usage["should_limit"]:
+        return Limited(action, usage["time_left"])
+    return None
+
+
+def reached(request: HttpRequest, action: str, key: str | None = None) -> Limited | None:
+    """For a POST: the ``Limited`` when the attempts at ``action`` counted so far (``count``)
+    fill its rate, so that one more would be over it; this one is not counted. For an action
+    counted by its outcome (an import counts only when it arrives), once that is known."""
+    usage = _usage(request, action, key, increment=False)
+    if usage is not None and usage["count"] >= usage["limit"]:
+        return Limited(action, usage["time_left"])
+    return None
+
+
+def count(request: HttpRequest, action: str, key: str | None = None) -> None:
+    """For a POST: count it as an attempt at ``action`` (which ``reached`` checked before)."""
+    _usage(request, action, key, increment=True)
+
+
+def _usage(request: HttpRequest, action: str, key: str | None, *, increment: bool) -> dict | None:
     if request.method != "POST":
         return None
     if key is None:
         key = f"racer:{request.user.pk}"
     try:
-        usage = get_usage(
+        return get_usage(
             request, group=f"pitlane:{action}", key=lambda group, request: key,
-            rate=settings.PITLANE_RATES[action], increment=True,
+            rate=settings.PITLANE_RATES[action], increment=increment,
         )  # fmt: skip
     except RedisError as error:
         logger.warning("Rate limit %s not counted: %s", action, error)
         return None
-    if usage is not None and usage["should_limit"]:
-        return Limited(action, usage["time_left"])
-    return None
 
 
 def refuse(form: BaseForm, limited: Limited) -> None:

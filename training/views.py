@@ -565,7 +565,9 @@ class _ModelImportAttempt:
         self.outcome: imports.Imported | Exception | None = None
         self.kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
         self.form = ModelImportForm(request.POST, request.FILES, owner=request.user, kept=self.kept)
-        self.limited = ratelimits.over(request, "import")
+        self.limited = ratelimits.reached(request, "import") or ratelimits.reached(
+            request, "import-refused"
+        )  # counted once the outcome is known (_import_counted)
         if self.limited:
             ratelimits.refuse(self.form, self.limited)
         elif self.form.is_valid():
@@ -583,6 +585,7 @@ class _ModelImportAttempt:
         if self.limited:
             form.keep(self.kept)  # the racer tries again later with the archive they chose
             return render(request, "training/model_import.html", {"form": form}, status=429)
+        _import_counted(request, outcome)
         refused = False
         if isinstance(outcome, imports.Imported):
             imports.upload_discard(session=request.session)
@@ -615,6 +618,17 @@ class _ModelImportAttempt:
 
 
 RACERS_TO_FIX = {"name", "quota", "max_minutes"}  # an import's problems the racer can fix
+
+
+def _import_counted(request: HttpRequest, outcome: object) -> None:
+    """Count a posted import against the racer's limits: one that arrived against "import";
+    any other attempt (refused, or a preview to confirm) against the looser "import-refused", so
+    that correcting an archive does not use up the hour's imports (a check that could not run
+    counts against neither)."""
+    if isinstance(outcome, imports.Imported):
+        ratelimits.count(request, "import")
+    elif not isinstance(outcome, CHECK_FAILURES):
+        ratelimits.count(request, "import-refused")
 
 
 def _import_errors(form: ModelImportForm, errors: dict[str, str]) -> None:

@@ -161,13 +161,14 @@ CELERY_BROKER_TRANSPORT_OPTIONS = {
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
 # Rate limits (common.ratelimits; README, "Limits"): a count per period, per racer unless
-# said: sign-in per racer name and per address, sign-up per address.
+# said: sign-in per racer name and per address, sign-up per address. "import" counts the imports
+# that arrived, "import-refused" the attempts that did not (a racer correcting an archive).
 PITLANE_RATES = {
     action: env.rate(f"PITLANE_RATE_{action.upper().replace('-', '_')}", default)
     for action, default in {
         "sign-in-account": "10/15m", "sign-in-address": "30/15m", "sign-up": "5/h",
-        "validate": "30/10m", "import": "10/h", "create": "20/h", "evaluate": "30/h",
-        "rescore": "20/h",
+        "validate": "30/10m", "import": "10/h", "import-refused": "30/h", "create": "20/h",
+        "evaluate": "30/h", "rescore": "20/h",
     }.items()
 }  # fmt: skip
 RATELIMIT_USE_CACHE = "default"

@@ -1,0 +1,191 @@
+"""An archive as racers pack it imports; a malformed one is refused in words, never with a
+server error; and only imports that arrive count against the racer's hourly import limit."""
+
+from __future__ import annotations
+
+import html
+import io
+import subprocess
+import tarfile
+
+import pytest
+from django.core.files.uploadedfile import SimpleUploadedFile
+from django.urls import reverse
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from tests.training.factories import ready_model
+from tests.training.test_imports import CHECKED_IMPORT, deepracer_export, tar_gz, virtual_archive
+from training import imports
+from training.models import RLModel
+
+pytestmark = pytest.mark.django_db
+
+
+def packed_from_a_folder(archive: bytes, folder) -> bytes:
+    """``archive`` unpacked into ``folder`` and packed again as racers do:
+    ``tar czf m.tar.gz -C folder .``, which starts with the folder itself, ``./``."""
+    with tarfile.open(fileobj=io.BytesIO(archive), mode="r:gz") as tar:
+        tar.extractall(folder, filter="data")
+    packed = folder.parent / "m.tar.gz"
+    subprocess.run(["tar", "czf", str(packed), "-C", str(folder), "."], check=True)
+    return packed.read_bytes()
+
+
+def test_a_model_folder_packed_with_tar_c_folder_dot_imports(alice, bob, tracks, tmp_path):
+    data = packed_from_a_folder(virtual_archive(ready_model(alice)), tmp_path / "folder")
+    with tarfile.open(fileobj=io.BytesIO(data)) as tar:
+        assert tar.getnames()[0] == "."  # the bare ./ entry that answered 500
+    imported = imports.import_model(owner=bob, archive=io.BytesIO(data))
+    assert imported.model.status == RLModel.Status.READY
+    assert imported.model.name == "straight-ahead"
+
+
+@CHECKED_IMPORT
+def test_the_import_page_takes_a_folder_packed_with_tar_c_folder_dot(
+    alice, tracks, client, tmp_path
+):
+    data = packed_from_a_folder(virtual_archive(ready_model(alice)), tmp_path / "folder")
+    client.force_login(alice)
+    upload = SimpleUploadedFile("m.tar.gz", data)
+    response = client.post(reverse("training:model-import"), {"archive": upload, "name": "packed"})
+    model = RLModel.objects.get(owner=alice, name="packed")
+    assert response.status_code == 302 and response["Location"].endswith(f"/models/{model.pk}/")
+
+
+def named(name: str, kind: bytes = tarfile.REGTYPE, **attributes):
+    """A tweak for ``tar_gz``: one more member called ``name``, of type ``kind``."""
+
+    def tweak(tar: tarfile.TarFile) -> None:
+        info = tarfile.TarInfo(name)
+        info.type = kind
+        for key, value in attributes.items():
+            setattr(info, key, value)
+        info.size = 1 if kind == tarfile.REGTYPE else 0
+        tar.addfile(info, io.BytesIO(b"x") if kind == tarfile.REGTYPE else None)
+
+    return tweak
+
+
+def pax_named(name: str):
+    """A member whose name comes in a pax header, where a NUL or any character may stand."""
+
+    def tweak(tar: tarfile.TarFile) -> None:
+        info = tarfile.TarInfo("placeholder")
+        info.pax_headers = {"path": name}
+        info.size = 1
+        tar.addfile(info, io.BytesIO(b"x"))
+
+    return tweak
+
+
+MALFORMED = {
+    "empty": named(""),
+    "dot as a file": named("."),
+    "dot slash as a file": named("./", tarfile.REGTYPE),
+    "parent": named(".."),
+    "up and out": named("../x"),
+    "in and out": named("a/../../b"),
+    "absolute": named("/etc/passwd"),
+    "backslashes": named("a\\..\\..\\b"),
+    "a drive": named("C:/x"),
+    "NUL": pax_named("a\x00b"),
+    "over-long": pax_named("a/" * 3000),
+    "symbolic link": named("l", tarfile.SYMTYPE, linkname="/etc/passwd"),
+    "hard link": named("h", tarfile.LNKTYPE, linkname="model_metadata.json"),
+    "device": named("d", tarfile.CHRTYPE, devmajor=1, devminor=3),
+    "fifo": named("p", tarfile.FIFOTYPE),
+    "folder called ..": named("..", tarfile.DIRTYPE),
+    "absolute folder": named("/", tarfile.DIRTYPE),
+}
+
+
+@pytest.mark.parametrize("case", MALFORMED)
+def test_each_malformed_member_name_is_refused_in_words(case):
+    archive = io.BytesIO(tar_gz(deepracer_export(), pax_format(MALFORMED[case])))
+    with pytest.raises(imports.ImportRefused) as refused:
+        imports.read_archive(archive)
+    assert str(refused.value).endswith(".") and "Traceback" not in str(refused.value)
+
+
+def pax_format(tweak):
+    def packed(tar: tarfile.TarFile) -> None:
+        tar.format = tarfile.PAX_FORMAT
+        tweak(tar)
+
+    return packed
+
+
+PIECES = st.sampled_from(["a", ".", "..", "/", "\\", ":", "\x00", " ", "é", "model_metadata.json"])
+KINDS = st.sampled_from([tarfile.REGTYPE, tarfile.DIRTYPE, tarfile.SYMTYPE, tarfile.CHRTYPE])
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(names=st.lists(st.lists(PIECES, max_size=8).map("".join), min_size=1, max_size=3),
+       kind=KINDS)  # fmt: skip
+def test_whatever_the_member_names_reading_an_archive_only_ever_refuses(names, kind):
+    def tweak(tar: tarfile.TarFile) -> None:
+        tar.format = tarfile.PAX_FORMAT
+        for name in names:
+            named(name, kind, linkname="x")(tar)
+
+    archive = io.BytesIO(tar_gz(deepracer_export(), tweak))
+    try:
+        members = imports.read_archive(archive)
+    except imports.ImportRefused:
+        return
+    assert all(path and not path.startswith("/") and ".." not in path.split("/")
+               for path in members)  # fmt: skip
+
+
+@CHECKED_IMPORT
+def test_the_import_page_answers_each_malformed_name_with_a_refusal_not_a_500(
+    alice, tracks, client, settings
+):
+    settings.PITLANE_RATES = {**settings.PITLANE_RATES, "import-refused": "100/m"}
+    client.force_login(alice)
+    for case, tweak in MALFORMED.items():
+        data = tar_gz(deepracer_export(), pax_format(tweak))
+        upload = SimpleUploadedFile("model.tar.gz", data)
+        response = client.post(reverse("training:model-import"), {"archive": upload})
+        assert response.status_code == 400, case
+        with pytest.raises(imports.ImportRefused) as refused:
+            imports.read_archive(io.BytesIO(data))
+        assert html.escape(str(refused.value)) in response.text, case
+        assert "Traceback" not in response.text
+    assert not RLModel.objects.exists()
+
+
+def post_import(client, data: bytes, name: str = ""):
+    upload = SimpleUploadedFile("model.tar.gz", data)
+    return client.post(reverse("training:model-import"), {"archive": upload, "name": name})
+
+
+NOT_AN_ARCHIVE = b"just some notes, not a model"
+
+
+@CHECKED_IMPORT
+def test_refused_imports_do_not_use_up_the_hours_imports(alice, tracks, client, settings):
+    settings.PITLANE_RATES = {**settings.PITLANE_RATES, "import": "2/h", "import-refused": "5/h"}
+    archive = virtual_archive(ready_model(alice))
+    client.force_login(alice)
+    for _ in range(2):
+        assert post_import(client, NOT_AN_ARCHIVE).status_code == 400
+    assert post_import(client, archive, "first").status_code == 302
+    assert post_import(client, archive, "second").status_code == 302
+    # Imports that arrived count: a third in the hour waits.
+    response = post_import(client, archive, "third")
+    assert response.status_code == 429
+    assert "Too many imports for now: try again in" in response.text
+    assert not RLModel.objects.filter(name="third").exists()
+
+
+def test_refused_imports_have_a_looser_limit_of_their_own_which_says_so(bob, client, settings):
+    settings.PITLANE_RATES = {**settings.PITLANE_RATES, "import": "1/h", "import-refused": "3/h"}
+    client.force_login(bob)
+    for _ in range(3):
+        response = post_import(client, NOT_AN_ARCHIVE)
+        assert response.status_code == 400 and "not a .tar.gz model archive" in response.text
+    response = post_import(client, NOT_AN_ARCHIVE)
+    assert response.status_code == 429
+    assert "Too many refused or unconfirmed imports for now: try again in" in response.text
