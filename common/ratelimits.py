@@ -34,6 +34,8 @@ WHAT = {
     "create": "new models",
     "evaluate": "evaluations and race entries",
     "rescore": "re-scorings",
+    "password-reset": "password reset requests from your address",
+    "password-reset-email": "password reset requests for that email address",
 }
 
 

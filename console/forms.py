@@ -1,4 +1,5 @@
-from django.contrib.auth.forms import UserCreationForm
+from django import forms
+from django.contrib.auth.forms import PasswordResetForm, UserCreationForm
 
 
 class SignUpForm(UserCreationForm):
@@ -10,3 +11,18 @@ class SignUpForm(UserCreationForm):
         help_texts = {
             "username": "Shown on leaderboards. Up to 150 letters, digits and @ . + - _ characters."
         }
+
+
+class PasswordResetRequestForm(PasswordResetForm):
+    """The email address a forgotten password's reset link goes to."""
+
+    email = forms.EmailField(
+        label="Email address",
+        max_length=254,
+        widget=forms.EmailInput(attrs={"autocomplete": "email", "autofocus": True}),
+        help_text="The one on your racer profile.",
+        error_messages={
+            "required": "Enter the email address on your racer profile.",
+            "invalid": "That is not an email address: it looks like name@example.org.",
+        },
+    )

@@ -1,9 +1,10 @@
 import sys
 
+from django.conf import settings
 from django.contrib import messages
 from django.contrib.admin.views.decorators import staff_member_required
 from django.contrib.auth import login
-from django.contrib.auth.views import LoginView
+from django.contrib.auth.views import LoginView, PasswordResetView
 from django.db import InterfaceError, OperationalError
 from django.http import HttpRequest, HttpResponse, HttpResponseServerError, JsonResponse
 from django.shortcuts import redirect, render
@@ -14,7 +15,7 @@ from django.views.decorators.http import require_safe
 
 from common import ratelimits
 from console import guidance
-from console.forms import SignUpForm
+from console.forms import PasswordResetRequestForm, SignUpForm
 from console.health import system_health
 from racing.models import RankingMethod
 from racing.selectors import events_not_closed
@@ -72,6 +73,43 @@ class SignInView(LoginView):
             context = self.get_context_data(form=form, limited=limited)
             return self.render_to_response(context, status=429)
         return super().post(request, *args, **kwargs)
+
+
+class ForgottenPasswordView(PasswordResetView):
+    """ "Forgot your password?": where the site sends email, Django's reset link goes to the
+    account with that address; the page says the same whether there is one or not, so it tells
+    nobody who has an account. Requests are limited per address and per email address asked
+    for. Where the site sends no email, the page says to ask league staff (the admin)."""
+
+    form_class = PasswordResetRequestForm
+    email_template_name = "registration/password_reset_email.txt"
+    subject_template_name = "registration/password_reset_subject.txt"
+
+    def get_context_data(self, **kwargs) -> dict:
+        return super().get_context_data(
+            by_email=settings.PITLANE_PASSWORD_RESET_BY_EMAIL,
+            link_hours=settings.PASSWORD_RESET_TIMEOUT // 3600,
+            **kwargs,
+        )
+
+    def post(self, request: HttpRequest, *args, **kwargs) -> HttpResponse:
+        if not settings.PITLANE_PASSWORD_RESET_BY_EMAIL:
+            return self.get(request, *args, **kwargs)
+        form = self.get_form()
+        email = str(request.POST.get("email", "")).strip().lower()[:254]
+        limited = ratelimits.over(
+            request, "password-reset", ratelimits.address(request)
+        ) or ratelimits.over(request, "password-reset-email", f"email:{email}")
+        if limited:
+            ratelimits.refuse(form, limited)
+            return self.render_to_response(self.get_context_data(form=form), status=429)
+        if not form.is_valid():
+            return self.render_to_response(self.get_context_data(form=form), status=400)
+        self.extra_email_context = {
+            "site_url": settings.PITLANE_SITE_URL.rstrip("/"),
+            "link_hours": settings.PASSWORD_RESET_TIMEOUT // 3600,
+        }
+        return self.form_valid(form)
 
 
 def _safe_next(request: HttpRequest) -> str:

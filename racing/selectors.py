@@ -76,7 +76,7 @@ def submission_visible_to(*, submission: Submission, user: AbstractBaseUser) -> 
 def leaderboard_page(*, event: Event, page: int | str = 1) -> Page:
     """One page of the event's rankings in order, each with its ``position`` and ``gap_ms`` to
     first. An out-of-range page number gives the last page."""
-    rankings = event.rankings.select_related("racer").order_by(*RANKING_ORDER)
+    rankings = event.rankings.select_related("racer__profile").order_by(*RANKING_ORDER)
     current = Paginator(rankings, LEADERBOARD_PAGE).get_page(page)
     current.object_list = list(current.object_list)
     leader = current.object_list[0] if current.number == 1 and current.object_list else None
@@ -91,7 +91,9 @@ def ranking_of(*, event: Event, racer: AbstractBaseUser) -> Ranking | None:
     """The racer's ranking in the event with its ``position`` (None when they are not ranked)."""
     if not racer.is_authenticated:
         return None
-    ranking = Ranking.objects.filter(event=event, racer=racer).first()
+    ranking = (
+        Ranking.objects.filter(event=event, racer=racer).select_related("racer__profile").first()
+    )
     if ranking is None:
         return None
     ahead = event.rankings.filter(

@@ -42,6 +42,7 @@ INSTALLED_APPS = [
     "racing",
     "analysis",
     "notifications",
+    "accounts",
 ]
 
 MIDDLEWARE = [
@@ -161,14 +162,16 @@ CELERY_BROKER_TRANSPORT_OPTIONS = {
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
 # Rate limits (common.ratelimits; README, "Limits"): a count per period, per racer unless
-# said: sign-in per racer name and per address, sign-up per address. "import" counts the imports
-# that arrived, "import-refused" the attempts that did not (a racer correcting an archive).
+# said: sign-in per racer name and per address, sign-up per address, password reset requests
+# per address and per email address asked for. "import" counts the imports that arrived,
+# "import-refused" the attempts that did not (a racer correcting an archive tries again).
 PITLANE_RATES = {
     action: env.rate(f"PITLANE_RATE_{action.upper().replace('-', '_')}", default)
     for action, default in {
         "sign-in-account": "10/15m", "sign-in-address": "30/15m", "sign-up": "5/h",
         "validate": "30/10m", "import": "10/h", "import-refused": "30/h", "create": "20/h",
-        "evaluate": "30/h", "rescore": "20/h",
+        "evaluate": "30/h", "rescore": "20/h", "password-reset": "5/h",
+        "password-reset-email": "3/h",
     }.items()
 }  # fmt: skip
 RATELIMIT_USE_CACHE = "default"
@@ -260,6 +263,10 @@ STORAGES = {
 # PITLANE_EMAIL_URL names a server; without it the bell in the console is all there is.
 _email_server = env.email("PITLANE_EMAIL_URL")
 PITLANE_EMAIL_NOTIFICATIONS = _email_server is not None
+# A racer who forgot their password gets a reset link by email only where there is a server;
+# without one, the "Forgot your password?" page tells them to ask league staff (the admin).
+PITLANE_PASSWORD_RESET_BY_EMAIL = _email_server is not None
+PASSWORD_RESET_TIMEOUT = 2 * 3600  # [s] a reset link works this long, and once
 if _email_server is not None:
     EMAIL_BACKEND = _email_server.backend
     EMAIL_HOST, EMAIL_PORT = _email_server.host, _email_server.port

@@ -1,0 +1,45 @@
+"""League staff find a racer by login or racer name, see their profile, and set a new password
+for a racer who forgot theirs (the console's "Forgot your password?" page sends them here where
+the site sends no email)."""
+
+from django.contrib import admin
+from django.contrib.auth.admin import UserAdmin
+from django.contrib.auth.models import User
+
+from accounts.models import Profile
+
+STAFF_RESET_HINT = (
+    "A racer who forgot their password: press <strong>Reset password</strong> under Password "
+    "below, set a new one, and tell it to them privately; they can change it on their profile "
+    "page once logged in."
+)
+
+
+class ProfileInline(admin.StackedInline):
+    model = Profile
+    can_delete = False
+    verbose_name = "racer profile"
+    fields = ["racer_name", "country", "avatar_colour"]
+
+
+class RacerAdmin(UserAdmin):
+    inlines = [ProfileInline]
+    list_display = ["username", "racer_name", "email", "is_staff", "last_login"]
+    list_select_related = ["profile"]
+    search_fields = ["username", "profile__racer_name", "email"]
+    fieldsets = (
+        (None, {"fields": ("username", "password"), "description": STAFF_RESET_HINT}),
+        *UserAdmin.fieldsets[1:],
+    )
+
+    def get_inline_instances(self, request, obj=None):
+        # A new account gets its profile as it is saved; an inline there would add a second.
+        return super().get_inline_instances(request, obj) if obj is not None else []
+
+    @admin.display(description="Racer name", ordering="profile__racer_name")
+    def racer_name(self, user: User) -> str:
+        return getattr(getattr(user, "profile", None), "racer_name", "")
+
+
+admin.site.unregister(User)
+admin.site.register(User, RacerAdmin)

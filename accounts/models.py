@@ -1,0 +1,86 @@
+"""A racer's profile: the name, country and avatar the leaderboards show for them."""
+
+from __future__ import annotations
+
+from django.conf import settings
+from django.core.exceptions import ValidationError
+from django.core.validators import MaxLengthValidator, MinLengthValidator, RegexValidator
+from django.db import models
+from django.db.models.functions import Lower
+
+from accounts.countries import COUNTRIES, country_name, flag
+
+# DeepRacer's racer alias: 2 to 64 letters, digits, underscores and hyphens (DeepRacer on AWS,
+# source/apps/website/src/constants/validation.ts: ALIAS_MIN_LENGTH, ALIAS_MAX_LENGTH, ALIAS_REGEX).
+RACER_NAME_MIN, RACER_NAME_MAX = 2, 64
+RACER_NAME_CHARACTERS = r"[A-Za-z0-9_-]"
+RACER_NAME_RULE = (
+    f"{RACER_NAME_MIN} to {RACER_NAME_MAX} letters, digits, hyphens (-) and underscores (_), "
+    "no spaces"
+)
+
+
+def validate_country(code: str) -> None:
+    if code and code not in COUNTRIES:
+        raise ValidationError(f"{code!r} is not a country code we know (ISO 3166, such as NZ).")
+
+
+class AvatarColour(models.TextChoices):
+    """The avatar's circle, behind the racer name's initial in white: each dark enough to read."""
+
+    TEAL = "teal", "Teal"
+    BLUE = "blue", "Blue"
+    PURPLE = "purple", "Purple"
+    MAGENTA = "magenta", "Magenta"
+    RED = "red", "Red"
+    ORANGE = "orange", "Orange"
+    GREEN = "green", "Green"
+    SLATE = "slate", "Slate"
+
+
+class Profile(models.Model):
+    """What other racers see of a racer: their racer name (DeepRacer's alias) on every
+    leaderboard, their country's flag and an avatar. Every account has one from the start."""
+
+    user = models.OneToOneField(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="profile"
+    )
+    racer_name = models.CharField(
+        max_length=RACER_NAME_MAX,
+        validators=[
+            MinLengthValidator(RACER_NAME_MIN, f"A racer name is {RACER_NAME_RULE}."),
+            MaxLengthValidator(RACER_NAME_MAX, f"A racer name is {RACER_NAME_RULE}."),
+            RegexValidator(rf"\A{RACER_NAME_CHARACTERS}+\Z", f"A racer name is {RACER_NAME_RULE}."),
+        ],
+        help_text=f"Shown on leaderboards: {RACER_NAME_RULE}. Yours alone.",
+    )
+    country = models.CharField(
+        max_length=2, blank=True, validators=[validate_country], help_text="ISO 3166 code."
+    )
+    avatar_colour = models.CharField(
+        max_length=16, choices=AvatarColour.choices, default=AvatarColour.TEAL
+    )
+
+    class Meta:
+        constraints = [
+            models.UniqueConstraint(
+                Lower("racer_name"),
+                name="accounts_profile_racer_name_unique",
+                violation_error_message="Another racer already uses that racer name.",
+            )
+        ]
+
+    def __str__(self) -> str:
+        return self.racer_name
+
+    @property
+    def initial(self) -> str:
+        return self.racer_name[:1].upper()
+
+    @property
+    def country_name(self) -> str:
+        return country_name(self.country)
+
+    @property
+    def flag(self) -> str:
+        return flag(self.country)

@@ -1,0 +1,67 @@
+"""Writes to racers' profiles."""
+
+from __future__ import annotations
+
+import re
+
+from django.contrib.auth.models import AbstractBaseUser
+from django.db import IntegrityError, transaction
+
+from accounts.models import RACER_NAME_MAX, RACER_NAME_MIN, AvatarColour, Profile
+
+
+class RacerNameTaken(Exception):
+    """Another racer took the name between the form's check and the save."""
+
+
+def default_racer_name(*, username: str) -> str:
+    """A racer name free for a new account: the username, its characters that a racer name
+    may not hold made hyphens, padded to the shortest name, and numbered where it is taken."""
+    base = re.sub(r"[^A-Za-z0-9_-]", "-", username)[:RACER_NAME_MAX].ljust(RACER_NAME_MIN, "-")
+    name, number = base, 1
+    while Profile.objects.filter(racer_name__iexact=name).exists():
+        number += 1
+        suffix = f"-{number}"
+        name = base[: RACER_NAME_MAX - len(suffix)] + suffix
+    return name
+
+
+def profile_create(*, user: AbstractBaseUser) -> Profile:
+    """The new account's profile: its username as its racer name where that is free, and
+    one of the avatar colours, chosen by its id so that a leaderboard is not all one colour."""
+    colours = AvatarColour.values
+    for _ in range(5):  # another account may take the same name in between: try the next
+        try:
+            with transaction.atomic():
+                return Profile.objects.create(
+                    user=user,
+                    racer_name=default_racer_name(username=user.get_username()),
+                    avatar_colour=colours[(user.pk or 0) % len(colours)],
+                )
+        except IntegrityError:
+            if Profile.objects.filter(user=user).exists():
+                return Profile.objects.get(user=user)
+    raise RacerNameTaken(user.get_username())
+
+
+def profile_update(
+    *, profile: Profile, racer_name: str, country: str, avatar_colour: str, email: str
+) -> Profile:
+    """Save what the racer chose on their profile page (already validated), and the email
+    address that password reset links go to."""
+    profile.racer_name, profile.country, profile.avatar_colour = racer_name, country, avatar_colour
+    try:
+        with transaction.atomic():
+            profile.save(update_fields=["racer_name", "country", "avatar_colour"])
+            profile.user.email = email
+            profile.user.save(update_fields=["email"])
+    except IntegrityError:
+        raise RacerNameTaken(racer_name) from None
+    return profile
+
+
+def profile_ensure(*, user: AbstractBaseUser) -> Profile:
+    """The racer's profile; an account made before profiles existed (or loaded from a fixture,
+    which sends no signal) gets its own on first sight."""
+    profile = Profile.objects.filter(user=user).select_related("user").first()
+    return profile or profile_create(user=user)

@@ -1,0 +1,116 @@
+import pytest
+from django.contrib.auth.models import User
+from django.urls import reverse
+
+from accounts.models import Profile
+from accounts.services import profile_ensure
+from tests.racing.factories import event, scored
+
+pytestmark = pytest.mark.django_db
+
+RULE = "A racer name is 2 to 64 letters, digits, hyphens (-) and underscores (_), no spaces."
+
+
+def profile_form(**fields) -> dict:
+    return {
+        "racer_name": "Alice_R",
+        "country": "NZ",
+        "avatar_colour": "purple",
+        "email": "",
+        **fields,
+    }
+
+
+def test_every_new_account_gets_a_profile_named_after_it():
+    racer = User.objects.create_user(username="carol", password="x")
+    assert racer.profile.racer_name == "carol"
+
+
+def test_a_username_a_racer_name_cannot_hold_becomes_one_it_can_and_a_free_one(alice):
+    Profile.objects.filter(user=alice).update(racer_name="dana-example-org")
+    dana = User.objects.create_user(username="dana@example.org", password="x")
+    assert dana.profile.racer_name == "dana-example-org-2"
+    assert User.objects.create_user(username="e", password="x").profile.racer_name == "e-"
+
+
+def test_an_account_from_before_profiles_gets_one_on_first_sight(alice):
+    Profile.objects.filter(user=alice).delete()
+    assert profile_ensure(user=User.objects.get(pk=alice.pk)).racer_name == "alice"
+
+
+def test_the_user_menu_opens_the_racer_profile(client, alice):
+    client.force_login(alice)
+    home = client.get(reverse("home")).text
+    assert f'<a href="{reverse("accounts:profile")}" title="Your racer profile">alice</a>' in home
+
+
+def test_a_racer_saves_their_name_country_avatar_and_email(client, alice):
+    client.force_login(alice)
+    response = client.post(
+        reverse("accounts:profile"), profile_form(email="alice@example.org"), follow=True
+    )
+    assert "Your profile is saved." in response.text
+    alice.refresh_from_db()
+    profile = alice.profile
+    assert (profile.racer_name, profile.country, profile.avatar_colour) == (
+        "Alice_R",
+        "NZ",
+        "purple",
+    )
+    assert alice.email == "alice@example.org"
+    assert 'href="/accounts/password/">Change your password</a>' in response.text
+
+
+@pytest.mark.parametrize(
+    ("fields", "error"),
+    [
+        ({"racer_name": ""}, "Choose a racer name for the leaderboards."),
+        ({"racer_name": "a"}, RULE),
+        ({"racer_name": "fast car"}, RULE),
+        ({"racer_name": "x" * 65}, "that one has 65."),
+        ({"racer_name": "BOB"}, "Another racer already races as BOB"),
+        ({"country": "XX"}, "Choose your country from the list, or Not shown."),
+        ({"avatar_colour": "gold"}, "Choose one of the colours shown."),
+        ({"email": "alice.example.org"}, "That is not an email address"),
+    ],
+)  # fmt: skip
+def test_a_profile_with_bad_input_gets_a_clear_error_and_keeps_what_was_typed(
+    client, alice, bob, fields, error
+):
+    client.force_login(alice)
+    response = client.post(reverse("accounts:profile"), profile_form(**fields))
+    assert response.status_code == 400
+    assert error in response.text
+    assert response.text.count('class="field-error"') == 1
+    alice.profile.refresh_from_db()
+    assert alice.profile.racer_name == "alice"  # nothing saved
+
+
+def test_a_racer_may_keep_their_own_name_in_other_capitals(client, alice):
+    client.force_login(alice)
+    response = client.post(reverse("accounts:profile"), profile_form(racer_name="ALICE"))
+    assert response.status_code == 302
+    assert Profile.objects.get(user=alice).racer_name == "ALICE"
+
+
+def test_the_profile_page_is_for_racers_who_are_logged_in(client):
+    response = client.get(reverse("accounts:profile"))
+    assert response.status_code == 302 and response.url.startswith(reverse("login"))
+
+
+def test_the_leaderboard_shows_racer_names_countries_and_avatars(client, alice, bob, tracks):
+    Profile.objects.filter(user=alice).update(
+        racer_name="Speedy-A", country="NZ", avatar_colour="red"
+    )
+    trial = event("Time trial")
+    scored(trial, alice, 10_000, 10_000, 10_000)
+    scored(trial, bob, 11_000, 11_000, 11_000)
+    client.force_login(bob)
+    response = client.get(trial.get_absolute_url())
+    page = response.text
+    assert '<span class="avatar avatar-red" aria-hidden="true">S</span>' in page
+    assert '<span class="racer-name">Speedy-A</span>' in page
+    assert '<abbr title="New Zealand">NZ</abbr>' in page
+    assert "\N{REGIONAL INDICATOR SYMBOL LETTER N}\N{REGIONAL INDICATOR SYMBOL LETTER Z}" in page
+    assert '<span class="racer-name">bob</span>' in page
+    assert ">alice<" not in page  # her login name is not shown
