@@ -23,15 +23,29 @@ dialog.querySelector("[data-confirm-no]").addEventListener("click", () => dialog
 const link = document.querySelector("[data-invite-link]");
 const copy = document.querySelector("[data-copy-invite]");
 const status = document.querySelector("[data-copy-status]");
+const COPIED = "Copied: paste it in a message to the racers you invite.";
+
+function copied() {
+  status.textContent = COPIED;
+  copy.textContent = "Copied";
+  setTimeout(() => { copy.textContent = "Copy the link"; }, 2000);
+}
+
 if (link && copy) {
   link.addEventListener("focus", () => link.select());
   copy.addEventListener("click", async () => {
     try {
       await navigator.clipboard.writeText(link.value);
-      status.textContent = "Copied: paste it in a message to the racers you invite.";
+      copied();
     } catch {
+      // No Clipboard API (a page not served over HTTPS, an older browser): select the link, and
+      // copy it the old way where the browser still allows that.
+      link.focus();
       link.select();
-      status.textContent = "Press Ctrl+C (⌘C on a Mac) to copy the selected link.";
+      let done = false;
+      try { done = document.execCommand("copy"); } catch { done = false; }
+      if (done) copied();
+      else status.textContent = "Press Ctrl+C (⌘C on a Mac) to copy the selected link.";
     }
   });
 }

@@ -47,12 +47,37 @@ def test_the_organiser_copies_the_invitation(page: Page, alice, tracks, daphne_s
     page.context.grant_permissions(["clipboard-read", "clipboard-write"], origin=daphne_server)
     log_in(page, "alice", PASSWORD)
     race = organise(page)
+    race.invite_token = "a_b_c_" + race.invite_token[6:]  # underscores, which were clipped
+    race.save(update_fields=["invite_token"])
+    page.reload()
+    link = page.get_by_role("textbox", name="Invitation link")
+    expect(link).to_have_attribute("readonly", "")
+    expect(link).to_have_value(f"{daphne_server}/races/invite/{race.invite_token}/")
+    # The whole line shows, underscores and all: a sane font and line height, nothing cut off.
+    size, line, inner, scrolled = link.evaluate(
+        "i => { const s = getComputedStyle(i); const padding = parseFloat(s.paddingTop)"
+        " + parseFloat(s.paddingBottom); return [parseFloat(s.fontSize),"
+        " parseFloat(s.lineHeight), i.clientHeight - padding, i.scrollHeight - i.clientHeight] }"
+    )
+    assert size >= 14 and line >= 1.3 * size and inner >= line and scrolled <= 0
+
     page.get_by_role("button", name="Copy the link").click()
     expect(page.locator("[data-copy-status]")).to_contain_text("Copied")
     copied = page.evaluate("navigator.clipboard.readText()")
-    assert copied.endswith(f"/races/invite/{race.invite_token}/")
+    assert copied == f"{daphne_server}/races/invite/{race.invite_token}/"
     page.set_viewport_size({"width": 375, "height": 800})  # a phone
     assert page_problems(page) == []
+
+
+def test_without_the_clipboard_api_copy_selects_the_link(page: Page, alice, tracks):
+    page.add_init_script("Object.defineProperty(navigator, 'clipboard', {value: undefined})")
+    log_in(page, "alice", PASSWORD)
+    organise(page)
+    page.get_by_role("button", name="Copy the link").click()
+    expect(page.locator("[data-copy-status]")).to_contain_text(re.compile("Copied|Ctrl\\+C"))
+    link = page.get_by_role("textbox", name="Invitation link")
+    selected = link.evaluate("i => i.value.slice(i.selectionStart, i.selectionEnd)")
+    assert selected == link.input_value()
 
 
 def test_the_organiser_is_asked_before_removing_a_racer_and_closing(page: Page, alice, bob, tracks):
