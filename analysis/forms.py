@@ -2,10 +2,11 @@ from __future__ import annotations
 
 from django import forms
 
+from common.forms import RacerWords
 from training.rewards import MAX_SOURCE_SIZE
 
 
-class RescoreForm(forms.Form):
+class RescoreForm(RacerWords, forms.Form):
     """Another reward function, and the iterations to score it over."""
 
     reward_function = forms.CharField(

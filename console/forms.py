@@ -1,8 +1,10 @@
 from django import forms
 from django.contrib.auth.forms import PasswordResetForm, UserCreationForm
 
+from common.forms import RacerWords
 
-class SignUpForm(UserCreationForm):
+
+class SignUpForm(RacerWords, UserCreationForm):
     """A racer's account: a racer name (shown on leaderboards) and a password."""
 
     class Meta(UserCreationForm.Meta):
@@ -13,7 +15,7 @@ class SignUpForm(UserCreationForm):
         }
 
 
-class PasswordResetRequestForm(PasswordResetForm):
+class PasswordResetRequestForm(RacerWords, PasswordResetForm):
     """The email address a forgotten password's reset link goes to."""
 
     email = forms.EmailField(

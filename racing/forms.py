@@ -10,6 +10,7 @@ from django import forms
 from django.core.exceptions import ValidationError
 from django.utils import timezone
 
+from common.forms import RacerWords
 from common.time_zones import local_text
 from racing import selectors
 from racing.models import Event, RaceType, RankingMethod
@@ -22,7 +23,7 @@ RACE_LENGTH = timedelta(days=7)  # a new community race closes a week after it o
 FORM_TOKEN = re.compile(r"[A-Za-z0-9_-]{32,43}")  # secrets.token_urlsafe(32) makes 43
 
 
-class SubmissionForm(forms.Form):
+class SubmissionForm(RacerWords, forms.Form):
     """A racer's ready model and an open event they may enter."""
 
     event = forms.ModelChoiceField(
@@ -67,7 +68,7 @@ def _model_label(model: RLModel) -> str:
     return f"{event.name} ({rule}, closes {local_text(event.closes_at)})"
 
 
-class RaceObstaclesForm(forms.ModelForm):
+class RaceObstaclesForm(RacerWords, forms.ModelForm):
     """An event's boxes and bot cars as fields of their own (the model keeps them as JSON);
     those of the chosen race type are required."""
 

@@ -16,7 +16,7 @@ from typing import TypedDict
 from common.refusals import Refused
 from rl import hyperparameters as hp
 from simulator import config as sim
-from training.models import Algorithm, Network, RLModel, ShellColour, Track, Vehicle
+from training.models import Algorithm, Direction, Network, RLModel, ShellColour, Track, Vehicle
 from training.rewards import Validation, reward_validate
 
 NAME = re.compile(r"^[A-Za-z0-9-]{1,64}$")
@@ -307,6 +307,11 @@ def reward_sample_track(settings: Draft) -> tuple[str, str] | None:
     return track.name, clean["direction"]
 
 
+def direction_words(direction: str) -> str:
+    """A direction as every page writes it ("counter-clockwise"), not as it is stored."""
+    return str(dict(Direction.choices).get(direction, direction)).lower()
+
+
 def _check_track(settings: dict, clean: dict, errors: dict) -> Track | None:
     track = Track.objects.filter(name=settings.get("track")).first()
     if track is None:
@@ -314,7 +319,7 @@ def _check_track(settings: dict, clean: dict, errors: dict) -> Track | None:
     clean["track"] = track
     direction = settings.get("direction") or "counterclockwise"
     if track is not None and direction not in _directions(track):
-        errors["direction"] = f"{track} cannot be driven {direction}."
+        errors["direction"] = f"{track} cannot be driven {direction_words(direction)}."
     clean["direction"] = direction
     return track
 

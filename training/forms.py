@@ -11,6 +11,7 @@ import re
 
 from django import forms
 
+from common.forms import RacerWords
 from rl import hyperparameters
 from simulator import config as sim
 from training import configuration, imports, selectors
@@ -18,7 +19,7 @@ from training.models import Algorithm, EvaluationJob, Network, RaceType, Track, 
 from training.rewards import MAX_SOURCE_SIZE
 
 
-class ModelImportForm(forms.Form):
+class ModelImportForm(RacerWords, forms.Form):
     """The name first (checked before the archive is read, and in the browser as it is typed),
     then the archive, or the one the racer uploaded to an attempt that had to be corrected
     (``kept_upload``, named by the hidden ``kept`` token)."""
@@ -65,7 +66,7 @@ class ModelImportForm(forms.Form):
         self.data["kept"] = kept.token if kept else ""
 
 
-class VehicleForm(forms.ModelForm):
+class VehicleForm(RacerWords, forms.ModelForm):
     """Build a vehicle; the owner comes from the request, never from the form."""
 
     class Meta:
@@ -107,7 +108,7 @@ class VehicleForm(forms.ModelForm):
         return name
 
 
-class RewardValidationForm(forms.Form):
+class RewardValidationForm(RacerWords, forms.Form):
     """What the editor's Validate button sends: the code and the track to try it on."""
 
     source = forms.CharField(
@@ -159,7 +160,7 @@ def limit(field: forms.Field, low: float, high: float, step: float | str = "any"
     field.widget.attrs.update(min=_number(low), max=_number(high), step=step)
 
 
-class TrackAndRaceFields(forms.Form):
+class TrackAndRaceFields(RacerWords, forms.Form):
     """Where and how the car races: the fields the create-model and evaluation pages share."""
 
     track = forms.ModelChoiceField(

@@ -528,11 +528,12 @@ def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str]:
         ((found[c], d) for c, d in candidates if c in found), (None, suffix_direction)
     )
     if track is None:
-        if world:
-            notes.append(f"Not carried over from training_params.yaml: the track {world}, which "
-                         f"is not loaded here. The model trains on {DEFAULT_TRACK}; choose "
-                         "another by cloning it.")  # fmt: skip
         track = Track.objects.filter(name=DEFAULT_TRACK).first()
+        if world:
+            shown = track.display_name if track else DEFAULT_TRACK
+            notes.append(f"Not carried over from training_params.yaml: the track {world}, which "
+                         f"is not loaded here. The model trains on {shown}; choose "
+                         "another by cloning it.")  # fmt: skip
     if direction is None and "TRACK_DIRECTION_CLOCKWISE" in params:
         clockwise = _truthy(params["TRACK_DIRECTION_CLOCKWISE"])
         direction = "clockwise" if clockwise else "counterclockwise"
@@ -542,8 +543,9 @@ def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str]:
         direction = "clockwise" if direction == "counterclockwise" else "counterclockwise"
     if track is not None and not getattr(track, direction):
         other = "clockwise" if direction == "counterclockwise" else "counterclockwise"
-        notes.append(f"{track.display_name} is not driven {direction} here: the model drives "
-                     f"it {other}.")  # fmt: skip
+        said, instead = map(configuration.direction_words, (direction, other))
+        notes.append(f"{track.display_name} is not driven {said} here: the model drives it "
+                     f"{instead}.")  # fmt: skip
         direction = other
     return (track.name if track else DEFAULT_TRACK), direction
 

@@ -108,6 +108,8 @@ LOGIN_REDIRECT_URL = "home"
 LOGOUT_REDIRECT_URL = "home"
 
 LANGUAGE_CODE = "en-us"
+# One way to write dates on every page (console/formats/en/formats.py), not Django's "Nov. 26".
+FORMAT_MODULE_PATH = ["console.formats"]
 TIME_ZONE = env.str("PITLANE_TIME_ZONE", "UTC")
 USE_I18N = True
 USE_TZ = True

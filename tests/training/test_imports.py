@@ -529,15 +529,16 @@ def track_row(name: str, **changes) -> Track:
         # Then lower-case, with hyphens for underscores; the suffix still gives the direction.
         ({"WORLD_NAME": "Kidney_Bean_cw"}, ("kidney-bean", "clockwise"), ""),
         ({"WORLD_NAME": "One_Way_cw"}, ("one-way", "counterclockwise"),
-         "One Way is not driven clockwise here: the model drives it counterclockwise."),
+         "One Way is not driven clockwise here: the model drives it counter-clockwise."),
         ({"WORLD_NAME": "monza_ccw"}, ("rookie-loop", "counterclockwise"),
          "Not carried over from training_params.yaml: the track monza_ccw, which is not loaded "
-         "here. The model trains on rookie-loop"),
+         "here. The model trains on Rookie Loop;"),  # its display name, not its slug
     ],
 )  # fmt: skip
 def test_world_name_finds_the_loaded_track_and_its_direction(params, expected, noted):
-    for name in ("reInvent2019_track", "Oval_cw", "Oval", "kidney-bean", "rookie-loop"):
+    for name in ("reInvent2019_track", "Oval_cw", "Oval", "kidney-bean"):
         track_row(name)
+    track_row("rookie-loop", display_name="Rookie Loop")
     track_row("one-way", display_name="One Way", clockwise=False)
     notes = []
     assert imports._deepracer_track(params, notes) == expected
