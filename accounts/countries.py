@@ -15,11 +15,3 @@ COUNTRIES: dict[str, str] = dict(
 def country_name(code: str) -> str:
     """The country's English name, or "" for no country or an unknown code."""
     return COUNTRIES.get(code, "")
-
-
-def flag(code: str) -> str:
-    """The country's flag as Unicode draws it: its two letters as regional indicator symbols
-    (some systems show the letters instead of a flag, hence the code beside it)."""
-    if code not in COUNTRIES:
-        return ""
-    return "".join(chr(0x1F1E6 + ord(letter) - ord("A")) for letter in code)

@@ -8,7 +8,7 @@ from django.core.validators import MaxLengthValidator, MinLengthValidator, Regex
 from django.db import models
 from django.db.models.functions import Lower
 
-from accounts.countries import COUNTRIES, country_name, flag
+from accounts.countries import COUNTRIES, country_name
 
 # DeepRacer's racer alias: 2 to 64 letters, digits, underscores and hyphens (DeepRacer on AWS,
 # source/apps/website/src/constants/validation.ts: ALIAS_MIN_LENGTH, ALIAS_MAX_LENGTH, ALIAS_REGEX).
@@ -80,7 +80,3 @@ class Profile(models.Model):
     @property
     def country_name(self) -> str:
         return country_name(self.country)
-
-    @property
-    def flag(self) -> str:
-        return flag(self.country)

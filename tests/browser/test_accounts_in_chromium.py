@@ -4,7 +4,9 @@ import pytest
 from django.contrib.auth.models import User
 from playwright.sync_api import Page, expect
 
+from accounts.models import Profile
 from racing.services import demo_season_load
+from tests.browser.checks import page_problems
 from tests.conftest import PASSWORD
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -62,3 +64,50 @@ def test_a_visitor_sees_what_pitlane_is_and_the_races_open_now(page: Page, track
     races = page.locator(".card h3 a")
     expect(races).to_have_count(3)
     expect(races.first).to_have_text(re.compile(r"Open time trial$"))
+
+
+def test_on_a_phone_a_racer_who_forgot_their_password_is_told_whom_to_ask_and_edits_a_profile(
+    page: Page, alice
+):
+    page.set_viewport_size({"width": 390, "height": 844})
+    page.goto("/accounts/login/")
+    page.get_by_role("link", name="Forgot your password?").click()
+    expect(page.get_by_text("This console sends no email")).to_be_visible()  # the suite's
+    expect(page.get_by_text("Ask your league staff")).to_be_visible()
+    assert page_problems(page) == []
+    page.get_by_role("link", name="Back to log in").click()
+
+    log_in(page, "alice", PASSWORD)
+    page.locator(".nav-account").get_by_role("link", name="alice").click()
+    expect(page.get_by_role("heading", name="Your racer profile")).to_be_visible()
+    assert page_problems(page) == []
+    preview = page.locator("[data-profile-preview]")
+    page.get_by_label("Racer name").fill("zoom_z")
+    page.get_by_label("Country").select_option("NZ")
+    page.get_by_label("Orange").check()
+    expect(preview.locator(".racer-name")).to_have_text("zoom_z")  # as the racer types
+    expect(preview.locator(".avatar")).to_have_text("Z")
+    expect(preview.locator(".avatar")).to_have_class("avatar avatar-orange")
+    expect(preview.locator(".racer-country")).to_have_text("NZ")
+    expect(preview.locator(".racer-country")).to_have_attribute("title", "New Zealand")
+
+    page.get_by_label("Racer name").fill("zoom z")
+    page.get_by_role("button", name="Save profile").click()
+    expect(page.locator(".field-error")).to_have_text(
+        "A racer name is 2 to 64 letters, digits, hyphens (-) and underscores (_), no spaces."
+    )
+    expect(page.get_by_label("Racer name")).to_have_value("zoom z")
+    expect(page.get_by_label("Country")).to_have_value("NZ")
+    assert page_problems(page) == []
+
+    page.get_by_label("Racer name").fill("zoom_z")
+    page.get_by_role("button", name="Save profile").click()
+    expect(page.get_by_text("Your profile is saved.")).to_be_visible()
+    expect(preview.locator(".avatar")).to_have_class("avatar avatar-orange")
+    profile = Profile.objects.get(user=alice)
+    assert (profile.racer_name, profile.country, profile.avatar_colour) == (
+        "zoom_z",
+        "NZ",
+        "orange",
+    )
+    assert page_problems(page) == []
