@@ -11,7 +11,8 @@ class SignUpForm(RacerWords, UserCreationForm):
         fields = ["username"]
         labels = {"username": "Racer name"}
         help_texts = {
-            "username": "Shown on leaderboards. Up to 150 letters, digits and @ . + - _ characters."
+            "username": "You log in with it, and leaderboards show it until you choose another "
+            "racer name on your profile. Up to 150 letters, digits and @ . + - _ characters."
         }
 
 
