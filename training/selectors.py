@@ -152,12 +152,12 @@ LOG_SHOWN = 200  # lines of a job's log its model page shows; the download has t
 
 
 def job_log(*, job: TrainingJob, source: str = "") -> list[JobLogLine]:
-    """The newest ``LOG_SHOWN`` lines of the job's log, newest first; only those of ``source``
-    (trainer, worker, reward) when it is given."""
+    """The newest ``LOG_SHOWN`` lines of the job's log in time order, oldest first, as the
+    download has them; only those of ``source`` (trainer, worker, reward) when it is given."""
     lines = job.log_lines.all()
     if source:
         lines = lines.filter(source=source)
-    return list(lines.order_by("-at", "-pk")[:LOG_SHOWN])
+    return list(reversed(lines.order_by("-at", "-pk")[:LOG_SHOWN]))
 
 
 def model_log_lines(*, model: RLModel) -> Iterator[str]:

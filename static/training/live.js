@@ -123,6 +123,8 @@ function showFrame(data) {
 // Messages
 
 function receive(message) {
+  // The model page's log reads its new lines again (static/training/log.js).
+  document.dispatchEvent(new CustomEvent("pitlane:job-update", { detail: message.type }));
   if (message.type === "state") {
     setStatus(message);
     for (const row of message.history) (kind === "training" ? addIteration : addTrial)(row);
