@@ -113,3 +113,8 @@ def test_the_leaderboard_shows_racer_names_countries_and_avatars(client, alice, 
     assert '<abbr class="racer-country" title="New Zealand">NZ</abbr>' in page
     assert '<span class="racer-name">bob</span>' in page
     assert ">alice<" not in page  # her login name is not shown
+
+
+def test_the_help_page_says_where_a_racer_chooses_how_leaderboards_show_them(client):
+    page = client.get(reverse("help")).text
+    assert f'<a href="{reverse("accounts:profile")}">racer profile</a>' in page
