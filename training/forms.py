@@ -8,6 +8,7 @@ obstacles), each with its own words for what is wrong.
 
 import json
 import re
+from dataclasses import dataclass
 
 from django import forms
 
@@ -507,6 +508,77 @@ class ModelCreateForm(TrackAndRaceFields):
         """The action table's errors that no single action's cells show."""
         in_cells = {error["message"] for error in self.action_errors}
         return [error for error in self.errors.get("actions", []) if error not in in_cells]
+
+    def sections_with_errors(self) -> "list[Section]":
+        """The page's sections that hold an error, in the page's order: what the summary at
+        the top links to."""
+        fields = {name for name, errors in self.errors.items() if errors and name != "__all__"}
+        return [section for section in SECTIONS if fields & set(section.fields(self))]
+
+
+@dataclass(frozen=True)
+class Section:
+    """One section of the create-model page: its anchor, its title, the fields it holds (the
+    hyperparameter fields, ``<algorithm>__<key>``, by ``prefixed``)."""
+
+    anchor: str
+    title: str
+    names: tuple[str, ...]
+    prefixed: bool = False
+
+    def fields(self, form: forms.Form) -> list[str]:
+        return [name for name in form.fields
+                if name in self.names or (self.prefixed and "__" in name)]  # fmt: skip
+
+
+SECTIONS = (
+    Section("section-name", "Name", ("name", "description")),
+    Section("section-track", "Track", ("track", "direction")),
+    Section("section-race-type", "Race type", ("race_type", "box_count", "box_randomize",
+                                               "bot_count", "bot_speed", "bot_lane_changes")),
+    Section("section-car", "Car: sensors and network", ("vehicle", "camera", "lidar", "network")),
+    Section("section-action-space", "Action space", ("action_space_type", "actions",
+                                                     "steering_low", "steering_high",
+                                                     "speed_low", "speed_high")),
+    Section("section-algorithm", "Training algorithm and hyperparameters", ("algorithm",),
+            prefixed=True),
+    Section("section-stop", "Stop condition and workers", ("max_minutes", "workers",
+                                                           "extra_tracks")),
+    Section("section-reward-function", "Reward function", ("reward_function",)),
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SettingShown:
+    """One row of a model's training settings as its page shows them: the create form's label,
+    the value as the form spells it, DeepRacer's key."""
+
+    label: str
+    value: str
+    key: str
+
+
+def training_settings_shown(
+    *, algorithm: str, stored: dict, max_minutes: int
+) -> tuple[list[SettingShown], list[SettingShown]]:
+    """(the settings a model trains with, DeepRacer's others that it keeps without using),
+    labelled as the create form labels them, in its order."""
+
+    def shown(name: str, value) -> SettingShown:
+        each = hyperparameters.setting(algorithm, name)
+        label = each.label if each else name
+        if isinstance(value, float):
+            text = _number(value)
+        else:
+            text = hyperparameters.LABELS.get(value, str(value))
+        return SettingShown(label, text, name)
+
+    order = [s.name for s in hyperparameters.SETTINGS.get(algorithm, ())]
+    used = [shown(name, stored[name]) for name in order if name in stored]
+    minutes = ModelCreateForm.base_fields["max_minutes"]
+    used.append(SettingShown(str(minutes.label), str(max_minutes), ""))
+    others = [shown(name, value) for name, value in stored.items() if name not in order]
+    return used, others
 
 
 class EvaluationForm(TrackAndRaceFields):

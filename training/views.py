@@ -52,6 +52,7 @@ from training.forms import (
     RewardFunctionForm,
     RewardValidationForm,
     VehicleForm,
+    training_settings_shown,
 )
 from training.models import Algorithm, EvaluationJob, JobLogLine, RewardFunction, RLModel, Vehicle
 
@@ -444,6 +445,11 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "log_source": log_source,
             "log_sources": JobLogLine.Source.choices,
             "files": selectors.model_files(model=model),
+            "training_settings": training_settings_shown(
+                algorithm=model.algorithm,
+                stored=model.hyperparameters,
+                max_minutes=model.max_minutes,
+            ),
         },
     )
 

@@ -1,12 +1,16 @@
 // The create-model page: show the settings that apply, and edit the discrete action space as a
 // table kept in the hidden "actions" field (JSON in model_metadata.json's form, the actions
-// numbered from 0 as there). On a clone the table keeps its number of rows.
+// numbered from 0 as there), drawn beside it as a fan. On a clone the table keeps its number of
+// rows. After a refused submit the summary of the sections to fix takes the focus, so that a
+// screen reader reads it first.
+import { drawActionSpace } from "./action_space.js";
 import { checked, refreshTrackAndRace, showWhen } from "./track_and_race.js";
 
 const form = document.querySelector("[data-model-form]");
 const actionsField = form.querySelector("input[name=actions]");
 const tableBody = form.querySelector("[data-actions]");
 const countLocked = form.querySelector("[data-add-action]") === null;
+const fan = form.querySelector("[data-action-fan]");
 const COLUMNS = { steering_angle: ["Steering angle", -30, 30], speed: ["Speed", 0.1, 4] };
 // What the server found wrong with single actions ({index, columns, message} each): the cells
 // stay marked until the racer changes them, or adds or removes a row.
@@ -18,6 +22,22 @@ function refresh() {
   showWhen(form, "algorithm", checked(form, "algorithm"));
   const vehicle = form.querySelector("select[name=vehicle]");
   form.querySelector("[data-sensors]").hidden = Boolean(vehicle && vehicle.value);
+  drawFan();
+}
+
+function drawFan() {
+  if (checked(form, "action_space_type") === "continuous") {
+    const value = (name) => form.querySelector(`input[name=${name}]`).value;
+    drawActionSpace(fan, {
+      type: "continuous",
+      ranges: {
+        steering_angle: { low: value("steering_low"), high: value("steering_high") },
+        speed: { low: value("speed_low"), high: value("speed_high") },
+      },
+    });
+  } else {
+    drawActionSpace(fan, { type: "discrete", actions: readActions() });
+  }
 }
 
 function readActions() {
@@ -42,6 +62,7 @@ function saveActions(actions) {
   actionsField.value = JSON.stringify(actions.map((action, index) => ({
     steering_angle: cellValue(action.steering_angle), speed: cellValue(action.speed), index,
   })));
+  drawFan();
 }
 
 function writeActions(actions) {
@@ -150,5 +171,9 @@ if (!countLocked) {
     writeActions([...readActions(), { steering_angle: 0, speed: 1 }]);
   });
 }
+form.addEventListener("input", (event) => {
+  if (event.target.closest("[data-when-actions=continuous]")) drawFan();
+});
 refresh();
 renderActions();
+form.querySelector("[data-error-summary]")?.focus();

@@ -1,10 +1,15 @@
+import re
+
 import pytest
 from playwright.sync_api import Page, expect
 
+from tests.browser.checks import page_problems
 from tests.browser.test_accounts_in_chromium import log_in
 from tests.conftest import PASSWORD
 from tests.training.factories import ready_model
 from training.models import RLModel
+from training.rewards import EXAMPLES
+from training.services import model_create
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -152,3 +157,91 @@ def test_the_evaluate_page_shows_only_the_chosen_race_types_settings(page: Page,
     expect(boxes).to_be_hidden()
     expect(bots).to_be_visible()
     expect(page.get_by_label("Bot speed [m/s]")).to_have_attribute("max", "6")
+
+
+def test_a_refused_model_names_the_sections_to_fix_and_links_to_each(page: Page, alice, tracks):
+    open_create_page(page, "")
+    page.get_by_label("Maximum training time [min]").fill("")
+    page.locator(".CodeMirror").evaluate("e => e.CodeMirror.setValue('')")
+    page.get_by_role("button", name="Create model and start training").click()
+
+    summary = page.locator("[data-error-summary]")
+    expect(summary).to_be_focused()  # a screen reader reads it first
+    links = summary.get_by_role("link")
+    expect(links).to_have_text(["Name", "Stop condition and workers", "Reward function"])
+    links.last.click()
+    expect(page).to_have_url(re.compile("#section-reward-function$"))
+    expect(page.get_by_role("heading", name="8. Reward function")).to_be_in_viewport()
+    for anchor in links.evaluate_all("links => links.map((link) => link.hash)"):
+        expect(page.locator(anchor)).to_have_count(1)
+
+
+def test_the_action_table_fits_a_phone_with_every_value_whole(page: Page, alice, tracks):
+    page.set_viewport_size({"width": 390, "height": 844})
+    open_create_page(page, "phone-actions")
+    page.get_by_label("Speed of action 0", exact=True).fill("1.33")
+    page.get_by_label("Steering angle of action 1", exact=True).fill("-22.5")
+    cut = page.locator("[data-actions] input").evaluate_all(
+        "inputs => inputs.filter((i) => i.scrollWidth > i.clientWidth).map((i) => i.value)"
+    )
+    assert cut == []
+    for box in (b.bounding_box() for b in page.get_by_role("button", name="Remove").all()):
+        assert box and box["x"] >= 0 and box["x"] + box["width"] <= 390, box
+    assert page_problems(page) == []
+
+
+def rays(page: Page):
+    return page.locator("[data-action-fan] [data-action-ray]")
+
+
+def left_of_the_car(page: Page, drawn) -> bool:
+    """Whether ``drawn`` lies left of the car (up to its rounded line ends), well clear of it."""
+    box = drawn.bounding_box()
+    car = page.locator("[data-action-fan] .fan-car").bounding_box()
+    centre = car["x"] + car["width"] / 2
+    return box["x"] + box["width"] <= centre + 4 and box["x"] < centre - 40
+
+
+def test_the_action_space_is_drawn_as_a_fan_that_follows_the_table(page: Page, alice, tracks):
+    open_create_page(page, "fan")
+    expect(rays(page)).to_have_count(10)  # DeepRacer's default: 5 angles at 2 speeds
+    page.get_by_role("button", name="Add an action").click()
+    expect(rays(page)).to_have_count(11)
+    page.get_by_label("Steering angle of action 10", exact=True).fill("30")
+    page.get_by_label("Steering angle of action 10", exact=True).press("Tab")
+    assert left_of_the_car(page, page.locator('[data-action-fan] [data-action-ray="10"]'))
+    page.get_by_role("button", name="Remove").first.click()
+    expect(rays(page)).to_have_count(10)
+
+    page.get_by_label("Continuous", exact=True).check()
+    expect(rays(page)).to_have_count(0)
+    sector = page.locator("[data-action-fan] [data-action-sector]")
+    expect(sector).to_have_count(1)
+    page.get_by_label("Lowest steering angle [°]").fill("0")
+    expect(page.locator("[data-action-fan]")).to_have_attribute(
+        "aria-label", "Action space fan: steering 0 to 30°, 1 to 2 m/s."
+    )
+    assert left_of_the_car(page, sector)  # 0 to 30°: all of it left
+
+
+def test_the_model_page_draws_its_action_space(page: Page, alice, tracks):
+    discrete = model_create(owner=alice, settings={
+        "name": "three-rays", "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
+        "action_space": [{"steering_angle": a, "speed": 1} for a in (-20, 0, 20)],
+    }, validate_reward=False)  # fmt: skip
+    log_in(page, "alice", PASSWORD)
+    page.goto(f"/models/{discrete.pk}/")
+    expect(rays(page)).to_have_count(3)
+    expect(page.locator("[data-action-fan]")).to_have_attribute(
+        "aria-label", "Action space fan: 3 actions, 1 m/s."
+    )
+    assert left_of_the_car(page, page.locator('[data-action-fan] [data-action-ray="2"]'))
+
+    continuous = model_create(owner=alice, settings={
+        "name": "a-sector", "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
+        "action_space": {"steering_angle": {"low": 5, "high": 30}, "speed": {"low": 1, "high": 3}},
+    }, validate_reward=False)  # fmt: skip
+    page.goto(f"/models/{continuous.pk}/")
+    expect(rays(page)).to_have_count(0)
+    expect(page.locator("[data-action-fan] [data-action-sector]")).to_have_count(1)
+    assert left_of_the_car(page, page.locator("[data-action-fan] [data-action-sector]"))

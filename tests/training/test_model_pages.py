@@ -95,6 +95,11 @@ def test_a_bad_hyperparameter_is_reported_on_its_field(client, alice, tracks):
     response = client.post(reverse("training:model-create"), form_data(**{"clipped_ppo__lr": 1}))
     assert response.status_code == 400
     assert "Learning rate must be between 1e-08 and 0.001." in response.text
+    summary = re.search(r"<ul aria-label=\"Sections to fix\">(.*?)</ul>", response.text)[1]
+    assert summary == (
+        '<li><a href="#section-algorithm">Training algorithm and hyperparameters</a></li>'
+    )
+    assert 'id="section-algorithm"' in response.text
 
 
 def test_another_racers_model_is_not_found(client, alice, bob, tracks):
@@ -116,3 +121,25 @@ def test_stop_on_a_queued_model_cancels_it(client, alice, tracks):
     response = client.post(reverse("training:model-stop", args=[model.pk]), follow=True)
     assert "Canceled: the model had not started training." in response.text
     assert model.jobs.get().status == TrainingJob.Status.CANCELED
+
+
+def test_the_model_page_shows_its_hyperparameters_as_the_create_form_labels_them(
+    client, alice, tracks
+):
+    settings = {**form_data(), "hyperparameters": {"lr": 1e-5, "loss_type": "mean squared error"}}
+    model = model_create(owner=alice, settings=settings, validate_reward=False)
+    client.force_login(alice)
+    page = client.get(reverse("training:model-detail", args=[model.pk])).text
+
+    table = re.search(r"<table [^>]*data-hyperparameters>.*?</table>", page, re.S)[0]
+    rows = re.findall(r"<tr><td>([^<]*?) <code.*?<td class=\"num\">(.*?)</td>", table)
+    assert rows == [
+        ("Gradient descent batch size", "64"), ("Number of epochs", "10"),
+        ("Learning rate", "1e-5"), ("Entropy", "0.01"), ("Discount factor", "0.999"),
+        ("Loss type", "Mean squared error"), ("Episodes between policy updates", "20"),
+    ]  # fmt: skip
+    assert '<tr><td>Maximum training time [min]</td><td class="num">60</td></tr>' in table
+    others = re.search(r"<details [^>]*data-other-hyperparameters>.*?</details>", page, re.S)[0]
+    assert "<summary>Other DeepRacer settings</summary>" in others
+    assert '<td>Stack size <code class="setting-key">stack_size</code></td>' in others
+    assert "beta_entropy 0.01" not in page  # no run of raw keys
