@@ -6,6 +6,7 @@ from console import views
 
 urlpatterns = [
     path("", views.home, name="home"),
+    path("favicon.ico", views.favicon, name="favicon"),
     path("healthz", views.healthz, name="healthz"),
     path("system/", views.system, name="system"),
     path("help/", views.help_page, name="help"),

@@ -128,3 +128,18 @@ def submission_scored(*, submission) -> Notification | None:
     return notification_send(
         recipient=submission.racer, text=text, url=submission.get_absolute_url()
     )
+
+
+@_quietly
+def submission_disqualified(*, submission) -> Notification | None:
+    """League staff disqualified a race submission: the racer is told why."""
+    text = (
+        f"{submission.model_name} in {submission.event.name} was disqualified by the league "
+        f"staff: {submission.disqualification_reason or 'no reason given.'}"
+    )
+    if not text.endswith((".", "!", "?")):
+        text += "."
+    text += " It no longer counts on the leaderboard."
+    return notification_send(
+        recipient=submission.racer, text=text, url=submission.get_absolute_url()
+    )

@@ -6,10 +6,13 @@ none on users; superusers manage everything.
 
 from django import forms
 from django.contrib import admin, messages
+from django.contrib.admin import helpers
 from django.core.exceptions import NON_FIELD_ERRORS, ValidationError
 from django.db import models
 from django.db.models import QuerySet
 from django.http import HttpRequest
+from django.template.defaultfilters import pluralize
+from django.template.response import TemplateResponse
 
 from common.formatting import laptime
 from racing import services
@@ -129,7 +132,8 @@ class EventAdmin(admin.ModelAdmin):
     def close_events(self, request: HttpRequest, queryset: QuerySet[Event]) -> None:
         for event in queryset:
             services.event_close(event=event)
-        self.message_user(request, f"Closed {len(queryset)} events.", messages.SUCCESS)
+        count = len(queryset)
+        self.message_user(request, f"Closed {count} event{pluralize(count)}.", messages.SUCCESS)
 
     @admin.action(description="Recompute the selected events' rankings")
     def recompute_rankings(self, request: HttpRequest, queryset: QuerySet[Event]) -> None:
@@ -141,6 +145,28 @@ class EventAdmin(admin.ModelAdmin):
         if not event.public:
             event.ensure_invite()
         super().save_model(request, event, form, change)
+
+
+class DisqualifyForm(forms.Form):
+    reason = forms.CharField(
+        max_length=255, widget=forms.Textarea(attrs={"rows": 3, "cols": 60}),
+        help_text="The racer reads it on their run's page and in their notification.",
+        error_messages={"required": "Say why: the racer reads it."},
+    )  # fmt: skip
+
+
+class SubmissionAdminForm(forms.ModelForm):
+    """A submission as staff change it: a disqualification says why."""
+
+    class Meta:
+        model = Submission
+        fields = ["disqualified", "disqualification_reason"]
+
+    def clean(self) -> dict:
+        data = super().clean()
+        if data.get("disqualified") and not (data.get("disqualification_reason") or "").strip():
+            self.add_error("disqualification_reason", "Say why: the racer reads it.")
+        return data
 
 
 class LapInline(admin.TabularInline):
@@ -171,6 +197,7 @@ class SubmissionAdmin(admin.ModelAdmin):
         "video",
     ]  # fmt: skip
     fields = [*readonly_fields, "disqualified", "disqualification_reason"]
+    form = SubmissionAdminForm
     inlines = [LapInline]
     actions = ["disqualify"]
 
@@ -178,15 +205,46 @@ class SubmissionAdmin(admin.ModelAdmin):
     def score(self, submission: Submission) -> str:
         return laptime(submission.score_ms)
 
-    @admin.action(description="Disqualify the selected submissions (their rankings recompute)")
-    def disqualify(self, request: HttpRequest, queryset: QuerySet[Submission]) -> None:
-        for submission in queryset.select_related("event", "racer"):
-            services.submission_disqualify(
-                submission=submission, reason="Disqualified by the league staff."
+    @admin.action(description="Disqualify the selected submissions (asks for the reason)")
+    def disqualify(
+        self, request: HttpRequest, queryset: QuerySet[Submission]
+    ) -> TemplateResponse | None:
+        """First a page that lists the submissions and asks why (as Django's delete action
+        asks); then each is disqualified with that reason and its racer told."""
+        form = DisqualifyForm(request.POST if "apply" in request.POST else None)
+        submissions = list(queryset.select_related("event", "racer"))
+        if form.is_valid():
+            for submission in submissions:
+                services.submission_disqualify(
+                    submission=submission, reason=form.cleaned_data["reason"]
+                )
+            count = len(submissions)
+            self.message_user(
+                request, f"Disqualified {count} submission{pluralize(count)}.", messages.SUCCESS
             )
-        self.message_user(request, f"Disqualified {len(queryset)} submissions.", messages.SUCCESS)
+            return None
+        return TemplateResponse(
+            request,
+            "racing/submission_disqualify.html",
+            {
+                **self.admin_site.each_context(request),
+                "title": f"Disqualify {len(submissions)} submission{pluralize(len(submissions))}",
+                "opts": self.model._meta,
+                "submissions": submissions,
+                "form": form,
+                "action_checkbox_name": helpers.ACTION_CHECKBOX_NAME,
+            },
+        )
 
     def save_model(self, request, submission: Submission, form, change: bool) -> None:
+        if submission.disqualified and {"disqualified", "disqualification_reason"} & set(
+            form.changed_data
+        ):
+            services.submission_disqualify(
+                submission=Submission.objects.get(pk=submission.pk),
+                reason=submission.disqualification_reason,
+            )
+            return
         super().save_model(request, submission, form, change)
         if "disqualified" in form.changed_data:
             services.ranking_recompute(event=submission.event, racer=submission.racer)

@@ -288,11 +288,15 @@ def event_rankings_recompute(*, event: Event) -> int:
 
 
 def submission_disqualify(*, submission: Submission, reason: str) -> Submission:
-    """Take the submission out of the ranking (league staff); the racer's next best takes its
-    place."""
-    _update(submission, disqualified=True, disqualification_reason=reason[:255])
+    """Take the submission out of the ranking (league staff) for ``reason``; the racer's next
+    best takes its place, and the racer is told why (again when the reason changes)."""
+    reason = reason.strip()[:255]
+    news = not submission.disqualified or submission.disqualification_reason != reason
+    _update(submission, disqualified=True, disqualification_reason=reason)
     ranking_recompute(event=submission.event, racer=submission.racer)
     live.announce_leaderboard(submission.event)
+    if news:
+        notifications.submission_disqualified(submission=submission)
     return submission
 
 

@@ -3,8 +3,10 @@ reading the leaderboards."""
 
 import pytest
 from django.contrib.auth.models import Group, User
+from django.templatetags.static import static
 from django.urls import reverse
 
+from notifications.models import Notification
 from racing.models import Event, Ranking, Submission
 from tests.conftest import PASSWORD
 from tests.racing.factories import DAY, event, scored
@@ -53,16 +55,28 @@ def test_staff_close_an_event_and_disqualify_from_the_admin(client, race_staff, 
     fast = scored(trial, alice, 9_000, 9_000, 9_000)
     scored(trial, alice, 10_000, 10_000, 10_000)
     client.force_login(race_staff)
-    response = client.post(
-        reverse("admin:racing_submission_changelist"),
-        {"action": "disqualify", "_selected_action": [fast.pk]},
+    changelist = reverse("admin:racing_submission_changelist")
+    chosen = {"action": "disqualify", "_selected_action": [fast.pk]}
+    asked = client.post(changelist, chosen)
+    assert asked.status_code == 200 and "Disqualify 1 submission" in asked.text
+    assert 'name="reason"' in asked.text and "m by alice in Time trial" in asked.text
+    without_reason = client.post(changelist, {**chosen, "apply": "yes", "reason": " "})
+    assert "Say why: the racer reads it." in without_reason.text
+    assert Ranking.objects.get(racer=alice).score_ms == 9_000  # nothing happened yet
+
+    done = client.post(
+        changelist, {**chosen, "apply": "yes", "reason": "Cut the chicane on lap 2"}, follow=True
     )
-    assert response.status_code == 302
+    assert "Disqualified 1 submission." in done.text
     assert Ranking.objects.get(racer=alice).score_ms == 10_000
-    client.post(
+    fast.refresh_from_db()
+    assert fast.disqualified and fast.disqualification_reason == "Cut the chicane on lap 2"
+    closed = client.post(
         reverse("admin:racing_event_changelist"),
         {"action": "close_events", "_selected_action": [trial.pk]},
+        follow=True,
     )
+    assert "Closed 1 event." in closed.text
     assert Event.objects.get(pk=trial.pk).state == Event.State.CLOSED
     changelist = client.get(reverse("admin:racing_submission_change", args=[fast.pk]))
     assert changelist.status_code == 200 and "Laps" in changelist.text
@@ -170,3 +184,63 @@ def test_an_upcoming_event_can_be_closed_before_it_opens(alice):
     later = event("Later", opens=DAY, closes=2 * DAY)
     services.event_close(event=later)
     assert later.state == Event.State.CLOSED
+
+
+@pytest.mark.django_db
+def test_a_disqualified_racer_is_told_why_and_reads_it_on_their_runs_page(
+    client, race_staff, alice
+):
+    trial = event()
+    run = scored(trial, alice, 9_000, 9_000, 9_000)
+    client.force_login(race_staff)
+    client.post(reverse("admin:racing_submission_changelist"), {
+        "action": "disqualify", "_selected_action": [run.pk], "apply": "yes",
+        "reason": "Cut the chicane on lap 2",
+    })  # fmt: skip
+    told = Notification.objects.get(recipient=alice, text__contains="disqualified")
+    assert told.text == (
+        "m in Time trial was disqualified by the league staff: Cut the chicane on lap 2. "
+        "It no longer counts on the leaderboard."
+    )
+    assert told.url == run.get_absolute_url()
+    client.force_login(alice)
+    page = client.get(run.get_absolute_url())
+    assert (
+        "Disqualified: Cut the chicane on lap 2" in page.text and "data-disqualified" in page.text
+    )
+
+
+@pytest.mark.django_db
+def test_disqualifying_on_a_submissions_admin_page_asks_why_and_tells_the_racer(
+    client, race_staff, alice
+):
+    run = scored(event(), alice, 9_000, 9_000, 9_000)
+    client.force_login(race_staff)
+    change = reverse("admin:racing_submission_change", args=[run.pk])
+    laps = {"laps-TOTAL_FORMS": 3, "laps-INITIAL_FORMS": 3} | {
+        f"laps-{n}-{name}": value
+        for n, lap in enumerate(run.laps.all())
+        for name, value in (("id", lap.pk), ("submission", run.pk))
+    }
+    refused = client.post(change, {**laps, "disqualified": "on", "disqualification_reason": ""})
+    assert "Say why: the racer reads it." in refused.text
+    assert not Submission.objects.get(pk=run.pk).disqualified
+
+    client.post(change, {**laps, "disqualified": "on", "disqualification_reason": "Wrong car"})
+    assert Submission.objects.get(pk=run.pk).disqualified
+    assert not Ranking.objects.filter(racer=alice).exists()
+    assert Notification.objects.get(recipient=alice, text__contains="disqualified").text.startswith(
+        "m in Time trial was disqualified by the league staff: Wrong car."
+    )
+
+
+@pytest.mark.django_db
+def test_the_admin_shows_the_sites_icon_and_favicon_ico_finds_it(client, race_staff):
+    client.force_login(race_staff)
+    admin_page = client.get(reverse("admin:index"))
+    icon = static("console/pitlane.svg")
+    assert f'<link rel="icon" href="{icon}" type="image/svg+xml">' in admin_page.text
+    assert "Pitlane administration" in admin_page.text  # the admin's own header stays
+    favicon = client.get("/favicon.ico")
+    assert favicon.status_code == 302 and favicon.url == icon
+    assert client.get(icon)["Content-Type"].startswith("image/svg+xml")

@@ -98,7 +98,7 @@ def test_a_head_to_bot_event_without_its_bots_says_so_on_the_field(client, race_
     response = client.post(reverse("admin:racing_event_add"), form)
     errors = response.context["adminform"].form.errors
     assert errors["bot_count"] == ["Say how many bot cars the race has."]
-    assert errors["bot_speed"] == ["Ensure this value is less than or equal to 6.0."]
+    assert errors["bot_speed"] == ["Bot car speed [m/s] is at most 6."]
     assert not Event.objects.exists()
 
 
