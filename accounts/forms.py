@@ -38,6 +38,7 @@ class ProfileForm(RacerWords, forms.ModelForm):
         error_messages = {
             "racer_name": {
                 "required": "Choose a racer name for the leaderboards.",
+                "min_length": f"A racer name is {RACER_NAME_RULE}; that one has %(show_value)d.",
                 "max_length": f"A racer name is {RACER_NAME_RULE}; that one has %(show_value)d.",
             }
         }

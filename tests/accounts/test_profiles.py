@@ -8,7 +8,7 @@ from tests.racing.factories import event, scored
 
 pytestmark = pytest.mark.django_db
 
-RULE = "A racer name is 2 to 64 letters, digits, hyphens (-) and underscores (_), no spaces."
+RULE = "A racer name is 2 to 64 letters, digits, hyphens (-) and underscores (_), no spaces"
 
 
 def profile_form(**fields) -> dict:
