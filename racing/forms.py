@@ -15,8 +15,8 @@ from common.time_zones import local_text
 from racing import selectors
 from racing.models import Event, RaceType, RankingMethod
 from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
-from training.models import RLModel, Track
 from training import selectors as training_selectors
+from training.models import RLModel, Track
 
 LOCAL = "%Y-%m-%dT%H:%M"  # what <input type="datetime-local"> sends
 RACE_LENGTH = timedelta(days=7)  # a new community race closes a week after it opens
@@ -43,8 +43,8 @@ class SubmissionForm(RacerWords, forms.Form):
         self.fields["event"].queryset = Event.objects.filter(pk__in=[e.pk for e in events])
         self.fields["event"].label_from_instance = _event_label
         self.fields["model"].queryset = selectors.models_ready_for(racer=racer)
-
         self.fields["model"].label_from_instance = _model_label
+
     def clean(self) -> dict:
         data = super().clean()
         if data.get("event") and data.get("model"):
@@ -56,7 +56,6 @@ class SubmissionForm(RacerWords, forms.Form):
         return data
 
 
-def _event_label(event: Event) -> str:
 def _model_label(model: RLModel) -> str:
     """A ready model by name, said to be untrained where it is (its entry would be refused)."""
     if training_selectors.model_untrained(model=model):
@@ -64,6 +63,7 @@ def _model_label(model: RLModel) -> str:
     return model.name
 
 
+def _event_label(event: Event) -> str:
     rule = f"{event.get_race_type_display().lower()} on {event.track}"
     return f"{event.name} ({rule}, closes {local_text(event.closes_at)})"
 

@@ -421,9 +421,9 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
     log_source = request.GET.get("log", "")
     if log_source not in JobLogLine.Source.values:
         log_source = ""
+    untrained = selectors.model_untrained(model=model)
     return render(
         request,
-    untrained = selectors.model_untrained(model=model)
         "training/model_detail.html",
         {
             "model": model,
