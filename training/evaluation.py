@@ -52,6 +52,7 @@ RUNNABLE = (
     EvaluationJob.Status.QUEUED,
     EvaluationJob.Status.INITIALIZING,
     EvaluationJob.Status.IN_PROGRESS,
+    EvaluationJob.Status.STOPPING,
 )
 VIDEO_CODEC = "VP80"
 LEASE_RENEWAL = 3.0  # [s] between renewals of a run's lease while it drives
@@ -59,6 +60,10 @@ LEASE_RENEWAL = 3.0  # [s] between renewals of a run's lease while it drives
 
 class EvaluationFailed(Exception):
     """The evaluation cannot run; the message is for the racer."""
+
+
+class _StopAsked(Exception):
+    """The racer asked to stop the evaluation (``services.evaluation_stop``)."""
 
 
 class _VideoWriter:
@@ -121,7 +126,11 @@ def run(evaluation_id: int) -> EvaluationJob | None:
     trainer holds its job's. One that is under way with a lapsed lease lost its worker (the
     heartbeat's ``jobs.lapsed_evaluations`` sent for this run, or Celery redelivered the task,
     which it acknowledges late): it starts over, so the racer gets a whole evaluation, not half
-    of one. One whose lease is alive is a duplicate delivery, and is left to its run."""
+    of one. One whose lease is alive is a duplicate delivery, and is left to its run.
+
+    The racer may stop it (``services.evaluation_stop``): the run looks twice a second, and ends
+    it CANCELED with the trials it finished, their video and trace (one whose run died as it
+    was being stopped ends with the trials recorded)."""
     owner = f"{socket.gethostname()}:{os.getpid()}:{secrets.token_hex(4)}"
     with transaction.atomic():
         evaluation = EvaluationJob.objects.select_for_update().filter(pk=evaluation_id).first()
@@ -134,6 +143,15 @@ def run(evaluation_id: int) -> EvaluationJob | None:
             if held and evaluation.lease_expires and evaluation.lease_expires > now:
                 logger.info("Evaluation %s is being driven by another run", evaluation_id)
                 return None
+            if evaluation.status == EvaluationJob.Status.STOPPING:
+                # Its run died as the racer stopped it: end it with the trials it recorded.
+                lifecycle.EVALUATION.move(
+                    evaluation, EvaluationJob.Status.CANCELED, finished_at=now, message="",
+                    failure_reason=jobs.EVALUATION_STOPPED, lease_owner="", lease_expires=None,
+                )  # fmt: skip
+                _model_free(evaluation)
+                _announce(evaluation)
+                return None
             logger.warning("Evaluation %s was interrupted; starting it over", evaluation_id)
             evaluation.trial_rows.all().delete()
         lifecycle.EVALUATION.move(
@@ -142,9 +160,10 @@ def run(evaluation_id: int) -> EvaluationJob | None:
         )  # fmt: skip
     evaluation = EvaluationJob.objects.select_related("model", "track").get(pk=evaluation_id)
     _announce(evaluation)
+    evaluator = Evaluator(evaluation)
     try:
         with _one_torch_thread():
-            Evaluator(evaluation).run()
+            evaluator.run()
     except jobs.LeaseLost:
         logger.warning("Evaluation %s was taken over by another run; this one stops", evaluation_id)
         return None
@@ -159,7 +178,10 @@ def run(evaluation_id: int) -> EvaluationJob | None:
             "Try again, and tell the league staff if it happens again.",
         )
     else:
-        _finish(evaluation, EvaluationJob.Status.COMPLETED)
+        if evaluator.stopped:
+            _finish(evaluation, EvaluationJob.Status.CANCELED, jobs.EVALUATION_STOPPED)
+        else:
+            _finish(evaluation, EvaluationJob.Status.COMPLETED)
     return evaluation
 
 
@@ -182,7 +204,8 @@ class Evaluator:
         self.trace: list[SimTraceRow] = []
         self.metrics: list[dict] = []
         self.results: list[EvaluationTrial] = []
-        self._renewed = time.monotonic()
+        self._renewed = self._looked = time.monotonic()
+        self.stopped = False  # the racer stopped it: it ends with the trials it finished
 
     def run(self) -> None:
         evaluation = self.evaluation
@@ -202,7 +225,12 @@ class Evaluator:
             checkpoint_name=checkpoint,
             checkpoint_iteration=artifacts.checkpoint_iteration(checkpoint),
         )
-        lifecycle.EVALUATION.move(evaluation, EvaluationJob.Status.IN_PROGRESS, message="Racing")
+        if not lifecycle.EVALUATION.move(
+            evaluation, EvaluationJob.Status.IN_PROGRESS, message="Racing"
+        ):  # the racer stopped it as it loaded
+            self.stopped = True
+            env.close()
+            return
         _announce(evaluation)
         with tempfile.TemporaryDirectory(prefix="pitlane-evaluation-") as directory:
             video_path = Path(directory) / artifacts.EVALUATION_VIDEO
@@ -211,6 +239,8 @@ class Evaluator:
             try:
                 with live.FramePublisher(redis_client(timeout=5.0), group) as publisher:
                     self._drive(env, policy, writer, publisher)
+            except _StopAsked:
+                self.stopped = True  # the trials it finished, and what was driven, are saved
             finally:
                 writer.close()
                 env.close()
@@ -254,6 +284,7 @@ class Evaluator:
 
     def _stepped(self, observation: dict, info: dict, done: bool) -> None:
         self._renew()
+        self._look_for_stop()
         unwrapped = self._unwrapped
         self.trace.append(self._row(info))
         frame = unwrapped.spectator.render(unwrapped)
@@ -270,6 +301,20 @@ class Evaluator:
             self._laps_done += 1
             lap_time = info["lap_times"][self._laps_done - 1]
             self._counts = self._record(unwrapped, info, self._counts, lap_time, completed=True)
+
+    def _look_for_stop(self) -> None:
+        """``_StopAsked`` once the racer has asked to stop (looked for twice a second)."""
+        now = time.monotonic()
+        if now - self._looked < jobs.EVALUATION_STOP_LOOK:
+            return
+        self._looked = now
+        stopping = EvaluationJob.Status.STOPPING
+        try:
+            asked = EvaluationJob.objects.filter(pk=self.evaluation.pk, status=stopping).exists()
+        except DatabaseError:
+            return  # looked for again in half a second
+        if asked:
+            raise _StopAsked
 
     def _renew(self) -> None:
         """Hold the lease while driving; ``jobs.LeaseLost`` once another run has it. A database
@@ -382,10 +427,15 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
     ):  # fmt: skip
         logger.warning("Evaluation %s was taken over by another run; it ends it", evaluation.pk)
         return
+    _model_free(evaluation)
+    _announce(evaluation)
+    if status != EvaluationJob.Status.CANCELED:  # the racer stopped it: they know
+        notifications.evaluation_ended(evaluation=evaluation)
+
+
+def _model_free(evaluation: EvaluationJob) -> None:
     driving = frozenset({RLModel.Status.EVALUATING, RLModel.Status.SUBMITTING})
     lifecycle.MODEL.move(evaluation.model_id, RLModel.Status.READY, only_from=driving)
-    _announce(evaluation)
-    notifications.evaluation_ended(evaluation=evaluation)
 
 
 def _announce(evaluation: EvaluationJob) -> None:

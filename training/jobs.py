@@ -34,6 +34,10 @@ EVALUATION_LAPSED = (
 )
 
 
+EVALUATION_STOPPED = "Stopped by you; the trials it finished are kept, with their video and trace."
+EVALUATION_STOP_LOOK = 0.5  # [s] between a driving evaluation's looks for the racer's stop
+
+
 class LeaseLost(Exception):
     """Another run holds the job now; this one must stop without writing."""
 
@@ -89,10 +93,12 @@ def lapsed_claim() -> list[TrainingJob]:
 
 def lapsed_evaluations() -> list[EvaluationJob]:
     """The evaluations (race entries' too) whose run died while driving, each claimed once per
-    lapse, as ``lapsed_claim`` claims jobs: the caller sends each to be driven again."""
+    lapse, as ``lapsed_claim`` claims jobs: the caller sends each to be driven again (one the
+    racer was stopping is ended by that run, with what it had)."""
     now = timezone.now()
+    statuses = EvaluationJob.Status
     lapsed = EvaluationJob.objects.filter(
-        status__in=(EvaluationJob.Status.INITIALIZING, EvaluationJob.Status.IN_PROGRESS),
+        status__in=(statuses.INITIALIZING, statuses.IN_PROGRESS, statuses.STOPPING),
         lease_expires__lt=now,
     ).exclude(lease_owner="")
     claimed = []

@@ -109,14 +109,16 @@ EVALUATION = Lifecycle(
     EvaluationJob,
     {
         # A run loads the model and drives it. A run redelivered after its worker died starts an
-        # interrupted evaluation over (INITIALIZING again), so the racer gets a whole one.
-        _E.QUEUED: frozenset({_E.INITIALIZING}),
-        _E.INITIALIZING: frozenset({_E.IN_PROGRESS, _E.FAILED}),
-        _E.IN_PROGRESS: frozenset({_E.INITIALIZING, _E.COMPLETED, _E.FAILED}),
+        # interrupted evaluation over (INITIALIZING again), so the racer gets a whole one. The
+        # racer's "Stop evaluation" cancels one still waiting, and asks a running one to stop
+        # (STOPPING): its run ends it, CANCELED with the trials it finished, or COMPLETED if
+        # the last trial ended as the stop came.
+        _E.QUEUED: frozenset({_E.INITIALIZING, _E.CANCELED}),
+        _E.INITIALIZING: frozenset({_E.IN_PROGRESS, _E.FAILED, _E.STOPPING}),
+        _E.IN_PROGRESS: frozenset({_E.INITIALIZING, _E.COMPLETED, _E.FAILED, _E.STOPPING}),
+        _E.STOPPING: frozenset({_E.CANCELED, _E.COMPLETED, _E.FAILED}),
         _E.COMPLETED: frozenset(),
         _E.FAILED: frozenset(),
-        # A training job's statuses an evaluation never takes: it runs to its end.
-        _E.STOPPING: frozenset(),
         _E.CANCELED: frozenset(),
     },
     born=frozenset({_E.QUEUED}),

@@ -380,6 +380,37 @@ def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJ
     return evaluation
 
 
+def evaluation_stop(*, evaluation: EvaluationJob) -> EvaluationJob:
+    """The racer's "Stop evaluation" (DeepRacer's console had it): one still waiting is canceled
+    at once and its model is ready again; a running one is asked to stop (STOPPING), and its run
+    notices within a second, ends it CANCELED with the trials it finished (their video and trace
+    kept) and frees the model. A race entry's evaluation runs to its end (``EvaluationRefused``);
+    one that has ended is returned as it is."""
+    if EvaluationJob.objects.filter(pk=evaluation.pk, submission__isnull=False).exists():
+        raise EvaluationRefused("A race entry drives to its end; it cannot be stopped.")
+    statuses = EvaluationJob.Status
+    with transaction.atomic():
+        evaluation = EvaluationJob.objects.select_for_update().get(pk=evaluation.pk)
+        if evaluation.status == statuses.QUEUED:
+            lifecycle.EVALUATION.move(
+                evaluation, statuses.CANCELED, finished_at=timezone.now(), message="",
+                failure_reason="Stopped by you before it began.",
+            )  # fmt: skip
+            lifecycle.MODEL.move(
+                evaluation.model_id, RLModel.Status.READY,
+                only_from=frozenset({RLModel.Status.EVALUATING}),
+            )  # fmt: skip
+        elif evaluation.status in (statuses.INITIALIZING, statuses.IN_PROGRESS):
+            lifecycle.EVALUATION.move(
+                evaluation, statuses.STOPPING,
+                message="Stopping: the trials it finished are kept",
+            )  # fmt: skip
+    live.announce(
+        live.evaluation_group(evaluation.pk), selectors.evaluation_status(evaluation=evaluation)
+    )
+    return evaluation
+
+
 class RewardFunctionInvalid(Refused):
     """The reward function was not saved: ``errors`` says why, by field (``name``, ``source``);
     ``validation`` holds the code's problems, line by line, when the code was run."""

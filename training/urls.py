@@ -30,6 +30,11 @@ urlpatterns = [
         name="evaluation-detail",
     ),
     path(
+        "models/<int:pk>/evaluations/<int:evaluation>/stop/",
+        views.evaluation_stop,
+        name="evaluation-stop",
+    ),
+    path(
         "models/<int:pk>/evaluations/<int:evaluation>/files/<path:name>",
         views.evaluation_file,
         name="evaluation-file",

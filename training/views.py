@@ -727,16 +727,43 @@ EVALUATION_FILES = {
 def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpResponse:
     job = _get_evaluation_for_user(request, pk, evaluation)
     prefix = artifacts.path(job.model, artifacts.evaluation_prefix(job))
+    ended = (EvaluationJob.Status.COMPLETED, EvaluationJob.Status.CANCELED)
     files = [
         (name, label) for name, label in EVALUATION_FILES.items()
-        if job.status == EvaluationJob.Status.COMPLETED and default_storage.exists(prefix + name)
+        if job.status in ended and default_storage.exists(prefix + name)
     ]  # fmt: skip
+    stoppable = job.status in (EvaluationJob.Status.QUEUED, EvaluationJob.Status.INITIALIZING,
+                               EvaluationJob.Status.IN_PROGRESS)  # fmt: skip
     return render(
         request,
         "training/evaluation_detail.html",
         {"model": job.model, "evaluation": job, "trials": list(job.trial_rows.all()),
-         "files": files},
+         "files": files, "can_stop": stoppable and not hasattr(job, "submission")},
     )  # fmt: skip
+
+
+@login_required
+@require_POST
+def evaluation_stop(request: HttpRequest, pk: int, evaluation: int) -> HttpResponse:
+    """The racer's "Stop evaluation": the trials it finished are kept."""
+    job = _get_evaluation_for_user(request, pk, evaluation)
+    was_active = job.is_active
+    try:
+        job = services.evaluation_stop(evaluation=job)
+    except Refused as refused:
+        messages.error(request, str(refused))
+    else:
+        if not was_active:
+            messages.info(request, f"The evaluation had already ended: {job.get_status_display()}.")
+        elif job.status == EvaluationJob.Status.CANCELED:
+            messages.success(request, "Stopped: the evaluation had not begun.")
+        elif job.status == EvaluationJob.Status.STOPPING:
+            messages.success(request, "Stopping the evaluation: the trials it finished are kept.")
+        else:
+            messages.info(request, f"The evaluation has ended: {job.get_status_display()}.")
+    return redirect("training:evaluation-detail", pk=job.model_id, evaluation=job.pk)
+
+
 
 
 @login_required

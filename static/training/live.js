@@ -143,6 +143,9 @@ function receive(message) {
   }
 }
 
+let leaving = false; // a form was sent (Stop evaluation): its answer replaces the page
+document.addEventListener("submit", () => { leaving = true; });
+
 function setStatus(message) {
   const wasActive = state ? state.active : null;
   state = message;
@@ -183,7 +186,8 @@ function setStatus(message) {
   }
   if (!message.active) {
     say(message.status === "COMPLETED" ? "Finished: no more live video." : `${message.status_display}.`);
-    if (kind === "evaluation" && wasActive && message.status === "COMPLETED") window.location.reload();
+    const ended = message.status === "COMPLETED" || message.status === "CANCELED"; // a video to show
+    if (kind === "evaluation" && wasActive && ended && !leaving) window.location.reload();
   } else if (message.status === "QUEUED" || message.status === "INITIALIZING") {
     say("The simulation starts when a worker takes the job.");
   }

@@ -42,3 +42,20 @@ def test_a_racer_reads_the_results_and_plays_the_recorded_video(page: Page, alic
     )
     expect(page.get_by_role("link", name="Simulation trace (CSV)")).to_be_visible()
     expect(page.get_by_role("link", name="Evaluation metrics (JSON)")).to_be_visible()
+
+
+def test_a_racer_stops_an_evaluation_from_its_page(page: Page, alice, tracks):
+    model = ready_model(alice)
+    job = services.evaluation_start(model=model, settings={}, enqueue=False)  # it waits
+
+    log_in(page, "alice", PASSWORD)
+    page.goto(f"/models/{model.pk}/evaluations/{job.pk}/")
+    stop = page.get_by_role("button", name="Stop evaluation")
+    expect(stop).to_be_visible()
+    stop.click()
+    expect(page.locator(".message")).to_have_text("Stopped: the evaluation had not begun.")
+    expect(page.locator("[data-live-status]")).to_have_text("Canceled")
+    expect(page.get_by_role("button", name="Stop evaluation")).to_have_count(0)
+    expect(page.locator("[data-live-failure]")).to_contain_text("Stopped by you before it began.")
+    page.goto(f"/models/{model.pk}/")
+    expect(page.locator("[data-live-model-status]")).to_have_text("Ready")

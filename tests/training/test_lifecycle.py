@@ -26,8 +26,8 @@ Job = TrainingJob.Status
 LIFECYCLES = {
     "model": (lifecycle.MODEL, {Status.IMPORTING}),  # no import waits half-done now
     "training job": (lifecycle.TRAINING_JOB, set()),
-    # an evaluation or a race entry runs to its end: never stopping, never canceled
-    "evaluation": (lifecycle.EVALUATION, {Job.STOPPING, Job.CANCELED}),
+    # the racer may stop an evaluation (stopping, then canceled); a race entry runs to its end
+    "evaluation": (lifecycle.EVALUATION, set()),
     "race entry": (SUBMISSION, {Job.INITIALIZING, Job.STOPPING, Job.CANCELED}),
 }
 
