@@ -169,6 +169,7 @@ def test_a_refused_model_names_the_sections_to_fix_and_links_to_each(page: Page,
     expect(summary).to_be_focused()  # a screen reader reads it first
     links = summary.get_by_role("link")
     expect(links).to_have_text(["Name", "Stop condition and workers", "Reward function"])
+    assert page_problems(page) == []  # the links read well on the summary's red wash
     links.last.click()
     expect(page).to_have_url(re.compile("#section-reward-function$"))
     expect(page.get_by_role("heading", name="8. Reward function")).to_be_in_viewport()
