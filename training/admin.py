@@ -1,5 +1,5 @@
 from django import forms
-from django.contrib import admin
+from django.contrib import admin, messages
 from django.urls import reverse
 from django.utils.html import format_html
 
@@ -12,7 +12,13 @@ from training.models import (
     Track,
     Vehicle,
 )
-from training.services import ROUTE_MAX_BYTES, TrackRefused, track_add, track_check
+from training.services import (
+    ROUTE_MAX_BYTES,
+    TrackRefused,
+    track_add,
+    track_check,
+    training_stop,
+)
 
 
 class TrackUploadForm(forms.ModelForm):
@@ -148,6 +154,30 @@ class RLModelAdmin(admin.ModelAdmin):
     search_fields = ["name", "owner__username"]
     date_hierarchy = "created_at"
     list_select_related = ["owner", "track"]
+    actions = ["stop_training"]
+
+    @admin.action(description="Stop training of the selected models")
+    def stop_training(self, request, queryset) -> None:
+        """Stop each selected model's training as its racer's button does, and say per model
+        what happened: stopping (saving its last iteration), canceled while it waited, or
+        nothing to stop (already ready, say)."""
+        for model in queryset:
+            job = model.latest_job
+            if job is None or not job.is_active:
+                status = model.get_status_display().lower()
+                self.message_user(request, f"{model}: already {status}: nothing to stop.",
+                                  messages.INFO)  # fmt: skip
+                continue
+            if job.stop_requested:
+                self.message_user(request, f"{model}: already stopping: {job.message}.",
+                                  messages.INFO)  # fmt: skip
+                continue
+            job = training_stop(job=job)
+            if job.status == job.Status.CANCELED:
+                said = "canceled: it had not started training"
+            else:
+                said = f"stopping: {job.message[0].lower()}{job.message[1:]}"
+            self.message_user(request, f"{model}: {said}.", messages.SUCCESS)
 
 
 @admin.register(RewardFunction)
