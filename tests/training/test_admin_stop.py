@@ -10,9 +10,7 @@ from training.models import RLModel, TrainingJob
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 
 
-def test_the_admin_stops_a_training_model_and_says_a_ready_one_had_nothing_to_stop(
-    client, alice
-):
+def test_the_admin_stops_a_training_model_and_says_a_ready_one_had_nothing_to_stop(client, alice):
     ready = ready_model(alice, "already-done")
     training = ready_model(alice, "still-learning")
     RLModel.objects.filter(pk=training.pk).update(status=RLModel.Status.TRAINING)
