@@ -131,7 +131,9 @@ def _get_submission_for_user(request: HttpRequest, pk: int) -> Submission:
     """The submission, if this user may see it (``selectors.submission_visible_to``); 404
     otherwise."""
     submission = get_object_or_404(
-        Submission.objects.select_related("event", "event__track", "event__season", "racer"),
+        Submission.objects.select_related(
+            "event", "event__track", "event__season", "racer__profile"
+        ),
         pk=pk,
     )
     if not selectors.submission_visible_to(submission=submission, user=request.user):

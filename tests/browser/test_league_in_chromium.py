@@ -57,7 +57,7 @@ def test_watch_opens_the_runs_page_and_it_fits_a_phone(page: Page, alice, tracks
 
     expect(page).to_have_url(re.compile(f"/races/submissions/{run.pk}/#video$"))
     expect(page.get_by_role("heading", name="zoom in Time trial")).to_be_visible()
-    expect(page.locator("[data-racer]")).to_have_text("alice")
+    expect(page.locator("[data-racer] .racer-name")).to_have_text("alice")
     expect(page.locator("[data-score]")).to_have_text("0:09.500")
     expect(page.locator("[data-place]")).to_have_text("1")
     expect(page.locator("[data-event-rules]")).to_contain_text(

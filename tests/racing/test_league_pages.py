@@ -130,7 +130,7 @@ def test_watch_opens_the_runs_page_for_everyone_once_it_is_on_the_leaderboard(
 
     page = client.get(fastest.get_absolute_url())  # a visitor, not logged in
     assert page.status_code == 200
-    assert "<strong data-racer>bob</strong>" in page.text and "b1 in " in page.text
+    assert '<span class="racer-name">bob</span>' in page.text and "b1 in " in page.text
     assert "place on the leaderboard: <strong data-place>1</strong>" in page.text
     assert "your place" not in page.text
     assert "data-score>0:29.450</strong>" in page.text and page.text.count("0:29.450") >= 4
