@@ -141,3 +141,18 @@ def test_back_and_submit_again_or_a_double_click_makes_one_race(page: Page, alic
     page.get_by_role("button", name="Create the race").dblclick()
     expect(page.get_by_role("heading", name=re.compile("Saturday"))).to_be_visible()
     assert Event.objects.filter(name="Saturday").count() == 1
+
+
+def test_the_organiser_deletes_a_race_nobody_entered_after_a_confirmation(
+    page: Page, alice, tracks
+):
+    log_in(page, "alice", PASSWORD)
+    race = organise(page)
+    page.set_viewport_size({"width": 390, "height": 844})
+    page.get_by_role("link", name="Delete the race").click()
+    expect(page.get_by_role("heading", name="Delete Friday night?")).to_be_visible()
+    assert page_problems(page) == []
+    page.get_by_role("button", name="Delete Friday night").click()
+    expect(page.get_by_text("Friday night is deleted.")).to_be_visible()
+    expect(page).to_have_url(re.compile("/races/$"))
+    assert not Event.objects.filter(pk=race.pk).exists()
