@@ -38,35 +38,30 @@ def reword(field: forms.Field, name: str) -> None:
 
 
 def words(field: forms.Field, label: str) -> dict[str, str]:
-    """The site's message for each of Django's error codes that ``field`` can raise. Django
-    fills in ``%(show_value)d`` (how long the value is); the limits are the field's own."""
+    """The site's message for each of Django's error codes that ``field`` can raise. The limits
+    come from the error itself (``%(limit_value)s``, ``%(show_value)d``), so a limit the model
+    sets (a validator on the model's field, checked when a model form is cleaned) is said too."""
     said = {"required": f"{label} is needed."}
     if isinstance(field, forms.ChoiceField | forms.ModelChoiceField):
         said["invalid_choice"] = f"{label}: choose one of those listed."
     if isinstance(field, forms.FileField):
         said["required"] = f"{label}: choose a file."
         said["empty"] = f"{label}: the file chosen is empty."
-        if field.max_length is not None:
-            said["max_length"] = f"{label}: its name is at most {field.max_length:,} characters."
+        said["max_length"] = f"{label}: its name is at most %(limit_value)d characters."
     elif invalid := _invalid(field, label):
         said["invalid"] = invalid
-    for code, limit, what in (
-        ("max_length", getattr(field, "max_length", None), "at most"),
-        ("min_length", getattr(field, "min_length", None), "at least"),
-    ):
-        if limit is not None and not isinstance(field, forms.FileField):
-            unit = "character" if limit == 1 else "characters"
-            said[code] = f"{label} is {what} {limit:,} {unit} long; this one has %(show_value)d."
-    for code, limit, what in (
-        ("max_value", getattr(field, "max_value", None), "at most"),
-        ("min_value", getattr(field, "min_value", None), "at least"),
-        ("step_size", getattr(field, "step_size", None), "in steps of"),
-    ):
-        if limit is not None and not callable(limit):
-            said[code] = f"{label} is {what} {_number(limit)}."
+    if isinstance(field, forms.CharField):
+        for code, what in (("max_length", "at most"), ("min_length", "at least")):
+            said[code] = (
+                f"{label} is {what} %(limit_value)d characters long; this one has %(show_value)d."
+            )
+    if isinstance(field, forms.IntegerField | forms.FloatField | forms.DecimalField):
+        for code, what in (("max_value", "at most"), ("min_value", "at least"),
+                           ("step_size", "in steps of")):  # fmt: skip
+            said[code] = f"{label} is {what} {_limit(getattr(field, code))}."
     if isinstance(field, forms.DecimalField):
-        said["max_digits"] = f"{label} has at most {field.max_digits} digits."
-        said["max_decimal_places"] = f"{label} has at most {field.decimal_places} decimal places."
+        said["max_digits"] = f"{label} has at most %(max)s digits."
+        said["max_decimal_places"] = f"{label} has at most %(max)s decimal places."
         said["max_whole_digits"] = f"{label} is too large."
     return {code: _escaped(text) if code in FORMATTED else text for code, text in said.items()}
 
@@ -74,10 +69,15 @@ def words(field: forms.Field, label: str) -> dict[str, str]:
 # The codes whose message Django formats with the error's params (a "%" of a label doubled).
 FORMATTED = {"invalid_choice", "max_length", "min_length", "max_value", "min_value", "step_size",
              "max_digits", "max_decimal_places", "max_whole_digits"}  # fmt: skip
+PLACEHOLDERS = ("%(limit_value)d", "%(limit_value)s", "%(show_value)d", "%(max)s")
 
 
 def _escaped(text: str) -> str:
-    return text.replace("%", "%%").replace("%%(show_value)d", "%(show_value)d")
+    """``text`` with a label's "%" doubled and Django's placeholders kept."""
+    doubled = text.replace("%", "%%")
+    for placeholder in PLACEHOLDERS:
+        doubled = doubled.replace("%" + placeholder, placeholder)
+    return doubled
 
 
 def _invalid(field: forms.Field, label: str) -> str | None:
@@ -101,7 +101,9 @@ def _subject(label: str) -> str:
     return label[:1].upper() + label[1:]
 
 
-def _number(value: object) -> str:
-    if isinstance(value, float | Decimal):
-        return f"{value:g}"
-    return f"{value:,}" if isinstance(value, int) else str(value)
+def _limit(value: object) -> str:
+    """A number field's own limit as written (6, not 6.0); the error's, for a limit only the
+    model's validators know."""
+    if isinstance(value, int | float | Decimal) and not isinstance(value, bool):
+        return f"{value:,}" if isinstance(value, int) else f"{value:g}"
+    return "%(limit_value)s"

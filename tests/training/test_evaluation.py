@@ -213,7 +213,7 @@ def test_the_evaluate_page_keeps_what_was_typed_and_says_what_to_change(client, 
     )  # fmt: skip
     assert response.status_code == 400
     content = response.content.decode()
-    assert "Ensure this value is less than or equal to 10" in content
+    assert "Off-track penalty [s] is at most 10." in content
     assert 'value="4" selected' in content  # what was typed is kept
     assert not EvaluationJob.objects.exists()
 
