@@ -7,6 +7,9 @@ simulated 1/15 s becomes a frame of the recorded video (VP8 in WebM: Chromium an
 play it); the frames someone watches live go to the ``evaluation_<id>`` group, and while someone
 watches, the simulation keeps to real time so that they see the race at its speed (an operator
 may speed it up: PITLANE_WATCHED_SPEEDUP).
+
+Long because an evaluation's run is one piece: its lease, its drive with the video encoder, the
+live frames, the racer's stop, the trials it records and the files it saves.
 """
 
 from __future__ import annotations
@@ -144,13 +147,7 @@ def run(evaluation_id: int) -> EvaluationJob | None:
                 logger.info("Evaluation %s is being driven by another run", evaluation_id)
                 return None
             if evaluation.status == EvaluationJob.Status.STOPPING:
-                # Its run died as the racer stopped it: end it with the trials it recorded.
-                lifecycle.EVALUATION.move(
-                    evaluation, EvaluationJob.Status.CANCELED, finished_at=now, message="",
-                    failure_reason=jobs.EVALUATION_STOPPED, lease_owner="", lease_expires=None,
-                )  # fmt: skip
-                _model_free(evaluation)
-                _announce(evaluation)
+                _end_stopped(evaluation)
                 return None
             logger.warning("Evaluation %s was interrupted; starting it over", evaluation_id)
             evaluation.trial_rows.all().delete()
@@ -431,6 +428,16 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
     _announce(evaluation)
     if status != EvaluationJob.Status.CANCELED:  # the racer stopped it: they know
         notifications.evaluation_ended(evaluation=evaluation)
+
+
+def _end_stopped(evaluation: EvaluationJob) -> None:
+    """End an evaluation whose run died as the racer stopped it, with the trials it recorded."""
+    lifecycle.EVALUATION.move(
+        evaluation, EvaluationJob.Status.CANCELED, finished_at=timezone.now(), message="",
+        failure_reason=jobs.EVALUATION_STOPPED, lease_owner="", lease_expires=None,
+    )  # fmt: skip
+    _model_free(evaluation)
+    _announce(evaluation)
 
 
 def _model_free(evaluation: EvaluationJob) -> None:

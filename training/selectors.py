@@ -1,4 +1,9 @@
-"""Reads for the training app."""
+"""Reads for the training app.
+
+Long because the app's reads are kept in one module, as its writes are in services.py: models
+and their training, tracks, vehicles, checkpoints (and what counts as trained), evaluations,
+races, quotas and reward functions.
+"""
 
 from __future__ import annotations
 
