@@ -327,7 +327,9 @@ def community_race_create(
     event.slug = _free_slug(fields.get("name") or "race")
     event.form_token = form_token
     event.ensure_invite()
-    event.full_clean()
+    # The one-race-per-form constraint is the database's to enforce, below: a twin request
+    # that saved first is found there, not reported as an error in the form.
+    event.full_clean(validate_constraints=False)
     if made := _same_race_just_made(organiser, event):
         return made, False
     try:

@@ -8,6 +8,8 @@ import pytest
 from django.urls import reverse
 from django.utils import timezone
 
+from racing import services
+from racing.forms import CommunityRaceForm
 from racing.models import Event, Ranking
 from tests.racing.conftest import race_form
 from tests.racing.factories import scored
@@ -199,3 +201,21 @@ def test_only_the_organiser_deletes_their_race(client, community_race, bob):
     assert client.get(delete).status_code == 404
     assert client.post(delete).status_code == 404
     assert Event.objects.filter(pk=community_race.pk).exists()
+
+
+def test_two_requests_from_one_form_at_once_make_one_race(alice, tracks, monkeypatch):
+    """A double click: both requests find no race from the form, one saves first."""
+    form = CommunityRaceForm(race_form(), organiser=alice)
+    assert form.is_valid(), form.errors
+    token = form.cleaned_data["form_token"]
+    first, created = services.community_race_create(
+        organiser=alice, fields=form.fields_for_service(), form_token=token
+    )
+    looked = iter([None, first])  # the twin looks before the first saves, then after
+    monkeypatch.setattr(services, "_race_from_form", lambda organiser, token: next(looked))
+    monkeypatch.setattr(services, "_same_race_just_made", lambda organiser, event: None)
+    second, again = services.community_race_create(
+        organiser=alice, fields=form.fields_for_service(), form_token=token
+    )
+    assert (created, again, second) == (True, False, first)
+    assert Event.objects.count() == 1
