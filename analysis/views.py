@@ -62,7 +62,11 @@ def page(request: HttpRequest, pk: int, evaluation: int | None = None) -> HttpRe
             "base": _base(source),
             "unreadable": unreadable,
             "multi_track": bool(source.model.extra_tracks) and source.evaluation is None,
-            "form": RescoreForm(initial={"reward_function": source.model.reward_function}),
+            "form": RescoreForm(
+                owner=request.user,
+                model=source.model,
+                initial={"reward_function": source.model.reward_function},
+            ),
             "rescorings": rescorings,
         },
     )
@@ -124,7 +128,7 @@ def episode(request: HttpRequest, pk: int, evaluation: int | None = None) -> Jso
 @require_POST
 def rescore(request: HttpRequest, pk: int, evaluation: int | None = None) -> JsonResponse:
     source = _source(request, pk, evaluation)
-    form = RescoreForm(request.POST)
+    form = RescoreForm(request.POST, owner=request.user, model=source.model)
     limited = ratelimits.over(request, "rescore")
     if limited is not None:
         return JsonResponse({"errors": {WHOLE: [{"message": str(limited)}]}}, status=429)

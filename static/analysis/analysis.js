@@ -459,6 +459,20 @@ async function rescore(event) {
   follow(data);
 }
 
+// The "Start from" choice fills the editor with a function the racer already has; an edit makes
+// the code pasted again, so what is sent is always what the editor shows.
+function chooseRewardFunction(form) {
+  const sources = JSON.parse(document.getElementById("rescore-sources").textContent);
+  const chosen = form.elements.saved;
+  const code = form.elements.reward_function;
+  chosen.addEventListener("change", () => {
+    if (chosen.value) code.value = sources[chosen.value];
+  });
+  code.addEventListener("input", () => {
+    chosen.value = "";
+  });
+}
+
 async function follow(data) {
   const status = find("rescore-status");
   while (data.status === "QUEUED" || data.status === "RUNNING") {
@@ -561,6 +575,7 @@ if (root) {
     drawEpisodes();
   }));
   find("rescore-form").addEventListener("submit", rescore);
+  chooseRewardFunction(find("rescore-form"));
   root.querySelectorAll("[data-rescoring-url]").forEach((button) => button.addEventListener("click", async () => {
     follow(await (await fetch(button.dataset.rescoringUrl)).json());
   }));

@@ -15,6 +15,7 @@ from analysis.models import Rescoring, TraceSummary
 from analysis.records import Source
 from analysis.tasks import RESCORE_HARD_LIMIT
 from tests.analysis.test_summaries import recorded_by_hand
+from training.models import RewardFunction
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 
@@ -107,6 +108,31 @@ def test_the_page_asks_for_a_rescoring_and_refuses_what_cannot_run(alice, client
     wide = {"reward_function": SPEED_AND_OFF_TRACK, "first": 0, "last": 2**40}
     scored = client.post(f"{base}rescore/", wide).json()
     assert (scored["first"], scored["last"], scored["total_steps"]) == (1, 1, 5)
+
+
+def test_a_racer_rescores_with_the_models_own_or_a_saved_function_and_never_anothers(
+    alice, bob, client
+):
+    job = recorded_by_hand(alice)
+    mine = RewardFunction.objects.create(owner=alice, name="speedy", source=SPEED_AND_OFF_TRACK)
+    theirs = RewardFunction.objects.create(owner=bob, name="secret", source="def nope(")
+    client.force_login(alice)
+    base = reverse("analysis:model", args=[job.model.pk])
+    page = client.get(base).content.decode()
+    assert '<option value="model" selected>' in page and ">speedy</option>" in page
+    assert "secret" not in page
+
+    asked = client.post(f"{base}rescore/", {"saved": mine.pk, "reward_function": ""})
+    assert asked.status_code == 202
+    assert Rescoring.objects.get(pk=asked.json()["id"]).reward_function == SPEED_AND_OFF_TRACK
+    own = client.post(f"{base}rescore/", {"saved": "model", "reward_function": "ignored"})
+    assert Rescoring.objects.get(pk=own.json()["id"]).reward_function == job.model.reward_function
+
+    refused = client.post(f"{base}rescore/", {"saved": theirs.pk, "reward_function": ""})
+    assert refused.status_code == 400
+    said = refused.json()["errors"]["saved"][0]["message"]
+    assert said.startswith("Choose the model's own reward function or one of your saved ones")
+    assert Rescoring.objects.filter(reward_function=theirs.source).count() == 0
 
 
 def test_a_rescoring_whose_worker_died_fails_and_frees_its_place(alice, client):

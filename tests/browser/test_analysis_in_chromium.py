@@ -12,6 +12,7 @@ from tests.browser.conftest import ARTIFACTS
 from tests.browser.test_accounts_in_chromium import log_in
 from tests.conftest import PASSWORD
 from tests.training.test_deepracer_utils import train_on_paper
+from training.models import RewardFunction
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -29,6 +30,9 @@ def test_a_racer_reads_their_models_driving_and_tries_another_reward_function(
     page: Page, alice, tracks, celery_worker_process
 ):
     model = untrained(alice, "analysed")
+    RewardFunction.objects.create(
+        owner=alice, name="speed-and-off-track", source=SPEED_AND_OFF_TRACK
+    )
     train_on_paper(model)  # two iterations: laps, and episodes straight off the track
     errors: list[str] = []
     page.on("pageerror", lambda error: errors.append(str(error)))
@@ -75,8 +79,17 @@ def test_a_racer_reads_their_models_driving_and_tries_another_reward_function(
     canvas.screenshot(path=ARTIFACTS / "analysis-one-episode.png")
     viewer.get_by_role("button", name="Back to all steps").click()
 
-    # Another reward function, scored by the simulation worker.
-    page.get_by_label("Reward function").fill(SPEED_AND_OFF_TRACK)
+    # Another reward function, from the racer's library, scored by the simulation worker. The
+    # editor opens on the model's own; choosing fills it, typing makes it pasted code again.
+    editor, start_from = page.get_by_label("Reward function"), page.get_by_label("Start from")
+    expect(start_from).to_have_value("model")
+    expect(editor).to_have_value(model.reward_function)
+    start_from.select_option(label="speed-and-off-track")
+    expect(editor).to_have_value(SPEED_AND_OFF_TRACK)
+    editor.press("End")
+    editor.press("Space")
+    expect(start_from).to_have_value("")
+    start_from.select_option(label="speed-and-off-track")
     page.get_by_role("button", name="Score the recorded driving").click()
     expect(page.locator("[data-rescore-status]")).to_contain_text("Scored", timeout=60_000)
     expect(page.get_by_label("Colour by")).to_have_value("rescored")
