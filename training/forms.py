@@ -67,6 +67,55 @@ class ModelImportForm(RacerWords, forms.Form):
         self.data["kept"] = kept.token if kept else ""
 
 
+class ModelImportConfirmForm(RacerWords, forms.Form):
+    """An import's preview (``imports.ImportPreview``): what the racer may change before the
+    model is created and its training starts (``imports.PREVIEW_CHANGES``), checked again by the
+    import as the create-model page checks them; the archive is the one kept (``kept``)."""
+
+    name = forms.CharField(max_length=64, help_text="Letters, digits and hyphens.")
+    track = forms.ModelChoiceField(
+        queryset=Track.objects.all(), to_field_name="name", empty_label=None,
+        error_messages={"required": "Choose a track.", "invalid_choice": "Choose a listed track."},
+    )  # fmt: skip
+    direction = forms.ChoiceField(
+        choices=[("counterclockwise", "Counter-clockwise"), ("clockwise", "Clockwise")]
+    )
+    max_minutes = forms.IntegerField(
+        label="Maximum training time [min]",
+        help_text=f"{configuration.MINUTES[0]} to {configuration.MINUTES[1]} minutes of your "
+        "monthly training time.",
+    )
+    kept = forms.CharField(widget=forms.HiddenInput)
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        limit(self.fields["max_minutes"], *configuration.MINUTES, step=1)
+
+    @classmethod
+    def of(
+        cls, preview: imports.ImportPreview, kept: imports.KeptUpload
+    ) -> "ModelImportConfirmForm":
+        """The preview's settings as the form's values, its problems on their fields."""
+        settings = preview.settings
+        form = cls({"kept": kept.token, **{key: settings[key] for key in imports.PREVIEW_CHANGES}})
+        form.add_problems(preview.problems)
+        return form
+
+    def changes(self) -> dict:
+        """The racer's changes that are valid (all of them once ``is_valid``)."""
+        data = getattr(self, "cleaned_data", {})
+        changes = {key: data[key] for key in imports.PREVIEW_CHANGES if key in data}
+        if "track" in changes:
+            changes["track"] = changes["track"].name
+        return changes
+
+    def add_problems(self, problems: dict[str, str]) -> None:
+        """``imports.ImportPreview.problems`` on the fields they concern."""
+        self.is_valid()
+        for setting, message in problems.items():
+            self.add_error(setting if setting in self.fields else None, message)
+
+
 class VehicleForm(RacerWords, forms.ModelForm):
     """Build a vehicle; the owner comes from the request, never from the form."""
 

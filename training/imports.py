@@ -44,8 +44,16 @@ from common.refusals import Refused
 from rl import hyperparameters, tfcheckpoint, tfgraph
 from simulator import config as sim
 from simulator import tracks as sim_tracks
-from training import artifacts, configuration, exports, history, jobs, services
-from training.models import Algorithm, Network, RLModel, ShellColour, Track, TrainingJob
+from training import artifacts, configuration, exports, history, jobs, rewards, services
+from training.models import (
+    Algorithm,
+    Network,
+    RaceType,
+    RLModel,
+    ShellColour,
+    Track,
+    TrainingJob,
+)
 
 if TYPE_CHECKING:
     from rl.policies import Policy
@@ -117,9 +125,132 @@ class Imported:
     notes: list[str] = field(default_factory=list)
 
 
+# What the racer may change on an import's preview, and the problems of theirs it can show (the
+# others are the archive's: the import is refused with them).
+PREVIEW_CHANGES = ("name", "track", "direction", "max_minutes")
+PREVIEW_PROBLEMS = {*PREVIEW_CHANGES, "quota"}
+
+
+@dataclass
+class ImportPreview:
+    """What importing an archive without weights would create: a model that trains from new
+    weights, using the racer's training time. Nothing is created until the racer confirms it
+    (``import_start(confirmed=True)``), with the name, track, direction and training time they
+    may change (``PREVIEW_CHANGES``). ``settings`` are the archive's, its hyperparameters complete;
+    ``problems``: those settings' problems the racer can fix here, by setting."""
+
+    settings: configuration.Draft
+    notes: list[str]
+    problems: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def track(self) -> Track | None:
+        return Track.objects.filter(name=self.settings.get("track")).first()
+
+    @property
+    def race(self) -> str:
+        """The race type, with its boxes or bot cars, in the model page's words."""
+        settings = self.settings
+        text = RaceType(settings["race_type"]).label
+        boxes, bots = settings.get("boxes"), settings.get("bots")
+        if settings["race_type"] == RaceType.OBJECT_AVOIDANCE and boxes:
+            return f"{text}: {boxes['count']} boxes" + (
+                ", new positions every episode" if boxes.get("randomize") else "")  # fmt: skip
+        if settings["race_type"] == RaceType.HEAD_TO_BOT and bots:
+            return f"{text}: {bots['count']} bot cars at {bots['speed']} m/s"
+        return text
+
+    @property
+    def car(self) -> list[tuple[str, str]]:
+        """The sensors, network, action space and algorithm, as (what, value) rows."""
+        settings, space = self.settings, self.settings["action_space"]
+        if isinstance(space, list):
+            actions = "Discrete: " + "; ".join(
+                f"{a['steering_angle']}° at {a['speed']} m/s" for a in space
+            )
+        else:
+            steering, speed = space["steering_angle"], space["speed"]
+            actions = (f"Continuous: steering {steering['low']} to {steering['high']}°, speed "
+                       f"{speed['low']} to {speed['high']} m/s")  # fmt: skip
+        return [
+            ("Sensors", ", ".join(settings["sensors"])),
+            ("Network", Network(settings["network"]).label),
+            ("Action space", actions),
+            ("Algorithm", Algorithm(settings["algorithm"]).label),
+            ("Simulations at once", str(settings["workers"])),
+        ]
+
+
+@dataclass
+class _Plan:
+    """What an archive holds, read and mapped to settings, before anything is written."""
+
+    members: Members
+    metadata: dict
+    ours: dict
+    settings: configuration.Draft
+    notes: list[str]
+    track_notes: list[str]  # those of ``notes`` that say which track it trains on, and why
+    weights: dict[str, bytes]
+    tensorflow: _TensorFlowFiles | None
+    fits: bool  # DeepRacer's TensorFlow weights fit the model's network
+
+    @property
+    def reward(self) -> str:
+        return self.settings["reward_function"]
+
+    @property
+    def trains(self) -> bool:
+        """Whether the import makes a model that trains from new weights (none it can drive
+        with came in the archive)."""
+        return not self.weights and not (self.tensorflow and self.fits)
+
+
 def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "") -> Imported:
-    """The model in ``archive`` (a file opened for reading), as ``owner``'s; ``name`` replaces
-    the archive's. ``ImportRefused`` or ``configuration.Invalid`` when it cannot be imported."""
+    """The model in ``archive`` (a file opened for reading), as ``owner``'s, at once (its training
+    queued when the archive has no weights: ``manage.py importmodel``); ``name`` replaces the
+    archive's. ``ImportRefused`` or ``configuration.Invalid`` when it cannot be imported."""
+    plan = _plan(archive, name)
+    if plan.trains:
+        model = services.model_create(owner=owner, settings=plan.settings)
+        return _noted(Imported(model, plan.notes))
+    return _import_ready(owner, archive, plan)
+
+
+def import_start(
+    *,
+    owner: AbstractBaseUser,
+    archive: IO[bytes],
+    name: str = "",
+    changes: dict | None = None,
+    confirmed: bool = False,
+) -> Imported | ImportPreview:
+    """The import page's step: a model that arrives with its weights (READY, nothing to train)
+    is imported at once, as DeepRacer's console imported one. An archive without weights would
+    start a training: its ``ImportPreview`` first, and the model (with its training queued) only
+    once ``confirmed`` with no problem left; ``changes``: the racer's ``PREVIEW_CHANGES``,
+    checked as the create-model page checks them. ``ImportRefused`` or ``configuration.Invalid``
+    for what the archive itself gets wrong."""
+    plan = _plan(archive, name)
+    if not plan.trains:
+        return _import_ready(owner, archive, plan)
+    settings = {**plan.settings, **{key: value for key, value in (changes or {}).items()
+                                    if key in PREVIEW_CHANGES}}  # fmt: skip
+    notes = _track_notes(plan, settings)
+    where = configuration.reward_sample_track(settings)
+    validation = rewards.reward_validate(source=plan.reward, track=where[0], direction=where[1]) \
+        if where else None  # fmt: skip
+    problems = _preview_problems(owner, settings, validation, track_changed=notes != plan.notes)
+    if problems or not confirmed:
+        settings["hyperparameters"] = hyperparameters.check(
+            settings["algorithm"], settings["hyperparameters"]
+        )[0]
+        return ImportPreview(settings, notes, problems)
+    model = services.model_create(owner=owner, settings=settings, validation=validation)
+    return _noted(Imported(model, notes))
+
+
+def _plan(archive: IO[bytes], name: str) -> _Plan:
     members = read_archive(archive)
     metadata = _json(members, _place(members, "model_metadata.json"))
     if metadata is None:
@@ -135,35 +266,99 @@ def import_model(*, owner: AbstractBaseUser, archive: IO[bytes], name: str = "")
             "model.pb."
         )
     notes: list[str] = []
-    settings = _settings(metadata, ours, members, reward, name, notes)
-    if weights:
-        layout = ours.get("network_layout", 1)  # format 1 came before DeepRacer's networks
+    track_notes: list[str] = []
+    settings = _settings(metadata, ours, members, reward, name, notes, track_notes)
+    fits = bool(not weights and tensorflow and _weights_fit(metadata, settings, notes))
+    plan = _Plan(members, metadata, ours, settings, notes, track_notes, weights, tensorflow, fits)
+    if plan.trains and not reward.strip():
+        raise ImportRefused(
+            "The archive has no reward_function.py, and its weights are for a car this console "
+            "does not have (see model_metadata.json): there is nothing to train or to drive."
+        )
+    return plan
+
+
+def _import_ready(owner: AbstractBaseUser, archive: IO[bytes], plan: _Plan) -> Imported:
+    """A READY model with the archive's weights: ours (safetensors) or DeepRacer's."""
+    notes = plan.notes
+    if plan.weights:
+        layout = plan.ours.get("network_layout", 1)  # format 1 came before DeepRacer's networks
         if layout not in (1, 2):
             raise ImportRefused(
                 f"{exports.PITLANE_SETTINGS} names a network layout this console does not know "
                 f"({_shown(layout)}): it was exported by a newer Pitlane."
             )
-        imported = _import_trained(owner, settings, members, ours, layout=layout,
-                                   checkpoints=lambda _: weights)  # fmt: skip
-    elif tensorflow and _weights_fit(metadata, settings, notes):
-        imported = _import_trained(
-            owner, settings, members, ours, layout=hyperparameters.NETWORK_LAYOUT,
-            checkpoints=lambda policy: tensorflow.load(archive, members, policy, notes),
-        )  # fmt: skip
-    elif not reward.strip():
-        raise ImportRefused(
-            "The archive has no reward_function.py, and its weights are for a car this console "
-            "does not have (see model_metadata.json): there is nothing to train or to drive."
-        )
+        imported = _import_trained(owner, plan.settings, plan.members, plan.ours, layout=layout,
+                                   checkpoints=lambda _: plan.weights)  # fmt: skip
     else:
-        return Imported(services.model_create(owner=owner, settings=settings), notes)
+        tensorflow = plan.tensorflow
+        imported = _import_trained(
+            owner, plan.settings, plan.members, plan.ours, layout=hyperparameters.NETWORK_LAYOUT,
+            checkpoints=lambda policy: tensorflow.load(archive, plan.members, policy, notes),
+        )  # fmt: skip
     imported.notes = notes + imported.notes
-    if not reward.strip():
+    if not plan.reward.strip():
+        untold = "" if _place(plan.members, "hyperparameters.json") in plan.members else (
+            ", no hyperparameters")  # fmt: skip
         imported.notes.append(
-            "The archive brings no reward function: the model can be evaluated, raced and "
-            "downloaded, but not trained on or cloned."
+            "A car archive: a driving model without training history. It can be evaluated, raced "
+            "and downloaded, but not trained on or cloned: the archive brings the policy alone "
+            f"(no reward function{untold}, no critics, no training time or episodes)."
         )
+    return _noted(imported)
+
+
+def _noted(imported: Imported) -> Imported:
+    """``imported``, its notes kept with the model for its page (after any stored on the way)."""
+    model = imported.model
+    stored = RLModel.objects.filter(pk=model.pk).values_list("import_notes", flat=True).first()
+    kept = list(stored or [])
+    kept += [note for note in imported.notes if note not in kept]
+    RLModel.objects.filter(pk=model.pk).update(import_notes=kept)
+    model.import_notes = kept
     return imported
+
+
+def _track_notes(plan: _Plan, settings: configuration.Draft) -> list[str]:
+    """The plan's notes, where the racer chose another track or direction on the preview: the
+    archive's track notes say only what was not carried over, and a note says what they chose."""
+    if (settings["track"], settings["direction"]) == (
+        plan.settings["track"], plan.settings["direction"]
+    ):  # fmt: skip
+        return list(plan.notes)
+    notes = [note for note in plan.notes if note not in plan.track_notes]
+    notes += [note.split(". ", 1)[0] + "." for note in plan.track_notes
+              if note.startswith("Not carried over")]  # fmt: skip
+    track = Track.objects.filter(name=settings["track"]).first()
+    shown = track.display_name if track else settings["track"]
+    notes.append(f"You chose the track on the import's preview: {shown}, "
+                 f"{settings['direction']}.")  # fmt: skip
+    return notes
+
+
+def _preview_problems(
+    owner: AbstractBaseUser,
+    settings: configuration.Draft,
+    validation: rewards.Validation | None,
+    *,
+    track_changed: bool,
+) -> dict[str, str]:
+    """The problems of ``settings`` the racer can fix on the preview (``PREVIEW_PROBLEMS``, and
+    the reward function's on a track they chose); ``configuration.Invalid`` for the others,
+    which are the archive's. The quota is read as the create-model page's save reads it."""
+    fixable = PREVIEW_PROBLEMS | ({"reward_function"} if track_changed else set())
+    try:
+        checked = configuration.check(settings, owner=owner, validation=validation)
+    except configuration.Invalid as invalid:
+        if not set(invalid.errors) <= fixable:
+            raise
+        return dict(invalid.errors)
+    try:
+        with transaction.atomic():
+            services.check_quota(owner=owner, minutes=checked.max_minutes)
+    except configuration.Invalid as invalid:
+        return dict(invalid.errors)
+    return {}
 
 
 @dataclass(frozen=True)
@@ -379,10 +574,17 @@ def _yaml(members: Members, path: str) -> dict:
 
 
 def _settings(
-    metadata: dict, ours: dict, members: Members, reward: str, name: str, notes: list[str]
+    metadata: dict,
+    ours: dict,
+    members: Members,
+    reward: str,
+    name: str,
+    notes: list[str],
+    track_notes: list[str] | None = None,
 ) -> configuration.Draft:
     """The create-model settings the archive describes, unchecked; what it leaves out takes the
-    defaults, and ``notes`` lists every setting it has that could not be carried over."""
+    defaults, and ``notes`` lists every setting it has that could not be carried over (those on
+    its track in ``track_notes`` too)."""
     params = _yaml(members, _place(members, "training_params.yaml"))
     algorithm = DEEPRACER_ALGORITHMS.get(
         str(metadata.get("training_algorithm", Algorithm.PPO)).lower(), "unknown"
@@ -412,7 +614,11 @@ def _settings(
             settings[key] = ours.get(key)
         settings["workers"] = ours.get("workers", 1)
         return settings
-    settings["track"], settings["direction"] = _deepracer_track(params, notes)
+    on_track: list[str] = []
+    settings["track"], settings["direction"] = _deepracer_track(params, on_track)
+    notes += on_track
+    if track_notes is not None:
+        track_notes += on_track
     settings.update(_deepracer_race(params, notes))
     settings["workers"] = _deepracer_workers(params, notes)
     settings["shell_colour"] = _deepracer_colour(params, notes)

@@ -40,8 +40,9 @@ def models_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:
 
 def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
     """The racer's models, each with ``training``: its latest job (or None) and, on that job,
-    ``queue_position`` (None unless it waits) and ``clock``; and ``status_text``, its status
-    in words (``model_status_display``): two queries, and one per waiting job."""
+    ``queue_position`` (None unless it waits), ``imported_only`` and ``clock``; and
+    ``status_text``, its status in words (``model_status_display``): two queries, and one per
+    waiting job."""
     now = timezone.now()
     newest_first = TrainingJob.objects.order_by("-created_at")
     models = list(
@@ -57,9 +58,17 @@ def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
             untrained=model_untrained(model=model, last_checkpoint=saved[0] if saved else ""),
         )
         if model.training is not None:
+            model.training.imported_only = job_imported_only(job=model.training)
             model.training.queue_position = jobs.queue_position(model.training)
             model.training.clock = training_clock(job=model.training, now=now)
     return models
+
+
+def job_imported_only(*, job: TrainingJob | None) -> bool:
+    """Whether ``job`` is only an import's record, without training history: the model was
+    trained elsewhere (or is a car archive's policy), so it has no training clock, iteration or
+    episode to show, and never had this console's training time."""
+    return job is not None and job.lease_owner == IMPORTED and not job.iterations
 
 
 def tracks_available() -> QuerySet[Track]:

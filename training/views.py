@@ -48,6 +48,7 @@ from training import (
 from training.forms import (
     EvaluationForm,
     ModelCreateForm,
+    ModelImportConfirmForm,
     ModelImportForm,
     RewardFunctionForm,
     RewardValidationForm,
@@ -435,16 +436,17 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "races": selectors.races_for_model(model=model)[:20],
             "can_evaluate": model.status == RLModel.Status.READY,
             "can_delete": model.status in RLModel.DELETABLE,
-            "checkpoints": selectors.model_checkpoint_choices(model=model),
-            "workers_range": range(model.workers),
             "untrained": untrained,
             "untrained_words": selectors.UNTRAINED,
             "model_status_text": selectors.model_status_display(model=model, untrained=untrained),
+            "checkpoints": selectors.model_checkpoint_choices(model=model),
+            "workers_range": range(model.workers),
             "clock": selectors.training_clock(job=job) if job else None,
             "log_lines": selectors.job_log(job=job, source=log_source) if job else [],
             "log_source": log_source,
             "log_sources": JobLogLine.Source.choices,
             "files": selectors.model_files(model=model),
+            "imported_only": selectors.job_imported_only(job=job),
             "training_settings": training_settings_shown(
                 algorithm=model.algorithm,
                 stored=model.hyperparameters,
@@ -541,9 +543,11 @@ def model_logs(request: HttpRequest, pk: int) -> HttpResponse:
 @login_required
 async def model_import(request: HttpRequest) -> HttpResponse:
     """The import form. The archive is read, its weights loaded and its reward function
-    validated by a checker (``training.checks``). An attempt that has to be corrected keeps the
-    racer's archive (unless the archive itself was refused), so the next one need not choose it
-    again."""
+    validated by a checker (``training.checks``). A model that arrives with its weights is
+    imported at once; one that would train is previewed first (``imports.import_start``), and
+    created, its training queued, once the racer confirms (the archive kept meanwhile, not sent
+    again). An attempt that has to be corrected keeps the racer's archive (unless the archive
+    itself was refused), so the next one need not choose it again."""
     if request.method != "POST":
         return await sync_to_async(_model_import_blank)(request)
     attempt = await sync_to_async(_ModelImportAttempt)(request)  # the upload is read to disk here
@@ -562,29 +566,42 @@ def _model_import_blank(request: HttpRequest) -> HttpResponse:
 
 
 class _ModelImportAttempt:
-    """A posted import: the form and the racer's limit (``work``: the import, for a checker,
-    when both allow it), then the page its outcome makes."""
+    """A posted import, or its preview confirmed (``confirm``): the form and the racer's limit
+    (``work``: the import, for a checker, when both allow it), then the page its outcome makes."""
 
     def __init__(self, request: HttpRequest) -> None:
         self.request = request
         self.work = None
-        self.outcome: imports.Imported | Exception | None = None
+        self.outcome: imports.Imported | imports.ImportPreview | Exception | None = None
         self.kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
-        self.form = ModelImportForm(request.POST, request.FILES, owner=request.user, kept=self.kept)
+        self.confirm = ModelImportConfirmForm(request.POST) if "confirm" in request.POST else None
+        posted = (request.POST, request.FILES) if self.confirm is None else (
+            {"kept": request.POST.get("kept", "")},)  # fmt: skip
+        self.form = ModelImportForm(*posted, owner=request.user, kept=self.kept)
+        if self.confirm is not None:
+            self.form.is_valid()  # for the page to go back to: the kept archive, or a choice
         self.limited = ratelimits.reached(request, "import") or ratelimits.reached(
             request, "import-refused"
         )  # counted once the outcome is known (_import_counted)
         if self.limited:
             ratelimits.refuse(self.form, self.limited)
+        elif self.confirm is not None and self.kept is None:
+            self.form.add_error(None, KEPT_GONE)
+        elif self.confirm is not None:
+            confirmed = self.confirm.is_valid()  # else the preview again, with what to correct
+            self.work = self._work(None, "", changes=self.confirm.changes(), confirmed=confirmed)
         elif self.form.is_valid():
-            upload, kept = self.form.cleaned_data["archive"], self.kept
-            owner, name = request.user, self.form.cleaned_data["name"]
+            data = self.form.cleaned_data
+            self.work = self._work(data["archive"], data["name"])
 
-            def work() -> imports.Imported:
-                with nullcontext(upload) if upload else kept.open() as archive:
-                    return imports.import_model(owner=owner, archive=archive, name=name)
+    def _work(self, upload, name: str, **step):
+        owner, kept = self.request.user, self.kept
 
-            self.work = work
+        def work() -> imports.Imported | imports.ImportPreview:
+            with nullcontext(upload) if upload else kept.open() as archive:
+                return imports.import_start(owner=owner, archive=archive, name=name, **step)
+
+        return work
 
     def respond(self) -> HttpResponse:
         request, form, outcome = self.request, self.form, self.outcome
@@ -595,14 +612,13 @@ class _ModelImportAttempt:
         refused = False
         if isinstance(outcome, imports.Imported):
             imports.upload_discard(session=request.session)
-            model = outcome.model
-            ready = model.status == RLModel.Status.READY
-            messages.success(request, f"Imported {model.name}" + (
-                ": it is ready to evaluate, clone or download." if ready
-                else "; its training is queued."))  # fmt: skip
-            for note in outcome.notes:
-                messages.warning(request, note)
-            return redirect("training:model-detail", pk=model.pk)
+            messages.success(request, _imported_message(outcome.model) + (
+                " “From its import” below says what the import rebuilt or left out."
+                if outcome.model.import_notes else ""))  # fmt: skip
+            return redirect("training:model-detail", pk=outcome.model.pk)
+        upload = request.FILES.get("archive") if self.confirm is None else None
+        if isinstance(outcome, imports.ImportPreview):
+            return self._preview(outcome, upload)
         if isinstance(outcome, imports.ImportRefused):
             form.add_error("archive", str(outcome))
             refused = True
@@ -611,16 +627,62 @@ class _ModelImportAttempt:
             refused = not set(outcome.errors) <= RACERS_TO_FIX  # else the archive is at fault
         elif isinstance(outcome, Exception):
             form.add_error(None, _check_failed(outcome))
-        upload = request.FILES.get("archive")
         if refused or ("archive" in form.errors and upload is not None):
             imports.upload_discard(session=request.session)  # the racer must choose another
             form.keep(None)
         elif upload is not None:
             form.keep(imports.upload_keep(session=request.session, upload=upload))
+        elif self.confirm is not None:
+            form.keep(self.kept)
         response = render(request, "training/model_import.html", {"form": form}, status=400)
         if isinstance(outcome, CHECK_FAILURES):
             return _check_refused(response, outcome)
         return response
+
+    def _preview(self, preview: imports.ImportPreview, upload) -> HttpResponse:
+        """What the import would create, to confirm or change: the archive kept for it."""
+        request = self.request
+        kept = imports.upload_keep(session=request.session, upload=upload) if upload else self.kept
+        confirm = self.confirm
+        if confirm is None:
+            confirm = ModelImportConfirmForm.of(preview, kept)
+        else:
+            confirm.add_problems(preview.problems)
+        settings = preview.settings
+        shown, _ = training_settings_shown(
+            algorithm=settings["algorithm"], stored=settings["hyperparameters"], max_minutes=0
+        )
+        context = {
+            "form": self.form, "preview": preview, "confirm": confirm, "kept": kept,
+            "hyperparameters": [row for row in shown if row.key],
+            "tracks": selectors.tracks_available(),
+            "allowance": selectors.allowance_for(racer=request.user),
+        }  # fmt: skip
+        status = 400 if confirm.errors else 200
+        return render(request, "training/model_import.html", context, status=status)
+
+
+KEPT_GONE = (
+    f"The archive you uploaded is no longer kept (it is kept for "
+    f"{imports.KEPT_FOR.total_seconds() / 3600:g} hours, in this browser's session): choose it "
+    "again."
+)
+
+
+def _imported_message(model: RLModel) -> str:
+    """What the import created, said as the model page says it."""
+    if model.status != RLModel.Status.READY:
+        return (
+            f"Imported {model.name}; its training is queued: up to {model.max_minutes} min on "
+            f"{model.track}."
+        )
+    if model.trainable:
+        return f"Imported {model.name}: it is ready to evaluate, race, clone or download."
+    return (
+        f"Imported {model.name}: a driving model without training history, ready to evaluate, "
+        "race and download. It came from a car archive, with no reward function: it cannot "
+        "train or be cloned."
+    )
 
 
 RACERS_TO_FIX = {"name", "quota", "max_minutes"}  # an import's problems the racer can fix
@@ -762,8 +824,6 @@ def evaluation_stop(request: HttpRequest, pk: int, evaluation: int) -> HttpRespo
         else:
             messages.info(request, f"The evaluation has ended: {job.get_status_display()}.")
     return redirect("training:evaluation-detail", pk=job.model_id, evaluation=job.pk)
-
-
 
 
 @login_required

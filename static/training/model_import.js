@@ -1,5 +1,7 @@
 // The import page: the name is checked as the racer types (and when they leave the field), so a
 // name already taken is said before a large archive is uploaded; the form is not sent while it is.
+// On the preview of an import that would train, the same for its name, and the direction offers
+// only the ways the chosen track is driven.
 const form = document.querySelector("[data-import-form]");
 const input = form.querySelector("[data-name-check]");
 const field = form.querySelector("[data-name-field]");
@@ -57,3 +59,17 @@ form.addEventListener("submit", async (event) => {
   }
   if (problem) input.focus();
 });
+
+const track = form.querySelector("[data-import-track]");
+const direction = form.querySelector("[data-import-direction]");
+
+function directionsFollowTrack() {
+  const allowed = track.selectedOptions[0]?.dataset.directions.trim().split(/\s+/) ?? [];
+  for (const option of direction.options) option.disabled = !allowed.includes(option.value);
+  if (direction.selectedOptions[0]?.disabled && allowed.length) direction.value = allowed[0];
+}
+
+if (track && direction) {
+  track.addEventListener("change", directionsFollowTrack);
+  directionsFollowTrack();
+}

@@ -569,8 +569,10 @@ def test_every_setting_that_is_not_carried_over_is_listed_on_the_result_page(ali
     })  # fmt: skip
     client.force_login(alice)
     upload = SimpleUploadedFile("model.tar.gz", tar_gz(drfc_layout(members)))
-    response = client.post(reverse("training:model-import"), {"archive": upload}, follow=True)
-    page = response.text.replace("&quot;", '"').replace("&#x27;", "'")
+    preview = client.post(reverse("training:model-import"), {"archive": upload})
+    assert not RLModel.objects.exists()  # no weights: it trains, once the racer confirms
+    confirmed = {**preview.context["confirm"].data, "confirm": "1"}
+    response = client.post(reverse("training:model-import"), confirmed, follow=True)
     listed = [
         "Not carried over from hyperparameters.json: num_epochs 20. Number of epochs must be "
         "between 3 and 10. The model uses 10.",
@@ -589,8 +591,10 @@ def test_every_setting_that_is_not_carried_over_is_listed_on_the_result_page(ali
         "(AWS_REGION, SAGEMAKER_SHARED_S3_BUCKET, SAGEMAKER_SHARED_S3_PREFIX); this console keeps",
         "TensorFlow weights were not carried over",
     ]
-    for note in listed:
-        assert note in page, note
+    for page in (preview.text, response.text):  # on the preview, then on the result page
+        page = page.replace("&quot;", '"').replace("&#x27;", "'")
+        for note in listed:
+            assert note in page, note
     model = RLModel.objects.get(owner=alice)
     assert (model.sensors, model.network) == (
         ["FRONT_FACING_CAMERA"],

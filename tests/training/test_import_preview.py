@@ -1,0 +1,172 @@
+"""What an import creates, said truthfully and confirmed first: a DeepRacer folder without weights
+is previewed, created (its training queued) only once the racer confirms, with the name, track
+and training time they chose, checked as the create-model page checks them; a car archive
+arrives as a driving model without training history, said so wherever it shows."""
+
+from __future__ import annotations
+
+import io
+
+import pytest
+import yaml
+from django.core.files.uploadedfile import SimpleUploadedFile
+from django.urls import reverse
+
+from tests.training.factories import ready_model
+from tests.training.test_imports import CHECKED_IMPORT, DEEPRACER_PARAMS, deepracer_export, tar_gz
+from training import artifacts, exports, imports, selectors
+from training.models import Quota, RLModel, TrainingJob
+
+pytestmark = pytest.mark.django_db
+
+
+def deepracer_folder(**params) -> bytes:
+    """A DeepRacer model folder without weights: its reward function and settings."""
+    return tar_gz(deepracer_export(**{
+        "training_params.yaml": yaml.safe_dump({**DEEPRACER_PARAMS, **params}).encode(),
+    }))  # fmt: skip
+
+
+def car_archive(owner) -> bytes:
+    """A physical-car archive (model_metadata.json and agent/model.pb), as the car takes it."""
+    with artifacts.default_storage.open(exports.physical(ready_model(owner)).name, "rb") as file:
+        return file.read()
+
+
+def test_a_folder_without_weights_is_previewed_and_nothing_is_created_until_confirmed(
+    alice, tracks
+):
+    minutes_left = selectors.allowance_for(racer=alice).minutes_left
+    preview = imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()))
+    assert isinstance(preview, imports.ImportPreview) and preview.problems == {}
+    assert not RLModel.objects.exists() and not TrainingJob.objects.exists()
+    assert selectors.allowance_for(racer=alice).minutes_left == minutes_left  # no quota used
+    settings = preview.settings
+    assert (settings["name"], settings["track"], settings["max_minutes"]) == (
+        "my-deepracer-car", "rookie-loop", 60,
+    )  # fmt: skip
+    assert preview.race == "Time trial"
+    assert ("Action space", "Discrete: -30.0° at 0.6 m/s; 0.0° at 1.2 m/s; 30.0° at 0.6 m/s") in (
+        preview.car
+    )
+    assert any("the track reInvent2019_track, which is not loaded here" in n for n in preview.notes)
+
+    # Confirmed with another name, track and time: the model is created as the racer chose.
+    changes = {"name": "my-car", "track": "pitlane-oval", "direction": "clockwise",
+               "max_minutes": 30}  # fmt: skip
+    imported = imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()),
+                                    changes=changes, confirmed=True)  # fmt: skip
+    model = RLModel.objects.get(owner=alice)
+    assert imported.model == model and model.status == RLModel.Status.QUEUED
+    assert (model.name, model.track.name, model.direction, model.max_minutes) == (
+        "my-car", "pitlane-oval", "clockwise", 30,
+    )  # fmt: skip
+    # The model's notes say what was not carried over, and what the racer chose instead.
+    assert "Not carried over from training_params.yaml: the track reInvent2019_track, which is " \
+        "not loaded here." in model.import_notes  # fmt: skip
+    assert "You chose the track on the import's preview: Pitlane Oval, clockwise." in (
+        model.import_notes
+    )
+    assert not any("trains on rookie-loop" in note for note in model.import_notes)
+
+
+@pytest.mark.parametrize(
+    ("changes", "setting", "said"),
+    [
+        ({"max_minutes": 5}, "max_minutes", "The maximum training time is 10 to 1440 minutes."),
+        ({"max_minutes": 100_000}, "max_minutes", "The maximum training time is 10 to 1440"),
+        ({"name": "no spaces please"}, "name", "1-64 letters, digits and hyphens"),
+        ({"name": "Straight-Ahead"}, "name", "You already have a model named"),
+        ({"track": "championship-circuit", "direction": "clockwise"}, "direction", "clockwise"),
+        ({"track": "no-such-track"}, "track", ""),
+    ],
+)
+def test_a_changed_value_is_checked_as_the_create_form_checks_it(
+    changes, setting, said, alice, tracks
+):
+    ready_model(alice)
+    preview = imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()),
+                                   changes=changes, confirmed=True)  # fmt: skip
+    assert isinstance(preview, imports.ImportPreview)
+    assert setting in preview.problems and said in preview.problems[setting]
+    assert RLModel.objects.filter(owner=alice).count() == 1  # the ready one alone
+
+
+def test_a_training_time_over_the_racers_minutes_is_theirs_to_change(alice, tracks):
+    Quota.objects.filter(pk=Quota.of(alice).pk).update(max_minutes_per_month=45)
+    preview = imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()),
+                                   confirmed=True)  # fmt: skip
+    assert "You have 45 training minutes left this month" in preview.problems["max_minutes"]
+    assert not RLModel.objects.exists()
+
+
+def test_an_archive_with_weights_is_still_imported_at_once(alice, bob, tracks):
+    imported = imports.import_start(owner=bob, archive=io.BytesIO(car_archive(alice)))
+    assert isinstance(imported, imports.Imported)
+    assert imported.model.status == RLModel.Status.READY and not imported.model.trainable
+
+
+def test_a_car_archive_says_what_it_is_and_keeps_it_with_the_model(alice, bob, tracks):
+    imported = imports.import_model(owner=bob, archive=io.BytesIO(car_archive(alice)))
+    said = [n for n in imported.notes if "driving model without training history" in n]
+    assert said and "no reward function, no hyperparameters" in said[0]
+    imported.model.refresh_from_db()
+    assert said[0] in imported.model.import_notes
+    assert selectors.job_imported_only(job=imported.model.latest_job)
+
+
+@CHECKED_IMPORT
+def test_a_car_archive_is_shown_as_a_driving_model_without_training_history(
+    alice, bob, tracks, client
+):
+    client.force_login(bob)
+    upload = SimpleUploadedFile("physicalmodel-straight-ahead.tar.gz", car_archive(alice))
+    response = client.post(reverse("training:model-import"), {"archive": upload}, follow=True)
+    model = RLModel.objects.get(owner=bob)
+    page = response.content.decode().replace("&#x27;", "'")
+    assert "a driving model without training history, ready to evaluate, race and download" in page
+    assert "ready to evaluate, clone or download" not in page
+    # No training clock, no episodes to a first update, no invented settings, no Clone.
+    for invented in ("used of 60 min", "first policy update comes after", "Batch size",
+                     f"?clone={model.pk}", "rookie-loop (", "Pitlane Oval ("):  # fmt: skip
+        assert invented not in page, invented
+    assert "cannot train and cannot be cloned" in page
+    assert "not in the car archive" in page
+    # The list says the same.
+    models = client.get(reverse("training:model-list")).content.decode().replace("&#x27;", "'")
+    assert "A car archive's driving model: no training history" in models
+    assert "0:00 of 60 min" not in models
+    # Reaching the clone page anyway: a clear refusal.
+    response = client.get(reverse("training:model-create") + f"?clone={model.pk}", follow=True)
+    assert "cannot be cloned" in response.content.decode()
+
+
+@CHECKED_IMPORT
+def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, tracks, client):
+    client.force_login(alice)
+    upload = SimpleUploadedFile("my-deepracer-car.tar.gz", deepracer_folder())
+    response = client.post(reverse("training:model-import"), {"archive": upload})
+    assert response.status_code == 200 and not RLModel.objects.exists()
+    page = response.content.decode()
+    assert "What the import creates" in page and "which is not loaded here" in page
+    confirm = response.context["confirm"]
+    kept = response.context["kept"]
+    assert artifacts.default_storage.exists(kept.name)
+    posted = {**confirm.data, "confirm": "1"}
+
+    # A value the create page refuses: the preview again, with the reason by its field.
+    response = client.post(reverse("training:model-import"), {**posted, "max_minutes": "5"})
+    assert response.status_code == 400 and not RLModel.objects.exists()
+    assert "The maximum training time is 10 to 1440 minutes." in response.content.decode()
+
+    # Confirmed without the archive sent again: created from the kept one, which is then deleted.
+    response = client.post(reverse("training:model-import"), {**posted, "track": "speedway"})
+    model = RLModel.objects.get(owner=alice)
+    assert response.status_code == 302 and response["Location"].endswith(f"/models/{model.pk}/")
+    assert model.track.name == "speedway" and model.status == RLModel.Status.QUEUED
+    assert not artifacts.default_storage.exists(kept.name)
+
+    # A preview confirmed after its archive is gone asks for the archive again, in words.
+    response = client.post(reverse("training:model-import"), {**posted, "name": "another"})
+    assert response.status_code == 400 and "no longer kept" in response.content.decode()
+    assert RLModel.objects.count() == 1
