@@ -1,5 +1,11 @@
 from django import forms
-from django.contrib.auth.forms import PasswordResetForm, UserCreationForm
+from django.contrib.auth.forms import (
+    AuthenticationForm,
+    PasswordChangeForm,
+    PasswordResetForm,
+    SetPasswordForm,
+    UserCreationForm,
+)
 
 from common.forms import RacerWords
 
@@ -29,3 +35,15 @@ class PasswordResetRequestForm(RacerWords, PasswordResetForm):
             "invalid": "That is not an email address: it looks like name@example.org.",
         },
     )
+
+
+class SignInForm(RacerWords, AuthenticationForm):
+    """Django's sign-in, in the site's words."""
+
+
+class PasswordChangeInOurWords(RacerWords, PasswordChangeForm):
+    """Django's password change, in the site's words."""
+
+
+class NewPasswordForm(RacerWords, SetPasswordForm):
+    """The new password a reset link sets, in the site's words."""

@@ -16,7 +16,7 @@ from django.views.decorators.http import require_safe
 
 from common import ratelimits
 from console import guidance
-from console.forms import PasswordResetRequestForm, SignUpForm
+from console.forms import PasswordResetRequestForm, SignInForm, SignUpForm
 from console.health import system_health
 from racing.models import RankingMethod
 from racing.selectors import events_not_closed
@@ -63,6 +63,8 @@ def signup(request: HttpRequest) -> HttpResponse:
 class SignInView(LoginView):
     """Django's sign-in, limited per racer name and per address: past either limit the form
     says how long to wait, and the password is not checked at all."""
+
+    form_class = SignInForm
 
     def post(self, request: HttpRequest, *args, **kwargs) -> HttpResponse:
         name = str(request.POST.get("username", "")).strip().lower()[:150]

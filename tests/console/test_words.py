@@ -94,10 +94,12 @@ def test_no_racer_facing_form_answers_in_djangos_default_words(client, alice, tr
             f"/models/{model.pk}/analysis/rescore/", {"reward_function": "x", "first": "-1"}
         ),
         "profile": client.post("/accounts/profile/", {"bio": LONG}),
+        "password change, empty": client.post("/accounts/password/", {}),
     }
     client.logout()
     answers["sign-up, empty"] = client.post("/accounts/signup/", {"username": ""})
     answers["sign-up, too long"] = client.post("/accounts/signup/", {"username": LONG})
+    answers["sign-in, empty"] = client.post("/accounts/login/", {"username": ""})
     for what, response in answers.items():
         assert response.status_code < 500, what
         said = _said(response)
