@@ -98,6 +98,9 @@ def test_an_import_says_what_it_creates_and_asks_before_it_trains(
     expect(page.locator("[data-preview-track]")).to_have_text("Rookie Loop (counterclockwise)")
     assert not RLModel.objects.filter(name="my-deepracer-car").exists()
     problems += page_problems(page)
+    page.set_viewport_size({"width": 390, "height": 844})  # and on a phone
+    problems += page_problems(page)
+    page.set_viewport_size({"width": 1280, "height": 800})
 
     # The racer changes the track (the direction follows what it allows) and confirms.
     track, direction = page.get_by_label("Track"), page.get_by_label("Direction")
