@@ -24,7 +24,11 @@ toolchain) needs to go on training: ``model_metadata.json``, ``reward_function.p
 ``ip/hyperparameters.json`` where DeepRacer keeps it), the best and the last
 checkpoints as safetensors under ``checkpoints/``, the metrics, and ``pitlane.json`` (the settings
 DeepRacer's files do not carry: track, direction, race type, network seed and layout, workers;
-and the time the model trained, which its page shows).
+and the time the model trained, which its page shows). Beside DeepRacer's files, left as they
+are: ``pitlane-history.json``, each iteration's figures exactly as the model's page shows them
+(DeepRacer's metrics round them) and which iterations the best and last checkpoints hold; and the
+simulation traces where DeepRacer keeps them (``training-simtrace/<n>-iteration.csv``,
+``evaluation-<time>/evaluation-simtrace/0-iteration.csv``), up to ``TRACES_LIMIT``.
 """
 
 from __future__ import annotations
@@ -42,13 +46,18 @@ from django.db.models import Sum
 
 from common.refusals import Refused
 from rl import hyperparameters
-from training import artifacts, selectors
+from training import artifacts, history, logs_archive, selectors
 from training.models import RLModel
 
 CAR_GRAPH = "agent/model.pb"  # where simapp puts it (tensorflow_model.py:355-371, 01f5f01)
 PITLANE_SETTINGS = "pitlane.json"
 HYPERPARAMETERS = "ip/hyperparameters.json"  # simapp bundle/markov/boto/s3/constants.py:43
 FORMAT = 2  # of pitlane.json; 2 added network_layout
+MiB = 1024 * 1024
+# [bytes] of simulation traces a virtual model's archive carries, and an import keeps: a long
+# training's traces run to gigabytes; the newest iterations' come first.
+TRACES_LIMIT = 64 * MiB
+MAX_TRACES = 1000  # files: an import reads at most imports.MAX_MEMBERS
 
 
 class ExportRefused(Refused):
@@ -115,14 +124,42 @@ def virtual(model: RLModel) -> Export:
     })  # fmt: skip
     if metrics is not None:
         members[artifacts.TRAINING_METRICS] = metrics
-    content = b"".join(name.encode() + b"\0" + data for name, data in sorted(members.items()))
+    members.update(_history_files(model))
+    content = hashlib.sha256()
+    for name, data in sorted(members.items()):
+        content.update(name.encode() + b"\0" + hashlib.sha256(data).digest())
     export = Export(
-        artifacts.path(model, f"exports/virtual-{_digest(content)}.tar.gz"),
+        artifacts.path(model, f"exports/virtual-{content.hexdigest()[:16]}.tar.gz"),
         f"virtualmodel-{model.name}.tar.gz",
     )
     if not default_storage.exists(export.name):
         _store(export.name, members)
     return export
+
+
+def _history_files(model: RLModel) -> dict[str, bytes]:
+    """Pitlane's exact record of the model's training (``history.EXACT``: each iteration's
+    figures, which iterations the checkpoints hold) and its simulation traces as DeepRacer lays
+    them out (``logs_archive``), up to ``TRACES_LIMIT`` and ``MAX_TRACES``: the evaluations'
+    and the newest iterations' first."""
+    job = model.latest_job
+    if job is None:
+        return {}
+    files = {}
+    if job.iteration_rows.exists():
+        checkpoints = {
+            which: artifacts.checkpoint_iteration(name)
+            for which in artifacts.EXPORTED_CHECKPOINTS
+            if (name := selectors.model_checkpoint(model=model, which=which))
+        }
+        files[history.EXACT] = _json(history.exact_document(job=job, checkpoints=checkpoints))
+    room = TRACES_LIMIT
+    for relative, stored in reversed(logs_archive.trace_files(model)[-MAX_TRACES:]):
+        size = default_storage.size(stored)
+        if size <= room:
+            room -= size
+            files[relative] = artifacts.read(stored)
+    return files
 
 
 def deepracer_hyperparameters(model: RLModel) -> bytes:

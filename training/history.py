@@ -13,6 +13,7 @@ count starts again; a file without trial counts is cut every ``episodes_per_iter
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from statistics import mean
 
@@ -174,3 +175,91 @@ def history_save(*, job: TrainingJob, history: History, seconds: float | None = 
         text=f"Imported with its training history: {job.iterations} iteration"
         f"{'s' if job.iterations != 1 else ''}, {job.episodes} episodes.",
     )
+
+
+# Pitlane's own record of a training, beside DeepRacer's metrics in a virtual model's archive
+# (``exports.virtual``): each iteration's figures exactly as its page shows them (the metrics
+# hold one rounded row per episode, from which ``read`` can only rebuild them), and which
+# iterations the best and the last checkpoints hold, for their labels.
+EXACT = "pitlane-history.json"
+EXACT_FORMAT = 1
+_NUMBERS = ("reward", "completion", "wall_seconds")
+_OPTIONAL = ("evaluation_completion", "best_lap_time", "evaluation_seconds")
+_COUNTS = ("episodes", "steps")
+
+
+@dataclass
+class Exact:
+    """What ``EXACT`` holds: the history, and the iterations of the best and last checkpoints
+    (None where the weights are not an iteration's)."""
+
+    history: History
+    checkpoints: dict[str, int | None]
+
+
+def exact_document(*, job: TrainingJob, checkpoints: dict[str, int | None]) -> dict:
+    """``EXACT``'s document for ``job``: its iterations and ``checkpoints`` ({"best": n, ...})."""
+    rows = []
+    for row in job.iteration_rows.order_by("number"):
+        rows.append({
+            "number": row.number, **{name: getattr(row, name) for name in _NUMBERS + _OPTIONAL},
+            **{name: getattr(row, name) for name in _COUNTS},
+            "time_split": row.time_split, "training_points": row.training_points,
+            "evaluation_points": row.evaluation_points,
+        })  # fmt: skip
+    return {"format": EXACT_FORMAT, "iterations": rows, "checkpoints": checkpoints}
+
+
+def exact_read(document: bytes) -> Exact:
+    """The history in ``EXACT``, every figure checked; ``Unreadable`` for anything amiss."""
+    try:
+        given = json.loads(document)
+    except ValueError:
+        raise Unreadable("it is not JSON") from None
+    if not isinstance(given, dict) or given.get("format") != EXACT_FORMAT:
+        raise Unreadable("it is not a format this console reads")
+    rows = given.get("iterations")
+    if not isinstance(rows, list) or not rows:
+        raise Unreadable("it holds no iteration")
+    iterations = [_exact_row(row, number) for number, row in enumerate(rows, start=1)]
+    marked = given.get("checkpoints") if isinstance(given.get("checkpoints"), dict) else {}
+    checkpoints = {
+        which: number if _whole(number) and 1 <= number <= len(rows) else None
+        for which in ("best", "last")
+        for number in [marked.get(which)]
+    }
+    seconds = sum(row.wall_seconds for row in iterations)
+    return Exact(History(iterations, seconds), checkpoints)
+
+
+def _exact_row(row: object, number: int) -> Iteration:
+    if not isinstance(row, dict) or row.get("number") != number:
+        raise Unreadable(f"its iteration {number} is missing or out of order")
+    values = {name: _finite(row.get(name), number, name) for name in _NUMBERS}
+    for name in _OPTIONAL:
+        values[name] = None if row.get(name) is None else _finite(row[name], number, name)
+    for name in _COUNTS:
+        if _whole(row.get(name)) is None or row[name] < 0:
+            raise Unreadable(f"its iteration {number} has no whole number of {name}")
+        values[name] = row[name]
+    points = row.get("training_points", [])
+    evaluation = row.get("evaluation_points", [])
+    split = row.get("time_split", {})
+    if not (
+        isinstance(points, list) and isinstance(evaluation, list) and isinstance(split, dict)
+        and all(isinstance(p, list) and len(p) == 2 for p in points)
+    ):  # fmt: skip
+        raise Unreadable(f"its iteration {number} has points that are not lists of numbers")
+    return Iteration(
+        number=number, **values,
+        time_split={str(k): _finite(v, number, "time_split") for k, v in split.items()},
+        training_points=[[_finite(r, number, "points"), _finite(p, number, "points")]
+                         for r, p in points],
+        evaluation_points=[_finite(p, number, "points") for p in evaluation],
+    )  # fmt: skip
+
+
+def _finite(value: object, number: int, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise Unreadable(f"its iteration {number} has no finite {name.replace('_', ' ')}")
+    return value

@@ -61,7 +61,7 @@ if TYPE_CHECKING:
 MiB = 1024 * 1024
 MAX_ARCHIVE = 256 * MiB  # [bytes] as uploaded
 MAX_UNPACKED = 512 * MiB  # [bytes] all members together
-MAX_MEMBERS = 256
+MAX_MEMBERS = 2048  # a virtual model's archive carries up to exports.MAX_TRACES traces
 MAX_NAME = 4096  # [characters] a member's path
 MAX_HEADER = 64 * 1024  # [bytes] one pax or GNU long-name header: a long name, a few attributes
 MAX_HEADERS = 1 * MiB  # [bytes] all of an archive's pax and long-name headers together
@@ -82,8 +82,12 @@ PLACES = {
 }
 WANTED = {
     *(path for paths in PLACES.values() for path in paths),
-    exports.PITLANE_SETTINGS, artifacts.TRAINING_METRICS, *CHECKPOINTS,
+    exports.PITLANE_SETTINGS, artifacts.TRAINING_METRICS, *CHECKPOINTS, history.EXACT,
 }  # fmt: skip
+# Simulation traces as DeepRacer lays them out (logs_archive), at the root or in a single folder:
+# a training iteration's are read, up to exports.TRACES_LIMIT together; an evaluation's are not.
+TRAINING_TRACE = re.compile(r"(?:[^/]+/)?training-simtrace/(\d{1,6})-iteration\.csv")
+EVALUATION_TRACE = re.compile(r"(?:[^/]+/)?evaluation-\d{14}/evaluation-simtrace/0-iteration\.csv")
 # DeepRacer's checkpoint pointers, in the folder of its checkpoints, most telling first: best and
 # last by name (simapp checkpoint_files/deepracer_checkpoint_json.py:83-131), rl_coach's latest
 # (rl_coach_checkpoint.py:160-179), TensorFlow's latest ("model_checkpoint_path: ...").
@@ -429,7 +433,7 @@ def read_archive(archive: IO[bytes]) -> Members:
         raise ImportRefused(f"The archive is over {size(MAX_ARCHIVE)}.")
     archive.seek(0)
     members = Members()
-    unpacked = 0
+    unpacked = traced = 0
     try:
         with tarfile.open(fileobj=archive, mode="r:*", tarinfo=_BoundedTarInfo) as tar:
             for count, member in enumerate(tar, start=1):
@@ -452,7 +456,11 @@ def read_archive(archive: IO[bytes]) -> Members:
                 unpacked += member.size
                 if unpacked > MAX_UNPACKED:
                     raise ImportRefused(f"The archive unpacks to over {size(MAX_UNPACKED)}.")
-                members[path] = _read(tar, member) if _wanted(path) else None
+                trace = bool(TRAINING_TRACE.fullmatch(path)) and (
+                    traced + member.size <= exports.TRACES_LIMIT
+                )  # a trace past the limit is left out, with a note (_import_traces)
+                traced += member.size if trace else 0
+                members[path] = _read(tar, member) if _wanted(path) or trace else None
     except (tarfile.TarError, EOFError, OSError, ValueError, zlib.error, RecursionError):
         raise ImportRefused(NOT_AN_ARCHIVE) from None
     return _without_top_folder(members)
@@ -1047,38 +1055,110 @@ def _import_trained(
         model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **checked.row())
         try:
             artifacts.write_model_files(model)
-            best_name = artifacts.save(model, "checkpoints/imported-best.safetensors", best)
-            last_name = artifacts.save(model, "checkpoints/imported-last.safetensors", last)
+            exact, notes = _exact_history(members)
+            best_name, last_name = _checkpoints_save(model, best, last, exact)
             job = TrainingJob.objects.create(
                 model=model, status=TrainingJob.Status.COMPLETED, weights_version=1,
                 best_checkpoint=best_name, last_checkpoint=last_name, lease_owner=jobs.IMPORTED,
                 message="Imported with its weights.",
             )  # fmt: skip
-            notes = _import_history(model, job, members, ours)
+            notes += _import_history(model, job, members, ours, exact)
         except BaseException:
             artifacts.delete_all(model)
             raise
     return Imported(model, notes)
 
 
-def _import_history(model: RLModel, job: TrainingJob, members: Members, ours: dict) -> list[str]:
-    """The job's iterations and totals from the archive's training metrics, which are kept with
-    the model; a note instead when the archive has none that can be read."""
-    data = members.get(artifacts.TRAINING_METRICS)
+def _exact_history(members: Members) -> tuple[history.Exact | None, list[str]]:
+    """Pitlane's exact record of the training (``history.EXACT``), when the archive has one
+    that can be read; else None, with a note when it has one that cannot."""
+    data = members.get(history.EXACT)
     if data is None:
-        return ["The archive has no training metrics: the model arrives without its training "
-                "history (no graph or iterations)."]  # fmt: skip
+        return None, []
     try:
+        if len(data) > METRICS_LIMIT:
+            raise history.Unreadable(f"it is over {size(METRICS_LIMIT)}")
+        return history.exact_read(data), []
+    except history.Unreadable as unreadable:
+        return None, [f"The archive's {history.EXACT} could not be read ({unreadable})."]
+
+
+def _checkpoints_save(
+    model: RLModel, best: bytes, last: bytes, exact: history.Exact | None
+) -> tuple[str, str]:
+    """The storage names of the best and last weights, saved: where the trainer keeps the
+    iteration each holds when the archive says which (so their labels say it), else as an
+    import's."""
+    names = []
+    for which, data in (("best", best), ("last", last)):
+        number = exact.checkpoints.get(which) if exact else None
+        relative = (
+            artifacts.checkpoint(number) if number else f"checkpoints/imported-{which}.safetensors"
+        )
+        names.append(artifacts.save(model, relative, data))
+    return names[0], names[1]
+
+
+def _import_history(
+    model: RLModel, job: TrainingJob, members: Members, ours: dict, exact: history.Exact | None
+) -> list[str]:
+    """The job's iterations and totals, exactly as they were from the archive's
+    ``history.EXACT``, else rebuilt from its training metrics (kept with the model either way
+    when they can be read); and its simulation traces. Notes say what was rebuilt or is missing."""
+    seconds = ours.get("training_seconds")
+    seconds = float(seconds) if isinstance(seconds, int | float) and 0 <= seconds < 10**7 else None
+    data = members.get(artifacts.TRAINING_METRICS)
+    notes, found = [], None
+    try:
+        if data is None:
+            raise history.Unreadable("none")
         if len(data) > METRICS_LIMIT:
             raise history.Unreadable(f"it is over {size(METRICS_LIMIT)}")
         found = history.read(
             data, episodes_per_iteration=model.hyperparameters["num_episodes_between_training"]
         )
+        artifacts.save(model, artifacts.TRAINING_METRICS, data)
     except history.Unreadable as unreadable:
-        return [f"The archive's training metrics could not be read ({unreadable}): the model "
-                "arrives without its training history (no graph or iterations)."]  # fmt: skip
-    seconds = ours.get("training_seconds")
-    exact = isinstance(seconds, int | float) and 0 <= seconds < 10**7
-    history.history_save(job=job, history=found, seconds=float(seconds) if exact else None)
-    artifacts.save(model, artifacts.TRAINING_METRICS, data)
-    return []
+        if exact is None:
+            said = ("The archive has no training metrics" if data is None else
+                    f"The archive's training metrics could not be read ({unreadable})")  # fmt: skip
+            notes.append(f"{said}: the model arrives without its training history (no graph or "
+                         "iterations).")  # fmt: skip
+    if exact is not None:
+        history.history_save(job=job, history=exact.history, seconds=seconds)
+    elif found is not None:
+        history.history_save(job=job, history=found, seconds=seconds)
+        notes.append(
+            "Training figures rebuilt from DeepRacer's metrics, which round them: the rewards "
+            "and completions may differ a little from those the model trained with, and which "
+            "iteration the best checkpoint holds is not known (the archive has no "
+            f"{history.EXACT})."
+        )
+    return notes + _import_traces(model, members, iterations=job.iterations)
+
+
+def _import_traces(model: RLModel, members: Members, *, iterations: int) -> list[str]:
+    """The archive's training simulation traces, kept where the Analysis tab reads them (those
+    of its iterations, when the history says how many); notes for what stays behind."""
+    found = {int(match[1]): path for path in members if (match := TRAINING_TRACE.fullmatch(path))}
+    kept = [number for number, path in sorted(found.items())
+            if members[path] is not None and (not iterations or number < iterations)]  # fmt: skip
+    for number in kept:
+        artifacts.save(model, artifacts.training_trace(number + 1), members[found[number]] or b"")
+    notes = []
+    if not found:
+        notes.append("The archive has no simulation traces (training-simtrace): the Analysis tab "
+                     "has nothing to show.")  # fmt: skip
+    elif len(kept) < len(found):
+        notes.append(
+            f"Simulation traces came for {len(kept)} of the archive's {len(found)} iterations "
+            f"(an import keeps up to {size(exports.TRACES_LIMIT)} of them): the Analysis tab "
+            "shows those."
+        )
+    evaluations = sum(1 for path in members if EVALUATION_TRACE.fullmatch(path))
+    if evaluations:
+        notes.append(
+            f"The archive's evaluation traces ({evaluations}) stay in it: evaluations start "
+            "afresh here, with their own traces, video and Analysis tab."
+        )
+    return notes

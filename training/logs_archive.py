@@ -75,16 +75,38 @@ def write(model: RLModel, target: BinaryIO) -> None:
 
 def _stored_files(model: RLModel) -> list[tuple[str, str]]:
     """(name in the archive, storage name) of the model's traces and metrics."""
-    files = []
+    files = _training_traces(model)
+    prefix = artifacts.path(model, "")
+    if files and default_storage.exists(prefix + artifacts.TRAINING_METRICS):
+        files.append((TRAINING_METRICS, prefix + artifacts.TRAINING_METRICS))
+    for trace, metrics in _evaluation_files(model):
+        files.append(trace)
+        if metrics is not None:
+            files.append(metrics)
+    return files
+
+
+def trace_files(model: RLModel) -> list[tuple[str, str]]:
+    """(name in a DeepRacer model folder, storage name) of the model's simulation traces: each
+    training iteration's, in order, then each finished evaluation's."""
+    return _training_traces(model) + [trace for trace, _ in _evaluation_files(model)]
+
+
+def _training_traces(model: RLModel) -> list[tuple[str, str]]:
     prefix = artifacts.path(model, "")
     try:
         _, names = default_storage.listdir(prefix + "training-simtrace")
     except FileNotFoundError:
         names = []
-    for name in sorted(n for n in names if re.fullmatch(r"\d+-iteration\.csv", n)):
-        files.append((f"training-simtrace/{name}", f"{prefix}training-simtrace/{name}"))
-    if files and default_storage.exists(prefix + artifacts.TRAINING_METRICS):
-        files.append((TRAINING_METRICS, prefix + artifacts.TRAINING_METRICS))
+    found = sorted((int(match[1]), name) for name in names
+                   if (match := re.fullmatch(r"(\d+)-iteration\.csv", name)))  # fmt: skip
+    return [(f"training-simtrace/{name}", f"{prefix}training-simtrace/{name}")
+            for _, name in found]  # fmt: skip
+
+
+def _evaluation_files(model: RLModel):
+    """(trace, metrics or None) of each finished evaluation with a trace, each as (name in the
+    archive, storage name)."""
     stamps: set[str] = set()
     evaluations = model.evaluations.filter(status=EvaluationJob.Status.COMPLETED).order_by("pk")
     for evaluation in evaluations:
@@ -94,13 +116,14 @@ def _stored_files(model: RLModel) -> list[tuple[str, str]]:
         if not default_storage.exists(trace):
             continue
         stamp = _stamp(evaluation, stamps)
-        files.append((f"evaluation-{stamp}/evaluation-simtrace/0-iteration.csv", trace))
         metrics = artifacts.path(
             model, artifacts.evaluation_prefix(evaluation) + artifacts.EVALUATION_METRICS
         )
-        if default_storage.exists(metrics):
-            files.append((f"metrics/EvaluationMetrics-{stamp}.json", metrics))
-    return files
+        yield (
+            (f"evaluation-{stamp}/evaluation-simtrace/0-iteration.csv", trace),
+            (f"metrics/EvaluationMetrics-{stamp}.json", metrics)
+            if default_storage.exists(metrics) else None,
+        )  # fmt: skip
 
 
 def _stamp(evaluation: EvaluationJob, taken: set[str]) -> str:
