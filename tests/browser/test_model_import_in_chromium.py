@@ -61,6 +61,14 @@ def test_the_import_page_checks_the_name_early_and_keeps_the_chosen_archive(
     expect(page.get_by_role("heading", name="imported-again")).to_be_visible()
     expect(page.locator("[data-live-progress]")).to_have_text("2 iterations, 6 episodes, 210 steps")
     assert RLModel.objects.get(owner=alice, name="imported-again").jobs.get().iterations == 2
+    # The archive (from before Pitlane carried its exact figures and traces) says, on the
+    # model's page for as long as it lives, what the import rebuilt and what is missing.
+    notes = page.locator("[data-import-notes]")
+    expect(notes).to_contain_text("Training figures rebuilt from DeepRacer's metrics")
+    expect(notes).to_contain_text("no simulation traces (training-simtrace)")
+    page.reload()  # not a message that goes once read
+    expect(notes).to_be_visible()
+    assert page_problems(page) == []
 
 
 def test_an_import_says_what_it_creates_and_asks_before_it_trains(
