@@ -75,6 +75,24 @@ def test_the_help_page_says_how_to_get_a_model_onto_the_car(client):
         assert words in section, words
 
 
+def test_the_help_page_says_what_the_third_walk_changed(client):
+    def section(name: str) -> str:
+        page = client.get(reverse("help")).text
+        return re.search(rf'id="{name}">(.*?)</section>', page, re.S).group(1)
+
+    said = {
+        "action-space": ("a fan from the car",),
+        "stop-condition": ("<strong>Ready: not trained yet</strong>", "not race, download"),
+        "evaluation": ("<strong>Stop evaluation</strong>",),
+        "analysis": ("one of your saved ones",),
+        "league": ("<strong>Watch</strong>", "give a reason"),
+        "physical-car": ("exact figures", "driving model without training history"),
+    }
+    for name, words in said.items():
+        for word in words:
+            assert word in section(name), (name, word)
+
+
 def test_the_create_form_links_to_the_help_on_its_settings(client, alice, tracks):
     client.force_login(alice)
     response = client.get(reverse("training:model-create"))
