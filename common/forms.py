@@ -47,7 +47,10 @@ def words(field: forms.Field, label: str) -> dict[str, str]:
     if isinstance(field, forms.FileField):
         said["required"] = f"{label}: choose a file."
         said["empty"] = f"{label}: the file chosen is empty."
-        said["max_length"] = f"{label}: its name is at most %(limit_value)d characters."
+        # Django raises this one with {"max", "length"}, not a validator's limit_value.
+        said["max_length"] = (
+            f"{label}: its name is at most %(max)d characters; this one has %(length)d."
+        )
     elif invalid := _invalid(field, label):
         said["invalid"] = invalid
     if isinstance(field, forms.CharField):
@@ -69,7 +72,9 @@ def words(field: forms.Field, label: str) -> dict[str, str]:
 # The codes whose message Django formats with the error's params (a "%" of a label doubled).
 FORMATTED = {"invalid_choice", "max_length", "min_length", "max_value", "min_value", "step_size",
              "max_digits", "max_decimal_places", "max_whole_digits"}  # fmt: skip
-PLACEHOLDERS = ("%(limit_value)d", "%(limit_value)s", "%(show_value)d", "%(max)s")
+PLACEHOLDERS = (
+    "%(limit_value)d", "%(limit_value)s", "%(show_value)d", "%(max)s", "%(max)d", "%(length)d",
+)  # fmt: skip
 
 
 def _escaped(text: str) -> str:

@@ -8,6 +8,7 @@ from datetime import UTC, datetime
 
 import pytest
 from django import forms
+from django.core.files.uploadedfile import SimpleUploadedFile
 from django.template import engines
 from django.utils import timezone
 
@@ -59,6 +60,16 @@ def test_a_form_names_the_field_and_its_limit_in_the_sites_words():
         "minutes": ["Maximum training time [min] is at least 10."],
         "speed": ["Speed is a number, such as 2.5."],
         "kept": ["Give your vehicle a name."],  # a form's own message stays
+    }
+
+
+def test_a_file_name_too_long_is_said_with_the_limit_django_gives():
+    class Example(RacerWords, forms.Form):
+        archive = forms.FileField(max_length=5)
+
+    form = Example({}, {"archive": SimpleUploadedFile("far-too-long.tar.gz", b"data")})
+    assert form.errors == {
+        "archive": ["Archive: its name is at most 5 characters; this one has 19."]
     }
 
 
