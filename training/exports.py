@@ -111,7 +111,8 @@ def onnx(model: RLModel, which: str = "best") -> Export:
 def virtual(model: RLModel) -> Export:
     """The virtual-model archive: everything needed to go on training elsewhere; built once per
     content (its checkpoints, metrics and settings files: a file this console writes
-    differently, as when it learnt DeepRacer's spellings, is a new export)."""
+    differently, as when it learnt DeepRacer's spellings, is a new export). Its traces are named
+    by their names and sizes (a trace is written once), and read only to build it."""
     stored_metrics = artifacts.path(model, artifacts.TRAINING_METRICS)
     metrics = artifacts.read(stored_metrics) if default_storage.exists(stored_metrics) else None
     members = {name: text.encode() for name, text in artifacts.model_files(model).items()}
@@ -124,42 +125,61 @@ def virtual(model: RLModel) -> Export:
     })  # fmt: skip
     if metrics is not None:
         members[artifacts.TRAINING_METRICS] = metrics
-    members.update(_history_files(model))
+    members.update(_exact_history(model))
+    traces = chosen_traces(model)
     content = hashlib.sha256()
     for name, data in sorted(members.items()):
         content.update(name.encode() + b"\0" + hashlib.sha256(data).digest())
+    for trace in sorted(traces):
+        content.update(f"{trace.relative}\0{trace.size}\0".encode())
     export = Export(
         artifacts.path(model, f"exports/virtual-{content.hexdigest()[:16]}.tar.gz"),
         f"virtualmodel-{model.name}.tar.gz",
     )
     if not default_storage.exists(export.name):
+        members.update({trace.relative: artifacts.read(trace.stored) for trace in traces})
         _store(export.name, members)
     return export
 
 
-def _history_files(model: RLModel) -> dict[str, bytes]:
+def _exact_history(model: RLModel) -> dict[str, bytes]:
     """Pitlane's exact record of the model's training (``history.EXACT``: each iteration's
-    figures, which iterations the checkpoints hold) and its simulation traces as DeepRacer lays
-    them out (``logs_archive``), up to ``TRACES_LIMIT`` and ``MAX_TRACES``: the evaluations'
-    and the newest iterations' first."""
+    figures, which iterations the checkpoints hold), when it has iterations."""
     job = model.latest_job
-    if job is None:
+    if job is None or not job.iteration_rows.exists():
         return {}
-    files = {}
-    if job.iteration_rows.exists():
-        checkpoints = {
-            which: artifacts.checkpoint_iteration(name)
-            for which in artifacts.EXPORTED_CHECKPOINTS
-            if (name := selectors.model_checkpoint(model=model, which=which))
-        }
-        files[history.EXACT] = _json(history.exact_document(job=job, checkpoints=checkpoints))
-    room = TRACES_LIMIT
-    for relative, stored in reversed(logs_archive.trace_files(model)[-MAX_TRACES:]):
+    checkpoints = {
+        which: artifacts.checkpoint_iteration(name)
+        for which in artifacts.EXPORTED_CHECKPOINTS
+        if (name := selectors.model_checkpoint(model=model, which=which))
+    }
+    return {history.EXACT: _json(history.exact_document(job=job, checkpoints=checkpoints))}
+
+
+@dataclass(frozen=True, order=True)
+class Trace:
+    """A simulation trace a virtual archive carries: its name there, in storage, and its size."""
+
+    relative: str
+    stored: str
+    size: int  # [bytes]
+
+
+def chosen_traces(model: RLModel) -> list[Trace]:
+    """The simulation traces the virtual archive carries, as DeepRacer lays them out
+    (``logs_archive``), up to ``TRACES_LIMIT`` and ``MAX_TRACES``: the training's, newest
+    iteration first (those an import keeps), then the evaluations', newest first, in the room
+    left. Read from storage by name and size only."""
+    training, evaluations = logs_archive.trace_files(model)
+    room, chosen = TRACES_LIMIT, []
+    for relative, stored in [*reversed(training), *reversed(evaluations)]:
+        if len(chosen) == MAX_TRACES:
+            break
         size = default_storage.size(stored)
         if size <= room:
             room -= size
-            files[relative] = artifacts.read(stored)
-    return files
+            chosen.append(Trace(relative, stored, size))
+    return chosen
 
 
 def deepracer_hyperparameters(model: RLModel) -> bytes:

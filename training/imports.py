@@ -20,6 +20,7 @@ hostile-input checks; the weights' formats have their own modules.
 
 from __future__ import annotations
 
+import heapq
 import json
 import re
 import secrets
@@ -433,7 +434,8 @@ def read_archive(archive: IO[bytes]) -> Members:
         raise ImportRefused(f"The archive is over {size(MAX_ARCHIVE)}.")
     archive.seek(0)
     members = Members()
-    unpacked = traced = 0
+    unpacked = 0
+    traces = _NewestTraces()
     try:
         with tarfile.open(fileobj=archive, mode="r:*", tarinfo=_BoundedTarInfo) as tar:
             for count, member in enumerate(tar, start=1):
@@ -456,14 +458,38 @@ def read_archive(archive: IO[bytes]) -> Members:
                 unpacked += member.size
                 if unpacked > MAX_UNPACKED:
                     raise ImportRefused(f"The archive unpacks to over {size(MAX_UNPACKED)}.")
-                trace = bool(TRAINING_TRACE.fullmatch(path)) and (
-                    traced + member.size <= exports.TRACES_LIMIT
-                )  # a trace past the limit is left out, with a note (_import_traces)
-                traced += member.size if trace else 0
-                members[path] = _read(tar, member) if _wanted(path) or trace else None
+                kept = False
+                if trace := TRAINING_TRACE.fullmatch(path):  # one past the limit: a note
+                    kept, dropped = traces.offer(path, int(trace[1]), member.size)
+                    members.update(dict.fromkeys(dropped))
+                members[path] = _read(tar, member) if _wanted(path) or kept else None
     except (tarfile.TarError, EOFError, OSError, ValueError, zlib.error, RecursionError):
         raise ImportRefused(NOT_AN_ARCHIVE) from None
     return _without_top_folder(members)
+
+
+class _NewestTraces:
+    """The training traces an import keeps, chosen as the archive is read, whatever its order:
+    the newest iterations' (by number), as many as fit in ``exports.TRACES_LIMIT`` together."""
+
+    def __init__(self) -> None:
+        self.kept: list[tuple[int, str, int]] = []  # a heap: (iteration, path, size), oldest first
+        self.size = 0  # [bytes] of those kept
+
+    def offer(self, path: str, number: int, size: int) -> tuple[bool, list[str]]:
+        """Whether the trace at ``path`` is kept, and the paths of those kept before that now
+        make room for it."""
+        heapq.heappush(self.kept, (number, path, size))
+        self.size += size
+        dropped = []
+        while self.size > exports.TRACES_LIMIT:
+            _, oldest, freed = heapq.heappop(self.kept)
+            self.size -= freed
+            dropped.append(oldest)
+        if path in dropped:
+            dropped.remove(path)
+            return False, dropped
+        return True, dropped
 
 
 class _BoundedTarInfo(tarfile.TarInfo):

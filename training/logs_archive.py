@@ -86,10 +86,10 @@ def _stored_files(model: RLModel) -> list[tuple[str, str]]:
     return files
 
 
-def trace_files(model: RLModel) -> list[tuple[str, str]]:
+def trace_files(model: RLModel) -> tuple[list[tuple[str, str]], list[tuple[str, str]]]:
     """(name in a DeepRacer model folder, storage name) of the model's simulation traces: each
-    training iteration's, in order, then each finished evaluation's."""
-    return _training_traces(model) + [trace for trace, _ in _evaluation_files(model)]
+    training iteration's, in order; and each finished evaluation's, in order."""
+    return _training_traces(model), [trace for trace, _ in _evaluation_files(model)]
 
 
 def _training_traces(model: RLModel) -> list[tuple[str, str]]:

@@ -20,7 +20,7 @@ from tests.analysis.test_summaries import HAND_WRITTEN
 from tests.training.factories import ready_model
 from tests.training.test_imports import tar_gz, trainer_metrics, virtual_archive
 from training import artifacts, exports, history, imports, selectors
-from training.models import Iteration, RLModel, TrainingJob
+from training.models import EvaluationJob, Iteration, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
 
@@ -152,6 +152,44 @@ def test_a_damaged_record_falls_back_to_the_metrics_and_traces_past_the_limit_st
     assert model.jobs.get().iterations == 3
     assert "Simulation traces came for 2 of the archive's 3 iterations" in said
     assert Source.of_job(model.jobs.get()).iterations() == [2, 3]  # the newest come first
+
+
+def test_the_archive_fills_its_trace_budget_with_the_newest_training_traces_first(
+    alice, tracks, monkeypatch
+):
+    model = trained_three_iterations(alice)
+    evaluation = EvaluationJob.objects.create(model=model, track=model.track, status="COMPLETED")
+    trace = artifacts.evaluation_prefix(evaluation) + artifacts.EVALUATION_TRACE
+    artifacts.save(model, trace, to_csv(HAND_WRITTEN))
+    monkeypatch.setattr(exports, "TRACES_LIMIT", 2 * len(to_csv(HAND_WRITTEN).encode()))
+    assert [trace.relative for trace in exports.chosen_traces(model)] == [
+        "training-simtrace/2-iteration.csv",
+        "training-simtrace/1-iteration.csv",
+    ]  # an import keeps the training's; the evaluation's only in the room left
+    monkeypatch.setattr(exports, "TRACES_LIMIT", 4 * len(to_csv(HAND_WRITTEN).encode()))
+    assert exports.chosen_traces(model)[-1].relative.endswith("evaluation-simtrace/0-iteration.csv")
+
+
+def test_an_archive_already_built_is_found_without_reading_its_traces(alice, tracks, monkeypatch):
+    model = trained_three_iterations(alice)
+    built = exports.virtual(model)
+    read = []
+    original = artifacts.read
+    monkeypatch.setattr(artifacts, "read", lambda name: read.append(name) or original(name))
+    assert exports.virtual(model) == built
+    assert read and not [name for name in read if "simtrace" in name]
+
+
+def test_traces_over_the_limit_are_the_newest_iterations_whatever_the_archives_order(
+    alice, bob, tracks, monkeypatch
+):
+    members = members_of(virtual_archive(trained_three_iterations(alice)))
+    traces = sorted(name for name in members if name.startswith("training-simtrace/"))
+    oldest_first = {name: data for name, data in members.items() if name not in traces}
+    oldest_first.update({name: members[name] for name in traces})  # 0-, 1-, 2-iteration.csv
+    monkeypatch.setattr(exports, "TRACES_LIMIT", 2 * len(to_csv(HAND_WRITTEN).encode()))
+    model = imported(bob, tar_gz(oldest_first))
+    assert Source.of_job(model.jobs.get()).iterations() == [2, 3]
 
 
 @pytest.mark.parametrize(
