@@ -61,7 +61,7 @@ def signup(request: HttpRequest) -> HttpResponse:
 
 
 class SignInView(LoginView):
-    """Django's sign-in, limited per racer name and per address: past either limit the form
+    """Django's sign-in, limited per login name and per address: past either limit the form
     says how long to wait, and the password is not checked at all."""
 
     form_class = SignInForm

@@ -14,7 +14,7 @@ pytestmark = pytest.mark.django_db(transaction=True)
 
 def log_in(page: Page, username: str, password: str) -> None:
     page.goto("/accounts/login/")
-    page.get_by_label("Racer name").fill(username)
+    page.get_by_label("Login name").fill(username)
     page.get_by_label("Password").fill(password)
     page.get_by_role("button", name="Log in").click()
 
@@ -22,7 +22,7 @@ def log_in(page: Page, username: str, password: str) -> None:
 def sign_up(page: Page, username: str) -> None:
     """From the home page, as a visitor finds it."""
     page.get_by_role("link", name="Create your racer account").click()
-    page.get_by_label("Racer name").fill(username)
+    page.get_by_label("Login name").fill(username)
     page.get_by_label("Password", exact=True).fill(PASSWORD)
     page.get_by_label("Password confirmation").fill(PASSWORD)
     page.get_by_role("button", name="Sign up").click()
@@ -50,10 +50,10 @@ def test_a_new_racer_signs_up_logs_out_and_logs_back_in(page: Page):
 def test_a_wrong_password_gets_a_clear_message_in_the_browser(page: Page, alice):
     log_in(page, "alice", "not-my-password")
     expect(page.get_by_role("alert")).to_have_text(
-        "That racer name and password do not match. Check both (passwords are case-sensitive) "
+        "That login name and password do not match. Check both (passwords are case-sensitive) "
         "and try again."
     )
-    expect(page.get_by_label("Racer name")).to_have_value("alice")
+    expect(page.get_by_label("Login name")).to_have_value("alice")
 
 
 def test_a_visitor_sees_what_pitlane_is_and_the_races_open_now(page: Page, tracks):

@@ -31,7 +31,7 @@ def test_an_invitee_signs_up_comes_back_and_joins(page: Page, alice, tracks):
 
     page.goto(f"/races/invite/{race.invite_token}/")
     page.get_by_role("link", name="Create a racer account").click()
-    page.get_by_label("Racer name").fill("dana")
+    page.get_by_label("Login name").fill("dana")
     page.get_by_label("Password", exact=True).fill(PASSWORD)
     page.get_by_label("Password confirmation").fill(PASSWORD)
     page.get_by_role("button", name="Sign up").click()

@@ -36,7 +36,7 @@ def test_a_visitor_is_offered_to_sign_up_and_comes_back_to_the_leaderboard(page:
     page.goto(trial.get_absolute_url())
     expect(page.get_by_role("link", name="Manage this race")).to_have_count(0)
     page.get_by_role("link", name="Sign up to race").click()
-    page.get_by_label("Racer name").fill("dana")
+    page.get_by_label("Login name").fill("dana")
     page.get_by_label("Password", exact=True).fill(PASSWORD)
     page.get_by_label("Password confirmation").fill(PASSWORD)
     page.get_by_role("button", name="Sign up").click()

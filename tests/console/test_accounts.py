@@ -77,13 +77,32 @@ def test_the_log_in_page_sends_new_racers_to_sign_up_with_where_they_were_going(
     assert f'href="{signup}?next=/races/invite/some-token/"' in page.text
 
 
-def test_sign_up_refuses_a_racer_name_that_is_taken_and_keeps_what_was_typed(client, alice):
+def test_sign_up_refuses_a_login_name_that_is_taken_and_keeps_what_was_typed(client, alice):
     response = client.post(
-        reverse("signup"), {"username": "alice", "password1": PASSWORD, "password2": PASSWORD}
+        reverse("signup"), {"username": "ALICE", "password1": PASSWORD, "password2": PASSWORD}
     )
     assert response.status_code == 400
-    assert "A user with that username already exists." in response.text
-    assert 'value="alice"' in response.text
+    assert "Another racer already logs in with that login name. Choose another." in response.text
+    assert 'value="ALICE"' in response.text
+
+
+def test_sign_up_asks_for_a_login_name_and_says_the_racer_name_starts_from_it(client):
+    page = client.get(reverse("signup")).text
+    assert '<label for="id_username">Login name</label>' in page
+    assert "racer name, which starts as this name" in page
+    assert "can be changed on your profile" in page
+
+
+def test_a_renamed_racer_logs_in_with_the_login_name_the_page_asks_for(client, alice):
+    alice.profile.racer_name = "zoom_z"
+    alice.profile.save()
+    page = client.get(reverse("login")).text
+    assert '<label for="id_username">Login name</label>' in page
+    assert "Racer name" not in page
+    response = client.post(
+        reverse("login"), {"username": "alice", "password": PASSWORD}, follow=True
+    )
+    assert response.context["user"] == alice
 
 
 def test_sign_up_says_when_the_passwords_differ(client):
@@ -107,7 +126,7 @@ def test_a_racer_logs_in_and_out(client, alice):
 def test_a_wrong_password_gets_a_clear_message(client, alice):
     response = client.post(reverse("login"), {"username": "alice", "password": "wrong"})
     assert response.status_code == 200
-    assert "That racer name and password do not match" in response.text
+    assert "That login name and password do not match" in response.text
     assert not response.context["user"].is_authenticated
 
 

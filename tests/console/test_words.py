@@ -115,10 +115,12 @@ def test_no_racer_facing_form_answers_in_djangos_default_words(client, alice, tr
         assert response.status_code < 500, what
         said = _said(response)
         assert [words for words in DJANGOS_WORDS if words in said] == [], what
-    assert "Racer name is needed." in _said(answers["sign-up, empty"])
-    assert "Racer name is at most 150 characters long; this one has 300." in _said(
+    assert "Login name is needed." in _said(answers["sign-up, empty"])
+    assert "Login name is at most 150 characters long; this one has 300." in _said(
         answers["sign-up, too long"]
     )
+    assert "Login name is needed." in _said(answers["sign-in, empty"])
+    assert "Password is needed." in _said(answers["sign-in, empty"])
 
 
 MOMENT = datetime(2026, 11, 26, 19, 46, tzinfo=UTC)
