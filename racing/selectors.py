@@ -9,6 +9,7 @@ from django.core.paginator import Page, Paginator
 from django.db.models import Count, Min, Prefetch, Q, QuerySet
 from django.utils import timezone
 
+from accounts.selectors import racer_name
 from common.time_zones import local_text
 from racing.models import (
     RANKING_ORDER,
@@ -111,7 +112,7 @@ def ranking_of(*, event: Event, racer: AbstractBaseUser) -> Ranking | None:
 
 @dataclass
 class Standing:
-    racer: str
+    racer: AbstractBaseUser  # its profile fetched with it
     points: int = 0
     finishes: list[int] = field(default_factory=list)  # places, best first
     position: int = 0
@@ -125,22 +126,23 @@ def season_standings(*, season: Season, division: str) -> tuple[list[Standing], 
     """The season's standings in one division, and the events they count: every public event
     of that division that has opened. Each event gives its first ten places ``POINTS``; racers
     are ordered by points, then by countback (more first places, then more second places, and
-    so on), then by name."""
+    so on), then by racer name."""
     events = list(
         season.events.filter(public=True, division=division, opens_at__lte=timezone.now())
         .select_related("track")
         .order_by("opens_at", "name")
     )
-    standings: dict[str, Standing] = {}
+    standings: dict[int, Standing] = {}
     for event in events:
-        top = event.rankings.select_related("racer").order_by(*RANKING_ORDER)
+        top = event.rankings.select_related("racer__profile").order_by(*RANKING_ORDER)
         for place, ranking in enumerate(top[: len(POINTS)], start=1):
-            standing = standings.setdefault(
-                ranking.racer.username, Standing(ranking.racer.username)
-            )
+            standing = standings.setdefault(ranking.racer_id, Standing(ranking.racer))
             standing.points += POINTS[place - 1]
             standing.finishes.append(place)
-    ordered = sorted(standings.values(), key=lambda s: (-s.points, sorted(s.finishes), s.racer))
+    ordered = sorted(
+        standings.values(),
+        key=lambda s: (-s.points, sorted(s.finishes), racer_name(racer=s.racer).lower()),
+    )
     for position, standing in enumerate(ordered, start=1):
         standing.finishes.sort()
         standing.position = position
@@ -232,9 +234,10 @@ def invitation_refusal(*, event: Event, racer: AbstractBaseUser) -> str | None:
     if event.state == Event.State.CLOSED:
         return "This invitation expired when the race closed."
     if racer.is_authenticated and event.removed.filter(pk=racer.pk).exists():
+        organiser = racer_name(racer=event.organiser)
         return (
-            f"{event.organiser} took you out of {event.name}, so its invitation no longer lets "
-            f"you in. If you think that was a mistake, ask {event.organiser} to let you back in."
+            f"{organiser} took you out of {event.name}, so its invitation no longer lets "
+            f"you in. If you think that was a mistake, ask {organiser} to let you back in."
         )
     return None
 
@@ -256,7 +259,7 @@ def community_races_for(*, racer: AbstractBaseUser) -> QuerySet[Event]:
     return (
         Event.objects.filter(public=False)
         .filter(Q(organiser=racer) | Q(participants=racer))
-        .select_related("track", "organiser")
+        .select_related("track", "organiser__profile")
         .distinct()
         .order_by("-opens_at")
     )

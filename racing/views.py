@@ -8,6 +8,7 @@ from django.shortcuts import get_object_or_404, redirect, render
 from django.urls import reverse
 from django.views.decorators.http import require_POST
 
+from accounts.selectors import racer_name
 from common import ratelimits
 from racing import selectors, services
 from racing.forms import CommunityRaceForm, SubmissionForm
@@ -37,7 +38,9 @@ def leaderboard_list(request: HttpRequest) -> HttpResponse:
 
 def _get_event_for_user(request: HttpRequest, slug: str) -> Event:
     """The event, if this user may see it (public events: anyone); 404 otherwise."""
-    event = get_object_or_404(Event.objects.select_related("season", "track"), slug=slug)
+    event = get_object_or_404(
+        Event.objects.select_related("season", "track", "organiser__profile"), slug=slug
+    )
     if not selectors.event_visible_to(event=event, user=request.user):
         raise Http404("No such event.")
     return event
@@ -226,8 +229,10 @@ def community_race_manage(request: HttpRequest, slug: str) -> HttpResponse:
         {
             "event": event,
             "invite": invite,
-            "participants": event.participants.order_by("username"),
-            "removed": event.removed.order_by("username"),
+            "participants": event.participants.select_related("profile").order_by(
+                "profile__racer_name"
+            ),
+            "removed": event.removed.select_related("profile").order_by("profile__racer_name"),
         },
     )
 
@@ -270,7 +275,7 @@ def community_race_remove(request: HttpRequest, slug: str, user_pk: int) -> Http
     except services.SubmissionRefused as refused:
         messages.error(request, str(refused))
     else:
-        messages.success(request, f"{racer.username} is out of {event.name}.")
+        messages.success(request, f"{racer_name(racer=racer)} is out of {event.name}.")
     return redirect("racing:community-race-manage", slug=event.slug)
 
 
@@ -280,7 +285,7 @@ def community_race_readmit(request: HttpRequest, slug: str, user_pk: int) -> Htt
     event = _get_organised_event(request, slug)
     racer = get_object_or_404(get_user_model(), pk=user_pk, removed_from_events=event)
     services.participant_readmit(event=event, racer=racer)
-    messages.success(request, f"{racer.username} is back in {event.name}.")
+    messages.success(request, f"{racer_name(racer=racer)} is back in {event.name}.")
     return redirect("racing:community-race-manage", slug=event.slug)
 
 
@@ -297,7 +302,9 @@ def community_race_invitation_renew(request: HttpRequest, slug: str) -> HttpResp
 
 def event_join(request: HttpRequest, token: str) -> HttpResponse:
     event = get_object_or_404(
-        Event.objects.select_related("track", "organiser"), public=False, invite_token=token
+        Event.objects.select_related("track", "organiser__profile"),
+        public=False,
+        invite_token=token,
     )
     expired = event.state == Event.State.CLOSED
     refusal = selectors.invitation_refusal(event=event, racer=request.user)

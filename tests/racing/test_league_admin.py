@@ -172,7 +172,7 @@ def test_season_standings_give_points_by_place_per_division(client, alice, bob, 
     response = client.get(reverse("racing:season-standings", args=[first.season_id]))
     rows = [(s.position, s.racer, s.points, s.finishes) for s in response.context["standings"]]
     # 25 + 18 each: countback sorts them by name then (both have a first and a second place)
-    assert rows == [(1, "alice", 43, [1, 2]), (2, "bob", 43, [1, 2]), (3, "stella", 15, [3])]
+    assert rows == [(1, alice, 43, [1, 2]), (2, bob, 43, [1, 2]), (3, stella, 15, [3])]
     pro = client.get(reverse("racing:season-standings", args=[first.season_id]) + "?division=PRO")
     assert pro.context["standings"] == [] and "No points yet in the Pro division" in pro.text
 
