@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import heapq
 import json
+import logging
 import re
 import secrets
 import tarfile
@@ -58,6 +59,8 @@ from training.models import (
 
 if TYPE_CHECKING:
     from rl.policies import Policy
+
+logger = logging.getLogger(__name__)
 
 MiB = 1024 * 1024
 MAX_ARCHIVE = 256 * MiB  # [bytes] as uploaded
@@ -1088,11 +1091,18 @@ def _import_trained(
                 best_checkpoint=best_name, last_checkpoint=last_name, lease_owner=jobs.IMPORTED,
                 message="Imported with its weights.",
             )  # fmt: skip
-            notes += _import_history(model, job, members, ours, exact)
+            history_notes, metrics = _import_history(model, job, members, ours, exact)
         except BaseException:
             artifacts.delete_all(model)
             raise
-    return Imported(model, notes)
+    # The model's row is committed (and the racer's quota unlocked) before the history's files,
+    # up to 1000 traces, are written: a failure there is a note, not a refused import.
+    return Imported(
+        model,
+        notes
+        + history_notes
+        + _history_files_save(model, metrics, members, iterations=job.iterations),
+    )
 
 
 def _exact_history(members: Members) -> tuple[history.Exact | None, list[str]]:
@@ -1127,10 +1137,10 @@ def _checkpoints_save(
 
 def _import_history(
     model: RLModel, job: TrainingJob, members: Members, ours: dict, exact: history.Exact | None
-) -> list[str]:
+) -> tuple[list[str], bytes | None]:
     """The job's iterations and totals, exactly as they were from the archive's
-    ``history.EXACT``, else rebuilt from its training metrics (kept with the model either way
-    when they can be read); and its simulation traces. Notes say what was rebuilt or is missing."""
+    ``history.EXACT``, else rebuilt from its training metrics; notes that say what was rebuilt
+    or is missing, and the metrics to keep with the model when they can be read."""
     seconds = ours.get("training_seconds")
     seconds = float(seconds) if isinstance(seconds, int | float) and 0 <= seconds < 10**7 else None
     data = members.get(artifacts.TRAINING_METRICS)
@@ -1143,7 +1153,6 @@ def _import_history(
         found = history.read(
             data, episodes_per_iteration=model.hyperparameters["num_episodes_between_training"]
         )
-        artifacts.save(model, artifacts.TRAINING_METRICS, data)
     except history.Unreadable as unreadable:
         if exact is None:
             said = ("The archive has no training metrics" if data is None else
@@ -1160,22 +1169,38 @@ def _import_history(
             "iteration the best checkpoint holds is not known (the archive has no "
             f"{history.EXACT})."
         )
-    return notes + _import_traces(model, members, iterations=job.iterations)
+    return notes, (data if found is not None else None)
 
 
-def _import_traces(model: RLModel, members: Members, *, iterations: int) -> list[str]:
-    """The archive's training simulation traces, kept where the Analysis tab reads them (those
-    of its iterations, when the history says how many); notes for what stays behind."""
+def _history_files_save(
+    model: RLModel, metrics: bytes | None, members: Members, *, iterations: int
+) -> list[str]:
+    """The training metrics (when they could be read) and the archive's training simulation
+    traces (those of its iterations, when the history says how many), kept where the Analysis
+    tab and the downloads read them; notes for what stays behind, or could not be stored."""
     found = {int(match[1]): path for path in members if (match := TRAINING_TRACE.fullmatch(path))}
     kept = [number for number, path in sorted(found.items())
             if members[path] is not None and (not iterations or number < iterations)]  # fmt: skip
-    for number in kept:
-        artifacts.save(model, artifacts.training_trace(number + 1), members[found[number]] or b"")
-    notes = []
+    notes, stored = [], 0
+    try:
+        if metrics is not None:
+            artifacts.save(model, artifacts.TRAINING_METRICS, metrics)
+        for number in kept:
+            artifacts.save(
+                model, artifacts.training_trace(number + 1), members[found[number]] or b""
+            )
+            stored += 1
+    except Exception as error:  # storage: the model stands without them
+        logger.warning("Model %s imported without all its history files: %s", model.pk, error)
+        notes.append(
+            f"Storage failed while the archive's training metrics and simulation traces were "
+            f"kept: {stored} of its {len(kept)} traces were, which the Analysis tab shows; a "
+            "download of this model carries what was kept."
+        )
     if not found:
         notes.append("The archive has no simulation traces (training-simtrace): the Analysis tab "
                      "has nothing to show.")  # fmt: skip
-    elif len(kept) < len(found):
+    elif stored == len(kept) < len(found):
         notes.append(
             f"Simulation traces came for {len(kept)} of the archive's {len(found)} iterations "
             f"(an import keeps up to {size(exports.TRACES_LIMIT)} of them): the Analysis tab "

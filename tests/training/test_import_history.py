@@ -11,6 +11,7 @@ import tarfile
 
 import pytest
 from django.conf import settings
+from django.db import connection
 from django.db.models import Max
 from django.urls import reverse
 
@@ -190,6 +191,42 @@ def test_traces_over_the_limit_are_the_newest_iterations_whatever_the_archives_o
     monkeypatch.setattr(exports, "TRACES_LIMIT", 2 * len(to_csv(HAND_WRITTEN).encode()))
     model = imported(bob, tar_gz(oldest_first))
     assert Source.of_job(model.jobs.get()).iterations() == [2, 3]
+
+
+def test_the_traces_are_written_after_the_import_commits_the_model(alice, bob, tracks, monkeypatch):
+    archive = virtual_archive(trained_three_iterations(alice))
+    outside, depths = len(connection.atomic_blocks), []
+    save = artifacts.save
+
+    def recording(model, relative, data):
+        if "simtrace" in relative or relative == artifacts.TRAINING_METRICS:
+            depths.append(len(connection.atomic_blocks))
+        return save(model, relative, data)
+
+    monkeypatch.setattr(artifacts, "save", recording)
+    imported(bob, archive)
+    assert depths == [outside] * 4  # the metrics and three traces, the quota row unlocked
+
+
+def test_traces_that_storage_fails_to_keep_are_a_note_and_the_model_stays(
+    alice, bob, tracks, monkeypatch
+):
+    archive = virtual_archive(trained_three_iterations(alice))
+    save = artifacts.save
+
+    def failing(model, relative, data):
+        if relative == artifacts.training_trace(2):
+            raise OSError("the bucket is gone")
+        return save(model, relative, data)
+
+    monkeypatch.setattr(artifacts, "save", failing)
+    model = imported(bob, archive)
+    assert model.status == RLModel.Status.READY and model.jobs.get().iterations == 3
+    assert (
+        "Storage failed while the archive's training metrics and simulation traces were kept: "
+        "1 of its 3 traces were" in " ".join(model.import_notes)
+    )
+    assert Source.of_job(model.jobs.get()).iterations() == [1]
 
 
 @pytest.mark.parametrize(
