@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 
+from django.conf import settings
+from django.contrib.auth.forms import PasswordResetForm
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import IntegrityError, transaction
 
@@ -65,3 +67,25 @@ def profile_ensure(*, user: AbstractBaseUser) -> Profile:
     which sends no signal) gets its own on first sight."""
     profile = Profile.objects.filter(user=user).select_related("user").first()
     return profile or profile_create(user=user)
+
+
+def password_reset_email_send(*, email: str) -> int:
+    """Email a one-time link that sets a new password to each active account with ``email``
+    (Django's reset form finds them); how many were sent. Run by a worker, never in the request
+    that asked: the request does the same work whether an account matches or not, so its time
+    tells nobody who has one."""
+    form = PasswordResetForm({"email": email})
+    if not form.is_valid():
+        return 0
+    site_url = settings.PITLANE_SITE_URL.rstrip("/")
+    accounts = list(form.get_users(form.cleaned_data["email"]))
+    form.save(
+        domain_override=site_url.split("://")[-1],
+        subject_template_name="registration/password_reset_subject.txt",
+        email_template_name="registration/password_reset_email.txt",
+        extra_email_context={
+            "site_url": site_url,
+            "link_hours": settings.PASSWORD_RESET_TIMEOUT // 3600,
+        },
+    )
+    return len(accounts)

@@ -214,6 +214,7 @@ CELERY_TASK_ROUTES = {
     "racing.race": {"queue": "simulation"},  # a race submission is an evaluation
     "racing.promote": {"queue": "simulation"},
     "analysis.rescore": {"queue": "simulation"},  # a racer's reward function, in the sandbox
+    "accounts.password_reset_email": {"queue": "simulation"},  # off the request: see its task
 }
 # Celery beat (run inside the worker by `make run`; one `celery -A console beat` when scaled out).
 CELERY_BEAT_SCHEDULE = {

@@ -3,8 +3,10 @@ import re
 import pytest
 from django.contrib.auth.models import User
 from django.core import mail
+from django.db import transaction
 from django.urls import reverse
 
+from accounts import tasks
 from tests.conftest import PASSWORD
 
 pytestmark = pytest.mark.django_db
@@ -19,12 +21,22 @@ def by_email(settings):
     settings.PITLANE_SITE_URL = "https://pitlane.example.org"
 
 
+@pytest.fixture
+def worker(monkeypatch):
+    """A worker that sends each reset email the moment its request commits (at once: the test's
+    transaction never commits)."""
+    monkeypatch.setattr(tasks.password_reset_email, "delay", tasks.password_reset_email)
+    monkeypatch.setattr(transaction, "on_commit", lambda queue, *args, **kwargs: queue())
+
+
 def test_the_log_in_page_offers_a_way_back_in_for_a_forgotten_password(client):
     page = client.get(reverse("login")).text
     assert f'<a href="{reverse("password_reset")}">Forgot your password?</a>' in page
 
 
-def test_a_racer_gets_a_reset_link_by_email_and_it_sets_a_new_password(client, alice, by_email):
+def test_a_racer_gets_a_reset_link_by_email_and_it_sets_a_new_password(
+    client, alice, by_email, worker
+):
     alice.email = "alice@example.org"
     alice.save()
     response = client.post(reverse("password_reset"), {"email": "Alice@Example.org"}, follow=True)
@@ -53,7 +65,7 @@ def test_a_racer_gets_a_reset_link_by_email_and_it_sets_a_new_password(client, a
 
 
 def test_the_reset_page_says_the_same_whether_or_not_an_account_has_the_address(
-    client, alice, by_email
+    client, alice, by_email, worker
 ):
     alice.email = "alice@example.org"
     alice.save()
@@ -64,13 +76,34 @@ def test_the_reset_page_says_the_same_whether_or_not_an_account_has_the_address(
     assert len(mail.outbox) == 1
 
 
+def test_the_request_sends_nothing_itself_and_queues_the_same_task_either_way(
+    client, alice, by_email, monkeypatch, django_capture_on_commit_callbacks
+):
+    alice.email = "alice@example.org"
+    alice.save()
+    queued = []
+    monkeypatch.setattr(tasks.password_reset_email, "delay", queued.append)
+    with django_capture_on_commit_callbacks(execute=True) as callbacks:
+        known = client.post(reverse("password_reset"), {"email": "Alice@Example.org"})
+        unknown = client.post(reverse("password_reset"), {"email": "nobody@example.org"})
+    assert known.status_code == unknown.status_code == 302
+    assert len(callbacks) == 2 and queued == ["Alice@Example.org", "nobody@example.org"]
+    assert mail.outbox == []  # the worker sends it, or nobody
+
+    tasks.password_reset_email("nobody@example.org")
+    assert mail.outbox == []
+    tasks.password_reset_email("Alice@Example.org")
+    (email,) = mail.outbox
+    assert email.to == ["alice@example.org"] and "You log in as: alice" in email.body
+
+
 def test_a_reset_request_that_is_not_an_email_address_says_so(client, by_email):
     response = client.post(reverse("password_reset"), {"email": "alice"})
     assert response.status_code == 400
     assert "That is not an email address: it looks like name@example.org." in response.text
 
 
-def test_reset_requests_for_one_address_are_limited(client, alice, by_email, settings):
+def test_reset_requests_for_one_address_are_limited(client, alice, by_email, settings, worker):
     alice.email = "alice@example.org"
     alice.save()
     for _ in range(3):
