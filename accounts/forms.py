@@ -6,12 +6,13 @@ from common.forms import RacerWords
 
 
 class ProfileForm(RacerWords, forms.ModelForm):
-    """The racer's profile page: what the leaderboards show, and where a reset link goes."""
+    """The racer's profile page: what the leaderboards show, and the email address that reset
+    links and notifications go to."""
 
     country = forms.ChoiceField(
         choices=[("", "Not shown"), *sorted(COUNTRIES.items(), key=lambda item: item[1])],
         required=False,
-        help_text="Its flag and code appear beside your racer name on leaderboards.",
+        help_text="Its code appears beside your racer name on leaderboards.",
         error_messages={"invalid_choice": "Choose your country from the list, or Not shown."},
     )
     avatar_colour = forms.ChoiceField(
@@ -24,7 +25,9 @@ class ProfileForm(RacerWords, forms.ModelForm):
     email = forms.EmailField(
         required=False,
         label="Email address",
-        help_text="Only for password reset links; never shown to other racers.",
+        help_text="Where this console sends email, your password reset links and your "
+        "notifications (training, evaluations and races ended) go here; never shown to other "
+        "racers.",
         error_messages={"invalid": "That is not an email address: it looks like name@example.org."},
     )
 

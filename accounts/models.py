@@ -40,7 +40,7 @@ class AvatarColour(models.TextChoices):
 
 class Profile(models.Model):
     """What other racers see of a racer: their racer name (DeepRacer's alias) on every
-    leaderboard, their country's flag and an avatar. Every account has one from the start."""
+    leaderboard, their country's code and an avatar. Every account has one from the start."""
 
     user = models.OneToOneField(
         settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="profile"

@@ -50,7 +50,7 @@ def profile_update(
     *, profile: Profile, racer_name: str, country: str, avatar_colour: str, email: str
 ) -> Profile:
     """Save what the racer chose on their profile page (already validated), and the email
-    address that password reset links go to."""
+    address that password reset links and notifications go to."""
     profile.racer_name, profile.country, profile.avatar_colour = racer_name, country, avatar_colour
     try:
         with transaction.atomic():

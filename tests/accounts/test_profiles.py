@@ -93,6 +93,13 @@ def test_a_racer_may_keep_their_own_name_in_other_capitals(client, alice):
     assert Profile.objects.get(user=alice).racer_name == "ALICE"
 
 
+def test_the_profile_page_says_notifications_go_to_the_email_address_too(client, alice):
+    client.force_login(alice)
+    page = client.get(reverse("accounts:profile")).text
+    assert "your password reset links and your notifications" in page
+    assert "Only for password reset links" not in page and "flag" not in page
+
+
 def test_the_profile_page_is_for_racers_who_are_logged_in(client):
     response = client.get(reverse("accounts:profile"))
     assert response.status_code == 302 and response.url.startswith(reverse("login"))
