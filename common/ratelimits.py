@@ -3,7 +3,8 @@
 Attempts are counted by django-ratelimit in the shared cache (Redis), so every web process on
 every machine counts together, in fixed windows. An attempt over its rate is refused before any
 work, with a sentence that says how long to wait (``over`` gives the ``Limited``); the views
-answer 429 with it.
+answer 429 with it. An attempt whose outcome says which limit it counts against (an import) is
+held against each at once (``hold``), and given back to the others once that is known.
 The rates are settings (``PITLANE_RATES``, from environment variables; README, "Limits").
 Where the cache cannot be reached, attempts are let through: the console says so in its log and
 goes on, as it does for what else Redis holds.
@@ -15,9 +16,11 @@ import logging
 import math
 
 from django.conf import settings
+from django.core.cache import caches
 from django.forms import BaseForm
 from django.forms.utils import ErrorDict
 from django.http import HttpRequest
+from django_ratelimit import core as ratelimit_core
 from django_ratelimit.core import get_usage
 from redis.exceptions import RedisError
 
@@ -60,19 +63,60 @@ def over(request: HttpRequest, action: str, key: str | None = None) -> Limited |
     return None
 
 
-def reached(request: HttpRequest, action: str, key: str | None = None) -> Limited | None:
-    """For a POST: the ``Limited`` when the attempts at ``action`` counted so far (``count``)
-    fill its rate, so that one more would be over it; this one is not counted. For an action
-    counted by its outcome (an import counts only when it arrives), once that is known."""
-    usage = _usage(request, action, key, increment=False)
-    if usage is not None and usage["count"] >= usage["limit"]:
-        return Limited(action, usage["time_left"])
-    return None
+class Held:
+    """An attempt counted up front against several limits (``hold``), before its outcome says
+    which of them it counts against: those it does not are given back (``give_back``)."""
+
+    def __init__(self, counted: dict[str, str]) -> None:
+        self._counted = counted  # action: the cache key of the window it was counted in
+        self.limited: Limited | None = None
+
+    def give_back(self, *actions: str) -> None:
+        """Take this attempt off the counts of ``actions`` (in the window it was counted in:
+        one since ended has nothing to give back)."""
+        cache = caches[settings.RATELIMIT_USE_CACHE]
+        for action in actions:
+            cache_key = self._counted.pop(action, None)
+            if cache_key is None:
+                continue
+            try:
+                cache.decr(cache_key)
+            except ValueError:  # the window ended, and its count with it
+                pass
+            except RedisError as error:
+                logger.warning("Rate limit %s not given back: %s", action, error)
 
 
-def count(request: HttpRequest, action: str, key: str | None = None) -> None:
-    """For a POST: count it as an attempt at ``action`` (which ``reached`` checked before)."""
-    _usage(request, action, key, increment=True)
+def hold(request: HttpRequest, *actions: str, key: str | None = None) -> Held:
+    """For a POST: count it at once as an attempt at each of ``actions``, so that attempts made
+    in parallel count each other before any outcome is known. ``limited``: the first of them it
+    is over, the attempt then given back to all; else the caller gives it back, once its outcome
+    is known, to those it does not count against (an import that arrives is not a refused one)."""
+    held = Held({})
+    if request.method != "POST":
+        return held
+    key = key or f"racer:{request.user.pk}"
+    for action in actions:
+        usage = _usage(request, action, key, increment=True)
+        if usage is None:
+            continue
+        held._counted[action] = _cache_key(action, key)
+        if usage["should_limit"] and held.limited is None:
+            held.limited = Limited(action, usage["time_left"])
+    if held.limited is not None:
+        held.give_back(*actions)
+    return held
+
+
+def _cache_key(action: str, key: str) -> str:
+    """django-ratelimit's key for the count of ``action`` by ``key`` in the present window, as
+    ``get_usage`` makes it (django-ratelimit 4.1 core.py: it has no public way to give one back;
+    tests/training/test_import_archives.py's rate tests prove it is the counter's)."""
+    rate = settings.PITLANE_RATES[action]
+    window = ratelimit_core._get_window(key, ratelimit_core._split_rate(rate)[1])
+    return ratelimit_core._make_cache_key(
+        f"pitlane:{action}", window, rate, key, ratelimit_core.ALL
+    )
 
 
 def _usage(request: HttpRequest, action: str, key: str | None, *, increment: bool) -> dict | None:

@@ -580,9 +580,10 @@ class _ModelImportAttempt:
         self.form = ModelImportForm(*posted, owner=request.user, kept=self.kept)
         if self.confirm is not None:
             self.form.is_valid()  # for the page to go back to: the kept archive, or a choice
-        self.limited = ratelimits.reached(request, "import") or ratelimits.reached(
-            request, "import-refused"
-        )  # counted once the outcome is known (_import_counted)
+        # Counted at once against both, so that parallel posts count each other; given back to
+        # the one its outcome does not count against (_import_counted).
+        self.held = ratelimits.hold(request, "import", "import-refused")
+        self.limited = self.held.limited
         if self.limited:
             ratelimits.refuse(self.form, self.limited)
         elif self.confirm is not None and self.kept is None:
@@ -608,7 +609,7 @@ class _ModelImportAttempt:
         if self.limited:
             form.keep(self.kept)  # the racer tries again later with the archive they chose
             return render(request, "training/model_import.html", {"form": form}, status=429)
-        _import_counted(request, outcome)
+        _import_counted(self.held, outcome)
         refused = False
         if isinstance(outcome, imports.Imported):
             imports.upload_discard(session=request.session)
@@ -688,15 +689,17 @@ def _imported_message(model: RLModel) -> str:
 RACERS_TO_FIX = {"name", "quota", "max_minutes"}  # an import's problems the racer can fix
 
 
-def _import_counted(request: HttpRequest, outcome: object) -> None:
-    """Count a posted import against the racer's limits: one that arrived against "import";
-    any other attempt (refused, or a preview to confirm) against the looser "import-refused", so
-    that correcting an archive does not use up the hour's imports (a check that could not run
-    counts against neither)."""
+def _import_counted(held: ratelimits.Held, outcome: object) -> None:
+    """Count a posted import, held against both of the racer's import limits, against one: one
+    that arrived against "import"; any other attempt (refused, or a preview to confirm) against
+    the looser "import-refused", so that correcting an archive does not use up the hour's
+    imports; a check that could not run counts against neither."""
     if isinstance(outcome, imports.Imported):
-        ratelimits.count(request, "import")
-    elif not isinstance(outcome, CHECK_FAILURES):
-        ratelimits.count(request, "import-refused")
+        held.give_back("import-refused")
+    elif isinstance(outcome, CHECK_FAILURES):
+        held.give_back("import", "import-refused")
+    else:
+        held.give_back("import")
 
 
 def _import_errors(form: ModelImportForm, errors: dict[str, str]) -> None:

@@ -9,14 +9,16 @@ import subprocess
 import tarfile
 
 import pytest
+from django.contrib.sessions.backends.db import SessionStore
 from django.core.files.uploadedfile import SimpleUploadedFile
+from django.test import RequestFactory
 from django.urls import reverse
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from tests.training.factories import ready_model
 from tests.training.test_imports import CHECKED_IMPORT, deepracer_export, tar_gz, virtual_archive
-from training import imports
+from training import imports, views
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db
@@ -178,6 +180,20 @@ def test_refused_imports_do_not_use_up_the_hours_imports(alice, tracks, client, 
     assert response.status_code == 429
     assert "Too many imports for now: try again in" in response.text
     assert not RLModel.objects.filter(name="third").exists()
+
+
+def test_imports_posted_in_parallel_count_each_other_before_either_ends(alice, settings):
+    settings.PITLANE_RATES = {**settings.PITLANE_RATES, "import": "1/h", "import-refused": "5/h"}
+
+    def posted():
+        request = RequestFactory().post(reverse("training:model-import"), {"name": "twin"})
+        request.user, request.session = alice, SessionStore()
+        return request
+
+    first = views._ModelImportAttempt(posted())  # its import still running
+    second = views._ModelImportAttempt(posted())
+    assert first.limited is None
+    assert str(second.limited).startswith("Too many imports for now: try again in")
 
 
 def test_refused_imports_have_a_looser_limit_of_their_own_which_says_so(bob, client, settings):
