@@ -8,12 +8,14 @@ staff's actions call one another, and a reader follows a submission through them
 from __future__ import annotations
 
 import calendar
+import enum
 import logging
 import math
 from datetime import date, datetime, time, timedelta
 
 from django.contrib.auth import get_user_model
 from django.contrib.auth.models import AbstractBaseUser
+from django.core.exceptions import ValidationError
 from django.core.files.storage import default_storage
 from django.db import IntegrityError, transaction
 from django.utils import timezone
@@ -61,11 +63,6 @@ SUBMISSION = Lifecycle(
 
 PROMOTED_SHARE = 0.10  # the top 10% of a month's Open time trials move up to Pro
 RESUBMIT_WINDOW = timedelta(minutes=10)  # a community race made again this soon is the same
-SAME_RACE = (  # what makes a community race the same race as one made a moment ago
-    "name", "track_id", "direction", "race_type", "boxes", "bots", "ranking_method",
-    "laps_required", "laps_to_drive", "off_track_penalty_s", "crash_penalty_s",
-    "max_off_tracks_per_lap", "submissions_per_racer",
-)  # fmt: skip
 VIDEO = "video.webm"
 
 
@@ -314,15 +311,24 @@ def event_close(*, event: Event) -> Event:
     return event
 
 
+class RaceMade(enum.Enum):
+    """How ``community_race_create`` came by the race it gives back."""
+
+    NEW = "new"
+    BY_THIS_FORM = "by this form"  # the same form sent again: a double click, or Back
+    ALIKE = "alike"  # the same settings from a fresh form, a moment ago: Back, refetched
+
+
 def community_race_create(
     *, organiser: AbstractBaseUser, fields: dict, form_token: str = ""
-) -> tuple[Event, bool]:
+) -> tuple[Event, RaceMade]:
     """A private event that ``organiser`` runs (a community race), entered through its
     invitation link; ``ValidationError`` lists what is wrong with ``fields``. The form's
-    one-time ``form_token`` makes it idempotent: the same form sent again (Back and submit, a
-    double click) gives back the race it created. The race, and whether it is new."""
-    if form_token and (made := _race_from_form(organiser, form_token)):
-        return made, False
+    one-time ``form_token`` makes it idempotent: the same form sent again (a double click)
+    gives back the race it created, and refuses in words when its fields were changed. Back
+    and submit again may send the same settings from a fresh form (Chromium fetches the form
+    anew and keeps what was typed): the race made with them within ``RESUBMIT_WINDOW`` is given
+    back too. The race, and how it was come by."""
     event = Event(**fields, organiser=organiser, public=False, season=None, division=Division.OPEN)
     event.slug = _free_slug(fields.get("name") or "race")
     event.form_token = form_token
@@ -330,35 +336,58 @@ def community_race_create(
     # The one-race-per-form constraint is the database's to enforce, below: a twin request
     # that saved first is found there, not reported as an error in the form.
     event.full_clean(validate_constraints=False)
-    if made := _same_race_just_made(organiser, event):
-        return made, False
+    if form_token and (made := _race_from_form(organiser, form_token)):
+        return _made_by_this_form(made, event, fields), RaceMade.BY_THIS_FORM
+    if made := _same_race_just_made(organiser, event, fields):
+        return made, RaceMade.ALIKE
     try:
         with transaction.atomic():
             event.save()
             event.participants.add(organiser)
     except IntegrityError:  # the same form, sent twice at once: the other request made it
         if made := _race_from_form(organiser, form_token):
-            return made, False
+            return _made_by_this_form(made, event, fields), RaceMade.BY_THIS_FORM
         raise
-    return event, True
+    return event, RaceMade.NEW
 
 
 def _race_from_form(organiser: AbstractBaseUser, form_token: str) -> Event | None:
     return Event.objects.filter(organiser=organiser, form_token=form_token).first()
 
 
-def _same_race_just_made(organiser: AbstractBaseUser, event: Event) -> Event | None:
-    """The organiser's race with ``event``'s name and rules made within ``RESUBMIT_WINDOW``,
-    its times within that much of ``event``'s: the form sent again after Back, when the
-    browser fetched the form anew (with a new token) but kept what was typed in it."""
+def _made_by_this_form(made: Event, event: Event, fields: dict) -> Event:
+    """The race this form made, when ``event`` asks for it again; a form sent again with other
+    settings (Back, a change, submit) is refused, so that no change is silently lost."""
+    if not _alike(made, event, fields, leeway=timedelta(0)):
+        raise ValidationError(
+            f"This form already created {made.name}; open the form again to organise another race."
+        )
+    return made
+
+
+def _same_race_just_made(organiser: AbstractBaseUser, event: Event, fields: dict) -> Event | None:
+    """The organiser's race with ``event``'s settings made within ``RESUBMIT_WINDOW``, its
+    times within that much of ``event``'s (a fresh form starts them at its own now)."""
     since = timezone.now() - RESUBMIT_WINDOW
     for made in Event.objects.filter(organiser=organiser, public=False, created_at__gte=since):
-        if all(getattr(made, name) == getattr(event, name) for name in SAME_RACE) and all(
-            abs(getattr(made, name) - getattr(event, name)) <= RESUBMIT_WINDOW
-            for name in ("opens_at", "closes_at")
-        ):
+        if _alike(made, event, fields, leeway=RESUBMIT_WINDOW):
             return made
     return None
+
+
+def _alike(made: Event, event: Event, fields: dict, *, leeway: timedelta) -> bool:
+    """Whether ``made`` has every setting the form gave (``fields``: the community race
+    form's fields, so a field added to the form is compared too), its times within
+    ``leeway``."""
+    for name in fields:
+        attname = Event._meta.get_field(name).attname
+        mine, theirs = getattr(made, attname), getattr(event, attname)
+        if isinstance(mine, datetime) and isinstance(theirs, datetime):
+            if abs(mine - theirs) > leeway:
+                return False
+        elif mine != theirs:
+            return False
+    return True
 
 
 class RaceNotDeleted(Refused):

@@ -186,7 +186,7 @@ def community_race_create(request: HttpRequest) -> HttpResponse:
     form = CommunityRaceForm(request.POST or None, organiser=request.user)
     if request.method == "POST" and form.is_valid():
         try:
-            event, created = services.community_race_create(
+            event, made = services.community_race_create(
                 organiser=request.user,
                 fields=form.fields_for_service(),
                 form_token=form.cleaned_data["form_token"],
@@ -194,22 +194,27 @@ def community_race_create(request: HttpRequest) -> HttpResponse:
         except ValidationError as invalid:
             form.add_error(None, invalid)
         else:
-            if created:
-                messages.success(
-                    request, "Your race is set up: send its invitation link to racers."
-                )
-            else:
-                messages.info(
-                    request,
-                    f"You created {event.name} with these settings a moment ago, so here it "
-                    "is: no second race. To organise another, give it another name.",
-                )
+            messages.add_message(request, *_race_made_message(event, made))
             return redirect("racing:community-race-manage", slug=event.slug)
     return render(
         request,
         "racing/community_race_create.html",
         {"form": form, "tracks": training_selectors.tracks_available()},
     )
+
+
+def _race_made_message(event: Event, made: services.RaceMade) -> tuple[int, str]:
+    if made == services.RaceMade.BY_THIS_FORM:
+        return (
+            messages.INFO,
+            f"This form created {event.name} already, so here it is: no second race.",
+        )
+    if made == services.RaceMade.ALIKE:
+        return messages.INFO, (
+            f"You created {event.name} with these settings a moment ago, so here it is: no "
+            "second race. To organise another race like it, give it another name."
+        )
+    return messages.SUCCESS, "Your race is set up: send its invitation link to racers."
 
 
 def _get_organised_event(request: HttpRequest, slug: str) -> Event:

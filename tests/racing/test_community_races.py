@@ -131,7 +131,25 @@ def test_the_same_race_form_sent_twice_creates_one_race(client, alice, tracks):
     race = Event.objects.get()
     assert first.url == reverse("racing:community-race-manage", args=[race.slug])
     assert again.redirect_chain[-1][0] == first.url
-    assert "You created Friday night with these settings a moment ago" in again.text
+    assert "This form created Friday night already, so here it is: no second race." in again.text
+
+
+def test_the_same_form_sent_again_with_other_settings_is_refused_and_keeps_them(
+    client, alice, tracks
+):
+    """Back, change the laps, submit: neither the old race nor a second one, but words."""
+    client.force_login(alice)
+    form = race_form()
+    client.post(reverse("racing:community-race-create"), form)
+    changed = client.post(reverse("racing:community-race-create"), {**form, "laps_to_drive": 5})
+    assert changed.status_code == 200
+    assert (
+        "This form already created Friday night; open the form again to organise another race."
+        in changed.text
+    )
+    assert "a moment ago" not in changed.text
+    assert changed.context["form"]["laps_to_drive"].value() == "5"
+    assert Event.objects.get().laps_to_drive == 3
 
 
 def test_the_same_race_sent_again_from_a_fresh_form_gives_back_the_race_just_made(
@@ -140,13 +158,17 @@ def test_the_same_race_sent_again_from_a_fresh_form_gives_back_the_race_just_mad
     """Back may fetch the form anew (a new token) while the browser keeps what was typed."""
     client.force_login(alice)
     client.post(reverse("racing:community-race-create"), race_form())
-    again = client.post(reverse("racing:community-race-create"), race_form())
+    again = client.post(reverse("racing:community-race-create"), race_form(), follow=True)
     race = Event.objects.get()
-    assert again.url == reverse("racing:community-race-manage", args=[race.slug])
+    assert again.redirect_chain[-1][0] == reverse("racing:community-race-manage", args=[race.slug])
+    assert "You created Friday night with these settings a moment ago" in again.text
+    assert "give it another name" in again.text
 
     client.post(reverse("racing:community-race-create"), race_form(name="Saturday"))
     client.post(reverse("racing:community-race-create"), race_form(laps_to_drive=5))
-    assert Event.objects.count() == 3
+    client.post(reverse("racing:community-race-create"), race_form(race_type="HEAD_TO_BOT",
+                bot_count=2, bot_speed="1.5"))  # fmt: skip
+    assert Event.objects.count() == 4
 
 
 def test_a_race_form_without_its_token_asks_to_check_and_send_it_again(client, alice, tracks):
@@ -213,9 +235,13 @@ def test_two_requests_from_one_form_at_once_make_one_race(alice, tracks, monkeyp
     )
     looked = iter([None, first])  # the twin looks before the first saves, then after
     monkeypatch.setattr(services, "_race_from_form", lambda organiser, token: next(looked))
-    monkeypatch.setattr(services, "_same_race_just_made", lambda organiser, event: None)
+    monkeypatch.setattr(services, "_same_race_just_made", lambda *looked: None)
     second, again = services.community_race_create(
         organiser=alice, fields=form.fields_for_service(), form_token=token
     )
-    assert (created, again, second) == (True, False, first)
+    assert (created, again, second) == (
+        services.RaceMade.NEW,
+        services.RaceMade.BY_THIS_FORM,
+        first,
+    )
     assert Event.objects.count() == 1
