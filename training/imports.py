@@ -1081,7 +1081,7 @@ def _import_trained(
     last = weights.get(CHECKPOINTS[1]) or best
     with transaction.atomic():
         services.check_quota(owner=owner, minutes=0)
-        model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **checked.row())
+        model = services.model_insert(owner=owner, settings=checked, status=RLModel.Status.READY)
         try:
             artifacts.write_model_files(model)
             exact, notes = _exact_history(members)

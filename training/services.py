@@ -246,6 +246,23 @@ def model_create(
         return _model_save(owner, settings, validate_reward, validation)
 
 
+def model_insert(
+    *, owner: AbstractBaseUser, settings: configuration.ModelSettings, status: str
+) -> RLModel:
+    """Within a transaction: the model's row, with ``settings`` (checked) and ``status``.
+    ``configuration.Invalid`` on its name where another request of the racer's took that name
+    since ``configuration.check`` found it free (two confirms of one import at once): the
+    database's constraint decides, in a savepoint, so the caller's transaction goes on."""
+    try:
+        with transaction.atomic():
+            return RLModel.objects.create(owner=owner, status=status, **settings.row())
+    except IntegrityError:
+        problem = configuration.name_problem(settings.name, owner=owner)
+        if problem is None:
+            raise
+        raise configuration.Invalid({"name": problem}) from None
+
+
 def _reward_validation(settings: configuration.Draft) -> rewards.Validation | None:
     """The validation ``configuration.check`` would run for ``settings``; None where it runs
     none (no reward function, or no track to validate it on)."""
@@ -274,7 +291,7 @@ def _model_save(
         )})  # fmt: skip
     if source is not None:  # its weights are for its source's network
         settings = settings.replace(network_layout=source.network_layout)
-    model = RLModel.objects.create(owner=owner, status=RLModel.Status.QUEUED, **settings.row())
+    model = model_insert(owner=owner, settings=settings, status=RLModel.Status.QUEUED)
     if weights is not None:
         artifacts.save(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))
     job = TrainingJob.objects.create(model=model)

@@ -14,7 +14,7 @@ from django.urls import reverse
 
 from tests.training.factories import ready_model
 from tests.training.test_imports import CHECKED_IMPORT, DEEPRACER_PARAMS, deepracer_export, tar_gz
-from training import artifacts, exports, imports, selectors
+from training import artifacts, configuration, exports, imports, selectors, services
 from training.models import Quota, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
@@ -90,6 +90,26 @@ def test_a_changed_value_is_checked_as_the_create_form_checks_it(
     assert isinstance(preview, imports.ImportPreview)
     assert setting in preview.problems and said in preview.problems[setting]
     assert RLModel.objects.filter(owner=alice).count() == 1  # the ready one alone
+
+
+def test_two_confirms_of_one_import_at_once_make_one_model_and_the_second_is_told_why(
+    alice, tracks, monkeypatch
+):
+    check_quota, calls = services.check_quota, []
+
+    def the_twin_commits_first(*, owner, minutes):
+        check_quota(owner=owner, minutes=minutes)
+        calls.append(minutes)
+        if len(calls) == 2:  # the confirm's own, its name found free just before
+            ready_model(alice, "my-car")  # (here in this test's transaction, so rolled back)
+
+    monkeypatch.setattr(services, "check_quota", the_twin_commits_first)
+    with pytest.raises(configuration.Invalid) as invalid:
+        imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()),
+                             changes={"name": "my-car"}, confirmed=True)  # fmt: skip
+    assert invalid.value.errors == {
+        "name": "You already have a model named “my-car”; choose another name."
+    }
 
 
 def test_a_training_time_over_the_racers_minutes_is_theirs_to_change(alice, tracks):
