@@ -79,6 +79,8 @@ def submission_create(*, racer: AbstractBaseUser, event: Event, model: RLModel) 
     racer's row is locked meanwhile, so two submissions at once cannot overrun the limit."""
     with transaction.atomic():
         _lock(racer)
+        if _lock_event(event) is None:
+            raise SubmissionRefused(f"{event.name} was deleted by its organiser.")
         reason = selectors.submission_refusal(racer=racer, event=event, model=model)
         if reason:
             raise SubmissionRefused(reason)
@@ -231,6 +233,13 @@ def _lock(racer: AbstractBaseUser) -> None:
     """Within a transaction: hold the racer's league row until it ends (their submissions and
     ranking change one transaction at a time)."""
     Racer.objects.select_for_update().filter(pk=Racer.of(racer).pk).first()
+
+
+def _lock_event(event: Event) -> Event | None:
+    """Within a transaction: hold the event's row until it ends; None when it is gone. A
+    submission is made, and a community race deleted, under this lock, so that a deletion never
+    takes with it a submission that arrived after it looked."""
+    return Event.objects.select_for_update().filter(pk=event.pk).first()
 
 
 def _order(ranking: Ranking) -> tuple:
@@ -398,6 +407,8 @@ def community_race_delete(*, event: Event) -> None:
     """Delete a community race nobody has raced in yet (``RaceNotDeleted`` once it has
     submissions: their racers' runs and places stay; the organiser may close it instead)."""
     with transaction.atomic():
+        if _lock_event(event) is None:
+            return  # deleted already: a second click
         reason = selectors.race_deletion_refusal(event=event)
         if reason:
             raise RaceNotDeleted(reason)

@@ -10,9 +10,10 @@ from django.utils import timezone
 
 from racing import services
 from racing.forms import CommunityRaceForm
-from racing.models import Event, Ranking
+from racing.models import Event, Ranking, Submission
 from tests.racing.conftest import race_form
 from tests.racing.factories import scored
+from tests.training.factories import ready_model
 
 pytestmark = pytest.mark.django_db
 
@@ -245,3 +246,30 @@ def test_two_requests_from_one_form_at_once_make_one_race(alice, tracks, monkeyp
         first,
     )
     assert Event.objects.count() == 1
+
+
+def test_a_submission_to_a_race_deleted_meanwhile_is_refused_in_words(community_race, alice, bob):
+    community_race.participants.add(bob)
+    model = ready_model(bob)
+    services.community_race_delete(event=Event.objects.get(pk=community_race.pk))
+    with pytest.raises(
+        services.SubmissionRefused, match="Friday night was deleted by its organiser"
+    ):
+        services.submission_create(racer=bob, event=community_race, model=model)
+    assert not Submission.objects.exists()
+
+
+def test_deleting_a_race_and_submitting_to_it_lock_the_races_row(
+    community_race, alice, bob, monkeypatch
+):
+    """Submitting holds the race's row, so a deletion that looked first waits, then finds the
+    submission (and refuses); one that deletes first leaves the submission nothing to join."""
+    locked = []
+    lock = Event.objects.select_for_update
+    monkeypatch.setattr(Event.objects, "select_for_update", lambda: locked.append(1) or lock())
+    community_race.participants.add(bob)
+    services.submission_create(racer=bob, event=community_race, model=ready_model(bob))
+    assert locked == [1]
+    with pytest.raises(services.RaceNotDeleted):
+        services.community_race_delete(event=community_race)
+    assert locked == [1, 1]
