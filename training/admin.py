@@ -10,6 +10,7 @@ from training.models import (
     RewardFunction,
     RLModel,
     Track,
+    TrainingJob,
     Vehicle,
 )
 from training.services import (
@@ -159,25 +160,29 @@ class RLModelAdmin(admin.ModelAdmin):
     @admin.action(description="Stop training of the selected models")
     def stop_training(self, request, queryset) -> None:
         """Stop each selected model's training as its racer's button does, and say per model
-        what happened: stopping (saving its last iteration), canceled while it waited, or
-        nothing to stop (already ready, say)."""
+        what happened, as the job stands after the stop (which reads it under its lock: it may
+        have ended since the list was shown): stopping (saving its last iteration), canceled
+        while it waited, or nothing to stop (already ready, say)."""
         for model in queryset:
             job = model.latest_job
-            if job is None or not job.is_active:
-                status = model.get_status_display().lower()
-                self.message_user(request, f"{model}: already {status}: nothing to stop.",
-                                  messages.INFO)  # fmt: skip
-                continue
-            if job.stop_requested:
-                self.message_user(request, f"{model}: already stopping: {job.message}.",
-                                  messages.INFO)  # fmt: skip
-                continue
-            job = training_stop(job=job)
-            if job.status == job.Status.CANCELED:
-                said = "canceled: it had not started training"
-            else:
-                said = f"stopping: {job.message[0].lower()}{job.message[1:]}"
-            self.message_user(request, f"{model}: {said}.", messages.SUCCESS)
+            was = job.status if job is not None else None
+            if job is not None and job.is_active:
+                job = training_stop(job=job)
+            model.refresh_from_db(fields=["status"])
+            said, level = _stop_said(model, job, was)
+            self.message_user(request, f"{model}: {said}.", level)
+
+
+def _stop_said(model: RLModel, job: TrainingJob | None, was: str | None) -> tuple[str, int]:
+    """What the admin's stop did to ``model``, whose ``job`` (after the stop) was ``was``."""
+    if job is not None and job.status == TrainingJob.Status.STOPPING:
+        said = "already stopping" if was == TrainingJob.Status.STOPPING else "stopping"
+        if job.message:
+            said += f": {job.message[:1].lower()}{job.message[1:]}"
+        return said, messages.INFO if said.startswith("already") else messages.SUCCESS
+    if job is not None and job.status == TrainingJob.Status.CANCELED and was != job.status:
+        return "canceled: it had not started training", messages.SUCCESS
+    return f"already {model.get_status_display().lower()}: nothing to stop", messages.INFO
 
 
 @admin.register(RewardFunction)
