@@ -237,17 +237,18 @@ class SubmissionAdmin(admin.ModelAdmin):
         )
 
     def save_model(self, request, submission: Submission, form, change: bool) -> None:
-        if submission.disqualified and {"disqualified", "disqualification_reason"} & set(
-            form.changed_data
-        ):
-            services.submission_disqualify(
-                submission=Submission.objects.get(pk=submission.pk),
-                reason=submission.disqualification_reason,
-            )
-            return
+        """A disqualification (or its new reason) and a reinstatement go through the league's
+        services, from the row as it was: the ranking, the leaderboard and the racer follow."""
+        if {"disqualified", "disqualification_reason"} & set(form.changed_data):
+            before = Submission.objects.get(pk=submission.pk)
+            if submission.disqualified:
+                services.submission_disqualify(
+                    submission=before, reason=submission.disqualification_reason
+                )
+            elif before.disqualified:
+                services.submission_reinstate(submission=before)
+            submission.disqualification_reason = before.disqualification_reason
         super().save_model(request, submission, form, change)
-        if "disqualified" in form.changed_data:
-            services.ranking_recompute(event=submission.event, racer=submission.racer)
 
     def has_add_permission(self, request) -> bool:
         return False  # submissions come from racers

@@ -306,6 +306,15 @@ def submission_disqualify(*, submission: Submission, reason: str) -> Submission:
     return submission
 
 
+def submission_reinstate(*, submission: Submission) -> Submission:
+    """Count a disqualified submission again (league staff): its reason goes, its place on the
+    leaderboard comes back where it is the racer's best, and the leaderboard says so."""
+    _update(submission, disqualified=False, disqualification_reason="")
+    ranking_recompute(event=submission.event, racer=submission.racer)
+    live.announce_leaderboard(submission.event)
+    return submission
+
+
 # Events
 
 

@@ -235,6 +235,31 @@ def test_disqualifying_on_a_submissions_admin_page_asks_why_and_tells_the_racer(
 
 
 @pytest.mark.django_db
+def test_reinstating_on_a_submissions_admin_page_clears_the_reason_and_announces_it(
+    client, race_staff, alice, monkeypatch
+):
+    from racing import live
+
+    run = scored(event(), alice, 9_000, 9_000, 9_000)
+    client.force_login(race_staff)
+    change = reverse("admin:racing_submission_change", args=[run.pk])
+    laps = {"laps-TOTAL_FORMS": 3, "laps-INITIAL_FORMS": 3} | {
+        f"laps-{n}-{name}": value
+        for n, lap in enumerate(run.laps.all())
+        for name, value in (("id", lap.pk), ("submission", run.pk))
+    }
+    client.post(change, {**laps, "disqualified": "on", "disqualification_reason": "Wrong car"})
+    announced = []
+    monkeypatch.setattr(live, "announce_leaderboard", announced.append)
+    saved = client.post(change, {**laps, "disqualification_reason": "Wrong car"})
+    assert saved.status_code == 302
+    run.refresh_from_db()
+    assert (run.disqualified, run.disqualification_reason) == (False, "")
+    assert Ranking.objects.get(racer=alice).submission == run
+    assert announced == [run.event]
+
+
+@pytest.mark.django_db
 def test_the_admin_shows_the_sites_icon_and_favicon_ico_finds_it(client, race_staff):
     client.force_login(race_staff)
     admin_page = client.get(reverse("admin:index"))
