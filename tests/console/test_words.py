@@ -104,7 +104,7 @@ def test_no_racer_facing_form_answers_in_djangos_default_words(client, alice, tr
         "re-scoring, wrong": client.post(
             f"/models/{model.pk}/analysis/rescore/", {"reward_function": "x", "first": "-1"}
         ),
-        "profile": client.post("/accounts/profile/", {"bio": LONG}),
+        "profile": client.post("/accounts/profile/", {"racer_name": LONG, "avatar_colour": "teal"}),
         "password change, empty": client.post("/accounts/password/", {}),
     }
     client.logout()
@@ -120,6 +120,10 @@ def test_no_racer_facing_form_answers_in_djangos_default_words(client, alice, tr
         answers["sign-up, too long"]
     )
     assert "Login name is needed." in _said(answers["sign-in, empty"])
+    assert (
+        "A racer name is 2 to 64 letters, digits, hyphens (-) and underscores (_), no spaces; "
+        "that one has 300." in _said(answers["profile"])
+    )
     assert "Password is needed." in _said(answers["sign-in, empty"])
 
 
