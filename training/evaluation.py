@@ -431,13 +431,20 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
 
 
 def _end_stopped(evaluation: EvaluationJob) -> None:
-    """End an evaluation whose run died as the racer stopped it, with the trials it recorded."""
+    """Within the transaction that locks it: end an evaluation whose run died as the racer
+    stopped it, with the trials it recorded (and its video and trace where it saved them before
+    it died); its model is freed and the racer told once that transaction commits."""
+    reason = jobs.EVALUATION_STOPPED if evaluation.video else jobs.EVALUATION_STOPPED_UNSAVED
     lifecycle.EVALUATION.move(
         evaluation, EvaluationJob.Status.CANCELED, finished_at=timezone.now(), message="",
-        failure_reason=jobs.EVALUATION_STOPPED, lease_owner="", lease_expires=None,
+        failure_reason=reason, lease_owner="", lease_expires=None,
     )  # fmt: skip
-    _model_free(evaluation)
-    _announce(evaluation)
+
+    def after_commit() -> None:
+        _model_free(evaluation)
+        _announce(evaluation)
+
+    transaction.on_commit(after_commit)
 
 
 def _model_free(evaluation: EvaluationJob) -> None:

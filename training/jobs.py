@@ -35,6 +35,10 @@ EVALUATION_LAPSED = (
 
 
 EVALUATION_STOPPED = "Stopped by you; the trials it finished are kept, with their video and trace."
+EVALUATION_STOPPED_UNSAVED = (
+    "Stopped by you; the simulation machine driving it stopped answering as it stopped, before "
+    "it saved the video and trace: the trials it finished are kept, without them."
+)
 EVALUATION_STOP_LOOK = 0.5  # [s] between a driving evaluation's looks for the racer's stop
 
 

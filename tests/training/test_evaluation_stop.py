@@ -124,3 +124,29 @@ async def test_the_racer_stops_a_running_evaluation_on_a_worker(alice, celery_wo
 
     await sync_to_async(wait_for)(ended, "the evaluation to stop", timeout=60)
     await sync_to_async(check_stopped_after_its_first_trial)(evaluation.pk)
+
+
+@pytest.mark.django_db
+def test_a_run_that_died_while_stopping_is_ended_by_the_next_and_said_without_its_video(
+    alice, monkeypatch, django_capture_on_commit_callbacks
+):
+    model = ready_model(alice)
+    RLModel.objects.filter(pk=model.pk).update(status=RLModel.Status.EVALUATING)
+    evaluation = EvaluationJob.objects.create(
+        model=model, track=model.track, status=EvaluationJob.Status.STOPPING,
+        lease_owner=jobs.RESUMING,  # claimed by jobs.lapsed_evaluations for this run
+    )  # fmt: skip
+    announced = []
+    monkeypatch.setattr(runner.live, "announce", lambda group, status: announced.append(group))
+    with django_capture_on_commit_callbacks() as after_commit:
+        assert runner.run(evaluation.pk) is None
+        assert announced == []  # nothing said, nor the model freed, under the row's lock
+        assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.EVALUATING
+    for callback in after_commit:
+        callback()
+    evaluation.refresh_from_db()
+    assert evaluation.status == EvaluationJob.Status.CANCELED
+    assert evaluation.failure_reason == jobs.EVALUATION_STOPPED_UNSAVED
+    assert "without them" in evaluation.failure_reason and not evaluation.video
+    assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
+    assert announced == [runner.live.evaluation_group(evaluation.pk)]
