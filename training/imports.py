@@ -156,6 +156,10 @@ class ImportPreview:
         return Track.objects.filter(name=self.settings.get("track")).first()
 
     @property
+    def direction(self) -> str:
+        return configuration.direction_words(self.settings["direction"])
+
+    @property
     def race(self) -> str:
         """The race type, with its boxes or bot cars, in the model page's words."""
         settings = self.settings
@@ -340,7 +344,7 @@ def _track_notes(plan: _Plan, settings: configuration.Draft) -> list[str]:
     track = Track.objects.filter(name=settings["track"]).first()
     shown = track.display_name if track else settings["track"]
     notes.append(f"You chose the track on the import's preview: {shown}, "
-                 f"{settings['direction']}.")  # fmt: skip
+                 f"{configuration.direction_words(settings['direction'])}.")  # fmt: skip
     return notes
 
 

@@ -103,7 +103,7 @@ def test_an_import_says_what_it_creates_and_asks_before_it_trains(
     expect(page.locator("[data-preview-notes]")).to_contain_text(
         "the track reInvent2019_track, which is not loaded here"
     )
-    expect(page.locator("[data-preview-track]")).to_have_text("Rookie Loop (counterclockwise)")
+    expect(page.locator("[data-preview-track]")).to_have_text("Rookie Loop (counter-clockwise)")
     assert not RLModel.objects.filter(name="my-deepracer-car").exists()
     problems += page_problems(page)
     page.set_viewport_size({"width": 390, "height": 844})  # and on a phone

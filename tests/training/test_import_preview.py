@@ -169,6 +169,7 @@ def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, track
     assert response.status_code == 200 and not RLModel.objects.exists()
     page = response.content.decode()
     assert "What the import creates" in page and "which is not loaded here" in page
+    assert "<dd data-preview-track>Rookie Loop (counter-clockwise)</dd>" in page  # the site's words
     confirm = response.context["confirm"]
     kept = response.context["kept"]
     assert artifacts.default_storage.exists(kept.name)
@@ -184,6 +185,10 @@ def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, track
     model = RLModel.objects.get(owner=alice)
     assert response.status_code == 302 and response["Location"].endswith(f"/models/{model.pk}/")
     assert model.track.name == "speedway" and model.status == RLModel.Status.QUEUED
+    assert (
+        f"You chose the track on the import's preview: {model.track.display_name}, "
+        "counter-clockwise." in model.import_notes
+    )
     assert not artifacts.default_storage.exists(kept.name)
 
     # A preview confirmed after its archive is gone asks for the archive again, in words.
