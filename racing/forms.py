@@ -57,8 +57,11 @@ class SubmissionForm(RacerWords, forms.Form):
 
 
 def _model_label(model: RLModel) -> str:
-    """A ready model by name, said to be untrained where it is (its entry would be refused)."""
-    if training_selectors.model_untrained(model=model):
+    """A ready model by name, said to be untrained where it is (its entry would be refused);
+    its last checkpoint from the jobs ``models_ready_for`` fetched with it."""
+    saved = getattr(model, "saved_jobs", None)
+    last = (saved[0].last_checkpoint if saved else "") if saved is not None else None
+    if training_selectors.model_untrained(model=model, last_checkpoint=last):
         return f"{model.name} (Ready: {training_selectors.UNTRAINED})"
     return model.name
 

@@ -20,7 +20,7 @@ from racing.models import (
     Season,
     Submission,
 )
-from training.models import RLModel
+from training.models import RLModel, TrainingJob
 
 LEADERBOARD_PAGE = 100  # rankings per page
 # Season points by place in an event, 1st to 10th (Formula 1's table); lower places score none.
@@ -214,7 +214,14 @@ def events_open_to(*, racer: AbstractBaseUser) -> list[Event]:
 
 
 def models_ready_for(*, racer: AbstractBaseUser) -> QuerySet[RLModel]:
-    return RLModel.objects.filter(owner=racer, status=RLModel.Status.READY).order_by("name")
+    """The racer's ready models by name, each with ``saved_jobs``: its trainings that saved a
+    checkpoint, newest first (one query for all, for ``model_untrained``'s last checkpoint)."""
+    saved = TrainingJob.objects.exclude(last_checkpoint="").order_by("-created_at")
+    return (
+        RLModel.objects.filter(owner=racer, status=RLModel.Status.READY)
+        .order_by("name")
+        .prefetch_related(Prefetch("jobs", queryset=saved, to_attr="saved_jobs"))
+    )
 
 
 def submissions_for_racer(*, racer: AbstractBaseUser) -> QuerySet[Submission]:

@@ -3,6 +3,8 @@ from zoneinfo import ZoneInfo
 
 import pytest
 from django.core.management import call_command
+from django.db import connection
+from django.test.utils import CaptureQueriesContext
 from django.urls import reverse
 from django.utils import timezone
 
@@ -11,6 +13,9 @@ from racing.forms import SubmissionForm
 from racing.models import Event, Season
 from racing.services import demo_season_load
 from tests.racing.factories import event, scored
+from tests.training.factories import ready_model
+from training.models import RLModel
+from training.selectors import UNTRAINED
 
 pytestmark = pytest.mark.django_db
 
@@ -147,3 +152,27 @@ def test_a_run_off_the_leaderboard_stays_its_racers_own(client, ranked_event, al
     client.force_login(bob)
     page = client.get(slower.get_absolute_url())
     assert "your place on the leaderboard" in page.text and "an earlier, better run" in page.text
+
+
+def test_the_submit_forms_model_list_costs_the_same_queries_however_many_models(alice, tracks):
+    """Whether each ready model is untrained comes from its jobs, fetched for all at once."""
+    first = ready_model(alice)
+    untrained = RLModel.objects.get(pk=first.pk)
+
+    def queries_to_show_the_list() -> tuple[int, str]:
+        field = SubmissionForm(racer=alice)["model"]
+        with CaptureQueriesContext(connection) as queries:
+            shown = str(field)
+        return len(queries), shown
+
+    alone, _ = queries_to_show_the_list()
+    for n, iteration in ((2, 3), (3, 5), (4, 0)):
+        job = untrained.jobs.get()
+        untrained.pk, untrained.name = None, f"copy-{n}"
+        untrained.save()
+        job.pk, job.model = None, untrained
+        job.last_checkpoint = f"{untrained.pk}/checkpoints/iteration-{iteration}.safetensors"
+        job.save()
+    many, shown = queries_to_show_the_list()
+    assert many == alone
+    assert f">copy-4 (Ready: {UNTRAINED})<" in shown and ">copy-3<" in shown
