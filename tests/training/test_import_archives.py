@@ -102,12 +102,38 @@ MALFORMED = {
 }
 
 
+OUTSIDE = "is not a relative path inside the archive."
+NO_NAME = "is a file without a name."
+NOT_A_FILE = "is a link or a device: models hold files."
+# What each is told: the member's name as the archive has it (tarfile reads "/" as ""), and why.
+SAID = {
+    "empty": f"'' {OUTSIDE}",
+    "dot as a file": f"'.' {NO_NAME}",
+    "dot slash as a file": f"'./' {NO_NAME}",
+    "parent": f"'..' {OUTSIDE}",
+    "up and out": f"'../x' {OUTSIDE}",
+    "in and out": f"'a/../../b' {OUTSIDE}",
+    "absolute": f"'/etc/passwd' {OUTSIDE}",
+    "backslashes": f"'a\\\\..\\\\..\\\\b' {OUTSIDE}",
+    "a drive": f"'C:/x' {OUTSIDE}",
+    "NUL": f"'a\\x00b' {OUTSIDE}",
+    "over-long": "A file in the archive has a name of 5,999 characters; the limit is 4,096.",
+    "symbolic link": f"'l' {NOT_A_FILE}",
+    "hard link": f"'h' {NOT_A_FILE}",
+    "device": f"'d' {NOT_A_FILE}",
+    "fifo": f"'p' {NOT_A_FILE}",
+    "folder called ..": f"'..' {OUTSIDE}",
+    "absolute folder": f"'' {OUTSIDE}",
+}
+
+
 @pytest.mark.parametrize("case", MALFORMED)
 def test_each_malformed_member_name_is_refused_in_words(case):
     archive = io.BytesIO(tar_gz(deepracer_export(), pax_format(MALFORMED[case])))
     with pytest.raises(imports.ImportRefused) as refused:
         imports.read_archive(archive)
     assert str(refused.value).endswith(".") and "Traceback" not in str(refused.value)
+    assert str(refused.value) == SAID[case]
 
 
 def pax_format(tweak):

@@ -78,7 +78,7 @@ def test_a_folder_without_weights_is_previewed_and_nothing_is_created_until_conf
         ({"name": "no spaces please"}, "name", "1-64 letters, digits and hyphens"),
         ({"name": "Straight-Ahead"}, "name", "You already have a model named"),
         ({"track": "championship-circuit", "direction": "clockwise"}, "direction", "clockwise"),
-        ({"track": "no-such-track"}, "track", ""),
+        ({"track": "no-such-track"}, "track", "Choose one of the listed tracks."),
     ],
 )
 def test_a_changed_value_is_checked_as_the_create_form_checks_it(
