@@ -11,6 +11,7 @@ urlpatterns = [
     path("models/<int:pk>/", views.model_detail, name="model-detail"),
     path("models/<int:pk>/stop/", views.model_stop, name="model-stop"),
     path("models/<int:pk>/log.txt", views.model_log, name="model-log"),
+    path("models/<int:pk>/log/", views.model_log_panel, name="model-log-panel"),
     path("models/<int:pk>/files/<path:relative>", views.model_file, name="model-file"),
     path("models/<int:pk>/download/logs/", views.model_logs, name="model-logs"),
     *(

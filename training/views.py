@@ -419,9 +419,7 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
     model = _get_model_for_user(request, pk)
     job = model.latest_job
     iterations = list(job.iteration_rows.all()) if job else []
-    log_source = request.GET.get("log", "")
-    if log_source not in JobLogLine.Source.values:
-        log_source = ""
+    log_source = _log_source(request)
     untrained = selectors.model_untrained(model=model)
     return render(
         request,
@@ -476,6 +474,31 @@ def model_stop(request: HttpRequest, pk: int) -> HttpResponse:
         request, "training/model_stop.html",
         {"model": model, "job": job, "clock": selectors.training_clock(job=job)},
     )  # fmt: skip
+
+
+def _log_source(request: HttpRequest) -> str:
+    """Whose lines the Log panel shows (``?log=``): one of the sources, or "" for all."""
+    source = request.GET.get("log", "")
+    return source if source in JobLogLine.Source.values else ""
+
+
+@login_required
+@require_safe
+def model_log_panel(request: HttpRequest, pk: int) -> HttpResponse:
+    """The model page's Log panel alone (its newest lines, in time order), for log.js to read
+    again when the job says something new, instead of the whole page."""
+    model = _get_model_for_user(request, pk)
+    job = model.latest_job
+    source = _log_source(request)
+    return render(
+        request,
+        "training/includes/log_panel.html",
+        {
+            "model": model,
+            "log_lines": selectors.job_log(job=job, source=source) if job else [],
+            "log_source": source,
+        },
+    )
 
 
 @login_required
@@ -625,7 +648,7 @@ class _ModelImportAttempt:
             refused = True
         elif isinstance(outcome, configuration.Invalid):
             _import_errors(form, outcome.errors)
-            refused = not set(outcome.errors) <= RACERS_TO_FIX  # else the archive is at fault
+            refused = not set(outcome.errors) <= imports.PREVIEW_PROBLEMS  # else the archive's
         elif isinstance(outcome, Exception):
             form.add_error(None, _check_failed(outcome))
         if refused or ("archive" in form.errors and upload is not None):
@@ -684,9 +707,6 @@ def _imported_message(model: RLModel) -> str:
         "race and download. It came from a car archive, with no reward function: it cannot "
         "train or be cloned."
     )
-
-
-RACERS_TO_FIX = {"name", "quota", "max_minutes"}  # an import's problems the racer can fix
 
 
 def _import_counted(held: ratelimits.Held, outcome: object) -> None:

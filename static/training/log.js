@@ -1,11 +1,12 @@
 // The model page's Log panel, in time order as the download has it: the oldest line at the top,
 // the newest at the bottom. The panel opens on the newest lines and follows new ones while the
 // racer is at the bottom; scrolled up to read, it stays where they are and offers "Jump to
-// newest". New lines are read again from the page when live.js announces an update of the job.
+// newest". New lines are read again (the panel alone, data-log-url) when live.js announces an
+// update of the job.
 
 const panel = document.querySelector("[data-log-panel]");
 const SLACK = 8; // [px] short of the bottom that still counts as at the bottom
-const QUIET = 5000; // [ms] between two readings of the page
+const QUIET = 5000; // [ms] between two readings of the panel
 
 const parts = () => ({
   log: panel.querySelector("[data-log]"),
@@ -31,7 +32,7 @@ function watch() {
   jump.addEventListener("click", toNewest);
 }
 
-let lastRead = performance.now(); // the page itself was read just now
+let lastRead = performance.now(); // the page, panel included, was read just now
 let pending = null;
 
 function readSoon() {
@@ -42,11 +43,10 @@ function readSoon() {
 async function readAgain() {
   lastRead = performance.now();
   try {
-    const response = await fetch(window.location.href, { credentials: "same-origin" });
+    const response = await fetch(panel.dataset.logUrl, { credentials: "same-origin" });
     if (!response.ok) return;
-    const page = new DOMParser().parseFromString(await response.text(), "text/html");
-    const fresh = page.querySelector("[data-log-panel]");
-    if (!fresh) return;
+    const fresh = document.createElement("div"); // the panel's lines, rendered by the server
+    fresh.innerHTML = await response.text();
     const { log } = parts();
     const freshLog = fresh.querySelector("[data-log]");
     if (log && freshLog) {

@@ -123,3 +123,20 @@ def test_the_whole_log_downloads_as_text_for_its_owner_only(client, alice, bob, 
     assert lines[3].endswith("[Reward function] progress 12.5")
     assert len(lines) == 5
     assert LOG_KEEP >= MAX_LOG
+
+
+@pytest.mark.django_db
+def test_the_log_panel_alone_is_its_owners_lines_in_time_order(client, alice, bob, logged):
+    url = reverse("training:model-log-panel", args=[logged.model_id])
+    client.force_login(bob)
+    assert client.get(url).status_code == 404
+    client.force_login(alice)
+    panel = client.get(url).text
+    assert "<html" not in panel and "data-log" in panel
+    said = [panel.index(text) for text in ("Training started", "driving Pitlane", "progress 12.5",
+                                           "Iteration 1: 5 episodes")]  # fmt: skip
+    assert said == sorted(said)
+    only_prints = client.get(url, {"log": "reward"}).text
+    assert only_prints.count('data-source="') == 1 and 'data-source="reward"' in only_prints
+    page = client.get(reverse("training:model-detail", args=[logged.model_id])).text
+    assert f'data-log-url="{url}"' in page
