@@ -50,7 +50,6 @@ from training import artifacts, configuration, exports, history, jobs, rewards, 
 from training.models import (
     Algorithm,
     Network,
-    RaceType,
     RLModel,
     ShellColour,
     Track,
@@ -160,37 +159,17 @@ class ImportPreview:
         return configuration.direction_words(self.settings["direction"])
 
     @property
-    def race(self) -> str:
-        """The race type, with its boxes or bot cars, in the model page's words."""
+    def model(self) -> RLModel:
+        """The model the import would create, unsaved: for the model page's includes
+        (training/includes/model_race.html, model_car.html, model_action_space.html)."""
         settings = self.settings
-        text = RaceType(settings["race_type"]).label
-        boxes, bots = settings.get("boxes"), settings.get("bots")
-        if settings["race_type"] == RaceType.OBJECT_AVOIDANCE and boxes:
-            return f"{text}: {boxes['count']} boxes" + (
-                ", new positions every episode" if boxes.get("randomize") else "")  # fmt: skip
-        if settings["race_type"] == RaceType.HEAD_TO_BOT and bots:
-            return f"{text}: {bots['count']} bot cars at {bots['speed']} m/s"
-        return text
-
-    @property
-    def car(self) -> list[tuple[str, str]]:
-        """The sensors, network, action space and algorithm, as (what, value) rows."""
-        settings, space = self.settings, self.settings["action_space"]
-        if isinstance(space, list):
-            actions = "Discrete: " + "; ".join(
-                f"{a['steering_angle']}° at {a['speed']} m/s" for a in space
-            )
-        else:
-            steering, speed = space["steering_angle"], space["speed"]
-            actions = (f"Continuous: steering {steering['low']} to {steering['high']}°, speed "
-                       f"{speed['low']} to {speed['high']} m/s")  # fmt: skip
-        return [
-            ("Sensors", ", ".join(settings["sensors"])),
-            ("Network", Network(settings["network"]).label),
-            ("Action space", actions),
-            ("Algorithm", Algorithm(settings["algorithm"]).label),
-            ("Simulations at once", str(settings["workers"])),
-        ]
+        space = settings["action_space"]
+        return RLModel(
+            name=settings["name"], race_type=settings["race_type"], boxes=settings.get("boxes"),
+            bots=settings.get("bots"), sensors=settings["sensors"], network=settings["network"],
+            action_space_type="discrete" if isinstance(space, list) else "continuous",
+            action_space=space, algorithm=settings["algorithm"], workers=settings["workers"],
+        )  # fmt: skip
 
 
 @dataclass

@@ -45,10 +45,10 @@ def test_a_folder_without_weights_is_previewed_and_nothing_is_created_until_conf
     assert (settings["name"], settings["track"], settings["max_minutes"]) == (
         "my-deepracer-car", "rookie-loop", 60,
     )  # fmt: skip
-    assert preview.race == "Time trial"
-    assert ("Action space", "Discrete: -30.0° at 0.6 m/s; 0.0° at 1.2 m/s; 30.0° at 0.6 m/s") in (
-        preview.car
-    )
+    assert preview.model.get_race_type_display() == "Time trial"
+    assert [(a["steering_angle"], a["speed"]) for a in preview.model.action_space] == [
+        (-30.0, 0.6), (0.0, 1.2), (30.0, 0.6)
+    ]  # fmt: skip
     assert any("the track reInvent2019_track, which is not loaded here" in n for n in preview.notes)
 
     # Confirmed with another name, track and time: the model is created as the racer chose.
@@ -170,6 +170,10 @@ def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, track
     page = response.content.decode()
     assert "What the import creates" in page and "which is not loaded here" in page
     assert "<dd data-preview-track>Rookie Loop (counter-clockwise)</dd>" in page  # the site's words
+    # The car as the model page shows it: the race type, the action space's fan and table.
+    assert "<dt>Race type</dt><dd>\nTime trial\n</dd>" in page
+    assert "<dt>Action space</dt><dd>Discrete:\n  3 actions" in page and "data-action-fan" in page
+    assert '<td class="num">-30.0</td><td class="num">0.6</td>' in page
     confirm = response.context["confirm"]
     kept = response.context["kept"]
     assert artifacts.default_storage.exists(kept.name)
