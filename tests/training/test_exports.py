@@ -185,7 +185,7 @@ def test_a_model_without_weights_has_nothing_to_download(alice, tracks, tmp_path
     response = client.get(reverse("training:model-export-virtual", args=[model.pk]), follow=True)
     assert "no trained weights yet" in response.text
     # A READY model without a trained checkpoint says why there is nothing to download.
-    assert "<p class=\"muted\" data-untrained>No downloads: untrained is " in response.text
+    assert '<p class="muted" data-untrained>No downloads: untrained is ' in response.text
 
 
 def test_the_model_page_offers_the_archives_to_its_owner_only(alice, bob, tracks, client):
