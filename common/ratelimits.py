@@ -57,7 +57,7 @@ class Limited(Exception):
 def over(request: HttpRequest, action: str, key: str | None = None) -> Limited | None:
     """For a POST: count it as an attempt at ``action``, by ``key`` (the signed-in racer where
     None); the ``Limited`` when that is over the rate, else None (and for anything else)."""
-    usage = _usage(request, action, key, increment=True)
+    usage = _counted(request, action, key)
     if usage is not None and usage["should_limit"]:
         return Limited(action, usage["time_left"])
     return None
@@ -97,7 +97,7 @@ def hold(request: HttpRequest, *actions: str, key: str | None = None) -> Held:
         return held
     key = key or f"racer:{request.user.pk}"
     for action in actions:
-        usage = _usage(request, action, key, increment=True)
+        usage = _counted(request, action, key)
         if usage is None:
             continue
         held._counted[action] = _cache_key(action, key)
@@ -119,7 +119,8 @@ def _cache_key(action: str, key: str) -> str:
     )
 
 
-def _usage(request: HttpRequest, action: str, key: str | None, *, increment: bool) -> dict | None:
+def _counted(request: HttpRequest, action: str, key: str | None) -> dict | None:
+    """Count a POST as an attempt at ``action`` by ``key``; django-ratelimit's usage after it."""
     if request.method != "POST":
         return None
     if key is None:
@@ -127,7 +128,7 @@ def _usage(request: HttpRequest, action: str, key: str | None, *, increment: boo
     try:
         return get_usage(
             request, group=f"pitlane:{action}", key=lambda group, request: key,
-            rate=settings.PITLANE_RATES[action], increment=increment,
+            rate=settings.PITLANE_RATES[action], increment=True,
         )  # fmt: skip
     except RedisError as error:
         logger.warning("Rate limit %s not counted: %s", action, error)
