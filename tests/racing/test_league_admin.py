@@ -210,6 +210,15 @@ def test_a_disqualified_racer_is_told_why_and_reads_it_on_their_runs_page(
     )
 
 
+def _laps_inline(run: Submission) -> dict:
+    """The submission admin page's laps inline, as the page posts it back unchanged."""
+    return {"laps-TOTAL_FORMS": 3, "laps-INITIAL_FORMS": 3} | {
+        f"laps-{n}-{name}": value
+        for n, lap in enumerate(run.laps.all())
+        for name, value in (("id", lap.pk), ("submission", run.pk))
+    }
+
+
 @pytest.mark.django_db
 def test_disqualifying_on_a_submissions_admin_page_asks_why_and_tells_the_racer(
     client, race_staff, alice
@@ -217,11 +226,7 @@ def test_disqualifying_on_a_submissions_admin_page_asks_why_and_tells_the_racer(
     run = scored(event(), alice, 9_000, 9_000, 9_000)
     client.force_login(race_staff)
     change = reverse("admin:racing_submission_change", args=[run.pk])
-    laps = {"laps-TOTAL_FORMS": 3, "laps-INITIAL_FORMS": 3} | {
-        f"laps-{n}-{name}": value
-        for n, lap in enumerate(run.laps.all())
-        for name, value in (("id", lap.pk), ("submission", run.pk))
-    }
+    laps = _laps_inline(run)
     refused = client.post(change, {**laps, "disqualified": "on", "disqualification_reason": ""})
     assert "Say why: the racer reads it." in refused.text
     assert not Submission.objects.get(pk=run.pk).disqualified
@@ -243,11 +248,7 @@ def test_reinstating_on_a_submissions_admin_page_clears_the_reason_and_announces
     run = scored(event(), alice, 9_000, 9_000, 9_000)
     client.force_login(race_staff)
     change = reverse("admin:racing_submission_change", args=[run.pk])
-    laps = {"laps-TOTAL_FORMS": 3, "laps-INITIAL_FORMS": 3} | {
-        f"laps-{n}-{name}": value
-        for n, lap in enumerate(run.laps.all())
-        for name, value in (("id", lap.pk), ("submission", run.pk))
-    }
+    laps = _laps_inline(run)
     client.post(change, {**laps, "disqualified": "on", "disqualification_reason": "Wrong car"})
     announced = []
     monkeypatch.setattr(live, "announce_leaderboard", announced.append)
