@@ -22,6 +22,11 @@ def log_in(page: Page, username: str, password: str) -> None:
 def sign_up(page: Page, username: str) -> None:
     """From the home page, as a visitor finds it."""
     page.get_by_role("link", name="Create your racer account").click()
+    sign_up_here(page, username)
+
+
+def sign_up_here(page: Page, username: str) -> None:
+    """The sign-up form, on the page open now, filled in and sent."""
     page.get_by_label("Login name").fill(username)
     page.get_by_label("Password", exact=True).fill(PASSWORD)
     page.get_by_label("Password confirmation").fill(PASSWORD)

@@ -10,7 +10,7 @@ from playwright.sync_api import Page, expect
 
 from racing.models import Event
 from tests.browser.checks import page_problems
-from tests.browser.test_accounts_in_chromium import log_in
+from tests.browser.test_accounts_in_chromium import log_in, sign_up_here
 from tests.conftest import PASSWORD
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -31,10 +31,7 @@ def test_an_invitee_signs_up_comes_back_and_joins(page: Page, alice, tracks):
 
     page.goto(f"/races/invite/{race.invite_token}/")
     page.get_by_role("link", name="Create a racer account").click()
-    page.get_by_label("Login name").fill("dana")
-    page.get_by_label("Password", exact=True).fill(PASSWORD)
-    page.get_by_label("Password confirmation").fill(PASSWORD)
-    page.get_by_role("button", name="Sign up").click()
+    sign_up_here(page, "dana")
 
     expect(page).to_have_url(re.compile(f"/races/invite/{race.invite_token}/$"))
     expect(page.get_by_text("Welcome to Pitlane, dana!")).to_be_visible()

@@ -13,7 +13,7 @@ from playwright.sync_api import Page, expect
 from racing.models import Submission
 from tests.browser.checks import page_problems
 from tests.browser.conftest import off_the_loop
-from tests.conftest import PASSWORD
+from tests.browser.test_accounts_in_chromium import sign_up_here
 from tests.racing.factories import event, scored
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -36,10 +36,7 @@ def test_a_visitor_is_offered_to_sign_up_and_comes_back_to_the_leaderboard(page:
     page.goto(trial.get_absolute_url())
     expect(page.get_by_role("link", name="Manage this race")).to_have_count(0)
     page.get_by_role("link", name="Sign up to race").click()
-    page.get_by_label("Login name").fill("dana")
-    page.get_by_label("Password", exact=True).fill(PASSWORD)
-    page.get_by_label("Password confirmation").fill(PASSWORD)
-    page.get_by_role("button", name="Sign up").click()
+    sign_up_here(page, "dana")
 
     expect(page).to_have_url(re.compile(f"{trial.get_absolute_url()}$"))
     expect(page.get_by_role("link", name="Submit a model")).to_be_visible()
