@@ -1,4 +1,4 @@
-"""Racers' code and archives are checked off the request thread, in a bounded pool.
+"""Racers' code and archives are checked off the request thread, in a bounded pool shared fairly.
 
 Validating a reward function runs it in the sandbox on sample situations (1.5 to 3 CPU-seconds
 and up to ``rewards.SAMPLE_TIMEOUT`` per sample); importing a model reads an untrusted archive,
@@ -8,6 +8,14 @@ so while a check runs the web server holds a coroutine, not one of the few threa
 every other page. At most ``PITLANE_CHECKS_WAITING`` more checks wait for a checker; past that a
 racer is told at once to try again (``Busy``), rather than queueing without end behind a flood.
 
+The checkers are shared by racer, not by check, so that a few racers (or a few accounts of one)
+sending check after check cannot keep the others out: a racer has at most ``RACER_PLACES``
+checks in the pool, running or waiting (past that, ``Busy`` again, in words about their own
+checks), and a free checker takes the next check of the racer who has the fewest running, and
+among those of the one whose last check ended longest ago (or who came first): the racers take
+turns. A racer who waits is therefore served before any flooder's next check, and one racer holds
+a second checker only while nobody else waits.
+
 A check's thread waits on the sandbox's pipes; the racer's code itself runs in the sandbox's
 processes, under their own limits (``sandbox``). A check keeps running to its end when
 its racer leaves, which those limits bound.
@@ -16,10 +24,12 @@ its racer leaves, which those limits bound.
 from __future__ import annotations
 
 import asyncio
+import itertools
 import threading
-from collections.abc import Callable
+from collections import Counter, deque
+from collections.abc import Callable, Hashable
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from django.conf import settings
 from django.db import close_old_connections
@@ -27,35 +37,109 @@ from django.db import close_old_connections
 T = TypeVar("T")
 
 RETRY_AFTER = 5  # [s] what a racer turned away is asked to wait
+# A racer's checks in the pool at once, running or waiting: one running and the next one (a
+# racer who validates, then saves, need not wait between the two); no more, so that a flood
+# from a handful of accounts leaves the waiting line's other places to everyone else.
+RACER_PLACES = 2
 
 
 class Busy(Exception):
-    """Every checker is busy and the waiting line is full."""
+    """Every checker is busy and the waiting line is full, or this racer's checks fill their
+    own places (``RACER_PLACES``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, own: bool = False) -> None:
         super().__init__(
-            "Every checker is busy with other racers' code right now: try again in a few seconds."
+            "Your earlier checks are still running: try again in a few seconds, once they end."
+            if own
+            else "Every checker is busy with other racers' code right now: "
+            "try again in a few seconds."
         )
 
 
 class _Pool:
+    """``checkers`` threads and a waiting line of ``waiting`` places, a queue per racer."""
+
     def __init__(self, checkers: int, waiting: int) -> None:
         self.checkers, self.waiting = checkers, waiting
         self.executor = ThreadPoolExecutor(max_workers=checkers, thread_name_prefix="checker")
-        self.admitted = threading.BoundedSemaphore(checkers + waiting)
+        self._lock = threading.RLock()
+        self._queues: dict[Hashable, deque[tuple[Future[Any], Callable[[], Any]]]] = {}
+        self._placed: Counter[Hashable] = Counter()  # a racer's checks, running or waiting
+        self._running: Counter[Hashable] = Counter()
+        # Each racer's turn: when their last check ended, or when they came if none has yet
+        # (while one runs, they wait behind those with fewer running anyway); forgotten once
+        # they have nothing in the pool, so that one who comes back is behind those waiting.
+        self._turn: dict[Hashable, int] = {}
+        self._ticks = itertools.count(1)
+        self._free = checkers
 
-    def submit(self, work: Callable[[], T]) -> Future[T]:
-        if not self.admitted.acquire(blocking=False):
-            raise Busy()
-        try:
-            future = self.executor.submit(_in_checker, work)
-        except BaseException:
-            self.admitted.release()
-            raise
-        # A place is given back when the work ends (or is cancelled before it starts), not when
-        # the racer stops waiting: racers who leave cannot pile work up behind the checkers.
-        future.add_done_callback(lambda _: self.admitted.release())
+    def submit(self, work: Callable[[], T], *, racer: Hashable) -> Future[T]:
+        """``work``'s future, placed in ``racer``'s queue; ``Busy`` at once when there is no
+        place for it."""
+        future: Future[T] = Future()
+        with self._lock:
+            if sum(self._placed.values()) >= self.checkers + self.waiting:
+                raise Busy()
+            if self._placed[racer] >= RACER_PLACES:
+                raise Busy(own=True)
+            self._placed[racer] += 1
+            self._turn.setdefault(racer, next(self._ticks))
+            self._queues.setdefault(racer, deque()).append((future, work))
+            # A place is given back when the work ends, or when it is cancelled before it
+            # starts, not when the racer stops waiting: racers who leave cannot pile work up.
+            future.add_done_callback(lambda done: self._cancelled(racer, done))
+            self._dispatch()
         return future
+
+    def _dispatch(self) -> None:
+        """Hand waiting checks to free checkers, fairest first (the module's docstring)."""
+        while self._free and self._queues:
+            racer = min(self._queues, key=lambda r: (self._running[r], self._turn[r]))
+            queue = self._queues[racer]
+            future, work = queue.popleft()
+            if not queue:
+                del self._queues[racer]
+            self._free -= 1
+            self._running[racer] += 1
+            self.executor.submit(self._check, racer, future, work)
+
+    def _check(self, racer: Hashable, future: Future[Any], work: Callable[[], Any]) -> None:
+        try:
+            if future.set_running_or_notify_cancel():
+                try:
+                    future.set_result(_in_checker(work))
+                except BaseException as error:  # the racer's to read, as the work's own result
+                    future.set_exception(error)
+        finally:
+            with self._lock:
+                self._free += 1
+                self._running[racer] -= 1
+                self._turn[racer] = next(self._ticks)
+                self._release(racer)
+                self._dispatch()
+
+    def _cancelled(self, racer: Hashable, future: Future[Any]) -> None:
+        """A check cancelled while it waited leaves its racer's queue (a cancelled check that
+        was already handed to a checker gives its place back there)."""
+        if not future.cancelled():
+            return
+        with self._lock:
+            queue = self._queues.get(racer, deque())
+            for entry in queue:
+                if entry[0] is future:
+                    queue.remove(entry)
+                    if not queue:
+                        del self._queues[racer]
+                    self._release(racer)
+                    return
+
+    def _release(self, racer: Hashable) -> None:
+        self._placed[racer] -= 1
+        for counts in (self._placed, self._running):
+            if counts[racer] <= 0:
+                del counts[racer]
+        if racer not in self._placed:
+            del self._turn[racer]
 
 
 def _in_checker(work: Callable[[], T]) -> T:
@@ -84,8 +168,8 @@ def pool() -> _Pool:
         return _pool
 
 
-async def run(work: Callable[[], T]) -> T:
-    """``work()``'s result (or its exception), computed by a checker; ``Busy`` at once when
-    every checker is taken and the waiting line is full. Cancelling the await cancels the work
-    only if it has not started."""
-    return await asyncio.wrap_future(pool().submit(work))
+async def run(work: Callable[[], T], *, racer: Hashable) -> T:
+    """``work()``'s result (or its exception), computed by a checker in ``racer``'s turn;
+    ``Busy`` at once when there is no place for it. Cancelling the await cancels the work only
+    if it has not started."""
+    return await asyncio.wrap_future(pool().submit(work, racer=racer))

@@ -158,7 +158,7 @@ async def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResp
     elif request.method == "POST" and await sync_to_async(form.is_valid)():
         source = services.reward_source(form.cleaned_data["source"])
         if source.strip():  # else the service says what is missing
-            checked = await _checked_reward(source, form.cleaned_data["track"].name)
+            checked = await _checked_reward(request, source, form.cleaned_data["track"].name)
     return await sync_to_async(_reward_editor_page)(request, function, form, checked)
 
 
@@ -235,14 +235,15 @@ def _reward_editor_page(
 
 
 async def _checked_reward(
-    source: str, track: str, direction: str = "counterclockwise"
+    request: HttpRequest, source: str, track: str, direction: str = "counterclockwise"
 ) -> rewards.Validation | Exception:
-    """``source`` validated on ``track`` by a checker; or why it could not be: ``checks.Busy``,
-    ``SandboxUnavailable`` or ``SandboxFailure``, for the page to show."""
+    """``source`` validated on ``track`` by a checker, in the racer's turn; or why it could
+    not be: ``checks.Busy``, ``SandboxUnavailable`` or ``SandboxFailure``, for the page to show."""
     where = await sync_to_async(simulator_tracks.inline)(track)  # an added track: its route
     try:
         return await checks.run(
-            partial(rewards.reward_validate, source=source, track=where, direction=direction)
+            partial(rewards.reward_validate, source=source, track=where, direction=direction),
+            racer=(await request.auser()).pk,
         )
     except CHECK_FAILURES as error:
         return error
@@ -288,7 +289,9 @@ async def reward_validation(request: HttpRequest) -> JsonResponse:
     form = RewardValidationForm(request.POST)
     if not await sync_to_async(form.is_valid)():
         return JsonResponse({"message": form.first_error()}, status=400)
-    checked = await _checked_reward(form.cleaned_data["source"], form.cleaned_data["track"].name)
+    checked = await _checked_reward(
+        request, form.cleaned_data["source"], form.cleaned_data["track"].name
+    )
     if isinstance(checked, SandboxFailure):
         message = f"Validation could not run: {checked}"
     elif isinstance(checked, Exception):
@@ -316,7 +319,9 @@ async def model_create(request: HttpRequest) -> HttpResponse:
     (``training.checks``), then the model is saved."""
     page = await sync_to_async(_ModelCreatePage)(request)
     if page.reward_where is not None:
-        page.checked = await _checked_reward(page.settings["reward_function"], *page.reward_where)
+        page.checked = await _checked_reward(
+            request, page.settings["reward_function"], *page.reward_where
+        )
     return await sync_to_async(page.respond)()
 
 
@@ -576,7 +581,7 @@ async def model_import(request: HttpRequest) -> HttpResponse:
     attempt = await sync_to_async(_ModelImportAttempt)(request)  # the upload is read to disk here
     if attempt.work is not None:
         try:
-            attempt.outcome = await checks.run(attempt.work)
+            attempt.outcome = await checks.run(attempt.work, racer=(await request.auser()).pk)
         except (Refused, *CHECK_FAILURES) as error:
             attempt.outcome = error
     return await sync_to_async(attempt.respond)()

@@ -35,15 +35,15 @@ def small_pool(settings):
 
 def test_past_the_checkers_and_the_waiting_line_a_check_is_refused_at_once(small_pool):
     release = threading.Event()
-    running = checks.pool().submit(release.wait)
-    waiting = checks.pool().submit(lambda: "waited")
+    running = checks.pool().submit(release.wait, racer="alice")
+    waiting = checks.pool().submit(lambda: "waited", racer="bob")
     with pytest.raises(checks.Busy, match="try again in a few seconds"):
-        checks.pool().submit(lambda: "refused")
+        checks.pool().submit(lambda: "refused", racer="carol")
     release.set()
     assert running.result(timeout=10) is True
     assert waiting.result(timeout=10) == "waited"
     # The places are given back once the work is done: the next check is taken.
-    assert checks.pool().submit(lambda: "taken").result(timeout=10) == "taken"
+    assert checks.pool().submit(lambda: "taken", racer="carol").result(timeout=10) == "taken"
 
 
 def test_a_check_that_fails_gives_its_place_back(small_pool):
@@ -52,7 +52,68 @@ def test_a_check_that_fails_gives_its_place_back(small_pool):
 
     for _ in range(3):  # more than the pool's places
         with pytest.raises(ValueError, match="broken"):
-            checks.pool().submit(broken).result(timeout=10)
+            checks.pool().submit(broken, racer="alice").result(timeout=10)
+
+
+@pytest.fixture
+def one_checker(settings):
+    settings.PITLANE_CHECKERS = 1
+    settings.PITLANE_CHECKS_WAITING = 8
+
+
+class SlowChecks:
+    """Checks that record their start and wait for ``release``: a fake of slow reward code."""
+
+    def __init__(self) -> None:
+        self.release = threading.Event()
+        self.started: list[str] = []
+
+    def submit(self, name: str, racer: str):
+        def work():
+            self.started.append(name)
+            self.release.wait(10)
+            return name
+
+        return checks.pool().submit(work, racer=racer)
+
+
+def test_a_flooders_waiting_checks_do_not_keep_a_bystander_out(one_checker):
+    slow = SlowChecks()
+    flood = []
+    with pytest.raises(checks.Busy, match="Your earlier checks are still running"):
+        for n in range(20):
+            flood.append(slow.submit(f"flood {n}", "flooder"))
+    assert len(flood) == checks.RACER_PLACES  # the waiting line keeps places for others
+    bystander = slow.submit("bystander", "bystander")
+    slow.release.set()
+    assert bystander.result(timeout=10) == "bystander"
+    assert [future.result(timeout=10) for future in flood]
+    assert slow.started[:2] == ["flood 0", "bystander"]
+
+
+def test_a_racer_who_waits_is_served_before_any_flooders_next_check(one_checker):
+    """Four accounts fill the pool with slow checks; a bystander who comes last is served
+    before the second check of any of them: the racers take turns."""
+    slow = SlowChecks()
+    flooders = ("f1", "f2", "f3", "f4")
+    flood = [slow.submit(f"{f} {n}", f) for n in range(checks.RACER_PLACES) for f in flooders]
+    bystander = slow.submit("bystander", "bystander")
+    slow.release.set()
+    assert [future.result(timeout=10) for future in flood] and bystander.result(timeout=10)
+    assert slow.started == [
+        "f1 0", "f2 0", "f3 0", "f4 0", "bystander", "f1 1", "f2 1", "f3 1", "f4 1"
+    ]  # fmt: skip
+
+
+def test_a_check_cancelled_while_it_waits_gives_its_place_back(small_pool):
+    release = threading.Event()
+    running = checks.pool().submit(release.wait, racer="alice")
+    waiting = checks.pool().submit(lambda: "never", racer="bob")
+    assert waiting.cancel()
+    assert checks.pool().submit(lambda: "taken", racer="bob").cancel()  # its place was free
+    release.set()
+    assert running.result(timeout=10) is True
+    assert checks.pool().submit(lambda: "taken", racer="bob").result(timeout=10) == "taken"
 
 
 def test_every_middleware_runs_on_the_event_loop(caplog, settings):
