@@ -113,6 +113,12 @@ class TrackAdmin(admin.ModelAdmin):
         url = reverse("training:track-preview", args=[track.name])
         return format_html('<img src="{}" width="480" alt="Top-down map of {}">', url, track)
 
+    def changeform_view(self, request, object_id=None, form_url="", extra_context=None):
+        # Django's admin runs a whole POST, the form's checks included, in one transaction, which
+        # on SQLite holds the write lock from its start: the route's check and the preview are
+        # slow work, so they run outside it, and track_add writes the row in its own.
+        return self._changeform_view(request, object_id, form_url, extra_context)
+
     def get_form(self, request, obj=None, change=False, **kwargs):
         kwargs["form"] = AddedTrackForm if obj is not None else TrackUploadForm
         return super().get_form(request, obj, change=change, **kwargs)

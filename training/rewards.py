@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from common.transactions import outside_transaction
 from sandbox import Sandbox, SandboxFailure, verified
 
 ALLOWED_IMPORTS = ("math", "random", "numpy", "scipy", "shapely")
@@ -177,6 +178,7 @@ def reward_validate(
 ) -> Validation:
     """Check ``source`` statically, then run it in the sandbox on sample situations of ``track``
     (a name, or its inline form, ``simulator.tracks.inline``, which needs no database)."""
+    outside_transaction("A reward function's validation in the sandbox")
     result = Validation(source)
     result.errors, result.warnings = static_problems(source)
     if result.errors:

@@ -14,6 +14,7 @@ from django.db import IntegrityError, transaction
 from django.utils import timezone
 
 from common.refusals import Refused
+from common.transactions import outside_transaction
 from simulator import tracks as simulator_tracks
 from training import artifacts, configuration, jobs, lifecycle, live, rewards, selectors, tasks
 from training.models import (
@@ -80,7 +81,8 @@ def track_check(
     replace: bool = False,
 ) -> simulator_tracks.Track:
     """The simulator's track for what ``track_add`` would store, or ``TrackRefused`` saying what is
-    wrong. Writes nothing."""
+    wrong. Writes nothing; called outside any transaction, as the route's check is slow work."""
+    outside_transaction("A track's route check")
     if not TRACK_NAME.fullmatch(name or ""):
         raise TrackRefused("name", (
             "A track name is 1 to 64 letters, digits, '_' or '-', starting with a letter or "
@@ -123,7 +125,6 @@ def track_check(
         raise TrackRefused("route", str(error)) from None
 
 
-@transaction.atomic
 def track_add(
     *,
     name: str,
@@ -139,7 +140,8 @@ def track_add(
     train, evaluate and race on it; with ``replace``, update the added track of that name instead.
 
     The route is checked by the simulator's loader; the row keeps the file, its length and width
-    and a preview. ``TrackRefused`` says what is wrong.
+    and a preview. ``TrackRefused`` says what is wrong. The check and the preview are done before
+    the transaction that writes the row, so no other writer waits behind them.
     """
     display_name = display_name or name
     track = track_check(
@@ -155,7 +157,19 @@ def track_add(
         png = texture.preview_png(shown)
     except ValueError as error:
         raise TrackRefused("route", "The track's preview could not be drawn.") from error
+    with transaction.atomic():
+        return _track_row_save(
+            name=name, display_name=display_name, route=route, directions=directions,
+            description=description, difficulty=difficulty, added_by=added_by, track=track,
+            png=png, replace=replace,
+        )  # fmt: skip
+
+
+def _track_row_save(*, name, display_name, route, directions, description, difficulty, added_by,
+                    track, png, replace) -> Track:  # fmt: skip
     existing = Track.objects.select_for_update().filter(name=name).first()
+    if existing is not None and (existing.builtin or not replace):  # added since it was checked
+        raise TrackRefused("name", f"There is already a track named {name}; choose another name.")
     row = existing or Track(name=name)
     if existing is None:
         last = Track.objects.order_by("-position").values_list("position", flat=True).first()

@@ -20,3 +20,6 @@ PITLANE_ROLLOUT_SILENCE = 20
 PITLANE_ROLLOUT_STARTUP = 60
 # Watched evaluations and races (the browser tests watch them) run at five times real time.
 PITLANE_WATCHED_SPEEDUP = 5
+# Slow work (a sandbox run, a route file's check) run inside a transaction fails the test that
+# ran it (common.transactions.outside_transaction), where production only logs it.
+PITLANE_TRANSACTION_GUARD = True

@@ -27,7 +27,9 @@ import numpy as np
 DATA_DIR = Path(__file__).resolve().parent / "data"
 MIN_POINTS = 3  # different waypoints: the fewest that close a loop
 REPEAT = 1e-9  # [m] a centre point that moved no further repeats the one before it
-CHUNK = 64  # consecutive segments checked for crossings at once
+GRID_CELLS = 4  # grid cells a border segment covers, on average, in the crossing check
+GRID_PAIRS = 50_000_000  # segment pairs the crossing check may compare: a few seconds
+GRID_BATCH = 100_000  # grid entries whose pairs are compared at once (bounds the memory)
 OPEN_GAP = 3.0  # a route whose end is this many of its longest steps from its start is open
 DIRECTIONS = ("counterclockwise", "clockwise")
 
@@ -416,37 +418,89 @@ def _from_inline(spec: Mapping[str, Any]) -> Track:
 
 
 def _first_crossing(first: np.ndarray, second: np.ndarray | None) -> tuple[int, int] | None:
-    """The first pair of segments (i, j) where polyline ``first`` properly crosses ``second``,
-    or crosses itself when ``second`` is None; None if none cross.
+    """The first pair of segments (i, j), by i then j, where polyline ``first`` properly crosses
+    ``second``, or crosses itself when ``second`` is None; None if none cross.
 
     Only a proper crossing counts, the two segments passing through each other: segments that
     merely touch (at a shared or repeated point, or end to end) and zero-length segments, which
-    repeated points make, never count.
+    repeated points make, never count. Only segments near each other are compared
+    (``_near_pairs``): comparing each with every other took minutes for a route of 174,000
+    waypoints, inside the transaction that adds the track.
     """
     a, b = first[:-1], first[1:]
     same = second is None
     c, d = (a, b) if same else (second[:-1], second[1:])
-    c_low, c_high = np.minimum(c, d), np.maximum(c, d)
-    for begin in range(0, len(a), CHUNK):
-        i = np.arange(begin, min(begin + CHUNK, len(a)))
-        # Only segments of ``second`` whose boxes meet this run of consecutive segments' box.
-        low = np.minimum(a[i], b[i]).min(axis=0)
-        high = np.maximum(a[i], b[i]).max(axis=0)
-        j = np.flatnonzero(((c_high >= low) & (c_low <= high)).all(axis=1))
-        if same:
-            j = j[j > begin]
-        if not len(j):
-            continue
-        ai, bi, cj, dj = a[i][:, None], b[i][:, None], c[j][None, :], d[j][None, :]
-        o1, o2 = _orientation(ai, bi, cj), _orientation(ai, bi, dj)
-        o3, o4 = _orientation(cj, dj, ai), _orientation(cj, dj, bi)
-        crosses = (o1 * o2 < 0) & (o3 * o4 < 0)
+    best = None
+    for i, j in _near_pairs(a, b, c, d):
         if same:  # each pair once, and not a segment with itself
-            crosses &= j[None, :] > i[:, None]
-        hits = np.argwhere(crosses)
+            keep = j > i
+            i, j = i[keep], j[keep]
+        o1, o2 = _orientation(a[i], b[i], c[j]), _orientation(a[i], b[i], d[j])
+        o3, o4 = _orientation(c[j], d[j], a[i]), _orientation(c[j], d[j], b[i])
+        hits = np.flatnonzero((o1 * o2 < 0) & (o3 * o4 < 0))
         if len(hits):
-            return int(i[hits[0, 0]]), int(j[hits[0, 1]])
-    return None
+            hit = min(zip(i[hits].tolist(), j[hits].tolist(), strict=True))
+            best = hit if best is None else min(best, hit)
+    return best
+
+
+def _near_pairs(a, b, c, d):
+    """Batches (i, j) of segments a[i]-b[i] and c[j]-d[j] whose bounding boxes share a cell of a
+    square grid: every pair whose boxes meet is among them (some more than once). The cell is the
+    median segment's size, doubled until the boxes cover at most ``GRID_CELLS`` cells a segment
+    (a long straight does not fill the grid); ``TrackError`` when the waypoints crowd so that
+    more than ``GRID_PAIRS`` pairs would be compared, which no drawn track comes near."""
+    low1, high1 = np.minimum(a, b), np.maximum(a, b)
+    low2, high2 = np.minimum(c, d), np.maximum(c, d)
+    origin = np.minimum(low1.min(axis=0), low2.min(axis=0))
+    extent = float((np.maximum(high1.max(axis=0), high2.max(axis=0)) - origin).max())
+    sides = np.concatenate([(high1 - low1).max(axis=1), (high2 - low2).max(axis=1)])
+    # At most 2**24 cells a side, so a cell's number fits in 64 bits.
+    size = max(float(np.median(sides)), extent / 2**24, 1e-9)
+    while _cell_count(low1, high1, origin, size) + _cell_count(
+        low2, high2, origin, size
+    ) > GRID_CELLS * (len(a) + len(c)):
+        size *= 2
+    cells1, segments1 = _cells(low1, high1, origin, size)
+    cells2, segments2 = _cells(low2, high2, origin, size)
+    order = np.argsort(cells2, kind="stable")
+    cells2, segments2 = cells2[order], segments2[order]
+    begin = np.searchsorted(cells2, cells1, side="left")
+    count = np.searchsorted(cells2, cells1, side="right") - begin
+    if int(count.sum()) > GRID_PAIRS:
+        raise TrackError(
+            "This route's waypoints crowd too closely to check that its borders do not cross; "
+            "a route's waypoints are usually spaced some centimetres apart."
+        )
+    for start in range(0, len(cells1), GRID_BATCH):
+        n = count[start : start + GRID_BATCH]
+        total = int(n.sum())
+        if not total:
+            continue
+        offset = np.arange(total) - np.repeat(np.cumsum(n) - n, n)
+        i = np.repeat(segments1[start : start + GRID_BATCH], n)
+        yield i, segments2[np.repeat(begin[start : start + GRID_BATCH], n) + offset]
+
+
+def _cell_span(low: np.ndarray, high: np.ndarray, origin: np.ndarray, size: float):
+    first = np.floor((low - origin) / size).astype(np.int64)
+    return first, np.floor((high - origin) / size).astype(np.int64) - first + 1
+
+
+def _cell_count(low: np.ndarray, high: np.ndarray, origin: np.ndarray, size: float) -> int:
+    _, span = _cell_span(low, high, origin, size)
+    return int((span[:, 0] * span[:, 1]).sum())
+
+
+def _cells(low: np.ndarray, high: np.ndarray, origin: np.ndarray, size: float):
+    """(cell, segment) for every grid cell each box covers, a cell numbered by one integer."""
+    first, span = _cell_span(low, high, origin, size)
+    count = span[:, 0] * span[:, 1]
+    segment = np.repeat(np.arange(len(low)), count)
+    k = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+    x = first[segment, 0] + k % span[segment, 0]
+    y = first[segment, 1] + k // span[segment, 0]
+    return (x << 24) + y, segment
 
 
 def _orientation(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
