@@ -6,20 +6,28 @@ work, with a sentence that says how long to wait (``over`` gives the ``Limited``
 answer 429 with it. An attempt whose outcome says which limit it counts against (an import) is
 held against each at once (``hold``), and given back to the others once that is known.
 The rates are settings (``PITLANE_RATES``, from environment variables; README, "Limits").
-Where the cache cannot be reached, attempts are let through: the console says so in its log and
-goes on, as it does for what else Redis holds.
+Every refusal says when to try again in a ``Retry-After`` header too, set in one place
+(``RetryAfterMiddleware``) from the ``Limited`` the request was refused with.
+
+Where the cache cannot be reached, signing in and signing up are refused for the moment (503,
+``Unavailable``): those limits are what stands between a guesser and the racers' passwords, or a
+script and a thousand accounts, so they fail closed. Other attempts are let through (the console
+says so in its log): each is a signed-in racer's, bounded again by what it asks for (the checkers,
+the queue, the sandbox), and refusing them would stop every racer's work for an outage of a cache.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 
+from asgiref.sync import iscoroutinefunction, markcoroutinefunction
 from django.conf import settings
 from django.core.cache import caches
 from django.forms import BaseForm
 from django.forms.utils import ErrorDict
-from django.http import HttpRequest
+from django.http import HttpRequest, HttpResponse
 from django_ratelimit import core as ratelimit_core
 from django_ratelimit.core import get_usage
 from redis.exceptions import RedisError
@@ -42,8 +50,15 @@ WHAT = {
 }
 
 
+# Limits that refuse attempts while they cannot be counted (the module's docstring).
+FAIL_CLOSED = frozenset({"sign-in-account", "sign-in-address", "sign-up"})
+UNAVAILABLE_RETRY = 10  # [s] when a refused sign-in or sign-up is asked to try again
+
+
 class Limited(Exception):
-    """Over a limit: the message says which and how long to wait."""
+    """Over a limit: the message says which and how long to wait (``wait``, in seconds)."""
+
+    status = 429
 
     def __init__(self, action: str, wait: int) -> None:
         minutes = max(1, math.ceil(wait / 60))
@@ -54,12 +69,30 @@ class Limited(Exception):
         self.action, self.wait = action, wait
 
 
+class Unavailable(Limited):
+    """An attempt at a limit that fails closed (``FAIL_CLOSED``), which could not be counted."""
+
+    status = 503
+
+    def __init__(self, action: str) -> None:
+        Exception.__init__(
+            self,
+            f"{'Signing up' if action == 'sign-up' else 'Signing in'} is paused for a moment "
+            "while the console reconnects to its store: try again in a moment.",
+        )
+        self.action, self.wait = action, UNAVAILABLE_RETRY
+
+
 def over(request: HttpRequest, action: str, key: str | None = None) -> Limited | None:
     """For a POST: count it as an attempt at ``action``, by ``key`` (the signed-in racer where
-    None); the ``Limited`` when that is over the rate, else None (and for anything else)."""
-    usage = _counted(request, action, key)
+    None); the ``Limited`` when that is over the rate (or ``Unavailable``), else None (and for
+    anything else)."""
+    try:
+        usage = _counted(request, action, key)
+    except Unavailable as unavailable:
+        return _refusing(request, unavailable)
     if usage is not None and usage["should_limit"]:
-        return Limited(action, usage["time_left"])
+        return _refusing(request, Limited(action, usage["time_left"]))
     return None
 
 
@@ -102,7 +135,7 @@ def hold(request: HttpRequest, *actions: str, key: str | None = None) -> Held:
             continue
         held._counted[action] = _cache_key(action, key)
         if usage["should_limit"] and held.limited is None:
-            held.limited = Limited(action, usage["time_left"])
+            held.limited = _refusing(request, Limited(action, usage["time_left"]))
     if held.limited is not None:
         held.give_back(*actions)
     return held
@@ -132,7 +165,43 @@ def _counted(request: HttpRequest, action: str, key: str | None) -> dict | None:
         )  # fmt: skip
     except RedisError as error:
         logger.warning("Rate limit %s not counted: %s", action, error)
+        if action in FAIL_CLOSED:
+            raise Unavailable(action) from error
         return None
+
+
+def _refusing(request: HttpRequest, limited: Limited) -> Limited:
+    """``limited``, noted on ``request`` for ``RetryAfterMiddleware``."""
+    request.pitlane_limited = limited
+    return limited
+
+
+class RetryAfterMiddleware:
+    """Every refusal for a limit (429, or ``Unavailable``'s 503) says in ``Retry-After`` how many
+    seconds to wait: here once, from the ``Limited`` noted on the request, not in each view.
+    Sync and async, as every middleware here is (``training.checks``)."""
+
+    sync_capable = async_capable = True
+
+    def __init__(self, get_response: Callable[[HttpRequest], HttpResponse]) -> None:
+        self.get_response = get_response
+        if iscoroutinefunction(get_response):
+            markcoroutinefunction(self)
+
+    def __call__(self, request: HttpRequest):
+        if iscoroutinefunction(self):
+            return self._acall(request)
+        return _with_retry_after(request, self.get_response(request))
+
+    async def _acall(self, request: HttpRequest) -> HttpResponse:
+        return _with_retry_after(request, await self.get_response(request))
+
+
+def _with_retry_after(request: HttpRequest, response: HttpResponse) -> HttpResponse:
+    limited = getattr(request, "pitlane_limited", None)
+    if limited is not None and response.status_code == limited.status:
+        response.setdefault("Retry-After", str(max(1, math.ceil(limited.wait))))
+    return response
 
 
 def refuse(form: BaseForm, limited: Limited) -> None:

@@ -57,7 +57,7 @@ def signup(request: HttpRequest) -> HttpResponse:
         request,
         "registration/signup.html",
         {"form": form, "next": next_url},
-        status=429 if limited else 400 if form.errors else 200,
+        status=limited.status if limited else 400 if form.errors else 200,
     )
 
 
@@ -75,7 +75,7 @@ class SignInView(LoginView):
         if limited:
             form = self.get_form_class()(request, initial={"username": name})
             context = self.get_context_data(form=form, limited=limited)
-            return self.render_to_response(context, status=429)
+            return self.render_to_response(context, status=limited.status)
         return super().post(request, *args, **kwargs)
 
 

@@ -55,6 +55,7 @@ MIDDLEWARE = [
     "common.time_zones.TimeZoneMiddleware",
     "django.contrib.messages.middleware.MessageMiddleware",
     "django.middleware.clickjacking.XFrameOptionsMiddleware",
+    "common.ratelimits.RetryAfterMiddleware",  # every refusal for a limit says when to retry
 ]
 
 ROOT_URLCONF = "console.urls"

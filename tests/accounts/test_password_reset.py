@@ -113,6 +113,7 @@ def test_reset_requests_for_one_address_are_limited(client, alice, by_email, set
         )
     refused = client.post(reverse("password_reset"), {"email": "ALICE@example.org"})
     assert refused.status_code == 429
+    assert 1 <= int(refused.headers["Retry-After"]) <= 3600  # the limit's window: an hour
     assert "Too many password reset requests for that email address for now" in refused.text
     assert len(mail.outbox) == 3
 

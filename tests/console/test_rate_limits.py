@@ -20,6 +20,11 @@ def rates(settings):
     return settings.PITLANE_RATES
 
 
+def assert_waits(response, at_most: int = 15 * 60) -> None:
+    """The refusal says in ``Retry-After`` how many seconds to wait: no more than the window."""
+    assert 1 <= int(response.headers["Retry-After"]) <= at_most
+
+
 def sign_in(client, username: str, password: str):
     return client.post(reverse("login"), {"username": username, "password": password})
 
@@ -30,6 +35,7 @@ def test_wrong_passwords_for_one_racer_end_in_a_wait_even_for_the_right_one(alic
         assert sign_in(client, "alice", "wrong password").status_code == 200
     response = sign_in(client, "alice", PASSWORD)
     assert response.status_code == 429
+    assert_waits(response)
     assert "Too many sign-in attempts for this racer for now: try again in" in response.text
     assert "minute" in response.text
     assert "_auth_user_id" not in client.session
@@ -50,6 +56,7 @@ def test_one_address_trying_many_racers_ends_in_a_wait(alice, bob, stella, clien
     assert sign_in(client, "bob", "wrong").status_code == 200
     response = sign_in(client, "stella", PASSWORD)
     assert response.status_code == 429
+    assert_waits(response)
     assert "Too many sign-in attempts from your address" in response.text
     assert sign_in(client_from("10.0.0.7"), "stella", PASSWORD).status_code == 302
 
@@ -62,6 +69,7 @@ def test_sign_ups_from_one_address_are_limited(client, rates):
         "username": "racer9", "password1": PASSWORD, "password2": PASSWORD,
     })  # fmt: skip
     assert response.status_code == 429
+    assert_waits(response)
     assert "Too many new accounts from your address" in response.text
     assert not User.objects.filter(username="racer9").exists()
 
@@ -72,6 +80,7 @@ def test_reward_checks_are_limited_per_racer(alice, bob, client, rates):
         assert client.post(reverse("training:reward-validation"), {}).status_code == 400
     response = client.post(reverse("training:reward-validation"), {})
     assert response.status_code == 429
+    assert_waits(response)
     assert response.json()["message"].startswith("Too many reward function checks for now")
     client.force_login(bob)  # each racer counts alone
     assert client.post(reverse("training:reward-validation"), {}).status_code == 400
@@ -80,6 +89,7 @@ def test_reward_checks_are_limited_per_racer(alice, bob, client, rates):
     assert client.post(reverse("training:reward-editor"), save).status_code == 400  # no track
     response = client.post(reverse("training:reward-editor"), {**save, "track": "rookie-loop"})
     assert response.status_code == 429
+    assert_waits(response)
     assert "Too many reward function checks for now: try again in" in response.text
     assert "mine" in response.text  # what the racer typed stays
     assert not RewardFunction.objects.exists()
@@ -95,6 +105,7 @@ def test_new_models_and_imports_are_limited_per_racer(alice, client, rates):
             assert client.post(reverse(page), {"name": ""}).status_code == 400
         response = client.post(reverse(page), {"name": ""})
         assert response.status_code == 429, page
+        assert_waits(response)
         assert f"Too many {what} for now: try again in" in response.text
     assert not RLModel.objects.exists()
 
@@ -107,9 +118,11 @@ def test_evaluations_and_race_entries_share_a_limit(alice, client, rates, tracks
     assert client.post(reverse("racing:submission-create"), {}).status_code == 200
     response = client.post(page, {"track": ""})
     assert response.status_code == 429
+    assert_waits(response)
     assert "Too many evaluations and race entries for now" in response.text
     response = client.post(reverse("racing:submission-create"), {})
     assert response.status_code == 429
+    assert_waits(response)
     assert not EvaluationJob.objects.exists()
 
 
@@ -122,3 +135,37 @@ def test_a_racer_has_at_most_so_many_evaluations_waiting(alice, bob, settings, t
         services.evaluation_start(model=models[2], settings={}, enqueue=False)
     # Another racer's queue is their own.
     services.evaluation_start(model=trained_model(bob, "bobs"), settings={}, enqueue=False)
+
+
+@pytest.fixture
+def cache_unreachable(settings):
+    """The rate limits' cache (Redis) on a port where nothing listens."""
+    settings.CACHES = {
+        "default": {**settings.CACHES["default"], "LOCATION": "redis://127.0.0.1:1/0"}
+    }
+
+
+def test_sign_in_and_sign_up_are_refused_while_attempts_cannot_be_counted(
+    alice, client, cache_unreachable
+):
+    response = sign_in(client, "alice", PASSWORD)
+    assert response.status_code == 503
+    assert "Signing in is paused for a moment" in response.text
+    assert "try again in a moment" in response.text
+    assert_waits(response, at_most=60)
+    assert "_auth_user_id" not in client.session
+    response = client.post(reverse("signup"), {
+        "username": "racer9", "password1": PASSWORD, "password2": PASSWORD,
+    })  # fmt: skip
+    assert response.status_code == 503
+    assert "Signing up is paused for a moment" in response.text
+    assert_waits(response, at_most=60)
+    assert not User.objects.filter(username="racer9").exists()
+
+
+def test_a_signed_in_racers_work_goes_on_while_attempts_cannot_be_counted(
+    alice, client, cache_unreachable
+):
+    client.force_login(alice)
+    response = client.post(reverse("training:model-create"), {"name": ""})
+    assert response.status_code == 400  # the form's own errors: not refused
