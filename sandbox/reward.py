@@ -27,7 +27,7 @@ import time
 import traceback
 from typing import Any
 
-from sandbox import seal
+from sandbox import CHILD_ENVIRONMENT, seal
 from sandbox.protocol import Late, ProtocolError, pack, read_frame, read_frame_by, write_by
 from simulator.rewards import RewardError, checked_reward
 
@@ -210,6 +210,11 @@ def _serve(
     os.set_blocking(requests, True)
     for name in PRELOADED:
         importlib.import_module(name)
+    # The racer's code sees only the environment the worker gave the child: what libraries add
+    # for processes they would start (cv2's LD_LIBRARY_PATH names the install's path) goes, as
+    # this process starts none, and every library here has read what it needs by now.
+    os.environ.clear()
+    os.environ.update(CHILD_ENVIRONMENT)
     host = _Host(os.fdopen(requests, "rb", buffering=0), replies, call_timeout)
     seal.enter_namespaces()
     seal.limit_resources(seal.current_address_space() + memory_allowance)

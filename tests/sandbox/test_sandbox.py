@@ -84,6 +84,17 @@ def test_the_workers_environment_is_not_there(monkeypatch):
     assert_stopped(result, "exception", "PermissionError")
 
 
+def test_the_racers_code_finds_nothing_about_the_host_in_its_environment():
+    """Not even what the child's libraries set as they load (cv2: LD_LIBRARY_PATH, naming
+    where the console is installed)."""
+    with Sandbox() as sandbox:
+        sandbox.load("import os\n" + reward("print(sorted(os.environ))\nreturn 1.0"))
+        assert sandbox.call(PARAMS) == 1.0
+        assert list(sandbox.logs) == [str(sorted(CHILD_ENVIRONMENT))]
+    source = "import os\n" + reward("return float(sum('/' in v for v in os.environ.values()))")
+    assert outcome(source) == 0.0
+
+
 def test_writing_a_file_is_refused(tmp_path):
     target = tmp_path / "written.txt"
     result = outcome(reward(f"open({str(target)!r}, 'w').write('x')\nreturn 1.0"))
