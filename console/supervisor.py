@@ -30,7 +30,7 @@ from django.conf import settings
 from django.core.management import call_command
 
 from common.redis_client import redis_client
-from console.env import env
+from console.env import _redact, env
 from console.workers import live_workers
 
 STOP_GRACE = 15.0  # [s] between SIGTERM and SIGKILL
@@ -125,11 +125,17 @@ class Supervisor:
         data = self.var_dir / "redis"
         data.mkdir(parents=True, exist_ok=True)
         self._say(f"Starting Redis on 127.0.0.1:{port} (data in {data})...")
+        # The password (settings.REDIS_PASSWORD) goes in a file only its owner reads, not on the
+        # command line, which every user of the machine can list.
+        config = data / "redis.conf"
+        config.touch(mode=0o600)
+        config.chmod(0o600)
+        config.write_text(f"requirepass {settings.REDIS_PASSWORD}\n")
         self._spawn(
             "Redis",
-            [executable, "--bind", "127.0.0.1", "--port", str(port), "--dir", str(data),
-             "--appendonly", "yes", "--protected-mode", "yes", "--daemonize", "no",
-             "--logfile", str(data / "redis.log")],
+            [executable, str(config), "--bind", "127.0.0.1", "--port", str(port),
+             "--dir", str(data), "--appendonly", "yes", "--protected-mode", "yes",
+             "--daemonize", "no", "--logfile", str(data / "redis.log")],
         )  # fmt: skip
 
     def _wait_for_redis(self) -> None:
@@ -143,7 +149,7 @@ class Supervisor:
             except redis.RedisError:
                 return False
 
-        self._wait_until(answers, f"Redis at {settings.REDIS_URL}")
+        self._wait_until(answers, f"Redis at {_redact(settings.REDIS_URL)}")
 
     def _worker_reported(self) -> bool:
         worker = self._child("Celery worker")

@@ -13,6 +13,7 @@ import dj_database_url
 from celery.schedules import crontab
 
 from console.env import env
+from console.kept_secrets import kept_secret
 
 # OpenVINO (the physical car's download) reports usage to Intel over the network, and writes under
 # ~/intel, as soon as it is imported, unless its telemetry package is missing; then it uses its own
@@ -116,10 +117,15 @@ USE_I18N = True
 USE_TZ = True
 
 # Redis: Celery's broker, the Channels layer and the cache; a shared Redis for many machines.
-# Without REDIS_URL, `make run` starts a private Redis on PITLANE_REDIS_PORT with its data in var/.
+# Without REDIS_URL, `make run` starts a private Redis on PITLANE_REDIS_PORT with its data in var/,
+# and a password made on first start and kept in var/redis_password (console.kept_secrets): any
+# local program could otherwise read the jobs' weights and write the broker's tasks.
 REDIS_PORT = env.int("PITLANE_REDIS_PORT", 6391, minimum=1, maximum=65535)
+REDIS_PASSWORD = None if env.str("REDIS_URL", "") else kept_secret(VAR_DIR / "redis_password")
 REDIS_URL = env.url(
-    "REDIS_URL", f"redis://127.0.0.1:{REDIS_PORT}/0", schemes=("redis", "rediss", "unix")
+    "REDIS_URL",
+    f"redis://:{REDIS_PASSWORD}@127.0.0.1:{REDIS_PORT}/0",
+    schemes=("redis", "rediss", "unix"),
 )
 
 CHANNEL_LAYERS = {

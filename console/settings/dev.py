@@ -4,22 +4,11 @@ The secret key is generated on first start and kept in ``var/secret_key`` (never
 Debug pages stay off unless DJANGO_DEBUG=true, so racers see readable error pages, not tracebacks.
 """
 
-import secrets
-
+from console.kept_secrets import kept_secret
 from console.settings.base import *  # noqa: F403
 from console.settings.base import VAR_DIR, env
 
-
-def _local_secret_key() -> str:
-    path = VAR_DIR / "secret_key"
-    if not path.exists():
-        VAR_DIR.mkdir(parents=True, exist_ok=True)
-        path.touch(mode=0o600)
-        path.write_text(secrets.token_urlsafe(50))
-    return path.read_text().strip()
-
-
-SECRET_KEY = env.secret_key("DJANGO_SECRET_KEY", "") or _local_secret_key()
+SECRET_KEY = env.secret_key("DJANGO_SECRET_KEY", "") or kept_secret(VAR_DIR / "secret_key")
 
 # Static files straight from the source tree, no collectstatic step; changes show on reload.
 STORAGES["staticfiles"] = {  # noqa: F405
