@@ -7,6 +7,7 @@ class RacingConfig(AppConfig):
 
     def ready(self) -> None:
         from racing import services
-        from training.signals import evaluation_lapsed
+        from training.signals import evaluation_lapsed, evaluations_waiting
 
         evaluation_lapsed.connect(services.submission_resend, dispatch_uid="racing.resend")
+        evaluations_waiting.connect(services.submissions_waiting, dispatch_uid="racing.waiting")

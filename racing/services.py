@@ -93,7 +93,9 @@ def submission_create(*, racer: AbstractBaseUser, event: Event, model: RLModel) 
         submission = Submission.objects.create(
             event=event, racer=racer, model=model, model_name=model.name, evaluation=evaluation
         )
-        transaction.on_commit(lambda: tasks.race.delay(submission.pk))
+        # A send that fails (the broker unreachable) is logged, not the racer's error: the
+        # workers send a queued task that is not in the broker again (tasks.resend_lost).
+        transaction.on_commit(lambda: tasks.race.delay(submission.pk), robust=True)
     return submission
 
 
@@ -569,6 +571,17 @@ def demo_season_load(*, today: date | None = None) -> Season:
 
 def _start_of(day: date) -> datetime:
     return timezone.make_aware(datetime.combine(day, time.min))
+
+
+def submissions_waiting(sender, *, waiting: dict[str, set], **kwargs) -> set[int]:
+    """On ``training.signals.evaluations_waiting``: the evaluations of the race entries whose race
+    task is waiting in the broker (``waiting``: the first arguments of its messages, by task)."""
+    ids = sorted(pk for pk in waiting.get("racing.race", ()) if isinstance(pk, int))
+    found: set[int] = set()
+    for start in range(0, len(ids), 500):  # within SQLite's limit on a query's parameters
+        rows = Submission.objects.filter(pk__in=ids[start : start + 500], evaluation__isnull=False)
+        found.update(rows.values_list("evaluation_id", flat=True))
+    return found
 
 
 def submission_resend(sender, *, evaluation: EvaluationJob, **kwargs) -> bool:

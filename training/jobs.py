@@ -34,6 +34,13 @@ EVALUATION_LAPSED = (
 )
 
 
+LOST_AFTER = 30  # [s] a queued job or evaluation whose task is not in the broker this long lost it
+QUEUED_LOST = (
+    "Its place in the queue was lost (the console's queue restarted, or a worker stopped as it "
+    "took the job); it was sent again, keeping its place."
+)
+
+
 EVALUATION_STOPPED = "Stopped by you; the trials it finished are kept, with their video and trace."
 EVALUATION_STOPPED_UNSAVED = (
     "Stopped by you; the simulation machine driving it stopped answering as it stopped, before "
@@ -116,6 +123,49 @@ def lapsed_evaluations() -> list[EvaluationJob]:
         if rows.update(**fields):
             claimed.append(evaluation)
     return claimed
+
+
+def lost_queued_claim(*, waiting: set[int]) -> list[TrainingJob]:
+    """The queued jobs that no trainer has taken and whose task is gone (not among ``waiting``,
+    the jobs whose ``training.train`` is in the broker; lost when sending it failed, with a
+    Redis restart, with a worker that died holding it, or when its trainer failed before taking
+    the lease), each claimed for one new send, as ``lapsed_claim`` claims jobs: once, and again
+    a lease later if no trainer has taken it by then. Its queue position, by when it was
+    created, stays the same."""
+    now = timezone.now()
+    claimed = []
+    for job in _unclaimed(TrainingJob.objects.filter(attempt=0), waiting, now):
+        if _claim(TrainingJob.objects.filter(pk=job.pk, attempt=0), job, now):
+            if job.lease_owner != RESUMING:
+                log(job, QUEUED_LOST, "warning")
+            claimed.append(job)
+    return claimed
+
+
+def lost_queued_evaluations(*, waiting: set[int]) -> list[EvaluationJob]:
+    """The queued evaluations (race entries' too) whose task is gone (not among ``waiting``),
+    each claimed for one new send as ``lost_queued_claim`` claims jobs."""
+    now = timezone.now()
+    lost = _unclaimed(EvaluationJob.objects.all(), waiting, now)
+    return [e for e in lost if _claim(EvaluationJob.objects.filter(pk=e.pk), e, now)]
+
+
+def _unclaimed(rows, waiting: set[int], now) -> list:
+    """Of ``rows``, those QUEUED for ``LOST_AFTER`` whose task is not ``waiting`` and that no one
+    has claimed (or whose claim lapsed, nothing having taken them since)."""
+    queued = rows.filter(status="QUEUED", created_at__lt=now - timedelta(seconds=LOST_AFTER))
+    unclaimed = queued.filter(lease_owner="") | queued.filter(
+        lease_owner=RESUMING, lease_expires__lt=now
+    )
+    return [row for row in unclaimed if row.pk not in waiting]
+
+
+def _claim(rows, row, now) -> bool:
+    """Claim ``row`` (QUEUED, unchanged since it was read) for one new send, by one caller."""
+    unchanged = rows.filter(status="QUEUED", lease_owner=row.lease_owner)
+    if row.lease_owner:
+        unchanged = unchanged.filter(lease_expires__lt=now)
+    return bool(unchanged.update(lease_owner=RESUMING, lease_expires=now + lease()))
 
 
 def _held(job: TrainingJob):

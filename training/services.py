@@ -309,7 +309,9 @@ def _model_save(
     if weights is not None:
         artifacts.save(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))
     job = TrainingJob.objects.create(model=model)
-    transaction.on_commit(lambda: tasks.train.delay(job.pk))
+    # A send that fails (the broker unreachable) is logged, not the racer's error: the
+    # workers send a queued task that is not in the broker again (tasks.resend_lost).
+    transaction.on_commit(lambda: tasks.train.delay(job.pk), robust=True)
     return model
 
 
@@ -378,7 +380,9 @@ def evaluation_start(*, model: RLModel, settings: dict, enqueue: bool = True) ->
     with transaction.atomic():
         evaluation = evaluation_reserve(model=model, purpose=RLModel.Status.EVALUATING, **clean)
         if enqueue:
-            transaction.on_commit(lambda: tasks.evaluate.delay(evaluation.pk))
+            # A failed send is logged, not the racer's error: the workers send
+            # a queued task that is not in the broker again (tasks.resend_lost).
+            transaction.on_commit(lambda: tasks.evaluate.delay(evaluation.pk), robust=True)
     return evaluation
 
 

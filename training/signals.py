@@ -10,3 +10,8 @@ trace_recorded = Signal()
 # receiver that sends the task that drives it (a race entry's) returns True; when none does, the
 # evaluation's own task is sent.
 evaluation_lapsed = Signal()
+
+# Which queued evaluations have their task waiting in the broker (``tasks.resend_lost``):
+# ``waiting`` maps a task's name to the first arguments of its messages; a receiver whose own
+# task drives evaluations (a race entry's) returns the ids of the evaluations it waits to drive.
+evaluations_waiting = Signal()

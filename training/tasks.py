@@ -6,6 +6,8 @@ process, which only enqueues, never loads them.
 
 from __future__ import annotations
 
+import base64
+import json
 import os
 
 from celery import shared_task
@@ -64,21 +66,90 @@ def evaluate(evaluation_id: int) -> None:
 def resume_lapsed() -> list[str]:
     """Send a trainer for each job whose run died (``jobs.lapsed_claim``), and a simulation
     worker for each evaluation or race whose run died (``jobs.lapsed_evaluations``); what was
-    sent for, in words for the log. Every worker calls it every few seconds
-    (``console.workers``), so the work goes on whichever machines are left."""
-    from training import jobs, signals
-    from training.models import EvaluationJob
+    sent for, in words for the log; then what lost its task while queued (``resend_lost``).
+    Every worker calls it every few seconds (``console.workers``), so the work goes on
+    whichever machines are left."""
+    from training import jobs
 
     sent = []
     for job in jobs.lapsed_claim():
         train.delay(job.pk)
         sent.append(f"training job {job.pk} lost its trainer; another is sent for")
     for evaluation in jobs.lapsed_evaluations():
-        answers = signals.evaluation_lapsed.send(EvaluationJob, evaluation=evaluation)
-        if not any(answered for _, answered in answers):
-            evaluate.delay(evaluation.pk)
+        _evaluation_send(evaluation)
         sent.append(f"evaluation {evaluation.pk} lost its simulation worker; it is driven again")
+    return sent + resend_lost()
+
+
+def resend_lost() -> list[str]:
+    """Send again the task of each queued job and evaluation whose task is gone: not in the
+    broker (``waiting``) for ``jobs.LOST_AFTER`` (``jobs.lost_queued_claim``); what was sent,
+    in words for the log. A trainer delivered twice never trains twice (the lease), nor is an
+    evaluation driven twice, so a task sent again that turns up after all does nothing."""
+    from training import jobs, signals
+    from training.models import EvaluationJob
+
+    found = waiting()
+    if found is None:
+        return []
+    sent = []
+    for job in jobs.lost_queued_claim(waiting=found.get(train.name, set())):
+        train.delay(job.pk)
+        sent.append(f"queued training job {job.pk} had lost its task; it is sent again")
+    evaluations = set(found.get(evaluate.name, set()))
+    for _, theirs in signals.evaluations_waiting.send(EvaluationJob, waiting=found):
+        evaluations |= set(theirs)
+    for evaluation in jobs.lost_queued_evaluations(waiting=evaluations):
+        _evaluation_send(evaluation)
+        sent.append(f"queued evaluation {evaluation.pk} had lost its task; it is sent again")
     return sent
+
+
+def _evaluation_send(evaluation) -> None:
+    """Send the task that drives ``evaluation``: a receiver of ``evaluation_lapsed`` sends its
+    own (a race entry's race task), else ``evaluate``."""
+    from training import signals
+    from training.models import EvaluationJob
+
+    answers = signals.evaluation_lapsed.send(EvaluationJob, evaluation=evaluation)
+    if not any(answered for _, answered in answers):
+        evaluate.delay(evaluation.pk)
+
+
+def waiting() -> dict[str, set[int]] | None:
+    """The tasks waiting in the broker's queues, by name: the first argument (a row's id) of
+    each message; None when the broker is not one whose queues can be read (Redis)."""
+    from celery import current_app
+
+    with current_app.connection_for_read() as connection:
+        channel = connection.default_channel
+        if not hasattr(channel, "_q_for_pri"):
+            return None
+        queues = {route["queue"] for route in current_app.conf.task_routes.values()}
+        queues.add(current_app.conf.task_default_queue)
+        prefix = getattr(channel, "global_keyprefix", "") or ""  # LRANGE is not prefixed for us
+        found: dict[str, set[int]] = {}
+        for queue in queues:
+            for priority in channel.priority_steps:  # kombu keeps a list per priority
+                key = prefix + channel._q_for_pri(queue, priority)
+                for raw in channel.client.lrange(key, 0, -1):
+                    name, first = _task_of(raw)
+                    if name:
+                        found.setdefault(name, set()).add(first)
+    return found
+
+
+def _task_of(raw: bytes) -> tuple[str, int | None]:
+    """(task name, first argument) of a message as kombu's Redis transport stores it."""
+    try:
+        message = json.loads(raw)
+        body = message["body"]
+        if message.get("properties", {}).get("body_encoding") == "base64":
+            body = base64.b64decode(body)
+        args = json.loads(body)[0]
+        return message["headers"]["task"], args[0] if args else None
+    except (ValueError, KeyError, IndexError, TypeError):
+        return "", None
 
 
 def torch_threads() -> None:
