@@ -12,13 +12,13 @@ count starts again; a file without trial counts is cut every ``episodes_per_iter
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from statistics import mean
 
 from django.utils import timezone
 
+from common import documents
 from simulator.config import CONTROL_HZ
 from training.models import Iteration, JobLogLine, TrainingJob
 
@@ -89,7 +89,9 @@ class History:
 def read(document: bytes, *, episodes_per_iteration: int) -> History:
     """The history in a training metrics file; ``Unreadable`` when it holds none."""
     try:
-        metrics = json.loads(document)["metrics"]
+        metrics = documents.json_loads(document)["metrics"]
+    except documents.Unreadable as unreadable:
+        raise Unreadable(str(unreadable)) from None
     except (ValueError, KeyError, TypeError):
         raise Unreadable("it is not DeepRacer's training metrics JSON") from None
     if not isinstance(metrics, list):
@@ -213,7 +215,9 @@ def exact_document(*, job: TrainingJob, checkpoints: dict[str, int | None]) -> d
 def exact_read(document: bytes) -> Exact:
     """The history in ``EXACT``, every figure checked; ``Unreadable`` for anything amiss."""
     try:
-        given = json.loads(document)
+        given = documents.json_loads(document)
+    except documents.Unreadable as unreadable:
+        raise Unreadable(str(unreadable)) from None
     except ValueError:
         raise Unreadable("it is not JSON") from None
     if not isinstance(given, dict) or given.get("format") != EXACT_FORMAT:

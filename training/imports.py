@@ -42,6 +42,7 @@ from django.utils import timezone
 from google.protobuf.message import DecodeError
 from safetensors import SafetensorError
 
+from common import documents
 from common.refusals import Refused
 from rl import hyperparameters, tfcheckpoint, tfgraph
 from simulator import config as sim
@@ -70,8 +71,15 @@ MAX_HEADER = 64 * 1024  # [bytes] one pax or GNU long-name header: a long name, 
 MAX_HEADERS = 1 * MiB  # [bytes] all of an archive's pax and long-name headers together
 EXTENDED = (tarfile.XHDTYPE, tarfile.XGLTYPE, tarfile.SOLARIS_XHDTYPE, tarfile.GNUTYPE_LONGNAME,
             tarfile.GNUTYPE_LONGLINK)  # fmt: skip
-TEXT_LIMIT = 1 * MiB  # [bytes] each of the JSON, YAML and Python files
-METRICS_LIMIT = 32 * MiB  # [bytes] the training metrics: a row per episode
+# [bytes] the most each file an import reads may hold (``_limit``), checked from the member's
+# header before a byte of it is read; a 500 MiB reward function packs into 511 KB of gzip.
+TEXT_LIMIT = 1 * MiB  # the reward function
+SETTINGS_LIMIT = 256 * 1024  # model_metadata.json, hyperparameters, training_params.yaml, ...
+METRICS_LIMIT = 32 * MiB  # the training metrics (a row per episode) and Pitlane's history
+WEIGHTS_LIMIT = 128 * MiB  # a checkpoint, a TensorFlow index or a frozen graph
+MAX_READ = 256 * MiB  # [bytes] all the files an import reads together, traces aside
+# Over its limit, a file of the training history is left unread with a note; any other, refused.
+HISTORY_FILES = (artifacts.TRAINING_METRICS, history.EXACT)
 CHECKPOINTS = tuple(artifacts.EXPORTED_CHECKPOINTS.values())  # best, last
 # Where each of DeepRacer's files is looked for, first found first: at the root (a Pitlane
 # export, a folder of DeepRacer's files packed as they are), or where DeepRacer's training keeps
@@ -110,9 +118,12 @@ DEEPRACER_ALGORITHMS = {hyperparameters.PPO: Algorithm.PPO, "ppo": Algorithm.PPO
 
 class Members(dict[str, bytes | None]):
     """An archive's files by relative path: the contents of those an import reads, None for the
-    others; ``top`` is the single top-level folder taken off their paths ('' when none)."""
+    others; ``top`` is the single top-level folder taken off their paths ('' when none);
+    ``over``: the paths of the training history's files left unread, being over their limit
+    (the model imports without its history)."""
 
     top = ""
+    over: frozenset[str] = frozenset()
 
 
 NOT_AN_ARCHIVE = (
@@ -420,7 +431,8 @@ def read_archive(archive: IO[bytes]) -> Members:
         raise ImportRefused(f"The archive is over {size(MAX_ARCHIVE)}.")
     archive.seek(0)
     members = Members()
-    unpacked = 0
+    unpacked = held = 0
+    over: set[str] = set()
     traces = _NewestTraces()
     try:
         with tarfile.open(fileobj=archive, mode="r:*", tarinfo=_BoundedTarInfo) as tar:
@@ -444,13 +456,30 @@ def read_archive(archive: IO[bytes]) -> Members:
                 unpacked += member.size
                 if unpacked > MAX_UNPACKED:
                     raise ImportRefused(f"The archive unpacks to over {size(MAX_UNPACKED)}.")
-                kept = False
                 if trace := TRAINING_TRACE.fullmatch(path):  # one past the limit: a note
                     kept, dropped = traces.offer(path, int(trace[1]), member.size)
                     members.update(dict.fromkeys(dropped))
-                members[path] = _read(tar, member) if _wanted(path) or kept else None
+                    members[path] = _read(tar, member, exports.TRACES_LIMIT) if kept else None
+                    continue
+                members[path] = None
+                if not _wanted(path):
+                    continue
+                limit = _limit(path)
+                if member.size > limit and _unprefixed(path) & set(HISTORY_FILES):
+                    over.add(path)
+                    continue
+                if member.size > limit:
+                    raise ImportRefused(f"{path} is over {size(limit)}.")
+                held += member.size
+                if held > MAX_READ:
+                    raise ImportRefused(
+                        f"The model's files in the archive (its settings, weights and metrics) "
+                        f"are over {size(MAX_READ)} together."
+                    )
+                members[path] = _read(tar, member, limit)
     except (tarfile.TarError, EOFError, OSError, ValueError, zlib.error, RecursionError):
         raise ImportRefused(NOT_AN_ARCHIVE) from None
+    members.over = frozenset(over)
     return _without_top_folder(members)
 
 
@@ -506,16 +535,35 @@ def _wanted(path: str) -> bool:
     later, only the tensors wanted)."""
     name = PurePosixPath(path).name
     return (
-        path in WANTED
-        or path.split("/", 1)[-1] in WANTED
+        bool(_unprefixed(path) & WANTED)
         or name.endswith((tfcheckpoint.SUFFIX_INDEX, ".pb"))
         or name in (DEEPRACER_CHECKPOINTS, TF_CHECKPOINT, *COACH_CHECKPOINTS)
     )
 
 
-def _read(tar: tarfile.TarFile, member: tarfile.TarInfo) -> bytes:
+def _limit(path: str) -> int:
+    """[bytes] the most the file at ``path``, one an import reads, may hold."""
+    name = PurePosixPath(path).name
+    if _unprefixed(path) & set(HISTORY_FILES):
+        return METRICS_LIMIT
+    if name == "reward_function.py":
+        return TEXT_LIMIT
+    if name.endswith((".safetensors", tfcheckpoint.SUFFIX_INDEX, ".pb")):
+        return WEIGHTS_LIMIT
+    return SETTINGS_LIMIT
+
+
+def _unprefixed(path: str) -> set[str]:
+    """What ``path`` may be once a single top-level folder is taken off: itself, or the rest."""
+    return {path, path.split("/", 1)[-1]}
+
+
+def _read(tar: tarfile.TarFile, member: tarfile.TarInfo, limit: int) -> bytes:
+    """``member``'s bytes, never more than ``limit`` + 1 of them whatever its header says."""
     handle = tar.extractfile(member)
-    data = handle.read(member.size + 1) if handle else b""
+    data = handle.read(min(member.size, limit) + 1) if handle else b""
+    if len(data) > limit:
+        raise ImportRefused(f"{member.name} is over {size(limit)}.")
     if len(data) != member.size:
         raise ImportRefused(f"{member.name} is cut short: the archive is damaged.")
     return data
@@ -549,6 +597,7 @@ def _without_top_folder(members: Members) -> Members:
     if len(tops) == 1 and all("/" in path for path in members):
         stripped = Members({path.split("/", 1)[1]: data for path, data in members.items()})
         stripped.top = tops.pop()
+        stripped.over = frozenset(path.split("/", 1)[1] for path in members.over)
         return stripped
     return members
 
@@ -557,8 +606,6 @@ def _text(members: Members, path: str) -> str | None:
     data = members.get(path)
     if data is None:
         return None
-    if len(data) > TEXT_LIMIT:
-        raise ImportRefused(f"{path} is over {size(TEXT_LIMIT)}.")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:
@@ -570,7 +617,9 @@ def _json(members: Members, path: str) -> dict | None:
     if text is None:
         return None
     try:
-        document = json.loads(text)
+        document = documents.json_loads(text)
+    except documents.Unreadable as unreadable:
+        raise ImportRefused(f"{path} cannot be read: {unreadable}.") from None
     except json.JSONDecodeError as error:
         raise ImportRefused(
             f"{path} is not valid JSON (line {error.lineno}, column {error.colno})."
@@ -587,7 +636,9 @@ def _yaml(members: Members, path: str) -> dict:
     if text is None:
         return {}
     try:
-        document = yaml.safe_load(text)
+        document = documents.yaml_load(text)
+    except documents.Unreadable as unreadable:
+        raise ImportRefused(f"{path} cannot be read: {unreadable}.") from None
     except yaml.YAMLError:
         raise ImportRefused(f"{path} is not valid YAML.") from None
     return document if isinstance(document, dict) else {}
@@ -1092,10 +1143,10 @@ def _exact_history(members: Members) -> tuple[history.Exact | None, list[str]]:
     """Pitlane's exact record of the training (``history.EXACT``), when the archive has one
     that can be read; else None, with a note when it has one that cannot."""
     data = members.get(history.EXACT)
-    if data is None:
+    if data is None and history.EXACT not in members.over:
         return None, []
     try:
-        if len(data) > METRICS_LIMIT:
+        if data is None:
             raise history.Unreadable(f"it is over {size(METRICS_LIMIT)}")
         return history.exact_read(data), []
     except history.Unreadable as unreadable:
@@ -1129,16 +1180,17 @@ def _import_history(
     data = members.get(artifacts.TRAINING_METRICS)
     notes, found = [], None
     try:
+        if artifacts.TRAINING_METRICS in members.over:
+            raise history.Unreadable(f"it is over {size(METRICS_LIMIT)}")
         if data is None:
             raise history.Unreadable("none")
-        if len(data) > METRICS_LIMIT:
-            raise history.Unreadable(f"it is over {size(METRICS_LIMIT)}")
         found = history.read(
             data, episodes_per_iteration=model.hyperparameters["num_episodes_between_training"]
         )
     except history.Unreadable as unreadable:
         if exact is None:
-            said = ("The archive has no training metrics" if data is None else
+            missing = data is None and artifacts.TRAINING_METRICS not in members.over
+            said = ("The archive has no training metrics" if missing else
                     f"The archive's training metrics could not be read ({unreadable})")  # fmt: skip
             notes.append(f"{said}: the model arrives without its training history (no graph or "
                          "iterations).")  # fmt: skip

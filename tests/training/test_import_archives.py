@@ -3,10 +3,13 @@ server error; and only imports that arrive count against the racer's hourly impo
 
 from __future__ import annotations
 
+import contextlib
 import html
 import io
+import re
 import subprocess
 import tarfile
+import tracemalloc
 
 import pytest
 from django.contrib.sessions.backends.db import SessionStore
@@ -16,9 +19,10 @@ from django.urls import reverse
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from common import documents
 from tests.training.factories import ready_model
 from tests.training.test_imports import CHECKED_IMPORT, deepracer_export, tar_gz, virtual_archive
-from training import imports, views
+from training import artifacts, history, imports, views
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db
@@ -231,3 +235,119 @@ def test_refused_imports_have_a_looser_limit_of_their_own_which_says_so(bob, cli
     response = post_import(client, NOT_AN_ARCHIVE)
     assert response.status_code == 429
     assert "Too many refused or unconfirmed imports for now: try again in" in response.text
+
+
+def sparse(name: str, size: int):
+    """A tweak for ``tar_gz``: a GNU sparse member of ``size`` bytes, all of them a hole: a
+    512-byte header that tarfile reads as a file of ``size`` zeros."""
+
+    def tweak(tar: tarfile.TarFile) -> None:
+        info = tarfile.TarInfo(name)
+        info.type, info.size = tarfile.GNUTYPE_SPARSE, 0  # no data stored: one hole
+        header = bytearray(info.tobuf(tarfile.GNU_FORMAT))
+        header[483:495] = tarfile.itn(size, 12, tarfile.GNU_FORMAT)  # the file's real size
+        header[148:156] = b" " * 8
+        header[148:155] = b"%06o\0" % sum(header)  # the checksum, counting itself as spaces
+        tar.fileobj.write(header)
+        tar.offset += len(header)
+
+    return tweak
+
+
+def test_sparse_tweak_packs_a_huge_member_in_a_few_bytes():
+    data = tar_gz({}, sparse("reward_function.py", 500 * imports.MiB))
+    with tarfile.open(fileobj=io.BytesIO(data)) as tar:
+        (member,) = tar.getmembers()
+        assert member.isfile() and member.size == 500 * imports.MiB
+        assert tar.extractfile(member).read(4) == b"\0" * 4
+    assert len(data) < 1024
+
+
+def peak_memory_growth(read) -> int:
+    """[bytes] the most Python's allocations grew by while ``read()`` ran."""
+    tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        with contextlib.suppress(imports.ImportRefused):
+            read()
+        return tracemalloc.get_traced_memory()[1] - before
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.mark.parametrize(
+    ("path", "limit"),
+    [("reward_function.py", "1 MiB"), ("model_metadata.json", "262,144 bytes"),
+     ("training_params.yaml", "262,144 bytes"), ("checkpoints/best.safetensors", "128 MiB")],
+)  # fmt: skip
+def test_a_huge_member_is_refused_from_its_header_before_a_byte_is_read(path, limit):
+    members = {name: data for name, data in deepracer_export().items() if name != path}
+    archive = io.BytesIO(tar_gz(members, sparse(path, 500 * imports.MiB)))  # 511 KB in the issue
+    with pytest.raises(imports.ImportRefused, match=rf"^{re.escape(path)} is over {limit}\.$"):
+        imports.read_archive(archive)
+    assert peak_memory_growth(lambda: imports.read_archive(archive)) < 4 * imports.MiB
+
+
+def test_no_file_is_read_past_its_limit_whatever_its_header_says(monkeypatch):
+    archive = io.BytesIO(tar_gz({}, sparse("reward_function.py", 500 * imports.MiB)))
+    reads, read = [], tarfile.ExFileObject.read
+    monkeypatch.setattr(tarfile.ExFileObject, "read",
+                        lambda self, size=-1: reads.append(size) or read(self, size))  # fmt: skip
+    over = pytest.raises(imports.ImportRefused, match=r"^reward_function\.py is over 100 bytes")
+    with tarfile.open(fileobj=archive) as tar, over:
+        imports._read(tar, tar.next(), 100)  # as if its header had passed
+    assert reads == [101]
+
+
+def test_the_files_read_are_bounded_together(monkeypatch):
+    monkeypatch.setattr(imports, "MAX_READ", 1000)
+    archive = io.BytesIO(tar_gz(deepracer_export(**{"model/model_8.pb": b"\x08" * 1000})))
+    with pytest.raises(imports.ImportRefused, match="are over 1,000 bytes together"):
+        imports.read_archive(archive)
+
+
+def test_training_metrics_over_their_limit_are_left_unread_not_refused():
+    archive = tar_gz(deepracer_export(), sparse(artifacts.TRAINING_METRICS, 100 * imports.MiB))
+    members = imports.read_archive(io.BytesIO(archive))
+    assert members[artifacts.TRAINING_METRICS] is None
+    assert members.over == {artifacts.TRAINING_METRICS}
+
+
+def nested(depth: int, opening: str, closing: str, inner: str = "1") -> str:
+    return opening * depth + inner + closing * depth
+
+
+# The issue's files (400,000 and 200,000 levels) are now over imports.SETTINGS_LIMIT; these fit
+# in it, and are as far past Python's recursion limit.
+@pytest.mark.parametrize(
+    ("path", "document"),
+    [("model_metadata.json", nested(30_000, '{"a": ', "}")),
+     ("model_metadata.json", '{"a": ' + "[" * 100_000),  # never closed
+     ("training_params.yaml", nested(100_000, "[", "]")),
+     ("training_params.yaml", "- " * 100_000 + "x")],
+)  # fmt: skip
+def test_a_settings_file_nested_too_deep_is_refused_in_words_before_it_is_parsed(
+    bob, tracks, path, document
+):
+    archive = io.BytesIO(tar_gz(deepracer_export(**{path: document.encode()})))
+    with pytest.raises(imports.ImportRefused) as refused:
+        imports.import_model(owner=bob, archive=archive)
+    assert str(refused.value) == (
+        f"{path} cannot be read: it nests lists or objects over {documents.MAX_DEPTH} levels deep."
+    )
+
+
+def test_a_yaml_alias_is_refused_a_document_that_holds_itself_or_a_billion_copies(bob, tracks):
+    laughs = "a: &a [x, x]\nb: &b [*a, *a]\nc: [*b, *b]\n"
+    archive = io.BytesIO(tar_gz(deepracer_export(**{"training_params.yaml": laughs.encode()})))
+    with pytest.raises(imports.ImportRefused, match=r"it uses a YAML alias \(\*name\)\.$"):
+        imports.import_model(owner=bob, archive=archive)
+
+
+def test_training_metrics_or_history_nested_too_deep_are_unreadable_in_words():
+    deep = nested(400_000, "[", "]").encode()  # as deep as the issue's metadata
+    words = f"it nests lists or objects over {documents.MAX_DEPTH} levels deep"
+    with pytest.raises(history.Unreadable, match=f"^{words}$"):
+        history.read(b'{"metrics": ' + deep + b"}", episodes_per_iteration=10)
+    with pytest.raises(history.Unreadable, match=f"^{words}$"):
+        history.exact_read(deep)
