@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cache, cached_property
@@ -32,6 +33,9 @@ GRID_PAIRS = 50_000_000  # segment pairs the crossing check may compare: a few s
 GRID_BATCH = 100_000  # grid entries whose pairs are compared at once (bounds the memory)
 OPEN_GAP = 3.0  # a route whose end is this many of its longest steps from its start is open
 DIRECTIONS = ("counterclockwise", "clockwise")
+# The .npy format versions numpy.save writes for a plain array, and their header readers.
+NPY_HEADERS = {(1, 0): np.lib.format.read_array_header_1_0,
+               (2, 0): np.lib.format.read_array_header_2_0}  # fmt: skip
 
 
 class TrackError(ValueError):
@@ -271,17 +275,32 @@ def load(source: str | Path | Mapping[str, Any]) -> Track:
 
 
 def read_route(data: bytes, filename: str = "The route file") -> np.ndarray:
-    """The array in a DeepRacer route file's bytes (a NumPy ``.npy`` file, no pickles)."""
+    """The array in a DeepRacer route file's bytes (a NumPy ``.npy`` file, no pickles). Its
+    header is read first: numpy sets aside the memory a header claims before reading a value, and
+    a header may claim any shape ((10**12, 6): 43.7 TiB), so an array that the file's bytes do not
+    hold is refused before that."""
+    stream = io.BytesIO(data)
     try:
-        array = np.load(io.BytesIO(data), allow_pickle=False)
-    except (OSError, ValueError, EOFError):
+        version = np.lib.format.read_magic(stream)
+        shape, _, dtype = NPY_HEADERS[version](stream)
+    except (KeyError, OSError, ValueError, EOFError):
+        if data.startswith(b"PK"):  # numpy.savez's zip
+            raise TrackError(f"{filename} holds several arrays; a route file holds one.") from None
         raise TrackError(
             f"{filename} is not a NumPy .npy track file: DeepRacer route files are saved with "
             "numpy.save."
         ) from None
-    if not isinstance(array, np.ndarray):
-        raise TrackError(f"{filename} holds several arrays; a route file holds one.")
-    return array
+    values, held = math.prod(shape), len(data) - stream.tell()
+    if values * max(dtype.itemsize, 1) > held:
+        raise TrackError(
+            f"{filename} is cut short or damaged: its header says it holds {values:,} values "
+            f"(shape {shape}), which take {values * dtype.itemsize:,} bytes, and {held:,} bytes "
+            "follow the header."
+        )
+    try:
+        return np.load(io.BytesIO(data), allow_pickle=False)
+    except (OSError, ValueError, EOFError):  # values that only a pickle holds
+        raise TrackError(f"{filename} holds values that are not numbers.") from None
 
 
 def preview_path(name: str) -> Path:

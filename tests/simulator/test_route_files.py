@@ -169,3 +169,31 @@ def test_a_registered_resolver_lets_a_name_load_and_travel_inline():
         tracks.unregister_resolver(resolver)
     with pytest.raises(TrackError, match="No track named 'my-loop'"):
         tracks.load("my-loop")
+
+
+def claiming(shape: tuple[int, ...]) -> bytes:
+    """A route file of 60 waypoints whose header claims ``shape``: read as it claims, it would
+    take ``prod(shape) * 8`` bytes."""
+    buffer = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        buffer, {"descr": "<f8", "fortran_order": False, "shape": shape}
+    )
+    return buffer.getvalue() + routes.counterclockwise()[:60].tobytes()
+
+
+def test_a_header_claiming_more_than_the_file_holds_is_refused_before_any_memory_is_set_aside():
+    said = r"^The route file is cut short or damaged: its header says it holds "
+    huge = said + r"6,000,000,000,000 values \(shape \(1000000000000, 6\)\)"
+    with pytest.raises(TrackError, match=huge):
+        tracks.read_route(claiming((10**12, 6)))
+    one_row_more = said + r"366 values .* 2,928 bytes, and 2,880 bytes follow the header\.$"
+    with pytest.raises(TrackError, match=one_row_more):
+        tracks.read_route(claiming((61, 6)))
+    assert tracks.read_route(claiming((60, 6))).shape == (60, 6)  # as its header says
+
+
+def test_a_route_file_of_pickled_objects_is_refused_without_unpickling_them():
+    buffer = io.BytesIO()
+    np.save(buffer, np.array([object()] * 6, dtype=object), allow_pickle=True)
+    with pytest.raises(TrackError, match=r"^The route file holds values that are not numbers\.$"):
+        tracks.read_route(buffer.getvalue())

@@ -12,6 +12,7 @@ from django.urls import reverse
 
 from tests import routes
 from tests.sandbox.test_sandbox import driving
+from tests.simulator.test_route_files import claiming
 from tests.training.test_model_pages import form_data
 from training.models import RLModel, Track
 from training.services import TrackRefused, track_add, tracks_sync
@@ -144,6 +145,21 @@ def test_a_bad_route_file_uploaded_in_the_admin_shows_the_loaders_message(admin_
     response = upload(admin_client, "wrong_shape", "flat")
     assert "This one has shape (61, 4)." in response.text
     assert not Track.objects.filter(name__in=["twisted", "flat"]).exists()
+
+
+def test_a_route_file_whose_header_claims_terabytes_is_refused_in_the_admin_not_a_500(
+    admin_client, tracks
+):
+    data = {
+        "route_file": SimpleUploadedFile("huge.npy", claiming((10**12, 6))), "name": "huge",
+        "difficulty": "beginner", "directions": ["counterclockwise"],
+    }  # fmt: skip
+    response = admin_client.post(reverse("admin:training_track_add"), data)
+    assert response.status_code == 200
+    assert "is cut short or damaged: its header says it holds 6,000,000,000,000 values" in (
+        response.text
+    )
+    assert not Track.objects.filter(name="huge").exists()
 
 
 def test_built_in_tracks_are_read_only_in_the_admin(admin_client, tracks):
