@@ -1,14 +1,24 @@
-"""What ``make run`` runs: a private Redis, the database set-up, one Celery worker and Daphne.
+"""What ``make run`` runs: a private Redis, the database set-up, a Celery worker per queue, Daphne.
+
+Each queue has a worker of its own (``worker_pools``), as on several machines: the trainers, the
+simulations (rollouts, evaluations, races) and the re-scorings each have their own processes, so
+no job's trainer can take the place one of its rollouts needs (three trainers in one pool of three
+processes waited for ever), and a re-scoring never holds an evaluation's. A job past the trainers'
+processes waits in the queue, its place shown.
 
 The supervisor starts each process in its own session, so Ctrl-C in the terminal reaches only the
-supervisor, which then stops what it started in reverse order (web server, worker, Redis), each with
-SIGTERM and, past a grace period, SIGKILL. Children are also asked by the kernel to stop should the
-supervisor itself be killed. A lock file under var/ keeps a second supervisor from starting over
-the first, and ports are checked before anything starts, so neither case ends in a traceback.
+supervisor, which then stops what it started in reverse order (web server, workers, Redis), each
+with SIGTERM and, past a grace period, SIGKILL. Children are also asked by the kernel to stop should
+the supervisor itself be killed. Once everything runs, a child that dies is started again, after a
+pause that doubles with each death in a row (``RESTART_DELAYS``), and the output says so; only
+Ctrl-C (or SIGTERM) stops the console. A lock file under var/ keeps a second supervisor from
+starting over the first, and ports are checked before anything starts, so neither case ends in a
+traceback.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import fcntl
 import os
@@ -35,6 +45,8 @@ from console.workers import live_workers
 
 STOP_GRACE = 15.0  # [s] between SIGTERM and SIGKILL
 START_TIMEOUT = 60.0  # [s] for Redis and the web server to answer
+RESTART_DELAYS = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)  # [s] before a restart, by deaths in a row
+STEADY = 60.0  # [s] a restarted child that runs this long has recovered: its next death waits 1 s
 _PR_SET_PDEATHSIG = 1
 
 
@@ -42,10 +54,40 @@ class StartError(Exception):
     """Pitlane cannot start; the message says why and what to do."""
 
 
+@dataclass(frozen=True)
+class Pool:
+    """A Celery worker serving one queue with its own processes."""
+
+    name: str  # in the supervisor's words: "training worker"
+    queue: str
+    hostname: str  # unique per worker on a machine: each has its own heartbeat (console.workers)
+    concurrency: int
+
+    def arguments(self) -> list[str]:
+        """``celery -A console worker`` and what follows it, for this pool."""
+        return ["-A", "console", "worker", "-Q", self.queue, "--hostname", self.hostname,
+                "--concurrency", str(self.concurrency), "--loglevel", "INFO"]  # fmt: skip
+
+
+def worker_pools(*, trainers: int, simulations: int, prefix: str = "") -> list[Pool]:
+    """The workers of one machine, one per queue (``settings.PITLANE_QUEUES``): ``trainers`` jobs
+    train at once, ``simulations`` processes drive their rollouts, evaluations and races, and one
+    process re-scores (analysis.rescore: minutes of a racer's reward function, taking no more)."""
+    return [
+        Pool("training worker", "training", f"{prefix}trainer@%h", trainers),
+        Pool("simulation worker", "simulation", f"{prefix}sim@%h", simulations),
+        Pool("re-scoring worker", "rescoring", f"{prefix}rescore@%h", 1),
+    ]
+
+
 @dataclass
 class Child:
     name: str
     process: subprocess.Popen
+    command: list[str]
+    started: float = field(default_factory=time.monotonic)
+    deaths: int = 0  # in a row: a child that stays up STEADY seconds starts again from zero
+    restart_at: float | None = None  # [monotonic] when a dead child is started again
 
 
 @dataclass
@@ -54,7 +96,8 @@ class Supervisor:
     port: int
     var_dir: Path
     local_redis_port: int | None  # None: REDIS_URL names a Redis that someone else runs
-    concurrency: int
+    trainers: int
+    concurrency: int  # the simulation worker's processes
     out: IO[str] = field(default_factory=lambda: sys.stdout)
     children: list[Child] = field(default_factory=list)
     _stopping: bool = False
@@ -66,8 +109,9 @@ class Supervisor:
             port=env.int("PITLANE_PORT", 8000, minimum=1, maximum=65535),
             var_dir=settings.VAR_DIR,
             local_redis_port=None if "REDIS_URL" in os.environ else settings.REDIS_PORT,
+            trainers=env.int("PITLANE_TRAINERS", 1, minimum=1),
             concurrency=env.int(
-                "PITLANE_WORKER_CONCURRENCY", max(3, os.cpu_count() or 1), minimum=1
+                "PITLANE_WORKER_CONCURRENCY", max(2, os.cpu_count() or 1), minimum=1
             ),
         )
 
@@ -76,7 +120,8 @@ class Supervisor:
         return f"http://{self.host}:{self.port}"
 
     def run(self) -> int:
-        """Start everything, serve until Ctrl-C or a child dies, then stop everything."""
+        """Start everything, serve (restarting a child that dies) until Ctrl-C, then stop
+        everything."""
         self.var_dir.mkdir(parents=True, exist_ok=True)
         with _InstanceLock(self.var_dir):
             _check_port(self.host, self.port, "the web server", "PITLANE_PORT")
@@ -100,18 +145,16 @@ class Supervisor:
         call_command("migrate", interactive=False, verbosity=0)
         call_command("loadtracks", stdout=self.out)
         call_command("loaddemoseason", stdout=self.out)
-        self._spawn(
-            "Celery worker",
-            [sys.executable, "-m", "celery", "-A", "console", "worker",
-             "-Q", ",".join(settings.PITLANE_QUEUES), "--hostname", "pitlane@%h", "--beat",
-             "--concurrency", str(self.concurrency), "--loglevel", "INFO"],
-        )  # fmt: skip
+        for pool in worker_pools(trainers=self.trainers, simulations=self.concurrency):
+            # the scheduler (the monthly promotion, a simulation task) runs inside one worker
+            beat = ["--beat"] if pool.queue == "simulation" else []
+            self._spawn(pool.name, [sys.executable, "-m", "celery", *pool.arguments(), *beat])
         self._spawn(
             "web server",
             [sys.executable, "-m", "daphne", "-b", self.host, "-p", str(self.port),
              "console.asgi:application"],
         )  # fmt: skip
-        self._wait_until(self._worker_reported, "the Celery worker to report in")
+        self._wait_until(self._workers_reported, "the Celery workers to report in")
         self._wait_until(self._web_answers, "the web server to answer")
         self._say(f"\nPitlane is running: {self.url}  (Ctrl-C stops it)\n")
 
@@ -151,15 +194,12 @@ class Supervisor:
 
         self._wait_until(answers, f"Redis at {_redact(settings.REDIS_URL)}")
 
-    def _worker_reported(self) -> bool:
-        worker = self._child("Celery worker")
+    def _workers_reported(self) -> bool:
+        started = {c.process.pid for c in self.children if c.command[1:3] == ["-m", "celery"]}
         try:
-            return any(w["pid"] == worker.pid for w in live_workers(redis_client()))
+            return started <= {w["pid"] for w in live_workers(redis_client())}
         except redis.RedisError:
             return False
-
-    def _child(self, name: str) -> subprocess.Popen:
-        return next(child.process for child in self.children if child.name == name)
 
     def _web_answers(self) -> bool:
         try:
@@ -181,33 +221,50 @@ class Supervisor:
             time.sleep(0.2)
 
     def _spawn(self, name: str, command: list[str]) -> None:
-        process = subprocess.Popen(
-            command,
-            cwd=settings.BASE_DIR,
-            start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops us in order
-            preexec_fn=_stop_with_parent,
-        )
-        self.children.append(Child(name, process))
+        self.children.append(Child(name, _popen(command), command))
 
     # Serving and stopping
 
     def _watch(self) -> int:
         while not self._stopping:
-            try:
-                self._check_children()
-            except StartError as error:
-                self._say(str(error))
-                return 1
+            for child in self.children:
+                self._tend(child, time.monotonic())
             time.sleep(0.5)
         return 0
 
+    def _tend(self, child: Child, now: float) -> None:
+        """Restart ``child`` if it died and its pause is over; schedule the pause when it has
+        just died. Its work goes on: a trainer's job by its lease, from its last checkpoint; an
+        unacknowledged task is delivered again; workers and the web server reconnect to a Redis
+        started again (its data kept in its append-only file)."""
+        if child.restart_at is not None:
+            if now >= child.restart_at and not self._stopping:
+                child.process, child.restart_at = _popen(child.command), None
+                child.started = now
+                self._say(f"Started the {child.name} again (process {child.process.pid}).")
+            return
+        code = child.process.poll()
+        if code is None:
+            if child.deaths and now - child.started >= STEADY:
+                child.deaths = 0
+            return
+        _kill_group(child.process)
+        delay = RESTART_DELAYS[min(child.deaths, len(RESTART_DELAYS) - 1)]
+        child.deaths += 1
+        child.restart_at = now + delay
+        self._say(
+            f"The {child.name} stopped unexpectedly (exit status {code}); its output is above. "
+            f"Starting it again in {delay:.0f} s."
+        )
+
     def _check_children(self) -> None:
+        """During start-up, a child that dies stops everything: it will not start by itself."""
         for child in self.children:
             code = child.process.poll()
             if code is not None and not self._stopping:
                 raise StartError(
-                    f"The {child.name} stopped unexpectedly (exit status {code}); its output is "
-                    "above. Stopping Pitlane."
+                    f"The {child.name} stopped while Pitlane was starting (exit status {code}); "
+                    "its output is above. Stopping Pitlane."
                 )
 
     def _request_stop(self, signum: int, frame: object) -> None:
@@ -226,6 +283,7 @@ class Supervisor:
                     self._say(f"The {child.name} did not stop in {STOP_GRACE:.0f} s; killing it.")
                     child.process.kill()
                     child.process.wait()
+            _kill_group(child.process)
         self.children.clear()
 
     def _say(self, text: str) -> None:
@@ -277,6 +335,23 @@ def _check_port(host: str, port: int, what: str, variable: str) -> None:
                 f"Port {port} is already in use by another program, so {what} cannot start. "
                 f"Stop that program, or choose another port: {variable}={port + 1} make run"
             ) from None
+
+
+def _popen(command: list[str]) -> subprocess.Popen:
+    return subprocess.Popen(
+        command,
+        cwd=settings.BASE_DIR,
+        start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops us in order
+        preexec_fn=_stop_with_parent,
+    )
+
+
+def _kill_group(process: subprocess.Popen) -> None:
+    """Kill what is left of an ended child's process group: a worker killed outright leaves its
+    pool's processes behind, holding their memory (and the terminal's output) for ever, and
+    perhaps still running a task that its restarted worker will be given again."""
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(process.pid, signal.SIGKILL)
 
 
 def _stop_with_parent() -> None:

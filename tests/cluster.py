@@ -265,6 +265,11 @@ class Cluster:
         )  # fmt: skip
         # exactly one scheduler, here on the web machine
         self.web.start(BIN / "celery", "-A", "console", "beat")
+        # re-scorings, one at a time, beside the checkers that run the same sandbox here
+        self.web.start(
+            BIN / "celery", "-A", "console", "worker", "-Q", "rescoring", "--hostname",
+            f"rescore@{self.web.name}", "--concurrency", "1", "--loglevel", "INFO",
+        )  # fmt: skip
 
     @staticmethod
     def start_training(machine: Machine) -> None:

@@ -12,6 +12,7 @@ from django.conf import settings
 from django.contrib.auth.models import User
 
 from common.redis_client import redis_client
+from console.supervisor import worker_pools
 from console.workers import live_workers
 from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
 
@@ -78,28 +79,49 @@ def logs_dir(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("logs")
 
 
+class WorkerPools:
+    """The Celery workers `make run` starts, one per queue (console.supervisor.worker_pools)."""
+
+    def __init__(self, workers: list[ServiceProcess]) -> None:
+        self.workers = workers
+
+    @property
+    def pids(self) -> set[int]:
+        return {worker.pid for worker in self.workers}
+
+    def ensure_running(self) -> None:
+        for worker in self.workers:
+            worker.ensure_running()
+
+    def stop(self) -> None:
+        for worker in self.workers:
+            worker.stop()
+
+
 @pytest.fixture(scope="session")
-def celery_worker_process(test_database, logs_dir) -> Iterator[ServiceProcess]:
-    """A real Celery worker process serving both queues, as `make run` starts one."""
-    worker = ServiceProcess(
-        python_module(
-            "celery", "-A", "console", "worker", "-Q", ",".join(settings.PITLANE_QUEUES),
-            "--hostname", "test-worker@%h", "--concurrency", "3", "--loglevel", "INFO",
-            "--without-mingle", "--without-gossip",
-        ),
-        env=service_env(test_database),
-        log=logs_dir / "celery-worker.log",
-    )  # fmt: skip
+def celery_worker_process(test_database, logs_dir) -> Iterator[WorkerPools]:
+    """Real Celery worker processes, one per queue, as `make run` starts them: two trainers (the
+    suite's tests may leave a job training), three simulation processes, one re-scoring."""
+    pools = WorkerPools(
+        [
+            ServiceProcess(
+                python_module("celery", *pool.arguments(), "--without-mingle", "--without-gossip"),
+                env=service_env(test_database),
+                log=logs_dir / f"celery-{pool.queue}.log",
+            )
+            for pool in worker_pools(trainers=2, simulations=3, prefix="test-")
+        ]
+    )
 
     def reported() -> bool:
-        worker.ensure_running()
-        return any(w["pid"] == worker.pid for w in live_workers(redis_client()))
+        pools.ensure_running()
+        return pools.pids <= {w["pid"] for w in live_workers(redis_client())}
 
     try:
-        wait_for(reported, "the Celery worker to report in")
-        yield worker
+        wait_for(reported, "the Celery workers to report in")
+        yield pools
     finally:
-        worker.stop()
+        pools.stop()
 
 
 @pytest.fixture(scope="session")

@@ -198,8 +198,12 @@ PITLANE_CHECKS_WAITING = env.int("PITLANE_CHECKS_WAITING", 8, minimum=0)
 # (training.imports.MAX_ARCHIVE, 256 MiB, with room for the form around it).
 PITLANE_MAX_BODY = env.int("PITLANE_MAX_BODY", 10 * 2**20, minimum=2**20)  # [bytes]
 PITLANE_MAX_IMPORT_BODY = env.int("PITLANE_MAX_IMPORT_BODY", 257 * 2**20, minimum=2**20)  # [bytes]
-# The queues a complete deployment serves; /healthz reports any that no worker consumes.
-PITLANE_QUEUES = ("training", "simulation")
+# The queues a complete deployment serves; /healthz reports any that no worker consumes. Each has
+# a worker (a pool of processes) of its own, on one machine too (console.supervisor), so that
+# no kind of work can take the processes another waits on: trainers never hold the places their
+# rollouts need, and re-scorings (a racer's reward function over recorded driving, minutes of
+# sandbox calls) never hold those of training, evaluations and races.
+PITLANE_QUEUES = ("training", "simulation", "rescoring")
 # A trainer learns while its rollout workers wait for the new weights (training.rollouts'
 # _await_next_version), so it may take every core then; idle, its threads take none.
 PITLANE_TRAINER_THREADS = env.int("PITLANE_TRAINER_THREADS", os.cpu_count() or 1, minimum=1)
@@ -220,7 +224,7 @@ CELERY_TASK_ROUTES = {
     "training.evaluate": {"queue": "simulation"},  # evaluations: no racer code
     "racing.race": {"queue": "simulation"},  # a race submission is an evaluation
     "racing.promote": {"queue": "simulation"},
-    "analysis.rescore": {"queue": "simulation"},  # a racer's reward function, in the sandbox
+    "analysis.rescore": {"queue": "rescoring"},  # a racer's reward function, in the sandbox
     "accounts.password_reset_email": {"queue": "simulation"},  # off the request: see its task
 }
 # Celery beat (run inside the worker by `make run`; one `celery -A console beat` when scaled out).

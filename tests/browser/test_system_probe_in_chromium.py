@@ -18,6 +18,6 @@ def test_staff_probe_the_workers_from_the_system_page(page: Page, stella, celery
     button.click()
 
     log = page.locator("[data-probe-log]")
-    expect(log.locator("li[data-ok=true]")).to_have_count(2, timeout=20_000)
-    for queue in ("training", "simulation"):
-        expect(log.locator(f"li[data-queue={queue}]")).to_contain_text("test-worker@")
+    expect(log.locator("li[data-ok=true]")).to_have_count(3, timeout=20_000)
+    for queue, worker in (("training", "trainer"), ("simulation", "sim"), ("rescoring", "rescore")):
+        expect(log.locator(f"li[data-queue={queue}]")).to_contain_text(f"test-{worker}@")

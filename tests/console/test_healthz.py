@@ -41,7 +41,7 @@ def test_healthz_is_200_when_the_database_redis_and_a_worker_are_up(client, cele
     assert body["down"] == []
     assert set(body["checks"]) == {"database", "redis", "workers"}
     workers = body["checks"]["workers"]["workers"]
-    assert {"simulation", "training"} <= {q for worker in workers for q in worker["queues"]}
+    assert {"simulation", "training", "rescoring"} <= {q for w in workers for q in w["queues"]}
 
 
 def test_healthz_is_503_naming_redis_when_redis_is_stopped(client, settings, tmp_path):
@@ -84,7 +84,7 @@ def test_healthz_is_503_when_no_workers_sandbox_holds(client, settings, tmp_path
     redis_server = RedisServer(tmp_path / "redis")
     settings.REDIS_URL = redis_server.url
     record = {
-        "hostname": "unsafe@box", "pid": 1, "queues": ["simulation", "training"],
+        "hostname": "unsafe@box", "pid": 1, "queues": ["rescoring", "simulation", "training"],
         "started_at": 0, "sandbox": {"ok": False, "detail": "sealed code could read a file"},
     }  # fmt: skip
     try:

@@ -8,12 +8,15 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import redis
 
+from console.workers import live_workers
 from tests.services import ROOT, free_port, parent_of, wait_for
 
 
@@ -51,27 +54,44 @@ def listening(port: int) -> bool:
         return False
 
 
+class Output:
+    """What a running console prints, read as it comes by a thread of its own."""
+
+    def __init__(self, process: subprocess.Popen) -> None:
+        self.lines: list[str] = []
+        self.thread = threading.Thread(target=self.lines.extend, args=(process.stdout,))
+        self.thread.start()
+
+    def __str__(self) -> str:
+        return "".join(self.lines)
+
+    def wait_for(self, text: str, process: subprocess.Popen, timeout: float = 60) -> None:
+        def printed() -> bool:
+            if process.poll() is not None:
+                self.thread.join()
+            return text in str(self) or process.poll() is not None
+
+        wait_for(printed, f"the console to print {text!r}", timeout=timeout)
+        assert text in str(self), f"the console exited without printing {text!r}:\n{self}"
+
+
 @pytest.fixture(scope="module")
-def console_running(tmp_path_factory) -> Iterator[tuple[subprocess.Popen, dict[str, str], str]]:
+def console_running(tmp_path_factory) -> Iterator[tuple[subprocess.Popen, dict[str, str], Output]]:
     var_dir = tmp_path_factory.mktemp("var")
     port, redis_port = free_port(), free_port()
     env = environment(var_dir, port, redis_port)
     process = runconsole(env)
-    output = []
-    for line in process.stdout:
-        output.append(line)
-        if "Pitlane is running" in line:
-            break
-    else:
-        pytest.fail("runconsole exited before serving:\n" + "".join(output))
-    yield process, env, "".join(output)
+    output = Output(process)
+    output.wait_for("Pitlane is running", process, timeout=120)
+    yield process, env, output
     if process.poll() is None:
         process.kill()
         process.wait()
 
 
-def test_it_serves_the_console_with_redis_and_a_worker(console_running):
-    _, env, output = console_running
+def test_it_serves_the_console_with_redis_and_a_worker_per_queue(console_running):
+    _, env, printed = console_running
+    output = str(printed)
     port = env["PITLANE_PORT"]
     assert f"Pitlane is running: http://127.0.0.1:{port}" in output
     assert "8 built-in tracks loaded" in output
@@ -81,6 +101,18 @@ def test_it_serves_the_console_with_redis_and_a_worker(console_running):
         assert json.load(response)["status"] == "ok"
     with urllib.request.urlopen(f"http://127.0.0.1:{port}/races/", timeout=10) as response:
         assert "Open time trial" in response.read().decode()
+    # Each queue has a worker of its own: no kind of work can take the processes of another.
+    assert {tuple(w["queues"]) for w in workers_of(env)} == {
+        ("training",),
+        ("simulation",),
+        ("rescoring",),
+    }
+
+
+def workers_of(env: dict[str, str]) -> list[dict]:
+    password = (Path(env["PITLANE_VAR_DIR"]) / "redis_password").read_text().strip()
+    url = f"redis://:{password}@127.0.0.1:{env['PITLANE_REDIS_PORT']}/0"
+    return live_workers(redis.Redis.from_url(url, socket_connect_timeout=2, socket_timeout=2))
 
 
 def test_a_second_run_is_refused_with_a_clear_message(console_running):
@@ -114,13 +146,64 @@ def children_of(pid: int) -> set[int]:
     return children
 
 
+def test_a_child_that_dies_is_started_again_and_says_so(console_running):
+    process, env, output = console_running
+    before = children_of(process.pid)
+    (worker,) = [w for w in workers_of(env) if w["queues"] == ["simulation"]]
+    redis_pid = next(pid for pid in before if "redis-server" in command_of(pid))
+    pool = group_of(worker["pid"])
+    assert len(pool) > 1  # the worker, its pool's process and the scheduler inside it
+    os.kill(worker["pid"], signal.SIGKILL)
+    os.kill(redis_pid, signal.SIGKILL)
+    output.wait_for("The simulation worker stopped unexpectedly (exit status -9)", process)
+    output.wait_for("The Redis stopped unexpectedly (exit status -9)", process)
+    output.wait_for("Started the simulation worker again", process)
+    output.wait_for("Started the Redis again", process)
+
+    def back() -> bool:
+        try:
+            return any(w["queues"] == ["simulation"] for w in workers_of(env))
+        except redis.RedisError:
+            return False
+
+    wait_for(back, "the new simulation worker to report in", timeout=60)
+    assert process.poll() is None  # the console goes on
+    assert len(children_of(process.pid)) == len(before)
+    assert not [pid for pid in pool if running(pid)]  # no orphan of its pool lives on
+
+
+def running(pid: int) -> bool:
+    """Whether ``pid`` runs: not ended, and not a zombie waiting for its new parent to reap it."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def group_of(leader: int) -> set[int]:
+    """The processes of ``leader``'s process group (each child of the console leads its own)."""
+    members = set()
+    for entry in Path("/proc").glob("[0-9]*"):
+        try:
+            if int((entry / "stat").read_text().rsplit(")", 1)[1].split()[2]) == leader:
+                members.add(int(entry.name))
+        except (OSError, IndexError, ValueError):
+            continue  # the process ended while we looked
+    return members
+
+
+def command_of(pid: int) -> str:
+    return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+
+
 def test_ctrl_c_stops_everything_it_started(console_running):
-    process, env, _ = console_running
+    process, env, output = console_running
     started = children_of(process.pid)
-    assert len(started) == 3  # Redis, the Celery worker, Daphne
+    assert len(started) == 5  # Redis, the training, simulation and re-scoring workers, Daphne
     process.send_signal(signal.SIGINT)
     assert process.wait(timeout=60) == 0
-    assert "Stopping Pitlane..." in process.stdout.read()
+    output.thread.join()
+    assert "Stopping Pitlane..." in str(output)
     for pid in started:
         assert not Path(f"/proc/{pid}").exists(), f"process {pid} outlived Ctrl-C"
     for port in (env["PITLANE_PORT"], env["PITLANE_REDIS_PORT"]):

@@ -25,15 +25,17 @@ async def test_a_task_enqueued_by_the_web_process_runs_on_a_worker_and_answers_o
     await communicator.send_json_to({"action": "probe"})
 
     sent = await communicator.receive_json_from(timeout=10)
-    assert sent == {"type": "probe.sent", "queues": ["training", "simulation"]}
+    assert sent == {"type": "probe.sent", "queues": ["training", "simulation", "rescoring"]}
     answers = [await communicator.receive_json_from(timeout=20) for _ in sent["queues"]]
     await communicator.disconnect()
 
-    assert {answer["queue"] for answer in answers} == {"training", "simulation"}
+    assert {answer["queue"] for answer in answers} == {"training", "simulation", "rescoring"}
+    hostnames = {"training": "test-trainer@", "simulation": "test-sim@"}
+    hostnames["rescoring"] = "test-rescore@"
     for answer in answers:
         assert answer["type"] == "probe.result"
-        assert parent_of(answer["pid"]) == celery_worker_process.pid  # one of its pool processes
-        assert answer["worker"].startswith("test-worker@")
+        assert parent_of(answer["pid"]) in celery_worker_process.pids  # a pool process of one
+        assert answer["worker"].startswith(hostnames[answer["queue"]])  # the queue's own worker
         assert answer["waited_ms"] >= 0
 
 
