@@ -77,7 +77,9 @@ def test_a_worker_reports_that_its_sandbox_holds(client, celery_worker_process):
 
     wait_for(sandbox_reported, "the worker's sandbox self-test", timeout=30)
     workers = client.get(reverse("healthz")).json()["checks"]["workers"]["workers"]
-    assert "held" in workers[0]["sandbox"]["detail"]
+    # Each pool's worker tests its own sandbox: one may still be checking when another has held.
+    reported = [w["sandbox"] for w in workers if (w.get("sandbox") or {}).get("ok")]
+    assert reported and all("held" in sandbox["detail"] for sandbox in reported)
 
 
 def test_healthz_is_503_when_no_workers_sandbox_holds(client, settings, tmp_path):
