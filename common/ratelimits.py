@@ -20,9 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
 
-from asgiref.sync import iscoroutinefunction, markcoroutinefunction
 from django.conf import settings
 from django.core.cache import caches
 from django.forms import BaseForm
@@ -31,6 +29,8 @@ from django.http import HttpRequest, HttpResponse
 from django_ratelimit import core as ratelimit_core
 from django_ratelimit.core import get_usage
 from redis.exceptions import RedisError
+
+from common.middleware import SyncAndAsyncMiddleware
 
 logger = logging.getLogger(__name__)
 
@@ -176,32 +176,15 @@ def _refusing(request: HttpRequest, limited: Limited) -> Limited:
     return limited
 
 
-class RetryAfterMiddleware:
+class RetryAfterMiddleware(SyncAndAsyncMiddleware):
     """Every refusal for a limit (429, or ``Unavailable``'s 503) says in ``Retry-After`` how many
-    seconds to wait: here once, from the ``Limited`` noted on the request, not in each view.
-    Sync and async, as every middleware here is (``training.checks``)."""
+    seconds to wait: here once, from the ``Limited`` noted on the request, not in each view."""
 
-    sync_capable = async_capable = True
-
-    def __init__(self, get_response: Callable[[HttpRequest], HttpResponse]) -> None:
-        self.get_response = get_response
-        if iscoroutinefunction(get_response):
-            markcoroutinefunction(self)
-
-    def __call__(self, request: HttpRequest):
-        if iscoroutinefunction(self):
-            return self._acall(request)
-        return _with_retry_after(request, self.get_response(request))
-
-    async def _acall(self, request: HttpRequest) -> HttpResponse:
-        return _with_retry_after(request, await self.get_response(request))
-
-
-def _with_retry_after(request: HttpRequest, response: HttpResponse) -> HttpResponse:
-    limited = getattr(request, "pitlane_limited", None)
-    if limited is not None and response.status_code == limited.status:
-        response.setdefault("Retry-After", str(max(1, math.ceil(limited.wait))))
-    return response
+    def after(self, request: HttpRequest, response: HttpResponse) -> HttpResponse:
+        limited = getattr(request, "pitlane_limited", None)
+        if limited is not None and response.status_code == limited.status:
+            response.setdefault("Retry-After", str(max(1, math.ceil(limited.wait))))
+        return response
 
 
 def refuse(form: BaseForm, limited: Limited) -> None:

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import functools
 import zoneinfo
-from collections.abc import Callable
 from datetime import datetime
 
-from asgiref.sync import iscoroutinefunction, markcoroutinefunction
-from django.http import HttpRequest, HttpResponse
+from django.http import HttpRequest
 from django.utils import dateformat, timezone
+
+from common.middleware import SyncAndAsyncMiddleware
 
 COOKIE = "pitlane_tz"
 # How a moment is written; static/console/time_zone.js writes the same in the browser's zone.
@@ -34,26 +34,11 @@ def zone_named(name: str | None) -> zoneinfo.ZoneInfo | None:
     return zoneinfo.ZoneInfo(name)
 
 
-class TimeZoneMiddleware:
-    """Activates the request's zone; sync and async, so that an async view (``training.checks``)
-    is awaited on the server's event loop rather than run in one of its threads."""
+class TimeZoneMiddleware(SyncAndAsyncMiddleware):
+    """Activates the request's zone."""
 
-    sync_capable = async_capable = True
-
-    def __init__(self, get_response: Callable[[HttpRequest], HttpResponse]) -> None:
-        self.get_response = get_response
-        if iscoroutinefunction(get_response):
-            markcoroutinefunction(self)
-
-    def __call__(self, request: HttpRequest):
-        if iscoroutinefunction(self):
-            return self._acall(request)
+    def before(self, request: HttpRequest) -> None:
         _activate(request)
-        return self.get_response(request)
-
-    async def _acall(self, request: HttpRequest) -> HttpResponse:
-        _activate(request)
-        return await self.get_response(request)
 
 
 def _activate(request: HttpRequest) -> None:
