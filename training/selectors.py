@@ -373,7 +373,7 @@ def model_checkpoint_choices(*, model: RLModel) -> list[CheckpointChoice]:
             which,
             number,
             completions.get(number),
-            trained=number != 0 or checkpoint_trained(model=model, name=names[which]),
+            trained=checkpoint_trained(model=model, name=names[which]),
         )
         for which, number in iterations.items()
     ]
