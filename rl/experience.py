@@ -4,8 +4,8 @@ Keys belong to one job and expire after it ends:
 ``pitlane:job:<id>:experience`` (a list of episodes), ``pitlane:job:<id>:counts`` (a hash:
 the training episodes pushed per policy version), ``pitlane:job:<id>:evaluation`` (a list of
 evaluation results), ``pitlane:job:<id>:policy`` (a hash: version, weights) and
-``pitlane:job:<id>:control`` (a hash: stop, attempt, the run's token, and each rollout worker's
-heartbeat).
+``pitlane:job:<id>:control`` (a hash: stop, attempt, the run's token, and when each rollout worker
+took its task and last beat).
 Episodes travel as msgpack with their arrays as raw bytes: they come from a sandbox that ran a
 racer's code, so the trainer checks every field before it learns from one (``decode_episode``).
 """
@@ -156,11 +156,24 @@ class JobChannel:
     def beat(self, worker: int) -> None:
         self.client.hset(self.control, f"worker:{worker}", time.time())
 
+    def take(self, worker: int) -> None:
+        """A rollout worker's word that it took its task and is starting (loading the simulator
+        and the sandbox, before its first beat): its slot no longer waits in the broker's queue."""
+        self.client.hset(self.control, f"taken:{worker}", time.time())
+
     def heartbeats(self) -> dict[int, float]:
+        """When each rollout worker last beat, by slot [s since the epoch]."""
+        return self._marks(b"worker:")
+
+    def takings(self) -> dict[int, float]:
+        """When each slot's task was last taken by a rollout worker [s since the epoch]."""
+        return self._marks(b"taken:")
+
+    def _marks(self, prefix: bytes) -> dict[int, float]:
         return {
             int(name.split(b":")[1]): float(value)
             for name, value in self.client.hgetall(self.control).items()
-            if name.startswith(b"worker:")
+            if name.startswith(prefix)
         }
 
     def report_failure(self, message: str) -> None:

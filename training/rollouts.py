@@ -72,6 +72,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
     if token is None:
         logger.info("Rollout %s/%s found no run of attempt %s going on", job_id, worker, attempt)
         return
+    channel.take(worker)  # the trainer waits for its first beat from now, not for the queue
     policy = {
         "algorithm": model.algorithm,
         "architecture": model.architecture,

@@ -29,7 +29,9 @@ def train(self, job_id: int) -> None:
 
     torch_threads()
     owner = f"{self.request.hostname}:{os.getpid()}"
-    if not trainer.run(job_id, owner=owner, start_rollouts=start_rollout):
+    if not trainer.run(
+        job_id, owner=owner, start_rollouts=start_rollout, queued_rollouts=queued_rollouts
+    ):
         # Another run holds the job: a duplicate delivery, or a redelivery after that run's
         # worker died. Look again when its lease would have lapsed; never train twice.
         from django.conf import settings
@@ -119,6 +121,31 @@ def _evaluation_send(evaluation) -> None:
 def waiting() -> dict[str, set[int]] | None:
     """The tasks waiting in the broker's queues, by name: the first argument (a row's id) of
     each message; None when the broker is not one whose queues can be read (Redis)."""
+    messages = _queued_messages()
+    if messages is None:
+        return None
+    found: dict[str, set[int]] = {}
+    for name, args in messages:
+        found.setdefault(name, set()).add(args[0] if args else None)
+    return found
+
+
+def queued_rollouts(job) -> set[int] | None:
+    """The slots of ``job``'s run (its attempt) whose rollout task waits in the broker's queue,
+    not yet taken by a simulation worker; None when the broker's queues cannot be read."""
+    messages = _queued_messages()
+    if messages is None:
+        return None
+    return {
+        args[1]
+        for name, args in messages
+        if name == rollout.name and len(args) == 4 and args[0] == job.pk and args[2] == job.attempt
+    }
+
+
+def _queued_messages() -> list[tuple[str, list]] | None:
+    """(task name, arguments) of each message waiting in the broker's queues; None when the
+    broker is not one whose queues can be read (Redis)."""
     from celery import current_app
 
     with current_app.connection_for_read() as connection:
@@ -128,28 +155,25 @@ def waiting() -> dict[str, set[int]] | None:
         queues = {route["queue"] for route in current_app.conf.task_routes.values()}
         queues.add(current_app.conf.task_default_queue)
         prefix = getattr(channel, "global_keyprefix", "") or ""  # LRANGE is not prefixed for us
-        found: dict[str, set[int]] = {}
+        found = []
         for queue in queues:
             for priority in channel.priority_steps:  # kombu keeps a list per priority
                 key = prefix + channel._q_for_pri(queue, priority)
-                for raw in channel.client.lrange(key, 0, -1):
-                    name, first = _task_of(raw)
-                    if name:
-                        found.setdefault(name, set()).add(first)
-    return found
+                found += [_task_of(raw) for raw in channel.client.lrange(key, 0, -1)]
+    return [(name, args) for name, args in found if name]
 
 
-def _task_of(raw: bytes) -> tuple[str, int | None]:
-    """(task name, first argument) of a message as kombu's Redis transport stores it."""
+def _task_of(raw: bytes) -> tuple[str, list]:
+    """(task name, arguments) of a message as kombu's Redis transport stores it."""
     try:
         message = json.loads(raw)
         body = message["body"]
         if message.get("properties", {}).get("body_encoding") == "base64":
             body = base64.b64decode(body)
         args = json.loads(body)[0]
-        return message["headers"]["task"], args[0] if args else None
+        return message["headers"]["task"], list(args)
     except (ValueError, KeyError, IndexError, TypeError):
-        return "", None
+        return "", []
 
 
 def torch_threads() -> None:

@@ -13,6 +13,7 @@ together.
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import logging
 import time
@@ -48,6 +49,7 @@ STOP_CHECK = 1.0  # [s] between looks for the racer's stop request, even in the 
 REPLACEMENTS = 2  # per worker slot, before the job carries on without it
 REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
 MAX_PRINTED_LINES = 20_000  # reward function and worker lines a job's log keeps, in all
+WAITING_FOR_WORKER = "Waiting for a free simulation worker; the clock starts when the car drives"
 
 
 class JobFailed(Exception):
@@ -66,17 +68,18 @@ class Slot:
     gone: bool = False
 
 
-def run(job_id: int, owner: str, start_rollouts) -> bool:
+def run(job_id: int, owner: str, start_rollouts, queued_rollouts=None) -> bool:
     """Train job ``job_id`` while this run holds its lease. ``start_rollouts(job, slot)`` enqueues a
-    rollout worker (the task module passes it, so this module stays free of Celery). False when
-    another run holds a live lease: the caller tries again later, and takes the job over if that
-    run has died (its lease expired)."""
+    rollout worker, and ``queued_rollouts(job)`` says which slots' rollouts still wait in the
+    broker's queue (None: it cannot tell); the task module passes both, so this module stays
+    free of Celery. False when another run holds a live lease: the caller tries again later, and
+    takes the job over if that run has died (its lease expired)."""
     job = jobs.lease_acquire(job_id=job_id, owner=owner)
     if job is None:
         held = TrainingJob.objects.filter(pk=job_id, status__in=TrainingJob.ACTIVE).exists()
         logger.info("Training job %s is %s", job_id, "held by another run" if held else "over")
         return not held
-    trainer = Trainer(job, start_rollouts)
+    trainer = Trainer(job, start_rollouts, queued_rollouts)
     try:
         trainer.train()
     except LeaseLost:
@@ -103,10 +106,11 @@ def run(job_id: int, owner: str, start_rollouts) -> bool:
 
 
 class Trainer:
-    def __init__(self, job: TrainingJob, start_rollouts) -> None:
+    def __init__(self, job: TrainingJob, start_rollouts, queued_rollouts=None) -> None:
         self.job = job
         self.model: RLModel = job.model
         self.start_rollouts = start_rollouts
+        self.queued_rollouts = queued_rollouts or (lambda job: None)
         self.channel = JobChannel(redis_client(timeout=30.0), job.pk)
         self.ppo = self.model.algorithm == hp.PPO
         self.slots = [Slot(0, self.model.track.name)] + [
@@ -119,6 +123,7 @@ class Trainer:
         self.evaluations: dict[int, list[dict]] = {}  # version: the results come so far
         self.best: tuple[float, int] | None = None  # (evaluation completion, iteration)
         self.session_started: float | None = None  # when this run's clock started [monotonic]
+        self.first_run = job.started_at is None
         self.base_seconds = job.training_seconds  # the time used before this run
         self.ending: str | None = None  # why the loop ends: "stop" or "limit"
         self.last_look = self.last_check = 0.0
@@ -129,7 +134,6 @@ class Trainer:
 
     def train(self) -> None:
         job, model = self.job, self.model
-        first_run = job.started_at is None
         preparing = not job.stop_requested and jobs.move(
             job, TrainingJob.Status.INITIALIZING, started_at=job.started_at or timezone.now(),
             message="Preparing the trainer",
@@ -149,25 +153,42 @@ class Trainer:
         for slot in self.slots:
             self.start_rollouts(job, slot)
         self.training_message = f"Training with {_workers(len(self.slots))} on {self._tracks()}"
-        self.session_started, self.base_seconds = time.monotonic(), job.training_seconds
+        self.base_seconds = job.training_seconds
+        waiting = jobs.clock_write(job, self.base_seconds, message=WAITING_FOR_WORKER)
+        live.announce_training(job.pk)
+        if not waiting:  # the racer stopped it while it was being prepared
+            jobs.log(job, "Stopped by the racer.")
+            self.finish(TrainingJob.Status.COMPLETED)
+            return
+        self._loop()
+        self.finish(TrainingJob.Status.COMPLETED)
+
+    def _start_clock(self) -> None:
+        """Start the job's clock, and move it IN_PROGRESS, once the car drives: when one of its
+        rollout workers first beats (it beats before its first episode, and through it) or an
+        episode arrives. Until then the job is INITIALIZING, waiting for a simulation worker
+        (the simulation queue may be busy with other jobs' rollouts and evaluations), and its
+        clock stands still: the racer is never billed for time the job could not drive, as
+        DeepRacer bills a job from when it trains, not while it waits. The clock starts when the
+        trainer sees the beat, within a turn of it (about a second): any error is the racer's
+        gain."""
+        job = self.job
+        self.session_started = time.monotonic()
         started = jobs.clock_write(
             job, self.base_seconds, to=TrainingJob.Status.IN_PROGRESS,
             message=self.training_message,
         )  # fmt: skip
         live.announce_training(job.pk)
-        if not started:  # the racer stopped it while it was being prepared
-            jobs.log(job, "Stopped by the racer.")
-            self.finish(TrainingJob.Status.COMPLETED)
+        if not started:  # the racer stopped it while it waited
+            self.ending = "stop"
             return
-        if first_run:
+        if self.first_run:
             device = "the GPU" if self.learner.device.startswith("cuda") else "the CPU"
             jobs.log(
                 job,
-                f"Training started: {model.get_algorithm_display()}, "
+                f"Training started: {self.model.get_algorithm_display()}, "
                 f"{_workers(len(self.slots))}, learning on {device}.",
             )
-        self._loop()
-        self.finish(TrainingJob.Status.COMPLETED)
 
     def _build_learner(self) -> None:
         """The learner, with the weights the job goes on from: its last checkpoint when it
@@ -240,6 +261,11 @@ class Trainer:
         first = self.channel.wait_for_episode(wait=1.0)
         self.stopwatch.charge(DRIVING)
         payloads = [first, *self.channel.pop_episodes(limit=49)] if first is not None else []
+        if self.session_started is None and (payloads or self.channel.heartbeats()):
+            self._start_clock()
+            if self.ending is not None:
+                self._say_why_it_ended()
+                return True
         for payload in payloads:
             episode = self._decode(payload)
             if episode is None or (self.ppo and episode.version != self.version):
@@ -484,29 +510,35 @@ class Trainer:
     # Workers and the racer
 
     def _watch_workers(self) -> None:
-        beats = self.channel.heartbeats()
-        now, wall = time.monotonic(), time.time()
+        """Replace each rollout worker that died, up to ``REPLACEMENTS`` times a slot; carry on
+        without a slot replaced that often, and fail the job when none is left.
+
+        Since it was last (re)started, a slot's rollout is waiting, starting or driving:
+
+        - waiting: no simulation worker has taken its task yet. The simulation queue may be busy
+          (other jobs' rollouts, evaluations, races) for as long as their work lasts: a task
+          waiting there is not dead, and a replacement would only queue behind it. It is given
+          up only when it is no longer in the broker's queue yet no worker took it,
+          ``PITLANE_ROLLOUT_STARTUP`` after it was sent (lost with a Redis restart, or held by
+          a worker that died before it began); when the broker cannot say, after that alone.
+        - starting: a worker took it (``JobChannel.take``) and loads the simulator and the
+          sandbox; dead when it has not beaten ``PITLANE_ROLLOUT_STARTUP`` after that.
+        - driving: it beats; dead when silent ``PITLANE_ROLLOUT_SILENCE``.
+        """
+        beats, takings = self.channel.heartbeats(), self.channel.takings()
+        queued = functools.cache(lambda: self.queued_rollouts(self.job) or set())  # read once
         for slot in self.slots:
-            if slot.gone:
+            why = None if slot.gone else _why_dead(slot, beats, takings, queued)
+            if why is None:
                 continue
-            last = beats.get(slot.index)
-            starting = last is None or last < slot.started_wall  # no beat since it was started
-            silent = (
-                (now - slot.started > settings.PITLANE_ROLLOUT_STARTUP)
-                if starting
-                else (wall - last > settings.PITLANE_ROLLOUT_SILENCE)
-            )
-            if not silent:
-                continue
+            now, wall = time.monotonic(), time.time()
             if slot.replacements < REPLACEMENTS:
                 slot.replacements += 1
                 slot.started, slot.started_wall = now, wall
                 jobs.log(
-                    self.job,
-                    f"Simulation worker {slot.index + 1} stopped answering; "
-                    "starting a replacement.",
+                    self.job, f"Simulation worker {slot.index + 1} {why}; starting a replacement.",
                     "warning",
-                )
+                )  # fmt: skip
                 self.start_rollouts(self.job, slot)
             else:
                 slot.gone = True
@@ -692,6 +724,24 @@ def training_trace(episodes: list[Episode], *, before: int) -> str:
         if len(row) == 19
     ]
     return to_csv(rows)
+
+
+def _why_dead(slot: Slot, beats: dict[int, float], takings: dict[int, float], queued) -> str | None:
+    """Why the rollout of ``slot`` is taken for dead, in the racer's words; None while it lives
+    or waits (``Trainer._watch_workers`` says when). ``beats`` and ``takings`` are the slots'
+    last beats and takes [s since the epoch]; ``queued()`` the slots whose task waits in the
+    broker's queue, read only for a rollout that has waited past its startup bound."""
+    wall = time.time()
+    last, taken = beats.get(slot.index, 0.0), takings.get(slot.index, 0.0)
+    if last >= slot.started_wall:  # driving
+        return "stopped answering" if wall - last > settings.PITLANE_ROLLOUT_SILENCE else None
+    if taken >= slot.started_wall:  # starting
+        late = wall - taken > settings.PITLANE_ROLLOUT_STARTUP
+        return "stopped answering as it started" if late else None
+    waited = time.monotonic() - slot.started > settings.PITLANE_ROLLOUT_STARTUP
+    if waited and slot.index not in queued():
+        return "was lost from the queue before a simulation worker took it"
+    return None
 
 
 def _workers(count: int) -> str:
