@@ -24,6 +24,11 @@ MAX_STEERING = 30.0  # [deg]
 SPEED_RANGE = (0.1, 4.0)  # [m/s]
 MAX_OBJECTS = 6
 BOT_SPEED_RANGE = (0.2, 6.0)  # [m/s]
+# Resets an evaluation's episode may use before it ends. DeepRacer for Cloud sets 100
+# (defaults/template-run.env:12, DR_EVAL_MAX_RESETS, 2eb1a1f); 10,000 is past what an episode
+# of max_steps could use.
+DEFAULT_MAX_RESETS = 100
+MAX_RESETS = 10_000
 
 DEFAULT_ACTION_SPACE = tuple(
     {"steering_angle": float(steering), "speed": speed}

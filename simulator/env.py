@@ -97,12 +97,17 @@ class DeepRacerEnv(gym.Env):
     (time_up). In evaluation, going off track or crashing freezes the car for the penalty while the
     clock runs (status ``pause``) and then puts it back on the centre line at its last progress;
     reversing or being immobilized puts it back without a penalty. Lap times include penalties.
+    With ``max_resets``, the episode ends (terminated, with the status that would have reset it)
+    when the car would be put back more than ``max_resets`` times: 0 ends it at the first, as
+    DeepRacer's evaluation does with NUMBER_OF_RESETS (simapp rollout_agent_ctrl.py:1042-1053,
+    its count cleared per episode at :1076, 01f5f01); None puts it back for ever.
 
     **Arguments**: ``track`` (a built-in name or a DeepRacer ``.npy`` path), ``direction``,
     ``sensors``, ``action_space``, ``race_type``, ``objects`` ({count, randomize}), ``bots``
     ({count, speed, lane_changes}), ``mode``, ``laps``, ``penalties`` ({off_track, crash} in
-    seconds), ``start`` (fraction of the lap), ``reward_fn``, ``seed``, ``render_mode``
-    ("rgb_array": the 640 x 480 spectator view), ``car`` (a ``CarSpec``), ``car_colour`` (BGR).
+    seconds), ``max_resets``, ``start`` (fraction of the lap), ``reward_fn``, ``seed``,
+    ``render_mode`` ("rgb_array": the 640 x 480 spectator view), ``car`` (a ``CarSpec``),
+    ``car_colour`` (BGR).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
@@ -119,6 +124,7 @@ class DeepRacerEnv(gym.Env):
         mode: str = "training",
         laps: int = 3,
         penalties: dict | None = None,
+        max_resets: int | None = None,
         start: float = 0.0,
         reward_fn: Callable[[dict], float] | None = None,
         seed: int | None = None,
@@ -142,6 +148,8 @@ class DeepRacerEnv(gym.Env):
         self.mode = config.choice("The mode", mode, config.MODES)
         self.laps = config.positive_int("The number of laps", laps, 1, 100)
         self.penalties = config.penalties(penalties)
+        self.max_resets = None if max_resets is None else config.positive_int(
+            "The number of resets", max_resets, 0, config.MAX_RESETS)  # fmt: skip
         self.start = config.fraction("The start", start)
         self.reward_fn = reward_fn or follow_centre_line
         if render_mode not in (None, "rgb_array"):
@@ -328,14 +336,22 @@ class DeepRacerEnv(gym.Env):
             self._lap_finished = True
         elif status in ("off_track", "crashed"):
             self.counts["off_tracks" if status == "off_track" else "crashes"] += 1
+            if self._out_of_resets():
+                return True, False
             seconds = self.penalties.off_track if status == "off_track" else self.penalties.crash
             self._pause_left = round(seconds / self.dt)
             if self._pause_left == 0:
                 self._put_back()
         elif status in ("reversed", "immobilized"):
             self.counts[status] += 1
+            if self._out_of_resets():
+                return True, False
             self._put_back()
         return False, truncated
+
+    def _out_of_resets(self) -> bool:
+        """Whether the episode has used the resets ``max_resets`` allows."""
+        return self.max_resets is not None and self.counts["resets"] >= self.max_resets
 
     def _paused_step(self):
         """A step frozen by a penalty: the clock runs, the car waits, then goes back on track."""

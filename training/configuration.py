@@ -276,6 +276,12 @@ def check_evaluation(settings: dict, *, model: RLModel) -> dict:
             what = name.replace("_", " ").capitalize()
             errors[name] = f"{what} is 0 to {PENALTY_MAX:g} seconds."
         clean[name] = value
+    resets = settings.get("max_resets", sim.DEFAULT_MAX_RESETS)
+    if resets is not None:  # None: the car is put back for as long as the trial lasts
+        resets = _integer(resets)
+        if resets is None or not 0 <= resets <= sim.MAX_RESETS:
+            errors["max_resets"] = f"Resets allowed is a whole number from 0 to {sim.MAX_RESETS:,}."
+    clean["max_resets"] = resets
     checkpoint = settings.get("checkpoint") or "best"
     if checkpoint not in ("best", "last"):
         errors["checkpoint"] = "Evaluate the best or the last checkpoint."

@@ -262,9 +262,11 @@ class Evaluator:
                 env, policy, "evaluate", record=False, seed=number,
                 on_reset=self._started, on_step=self._stepped,
             )  # fmt: skip
-            if driven.truncated and len(self.results) < evaluation.trials:
+            status = "time_up" if driven.truncated else driven.info["status"]
+            if status != "lap_complete" and len(self.results) < evaluation.trials:
+                # Out of time, or out of resets (``max_resets``): the part of a lap it drove.
                 seconds = self._unwrapped.sim_time - self._counts.started
-                self._record(self._unwrapped, driven.info, self._counts, seconds, completed=False)
+                self._record(self._unwrapped, driven.info, self._counts, seconds, status=status)
 
     def _started(self, observation: dict, info: dict) -> None:
         # Trace rows are numbered by trials done, so each lap of continuous laps is its own
@@ -297,7 +299,9 @@ class Evaluator:
         while len(info["lap_times"]) > self._laps_done:
             self._laps_done += 1
             lap_time = info["lap_times"][self._laps_done - 1]
-            self._counts = self._record(unwrapped, info, self._counts, lap_time, completed=True)
+            self._counts = self._record(
+                unwrapped, info, self._counts, lap_time, status="lap_complete"
+            )
 
     def _look_for_stop(self) -> None:
         """``_StopAsked`` once the racer has asked to stop (looked for twice a second)."""
@@ -342,13 +346,12 @@ class Evaluator:
             ))  # fmt: skip
 
     def _record(
-        self, env, info: dict, before: LapCounts, seconds: float, *, completed: bool
+        self, env, info: dict, before: LapCounts, seconds: float, *, status: str
     ) -> LapCounts:
-        """The trial that just ended (a lap, or the part of one driven before time ran out);
-        the counts the next trial starts from."""
+        """The trial that just ended with ``status``: a lap, or the part of one driven before
+        time or resets ran out; the counts the next trial starts from."""
         evaluation = self.evaluation
         now = env.counts
-        status = "lap_complete" if completed else "time_up"
         off_tracks = now["off_tracks"] - before.off_tracks
         crashes = now["crashes"] - before.crashes
         trial = EvaluationTrial.objects.create(

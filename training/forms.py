@@ -653,6 +653,14 @@ class EvaluationForm(TrackAndRaceFields):
         widget=forms.NumberInput(attrs={"step": "0.1"}),
         help_text="The same, after hitting a box or a bot car. " + range_help(0, 10, 5),
     )  # fmt: skip
+    max_resets = forms.IntegerField(
+        label="Resets allowed", min_value=0, max_value=sim.MAX_RESETS,
+        initial=sim.DEFAULT_MAX_RESETS, required=False,
+        help_text="Each time the car leaves the track, crashes, turns back or gets stuck, it is "
+        "put back on the track; after this many, its trial ends where it is. 0 ends it at the "
+        f"first; empty, never. Range 0-{sim.MAX_RESETS:,}, default {sim.DEFAULT_MAX_RESETS} "
+        "(DeepRacer for Cloud's DR_EVAL_MAX_RESETS).",
+    )  # fmt: skip
     checkpoint = forms.ChoiceField(
         choices=EvaluationJob.Checkpoint.choices, initial=EvaluationJob.Checkpoint.BEST,
         widget=forms.RadioSelect,
@@ -671,5 +679,5 @@ class EvaluationForm(TrackAndRaceFields):
         return {
             **self.race_settings(),
             **{name: data[name] for name in ("trials", "continuous_laps", "off_track_penalty",
-                                             "crash_penalty", "checkpoint")},
+                                             "crash_penalty", "max_resets", "checkpoint")},
         }  # fmt: skip

@@ -472,6 +472,11 @@ class EvaluationJob(RaceConditions):
     )
     off_track_penalty = models.FloatField("off-track penalty [s]", default=2.0)
     crash_penalty = models.FloatField("crash penalty [s]", default=5.0)
+    max_resets = models.PositiveSmallIntegerField(
+        "resets allowed", null=True, blank=True,
+        help_text="Times the car may be put back on the track before its trial ends there "
+        "(DeepRacer for Cloud's DR_EVAL_MAX_RESETS); empty: no limit, as in a race.",
+    )  # fmt: skip
     checkpoint = models.CharField(max_length=8, choices=Checkpoint.choices, default=Checkpoint.BEST)
     checkpoint_name = models.CharField(max_length=255, blank=True, help_text="The weights used.")
     checkpoint_iteration = models.PositiveIntegerField(
@@ -523,6 +528,7 @@ class EvaluationJob(RaceConditions):
             "mode": "evaluation",
             "laps": self.laps,
             "penalties": {"off_track": self.off_track_penalty, "crash": self.crash_penalty},
+            "max_resets": self.max_resets,
         }
 
 

@@ -280,6 +280,19 @@ def test_an_evaluation_penalty_freezes_the_car_then_puts_it_back(environments):
     assert lap > env.unwrapped.track.length / 1.0 + 2.0
 
 
+def test_an_evaluation_episode_ends_where_the_car_would_be_put_back_once_too_often(environments):
+    env = environments(track="pitlane-oval", mode="evaluation", laps=1, max_resets=1,
+                       penalties={"off_track": 0.0, "crash": 0.0})  # fmt: skip
+    env.reset(seed=0)
+    drive(env, steps=20)
+    put_back = drive(env, head_for_the_border(env), until="off_track")
+    assert put_back[-1]["resets"] == 1 and not put_back[-1]["trace"].done
+    ended = drive(env, head_for_the_border(env), until="off_track")
+    assert ended[-1]["status"] == "off_track" and ended[-1]["trace"].done
+    assert ended[-1]["resets"] == 1 and ended[-1]["off_tracks"] == 2
+    assert not ended[-1]["lap_times"] and 0 < ended[-1]["progress"] < 100
+
+
 def test_the_training_start_advances_five_percent_each_episode(environments):
     env = environments(track="pitlane-oval", start=0.1)
     length = env.unwrapped.track.length

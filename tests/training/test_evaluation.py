@@ -101,6 +101,22 @@ def test_the_evaluate_command_prints_the_results_and_records_every_step(alice, c
 
 
 @pytest.mark.django_db
+def test_a_trial_out_of_resets_ends_where_the_car_left_the_track(alice, capsys):
+    model = ready_model(alice)  # straight ahead: off at the first bend
+    call_command("evaluate", model.name, "--track", "pitlane-oval", "--max-resets", "0")
+    evaluation = EvaluationJob.objects.get(model=model)
+    assert evaluation.status == EvaluationJob.Status.COMPLETED and evaluation.max_resets == 0
+    trials = list(evaluation.trial_rows.all())
+    assert len(trials) == 3
+    for trial in trials:
+        assert trial.status == "off_track" and trial.status_display == "Off track"
+        assert 0 < trial.progress < 100 and trial.off_tracks == 1 and trial.resets == 0
+    metrics = json.loads(stored(evaluation, METRICS))["metrics"]
+    assert {m["episode_status"] for m in metrics} == {"Off track"}
+    assert evaluation.best_lap_ms is None
+
+
+@pytest.mark.django_db
 def test_the_evaluate_command_says_what_is_wrong(alice):
     model = ready_model(alice)
     with pytest.raises(CommandError, match="3 to 5 trials"):
@@ -122,11 +138,14 @@ def test_evaluation_settings_are_checked_as_a_whole(alice):
             settings={
                 "track": "nowhere", "trials": 2, "off_track_penalty": -1,
                 "crash_penalty": "a lot", "checkpoint": "first", "race_type": "DRAG_RACE",
+                "max_resets": -1,
             },
         )  # fmt: skip
     assert set(invalid.value.errors) == {
         "track", "trials", "off_track_penalty", "crash_penalty", "checkpoint", "race_type",
+        "max_resets",
     }  # fmt: skip
+    assert "0 to 10,000" in invalid.value.errors["max_resets"]
     assert not EvaluationJob.objects.exists()
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
 

@@ -2,6 +2,7 @@ from django.core.management.base import BaseCommand, CommandError
 
 from common.formatting import laptime
 from common.refusals import Refused
+from simulator import config as sim
 from training import evaluation, services
 from training.management.lookup import find_model
 from training.models import EvaluationJob
@@ -29,6 +30,10 @@ class Command(BaseCommand):
         parser.add_argument("--continuous", action="store_true", help="consecutive laps")
         parser.add_argument("--off-track-penalty", type=float, default=2.0, help="[s]")
         parser.add_argument("--crash-penalty", type=float, default=5.0, help="[s]")
+        parser.add_argument(
+            "--max-resets", type=int, default=sim.DEFAULT_MAX_RESETS,
+            help="resets a trial may use before it ends (default 100; -1: no limit)",
+        )  # fmt: skip
         parser.add_argument("--checkpoint", choices=["best", "last"], default="best")
 
     def handle(self, *args, **options) -> None:
@@ -39,6 +44,7 @@ class Command(BaseCommand):
             "continuous_laps": options["continuous"],
             "off_track_penalty": options["off_track_penalty"],
             "crash_penalty": options["crash_penalty"],
+            "max_resets": None if options["max_resets"] == -1 else options["max_resets"],
             "checkpoint": options["checkpoint"],
         }
         if options["track"]:
