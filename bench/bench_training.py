@@ -108,13 +108,13 @@ def reward_function(params):
 REWARDS = {"road-ahead": FAST_REWARD, "steady": STEADY_REWARD, "aligned": ALIGNED_REWARD}
 
 
-def bench_racer():
-    """The benchmarks' racer, with a quota no benchmark reaches."""
+def bench_racer(name: str = "bench"):
+    """A benchmark's racer, with a quota no benchmark reaches."""
     from django.contrib.auth.models import User
 
     from training.models import Quota
 
-    owner = User.objects.create_user("bench", password="bench-password-1")  # noqa: S106
+    owner = User.objects.create_user(name, password="bench-password-1")  # noqa: S106
     Quota.objects.create(racer=owner, max_models=1_000, max_minutes_per_month=1_000_000)
     return owner
 

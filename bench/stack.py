@@ -39,9 +39,10 @@ def free_port() -> int:
 
 
 @contextlib.contextmanager
-def running_console(concurrency: int = 2) -> Iterator[dict]:
-    """Serve the console (its own Redis, one Celery worker, Daphne) until the block ends; yields
-    {"url", "var_dir", "ready_seconds", "env"}; ``env`` points Django at the same database."""
+def running_console(concurrency: int = 2, settings: dict[str, str] | None = None) -> Iterator[dict]:
+    """Serve the console (its own Redis, a Celery worker per queue, Daphne) until the block ends;
+    yields {"url", "var_dir", "ready_seconds", "env"}; ``env`` points Django at the same database.
+    ``settings``: more environment variables for the console (``PITLANE_TRAINERS``, a rate)."""
     with _sigterm_exits(), tempfile.TemporaryDirectory(prefix="pitlane-bench-") as var_dir:
         port = free_port()
         env = {k: v for k, v in os.environ.items() if not k.startswith(("DJANGO_", "PITLANE_"))}
@@ -54,6 +55,7 @@ def running_console(concurrency: int = 2) -> Iterator[dict]:
             PITLANE_WORKER_CONCURRENCY=str(concurrency),
             PYTHONUNBUFFERED="1",
         )
+        env.update(settings or {})
         started = time.perf_counter()
         console = subprocess.Popen(
             [sys.executable, "manage.py", "runconsole"],
