@@ -5,13 +5,27 @@ const root = document.querySelector("[data-submission-live]");
 const badge = document.querySelector("[data-submission-status]");
 const scheme = location.protocol === "https:" ? "wss" : "ws";
 const socket = new WebSocket(`${scheme}://${location.host}/ws/events/${root.dataset.event}/`);
-socket.addEventListener("open", () => {
+const ENDED = ["COMPLETED", "FAILED", "CANCELED"];
+
+function show(status, display) {
+  badge.textContent = display;
+  badge.className = `badge badge-${status.toLowerCase()}`;
+  if (ENDED.includes(status)) location.reload();
+}
+
+socket.addEventListener("open", async () => {
+  // The race may have moved on between this page being drawn and the socket opening (its
+  // updates went to nobody): read the status once more, now that no update can be missed.
+  const response = await fetch(location.href, { headers: { Accept: "text/html" } });
+  if (response.ok) {
+    const page = new DOMParser().parseFromString(await response.text(), "text/html");
+    const now = page.querySelector("[data-submission-status]");
+    if (now && now.dataset.submissionStatus) show(now.dataset.submissionStatus, now.textContent);
+  }
   root.dataset.listening = "true";
 });
 socket.addEventListener("message", (message) => {
   const update = JSON.parse(message.data);
   if (update.type !== "submission" || String(update.submission) !== root.dataset.submission) return;
-  badge.textContent = update.status_display;
-  badge.className = `badge badge-${update.status.toLowerCase()}`;
-  if (["COMPLETED", "FAILED", "CANCELED"].includes(update.status)) location.reload();
+  show(update.status, update.status_display);
 });

@@ -79,3 +79,45 @@ def test_the_submission_page_follows_its_race_and_then_shows_the_score(page: Pag
     expect(badge).to_have_text("Completed")  # the page reloaded with the result
     expect(page.get_by_text("Qualified")).to_be_visible()
     expect(page.locator("table")).to_contain_text("0:12.345")
+
+
+# The page's websocket connects only when the test says so: what happens between the page being
+# drawn and its socket opening can then be staged.
+HELD_SOCKETS = """
+const Real = window.WebSocket;
+const held = [];
+window.WebSocket = class extends EventTarget {
+  constructor(url) {
+    super();
+    held.push(() => {
+      const socket = new Real(url);
+      for (const type of ["open", "message", "close", "error"]) {
+        const relay = (event) => this.dispatchEvent(new event.constructor(type, event));
+        socket.addEventListener(type, relay);
+      }
+    });
+  }
+};
+window.openHeldSockets = () => held.splice(0).forEach((open) => open());
+"""
+
+
+def test_the_submission_page_catches_up_with_a_race_that_moved_on_while_it_opened(
+    page: Page, alice, tracks
+):
+    model = ready_model(alice)
+    trial = event(laps_required=1, laps_to_drive=1)
+    submission = Submission.objects.create(
+        event=trial, racer=alice, model=model, model_name=model.name,
+        evaluation=race_evaluation(model, trial),
+    )  # fmt: skip
+    log_in(page, "alice", PASSWORD)
+    page.add_init_script(HELD_SOCKETS)
+    page.goto(submission.get_absolute_url())
+    badge = page.locator("[data-submission-status]")
+    expect(badge).to_have_text("Queued")
+    # The race starts, and says so to nobody, before the page's socket opens.
+    Submission.objects.filter(pk=submission.pk).update(status=Submission.Status.IN_PROGRESS)
+    page.evaluate("openHeldSockets()")
+    expect(page.locator("[data-submission-live]")).to_have_attribute("data-listening", "true")
+    expect(badge).to_have_text("In progress")
