@@ -50,6 +50,12 @@ REPLACEMENTS = 2  # per worker slot, before the job carries on without it
 REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
 MAX_PRINTED_LINES = 20_000  # reward function and worker lines a job's log keeps, in all
 WAITING_FOR_WORKER = "Waiting for a free simulation worker; the clock starts when the car drives"
+WORKER_PATIENCE = 30 * 60  # [s] a job waits for its first simulation worker, unbilled
+NO_WORKER = (
+    f"No simulation worker took this job's rollouts in {WORKER_PATIENCE // 60} minutes: they "
+    "were all busy, or none serves the simulation queue. You were not billed for the wait; "
+    "start the training again later."
+)
 
 
 class JobFailed(Exception):
@@ -123,6 +129,7 @@ class Trainer:
         self.evaluations: dict[int, list[dict]] = {}  # version: the results come so far
         self.best: tuple[float, int] | None = None  # (evaluation completion, iteration)
         self.session_started: float | None = None  # when this run's clock started [monotonic]
+        self.waiting_since = time.monotonic()  # for its first simulation worker
         self.first_run = job.started_at is None
         self.base_seconds = job.training_seconds  # the time used before this run
         self.ending: str | None = None  # why the loop ends: "stop" or "limit"
@@ -152,6 +159,7 @@ class Trainer:
         self._publish()
         for slot in self.slots:
             self.start_rollouts(job, slot)
+        self.waiting_since = time.monotonic()
         self.training_message = f"Training with {_workers(len(self.slots))} on {self._tracks()}"
         self.base_seconds = job.training_seconds
         waiting = jobs.clock_write(job, self.base_seconds, message=WAITING_FOR_WORKER)
@@ -524,7 +532,13 @@ class Trainer:
         - starting: a worker took it (``JobChannel.take``) and loads the simulator and the
           sandbox; dead when it has not beaten ``PITLANE_ROLLOUT_STARTUP`` after that.
         - driving: it beats; dead when silent ``PITLANE_ROLLOUT_SILENCE``.
+
+        A job none of whose rollouts has driven ``WORKER_PATIENCE`` after they were sent fails,
+        unbilled, rather than hold its trainer for ever (trainers and rollouts sharing one pool
+        that the trainers fill; no worker serving the simulation queue).
         """
+        if self.session_started is None and time.monotonic() - self.waiting_since > WORKER_PATIENCE:
+            raise JobFailed(NO_WORKER)
         beats, takings = self.channel.heartbeats(), self.channel.takings()
         queued = functools.cache(lambda: self.queued_rollouts(self.job) or set())  # read once
         for slot in self.slots:

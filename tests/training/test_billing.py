@@ -127,3 +127,16 @@ def test_the_broker_says_which_of_a_jobs_rollouts_wait_in_its_queue(monkeypatch)
             channel = connection.default_channel
             channel.client.delete(*(channel._q_for_pri(queue, p) for p in channel.priority_steps))
     assert found == {1}  # not an earlier attempt's, nor another job's
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_job_no_simulation_worker_takes_fails_unbilled_rather_than_hold_its_trainer(
+    alice, tracks, monkeypatch
+):
+    job = queued_job(alice)
+    monkeypatch.setattr(trainer, "WORKER_PATIENCE", 0)  # 30 minutes, as far as the job can tell
+    assert trainer.run(job.pk, owner="test-billing", start_rollouts=lambda job, slot: None)
+    job = reload(job)
+    assert job.status == TrainingJob.Status.FAILED
+    assert job.failure_reason == trainer.NO_WORKER
+    assert (job.training_seconds, job.iterations) == (0, 0)
