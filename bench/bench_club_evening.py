@@ -30,6 +30,7 @@ import argparse
 import math
 import os
 import statistics
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -331,8 +332,9 @@ class Evening:
 
     # The figures
 
-    def report(self, finished: bool) -> None:
-        trained = self._jobs_table(finished)
+    def report(self, unfinished: str | None) -> None:
+        """The figures; ``unfinished``: why the evening ended early, if it did."""
+        trained = self._jobs_table(unfinished)
         print(f"\nValidate, flooders (all {len(self.flooders)}): {self.flood.line()}")
         print(f"Validate, the bystander: {self.bystander.line()}")
         print(f"Home page, the bystander: {self.home.line()}")
@@ -354,13 +356,13 @@ class Evening:
             f"re-scoring ran was taken up within {EVALUATION_WAIT_TARGET:g} s"
         )
 
-    def _jobs_table(self, finished: bool) -> bool:
+    def _jobs_table(self, unfinished: str | None) -> bool:
         from bench.bench_training import job_of
         from training.models import Iteration
 
         print(f"\n{'job':<14}{'queue wait':>11}{'training':>10}{'iterations':>11}{'steps':>8}"
               f"{'steps/s':>9}  status")  # fmt: skip
-        healthy = finished
+        healthy = unfinished is None
         for model in self.models:
             job = job_of(model)
             rows = Iteration.objects.filter(job=job)
@@ -371,8 +373,8 @@ class Evening:
             print(f"{model.owner.username:<14}{wait:>11}{clock(job.training_seconds):>10}"
                   f"{job.iterations:>11}{job.steps:>8}{rate}  {job.status}{reason}")  # fmt: skip
             healthy &= job.status == "COMPLETED" and job.iterations > 0
-        if not finished:
-            print("Given up after --patience: the jobs not completed above waited or trained on.")
+        if unfinished:
+            print(f"{unfinished}: the jobs not completed above waited or trained on.")
         return healthy
 
     def _evaluations_table(self) -> str:
@@ -481,12 +483,14 @@ def main() -> None:
             flush=True,
         )
         evening = Evening(console["url"], arguments)
-        finished = False
         try:
-            finished = evening.run()
+            unfinished = None if evening.run() else "Given up after --patience"
         except KeyboardInterrupt:
+            unfinished = "Interrupted"
             print("\nInterrupted: the figures so far.")
-        evening.report(finished)
+        evening.report(unfinished)
+    if unfinished == "Interrupted":
+        sys.exit(130)
 
 
 if __name__ == "__main__":
