@@ -23,6 +23,7 @@ from django.utils.crypto import get_random_string
 from django.utils.text import slugify
 
 from common.refusals import Refused
+from common.transactions import outside_transaction
 from notifications import services as notifications
 from racing import live, scoring, selectors, tasks
 from racing.models import (
@@ -194,6 +195,7 @@ def _keep_video(submission: Submission, video: str) -> str:
     model (and its evaluations) are deleted."""
     if not video or not default_storage.exists(video):
         return ""
+    outside_transaction("A race's video copied in storage")
     name = f"league/submissions/{submission.pk}/{VIDEO}"
     if default_storage.exists(name):
         default_storage.delete(name)

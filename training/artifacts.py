@@ -11,6 +11,7 @@ from django.core.files.base import ContentFile
 from django.core.files.storage import FileSystemStorage, default_storage
 from django.http import FileResponse, HttpResponse, HttpResponseRedirect
 
+from common.transactions import outside_transaction
 from rl.hyperparameters import deepracer_json
 from training.models import EvaluationJob, RLModel
 
@@ -79,7 +80,9 @@ def path(model: RLModel, relative: str) -> str:
 
 
 def save(model: RLModel, relative: str, data: bytes | str) -> str:
-    """Write ``data`` at ``relative`` under the model's prefix, replacing what was there."""
+    """Write ``data`` at ``relative`` under the model's prefix, replacing what was there; never
+    inside a transaction (a checkpoint may be hundreds of MiB, to a bucket)."""
+    outside_transaction("A file written to storage")
     name = path(model, relative)
     if default_storage.exists(name):
         default_storage.delete(name)
@@ -113,7 +116,9 @@ def download(
 
 
 def delete_all(model: RLModel) -> int:
-    """Delete every stored object under the model's prefix; how many there were."""
+    """Delete every stored object under the model's prefix; how many there were. Never inside a
+    transaction (a bucket's listing and deletes are requests)."""
+    outside_transaction("Files deleted from storage")
     return _delete_tree(path(model, "").rstrip("/"))
 
 

@@ -45,6 +45,7 @@ from django.core.files.storage import default_storage
 from django.db.models import Sum
 
 from common.refusals import Refused
+from common.transactions import outside_transaction
 from rl import hyperparameters
 from training import artifacts, history, logs_archive, selectors
 from training.models import RLModel
@@ -241,6 +242,7 @@ def _json(document: dict) -> bytes:
 
 def _store(name: str, members: dict[str, bytes]) -> None:
     """A gzipped tar of ``members`` (relative name: bytes) saved in storage at ``name``."""
+    outside_transaction("An export written to storage")
     with tempfile.SpooledTemporaryFile(max_size=16 * 1024 * 1024) as spool:
         with tarfile.open(fileobj=spool, mode="w:gz") as archive:
             for relative, data in members.items():

@@ -44,10 +44,20 @@ from safetensors import SafetensorError
 
 from common import documents
 from common.refusals import Refused
+from common.transactions import outside_transaction
 from rl import hyperparameters, tfcheckpoint, tfgraph
 from simulator import config as sim
 from simulator import tracks as sim_tracks
-from training import artifacts, configuration, exports, history, jobs, rewards, services
+from training import (
+    artifacts,
+    configuration,
+    exports,
+    history,
+    jobs,
+    lifecycle,
+    rewards,
+    services,
+)
 from training.models import (
     Algorithm,
     Network,
@@ -382,6 +392,7 @@ class KeptUpload:
 def upload_keep(*, session: SessionBase, upload: UploadedFile) -> KeptUpload:
     """Keep ``upload`` for the racer's next attempt (replacing one kept before); kept archives
     older than ``KEPT_FOR`` are deleted on the way, whoever left them."""
+    outside_transaction("An uploaded archive kept in storage")
     upload_discard(session=session)
     _delete_stale_uploads()
     token = secrets.token_urlsafe(16)
@@ -1118,28 +1129,45 @@ def _import_trained(
     last = weights.get(CHECKPOINTS[1]) or best
     with transaction.atomic():
         services.check_quota(owner=owner, minutes=0)
-        model = services.model_insert(owner=owner, settings=checked, status=RLModel.Status.READY)
-        try:
-            artifacts.write_model_files(model)
-            exact, notes = _exact_history(members)
-            best_name, last_name = _checkpoints_save(model, best, last, exact)
+        model = services.model_insert(
+            owner=owner, settings=checked, status=RLModel.Status.IMPORTING
+        )
+    # Its files are written outside any transaction (the weights may be hundreds of MiB), the
+    # model IMPORTING meanwhile, its row holding the racer's quota; it is READY, with its job,
+    # only once they are all stored, and gone with them where they cannot be.
+    try:
+        artifacts.write_model_files(model)
+        exact, notes = _exact_history(members)
+        best_name, last_name = _checkpoints_save(model, best, last, exact)
+        with transaction.atomic():
             job = TrainingJob.objects.create(
                 model=model, status=TrainingJob.Status.COMPLETED, weights_version=1,
                 best_checkpoint=best_name, last_checkpoint=last_name, lease_owner=jobs.IMPORTED,
                 message="Imported with its weights.",
             )  # fmt: skip
             history_notes, metrics = _import_history(model, job, members, ours, exact)
-        except BaseException:
-            artifacts.delete_all(model)
-            raise
-    # The model's row is committed (and the racer's quota unlocked) before the history's files,
-    # up to 1000 traces, are written: a failure there is a note, not a refused import.
+            lifecycle.MODEL.move(model, RLModel.Status.READY)
+    except BaseException:
+        _import_undo(model)
+        raise
+    # The model is READY before the history's files, up to 1000 traces, are written: a failure
+    # there is a note, not a refused import.
     return Imported(
         model,
         notes
         + history_notes
         + _history_files_save(model, metrics, members, iterations=job.iterations),
     )
+
+
+def _import_undo(model: RLModel) -> None:
+    """Take back an import that failed while its files were stored: its files, then its row
+    (a failed delete leaves files under the deleted model's prefix, never a row without them)."""
+    try:
+        artifacts.delete_all(model)
+    except Exception:
+        logger.exception("Import of model %s failed; its files could not all be deleted", model.pk)
+    model.delete()
 
 
 def _exact_history(members: Members) -> tuple[history.Exact | None, list[str]]:

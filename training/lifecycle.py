@@ -80,8 +80,9 @@ MODEL = Lifecycle(
         _M.DELETING: frozenset({_M.READY, _M.ERROR}),
         _M.IMPORTING: frozenset({_M.READY, _M.ERROR}),
     },
-    # A new model queued for training, an import with its weights.
-    born=frozenset({_M.QUEUED, _M.READY}),
+    # A new model queued for training; an import with its weights, IMPORTING while they are
+    # stored (outside the transaction that inserted its row), then READY.
+    born=frozenset({_M.QUEUED, _M.IMPORTING}),
 )
 
 _J = TrainingJob.Status

@@ -6,6 +6,7 @@ services: tracks, vehicles, models, clones, deletes, evaluations and reward func
 
 from __future__ import annotations
 
+import logging
 import re
 
 from django.conf import settings as django_settings
@@ -14,7 +15,7 @@ from django.db import IntegrityError, transaction
 from django.utils import timezone
 
 from common.refusals import Refused
-from common.transactions import outside_transaction
+from common.transactions import SlowStepInTransaction, outside_transaction
 from simulator import tracks as simulator_tracks
 from training import artifacts, configuration, jobs, lifecycle, live, rewards, selectors, tasks
 from training.models import (
@@ -27,6 +28,8 @@ from training.models import (
     TrainingJob,
     Vehicle,
 )
+
+logger = logging.getLogger(__name__)
 
 
 @transaction.atomic
@@ -250,14 +253,68 @@ def model_create(
     """Check every setting (``configuration.Invalid`` lists the problems), then save the model and
     its training job, QUEUED; the trainer task is enqueued once both are committed. A clone
     (``cloned_from``: the racer's own READY model) gets a copy of its source's best weights, which
-    its training starts from. ``validation``: the reward function's, already found by a checker
+    its training starts from: copied after the rows are committed, before its trainer is sent
+    (``clone_weights_copy``). ``validation``: the reward function's, already found by a checker
     (see ``configuration.check``); without it, the reward function is validated here, in the
     sandbox, before the transaction that saves opens, so no other writer waits on it (SQLite
-    takes its write lock when the transaction begins)."""
+    takes its write lock when the transaction begins); the copy waits for no transaction either."""
     if validation is None and validate_reward:
         validation = _reward_validation(settings)
     with transaction.atomic():
-        return _model_save(owner, settings, validate_reward, validation)
+        model, job = _model_save(owner, settings, validate_reward, validation)
+    if model.cloned_from_id is not None and not _clone_weights_start(job):
+        return model
+    # A send that fails (the broker unreachable) is logged, not the racer's error: the
+    # workers send a queued task that is not in the broker again (tasks.resend_lost).
+    transaction.on_commit(lambda: tasks.train.delay(job.pk), robust=True)
+    return model
+
+
+CLONE_COPY_FAILED = (
+    "The weights of the model it was cloned from could not be copied ({why}), so it did not "
+    "start training; delete it and clone that model again."
+)
+
+
+def clone_weights_copy(*, model: RLModel) -> bool:
+    """Copy the clone ``model``'s starting weights, its source's best trained checkpoint, to
+    where its training starts from (``artifacts.CLONED_WEIGHTS``): file work (a checkpoint may
+    be hundreds of MiB), so never inside a transaction. False when the source has none (it was
+    deleted). ``model_create`` copies them; a trainer that finds no copy (its request died before
+    it made one) makes it."""
+    source = RLModel.objects.filter(pk=model.cloned_from_id).first()
+    weights = selectors.model_trained_checkpoint(model=source) if source is not None else None
+    if weights is None:
+        return False
+    artifacts.save(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))
+    return True
+
+
+def _clone_weights_start(job: TrainingJob) -> bool:
+    """Copy a new clone's starting weights; whether its trainer may be sent. Where they cannot
+    be copied, its job fails in words and the model is ERROR, for the racer to delete."""
+    try:
+        if clone_weights_copy(model=job.model):
+            return True
+        why = "that model was deleted"
+    except SlowStepInTransaction:
+        raise
+    except Exception:
+        logger.exception("The clone %s's starting weights could not be copied", job.model_id)
+        why = "storage failed"
+    with transaction.atomic():
+        locked = TrainingJob.objects.select_for_update().get(pk=job.pk)
+        if locked.status != TrainingJob.Status.QUEUED or locked.attempt:
+            return False  # stopped by the racer meanwhile, or taken by a trainer, which copies
+        lifecycle.TRAINING_JOB.move(locked, TrainingJob.Status.STOPPING)
+        lifecycle.TRAINING_JOB.move(
+            locked, TrainingJob.Status.FAILED, finished_at=timezone.now(), lease_expires=None,
+            failure_reason=CLONE_COPY_FAILED.format(why=why),
+        )  # fmt: skip
+        lifecycle.MODEL.move(job.model_id, RLModel.Status.ERROR)
+    live.announce_training(job.pk)
+    live.announce_queue()
+    return False
 
 
 def model_insert(
@@ -290,7 +347,7 @@ def _reward_validation(settings: configuration.Draft) -> rewards.Validation | No
 def _model_save(
     owner: AbstractBaseUser, draft: configuration.Draft, validate_reward: bool,
     validation: rewards.Validation | None,
-) -> RLModel:  # fmt: skip
+) -> tuple[RLModel, TrainingJob]:  # fmt: skip
     settings = configuration.check(
         draft, owner=owner, validate_reward=validate_reward, validation=validation
     )
@@ -306,13 +363,12 @@ def _model_save(
     if source is not None:  # its weights are for its source's network
         settings = settings.replace(network_layout=source.network_layout)
     model = model_insert(owner=owner, settings=settings, status=RLModel.Status.QUEUED)
-    if weights is not None:
-        artifacts.save(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))
-    job = TrainingJob.objects.create(model=model)
-    # A send that fails (the broker unreachable) is logged, not the racer's error: the
-    # workers send a queued task that is not in the broker again (tasks.resend_lost).
-    transaction.on_commit(lambda: tasks.train.delay(job.pk), robust=True)
-    return model
+    if source is None:
+        return model, TrainingJob.objects.create(model=model)
+    # Its weights are copied once this commits: the send is held for a lease meanwhile, so
+    # tasks.resend_lost does not send its trainer before they are there.
+    held = {"lease_owner": jobs.RESUMING, "lease_expires": timezone.now() + jobs.lease()}
+    return model, TrainingJob.objects.create(model=model, **held)
 
 
 def training_stop(*, job: TrainingJob) -> TrainingJob:

@@ -37,7 +37,7 @@ from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stop
 from sandbox.protocol import unpack
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, jobs, lifecycle, live, signals
+from training import artifacts, jobs, lifecycle, live, services, signals
 from training.jobs import LeaseLost
 from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 
@@ -224,6 +224,8 @@ class Trainer:
             return
         artifacts.write_model_files(model)
         cloned = artifacts.path(model, artifacts.CLONED_WEIGHTS)
+        if model.cloned_from_id is not None and not default_storage.exists(cloned):
+            services.clone_weights_copy(model=model)  # its request died before it copied them
         if model.cloned_from_id is not None and default_storage.exists(cloned):
             self.learner.restore(artifacts.read(cloned))
             jobs.log(job, "Starting from the weights of the model this one was cloned from.")
@@ -381,6 +383,7 @@ class Trainer:
         self.version = number
         self._publish(evaluate=EVALUATION_EPISODES)
         self.stopwatch.charge(TRANSFER)
+        checkpoint = self._checkpoint(number)  # file work: before the transaction, not in it
         with transaction.atomic():
             row = Iteration.objects.create(
                 job=self.job,
@@ -396,7 +399,6 @@ class Trainer:
                     for e in episodes
                 ],
             )
-            checkpoint = self._checkpoint(number)
             jobs.write(
                 self.job,
                 weights_version=self.version,

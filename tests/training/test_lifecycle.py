@@ -24,7 +24,7 @@ Status = RLModel.Status
 Job = TrainingJob.Status
 
 LIFECYCLES = {
-    "model": (lifecycle.MODEL, {Status.IMPORTING}),  # no import waits half-done now
+    "model": (lifecycle.MODEL, set()),
     "training job": (lifecycle.TRAINING_JOB, set()),
     # the racer may stop an evaluation (stopping, then canceled); a race entry runs to its end
     "evaluation": (lifecycle.EVALUATION, set()),

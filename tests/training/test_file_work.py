@@ -1,0 +1,154 @@
+"""No file work inside a write transaction (issue 42, item 3): a clone's starting weights, an
+import's files and a trainer's checkpoints are written to storage with no transaction open, and a
+model row never points at files that are not there (a clone whose copy failed is ERROR, an
+import whose files failed leaves nothing)."""
+
+import io
+
+import pytest
+from django.core.files.storage import FileSystemStorage
+
+from common import transactions
+from rl.learner import Update
+from rl.stopwatch import Stopwatch
+from tests.training.factories import STRAIGHT_AHEAD, ready_model
+from tests.training.test_imports import stored_objects, virtual_archive
+from tests.training.test_training import settings as training_settings
+from training import artifacts, imports, jobs, services, trainer
+from training.models import RLModel, TrainingJob
+
+pytestmark = pytest.mark.django_db
+
+
+@pytest.fixture
+def storage_writes(monkeypatch) -> list[tuple[str, bool]]:
+    """Each file saved to or deleted from storage: (its name, whether a transaction of the
+    code's was open)."""
+    seen, save, delete = [], FileSystemStorage._save, FileSystemStorage.delete
+
+    def saved(storage, name, content):
+        seen.append((name, transactions.in_transaction()))
+        return save(storage, name, content)
+
+    def deleted(storage, name):
+        seen.append((name, transactions.in_transaction()))
+        return delete(storage, name)
+
+    monkeypatch.setattr(FileSystemStorage, "_save", saved)
+    monkeypatch.setattr(FileSystemStorage, "delete", deleted)
+    return seen
+
+
+def clone_of(source: RLModel) -> RLModel:
+    return services.model_create(
+        owner=source.owner, validate_reward=False,
+        settings=training_settings(name="clone", action_space=STRAIGHT_AHEAD, cloned_from=source),
+    )  # fmt: skip
+
+
+def test_a_clone_copies_its_sources_weights_after_its_rows_are_committed(
+    alice, tracks, storage_writes, django_capture_on_commit_callbacks
+):
+    source = ready_model(alice)
+    storage_writes.clear()
+    with django_capture_on_commit_callbacks() as sends:
+        clone = clone_of(source)
+    copy = artifacts.path(clone, artifacts.CLONED_WEIGHTS)
+    assert (copy, False) in storage_writes and not any(inside for _, inside in storage_writes)
+    assert artifacts.read(copy) == artifacts.read(source.jobs.get().best_checkpoint)
+    assert clone.status == RLModel.Status.QUEUED and len(sends) == 1  # its trainer, sent after
+
+
+def test_a_clone_whose_weights_cannot_be_copied_fails_in_words_and_its_source_stays(
+    alice, tracks, monkeypatch, django_capture_on_commit_callbacks
+):
+    source = ready_model(alice)
+    best = source.jobs.get().best_checkpoint
+
+    def storage_down(model, relative, data):
+        raise OSError("No space left on device")
+
+    monkeypatch.setattr(artifacts, "save", storage_down)
+    with django_capture_on_commit_callbacks() as sends:
+        clone = clone_of(source)
+    clone.refresh_from_db()
+    job = clone.jobs.get()
+    assert clone.status == RLModel.Status.ERROR and job.status == TrainingJob.Status.FAILED
+    assert job.failure_reason == (
+        "The weights of the model it was cloned from could not be copied (storage failed), so "
+        "it did not start training; delete it and clone that model again."
+    )
+    assert sends == []  # no trainer sent for it
+    assert RLModel.objects.get(pk=source.pk).status == RLModel.Status.READY
+    assert artifacts.read(best)
+
+
+def test_a_trainer_that_finds_no_copy_of_its_clones_weights_makes_it(alice, tracks, monkeypatch):
+    # The request that created the clone died before it copied them: the job, sent again by
+    # tasks.resend_lost, starts from the source's weights all the same.
+    source = ready_model(alice)
+    monkeypatch.setattr(services, "_clone_weights_start", lambda job: True)
+    clone = clone_of(source)
+    copy = artifacts.path(clone, artifacts.CLONED_WEIGHTS)
+    artifacts.default_storage.delete(copy)  # an earlier test's model of that id may have left one
+    run = trainer.Trainer(jobs.lease_acquire(job_id=clone.jobs.get().pk, owner="run"), None)
+    run._build_learner()
+    assert artifacts.read(copy) == artifacts.read(source.jobs.get().best_checkpoint)
+    assert run.job.log_lines.filter(text__startswith="Starting from the weights").exists()
+
+
+_ARCHIVES: list[bytes] = []
+
+
+def archive_of_a_ready_model(owner) -> bytes:
+    """A virtual model's download (the same bytes for every ``ready_model``): built once."""
+    if not _ARCHIVES:
+        _ARCHIVES.append(virtual_archive(ready_model(owner)))
+    return _ARCHIVES[0]
+
+
+def test_an_import_stores_its_files_outside_any_transaction(alice, bob, tracks, storage_writes):
+    archive = archive_of_a_ready_model(alice)
+    storage_writes.clear()
+    model = imports.import_model(owner=bob, archive=io.BytesIO(archive)).model
+    assert storage_writes and not any(inside for _, inside in storage_writes)
+    model.refresh_from_db()
+    assert model.status == RLModel.Status.READY
+    assert artifacts.read(model.jobs.get().best_checkpoint)
+
+
+def test_an_import_whose_files_cannot_be_stored_leaves_no_model_and_no_files(
+    alice, bob, tracks, monkeypatch, settings, tmp_path
+):
+    settings.MEDIA_ROOT = tmp_path  # its own: a model of an earlier test may have had bob's id
+    archive = archive_of_a_ready_model(alice)
+    before = stored_objects()
+    save = artifacts.save
+
+    def fails_at_the_weights(model, relative, data):
+        if relative.startswith("checkpoints/"):
+            raise OSError("No space left on device")
+        return save(model, relative, data)
+
+    monkeypatch.setattr(artifacts, "save", fails_at_the_weights)
+    with pytest.raises(OSError):
+        imports.import_model(owner=bob, archive=io.BytesIO(archive))
+    assert not RLModel.objects.filter(owner=bob).exists()
+    assert stored_objects() == before
+
+
+def test_a_trainer_saves_each_iterations_checkpoint_outside_its_transaction(
+    alice, tracks, storage_writes, monkeypatch
+):
+    model = services.model_create(owner=alice, settings=training_settings(), validate_reward=False)
+    run = trainer.Trainer(jobs.lease_acquire(job_id=model.jobs.get().pk, owner="run"), None)
+    run._build_learner()
+    run.version, run.stopwatch, run.training_message = 0, Stopwatch(), "Training"
+    learnt = Update(episodes=1, steps=10, reward=1.0, completion=5.0, best_lap_time=None)
+    monkeypatch.setattr(run.learner, "learn", lambda episodes, interrupted: learnt)
+    monkeypatch.setattr(run, "_record_training", lambda number, episodes: None)
+    storage_writes.clear()
+    assert run._update([])
+    checkpoint = artifacts.path(model, artifacts.checkpoint(1))
+    assert set(storage_writes) == {(checkpoint, False)}  # (a deletion of an earlier test's first)
+    assert TrainingJob.objects.get(pk=run.job.pk).last_checkpoint == checkpoint
