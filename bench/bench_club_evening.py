@@ -20,8 +20,10 @@ final status; each evaluation's wait and whether a re-scoring ran while it waite
 p50/p95 for the flooders and for the bystander; the home page's p50/p95; the re-scorings; and a
 PASS or FAIL line per target of the issue: no job fails or starves, the bystander's Validate
 answers within 10 s at p95 (a refused try counts as never answered), no evaluation waits behind a
-re-scoring. A short run: ``--racers 2 --minutes 1 --flooders 1``. Every process it started is
-stopped when it ends, fails or is interrupted (Ctrl-C, SIGTERM).
+re-scoring. A shorter evening: ``--racers 2 --flooders 1`` (about 15 minutes); with fewer
+``--minutes`` a job on a busy machine may be stopped before its first iteration, which counts as
+starving. Every process it started is stopped when it ends, fails or is interrupted (Ctrl-C,
+SIGTERM).
 """
 
 from __future__ import annotations
