@@ -109,7 +109,7 @@ class Supervisor:
             port=env.int("PITLANE_PORT", 8000, minimum=1, maximum=65535),
             var_dir=settings.VAR_DIR,
             local_redis_port=None if "REDIS_URL" in os.environ else settings.REDIS_PORT,
-            trainers=env.int("PITLANE_TRAINERS", 1, minimum=1),
+            trainers=settings.PITLANE_TRAINERS,
             concurrency=env.int(
                 "PITLANE_WORKER_CONCURRENCY", max(2, os.cpu_count() or 1), minimum=1
             ),

@@ -222,9 +222,10 @@ def _reading(
     return number, None
 
 
-def choice(name: str, value: str, allowed: Sequence[str]) -> str:
+def choice(name: str, value, allowed: Sequence) -> str:
     if value not in allowed:
-        raise ConfigError(f"{name} must be one of {', '.join(allowed)}, not {value!r}.")
+        names = ", ".join(str(option) for option in allowed)
+        raise ConfigError(f"{name} must be one of {names}, not {value!r}.")
     return value
 
 
@@ -260,6 +261,11 @@ def penalties(value) -> Penalties:
                 f"The {name.replace('_', '-')} penalty is 0-60 seconds, not {seconds}."
             )
     return settings
+
+
+def resets(value) -> int | None:
+    """The resets an evaluation's episode may use; None: no limit."""
+    return None if value is None else positive_int("The number of resets", value, 0, MAX_RESETS)
 
 
 def positive_int(name: str, value, low: int, high: int) -> int:

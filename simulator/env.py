@@ -148,13 +148,10 @@ class DeepRacerEnv(gym.Env):
         self.mode = config.choice("The mode", mode, config.MODES)
         self.laps = config.positive_int("The number of laps", laps, 1, 100)
         self.penalties = config.penalties(penalties)
-        self.max_resets = None if max_resets is None else config.positive_int(
-            "The number of resets", max_resets, 0, config.MAX_RESETS)  # fmt: skip
+        self.max_resets = config.resets(max_resets)
         self.start = config.fraction("The start", start)
         self.reward_fn = reward_fn or follow_centre_line
-        if render_mode not in (None, "rgb_array"):
-            raise config.ConfigError(f"The render mode must be rgb_array, not {render_mode!r}.")
-        self.render_mode = render_mode
+        self.render_mode = config.choice("The render mode", render_mode, (None, "rgb_array"))
         self.car_colour = tuple(int(channel) for channel in car_colour)  # JSON gives a list
 
         self.car = Car(car, substeps=self.config["physics_substeps"])

@@ -106,7 +106,7 @@ def celery_worker_process(test_database, logs_dir) -> Iterator[WorkerPools]:
         [
             ServiceProcess(
                 python_module("celery", *pool.arguments(), "--without-mingle", "--without-gossip"),
-                env=service_env(test_database),
+                env={**service_env(test_database), "PITLANE_TRAINERS": "2"},
                 log=logs_dir / f"celery-{pool.queue}.log",
             )
             for pool in worker_pools(trainers=2, simulations=3, prefix="test-")

@@ -204,9 +204,14 @@ PITLANE_MAX_IMPORT_BODY = env.int("PITLANE_MAX_IMPORT_BODY", 257 * 2**20, minimu
 # rollouts need, and re-scorings (a racer's reward function over recorded driving, minutes of
 # sandbox calls) never hold those of training, evaluations and races.
 PITLANE_QUEUES = ("training", "simulation", "rescoring")
-# A trainer learns while its rollout workers wait for the new weights (training.rollouts'
-# _await_next_version), so it may take every core then; idle, its threads take none.
-PITLANE_TRAINER_THREADS = env.int("PITLANE_TRAINER_THREADS", os.cpu_count() or 1, minimum=1)
+# Jobs that train at once on a machine `make run` serves (console.supervisor): processes of its
+# training worker. A trainer learns while its rollout workers wait for the new weights
+# (training.rollouts' _await_next_version), so the trainers share the cores then: two trainers
+# with every core each made each update several times slower than with half of them each.
+PITLANE_TRAINERS = env.int("PITLANE_TRAINERS", 1, minimum=1)
+PITLANE_TRAINER_THREADS = env.int(
+    "PITLANE_TRAINER_THREADS", max(1, (os.cpu_count() or 1) // PITLANE_TRAINERS), minimum=1
+)
 # A rollout worker silent this long is taken for dead and replaced; a new one may take longer to
 # start (torch, the simulator and the sandbox load first).
 PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [s]
@@ -215,6 +220,13 @@ PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [
 # last checkpoint, and an evaluation or race is driven again by another simulation worker.
 PITLANE_TRAINER_LEASE = env.int("PITLANE_TRAINER_LEASE", 45, minimum=10)  # [s]
 PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # [s]
+# Cars a rollout worker drives together (training.rollouts): each step runs the policy once for
+# all of them, and a batched forward pass costs far less per car than one per car (on one core of
+# the 2-core dev box: 12.6 ms a car at 1, 6.8 at 4, 4.6 at 8; 1.27 at 64 on the GPU box's CPU).
+# The same on any machine: the gain is per core, not from more of them. Not more: each car adds
+# an environment (about 28 MiB) and an episode in memory, and an iteration is 20 episodes by
+# default, which more cars would finish with fewer and fewer of them driving.
+PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", 8, minimum=1, maximum=64)
 # An evaluation or a race that someone watches keeps to this many times real time (1: as the
 # DeepRacer console shows it); nobody watching, it runs as fast as it can.
 PITLANE_WATCHED_SPEEDUP = env.int("PITLANE_WATCHED_SPEEDUP", 1, minimum=1, maximum=20)
