@@ -5,13 +5,19 @@ One loop for every episode Pitlane drives: the sandbox child's training and eval
 benchmark times in process (``bench.bench_sandbox``). What differs between them is the mode and
 what runs after the reset and after each step (``on_reset``, ``on_step``: trace rows, video and
 live frames, lap records, progress), never the loop.
+
+The loop drives a ``Fleet``: one car (``drive``) or several, each in an environment of its own
+with an episode of its own, stepped together so that the policy runs once a step for all the
+cars exploring (one batched forward pass, the costly part of a step). Each car draws its actions
+from random streams of its own (``Policy.generator``, its action space's), so a car drives the
+same episodes, step for step, whether it drives alone or beside others.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,6 +33,7 @@ class Driven:
     PPO's value and log-probability of it, and trace row (the prepare row first, as DeepRacer's
     trace has it); else the rewards and the last step's ``info`` alone."""
 
+    mode: str = "explore"
     rewards: list[float] = field(default_factory=list)
     observations: dict[str, list] = field(default_factory=dict)
     actions: list = field(default_factory=list)
@@ -39,50 +46,148 @@ class Driven:
     last_observation: dict | None = None
 
 
+@dataclass
+class Car:
+    """One of a fleet's cars: its environment, its own random stream for the policy's sampling,
+    and the episode it drives (``mode`` None: it is idle; ``driven`` then holds its last one)."""
+
+    env: Any
+    index: int
+    generator: Any = None  # a torch.Generator, or None for torch's global stream
+    mode: str | None = None
+    record: bool = True
+    observation: dict | None = None
+    driven: Driven = field(default_factory=Driven)
+
+
+class Fleet:
+    """Cars driven together by one policy. ``seeds[i]`` seeds car ``i``'s sampling and its
+    action space (their environments are seeded by their resets)."""
+
+    def __init__(self, envs: list, policy: Policy, seeds: list[int] | None = None) -> None:
+        self.policy = policy
+        self.cars: list[Car] = []
+        self.stepping: Car | None = None  # the car whose step raised, when one did
+        for index, env in enumerate(envs):
+            seed = None if seeds is None else seeds[index]
+            if seed is not None:
+                env.action_space.seed(seed)
+            generator = policy.generator(seed) if seed is not None and policy is not None else None
+            self.cars.append(Car(env, index, generator))
+
+    def driving(self) -> list[Car]:
+        return [car for car in self.cars if car.mode is not None]
+
+    def idle(self) -> list[Car]:
+        return [car for car in self.cars if car.mode is None]
+
+    def start(
+        self, car: Car, mode: str, *, record: bool = True, seed: int | None = None
+    ) -> tuple[dict, dict]:
+        """Reset ``car``'s environment (with ``seed``) for an episode in ``mode``: "explore" (the
+        policy, sampling), "random" (uniform actions) or "evaluate" (the policy,
+        deterministic). The reset's observation and info."""
+        if mode not in MODES:
+            raise ValueError(f"An episode explores, drives at random or evaluates, not {mode!r}.")
+        observation, info = car.env.reset(seed=seed)
+        car.mode, car.record, car.observation = mode, record, observation
+        car.driven = Driven(mode=mode)
+        if record:
+            car.driven.observations = {name: [value] for name, value in observation.items()}
+            car.driven.trace.append(list(info["trace"]))
+        return observation, info
+
+    def step(self, on_step: Callable[[Car, dict, dict, bool], None] | None = None) -> list[Car]:
+        """One step of every car that drives: their actions first (one forward pass for all
+        that explore), then each car's environment steps in turn, ``on_step(car, observation,
+        info, done)`` after each. The cars whose episodes ended, now idle with ``driven``
+        whole. The reward function's failures propagate; the failing car (``stepping``) is
+        left idle, its episode abandoned."""
+        driving = self.driving()
+        chosen = self._actions(driving)
+        finished = []
+        for car, (action, value, log_prob) in zip(driving, chosen, strict=True):
+            self.stepping = car
+            try:
+                done = self._step(car, action, value, log_prob, on_step)
+            except BaseException:
+                car.mode = None
+                raise
+            if done:
+                car.mode = None
+                finished.append(car)
+        self.stepping = None
+        return finished
+
+    def _actions(self, cars: list[Car]) -> list[tuple]:
+        """(action, value, log-probability) for each of ``cars``."""
+        chosen: dict[int, tuple] = {}
+        exploring = [car for car in cars if car.mode == "explore"]
+        if exploring:
+            actions, values, log_probs = self.policy.explore(
+                [car.observation for car in exploring], [car.generator for car in exploring]
+            )
+            for row, car in enumerate(exploring):
+                chosen[car.index] = (
+                    actions[row],
+                    0.0 if values is None else float(values[row]),
+                    0.0 if log_probs is None else float(log_probs[row]),
+                )
+        for car in cars:
+            if car.mode == "random":
+                chosen[car.index] = (car.env.action_space.sample(), 0.0, 0.0)
+            elif car.mode == "evaluate":
+                chosen[car.index] = (self.policy.drive(car.observation), 0.0, 0.0)
+        return [chosen[car.index] for car in cars]
+
+    def _step(self, car: Car, action, value: float, log_prob: float, on_step) -> bool:
+        """Step ``car``'s environment with ``action``; whether its episode ended."""
+        env, driven = car.env, car.driven
+        discrete = hasattr(env.action_space, "n")
+        observation, reward, terminated, truncated, info = env.step(
+            self.policy.command(action, discrete)
+        )
+        car.observation = observation
+        driven.rewards.append(reward)
+        driven.last_observation = observation
+        if car.record:
+            driven.actions.append(action)
+            driven.values.append(value)
+            driven.log_probs.append(log_prob)
+            for name, value_now in observation.items():
+                driven.observations[name].append(value_now)
+            driven.trace.append(list(info["trace"]))
+        done = bool(terminated or truncated)
+        if on_step is not None:
+            on_step(car, observation, info, done)
+        if done:
+            driven.info, driven.terminated, driven.truncated = (
+                info,
+                bool(terminated),
+                bool(truncated),
+            )
+        return done
+
+
 def drive(
     env, policy: Policy, mode: str = "explore", *, record: bool = True, seed: int | None = None,
     on_reset: Callable[[dict, dict], None] | None = None,
     on_step: Callable[[dict, dict, bool], None] | None = None,
 ) -> Driven:  # fmt: skip
-    """One episode of ``env`` from a reset (with ``seed``): ``mode`` "explore" (the policy,
-    sampling), "random" (uniform actions) or "evaluate" (the policy, deterministic).
-    ``on_reset(observation, info)`` runs after the reset, ``on_step(observation, info, done)``
-    after each step. The reward function's failures propagate."""
-    if mode not in MODES:
-        raise ValueError(f"An episode explores, drives at random or evaluates, not {mode!r}.")
-    discrete = hasattr(env.action_space, "n")
-    observation, info = env.reset(seed=seed)
+    """One episode of ``env`` from a reset (with ``seed``), a fleet of one car: ``mode``
+    "explore" (the policy, sampling), "random" (uniform actions) or "evaluate" (the policy,
+    deterministic). ``on_reset(observation, info)`` runs after the reset,
+    ``on_step(observation, info, done)`` after each step. The reward function's failures
+    propagate."""
+    fleet = Fleet([env], policy)
+    car = fleet.cars[0]
+    observation, info = fleet.start(car, mode, record=record, seed=seed)
     if on_reset is not None:
         on_reset(observation, info)
-    driven = Driven()
-    if record:
-        driven.observations = {name: [value] for name, value in observation.items()}
-        driven.trace.append(list(info["trace"]))
-    while True:
-        if mode == "random":
-            action, value, log_prob = env.action_space.sample(), 0.0, 0.0
-        elif mode == "evaluate":
-            action, value, log_prob = policy.drive(observation), 0.0, 0.0
-        else:
-            action, value, log_prob = policy.act(observation, deterministic=False)
-        observation, reward, terminated, truncated, info = env.step(
-            policy.command(action, discrete)
-        )
-        driven.rewards.append(reward)
-        driven.last_observation = observation
-        if record:
-            driven.actions.append(action)
-            driven.values.append(value or 0.0)
-            driven.log_probs.append(log_prob or 0.0)
-            for name, value_now in observation.items():
-                driven.observations[name].append(value_now)
-            driven.trace.append(list(info["trace"]))
-        if on_step is not None:
-            on_step(observation, info, terminated or truncated)
-        if terminated or truncated:
-            break
-    driven.info, driven.terminated, driven.truncated = info, bool(terminated), bool(truncated)
-    return driven
+    stepped = None if on_step is None else (lambda _car, *seen: on_step(*seen))
+    while not fleet.step(stepped):
+        pass
+    return car.driven
 
 
 def experience(driven: Driven, discrete: bool, ppo: bool) -> dict[str, np.ndarray]:

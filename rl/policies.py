@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import gymnasium
 import numpy as np
 import torch
+from stable_baselines3.common.distributions import SquashedDiagGaussianDistribution
 
 import simulator
 from rl.hyperparameters import PPO
@@ -83,6 +84,39 @@ class Policy:
                 return actions[0].numpy(), float(values[0]), float(log_probs[0])
             return self.network.actor(tensor, deterministic=deterministic)[0].numpy(), None, None
 
+    @staticmethod
+    def generator(seed: int) -> torch.Generator:
+        """A random stream of its own for one car's sampling (``explore``): a car's actions then
+        depend on its seed alone, never on the cars it drives beside."""
+        return torch.Generator().manual_seed(seed)
+
+    def explore(
+        self, observations: list[dict], generators: list[torch.Generator | None]
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Sampled actions for several cars in one forward pass, each car's drawn from its own
+        generator (None: torch's global one): (actions, values, log-probabilities), the last
+        two only for PPO, one row per car."""
+        batch = {name: np.stack([seen[name] for seen in observations]) for name in observations[0]}
+        tensor, _ = self.network.obs_to_tensor(batch)
+        with torch.no_grad():
+            if not self.ppo:
+                actor = self.network.actor
+                mean, log_std, kwargs = actor.get_action_dist_params(tensor)
+                distribution = actor.action_dist.proba_distribution(mean, log_std, **kwargs)
+                return _sample(distribution, generators).numpy(), None, None
+            network = self.network  # SB3's ActorCriticPolicy.forward, its sampling apart
+            features = network.extract_features(tensor)
+            if network.share_features_extractor:
+                latent_pi, latent_vf = network.mlp_extractor(features)
+            else:
+                latent_pi = network.mlp_extractor.forward_actor(features[0])
+                latent_vf = network.mlp_extractor.forward_critic(features[1])
+            values = network.value_net(latent_vf).flatten()
+            distribution = network._get_action_dist_from_latent(latent_pi)
+            actions = _sample(distribution, generators)
+            log_probs = distribution.log_prob(actions)
+        return actions.numpy(), values.numpy(), log_probs.numpy()
+
     def drive(self, observation: dict) -> np.ndarray:
         """The deterministic action alone, as evaluations drive: PPO's critic, a network of its
         own, is not run (it would double the time of a step)."""
@@ -98,3 +132,23 @@ class Policy:
     def command(action: np.ndarray, discrete: bool):
         """What the environment takes for an action: an index, or the clipped vector."""
         return int(action) if discrete else np.clip(action, -1.0, 1.0)
+
+
+def _sample(distribution, generators: list[torch.Generator | None]) -> torch.Tensor:
+    """One action per row of ``distribution`` (SB3's categorical, Gaussian or squashed
+    Gaussian), row ``i`` drawn from ``generators[i]``: the draw a row gets does not depend on the
+    rows beside it."""
+    inner = distribution.distribution
+    if isinstance(inner, torch.distributions.Categorical):
+        return torch.cat([
+            torch.multinomial(inner.probs[row], 1, generator=generator)
+            for row, generator in enumerate(generators)
+        ])  # fmt: skip
+    noise = torch.stack([
+        torch.randn(inner.loc.shape[1:], generator=generator) for generator in generators
+    ])  # fmt: skip
+    actions = inner.loc + inner.scale * noise
+    if isinstance(distribution, SquashedDiagGaussianDistribution):
+        distribution.gaussian_actions = actions
+        return torch.tanh(actions)
+    return actions

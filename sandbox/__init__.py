@@ -62,6 +62,7 @@ class SandboxFailure(Exception):
         line: int | None = None,
         step: int | None = None,
         status: str | None = None,
+        car: int | None = None,
     ) -> None:
         super().__init__(message)
         self.kind, self.message, self.line, self.step, self.status = (
@@ -71,6 +72,7 @@ class SandboxFailure(Exception):
             step,
             status,
         )
+        self.car = car  # which of the sandbox's cars was driving, where several do
 
     def __str__(self) -> str:
         where = []
@@ -98,9 +100,11 @@ class SandboxUnavailable(Exception):
 
 @dataclass
 class Sandbox:
-    """One sandbox child. ``env``: settings for a simulator the child builds before sealing."""
+    """One sandbox child. ``env``: settings for a simulator the child builds before sealing,
+    once per car of ``cars`` (``episode`` drives them together)."""
 
     env: dict | None = None
+    cars: int = 1
     policy: dict | None = None  # {"algorithm", "architecture", "seed"}: a policy to act with
     samples: dict | None = None  # {"track", "direction"}: sample situations, made before sealing
     call_timeout: float = 1.0  # [s] per call of the reward function
@@ -141,7 +145,7 @@ class Sandbox:
         threading.Thread(target=self._read_stderr, daemon=True).start()
         self.report = self._request({
             "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
-            "env": portable_env(self.env), "policy": self.policy,
+            "env": portable_env(self.env), "cars": self.cars, "policy": self.policy,
             "samples": portable_env(self.samples), "op": "start",
         }, {"ready"}, self.start_timeout)  # fmt: skip
         return self.report
@@ -190,14 +194,25 @@ class Sandbox:
 
     def episode(
         self, mode: str = "explore", worker: int = 0,
-        on_progress: Callable[[int], None] | None = None,
+        on_progress: Callable[[int], None] | None = None, *, start: int = 1,
     ) -> dict:  # fmt: skip
-        """Drive one episode: ``summary`` (steps, reward, progress, status, lap_time) and, unless
-        evaluating, ``payload``: the episode's experience, encoded for the experience buffer."""
-        reply = self._request({"op": "episode", "mode": mode, "worker": worker}, {"episode"},
-                              None, on_progress or _ignore)  # fmt: skip
+        """The next episode of the child's cars to end, ``start`` of its idle cars first
+        beginning one in ``mode`` (with one car: drive one episode): ``summary`` (steps, reward,
+        progress, status, lap_time), ``car`` (which), ``driving`` (how many cars have episodes
+        under way, to come from the next requests) and, unless evaluating, ``payload``: the
+        episode's experience, encoded for the experience buffer."""
+        request = {"op": "episode", "mode": mode, "worker": worker, "start": start}
+        reply = self._request(request, {"episode"}, None, on_progress or _ignore)
         if not isinstance(reply.get("summary"), dict):
             raise SandboxFailure("protocol", "The sandbox sent an episode without a summary.")
+        car, driving = _int_or_none(reply.get("car")), _int_or_none(reply.get("driving"))
+        if (
+            car is None
+            or driving is None
+            or not (0 <= car < self.cars and 0 <= driving < self.cars)
+        ):
+            self._kill()
+            raise SandboxFailure("protocol", "The sandbox sent an episode of no car it drives.")
         return reply
 
     def watch(self, views: set[str]) -> None:
@@ -307,6 +322,7 @@ class Sandbox:
                     str(frame.get("kind", "error"))[:20], str(frame.get("message", ""))[:500],
                     _int_or_none(frame.get("line")), _int_or_none(frame.get("step")),
                     str(frame["status"])[:20] if frame.get("status") else None,
+                    _int_or_none(frame.get("car")),
                 )  # fmt: skip
             self._kill()
             raise SandboxFailure(

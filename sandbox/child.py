@@ -2,8 +2,9 @@
 
 It reads requests on standard input and answers on standard output, in protocol frames. It runs
 only our code: it forks the reward process (``reward.py``), where the racer's code will run
-alone, then builds the simulator and the policy when a rollout is to drive (or places the car in
-the sample situations a validation tries the code on), then seals itself (``seal.py``). Every
+alone, then builds the simulator (an environment per car: a rollout's child drives ``cars``
+together, ``rl.episode.Fleet``) and the policy when a rollout is to drive (or places the car
+in the sample situations a validation tries the code on), then seals itself (``seal.py``). Every
 call of the racer's code goes to the reward process and is timed from here; what it prints
 becomes log messages, what it raises, returns or takes too long over becomes an error message
 naming the line. Since the racer's code cannot write to the worker, the frames the worker reads
@@ -17,6 +18,7 @@ import select
 import sys
 import time
 import traceback
+from collections import deque
 from typing import Any
 
 import cv2
@@ -48,7 +50,11 @@ class Child:
         self._last_look = self._last_frame = 0.0
         self.reply_fd = 1
         self.reward: RewardProcess | None = None
-        self.env = None
+        self.env = None  # car 0's: the one shown live
+        self.envs: list = []
+        self.fleet: episode.Fleet | None = None
+        self.finished: deque[episode.Car] = deque()  # ended on one step, not yet sent
+        self.driven = 0  # steps driven by all the cars, for progress messages
         self.policy = None
         self.ppo = True
         self.samples: list[dict] = []
@@ -70,7 +76,8 @@ class Child:
         self.reward = RewardProcess(float(init["call_timeout"]), int(init["memory_allowance"]))
         cv2.setNumThreads(0)  # no worker threads: the sealed process cannot start any
         if init.get("env") is not None:
-            self.env = self._build_env(init["env"])
+            self.envs = self._build_envs(init["env"], int(init.get("cars", 1)))
+            self.env = self.envs[0]
         if init.get("policy") is not None:
             self._build_policy(init["policy"])
         if init.get("samples") is not None:
@@ -91,16 +98,23 @@ class Child:
                 continue
             handler(request)
 
-    def _build_env(self, settings: dict):
+    def _build_envs(self, settings: dict, cars: int) -> list:
+        """An environment per car. Car ``k`` of ``cars`` starts its training episodes
+        ``k / cars`` of the lap further on, then advances its start per episode as one car
+        does: the cars of a worker share an iteration's episodes, and between them cover the
+        lap as one car driving them all would, rather than all drive the same stretch."""
         import gymnasium
 
         import simulator
 
-        env = gymnasium.make(simulator.ENV_ID, reward_fn=self.reward.call, **settings)
-        observation, _ = env.reset(seed=0)
+        envs, first = [], float(settings.get("start", 0.0))
+        for car in range(cars):
+            placed = settings if cars == 1 else {**settings, "start": (first + car / cars) % 1.0}
+            envs.append(gymnasium.make(simulator.ENV_ID, reward_fn=self.reward.call, **placed))
+        observation, _ = envs[0].reset(seed=0)
         for view in VIEWS:  # the spectator's textures and the JPEG codec, before sealing
-            jpeg(view_image(env.unwrapped, view, observation))
-        return env
+            jpeg(view_image(envs[0].unwrapped, view, observation))
+        return envs
 
     def _build_policy(self, settings: dict) -> None:
         """The policy network the rollout acts with, built and run once before sealing."""
@@ -114,8 +128,11 @@ class Child:
             self.env.observation_space, self.env.action_space,
         )  # fmt: skip
         self.ppo = self.policy.ppo
-        observation, _ = self.env.reset(seed=int(settings.get("seed", 0)))
-        self.policy.act(observation, deterministic=False)
+        # Car k takes seed + k: the worker gives each of its children seeds of their own.
+        seeds = [int(settings.get("seed", 0)) + car for car in range(len(self.envs))]
+        observations = [env.reset(seed=seed)[0] for env, seed in zip(self.envs, seeds, strict=True)]
+        self.policy.explore(observations, [None] * len(observations))
+        self.fleet = episode.Fleet(self.envs, self.policy, seeds)
         self.version = -1
 
     # Requests
@@ -126,63 +143,83 @@ class Child:
         self.send({"type": "weights", "version": self.version})
 
     def op_episode(self, request: dict) -> None:
-        """One episode (``rl.episode.drive``): ``mode`` "explore" (the policy, sampling),
-        "random" (uniform actions) or "evaluate" (the policy, deterministic: only a summary
-        comes back). Between steps, live frames and progress go out."""
+        """The next episode to end (``rl.episode.Fleet``): first ``start`` of the idle cars
+        begin one in ``mode``, "explore" (the policy, sampling), "random" (uniform actions) or
+        "evaluate" (the policy, deterministic: only a summary comes back); then the cars that
+        drive step together until one's episode ends. The answer names that car and how many
+        still drive; where several ended on one step, the next requests take the others first.
+        Between steps, live frames (car 0's) and progress go out."""
         mode = request.get("mode", "explore")
-        if mode not in episode.MODES:
-            self.send({"type": "error", "kind": "protocol", "message": "unknown episode mode"})
+        start = request.get("start", 1)
+        if mode not in episode.MODES or not isinstance(start, int) or isinstance(start, bool):
+            self.send({"type": "error", "kind": "protocol", "message": "unknown episode request"})
             return
         self.worker = int(request.get("worker", 0))
-        reported = [time.perf_counter()]
-
-        def stepped(observation: dict, info: dict, done: bool) -> None:
-            self.observation = observation
-            if done:
+        fleet = self.fleet
+        if not self.finished:
+            for car in fleet.idle()[: max(start, 0)]:
+                fleet.start(car, mode, record=mode != "evaluate")
+            if not fleet.driving():
+                self.send({"type": "error", "kind": "protocol", "message": "no car is driving"})
                 return
-            self._live(observation)
-            if time.perf_counter() - reported[0] >= PROGRESS_EVERY:
-                self.send({"type": "progress", "steps": self.env.unwrapped.steps}, log=True)
-                reported[0] = time.perf_counter()
+            reported = [time.perf_counter()]
 
-        env = self.env
-        try:
-            driven = episode.drive(env, self.policy, mode, record=mode != "evaluate",
-                                   on_step=stepped)  # fmt: skip
-        except (RewardFailure, RewardError) as error:
-            self.send(_failure(error, step=env.unwrapped.steps, status=env.unwrapped.status),
-                      log=True)  # fmt: skip
-            return
-        summary = self._summary(driven.rewards, driven.info, driven.terminated)
-        if mode == "evaluate":
-            self.send({"type": "episode", "summary": summary}, log=True)
+            def stepped(car: episode.Car, observation: dict, info: dict, done: bool) -> None:
+                self.driven += 1
+                if car.index == 0:
+                    self.observation = observation
+                self._live(observation if car.index == 0 and not done else None)
+                if time.perf_counter() - reported[0] >= PROGRESS_EVERY:
+                    self.send({"type": "progress", "steps": self.driven}, log=True)
+                    reported[0] = time.perf_counter()
+
+            try:
+                while not (ended := fleet.step(stepped)):
+                    pass
+            except (RewardFailure, RewardError) as error:
+                env, car = fleet.stepping.env.unwrapped, fleet.stepping.index
+                which = {"car": car} if len(fleet.cars) > 1 else {}
+                self.send(_failure(error, step=env.steps, status=env.status, **which), log=True)
+                return
+            self.finished.extend(ended)
+        self._send_episode(self.finished.popleft(), len(fleet.driving()) + len(self.finished))
+
+    def _send_episode(self, car: episode.Car, driving: int) -> None:
+        """``car``'s episode as it ended: its summary and, unless it evaluated, its experience
+        (``payload``), with ``car`` and how many cars still ``driving`` (theirs not yet sent
+        counted)."""
+        driven = car.driven
+        summary = self._summary(car, driven.rewards, driven.info, driven.terminated)
+        answer = {"type": "episode", "summary": summary, "car": car.index, "driving": driving}
+        if not car.record:
+            self.send(answer, log=True)
             return
         final_value = 0.0
-        if self.ppo and mode != "random" and not driven.terminated:
+        if self.ppo and driven.mode != "random" and not driven.terminated:
             final_value = self.policy.act(driven.last_observation, deterministic=True)[1]
-        arrays = episode.experience(driven, hasattr(env.action_space, "n"), self.ppo)
-        payload = msgpack.packb(
+        arrays = episode.experience(driven, hasattr(car.env.action_space, "n"), self.ppo)
+        answer["payload"] = msgpack.packb(
             {**summary, "final_value": final_value, "arrays": encode_arrays(arrays),
              "trace": driven.trace}, use_bin_type=True,
         )  # fmt: skip
-        self.send({"type": "episode", "summary": summary, "payload": payload}, log=True)
+        self.send(answer, log=True)
 
-    def _summary(self, rewards: list, info: dict, terminated: bool) -> dict:
+    def _summary(self, car: episode.Car, rewards: list, info: dict, terminated: bool) -> dict:
         """What the trainer and the job's page read of an episode without its experience."""
         return {
-            "worker": self.worker, "version": self.version, "steps": len(rewards),
-            "reward": float(sum(rewards)), "progress": info["progress"], "status": info["status"],
-            "terminated": bool(terminated),
-            "lap_time": self.env.unwrapped.sim_time if info["status"] == "lap_complete" else None,
+            "worker": self.worker, "car": car.index, "version": self.version,
+            "steps": len(rewards), "reward": float(sum(rewards)), "progress": info["progress"],
+            "status": info["status"], "terminated": bool(terminated),
+            "lap_time": car.env.unwrapped.sim_time if info["status"] == "lap_complete" else None,
         }  # fmt: skip
 
     def op_watch(self, request: dict) -> None:
         """Which views to send while driving; no answer."""
         self.views = {view for view in request.get("views", []) if view in VIEWS}
 
-    def _live(self, observation: dict) -> None:
+    def _live(self, observation: dict | None) -> None:
         """Between two steps: take a watch request that came, and send each watched view at
-        15 frames/s (wall clock)."""
+        15 frames/s (wall clock) of ``observation`` (car 0's; None: none to show)."""
         now = time.perf_counter()
         if now - self._last_look >= LOOK_EVERY:
             self._last_look = now
@@ -194,7 +231,7 @@ class Child:
                     self.op_watch(request)
                 elif request.get("op") == "exit":  # the worker stops mid-episode
                     os._exit(0)
-        if not self.views or now - self._last_frame < FRAME_INTERVAL:
+        if observation is None or not self.views or now - self._last_frame < FRAME_INTERVAL:
             return
         self._last_frame = now
         for view in sorted(self.views):

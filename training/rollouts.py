@@ -1,9 +1,10 @@
 """A rollout worker: the loop of the ``training.rollout`` task, one per simulation slot of a job.
 
-It starts a sandbox child that holds the simulator, the policy network and the racer's reward
-function, keeps the child's weights at the newest published version, and relays what the child
-drives: training episodes to the experience buffer, evaluation results after each update, and
-what the reward function printed. It never writes the job's rows; a failure of the racer's code
+It starts a sandbox child that holds the simulator (``PITLANE_CARS_PER_WORKER`` cars, driven
+together), the policy network and the racer's reward function, keeps the child's weights at the
+newest published version, and relays what the child drives: training episodes to the experience
+buffer as each car ends one, evaluation results after each update, and what the reward function
+printed. It never writes the job's rows; a failure of the racer's code
 is reported to the trainer, which fails the job.
 """
 
@@ -16,6 +17,7 @@ import time
 
 import msgpack
 import redis
+from django.conf import settings
 
 from common.redis_client import redis_client
 from rl import hyperparameters as hp
@@ -30,6 +32,7 @@ REWARD_CALL_LIMIT = 1.0  # [s]
 WAIT_POLL = 0.2  # [s] between looks for new weights while the trainer learns
 JOB_CHECK = 15.0  # [s] between looks at the job's row
 MEMORY_ALLOWANCE = 1024 * MiB  # beyond the child's size with torch and the simulator loaded
+CAR_MEMORY = 384 * MiB  # more per car past the first: a 10,000-step episode of stereo frames
 HOLD_INTERVAL = 1.0  # [s] between the paused frames shown while the trainer learns
 STOP_LOOK = 1.0  # [s] between looks for the end of the job in the middle of an episode
 PRINTED_LINES = 20  # lines of what the reward function printed a worker keeps per iteration
@@ -73,29 +76,31 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
         logger.info("Rollout %s/%s found no run of attempt %s going on", job_id, worker, attempt)
         return
     channel.take(worker)  # the trainer waits for its first beat from now, not for the queue
+    cars = settings.PITLANE_CARS_PER_WORKER
     policy = {
         "algorithm": model.algorithm,
         "architecture": model.architecture,
-        "seed": model.seed + worker,
+        "seed": model.seed + worker * cars,  # its car k takes this + k: a seed each
     }
     name = f"Simulation worker {worker + 1}"
     label = name if model.workers > 1 else ""
     printed = Printed(label)
 
-    def sandbox() -> Sandbox:
+    def sandbox(cars: int) -> Sandbox:
         return Sandbox(
-            env=model.environment_settings(track), policy=policy,
-            call_timeout=REWARD_CALL_LIMIT, memory_allowance=MEMORY_ALLOWANCE,
+            env=model.environment_settings(track), cars=cars, policy=policy,
+            call_timeout=REWARD_CALL_LIMIT,
+            memory_allowance=MEMORY_ALLOWANCE + (cars - 1) * CAR_MEMORY,
         )  # fmt: skip
 
     try:
         with contextlib.ExitStack() as stack:
-            driver = stack.enter_context(sandbox())
+            driver = stack.enter_context(sandbox(cars))
             driver.load(model.reward_function)
             evaluator = None
             if worker == 0:  # DeepRacer's first worker evaluates (simapp
                 # bundle/markov/rollout_worker.py:327-329, 01f5f01)
-                evaluator = Evaluator(stack.enter_context(sandbox()), channel, token,
+                evaluator = Evaluator(stack.enter_context(sandbox(1)), channel, token,
                                       Printed(label))  # fmt: skip
                 evaluator.sandbox.load(model.reward_function)
                 stack.callback(evaluator.close)
@@ -271,12 +276,21 @@ def _drive(
     sandbox: Sandbox, channel: JobChannel, run: str, job: TrainingJob, worker: int,
     viewing: Viewing, printed: Printed, evaluator: Evaluator | None = None,
 ) -> str:  # fmt: skip
-    """Drive episodes until the job's run ends; why it ended, in the racer's words."""
+    """Drive episodes until the job's run ends; why it ended, in the racer's words.
+
+    The sandbox's cars drive together, and each episode goes to the buffer as it ends. A car
+    starts another only while the version it drives with is the newest and the episodes pushed
+    of it and those under way come short of what the trainer wants: with one car, one episode
+    after another until the trainer has its share, as a single car always drove. The weights
+    change only once no car drives, so no episode mixes two versions; and none is started that
+    the trainer would drop for being past its count (it keeps the first to come, and those
+    would be the short ones)."""
     algorithm = job.model.algorithm
     version = -1
     weights = b""
     checked = time.monotonic()
     job_ended = EndWatch(channel, run)
+    driving = pushed = 0  # cars under way; episodes pushed of ``version`` (by every worker)
 
     def beat(steps: int) -> None:  # a long episode still shows the trainer this worker lives
         channel.beat(worker)
@@ -291,17 +305,21 @@ def _drive(
             if not _still_wanted(job):
                 return "the training is over"
         published = channel.policy_version()
-        if published > version:
+        if driving == 0 and published > version:
             published, weights = channel.fetch_policy()
             sandbox.set_weights(published, weights)
-            version = published
+            version, pushed = published, 0
         if evaluator is not None and version > 0:
             evaluator.offer(version, weights)
         mode = "random" if version == 0 and algorithm == hp.SAC else "explore"
-        reply = sandbox.episode(mode, worker, beat)
+        room = channel.episodes_wanted() - pushed - driving if published == version else 0
+        reply = sandbox.episode(
+            mode, worker, beat, start=max(min(room, sandbox.cars - driving), 0 if driving else 1)
+        )
+        driving = reply["driving"]
         pushed = channel.push_episode(reply["payload"], version)
         channel.push_log(printed.take(sandbox, version + 1))
-        if pushed >= channel.episodes_wanted():
+        if driving == 0 and pushed >= channel.episodes_wanted():
             channel.push_log(printed.close())  # this worker's share of the iteration is done
             if not _await_next_version(channel, run, job, version, worker, viewing, evaluator):
                 return "the training is over"
@@ -341,6 +359,8 @@ def _await_next_version(
 
 
 def _where(failure: SandboxFailure, worker: int) -> str:
+    car = f", car {failure.car + 1}" if failure.car is not None and failure.step is not None else ""
     return (
-        f"in simulation worker {worker + 1}" if failure.step is None else f"(worker {worker + 1})"
-    )
+        f"in simulation worker {worker + 1}" if failure.step is None
+        else f"(worker {worker + 1}{car})"
+    )  # fmt: skip

@@ -1,0 +1,99 @@
+"""A rollout worker whose sandbox drives several cars (``training.rollouts._drive``): each episode
+goes to the buffer as its car ends it, no more are started than the trainer wants of a version,
+and the weights change only while no car drives, so no episode mixes two versions. The sandbox
+here is a stand-in that ends the cars' episodes in a scripted order; Redis is real."""
+
+from types import SimpleNamespace
+
+import msgpack
+import pytest
+
+from common.redis_client import redis_client
+from rl.experience import JobChannel
+from training.rollouts import Printed, _drive
+
+CARS = 3
+LENGTHS = (30, 10, 20, 15, 40, 25)  # [steps] of the episodes, in the order they start, cycled
+
+
+class ScriptedCars:
+    """What ``_drive`` uses of a ``Sandbox`` of ``CARS`` cars: each episode takes the next of
+    ``LENGTHS`` steps, the cars step together, and ``script[n]`` runs (the trainer, or other
+    workers) as the ``n``-th episode ends."""
+
+    def __init__(self, script: dict) -> None:
+        self.cars = CARS
+        self.script = script
+        self.lengths = (length for _ in range(100) for length in LENGTHS)
+        self.driving: dict[int, list] = {}  # car: [steps left, version it started with]
+        self.version = -1
+        self.loads: list[tuple[int, int]] = []  # (version, cars driving as it was loaded)
+        self.started: dict[int, int] = {}  # episodes started, by version
+        self.ended: list[int] = []  # each episode's version, in the order they ended
+
+    def set_weights(self, version: int, data: bytes) -> None:
+        self.loads.append((version, len(self.driving)))
+        self.version = version
+
+    def episode(self, mode: str, worker: int, on_progress, *, start: int) -> dict:
+        idle = [car for car in range(self.cars) if car not in self.driving]
+        for car in idle[:start]:
+            self.driving[car] = [next(self.lengths), self.version]
+            self.started[self.version] = self.started.get(self.version, 0) + 1
+        car = min(self.driving, key=lambda car: (self.driving[car][0], car))
+        steps, version = self.driving.pop(car)
+        for other in self.driving.values():
+            other[0] -= steps
+        self.ended.append(version)
+        self.script.get(len(self.ended), lambda: None)()
+        payload = msgpack.packb({"version": version, "car": car})
+        return {"payload": payload, "car": car, "driving": len(self.driving)}
+
+    def take_logs(self) -> tuple[list[str], int]:
+        return [], 0
+
+
+class Unwatched:
+    def update(self) -> None: ...
+    def hold(self) -> None: ...
+    def resume(self) -> None: ...
+
+
+@pytest.fixture
+def channel():
+    channel = JobChannel(redis_client(), job_id=987_701)
+    channel.start(attempt=1)
+    yield channel
+    channel.client.delete(channel.experience, channel.counts, channel.control, channel.policy,
+                          channel.log, channel.evaluation)  # fmt: skip
+
+
+def test_a_worker_of_several_cars_drives_each_version_its_share_and_no_episode_mixes_two(
+    channel,
+):
+    channel.publish(0, b"weights 0", episodes=5)
+
+    def another_worker_completes_version_1() -> None:
+        for _ in range(3):  # while this worker's other two cars still drive with version 1
+            channel.push_episode(msgpack.packb({"version": 1, "car": "another's"}), version=1)
+        channel.publish(2, b"weights 2", episodes=3)
+
+    sandbox = ScriptedCars({
+        5: lambda: channel.publish(1, b"weights 1", episodes=4),  # the trainer has its 5
+        6: another_worker_completes_version_1,
+        11: channel.request_stop,  # the racer stops the job as version 2's third ends
+    })  # fmt: skip
+    job = SimpleNamespace(model=SimpleNamespace(algorithm="clipped_ppo"))
+    why = _drive(sandbox, channel, channel.join(1), job, 0, Unwatched(), Printed())
+    assert why == "the training ended"
+    # Version 0: five episodes wanted, five started on three cars. Version 1: four wanted,
+    # three started (a car each); once another worker's pushes made four, none more, and the
+    # two under way ended with version 1. Version 2 loaded only then.
+    assert sandbox.started == {0: 5, 1: 3, 2: 3}
+    assert sandbox.loads == [(0, 0), (1, 0), (2, 0)]  # never with a car driving
+    pushed = [msgpack.unpackb(payload) for payload in channel.pop_episodes(limit=100)]
+    ours = [episode["version"] for episode in pushed if episode["car"] != "another's"]
+    assert ours == sandbox.ended == [0] * 5 + [1] * 3 + [2] * 3  # each as it ended
+    counts = {int(version): int(count) for version, count in
+              channel.client.hgetall(channel.counts).items()}  # fmt: skip
+    assert counts == {0: 5, 1: 6, 2: 3}
