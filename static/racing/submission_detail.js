@@ -13,19 +13,27 @@ function show(status, display) {
   if (ENDED.includes(status)) location.reload();
 }
 
+let updated = false; // a socket update has been shown: it is newer than any page fetched
+
 socket.addEventListener("open", async () => {
   // The race may have moved on between this page being drawn and the socket opening (its
   // updates went to nobody): read the status once more, now that no update can be missed.
-  const response = await fetch(location.href, { headers: { Accept: "text/html" } });
-  if (response.ok) {
+  try {
+    const response = await fetch(location.href, { headers: { Accept: "text/html" } });
+    if (!response.ok) return;
     const page = new DOMParser().parseFromString(await response.text(), "text/html");
     const now = page.querySelector("[data-submission-status]");
-    if (now && now.dataset.submissionStatus) show(now.dataset.submissionStatus, now.textContent);
+    const status = now?.dataset.submissionStatus;
+    if (status && !updated) show(status, now.textContent);
+  } catch {
+    // The socket's next update says it instead.
+  } finally {
+    root.dataset.listening = "true";
   }
-  root.dataset.listening = "true";
 });
 socket.addEventListener("message", (message) => {
   const update = JSON.parse(message.data);
   if (update.type !== "submission" || String(update.submission) !== root.dataset.submission) return;
+  updated = true;
   show(update.status, update.status_display);
 });
