@@ -1167,7 +1167,41 @@ def _import_undo(model: RLModel) -> None:
         artifacts.delete_all(model)
     except Exception:
         logger.exception("Import of model %s failed; its files could not all be deleted", model.pk)
-    model.delete()
+    try:
+        model.delete()
+    except Exception:  # the database locked, say: the racer reads why the import failed
+        logger.exception(
+            "Import of model %s failed and its row could not be deleted; the workers' "
+            "heartbeat removes it (abandoned_imports_remove)", model.pk,
+        )  # fmt: skip
+
+
+ABANDONED_AFTER = 10 * 60  # [s] an import still IMPORTING this long has died
+
+
+def abandoned_imports_remove() -> list[str]:
+    """Remove each model whose import died while it stored its files (its web process stopped,
+    or its undo could not delete the row): IMPORTING for ``ABANDONED_AFTER``. Its files and row
+    go, as ``services.model_delete`` takes them, rather than stay as an ERROR model: the racer
+    never saw it ready and its files may be partial, so there is nothing in it to keep, and
+    they expect its name and their quota free to import it again. What was removed, in words
+    for the log; every worker's heartbeat calls it (``tasks.resume_lapsed``)."""
+    importing = frozenset({RLModel.Status.IMPORTING})
+    since = timezone.now() - timedelta(seconds=ABANDONED_AFTER)
+    removed = []
+    for model in RLModel.objects.filter(status__in=importing, created_at__lt=since):
+        if not lifecycle.MODEL.move(model, RLModel.Status.ERROR, only_from=importing):
+            continue  # it became READY meanwhile, or another worker took it
+        pk = model.pk  # None once deleted
+        try:
+            services.model_delete(model=model)
+        except Exception:  # it stays ERROR, for the racer to delete
+            logger.exception("The abandoned import of model %s could not be removed", pk)
+            continue
+        removed.append(
+            f"import of model {pk} stopped as it stored its files; the model was removed"
+        )
+    return removed
 
 
 def _exact_history(members: Members) -> tuple[history.Exact | None, list[str]]:

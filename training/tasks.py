@@ -68,10 +68,11 @@ def evaluate(evaluation_id: int) -> None:
 def resume_lapsed() -> list[str]:
     """Send a trainer for each job whose run died (``jobs.lapsed_claim``), and a simulation
     worker for each evaluation or race whose run died (``jobs.lapsed_evaluations``); what was
-    sent for, in words for the log; then what lost its task while queued (``resend_lost``).
+    sent for, in words for the log; then what lost its task while queued (``resend_lost``),
+    and the imports that died storing their files (``imports.abandoned_imports_remove``).
     Every worker calls it every few seconds (``console.workers``), so the work goes on
     whichever machines are left."""
-    from training import jobs
+    from training import imports, jobs
 
     sent = []
     for job in jobs.lapsed_claim():
@@ -80,7 +81,7 @@ def resume_lapsed() -> list[str]:
     for evaluation in jobs.lapsed_evaluations():
         _evaluation_send(evaluation)
         sent.append(f"evaluation {evaluation.pk} lost its simulation worker; it is driven again")
-    return sent + resend_lost()
+    return sent + resend_lost() + imports.abandoned_imports_remove()
 
 
 def resend_lost() -> list[str]:

@@ -4,9 +4,12 @@ model row never points at files that are not there (a clone whose copy failed is
 import whose files failed leaves nothing)."""
 
 import io
+from datetime import timedelta
 
 import pytest
 from django.core.files.storage import FileSystemStorage
+from django.db import OperationalError
+from django.utils import timezone
 
 from common import transactions
 from rl.learner import Update
@@ -14,7 +17,7 @@ from rl.stopwatch import Stopwatch
 from tests.training.factories import STRAIGHT_AHEAD, ready_model
 from tests.training.test_imports import stored_objects, virtual_archive
 from tests.training.test_training import settings as training_settings
-from training import artifacts, imports, jobs, services, trainer
+from training import artifacts, configuration, imports, jobs, services, tasks, trainer
 from training.models import RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
@@ -152,3 +155,44 @@ def test_a_trainer_saves_each_iterations_checkpoint_outside_its_transaction(
     checkpoint = artifacts.path(model, artifacts.checkpoint(1))
     assert set(storage_writes) == {(checkpoint, False)}  # (a deletion of an earlier test's first)
     assert TrainingJob.objects.get(pk=run.job.pk).last_checkpoint == checkpoint
+
+
+def test_an_import_whose_undo_cannot_delete_its_row_still_says_why_it_failed(
+    alice, bob, tracks, monkeypatch
+):
+    archive = archive_of_a_ready_model(alice)
+
+    def storage_down(model, relative, data):
+        raise OSError("No space left on device")
+
+    def database_locked(model, *args, **kwargs):
+        raise OperationalError("database is locked")
+
+    monkeypatch.setattr(artifacts, "save", storage_down)
+    monkeypatch.setattr(RLModel, "delete", database_locked)
+    with pytest.raises(OSError, match="No space left on device"):
+        imports.import_model(owner=bob, archive=io.BytesIO(archive))
+    assert RLModel.objects.get(owner=bob).status == RLModel.Status.IMPORTING  # for the sweep
+
+
+def importing(owner, name: str) -> RLModel:
+    """A model as an import inserts it, before it stores its files."""
+    checked = configuration.check(training_settings(name=name), owner=owner, validate_reward=False)
+    return services.model_insert(owner=owner, settings=checked, status=RLModel.Status.IMPORTING)
+
+
+def test_an_import_that_died_storing_its_files_is_removed_by_the_workers_heartbeat(
+    bob, tracks, settings, tmp_path
+):
+    settings.MEDIA_ROOT = tmp_path
+    died = importing(bob, "died-importing")
+    artifacts.save(died, "checkpoints/imported-best.safetensors", b"half of the weights")
+    long_ago = timezone.now() - timedelta(seconds=imports.ABANDONED_AFTER + 1)
+    RLModel.objects.filter(pk=died.pk).update(created_at=long_ago)
+    still_storing = importing(bob, "still-importing")
+
+    assert tasks.resume_lapsed()[-1:] == [
+        f"import of model {died.pk} stopped as it stored its files; the model was removed"
+    ]
+    assert list(RLModel.objects.filter(owner=bob)) == [still_storing]  # its name, quota free
+    assert stored_objects() == set()
