@@ -173,13 +173,14 @@ class Trainer:
 
     def _start_clock(self) -> None:
         """Start the job's clock, and move it IN_PROGRESS, once the car drives: when one of its
-        rollout workers first beats (it beats before its first episode, and through it) or an
-        episode arrives. Until then the job is INITIALIZING, waiting for a simulation worker
-        (the simulation queue may be busy with other jobs' rollouts and evaluations), and its
-        clock stands still: the racer is never billed for time the job could not drive, as
-        DeepRacer bills a job from when it trains, not while it waits. The clock starts when the
-        trainer sees the beat, within a turn of it (about a second): any error is the racer's
-        gain."""
+        rollout workers beats (it beats before its first episode, through it, and while it
+        waits for new weights) or an episode arrives. Until then the job is INITIALIZING,
+        waiting for a simulation worker (the simulation queue may be busy with other jobs'
+        rollouts and evaluations), and its clock stands still: the racer is never billed for
+        time the job could not drive, as DeepRacer bills a job from when it trains, not while it
+        waits. The clock starts when the trainer sees the beat, within a turn of it (about a
+        second): any error is the racer's gain. It stops again whenever no car drives
+        (``_stop_clock``)."""
         job = self.job
         self.session_started = time.monotonic()
         started = jobs.clock_write(
@@ -191,12 +192,33 @@ class Trainer:
             self.ending = "stop"
             return
         if self.first_run:
+            self.first_run = False  # said once, not each time the clock starts again
             device = "the GPU" if self.learner.device.startswith("cuda") else "the CPU"
             jobs.log(
                 job,
                 f"Training started: {self.model.get_algorithm_display()}, "
                 f"{_workers(len(self.slots))}, learning on {device}.",
             )
+
+    def _stop_clock(self, why: str) -> None:
+        """Stop the job's clock while no car drives (its rollout workers all stopped answering
+        and their replacements wait behind other work, or Redis restarted): the time so far is
+        kept, the job is INITIALIZING and waits for a simulation worker again, unbilled, as it
+        did for its first, and for ``WORKER_PATIENCE`` at most; the clock starts again at the
+        next beat or episode."""
+        if self.session_started is None:
+            return
+        self.base_seconds = self._spent()
+        self.session_started = None
+        self.waiting_since = time.monotonic()
+        jobs.log(self.job, f"{why}: the clock stops until a car drives again.")
+        waiting = jobs.clock_write(
+            self.job, self.base_seconds, to=TrainingJob.Status.INITIALIZING,
+            message=WAITING_FOR_WORKER,
+        )  # fmt: skip
+        live.announce_training(self.job.pk)
+        if not waiting:  # the racer stopped it
+            self.ending = "stop"
 
     def _build_learner(self) -> None:
         """The learner, with the weights the job goes on from: its last checkpoint when it
@@ -271,7 +293,7 @@ class Trainer:
         first = self.channel.wait_for_episode(wait=1.0)
         self.stopwatch.charge(DRIVING)
         payloads = [first, *self.channel.pop_episodes(limit=49)] if first is not None else []
-        if self.session_started is None and (payloads or self.channel.heartbeats()):
+        if self.session_started is None and (payloads or _driving(self.channel.heartbeats())):
             self._start_clock()
             if self.ending is not None:
                 self._say_why_it_ended()
@@ -342,6 +364,7 @@ class Trainer:
         """Wait for Redis to come back, then set the job's keys up again and restart the rollout
         workers (who stop when Redis goes); ``JobFailed`` if it stays away."""
         jobs.log(self.job, f"{what}; waiting for it.", "warning")
+        self._stop_clock("Redis was lost")
         deadline = time.monotonic() + REDIS_PATIENCE
         while True:
             try:
@@ -535,13 +558,17 @@ class Trainer:
           sandbox; dead when it has not beaten ``PITLANE_ROLLOUT_STARTUP`` after that.
         - driving: it beats; dead when silent ``PITLANE_ROLLOUT_SILENCE``.
 
-        A job none of whose rollouts has driven ``WORKER_PATIENCE`` after they were sent fails,
-        unbilled, rather than hold its trainer for ever (trainers and rollouts sharing one pool
-        that the trainers fill; no worker serving the simulation queue).
+        When none of them has beaten for ``PITLANE_ROLLOUT_SILENCE``, no car drives: the clock
+        stops (``_stop_clock``). A job none of whose rollouts drives ``WORKER_PATIENCE`` after
+        they were sent, or after its cars last drove, fails, unbilled for the wait, rather than
+        hold its trainer for ever (trainers and rollouts sharing one pool that the trainers
+        fill; no worker serving the simulation queue).
         """
+        beats, takings = self.channel.heartbeats(), self.channel.takings()
+        if not _driving(beats):
+            self._stop_clock("No simulation worker is driving")
         if self.session_started is None and time.monotonic() - self.waiting_since > WORKER_PATIENCE:
             raise JobFailed(NO_WORKER)
-        beats, takings = self.channel.heartbeats(), self.channel.takings()
         queued = functools.cache(lambda: self.queued_rollouts(self.job) or set())  # read once
         for slot in self.slots:
             why = None if slot.gone else _why_dead(slot, beats, takings, queued)
@@ -551,10 +578,8 @@ class Trainer:
             if slot.replacements < REPLACEMENTS:
                 slot.replacements += 1
                 slot.started, slot.started_wall = now, wall
-                jobs.log(
-                    self.job, f"Simulation worker {slot.index + 1} {why}; starting a replacement.",
-                    "warning",
-                )  # fmt: skip
+                what = why.format(worker=f"Simulation worker {slot.index + 1}")
+                jobs.log(self.job, f"{what}; starting a replacement.", "warning")
                 self.start_rollouts(self.job, slot)
             else:
                 slot.gone = True
@@ -742,21 +767,30 @@ def training_trace(episodes: list[Episode], *, before: int) -> str:
     return to_csv(rows)
 
 
+def _driving(beats: dict[int, float]) -> bool:
+    """Whether one of the job's rollout workers has beaten (``beats``: their last beats, [s since
+    the epoch]) within ``PITLANE_ROLLOUT_SILENCE``: a car drives."""
+    return time.time() - max(beats.values(), default=0.0) <= settings.PITLANE_ROLLOUT_SILENCE
+
+
 def _why_dead(slot: Slot, beats: dict[int, float], takings: dict[int, float], queued) -> str | None:
-    """Why the rollout of ``slot`` is taken for dead, in the racer's words; None while it lives
-    or waits (``Trainer._watch_workers`` says when). ``beats`` and ``takings`` are the slots'
-    last beats and takes [s since the epoch]; ``queued()`` the slots whose task waits in the
-    broker's queue, read only for a rollout that has waited past its startup bound."""
+    """Why the rollout of ``slot`` is taken for dead, in the racer's words, ``{worker}`` for the
+    worker's name; None while it lives or waits (``Trainer._watch_workers`` says when). ``beats``
+    and ``takings`` are the slots' last beats and takes [s since the epoch]; ``queued()`` the
+    slots whose task waits in the broker's queue, read only for a rollout that has waited past
+    its startup bound."""
     wall = time.time()
     last, taken = beats.get(slot.index, 0.0), takings.get(slot.index, 0.0)
     if last >= slot.started_wall:  # driving
-        return "stopped answering" if wall - last > settings.PITLANE_ROLLOUT_SILENCE else None
+        return (
+            "{worker} stopped answering" if wall - last > settings.PITLANE_ROLLOUT_SILENCE else None
+        )
     if taken >= slot.started_wall:  # starting
         late = wall - taken > settings.PITLANE_ROLLOUT_STARTUP
-        return "stopped answering as it started" if late else None
+        return "{worker} stopped answering as it started" if late else None
     waited = time.monotonic() - slot.started > settings.PITLANE_ROLLOUT_STARTUP
     if waited and slot.index not in queued():
-        return "was lost from the queue before a simulation worker took it"
+        return "{worker}'s task was lost from the queue before any worker took it"
     return None
 
 

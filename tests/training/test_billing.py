@@ -3,6 +3,7 @@ worker (issue 42: three jobs billed 3:54 with no rollout ever started); and a ro
 in a busy simulation queue is not taken for dead and replaced."""
 
 import threading
+import time
 import uuid
 from types import SimpleNamespace
 
@@ -11,6 +12,7 @@ from django.db import connection
 from django.urls import reverse
 from django.utils import timezone
 
+from rl.stopwatch import Stopwatch
 from tests.services import wait_for
 from tests.training.test_training import queued_job, reload, wait_for_job
 from training import jobs, selectors, tasks, trainer
@@ -98,7 +100,7 @@ def test_a_rollout_is_replaced_only_when_taken_for_dead_not_while_it_waits_in_th
     run._watch_workers()
     assert sent == [0]
     assert job.log_lines.get().text == (
-        "Simulation worker 1 was lost from the queue before a simulation worker took it; "
+        "Simulation worker 1's task was lost from the queue before any worker took it; "
         "starting a replacement."
     )
 
@@ -140,3 +142,45 @@ def test_a_job_no_simulation_worker_takes_fails_unbilled_rather_than_hold_its_tr
     assert job.status == TrainingJob.Status.FAILED
     assert job.failure_reason == trainer.NO_WORKER
     assert (job.training_seconds, job.iterations) == (0, 0)
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_jobs_clock_stops_while_no_car_drives_and_starts_again_when_one_does(
+    alice, tracks, settings, monkeypatch
+):
+    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    run = trainer.Trainer(job, start_rollouts=lambda job, slot: None)
+    run.channel.start(job.attempt)
+    run.training_message, run.first_run = "Training with 1 simulation worker", False
+    run.collected, run.stopwatch, run.last_watch = [], Stopwatch(), time.monotonic()
+    jobs.move(job, TrainingJob.Status.INITIALIZING)
+    run.channel.beat(0)
+    run._start_clock()
+    run.session_started -= 5  # it drove 5 s
+    silent = time.time() - settings.PITLANE_ROLLOUT_SILENCE - 1
+    run.channel.client.hset(run.channel.control, "worker:0", silent)  # then its worker died
+
+    run._watch_workers()  # its replacement waits behind other work
+    job = reload(job)
+    assert (job.status, job.message) == (
+        TrainingJob.Status.INITIALIZING,
+        trainer.WAITING_FOR_WORKER,
+    )
+    clock = selectors.training_clock(job=job)
+    assert not clock.running and 5 <= clock.seconds < 6
+    run._turn()  # the dead worker's last beat does not start it again
+    assert not selectors.training_clock(job=reload(job)).running
+
+    run.channel.beat(0)  # the replacement drives
+    run._turn()
+    job = reload(job)
+    assert (job.status, job.message) == (TrainingJob.Status.IN_PROGRESS, run.training_message)
+    assert selectors.training_clock(job=job).running
+    assert job.log_lines.filter(text__startswith="Training started").count() == 0  # said once
+
+    monkeypatch.setattr(run, "_publish", lambda: None)  # no learner here
+    run._recover_redis("Redis restarted and lost the job's keys")  # its workers stop with it
+    assert not selectors.training_clock(job=reload(job)).running
+    monkeypatch.setattr(trainer, "WORKER_PATIENCE", 0)  # and no worker comes for 30 minutes
+    with pytest.raises(trainer.JobFailed, match="You were not billed for the wait"):
+        run._watch_workers()
