@@ -7,10 +7,15 @@ process and once inside a sealed sandbox child, as a rollout worker drives it (`
 the episode's experience encoded and sent back). The sandbox adds the reward function's process
 of its own (a round trip per call), seccomp's check of each syscall, progress messages and the
 episode's encoding.
+
+``--cars 1 4 8``: the rollouts alone with that many cars in one sandbox (``Sandbox(cars=...)``,
+driven as a rollout worker drives them: every idle car starts an episode, each step one batched
+forward pass for all): steps/s of all the cars together, on the same one core.
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import statistics
 import time
@@ -52,19 +57,32 @@ def in_process() -> float:
     return steps / elapsed
 
 
-def in_sandbox() -> float:
-    with Sandbox(env={"track": TRACK}, policy=POLICY, memory_allowance=1024 * MiB) as sandbox:
+def in_sandbox(cars: int = 1, steps_wanted: int = STEPS) -> float:
+    with Sandbox(env={"track": TRACK}, cars=cars, policy=POLICY,
+                 memory_allowance=(1024 + 384 * (cars - 1)) * MiB) as sandbox:  # fmt: skip
         sandbox.load(reward_source())
-        sandbox.episode()  # warm-up
+        driving = sandbox.episode(start=cars)["driving"]  # warm-up
         steps, started = 0, time.perf_counter()
-        while steps < STEPS:
-            steps += sandbox.episode()["summary"]["steps"]
+        while steps < steps_wanted:
+            reply = sandbox.episode(start=cars - driving)
+            steps, driving = steps + reply["summary"]["steps"], reply["driving"]
         return steps / (time.perf_counter() - started)
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--cars", type=int, nargs="+", help="rollouts alone, with these cars")
+    parser.add_argument("--steps", type=int, default=STEPS, help="steps timed per figure")
+    parser.add_argument("--rounds", type=int, default=ROUNDS, help="figures a median is of")
+    options = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # the child inherits it
+    if options.cars:
+        print(f"{'cars in one sandbox, one core':<52}{'steps/s':>10}")
+        for cars in options.cars:
+            rate = statistics.median(in_sandbox(cars, options.steps) for _ in range(options.rounds))
+            print(f"{cars:<52}{rate:>10,.0f}")
+        return
     direct = statistics.median(in_process() for _ in range(ROUNDS))
     sandboxed = statistics.median(in_sandbox() for _ in range(ROUNDS))
     print(f"{'loop':<52}{'steps/s':>10}")

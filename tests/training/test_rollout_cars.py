@@ -10,7 +10,8 @@ import pytest
 
 from common.redis_client import redis_client
 from rl.experience import JobChannel
-from training.rollouts import Printed, _drive
+from sandbox import SandboxFailure
+from training.rollouts import Printed, _drive, _where
 
 CARS = 3
 LENGTHS = (30, 10, 20, 15, 40, 25)  # [steps] of the episodes, in the order they start, cycled
@@ -97,3 +98,10 @@ def test_a_worker_of_several_cars_drives_each_version_its_share_and_no_episode_m
     counts = {int(version): int(count) for version, count in
               channel.client.hgetall(channel.counts).items()}  # fmt: skip
     assert counts == {0: 5, 1: 6, 2: 3}
+
+
+def test_a_reward_function_that_failed_in_one_of_several_cars_names_the_car():
+    failure = SandboxFailure("exception", "KeyError: 'missing'", line=4, step=3, car=1)
+    assert _where(failure, worker=0) == "(worker 1, car 2)"
+    alone = SandboxFailure("exception", "KeyError: 'missing'", line=4, step=3)
+    assert _where(alone, worker=0) == "(worker 1)"  # a worker of one car says no more
