@@ -222,7 +222,8 @@ PITLANE_TRAINER_LEASE = env.int("PITLANE_TRAINER_LEASE", 45, minimum=10)  # [s]
 PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # [s]
 # Cars a rollout worker drives together (training.rollouts): each step runs the policy once for
 # all of them, and a batched forward pass costs far less per car than one per car (on one core of
-# the 2-core dev box: 12.6 ms a car at 1, 6.8 at 4, 4.6 at 8; 1.27 at 64 on the GPU box's CPU).
+# the 2-core dev box: 12.6 ms a car at 1, 6.8 at 4, 4.6 at 8; 1.27 at 64 on the GPU box's CPU),
+# so a core drives 2.3 to 3 times the steps/s with 8 cars as with 1 (bench.bench_sandbox --cars).
 # The same on any machine: the gain is per core, not from more of them. Not more: each car adds
 # an environment (about 28 MiB) and an episode in memory, and an iteration is 20 episodes by
 # default, which more cars would finish with fewer and fewer of them driving.
