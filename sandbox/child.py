@@ -13,6 +13,7 @@ naming the line. Since the racer's code cannot write to the worker, the frames t
 
 from __future__ import annotations
 
+import functools
 import os
 import select
 import sys
@@ -110,7 +111,8 @@ class Child:
         envs, first = [], float(settings.get("start", 0.0))
         for car in range(cars):
             placed = settings if cars == 1 else {**settings, "start": (first + car / cars) % 1.0}
-            envs.append(gymnasium.make(simulator.ENV_ID, reward_fn=self.reward.call, **placed))
+            reward_fn = functools.partial(self.reward.call, car=car)  # its own copy of it
+            envs.append(gymnasium.make(simulator.ENV_ID, reward_fn=reward_fn, **placed))
         observation, _ = envs[0].reset(seed=0)
         for view in VIEWS:  # the spectator's textures and the JPEG codec, before sealing
             jpeg(view_image(envs[0].unwrapped, view, observation))
@@ -256,7 +258,7 @@ class Child:
 
     def op_load(self, request: dict) -> None:
         try:
-            self.reward.load(request["source"])
+            self.reward.load(request["source"], copies=max(len(self.envs), 1))
         except RewardFailure as error:
             self.send(_failure(error), log=True)
         else:

@@ -113,17 +113,22 @@ class RewardProcess:
         while the child builds the simulator)."""
         self._ask({"op": "hello"}, "ready", limit)
 
-    def load(self, source: str) -> None:
-        self._ask({"op": "load", "source": source}, "loaded", self.call_timeout + KILL_GRACE)
+    def load(self, source: str, copies: int = 1) -> None:
+        """Run the racer's module ``copies`` times, each in a namespace of its own: one per car
+        that calls it, so that a function keeping values in globals between calls (as
+        DeepRacer's, called by one car in order, may) sees only its own car's calls."""
+        limit = copies * self.call_timeout + KILL_GRACE
+        self._ask({"op": "load", "source": source, "copies": copies}, "loaded", limit)
 
-    def call(self, params: dict) -> float:
-        """The reward for ``params``, checked here (``RewardError`` if it is not one)."""
+    def call(self, params: dict, car: int = 0) -> float:
+        """The reward for ``params`` from car ``car``'s copy of the function, checked here
+        (``RewardError`` if it is not one)."""
         params = dict(params)
         waypoints = params.pop("waypoints", None)
         if waypoints is not None and waypoints != self._waypoints:
             self._ask({"op": "waypoints", "waypoints": waypoints}, "waypoints", 5.0)
             self._waypoints = waypoints
-        reply = self._ask({"op": "call", "params": params}, "reward",
+        reply = self._ask({"op": "call", "params": params, "car": car}, "reward",
                           self.call_timeout + KILL_GRACE)  # fmt: skip
         return checked_reward(reply.get("value"))
 
@@ -226,7 +231,7 @@ class _Host:
     def __init__(self, requests, replies: int, call_timeout: float) -> None:
         self.requests, self.replies = requests, replies
         self.call_timeout = call_timeout
-        self.function = None
+        self.functions: list = []  # the racer's reward_function, a copy per car
         self.waypoints: tuple = ()
         self.printed = _Printed()
         sys.stdout = self.printed
@@ -257,7 +262,6 @@ class _Host:
     def op_load(self, request: dict) -> None:
         source = request["source"]
         linecache.cache[FILENAME] = (len(source), None, source.splitlines(True), FILENAME)
-        namespace = {"__name__": "reward_function_module", "__builtins__": __builtins__}
         try:
             code = compile(source, FILENAME, "exec")
         except SyntaxError as error:
@@ -266,23 +270,27 @@ class _Host:
         except (MemoryError, RecursionError):  # nested too deep for the parser
             self.send(_error("syntax", "The code is nested too deeply for Python to read.", None))
             return
-        try:
-            self._limited(exec, code, namespace)
-        except BaseException as error:  # whatever the module did is reported
-            kind = "import" if isinstance(error, ImportError) else "exception"
-            self.send(_exception(kind, error, self.call_timeout))
-            return
-        function = namespace.get("reward_function")
-        if not callable(function):
-            self.send(_error("definition", "The code must define reward_function(params).", None))
-            return
-        self.function = function
+        functions = []
+        for _ in range(int(request.get("copies", 1))):
+            namespace = {"__name__": "reward_function_module", "__builtins__": __builtins__}
+            try:
+                self._limited(exec, code, namespace)
+            except BaseException as error:  # whatever the module did is reported
+                kind = "import" if isinstance(error, ImportError) else "exception"
+                self.send(_exception(kind, error, self.call_timeout))
+                return
+            functions.append(namespace.get("reward_function"))
+            if not callable(functions[-1]):
+                message = "The code must define reward_function(params)."
+                self.send(_error("definition", message, None))
+                return
+        self.functions = functions
         self.send({"type": "loaded"})
 
     def op_call(self, request: dict) -> None:
         params = _params(request["params"], self.waypoints)
         try:
-            value = checked_reward(self._limited(self.function, params))
+            value = checked_reward(self._limited(self.functions[request["car"]], params))
         except RewardError as error:
             self.send(_error("value", str(error), None))
         except BaseException as error:  # user code may raise anything

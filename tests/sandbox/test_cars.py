@@ -18,8 +18,16 @@ ENV = {"track": "pitlane-oval"}
 SEED = 7
 CARS = 2
 EPISODES = 2  # per car
-# Stateless, and reading where the car is and how it moves, so that any difference shows.
-REWARD = reward("return params['progress'] + params['speed'] + abs(params['heading']) / 100")
+# Reading where the car is and how it moves, so that any difference shows; and counting its
+# calls in a global, as DeepRacer reward functions that remember the step before do: each car's
+# calls must reach a copy of their own, or the cars' counts would mix.
+REWARD = """calls = 0
+
+def reward_function(params):
+    global calls
+    calls += 1
+    return params["progress"] + params["speed"] + abs(params["heading"]) / 100 + calls / 1000
+"""
 
 
 @pytest.fixture(scope="module")
