@@ -11,15 +11,20 @@ died goes on on another, rather than when the broker would hand its task out aga
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import threading
+from collections.abc import Iterator
 from datetime import timedelta
 
 from django.conf import settings
-from django.db import transaction
+from django.db import DatabaseError, connection, transaction
 from django.utils import timezone
 
 from training import lifecycle
 from training.models import EvaluationJob, JobLogLine, TrainingJob
 
+logger = logging.getLogger(__name__)
 IMPORTED = "import"  # the lease owner of a job an import recorded: it never ran on this console
 RESUMING = "resuming"  # the lease owner of a job whose run died, while another is sent for
 LAPSED = (
@@ -79,6 +84,32 @@ def lease_acquire(*, job_id: int, owner: str) -> TrainingJob | None:
 def lease() -> timedelta:
     """How long a run's lease lasts unrenewed (``PITLANE_TRAINER_LEASE``)."""
     return timedelta(seconds=settings.PITLANE_TRAINER_LEASE)
+
+
+@contextlib.contextmanager
+def lease_renewed(rows) -> Iterator[None]:
+    """While the block runs, renew the lease of ``rows`` (a job's row while its holder holds
+    it) every third of a lease, from a thread: slow file work (a clone's weights copied to a
+    bucket) may outlast a lease, and the job must not be taken for lost meanwhile; a holder
+    that dies stops renewing, and the lease lapses as it would."""
+    done = threading.Event()
+
+    def renew() -> None:
+        try:
+            while not done.wait(lease().total_seconds() / 3):
+                rows.update(lease_expires=timezone.now() + lease())
+        except DatabaseError as error:
+            logger.warning("A job's lease could not be renewed: %s", error)
+        finally:
+            connection.close()
+
+    renewing = threading.Thread(target=renew, name="lease-renewal", daemon=True)
+    renewing.start()
+    try:
+        yield
+    finally:
+        done.set()
+        renewing.join()
 
 
 def lapsed_claim() -> list[TrainingJob]:

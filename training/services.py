@@ -7,10 +7,12 @@ services: tracks, vehicles, models, clones, deletes, evaluations and reward func
 from __future__ import annotations
 
 import logging
+import os
 import re
 
 from django.conf import settings as django_settings
 from django.contrib.auth.models import AbstractBaseUser
+from django.core.files.storage import FileSystemStorage, default_storage
 from django.db import IntegrityError, transaction
 from django.utils import timezone
 
@@ -261,8 +263,8 @@ def model_create(
     if validation is None and validate_reward:
         validation = _reward_validation(settings)
     with transaction.atomic():
-        model, job = _model_save(owner, settings, validate_reward, validation)
-    if model.cloned_from_id is not None and not _clone_weights_start(job):
+        model, job, weights = _model_save(owner, settings, validate_reward, validation)
+    if weights is not None and not _clone_weights_start(job, weights):
         return model
     # A send that fails (the broker unreachable) is logged, not the racer's error: the
     # workers send a queued task that is not in the broker again (tasks.resend_lost).
@@ -276,32 +278,52 @@ CLONE_COPY_FAILED = (
 )
 
 
-def clone_weights_copy(*, model: RLModel) -> bool:
-    """Copy the clone ``model``'s starting weights, its source's best trained checkpoint, to
-    where its training starts from (``artifacts.CLONED_WEIGHTS``): file work (a checkpoint may
-    be hundreds of MiB), so never inside a transaction. False when the source has none (it was
-    deleted). ``model_create`` copies them; a trainer that finds no copy (its request died before
-    it made one) makes it."""
-    source = RLModel.objects.filter(pk=model.cloned_from_id).first()
-    weights = selectors.model_trained_checkpoint(model=source) if source is not None else None
+def clone_weights_copy(*, model: RLModel, weights: str | None = None) -> str | None:
+    """Copy the clone ``model``'s starting weights, its source's best trained checkpoint
+    (``weights``, when the caller has looked it up), to where its training starts from
+    (``artifacts.CLONED_WEIGHTS``); None once copied, else why not, in the racer's words, for
+    ``CLONE_COPY_FAILED``. File work (a checkpoint may be hundreds of MiB), so never inside a
+    transaction; the copy appears there whole or not at all (``_save_whole``), so a trainer
+    never starts from part of it. ``model_create`` copies them; a trainer that finds no copy
+    (its request died before it made one) makes it."""
     if weights is None:
-        return False
-    artifacts.save(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))
-    return True
-
-
-def _clone_weights_start(job: TrainingJob) -> bool:
-    """Copy a new clone's starting weights; whether its trainer may be sent. Where they cannot
-    be copied, its job fails in words and the model is ERROR, for the racer to delete."""
+        source = RLModel.objects.filter(pk=model.cloned_from_id).first()
+        weights = selectors.model_trained_checkpoint(model=source) if source else None
+    if weights is None:
+        return "that model was deleted"
     try:
-        if clone_weights_copy(model=job.model):
-            return True
-        why = "that model was deleted"
+        _save_whole(model, artifacts.CLONED_WEIGHTS, artifacts.read(weights))
     except SlowStepInTransaction:
         raise
     except Exception:
-        logger.exception("The clone %s's starting weights could not be copied", job.model_id)
-        why = "storage failed"
+        logger.exception("The clone %s's starting weights could not be copied", model.pk)
+        return "storage failed"
+    return None
+
+
+def _save_whole(model: RLModel, relative: str, data: bytes) -> None:
+    """Save ``data`` at ``relative`` under the model's prefix so that a reader finds all of it
+    or nothing: on local storage under a temporary name, then renamed (a rename is atomic); a
+    bucket's object appears only once all of it is uploaded."""
+    if not isinstance(default_storage, FileSystemStorage):
+        artifacts.save(model, relative, data)
+        return
+    partial = artifacts.save(model, f"{relative}.partial", data)
+    os.replace(default_storage.path(partial), default_storage.path(artifacts.path(model, relative)))
+
+
+def _clone_weights_start(job: TrainingJob, weights: str) -> bool:
+    """Copy a new clone's starting weights (its source's checkpoint ``weights``); whether its
+    trainer may be sent. Its send stays held meanwhile (``jobs.lease_renewed``), so
+    ``tasks.resend_lost`` does not send its trainer before they are all there, however long
+    the copy takes; a request that dies copying lets the hold lapse, and a trainer sent then
+    copies them. Where they cannot be copied, its job fails in words and the model is ERROR,
+    for the racer to delete."""
+    held = TrainingJob.objects.filter(pk=job.pk, attempt=0, lease_owner=jobs.RESUMING)
+    with jobs.lease_renewed(held):
+        why = clone_weights_copy(model=job.model, weights=weights)
+    if why is None:
+        return True
     with transaction.atomic():
         locked = TrainingJob.objects.select_for_update().get(pk=job.pk)
         if locked.status != TrainingJob.Status.QUEUED or locked.attempt:
@@ -347,7 +369,8 @@ def _reward_validation(settings: configuration.Draft) -> rewards.Validation | No
 def _model_save(
     owner: AbstractBaseUser, draft: configuration.Draft, validate_reward: bool,
     validation: rewards.Validation | None,
-) -> tuple[RLModel, TrainingJob]:  # fmt: skip
+) -> tuple[RLModel, TrainingJob, str | None]:  # fmt: skip
+    """The model's and its job's rows, and a clone's source's checkpoint, to be copied."""
     settings = configuration.check(
         draft, owner=owner, validate_reward=validate_reward, validation=validation
     )
@@ -364,11 +387,11 @@ def _model_save(
         settings = settings.replace(network_layout=source.network_layout)
     model = model_insert(owner=owner, settings=settings, status=RLModel.Status.QUEUED)
     if source is None:
-        return model, TrainingJob.objects.create(model=model)
-    # Its weights are copied once this commits: the send is held for a lease meanwhile, so
-    # tasks.resend_lost does not send its trainer before they are there.
+        return model, TrainingJob.objects.create(model=model), None
+    # Its weights are copied once this commits: its send is held meanwhile, so
+    # tasks.resend_lost does not send its trainer before they are there (_clone_weights_start).
     held = {"lease_owner": jobs.RESUMING, "lease_expires": timezone.now() + jobs.lease()}
-    return model, TrainingJob.objects.create(model=model, **held)
+    return model, TrainingJob.objects.create(model=model, **held), weights
 
 
 def training_stop(*, job: TrainingJob) -> TrainingJob:
@@ -414,6 +437,12 @@ def model_delete(*, model: RLModel) -> int:
                 f"The model is {locked.get_status_display().lower()}; it can be deleted once it "
                 "is ready (stop its training first) or has failed."
             )
+        waiting = _clone_waiting(locked)
+        if waiting is not None:  # (the move to DELETING rolls back)
+            raise ModelBusy(
+                f"{waiting}, cloned from it, has not started training from its weights yet; "
+                f"delete this model once {waiting} trains, or stop {waiting} first."
+            )
     try:
         removed = artifacts.delete_all(model)
     except Exception:
@@ -422,6 +451,18 @@ def model_delete(*, model: RLModel) -> int:
         raise
     model.delete()
     return removed
+
+
+def _clone_waiting(source: RLModel) -> str | None:
+    """The name of a clone of ``source`` that has not yet started from its weights (its job
+    waits, with no checkpoint of its own), if any: once ``source`` is deleted, a clone no
+    longer says it is one (``cloned_from`` is cleared), and its trainer could neither find its
+    copy of them nor make one."""
+    waiting = TrainingJob.objects.filter(
+        model__cloned_from=source, last_checkpoint="",
+        status__in=(TrainingJob.Status.QUEUED, TrainingJob.Status.INITIALIZING),
+    )  # fmt: skip
+    return waiting.values_list("model__name", flat=True).first()
 
 
 class EvaluationRefused(Refused):

@@ -4,10 +4,12 @@ model row never points at files that are not there (a clone whose copy failed is
 import whose files failed leaves nothing)."""
 
 import io
+import time
 from datetime import timedelta
+from pathlib import Path
 
 import pytest
-from django.core.files.storage import FileSystemStorage
+from django.core.files.storage import FileSystemStorage, default_storage
 from django.db import OperationalError
 from django.utils import timezone
 
@@ -15,7 +17,7 @@ from common import transactions
 from rl.learner import Update
 from rl.stopwatch import Stopwatch
 from tests.training.factories import STRAIGHT_AHEAD, ready_model
-from tests.training.test_imports import stored_objects, virtual_archive
+from tests.training.test_imports import virtual_archive
 from tests.training.test_training import settings as training_settings
 from training import artifacts, configuration, imports, jobs, services, tasks, trainer
 from training.models import RLModel, TrainingJob
@@ -42,6 +44,12 @@ def storage_writes(monkeypatch) -> list[tuple[str, bool]]:
     return seen
 
 
+def stored_objects() -> set[str]:
+    """Every file in the storage the code writes to (a changed ``MEDIA_ROOT`` does not move it)."""
+    root = Path(default_storage.location)
+    return {str(path.relative_to(root)) for path in root.rglob("*") if path.is_file()}
+
+
 def clone_of(source: RLModel) -> RLModel:
     return services.model_create(
         owner=source.owner, validate_reward=False,
@@ -57,7 +65,8 @@ def test_a_clone_copies_its_sources_weights_after_its_rows_are_committed(
     with django_capture_on_commit_callbacks() as sends:
         clone = clone_of(source)
     copy = artifacts.path(clone, artifacts.CLONED_WEIGHTS)
-    assert (copy, False) in storage_writes and not any(inside for _, inside in storage_writes)
+    assert any(name.startswith(copy) for name, _ in storage_writes)
+    assert not any(inside for _, inside in storage_writes)
     assert artifacts.read(copy) == artifacts.read(source.jobs.get().best_checkpoint)
     assert clone.status == RLModel.Status.QUEUED and len(sends) == 1  # its trainer, sent after
 
@@ -90,7 +99,7 @@ def test_a_trainer_that_finds_no_copy_of_its_clones_weights_makes_it(alice, trac
     # The request that created the clone died before it copied them: the job, sent again by
     # tasks.resend_lost, starts from the source's weights all the same.
     source = ready_model(alice)
-    monkeypatch.setattr(services, "_clone_weights_start", lambda job: True)
+    monkeypatch.setattr(services, "_clone_weights_start", lambda job, weights: True)
     clone = clone_of(source)
     copy = artifacts.path(clone, artifacts.CLONED_WEIGHTS)
     artifacts.default_storage.delete(copy)  # an earlier test's model of that id may have left one
@@ -98,6 +107,75 @@ def test_a_trainer_that_finds_no_copy_of_its_clones_weights_makes_it(alice, trac
     run._build_learner()
     assert artifacts.read(copy) == artifacts.read(source.jobs.get().best_checkpoint)
     assert run.job.log_lines.filter(text__startswith="Starting from the weights").exists()
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_clones_trainer_stays_unsent_however_long_its_weights_take_and_never_sees_part_of_them(
+    alice, tracks, settings, monkeypatch
+):
+    settings.PITLANE_TRAINER_LEASE = 1  # [s] so that the copy below outlasts two leases
+    monkeypatch.setattr(jobs, "LOST_AFTER", 0)
+    source = ready_model(alice)
+    during, save = [], FileSystemStorage._save
+
+    def slow_to_a_bucket(storage, name, content):
+        if "/checkpoints/cloned" not in name:
+            return save(storage, name, content)
+        copy = artifacts.path(RLModel(pk=int(name.split("/")[1])), artifacts.CLONED_WEIGHTS)
+        if name != copy and storage.exists(copy):
+            storage.delete(copy)  # an earlier test's model of that id left one
+        stored = save(storage, name, content)
+        time.sleep(2.5)
+        during.append((storage.exists(copy), jobs.lost_queued_claim(waiting=set())))
+        return stored
+
+    monkeypatch.setattr(FileSystemStorage, "_save", slow_to_a_bucket)
+    clone = clone_of(source)
+    assert during == [(False, [])]  # no copy a trainer could read yet, and none sent for
+    copy = artifacts.path(clone, artifacts.CLONED_WEIGHTS)
+    assert artifacts.read(copy) == artifacts.read(source.jobs.get().best_checkpoint)
+
+
+def test_a_trainer_that_cannot_make_its_clones_missing_copy_fails_it_in_words(
+    alice, tracks, monkeypatch
+):
+    source = ready_model(alice)
+    monkeypatch.setattr(services, "_clone_weights_start", lambda job, weights: True)
+    clone = clone_of(source)  # its request died before it copied the weights
+    artifacts.default_storage.delete(artifacts.path(clone, artifacts.CLONED_WEIGHTS))
+    save = artifacts.save
+
+    def storage_down_for_the_copy(model, relative, data):
+        if "cloned" in relative:
+            raise OSError("No space left on device")
+        return save(model, relative, data)
+
+    monkeypatch.setattr(artifacts, "save", storage_down_for_the_copy)
+    assert trainer.run(clone.jobs.get().pk, owner="run", start_rollouts=lambda job, slot: None)
+    job = clone.jobs.get()
+    assert (job.status, job.failure_reason) == (
+        TrainingJob.Status.FAILED,
+        "The weights of the model it was cloned from could not be copied (storage failed), so "
+        "it did not start training; delete it and clone that model again.",
+    )
+    assert RLModel.objects.get(pk=clone.pk).status == RLModel.Status.ERROR  # not fresh weights
+
+
+def test_a_model_cannot_be_deleted_while_a_clone_of_it_waits_to_start_from_its_weights(
+    alice, tracks
+):
+    source = ready_model(alice)
+    clone = clone_of(source)
+    with pytest.raises(services.ModelBusy) as busy:
+        services.model_delete(model=source)
+    assert str(busy.value) == (
+        "clone, cloned from it, has not started training from its weights yet; delete this "
+        "model once clone trains, or stop clone first."
+    )
+    assert RLModel.objects.get(pk=source.pk).status == RLModel.Status.READY
+    services.training_stop(job=clone.jobs.get())
+    services.model_delete(model=source)
+    assert not RLModel.objects.filter(pk=source.pk).exists()
 
 
 _ARCHIVES: list[bytes] = []
@@ -121,9 +199,8 @@ def test_an_import_stores_its_files_outside_any_transaction(alice, bob, tracks, 
 
 
 def test_an_import_whose_files_cannot_be_stored_leaves_no_model_and_no_files(
-    alice, bob, tracks, monkeypatch, settings, tmp_path
+    alice, bob, tracks, monkeypatch
 ):
-    settings.MEDIA_ROOT = tmp_path  # its own: a model of an earlier test may have had bob's id
     archive = archive_of_a_ready_model(alice)
     before = stored_objects()
     save = artifacts.save
@@ -137,7 +214,7 @@ def test_an_import_whose_files_cannot_be_stored_leaves_no_model_and_no_files(
     with pytest.raises(OSError):
         imports.import_model(owner=bob, archive=io.BytesIO(archive))
     assert not RLModel.objects.filter(owner=bob).exists()
-    assert stored_objects() == before
+    assert not stored_objects() - before  # (an earlier test's files under its id went too)
 
 
 def test_a_trainer_saves_each_iterations_checkpoint_outside_its_transaction(
@@ -181,12 +258,9 @@ def importing(owner, name: str) -> RLModel:
     return services.model_insert(owner=owner, settings=checked, status=RLModel.Status.IMPORTING)
 
 
-def test_an_import_that_died_storing_its_files_is_removed_by_the_workers_heartbeat(
-    bob, tracks, settings, tmp_path
-):
-    settings.MEDIA_ROOT = tmp_path
+def test_an_import_that_died_storing_its_files_is_removed_by_the_workers_heartbeat(bob, tracks):
     died = importing(bob, "died-importing")
-    artifacts.save(died, "checkpoints/imported-best.safetensors", b"half of the weights")
+    half = artifacts.save(died, "checkpoints/imported-best.safetensors", b"half of the weights")
     long_ago = timezone.now() - timedelta(seconds=imports.ABANDONED_AFTER + 1)
     RLModel.objects.filter(pk=died.pk).update(created_at=long_ago)
     still_storing = importing(bob, "still-importing")
@@ -195,4 +269,4 @@ def test_an_import_that_died_storing_its_files_is_removed_by_the_workers_heartbe
         f"import of model {died.pk} stopped as it stored its files; the model was removed"
     ]
     assert list(RLModel.objects.filter(owner=bob)) == [still_storing]  # its name, quota free
-    assert stored_objects() == set()
+    assert not default_storage.exists(half)
