@@ -87,11 +87,12 @@ def lease() -> timedelta:
 
 
 @contextlib.contextmanager
-def lease_renewed(rows) -> Iterator[None]:
-    """While the block runs, renew the lease of ``rows`` (a job's row while its holder holds
-    it) every third of a lease, from a thread: slow file work (a clone's weights copied to a
-    bucket) may outlast a lease, and the job must not be taken for lost meanwhile; a holder
-    that dies stops renewing, and the lease lapses as it would."""
+def lease_renewed(job: TrainingJob) -> Iterator[None]:
+    """While the block runs, renew ``job``'s lease (while its attempt holds it: a trainer's, or
+    a new clone's held send) every third of a lease, from a thread: slow file work (a clone's
+    weights copied to a bucket) may outlast a lease, and the job must not be taken for lost
+    meanwhile; a holder that dies stops renewing, and the lease lapses as it would."""
+    rows = _held(job)
     done = threading.Event()
 
     def renew() -> None:

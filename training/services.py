@@ -319,8 +319,7 @@ def _clone_weights_start(job: TrainingJob, weights: str) -> bool:
     the copy takes; a request that dies copying lets the hold lapse, and a trainer sent then
     copies them. Where they cannot be copied, its job fails in words and the model is ERROR,
     for the racer to delete."""
-    held = TrainingJob.objects.filter(pk=job.pk, attempt=0, lease_owner=jobs.RESUMING)
-    with jobs.lease_renewed(held):
+    with jobs.lease_renewed(job):
         why = clone_weights_copy(model=job.model, weights=weights)
     if why is None:
         return True

@@ -247,7 +247,8 @@ class Trainer:
         artifacts.write_model_files(model)
         cloned = artifacts.path(model, artifacts.CLONED_WEIGHTS)
         if model.cloned_from_id is not None and not default_storage.exists(cloned):
-            why = services.clone_weights_copy(model=model)  # its request died before copying
+            with jobs.lease_renewed(job):  # its request died before it copied them
+                why = services.clone_weights_copy(model=model)
             if why is not None:
                 raise JobFailed(services.CLONE_COPY_FAILED.format(why=why))
         if model.cloned_from_id is not None and default_storage.exists(cloned):
