@@ -60,22 +60,24 @@ class EndWatch:
 
 
 def run(job_id: int, worker: int, attempt: int, track: str) -> None:
+    channel = JobChannel(redis_client(timeout=30.0), job_id)
+    token = channel.join(attempt)  # the run this worker drives in; it stops when that ends
+    if token is None:
+        logger.info("Rollout %s/%s found no run of attempt %s going on", job_id, worker, attempt)
+        return
+    # At once, before the slower reads: a task just taken from the queue is then never taken
+    # for one lost from it; the trainer waits for its first beat from now.
+    channel.take(worker)
     job = TrainingJob.objects.select_related("model").filter(pk=job_id).first()
     if job is None or not job.is_active or job.attempt != attempt:
         logger.info("Rollout %s/%s is stale or its job ended; nothing to do", job_id, worker)
         return
     model = job.model
-    channel = JobChannel(redis_client(timeout=30.0), job_id)
     try:
         verified()
     except SandboxUnavailable as error:
         channel.report_failure(str(error))
         return
-    token = channel.join(attempt)  # the run this worker drives in; it stops when that ends
-    if token is None:
-        logger.info("Rollout %s/%s found no run of attempt %s going on", job_id, worker, attempt)
-        return
-    channel.take(worker)  # the trainer waits for its first beat from now, not for the queue
     cars = settings.PITLANE_CARS_PER_WORKER
     policy = {
         "algorithm": model.algorithm,

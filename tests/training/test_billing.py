@@ -13,9 +13,10 @@ from django.urls import reverse
 from django.utils import timezone
 
 from rl.stopwatch import Stopwatch
+from sandbox import SandboxUnavailable
 from tests.services import wait_for
 from tests.training.test_training import queued_job, reload, wait_for_job
-from training import jobs, selectors, tasks, trainer
+from training import jobs, rollouts, selectors, tasks, trainer
 from training.models import TrainingJob
 from training.services import training_stop
 
@@ -184,3 +185,20 @@ def test_a_jobs_clock_stops_while_no_car_drives_and_starts_again_when_one_does(
     monkeypatch.setattr(trainer, "WORKER_PATIENCE", 0)  # and no worker comes for 30 minutes
     with pytest.raises(trainer.JobFailed, match="You were not billed for the wait"):
         run._watch_workers()
+
+
+def test_a_rollout_says_it_took_its_task_before_it_reads_or_checks_anything(
+    alice, tracks, monkeypatch
+):
+    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    channel = trainer.Trainer(job, start_rollouts=None).channel
+    channel.start(job.attempt)
+    taken_when_checking = []
+
+    def sandbox_checked() -> None:  # it may take seconds on a busy machine
+        taken_when_checking.append(set(channel.takings()))
+        raise SandboxUnavailable("no sandbox here")
+
+    monkeypatch.setattr(rollouts, "verified", sandbox_checked)
+    rollouts.run(job.pk, 0, job.attempt, "pitlane-oval")
+    assert taken_when_checking == [{0}]  # not taken for lost from the queue meanwhile
