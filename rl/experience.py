@@ -3,7 +3,8 @@
 Keys belong to one job and expire after it ends:
 ``pitlane:job:<id>:experience`` (a list of episodes), ``pitlane:job:<id>:counts`` (a hash:
 the training episodes pushed per policy version), ``pitlane:job:<id>:evaluation`` (a list of
-evaluation results), ``pitlane:job:<id>:policy`` (a hash: version, weights) and
+evaluation results), ``pitlane:job:<id>:policy`` (a hash: version, weights, their size and
+hash) and
 ``pitlane:job:<id>:control`` (a hash: stop, attempt, the run's token, and when each rollout worker
 took its task and last beat).
 Episodes travel as msgpack with their arrays as raw bytes: they come from a sandbox that ran a
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import redis
 
+from rl.weights_cache import Published, WeightsCache, weights_digest
 from rl.wire import decode
 from simulator.rewards import MAX_REWARD
 
@@ -62,11 +64,13 @@ class JobChannel:
     # Policy
 
     def publish(self, version: int, weights: bytes, *, episodes: int, evaluate: int = 0) -> None:
-        """Weights ``version``, and how many training episodes the trainer wants with it."""
+        """Weights ``version``, and how many training episodes the trainer wants with it. Their
+        size and hash go beside them: a machine's ``WeightsCache`` names and checks its copy so."""
         self.client.hset(
             self.policy,
             mapping={"version": version, "weights": weights, "evaluate": evaluate,
-                     "episodes": episodes},
+                     "episodes": episodes, "size": len(weights),
+                     "digest": weights_digest(weights)},
         )  # fmt: skip
 
     def episodes_wanted(self) -> int:
@@ -77,11 +81,33 @@ class JobChannel:
         value = self.client.hget(self.policy, "version")
         return int(value) if value is not None else -1
 
-    def fetch_policy(self) -> tuple[int, bytes]:
+    def fetch_policy(self, cache: WeightsCache | None = None) -> tuple[int, bytes]:
+        """The newest weights published: (version, weights); (-1, b"") before any. With a
+        ``cache``, from this machine's copy, fetched from Redis by the first of its workers to
+        need them (the others wait for that one fetch): once per machine, not per worker."""
+        if cache is not None:
+            published = self._published()
+            if published is not None:
+                return cache.weights(self.job_id, published, self._fetch_published)
         version, weights = self.client.hmget(self.policy, "version", "weights")
         if version is None:
             return -1, b""
         return int(version), weights
+
+    def _published(self) -> Published | None:
+        """What names the newest weights, without them; None before any (or from a trainer
+        that published none of it)."""
+        version, size, digest = self.client.hmget(self.policy, "version", "size", "digest")
+        if version is None or size is None or digest is None:
+            return None
+        return Published(int(version), int(size), digest.decode())
+
+    def _fetch_published(self) -> tuple[Published, bytes]:
+        version, digest, weights = self.client.hmget(self.policy, "version", "digest", "weights")
+        if version is None or weights is None:
+            raise redis.RedisError("the published weights vanished (the job's keys expired)")
+        digest = digest.decode() if digest is not None else weights_digest(weights)
+        return Published(int(version), len(weights), digest), weights
 
     def evaluations_wanted(self) -> int:
         """How many evaluation episodes the trainer asks for with the current version."""

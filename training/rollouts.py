@@ -22,6 +22,7 @@ from django.conf import settings
 from common.redis_client import redis_client
 from rl import hyperparameters as hp
 from rl.experience import JobChannel, LogEntry
+from rl.weights_cache import WeightsCache
 from sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
 from training import live
 from training.models import Track, TrainingJob
@@ -308,7 +309,7 @@ def _drive(
                 return "the training is over"
         published = channel.policy_version()
         if driving == 0 and published > version:
-            published, weights = channel.fetch_policy()
+            published, weights = channel.fetch_policy(WeightsCache(settings.PITLANE_WEIGHTS_CACHE))
             sandbox.set_weights(published, weights)
             version, pushed = published, 0
         if evaluator is not None and version > 0:

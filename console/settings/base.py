@@ -228,6 +228,11 @@ PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # 
 # an environment (about 28 MiB) and an episode in memory, and an iteration is 20 episodes by
 # default, which more cars would finish with fewer and fewer of them driving.
 PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", 8, minimum=1, maximum=64)
+# Where a machine's rollout workers share the policy weights they drive with (rl.weights_cache):
+# Redis sends each iteration's weights once per machine, not once per worker. On disk under var/
+# rather than in /dev/shm: a container's /dev/shm is often 64 MiB, less than a 5-layer model's
+# 230 MB, and the page cache serves a file just written from memory all the same.
+PITLANE_WEIGHTS_CACHE = env.path("PITLANE_WEIGHTS_CACHE", VAR_DIR / "weights")
 # An evaluation or a race that someone watches keeps to this many times real time (1: as the
 # DeepRacer console shows it); nobody watching, it runs as fast as it can.
 PITLANE_WATCHED_SPEEDUP = env.int("PITLANE_WATCHED_SPEEDUP", 1, minimum=1, maximum=20)
