@@ -42,6 +42,7 @@ import requests
 
 from bench.bench_console import percentile
 from bench.stack import running_console
+from common.formatting import clock
 
 TRACK = "rookie-loop"
 BYSTANDER_PAUSE = 10.0  # [s] between the bystander's checks, as someone editing their code
@@ -90,8 +91,8 @@ class Answers:
 
     def p95_counting_refusals(self) -> float:
         """p95 with each refused try as never answered (infinitely slow)."""
-        slowest_first = self.answered + [math.inf] * sum(self.refused.values())
-        return percentile(slowest_first, 0.95) if slowest_first else math.inf
+        times = self.answered + [math.inf] * sum(self.refused.values())
+        return percentile(times, 0.95) if times else math.inf
 
     def line(self) -> str:
         if not self.tries:
@@ -289,8 +290,8 @@ class Evening:
             job, name = job_of(model), model.owner.username
             self._progress(f"{name}'s training", job.status, f"{job.iterations} iterations")
             # The racer reads the clock on the model page (the time billed) and presses Stop.
-            clock = training_clock(job=job)
-            if clock.running and clock.seconds >= self.arguments.minutes * 60:
+            billed = training_clock(job=job)
+            if billed.running and billed.seconds >= self.arguments.minutes * 60:
                 training_stop(job=job)
             model.refresh_from_db()
             if model.pk in self.evaluations:
@@ -370,7 +371,8 @@ class Evening:
             rows = Iteration.objects.filter(job=job)
             wall = sum(row.wall_seconds for row in rows)
             rate = f"{sum(row.steps for row in rows) / wall:9.1f}" if wall else f"{'—':>9}"
-            wait = clock(job.started_at - job.created_at) if job.started_at else "never"
+            started = job.started_at
+            wait = clock((started - job.created_at).total_seconds()) if started else "never"
             reason = f" ({job.failure_reason})" if job.failure_reason else ""
             print(f"{model.owner.username:<14}{wait:>11}{clock(job.training_seconds):>10}"
                   f"{job.iterations:>11}{job.steps:>8}{rate}  {job.status}{reason}")  # fmt: skip
@@ -407,7 +409,7 @@ class Evening:
                 overlapping = overlapping.filter(started_at__lt=waited_until)
             rescoring = "yes" if overlapping.exists() else "no"
             wait = (waited_until or timezone.now()) - evaluation.created_at
-            shown = clock(wait) if waited_until else f"{clock(wait)}+"
+            shown = clock(wait.total_seconds()) + ("" if waited_until else "+")
             print(f"{name:<14}{shown:>8}  {rescoring:<30}{evaluation.status}")
             measured |= rescoring == "yes"
             ok &= not (rescoring == "yes" and wait.total_seconds() > EVALUATION_WAIT_TARGET)
@@ -430,12 +432,6 @@ class Evening:
         rate = f"{scored / busy:,.0f} steps/s while running" if busy else "none ended"
         print(f"Re-scorings, racer-1: {len(rows)} asked ({statuses}); {rate}; "
               f"refused: {refused or '0'}")  # fmt: skip
-
-
-def clock(span) -> str:
-    """M:SS of a timedelta or of seconds."""
-    seconds = round(span if isinstance(span, (int, float)) else span.total_seconds())
-    return f"{seconds // 60}:{seconds % 60:02d}"
 
 
 def main() -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TypeVar
 
 # DeepRacer's control rate: the car acts, and a step is traced, 15 times a simulated second.
 CONTROL_HZ = 15  # [Hz]
@@ -222,7 +223,11 @@ def _reading(
     return number, None
 
 
-def choice(name: str, value, allowed: Sequence) -> str:
+Option = TypeVar("Option")
+
+
+def choice(name: str, value, allowed: Sequence[Option]) -> Option:
+    """``value``, one of ``allowed`` (a name, or None for a render mode); ``ConfigError`` else."""
     if value not in allowed:
         names = ", ".join(str(option) for option in allowed)
         raise ConfigError(f"{name} must be one of {names}, not {value!r}.")

@@ -17,6 +17,7 @@ from console.workers import live_workers
 from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
 
 PASSWORD = "correct-horse-battery-staple"
+TRAINERS = 2  # the suite's training worker's processes (celery_worker_process)
 BROWSER_TESTS = Path(__file__).parent / "browser"
 
 
@@ -106,10 +107,10 @@ def celery_worker_process(test_database, logs_dir) -> Iterator[WorkerPools]:
         [
             ServiceProcess(
                 python_module("celery", *pool.arguments(), "--without-mingle", "--without-gossip"),
-                env={**service_env(test_database), "PITLANE_TRAINERS": "2"},
+                env={**service_env(test_database), "PITLANE_TRAINERS": str(TRAINERS)},
                 log=logs_dir / f"celery-{pool.queue}.log",
             )
-            for pool in worker_pools(trainers=2, simulations=3, prefix="test-")
+            for pool in worker_pools(trainers=TRAINERS, simulations=3, prefix="test-")
         ]
     )
 

@@ -40,6 +40,7 @@ from django.utils import timezone
 
 import simulator
 from common.redis_client import redis_client
+from common.transactions import outside_transaction
 from notifications import services as notifications
 from rl import episode
 from rl.policies import Policy
@@ -405,6 +406,7 @@ class Evaluator:
         name = artifacts.path(self.model, prefix + artifacts.EVALUATION_VIDEO)
         if default_storage.exists(name):
             default_storage.delete(name)
+        outside_transaction("An evaluation's video written to storage")
         with video_path.open("rb") as handle:
             saved = default_storage.save(name, File(handle))
         _update(self.evaluation, video=saved)

@@ -66,9 +66,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
     if token is None:
         logger.info("Rollout %s/%s found no run of attempt %s going on", job_id, worker, attempt)
         return
-    # At once, before the slower reads: a task just taken from the queue is then never taken
-    # for one lost from it; the trainer waits for its first beat from now.
-    channel.take(worker)
+    channel.take(worker)  # before the slower reads: a task just dequeued is never taken for lost
     job = TrainingJob.objects.select_related("model").filter(pk=job_id).first()
     if job is None or not job.is_active or job.attempt != attempt:
         logger.info("Rollout %s/%s is stale or its job ended; nothing to do", job_id, worker)

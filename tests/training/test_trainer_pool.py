@@ -6,13 +6,13 @@ three worker processes as trainers, no rollout ever started, and all three faile
 import pytest
 from django.urls import reverse
 
+from tests.conftest import TRAINERS
 from tests.services import wait_for
-from tests.training.test_training import reload, settings
+from tests.training.test_training import reload
+from tests.training.test_training import settings as model_settings
 from training import selectors
 from training.models import TrainingJob
 from training.services import model_create, training_stop
-
-TRAINERS = 2  # the suite's training worker's processes (tests/conftest.py)
 
 
 @pytest.mark.timeout(600)
@@ -21,7 +21,7 @@ def test_more_jobs_than_trainers_all_train_and_the_one_waiting_is_shown_its_plac
     client, alice, tracks, celery_worker_process
 ):
     models = [
-        model_create(owner=alice, settings=settings(name=f"pool-{n}"), validate_reward=False)
+        model_create(owner=alice, settings=model_settings(name=f"pool-{n}"), validate_reward=False)
         for n in range(TRAINERS + 1)
     ]
     started = [model.jobs.get() for model in models]
