@@ -171,3 +171,26 @@ def test_a_cache_it_cannot_write_costs_only_the_cache(tmp_path):
         1, b"version 1",
     )  # fmt: skip
     assert fetch.calls == 1
+
+
+def test_rollout_workers_of_one_machine_drive_with_weights_fetched_once(channel, monkeypatch):
+    from types import SimpleNamespace
+
+    from tests.training.test_rollout_cars import ScriptedCars, Unwatched
+    from training.rollouts import Printed, _drive
+
+    fetched = []  # the weights' trips from Redis
+    hmget = channel.client.hmget
+    monkeypatch.setattr(channel.client, "hmget",
+                        lambda name, *keys: (fetched.append(1) if "weights" in keys else None)
+                        or hmget(name, *keys))  # fmt: skip
+    channel.start(attempt=1)
+    channel.publish(0, b"weights 0", episodes=100)
+    job = SimpleNamespace(model=SimpleNamespace(algorithm="clipped_ppo"))
+    for worker in range(2):  # each drives one episode with version 0, then the racer stops
+        sandbox = ScriptedCars({1: channel.request_stop})
+        assert _drive(sandbox, channel, channel.join(1), job, worker, Unwatched(), Printed())
+        assert sandbox.loads == [(0, 0)]
+        channel.client.hset(channel.control, "stop", 0)
+    assert len(fetched) == 1
+    channel.client.delete(channel.experience, channel.counts, channel.control, channel.log)
