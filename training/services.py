@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+import secrets
 
 from django.conf import settings as django_settings
 from django.contrib.auth.models import AbstractBaseUser
@@ -303,12 +304,13 @@ def clone_weights_copy(*, model: RLModel, weights: str | None = None) -> str | N
 
 def _save_whole(model: RLModel, relative: str, data: bytes) -> None:
     """Save ``data`` at ``relative`` under the model's prefix so that a reader finds all of it
-    or nothing: on local storage under a temporary name, then renamed (a rename is atomic); a
-    bucket's object appears only once all of it is uploaded."""
+    or nothing: on local storage under a temporary name of its own (another writer's is left
+    alone), then renamed (a rename is atomic); a bucket's object appears only once all of it is
+    uploaded."""
     if not isinstance(default_storage, FileSystemStorage):
         artifacts.save(model, relative, data)
         return
-    partial = artifacts.save(model, f"{relative}.partial", data)
+    partial = artifacts.save(model, f"{relative}.{secrets.token_hex(8)}.partial", data)
     os.replace(default_storage.path(partial), default_storage.path(artifacts.path(model, relative)))
 
 
