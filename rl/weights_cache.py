@@ -29,6 +29,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 logger = logging.getLogger(__name__)
 
@@ -83,11 +84,12 @@ class WeightsCache:
             return published.version, found
         try:
             folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+            lock = open(folder / LOCK, "a+b")  # noqa: SIM115 (closed by the block below)
         except OSError as error:
             logger.warning("The weights cache %s is unusable (%s); fetching", self.directory, error)
             fresh, weights = fetch()
             return fresh.version, weights
-        with self._locked(folder) as held:
+        with lock, self._locked(lock, folder) as held:
             found = self._read(folder / published.file_name, published)  # another's fetch
             if found is not None:
                 return published.version, found
@@ -108,26 +110,26 @@ class WeightsCache:
         return None
 
     @contextlib.contextmanager
-    def _locked(self, folder: Path) -> Iterator[bool]:
-        """The job's lock, held for the block; False when another held it past ``patience``
-        (the block then fetches without storing). ``flock`` ends with its holder's process."""
-        with open(folder / LOCK, "a+b") as lock:
-            deadline = time.monotonic() + self.patience
-            while True:
-                try:
-                    fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                    break
-                except BlockingIOError:
-                    if time.monotonic() > deadline:
-                        logger.warning("Waited %.0f s for the lock of %s; fetching",
-                                       self.patience, folder)  # fmt: skip
-                        yield False
-                        return
-                    time.sleep(LOCK_POLL)
+    def _locked(self, lock: BinaryIO, folder: Path) -> Iterator[bool]:
+        """The job's lock (the open ``lock`` file), held for the block; False when another held
+        it past ``patience`` (the block then fetches without storing). ``flock`` ends with its
+        holder's process, however that ends."""
+        deadline = time.monotonic() + self.patience
+        while True:
             try:
-                yield True
-            finally:
-                fcntl.flock(lock, fcntl.LOCK_UN)
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                if time.monotonic() > deadline:
+                    logger.warning("Waited %.0f s for the lock of %s; fetching",
+                                   self.patience, folder)  # fmt: skip
+                    yield False
+                    return
+                time.sleep(LOCK_POLL)
+        try:
+            yield True
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
 
     def _store(self, folder: Path, published: Published, weights: bytes) -> None:
         """Under the job's lock: the job's one file becomes ``published``'s; other jobs idle past
