@@ -2,11 +2,11 @@
 
 Keys belong to one job and expire after it ends:
 ``pitlane:job:<id>:experience`` (a list of episodes), ``pitlane:job:<id>:counts`` (a hash:
-the training episodes pushed per policy version), ``pitlane:job:<id>:evaluation`` (a list of
-evaluation results), ``pitlane:job:<id>:policy`` (a hash: version, weights, their size and
-hash) and
-``pitlane:job:<id>:control`` (a hash: stop, attempt, the run's token, and when each rollout worker
-took its task and last beat).
+the training episodes pushed per policy version), ``pitlane:job:<id>:reserved`` (a hash: per
+rollout worker, "version:count" of the episodes it has started and not yet pushed),
+``pitlane:job:<id>:evaluation`` (a list of evaluation results), ``pitlane:job:<id>:policy``
+(a hash: version, weights, their size and hash) and ``pitlane:job:<id>:control`` (a hash:
+stop, attempt, the run's token, and when each rollout worker took its task and last beat).
 Episodes travel as msgpack with their arrays as raw bytes: they come from a sandbox that ran a
 racer's code, so the trainer checks every field before it learns from one (``decode_episode``).
 """
@@ -32,6 +32,36 @@ MAX_LOG_LINES = 500  # log lines waiting for the trainer to file them
 MAX_LOG_TEXT = 500  # [characters] of one log line
 LOG_SOURCES = ("worker", "reward")  # JobLogLine.Source values a rollout worker may send
 LOG_LEVELS = ("info", "warning", "error")
+# Reserve up to ARGV[3] episodes of version ARGV[2] for worker ARGV[1], as many as the trainer
+# still wants of it past those pushed and those other workers (and this one) drive; none of a
+# version no longer the newest. One script, so two workers never both take the last ones.
+RESERVE = """
+local version = redis.call('HGET', KEYS[1], 'version')
+if version ~= ARGV[2] then return 0 end
+local room = tonumber(redis.call('HGET', KEYS[1], 'episodes') or '1')
+room = room - tonumber(redis.call('HGET', KEYS[2], version) or '0')
+local mine = 0
+local held = redis.call('HGETALL', KEYS[3])
+for i = 1, #held, 2 do
+  local of, count = string.match(held[i + 1], '^(%-?%d+):(%d+)$')
+  if of == version then
+    room = room - tonumber(count)
+    if held[i] == ARGV[1] then mine = tonumber(count) end
+  end
+end
+local granted = math.max(0, math.min(tonumber(ARGV[3]), room))
+redis.call('HSET', KEYS[3], ARGV[1], version .. ':' .. (mine + granted))
+redis.call('EXPIRE', KEYS[3], ARGV[4])
+return granted
+"""
+# Worker ARGV[1] pushed an episode of version ARGV[2]: one fewer it holds reserved.
+UNRESERVE = """
+local of, count = string.match(redis.call('HGET', KEYS[1], ARGV[1]) or '', '^(%-?%d+):(%d+)$')
+if of == ARGV[2] and tonumber(count) > 0 then
+  redis.call('HSET', KEYS[1], ARGV[1], of .. ':' .. (tonumber(count) - 1))
+end
+return 0
+"""
 
 
 @dataclass(frozen=True)
@@ -56,6 +86,7 @@ class JobChannel:
         self.job_id = job_id
         self.experience = key(job_id, "experience")
         self.counts = key(job_id, "counts")
+        self.reserved = key(job_id, "reserved")
         self.evaluation = key(job_id, "evaluation")
         self.policy = key(job_id, "policy")
         self.control = key(job_id, "control")
@@ -115,17 +146,34 @@ class JobChannel:
 
     # Experience
 
-    def push_episode(self, payload: bytes, version: int) -> int:
-        """A training episode driven with ``version`` into the buffer; how many of that version's
-        have been pushed so far. The episode and its count go in one transaction, and ``start``
-        deletes both in one: a worker that outlived a Redis restart, whose client retries its
-        push on the new server, cannot leave a count the buffer does not hold (the other workers
-        would stop short of the episodes the trainer waits for)."""
+    def episodes_reserve(self, worker: int, version: int, most: int) -> int:
+        """How many episodes of ``version`` (at most ``most``) ``worker`` may start: those the
+        trainer still wants past the ones pushed and the ones every worker has reserved and not
+        pushed; none once a newer version is published. The trainer keeps the first episodes of
+        a version to come, so an episode started past its count would be dropped, and those
+        dropped would be the longest (the laps completed): a bias the reservations prevent."""
+        return int(self.client.eval(RESERVE, 3, self.policy, self.counts, self.reserved,
+                                    worker, version, most, EXPIRE_AFTER))  # fmt: skip
+
+    def reservations_drop(self, worker: int) -> None:
+        """Give back what ``worker`` reserved and did not push: its episodes were abandoned
+        (a worker that died mid-episode, now replaced), and another may drive them."""
+        self.client.hdel(self.reserved, str(worker))
+
+    def push_episode(self, payload: bytes, version: int, worker: int | None = None) -> int:
+        """A training episode driven with ``version`` into the buffer (by ``worker``, for one of
+        its reservations); how many of that version's have been pushed so far. The episode and
+        its count go in one transaction, and ``start`` deletes both in one: a worker that
+        outlived a Redis restart, whose client retries its push on the new server, cannot leave
+        a count the buffer does not hold (the other workers would stop short of the episodes
+        the trainer waits for)."""
         pipe = self.client.pipeline(transaction=True)
         pipe.rpush(self.experience, payload)
         pipe.ltrim(self.experience, -MAX_QUEUED_EPISODES, -1)
         pipe.hincrby(self.counts, str(version), 1)
         pipe.expire(self.counts, EXPIRE_AFTER)
+        if worker is not None:
+            pipe.eval(UNRESERVE, 1, self.reserved, worker, version)
         return pipe.execute()[2]
 
     def wait_for_episode(self, wait: float) -> bytes | None:
@@ -152,7 +200,8 @@ class JobChannel:
         (``join``), and one that outlived a restart sees the token change and stops, rather
         than drive on beside its replacement."""
         pipe = self.client.pipeline(transaction=True)
-        pipe.delete(self.experience, self.counts, self.evaluation, self.control, self.log)
+        pipe.delete(self.experience, self.counts, self.reserved, self.evaluation, self.control,
+                    self.log)  # fmt: skip
         pipe.hset(self.control, mapping={
             "stop": 0, "attempt": attempt, "run": f"{attempt}:{secrets.token_hex(8)}",
         })  # fmt: skip
@@ -233,8 +282,8 @@ class JobChannel:
         return entries
 
     def expire(self) -> None:
-        for name in (self.experience, self.counts, self.evaluation, self.policy, self.control,
-                     self.log):  # fmt: skip
+        for name in (self.experience, self.counts, self.reserved, self.evaluation, self.policy,
+                     self.control, self.log):  # fmt: skip
             self.client.expire(name, EXPIRE_AFTER)
 
 

@@ -84,6 +84,13 @@ class Policy:
                 return actions[0].numpy(), float(values[0]), float(log_probs[0])
             return self.network.actor(tensor, deterministic=deterministic)[0].numpy(), None, None
 
+    def value(self, observation: dict) -> float:
+        """PPO's critic's value of ``observation``, the critic alone run: an episode's last
+        observation, where time cut it short."""
+        tensor, _ = self.network.obs_to_tensor(observation)
+        with torch.no_grad():
+            return float(self.network.predict_values(tensor)[0])
+
     @staticmethod
     def generator(seed: int) -> torch.Generator:
         """A random stream of its own for one car's sampling (``explore``): a car's actions then

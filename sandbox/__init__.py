@@ -108,7 +108,10 @@ class Sandbox:
     policy: dict | None = None  # {"algorithm", "architecture", "seed"}: a policy to act with
     samples: dict | None = None  # {"track", "direction"}: sample situations, made before sealing
     call_timeout: float = 1.0  # [s] per call of the reward function
-    memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing
+    memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing,
+    # and the reward process beyond what it has at its own: the racer's code gets this whatever
+    # the cars
+    car_memory: int = 0  # [bytes] more the child (never the racer's code) may map per car past one
     start_timeout: float = 60.0  # [s]
     logs: deque = field(default_factory=lambda: deque(maxlen=LOG_KEEP))
     logs_dropped: int = 0  # lines printed and not kept: past LOG_KEEP, or the child's bound
@@ -120,6 +123,7 @@ class Sandbox:
         self._frames: queue.Queue = queue.Queue(maxsize=FRAMES_AHEAD)
         self._closed = threading.Event()
         self.stderr_tail = b""
+        self.driving = 0  # cars with episodes under way, as the child last said
 
     def __enter__(self) -> Sandbox:
         self.start()
@@ -145,14 +149,17 @@ class Sandbox:
         threading.Thread(target=self._read_stderr, daemon=True).start()
         self.report = self._request({
             "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
-            "env": portable_env(self.env), "cars": self.cars, "policy": self.policy,
+            "car_memory": self.car_memory, "env": portable_env(self.env), "cars": self.cars,
+            "policy": self.policy,
             "samples": portable_env(self.samples), "op": "start",
         }, {"ready"}, self.start_timeout)  # fmt: skip
         return self.report
 
     def load(self, source: str) -> None:
-        """Run the racer's module; ``SandboxFailure`` if it does not define a reward function."""
-        self._request({"op": "load", "source": source}, {"loaded"})
+        """Run the racer's module, once per car that drives (each copy's top level within the
+        call's limit); ``SandboxFailure`` if it does not define a reward function."""
+        copies = self.cars if self.env is not None else 1
+        self._request({"op": "load", "source": source}, {"loaded"}, copies * self.call_timeout)
 
     def situations(self) -> list[dict]:
         """The sample situations of ``samples``' track (``simulator.samples``), as the child
@@ -200,19 +207,24 @@ class Sandbox:
         beginning one in ``mode`` (with one car: drive one episode): ``summary`` (steps, reward,
         progress, status, lap_time), ``car`` (which), ``driving`` (how many cars have episodes
         under way, to come from the next requests) and, unless evaluating, ``payload``: the
-        episode's experience, encoded for the experience buffer."""
+        episode's experience, encoded for the experience buffer. ``start`` may be no more
+        than the cars idle (``cars - driving``); the child starts them all, so each answer's
+        ``driving`` must be the last answer's, plus ``start``, less the one sent."""
         request = {"op": "episode", "mode": mode, "worker": worker, "start": start}
         reply = self._request(request, {"episode"}, None, on_progress or _ignore)
         if not isinstance(reply.get("summary"), dict):
-            raise SandboxFailure("protocol", "The sandbox sent an episode without a summary.")
-        car, driving = _int_or_none(reply.get("car")), _int_or_none(reply.get("driving"))
-        if (
-            car is None
-            or driving is None
-            or not (0 <= car < self.cars and 0 <= driving < self.cars)
-        ):
             self._kill()
-            raise SandboxFailure("protocol", "The sandbox sent an episode of no car it drives.")
+            raise SandboxFailure("protocol", "The sandbox sent an episode without a summary.")
+        if mode != "evaluate" and not isinstance(reply.get("payload"), bytes):
+            self._kill()
+            raise SandboxFailure("protocol", "The sandbox sent an episode without its experience.")
+        car, driving = _int_or_none(reply.get("car")), _int_or_none(reply.get("driving"))
+        if car is None or not 0 <= car < self.cars or driving != self.driving + start - 1:
+            self._kill()
+            raise SandboxFailure(
+                "protocol", "The sandbox sent an episode of no car it drives, or lost count."
+            )
+        self.driving = driving
         return reply
 
     def watch(self, views: set[str]) -> None:

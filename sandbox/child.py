@@ -51,11 +51,14 @@ class Child:
         self._last_look = self._last_frame = 0.0
         self.reply_fd = 1
         self.reward: RewardProcess | None = None
-        self.env = None  # car 0's: the one shown live
+        self.env = None  # the shown car's: the lowest-numbered that drives (car 0 at first)
         self.envs: list = []
         self.fleet: episode.Fleet | None = None
         self.finished: deque[episode.Car] = deque()  # ended on one step, not yet sent
         self.driven = 0  # steps driven by all the cars, for progress messages
+        self.episodes = 0  # episodes this worker's cars have started, the live view's numbers
+        self.episode_of: dict[int, int] = {}  # each car's: the number of its episode
+        self.shown_episode = 0  # the number of the shown car's episode
         self.policy = None
         self.ppo = True
         self.samples: list[dict] = []
@@ -73,18 +76,21 @@ class Child:
         if init is None:
             return
         # Before anything else: the reward process, forked while this one is still small and
-        # has no threads; then the simulator and the policy, which it never sees.
+        # has no threads; then the simulator and the policy, which it never sees. The racer's
+        # code gets the allowance alone, however many cars: only this process grows with them.
         self.reward = RewardProcess(float(init["call_timeout"]), int(init["memory_allowance"]))
         cv2.setNumThreads(0)  # no worker threads: the sealed process cannot start any
+        cars = int(init.get("cars", 1))
         if init.get("env") is not None:
-            self.envs = self._build_envs(init["env"], int(init.get("cars", 1)))
+            self.envs = self._build_envs(init["env"], cars)
             self.env = self.envs[0]
         if init.get("policy") is not None:
             self._build_policy(init["policy"])
         if init.get("samples") is not None:
             self.samples = _situations(init["samples"])
         self.reward.wait_ready(60.0)
-        address_space = seal.current_address_space() + int(init["memory_allowance"])
+        allowance = int(init["memory_allowance"]) + (cars - 1) * int(init.get("car_memory", 0))
+        address_space = seal.current_address_space() + allowance
         namespaces = seal.enter_namespaces()
         seal.limit_resources(address_space)
         seal.install_seccomp(
@@ -149,8 +155,9 @@ class Child:
         begin one in ``mode``, "explore" (the policy, sampling), "random" (uniform actions) or
         "evaluate" (the policy, deterministic: only a summary comes back); then the cars that
         drive step together until one's episode ends. The answer names that car and how many
-        still drive; where several ended on one step, the next requests take the others first.
-        Between steps, live frames (car 0's) and progress go out."""
+        still drive; where several ended on one step, the next requests take the others first
+        (the cars idle are started all the same, so the worker can check the count). Between
+        steps, live frames (the lowest-numbered driving car's) and progress go out."""
         mode = request.get("mode", "explore")
         start = request.get("start", 1)
         if mode not in episode.MODES or not isinstance(start, int) or isinstance(start, bool):
@@ -158,9 +165,12 @@ class Child:
             return
         self.worker = int(request.get("worker", 0))
         fleet = self.fleet
+        waiting = {car.index for car in self.finished}  # ended, their episodes not yet sent
+        for car in [car for car in fleet.idle() if car.index not in waiting][: max(start, 0)]:
+            fleet.start(car, mode, record=mode != "evaluate")
+            self.episodes += 1
+            self.episode_of[car.index] = self.episodes
         if not self.finished:
-            for car in fleet.idle()[: max(start, 0)]:
-                fleet.start(car, mode, record=mode != "evaluate")
             if not fleet.driving():
                 self.send({"type": "error", "kind": "protocol", "message": "no car is driving"})
                 return
@@ -168,9 +178,11 @@ class Child:
 
             def stepped(car: episode.Car, observation: dict, info: dict, done: bool) -> None:
                 self.driven += 1
-                if car.index == 0:
-                    self.observation = observation
-                self._live(observation if car.index == 0 and not done else None)
+                shown = car is next(other for other in fleet.cars if other.mode is not None)
+                if shown:
+                    self.env, self.observation = car.env, observation
+                    self.shown_episode = self.episode_of.get(car.index, 0)
+                self._live(observation if shown and not done else None)
                 if time.perf_counter() - reported[0] >= PROGRESS_EVERY:
                     self.send({"type": "progress", "steps": self.driven}, log=True)
                     reported[0] = time.perf_counter()
@@ -198,7 +210,7 @@ class Child:
             return
         final_value = 0.0
         if self.ppo and driven.mode != "random" and not driven.terminated:
-            final_value = self.policy.act(driven.last_observation, deterministic=True)[1]
+            final_value = self.policy.value(driven.last_observation)
         arrays = episode.experience(driven, hasattr(car.env.action_space, "n"), self.ppo)
         answer["payload"] = msgpack.packb(
             {**summary, "final_value": final_value, "arrays": encode_arrays(arrays),
@@ -221,7 +233,7 @@ class Child:
 
     def _live(self, observation: dict | None) -> None:
         """Between two steps: take a watch request that came, and send each watched view at
-        15 frames/s (wall clock) of ``observation`` (car 0's; None: none to show)."""
+        15 frames/s (wall clock) of ``observation`` (the shown car's; None: none to show)."""
         now = time.perf_counter()
         if now - self._last_look >= LOOK_EVERY:
             self._last_look = now
@@ -252,7 +264,7 @@ class Child:
         self.send({
             "type": "frame", "view": view, "rendered_at": time.time(),
             "jpeg": jpeg(view_image(env, view, observation)),
-            "worker": self.worker, "episode": env._episode,
+            "worker": self.worker, "episode": self.shown_episode,
             "step": env.steps, "status": env.status, "progress": env.progress,
         })  # fmt: skip
 

@@ -77,7 +77,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
     except SandboxUnavailable as error:
         channel.report_failure(str(error))
         return
-    cars = settings.PITLANE_CARS_PER_WORKER
+    cars = cars_for(model.algorithm)
     policy = {
         "algorithm": model.algorithm,
         "architecture": model.architecture,
@@ -90,8 +90,8 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
     def sandbox(cars: int) -> Sandbox:
         return Sandbox(
             env=model.environment_settings(track), cars=cars, policy=policy,
-            call_timeout=REWARD_CALL_LIMIT,
-            memory_allowance=MEMORY_ALLOWANCE + (cars - 1) * CAR_MEMORY,
+            call_timeout=REWARD_CALL_LIMIT, memory_allowance=MEMORY_ALLOWANCE,
+            car_memory=CAR_MEMORY,
         )  # fmt: skip
 
     try:
@@ -119,6 +119,13 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
         channel.report_failure(f"Your reward function failed {_where(failure, worker)}: {failure}")
     except redis.RedisError as error:
         logger.warning("Rollout %s/%s lost Redis: %s", job_id, worker, error)
+
+
+def cars_for(algorithm: str) -> int:
+    """The cars a worker's sandbox drives: ``PITLANE_CARS_PER_WORKER``, but one for SAC, which
+    wants one episode per update and would never start a second car (so would build seven
+    environments, and take their memory, for nothing)."""
+    return 1 if algorithm == hp.SAC else settings.PITLANE_CARS_PER_WORKER
 
 
 class Viewing:
@@ -280,18 +287,20 @@ def _drive(
     """Drive episodes until the job's run ends; why it ended, in the racer's words.
 
     The sandbox's cars drive together, and each episode goes to the buffer as it ends. A car
-    starts another only while the version it drives with is the newest and the episodes pushed
-    of it and those under way come short of what the trainer wants: with one car, one episode
-    after another until the trainer has its share, as a single car always drove. The weights
-    change only once no car drives, so no episode mixes two versions; and none is started that
-    the trainer would drop for being past its count (it keeps the first to come, and those
-    would be the short ones)."""
+    starts another only for an episode reserved in Redis (``JobChannel.episodes_reserve``):
+    while the version it drives with is the newest and the episodes pushed of it and those under
+    way on every worker come short of what the trainer wants. With one car, one episode after
+    another until the trainer has its share, as a single car always drove. The weights change
+    only once no car drives, so no episode mixes two versions; and none is started that the
+    trainer would drop for being past its count (it keeps the first to come, and those would
+    be the short ones)."""
     algorithm = job.model.algorithm
     version = -1
     weights = b""
     checked = time.monotonic()
     job_ended = EndWatch(channel, run)
-    driving = pushed = 0  # cars under way; episodes pushed of ``version`` (by every worker)
+    driving = 0  # cars under way
+    channel.reservations_drop(worker)  # a predecessor's, if it died driving: never to come
 
     def beat(steps: int) -> None:  # a long episode still shows the trainer this worker lives
         channel.beat(worker)
@@ -307,23 +316,21 @@ def _drive(
                 return "the training is over"
         published = channel.policy_version()
         if driving == 0 and published > version:
-            published, weights = channel.fetch_policy(WeightsCache(settings.PITLANE_WEIGHTS_CACHE))
-            sandbox.set_weights(published, weights)
-            version, pushed = published, 0
+            version, weights = channel.fetch_policy(WeightsCache(settings.PITLANE_WEIGHTS_CACHE))
+            sandbox.set_weights(version, weights)
         if evaluator is not None and version > 0:
             evaluator.offer(version, weights)
         mode = "random" if version == 0 and algorithm == hp.SAC else "explore"
-        room = channel.episodes_wanted() - pushed - driving if published == version else 0
-        reply = sandbox.episode(
-            mode, worker, beat, start=max(min(room, sandbox.cars - driving), 0 if driving else 1)
-        )
-        driving = reply["driving"]
-        pushed = channel.push_episode(reply["payload"], version)
-        channel.push_log(printed.take(sandbox, version + 1))
-        if driving == 0 and pushed >= channel.episodes_wanted():
+        start = channel.episodes_reserve(worker, version, sandbox.cars - driving)
+        if driving == 0 and start == 0:  # the rest of the version's are pushed or under way
             channel.push_log(printed.close())  # this worker's share of the iteration is done
             if not _await_next_version(channel, run, job, version, worker, viewing, evaluator):
                 return "the training is over"
+            continue
+        reply = sandbox.episode(mode, worker, beat, start=start)
+        driving = reply["driving"]
+        channel.push_episode(reply["payload"], version, worker)
+        channel.push_log(printed.take(sandbox, version + 1))
     return "the training ended"
 
 

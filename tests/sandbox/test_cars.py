@@ -9,10 +9,11 @@ import msgpack
 import numpy as np
 import pytest
 
+import sandbox as sandbox_package
 from rl.learner import weights_bytes
 from rl.policies import Policy
 from sandbox import MiB, Sandbox, SandboxFailure
-from tests.sandbox.test_sandbox import POLICY, reward
+from tests.sandbox.test_sandbox import POLICY, assert_stopped, outcome, reward
 
 ENV = {"track": "pitlane-oval"}
 SEED = 7
@@ -124,3 +125,54 @@ def test_a_reward_function_that_fails_in_one_of_several_cars_fails_with_its_reas
     failure = failed.value
     assert (failure.kind, failure.car) == (kind, 1)
     assert message in str(failure)
+
+
+def test_the_racers_code_gets_the_same_memory_however_many_cars_its_worker_drives():
+    # The child may map more per car (car_memory); the reward process, where the racer's code
+    # runs, is held to memory_allowance with three cars as with one.
+    hungry = reward("x = bytearray(600 * 1024 ** 2)\nreturn 1.0")
+    for cars in (1, 3):
+        result = outcome(hungry, cars=cars, memory_allowance=256 * MiB, car_memory=512 * MiB)
+        assert_stopped(result, "memory", "ran out of memory")
+
+
+def test_a_module_whose_top_level_takes_most_of_the_call_limit_loads_for_three_cars(monkeypatch):
+    # Each car's copy of the module runs within the call's limit (1 s); the worker waits for
+    # the three, not for one (a grace shortened here to keep the test short).
+    monkeypatch.setattr(sandbox_package, "GRACE", 0.5)
+    slow = "import time\ntime.sleep(0.6)\n" + reward("return 1.0")
+    with Sandbox(env=ENV, cars=3, call_timeout=1.0) as sandbox:
+        sandbox.load(slow)
+
+
+@pytest.mark.parametrize(
+    ("reply", "message"),
+    [
+        ({"car": 0, "driving": 1}, "without its experience"),  # no payload
+        ({"car": 0, "driving": 1, "payload": "text"}, "without its experience"),
+        ({"car": 0, "driving": 0, "payload": b""}, "lost count"),  # 2 started, 1 sent: 1 drives
+        ({"car": 2, "driving": 1, "payload": b""}, "no car it drives"),
+    ],
+)
+def test_an_episode_the_child_sends_out_of_protocol_is_a_protocol_failure(reply, message):
+    sandbox = Sandbox(cars=2)  # never started: its answer is the one given here
+    sandbox._request = lambda *args: {"type": "episode", "summary": {}, **reply}
+    with pytest.raises(SandboxFailure) as failed:
+        sandbox.episode("explore", start=2)
+    assert failed.value.kind == "protocol"
+    assert message in str(failed.value)
+
+
+def test_the_live_view_shows_the_lowest_numbered_car_that_drives_with_the_workers_episode():
+    frames: list[dict] = []
+    policy = {**POLICY, "seed": SEED}
+    with Sandbox(env=ENV, cars=2, policy=policy, memory_allowance=1024 * MiB) as sandbox:
+        sandbox.load(REWARD)
+        sandbox.on_frame = frames.append
+        sandbox.watch({"spectator"})
+        assert sandbox.episode("random", start=2)["car"] == 0  # with this seed, car 0 ends first
+        frames.clear()
+        assert sandbox.episode("random", start=0)["car"] == 1  # car 1 drives on alone
+    # Car 1's frames, numbered as the worker's second episode, not car 0's standing still.
+    assert frames
+    assert {frame["episode"] for frame in frames} == {2}

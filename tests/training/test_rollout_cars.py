@@ -3,15 +3,18 @@ goes to the buffer as its car ends it, no more are started than the trainer want
 and the weights change only while no car drives, so no episode mixes two versions. The sandbox
 here is a stand-in that ends the cars' episodes in a scripted order; Redis is real."""
 
+import time
+from concurrent.futures import ThreadPoolExecutor
 from types import SimpleNamespace
 
 import msgpack
 import pytest
 
 from common.redis_client import redis_client
+from rl import hyperparameters as hp
 from rl.experience import JobChannel
 from sandbox import SandboxFailure
-from training.rollouts import Printed, _drive, _where
+from training.rollouts import Printed, _drive, _where, cars_for
 
 CARS = 3
 LENGTHS = (30, 10, 20, 15, 40, 25)  # [steps] of the episodes, in the order they start, cycled
@@ -22,8 +25,9 @@ class ScriptedCars:
     ``LENGTHS`` steps, the cars step together, and ``script[n]`` runs (the trainer, or other
     workers) as the ``n``-th episode ends."""
 
-    def __init__(self, script: dict) -> None:
-        self.cars = CARS
+    def __init__(self, script: dict, cars: int = CARS, pause: float = 0.0) -> None:
+        self.cars = cars
+        self.pause = pause  # [s] each episode's end takes: lets another worker's thread in
         self.script = script
         self.lengths = (length for _ in range(100) for length in LENGTHS)
         self.driving: dict[int, list] = {}  # car: [steps left, version it started with]
@@ -41,6 +45,7 @@ class ScriptedCars:
         for car in idle[:start]:
             self.driving[car] = [next(self.lengths), self.version]
             self.started[self.version] = self.started.get(self.version, 0) + 1
+        time.sleep(self.pause)
         car = min(self.driving, key=lambda car: (self.driving[car][0], car))
         steps, version = self.driving.pop(car)
         for other in self.driving.values():
@@ -66,7 +71,7 @@ def channel():
     channel.start(attempt=1)
     yield channel
     channel.client.delete(channel.experience, channel.counts, channel.control, channel.policy,
-                          channel.log, channel.evaluation)  # fmt: skip
+                          channel.log, channel.evaluation, channel.reserved)  # fmt: skip
 
 
 def test_a_worker_of_several_cars_drives_each_version_its_share_and_no_episode_mixes_two(
@@ -98,6 +103,54 @@ def test_a_worker_of_several_cars_drives_each_version_its_share_and_no_episode_m
     counts = {int(version): int(count) for version, count in
               channel.client.hgetall(channel.counts).items()}  # fmt: skip
     assert counts == {0: 5, 1: 6, 2: 3}
+
+
+def test_two_workers_of_several_cars_start_no_more_episodes_of_a_version_than_wanted(channel):
+    wanted, versions = 20, 3
+    fleets = [ScriptedCars({}, cars=8, pause=0.002) for _ in range(2)]
+    job = SimpleNamespace(model=SimpleNamespace(algorithm="clipped_ppo"))
+    run = channel.join(1)
+    channel.publish(0, b"weights 0", episodes=wanted)
+
+    def drive(worker: int) -> str:
+        own = JobChannel(redis_client(), channel.job_id)  # as a worker's process has its own
+        return _drive(fleets[worker], own, run, job, worker, Unwatched(), Printed())
+
+    def learn() -> None:  # the trainer: the next version once it has this one's episodes
+        for version in range(versions):
+            if version:
+                channel.publish(version, b"weights %d" % version, episodes=wanted)
+            while int(channel.client.hget(channel.counts, str(version)) or 0) < wanted:
+                time.sleep(0.01)
+        channel.request_stop()
+
+    with ThreadPoolExecutor(3) as pool:
+        trainer = pool.submit(learn)
+        workers = [pool.submit(drive, worker) for worker in range(2)]
+        trainer.result(timeout=120)
+        assert [worker.result(timeout=30) for worker in workers] == ["the training ended"] * 2
+    started = {version: sum(fleet.started.get(version, 0) for fleet in fleets)
+               for version in range(versions)}  # fmt: skip
+    # Both workers drove each version (eight cars each, twenty wanted), and between them
+    # started exactly the episodes wanted: none the trainer would drop.
+    assert all(fleet.started.get(0, 0) > 0 for fleet in fleets)
+    assert started == {version: wanted for version in range(versions)}
+
+
+def test_a_worker_that_replaces_one_that_died_driving_may_drive_what_that_one_had_reserved(
+    channel,
+):
+    channel.publish(0, b"weights 0", episodes=4)
+    assert channel.episodes_reserve(0, 0, 3) == 3  # worker 1's first task: it died driving them
+    sandbox = ScriptedCars({1: channel.request_stop})
+    job = SimpleNamespace(model=SimpleNamespace(algorithm="clipped_ppo"))
+    _drive(sandbox, channel, channel.join(1), job, 0, Unwatched(), Printed())
+    assert sandbox.started == {0: 3}  # its three cars at once, not the one left unreserved
+
+
+def test_a_sac_worker_drives_one_car_and_a_ppo_worker_the_cars_set(settings):
+    settings.PITLANE_CARS_PER_WORKER = 8
+    assert (cars_for(hp.SAC), cars_for(hp.PPO)) == (1, 8)
 
 
 def test_a_reward_function_that_failed_in_one_of_several_cars_names_the_car():
