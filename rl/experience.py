@@ -104,10 +104,6 @@ class JobChannel:
                      "digest": weights_digest(weights)},
         )  # fmt: skip
 
-    def episodes_wanted(self) -> int:
-        value = self.client.hget(self.policy, "episodes")
-        return int(value) if value is not None else 1
-
     def policy_version(self) -> int:
         value = self.client.hget(self.policy, "version")
         return int(value) if value is not None else -1

@@ -226,7 +226,8 @@ PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # 
 # so a core drives 2.3 to 3 times the steps/s with 8 cars as with 1 (bench.bench_sandbox --cars).
 # The same on any machine: the gain is per core, not from more of them. Not more: each car adds
 # an environment (about 28 MiB) and an episode in memory, and an iteration is 20 episodes by
-# default, which more cars would finish with fewer and fewer of them driving.
+# default, which more cars would finish with fewer and fewer of them driving. A SAC worker drives
+# one (it wants an episode per update: training.rollouts.cars_for).
 PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", 8, minimum=1, maximum=64)
 # Where a machine's rollout workers share the policy weights they drive with (rl.weights_cache):
 # Redis sends each iteration's weights once per machine, not once per worker. On disk under var/
