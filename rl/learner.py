@@ -37,6 +37,10 @@ CLIP_RANGE = 0.2
 REPLAY_SIZE = 10_000  # [transitions] SAC's replay buffer
 SAC_CHUNK = 32  # gradient steps between looks at whether the update should be abandoned
 
+Progress = Callable[[int, int], None]
+"""Told how far an update has gone: (gradient steps done, of the update's total), after each of
+PPO's minibatches and each chunk of SAC's steps, the last call (total, total)."""
+
 
 class Interrupted(Exception):
     """The update was abandoned part-way (the racer stopped training, or its time ran out); the
@@ -74,6 +78,7 @@ class DeepRacerPPO(PPO):
     def __init__(self, *args, value_loss: str = hp.HUBER, **kwargs) -> None:
         self.value_loss = value_loss
         self.interrupted: Callable[[], bool] = lambda: False  # looked at between minibatches
+        self.progress: Progress = lambda done, total: None  # told after each minibatch
         super().__init__(*args, **kwargs)
 
     def train(self) -> None:
@@ -83,7 +88,9 @@ class DeepRacerPPO(PPO):
             advantages = self.rollout_buffer.advantages
             advantages[:] = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
         losses = []
-        for batch in self._minibatches():
+        size = self.rollout_buffer.buffer_size * self.rollout_buffer.n_envs
+        total = self.n_epochs * -(-size // self.batch_size)  # minibatches of all the epochs
+        for done, batch in enumerate(self._minibatches()):
             if self.interrupted():
                 raise Interrupted
             loss, terms, kl = self._loss(batch)
@@ -94,6 +101,9 @@ class DeepRacerPPO(PPO):
             torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
             self.policy.optimizer.step()
             losses.append(terms)
+            self.progress(done + 1, total)
+        if len(losses) < total:  # a target KL ended it early: it is done all the same
+            self.progress(total, total)
         self.last_losses = dict(zip(("policy", "value", "entropy"), np.mean(losses, axis=0),
                                     strict=True)) if losses else {}  # fmt: skip
 
@@ -205,18 +215,23 @@ class Learner:
     # Learning
 
     def learn(
-        self, episodes: list[Episode], interrupted: Callable[[], bool] = lambda: False
-    ) -> Update:
+        self, episodes: list[Episode], interrupted: Callable[[], bool] = lambda: False,
+        progress: Progress = lambda done, total: None,
+    ) -> Update:  # fmt: skip
         """One policy update from ``episodes``. ``interrupted`` is asked between minibatches (or
-        every few gradient steps): when it says True, the update is abandoned (``Interrupted``)."""
+        every few gradient steps): when it says True, the update is abandoned (``Interrupted``).
+        ``progress(done, total)`` is told the gradient steps done after each (``Progress``): PPO
+        takes ``num_epochs`` passes of equal numbers of minibatches, SAC one step per
+        transition."""
         if self.algorithm == hp.PPO:
-            self.model.interrupted = interrupted
+            self.model.interrupted, self.model.progress = interrupted, progress
             try:
                 self._learn_ppo(episodes)
             finally:
                 self.model.interrupted = lambda: False
+                self.model.progress = lambda done, total: None
         else:
-            self._learn_sac(episodes, interrupted)
+            self._learn_sac(episodes, interrupted, progress)
         laps = [e.lap_time for e in episodes if e.lap_time]
         return Update(
             episodes=len(episodes),
@@ -257,7 +272,9 @@ class Learner:
         model._current_progress_remaining = 1.0
         model.train()
 
-    def _learn_sac(self, episodes: list[Episode], interrupted: Callable[[], bool]) -> None:
+    def _learn_sac(
+        self, episodes: list[Episode], interrupted: Callable[[], bool], progress: Progress
+    ) -> None:
         model = self.model
         for episode in episodes:
             for t in range(episode.steps):
@@ -274,8 +291,9 @@ class Learner:
         for done in range(0, gradient_steps, SAC_CHUNK):
             if interrupted():
                 raise Interrupted
-            model.train(gradient_steps=min(SAC_CHUNK, gradient_steps - done),
-                        batch_size=self.hyperparameters["batch_size"])  # fmt: skip
+            chunk = min(SAC_CHUNK, gradient_steps - done)
+            model.train(gradient_steps=chunk, batch_size=self.hyperparameters["batch_size"])
+            progress(done + chunk, gradient_steps)
 
 
 def _gae(episode: Episode, gamma: float, lam: float) -> np.ndarray:
