@@ -11,12 +11,15 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import datetime
 
+import redis
 from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
 from django.db.models import Count, F, FloatField, Prefetch, QuerySet, Sum
 from django.db.models.functions import Least, Lower
 from django.utils import timezone
 
+from common.redis_client import redis_client
+from rl.experience import JobChannel
 from rl.stopwatch import PHASES
 from training import artifacts, jobs
 from training.jobs import IMPORTED
@@ -199,12 +202,29 @@ def training_status(*, job: TrainingJob) -> dict:
         "failure_reason": job.failure_reason,
         "queue_position": jobs.queue_position(job),
         "iterations": job.iterations,
-        "episodes": job.episodes,
+        "episodes": job.episodes + episodes_arrived(job=job),
         "steps": job.steps,
         "model_status": model.status,
         "model_status_display": model_status_display(model=model),
         "workers": model.workers,
     }
+
+
+def episodes_arrived(*, job: TrainingJob) -> int:
+    """The episodes of the iteration under way that have come so far: the rollout workers push
+    each to the job's buffer as its car ends it, counted by the weights it was driven with
+    (``JobChannel.counts``), and the trainer learns from the newest weights' first
+    ``num_episodes_between_training``. So the page counts an episode as the video shows it end,
+    not only once its iteration is learnt; 0 for a job that does not train now (a stopped
+    job's episodes never learnt are not counted) or when Redis cannot say."""
+    if job.status not in (TrainingJob.Status.INITIALIZING, TrainingJob.Status.IN_PROGRESS):
+        return 0
+    channel = JobChannel(redis_client(), job.pk)
+    try:
+        pushed = int(channel.client.hget(channel.counts, str(job.weights_version)) or 0)
+    except (redis.RedisError, ValueError):
+        return 0
+    return min(pushed, job.model.hyperparameters["num_episodes_between_training"])
 
 
 def iteration_point(*, row: Iteration) -> dict:

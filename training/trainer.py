@@ -28,11 +28,12 @@ from django.db.models import Sum
 from django.utils import timezone
 
 import simulator
+from common.formatting import clock
 from common.redis_client import redis_client
 from notifications import services as notifications
 from rl import hyperparameters as hp
 from rl.experience import Episode, JobChannel, decode_episode
-from rl.learner import Interrupted, Learner
+from rl.learner import Interrupted, Learner, Progress
 from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stopwatch
 from sandbox.protocol import unpack
 from simulator.config import CONTROL_HZ
@@ -46,6 +47,7 @@ logger = logging.getLogger(__name__)
 EVALUATION_EPISODES = 5
 CHECK_EVERY = 3.0  # [s] between lease renewals, clock writes and worker checks
 STOP_CHECK = 1.0  # [s] between looks for the racer's stop request, even in the middle of an update
+UPDATE_SAID_EVERY = 1.5  # [s] at least between two words of how far the update has gone
 REPLACEMENTS = 2  # per worker slot, before the job carries on without it
 REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
 MAX_PRINTED_LINES = 20_000  # reward function and worker lines a job's log keeps, in all
@@ -394,14 +396,10 @@ class Trainer:
         """Learn one iteration from ``episodes`` and record it; False when training ended
         meanwhile (the racer stopped it, or its time ran out) and the iteration was abandoned."""
         number = self.version + 1
-        jobs.clock_write(
-            self.job, self._spent(), message=f"Learning iteration {number} from "
-            f"{len(episodes)} episode{'s' if len(episodes) != 1 else ''}",
-        )  # fmt: skip
-        live.announce_training(self.job.pk)
+        progress = self._update_progress(number, episodes)
         self.stopwatch.charge(CHECKS)
         try:
-            update = self.learner.learn(episodes, interrupted=self._should_end)
+            update = self.learner.learn(episodes, interrupted=self._should_end, progress=progress)
         except Interrupted:
             self.abandoned = number
             return False
@@ -449,6 +447,25 @@ class Trainer:
             + ", ".join(f"{phase} {split[phase]:.1f} s" for phase in PHASES),
         )
         return True
+
+    def _update_progress(self, number: int, episodes: list[Episode]) -> Progress:
+        """The learner's word of how far the update of iteration ``number`` has gone, turned into
+        the job's message (``update_message``) for the page, said now and every
+        ``UPDATE_SAID_EVERY`` at most."""
+        epochs = self.model.hyperparameters["num_epochs"] if self.ppo else 0
+        about = f"iteration {number}, from {len(episodes)} episode{'s' * (len(episodes) > 1)}"
+        started, said = time.monotonic(), [-UPDATE_SAID_EVERY]
+
+        def progress(done: int, total: int) -> None:
+            now = time.monotonic()
+            if done == 0 or (done < total and now - said[0] >= UPDATE_SAID_EVERY):
+                said[0] = now
+                message = update_message(done, total, epochs, now - started, about)
+                jobs.clock_write(self.job, self._spent(), message=message)
+                live.announce_training(self.job.pk)
+
+        progress(0, sum(e.steps for e in episodes))
+        return progress
 
     def _publish(self, evaluate: int = 0) -> None:
         self.channel.publish(
@@ -799,3 +816,15 @@ def _why_dead(slot: Slot, beats: dict[int, float], takings: dict[int, float], qu
 
 def _workers(count: int) -> str:
     return f"{count} simulation worker{'s' if count != 1 else ''}"
+
+
+def update_message(done: int, total: int, epochs: int, seconds: float, about: str) -> str:
+    """What the racer reads while the policy is updated: ``done`` of ``total`` gradient steps
+    after ``seconds``, in epochs of ``epochs`` (PPO) or in steps (SAC, ``epochs`` 0), the time
+    left estimated from the time per step so far; ``about``: which iteration, from what."""
+    if epochs:
+        where = f"epoch {min(done * epochs // max(total, 1) + 1, epochs)} of {epochs}"
+    else:
+        where = f"{done:,} of {total:,} gradient steps"
+    left = f", about {clock(seconds / done * (total - done))} left" if 0 < done < total else ""
+    return f"Updating the policy: {where}{left} ({about})"

@@ -3,6 +3,8 @@ abandons an update it is in the middle of, the job ends at once with the model o
 finished iteration, and it is billed the time up to the stop. What the reward function printed
 reaches the job's log, a bounded share of it."""
 
+import re
+
 import gymnasium
 import numpy as np
 import pytest
@@ -45,8 +47,14 @@ def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_
     job = TrainingJob.objects.create(model=model)
     tasks.train.delay(job.pk)
     job = wait_for_job(
-        job, lambda j: j.message.startswith("Learning iteration 1 from 5 episodes"),
+        job, lambda j: j.message.endswith("(iteration 1, from 5 episodes)"),
         "the first update to begin",
+    )  # fmt: skip
+    # The page tells how far the update has gone, and its time left at the pace so far.
+    job = wait_for_job(job, lambda j: "left" in j.message, "the update's first estimate")
+    assert re.fullmatch(
+        r"Updating the policy: epoch \d+ of 100000, about \d+:\d\d left "
+        r"\(iteration 1, from 5 episodes\)", job.message,
     )  # fmt: skip
 
     stopping = training_stop(job=job)
@@ -93,7 +101,7 @@ def test_a_job_deleted_in_the_middle_of_an_update_frees_its_rollout_worker(
     job = TrainingJob.objects.create(model=model)
     tasks.train.delay(job.pk)
     wait_for_job(
-        job, lambda j: j.message.startswith("Learning iteration 1 from 5 episodes"),
+        job, lambda j: j.message.endswith("(iteration 1, from 5 episodes)"),
         "the first update to begin",
     )  # fmt: skip
     ours = set(sandbox_children()) - before
