@@ -73,17 +73,6 @@ class Policy:
         """The policy with its critics as the trainer stores a checkpoint."""
         return weights_bytes(self.network.state_dict())
 
-    def act(
-        self, observation: dict, deterministic: bool
-    ) -> tuple[np.ndarray, float | None, float | None]:
-        """(action, value, log-probability); value and log-probability only for PPO."""
-        tensor, _ = self.network.obs_to_tensor(observation)
-        with torch.no_grad():
-            if self.ppo:
-                actions, values, log_probs = self.network(tensor, deterministic=deterministic)
-                return actions[0].numpy(), float(values[0]), float(log_probs[0])
-            return self.network.actor(tensor, deterministic=deterministic)[0].numpy(), None, None
-
     def value(self, observation: dict) -> float:
         """PPO's critic's value of ``observation``, the critic alone run: an episode's last
         observation, where time cut it short."""

@@ -63,7 +63,7 @@ def expected(policy, observation, discrete: bool) -> np.ndarray:
     with torch.no_grad():
         if discrete:
             return policy.network.get_distribution(tensor).distribution.probs.numpy()
-    action, _, _ = policy.act(observation, deterministic=True)
+    action = policy.drive(observation)
     return action[None]
 
 

@@ -95,7 +95,7 @@ def test_the_car_installs_the_archive_and_its_graph_chooses_the_pytorch_policys_
     policy, chosen = torch_policy(model), []
     with tensorflow.compat.v1.Session(graph=loaded) as session:
         for observation in sensor_frames(model.environment_settings()):
-            action, _, _ = policy.act(observation, deterministic=True)
+            action = policy.drive(observation)
             tensor, _ = policy.network.obs_to_tensor(observation)
             with torch.no_grad():
                 expected = policy.network.get_distribution(tensor).distribution.probs.numpy()
@@ -129,7 +129,7 @@ def test_a_continuous_stereo_lidar_policy_runs_as_onnx_on_onnx_runtime_and_openv
                             {"INFERENCE_PRECISION_HINT": "f32"})  # fmt: skip
     policy = torch_policy(model)
     for observation in sensor_frames(model.environment_settings(), count=6):
-        expected, _, _ = policy.act(observation, deterministic=True)
+        expected = policy.drive(observation)
         inputs = {s: observation[s][None].astype(np.float32) for s in model.sensors}
         assert inputs["STEREO_CAMERAS"].shape == (1, 2, 120, 160)
         assert inputs["LIDAR"].shape == (1, 64)
