@@ -219,9 +219,9 @@ def episodes_arrived(*, job: TrainingJob) -> int:
     job's episodes never learnt are not counted) or when Redis cannot say."""
     if job.status not in (TrainingJob.Status.INITIALIZING, TrainingJob.Status.IN_PROGRESS):
         return 0
-    channel = JobChannel(redis_client(), job.pk)
     try:
-        pushed = int(channel.client.hget(channel.counts, str(job.weights_version)) or 0)
+        with redis_client() as client:
+            pushed = int(client.hget(JobChannel(client, job.pk).counts, job.weights_version) or 0)
     except (redis.RedisError, ValueError):
         return 0
     return min(pushed, job.model.hyperparameters["num_episodes_between_training"])
