@@ -167,7 +167,8 @@ def test_the_live_view_shows_the_lowest_numbered_car_that_drives_with_the_worker
     frames: list[dict] = []
     policy = {**POLICY, "seed": SEED}
     with Sandbox(env=ENV, cars=2, policy=policy, memory_allowance=1024 * MiB) as sandbox:
-        sandbox.load(REWARD)
+        # A step of 5 ms at least: car 1's last 78 steps alone span several frames (15 a second).
+        sandbox.load("import time\n" + reward("time.sleep(0.005)\nreturn 1.0"))
         sandbox.on_frame = frames.append
         sandbox.watch({"spectator"})
         assert sandbox.episode("random", start=2)["car"] == 0  # with this seed, car 0 ends first
