@@ -53,13 +53,18 @@ def test_the_evaluation_page_says_queued_once_then_follows_the_evaluation(
     expect(page.get_by_text(QUEUED)).to_have_count(0)
 
 
-def test_the_submission_page_follows_its_race_and_then_shows_the_score(page: Page, alice, tracks):
-    model = ready_model(alice)
+def queued_submission(racer) -> Submission:
+    """``racer``'s ready model entered in a one-lap race, its evaluation queued."""
+    model = ready_model(racer)
     trial = event(laps_required=1, laps_to_drive=1)
-    submission = Submission.objects.create(
-        event=trial, racer=alice, model=model, model_name=model.name,
+    return Submission.objects.create(
+        event=trial, racer=racer, model=model, model_name=model.name,
         evaluation=race_evaluation(model, trial),
     )  # fmt: skip
+
+
+def test_the_submission_page_follows_its_race_and_then_shows_the_score(page: Page, alice, tracks):
+    submission = queued_submission(alice)
     log_in(page, "alice", PASSWORD)
     page.goto(submission.get_absolute_url())
     badge = page.locator("[data-submission-status]")
@@ -105,12 +110,7 @@ window.openHeldSockets = () => held.splice(0).forEach((open) => open());
 def test_the_submission_page_catches_up_with_a_race_that_moved_on_while_it_opened(
     page: Page, alice, tracks
 ):
-    model = ready_model(alice)
-    trial = event(laps_required=1, laps_to_drive=1)
-    submission = Submission.objects.create(
-        event=trial, racer=alice, model=model, model_name=model.name,
-        evaluation=race_evaluation(model, trial),
-    )  # fmt: skip
+    submission = queued_submission(alice)
     log_in(page, "alice", PASSWORD)
     page.add_init_script(HELD_SOCKETS)
     page.goto(submission.get_absolute_url())

@@ -292,7 +292,7 @@ def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk_through_
 
     def raced() -> bool:
         text = browser.get(path).text
-        return re.search(r"data-submission-status>(Completed|Failed)<", text) is not None
+        return re.search(r'data-submission-status="\w+">(Completed|Failed)<', text) is not None
 
     wait_for(raced, "the race to be scored", timeout=300)
     assert "data-submission-status>Completed<" in browser.get(path).text

@@ -19,7 +19,7 @@ def test_a_racing_submission_says_its_status_and_nothing_that_contradicts_it(cli
     )
     client.force_login(alice)
     page = client.get(racing.get_absolute_url()).text
-    assert "data-submission-status>In progress</span>" in page
+    assert 'data-submission-status="IN_PROGRESS">In progress</span>' in page
     assert "soon" not in page.lower()
     assert "queued" not in page.lower()
 

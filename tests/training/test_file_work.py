@@ -225,7 +225,7 @@ def test_a_trainer_saves_each_iterations_checkpoint_outside_its_transaction(
     run._build_learner()
     run.version, run.stopwatch, run.training_message = 0, Stopwatch(), "Training"
     learnt = Update(episodes=1, steps=10, reward=1.0, completion=5.0, best_lap_time=None)
-    monkeypatch.setattr(run.learner, "learn", lambda episodes, interrupted: learnt)
+    monkeypatch.setattr(run.learner, "learn", lambda episodes, **how: learnt)
     monkeypatch.setattr(run, "_record_training", lambda number, episodes: None)
     storage_writes.clear()
     assert run._update([])
