@@ -109,7 +109,10 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     assert frame.evaluate(FRAME_BYTES) != first
     expect(page.locator("[data-live-time]")).to_contain_text("left")
     chart = page.locator("[data-live-chart]")
-    expect(chart).to_have_attribute("data-iterations", "1", timeout=120_000)
+    page.wait_for_function(  # one iteration or more: several cars a worker may learn fast
+        "() => Number(document.querySelector('[data-live-chart]').dataset.iterations) >= 1",
+        timeout=120_000,
+    )
     assert int(chart.get_attribute("data-points")) > 0
     album.shoot("training")
 
