@@ -87,6 +87,18 @@ class Env:
             )
         return value  # type: ignore[return-value]
 
+    def choice(
+        self, name: str, default: str | object = _MISSING, *, choices: tuple[str, ...]
+    ) -> str:
+        """One of ``choices``, in any case."""
+        value = self._raw(name, default)
+        if value.lower() not in choices:
+            raise ImproperlyConfigured(
+                f"The environment variable {name} must be one of {', '.join(choices)}, "
+                f"not {value!r}."
+            )
+        return value.lower()
+
     def rate(self, name: str, default: str | object = _MISSING) -> str:
         """A rate limit: a count per period, as ``5/15m`` (5 in 15 minutes) or ``30/h``; the
         period in s, m, h or d."""

@@ -229,6 +229,14 @@ PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # 
 # default, which more cars would finish with fewer and fewer of them driving. A SAC worker drives
 # one (it wants an episode per update: training.rollouts.cars_for).
 PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", 8, minimum=1, maximum=64)
+# Where a rollout worker runs its cars' policy: "cuda" serves it from the worker's own process on
+# the GPU (the sandbox child, which runs racers' code, is never given the GPU's driver: it sends
+# the cars' observations each step and reads back their actions), "cpu" runs it inside the
+# child, "auto" is "cuda" where PyTorch finds a GPU (read by the worker, not here: no Django
+# process imports PyTorch to start).
+PITLANE_ROLLOUT_DEVICE = env.choice(
+    "PITLANE_ROLLOUT_DEVICE", "auto", choices=("auto", "cpu", "cuda")
+)
 # Where a machine's rollout workers share the policy weights they drive with (rl.weights_cache):
 # Redis sends each iteration's weights once per machine, not once per worker. On disk under var/
 # rather than in /dev/shm: a container's /dev/shm is often 64 MiB, less than a 5-layer model's

@@ -53,3 +53,17 @@ def test_it_accepts_a_postgres_url():
 def test_it_rejects_a_weak_secret_key(weak):
     with pytest.raises(ImproperlyConfigured, match="at least 50 characters"):
         Env({"DJANGO_SECRET_KEY": weak}).secret_key("DJANGO_SECRET_KEY")
+
+
+def test_it_takes_one_of_its_choices_in_any_case_and_names_them_when_refusing_another():
+    assert (
+        Env({"PITLANE_ROLLOUT_DEVICE": "CUDA"}).choice(
+            "PITLANE_ROLLOUT_DEVICE", "auto", choices=("auto", "cpu", "cuda")
+        )
+        == "cuda"
+    )
+    assert Env({}).choice("PITLANE_ROLLOUT_DEVICE", "auto", choices=("auto", "cpu")) == "auto"
+    with pytest.raises(ImproperlyConfigured, match=r"must be one of auto, cpu, cuda, not 'gpu'"):
+        Env({"PITLANE_ROLLOUT_DEVICE": "gpu"}).choice(
+            "PITLANE_ROLLOUT_DEVICE", "auto", choices=("auto", "cpu", "cuda")
+        )
