@@ -158,9 +158,13 @@ class DeepRacerEnv(gym.Env):
         self.dt = 1.0 / self.config["control_hz"]
         self._build_spaces()
         self._build_sensors()
-        self._world = World()
-        spec = self.car.spec
-        self._car_body = self._world.add_car(spec.length, spec.width, spec.height)
+        # A PyBullet world only where something stands on the track to be hit or seen (boxes,
+        # bot cars): without one the lidar's rays reach their range, and a time trial runs where
+        # PyBullet is not installed.
+        self._world = World() if self.traffic.present else None
+        if self._world is not None:
+            spec = self.car.spec
+            self._car_body = self._world.add_car(spec.length, spec.width, spec.height)
         self._actor_bodies = []
         self._waypoints = tuple(self.track.waypoints)
         self._waypoint_distances = waypoint_distances(self.track)
@@ -279,7 +283,8 @@ class DeepRacerEnv(gym.Env):
         return self._spectator
 
     def close(self) -> None:
-        self._world.close()
+        if self._world is not None:
+            self._world.close()
 
     # Motion and statuses
 
@@ -298,6 +303,8 @@ class DeepRacerEnv(gym.Env):
         self._distance = float(self.track.project_points([self.car.position]).distance[0])
 
     def _sync_car_body(self) -> None:
+        if self._world is None:
+            return
         c = self.car
         offset = c.spec.centre_offset
         self._world.place(self._car_body, c.x + offset * math.cos(c.yaw),
@@ -431,6 +438,8 @@ class DeepRacerEnv(gym.Env):
 
     def _lidar(self) -> np.ndarray:
         low, high = self.config["lidar_range"]
+        if self._world is None:  # nothing on the track: every ray reaches its range
+            return np.full(len(self._lidar_angles), high)
         c = self.car
         angles = c.yaw + self._lidar_angles
         directions = np.column_stack([np.cos(angles), np.sin(angles)])

@@ -3,6 +3,10 @@
 One ``BulletClient`` per world, never the global ``pybullet`` connection, so environments in one
 process stay independent. Bodies are posed each control step by the simulator (the car and bots
 move kinematically); the world answers which bodies the car touches and what the lidar's rays hit.
+
+PyBullet is imported when the first world is made, not with this module: an environment makes a
+world only where boxes or bot cars stand on the track, so a time trial runs on a machine that has
+no PyBullet (no wheel is published for every Python: the device machine's 3.12 has none).
 """
 
 from __future__ import annotations
@@ -34,15 +38,30 @@ def _quiet_stdout() -> Iterator[None]:
             os.close(copy)
 
 
-with _quiet_stdout():
-    import pybullet
-    from pybullet_utils.bullet_client import BulletClient
+class WorldUnavailable(RuntimeError):
+    """PyBullet, which boxes and bot cars need, cannot be imported on this machine."""
+
+
+def _bullet():
+    """The ``pybullet`` module and its ``BulletClient``, imported quietly on first use."""
+    try:
+        with _quiet_stdout():
+            import pybullet
+            from pybullet_utils.bullet_client import BulletClient
+    except ImportError as error:
+        raise WorldUnavailable(
+            "Object avoidance and head-to-bot races need PyBullet, which is not installed on "
+            "this simulation machine; time trials run without it."
+        ) from error
+    return pybullet, BulletClient
 
 
 class World:
     def __init__(self) -> None:
+        pybullet, bullet_client = _bullet()
+        self._box_shape = pybullet.GEOM_BOX
         with _quiet_stdout():
-            self._client = BulletClient(connection_mode=pybullet.DIRECT)
+            self._client = bullet_client(connection_mode=pybullet.DIRECT)
         self._client.setGravity(0, 0, 0)
         self._heights: dict[int, float] = {}
         self._obstacles: list[int] = []
@@ -61,7 +80,7 @@ class World:
 
     def _add_box(self, length: float, width: float, height: float, *, mass: float) -> int:
         shape = self._client.createCollisionShape(
-            pybullet.GEOM_BOX, halfExtents=[length / 2, width / 2, height / 2]
+            self._box_shape, halfExtents=[length / 2, width / 2, height / 2]
         )
         body = self._client.createMultiBody(baseMass=mass, baseCollisionShapeIndex=shape)
         self._heights[body] = height
