@@ -158,13 +158,7 @@ class DeepRacerEnv(gym.Env):
         self.dt = 1.0 / self.config["control_hz"]
         self._build_spaces()
         self._build_sensors()
-        # A PyBullet world only where something stands on the track to be hit or seen (boxes,
-        # bot cars): without one the lidar's rays reach their range, and a time trial runs where
-        # PyBullet is not installed.
-        self._world = World() if self.traffic.present else None
-        if self._world is not None:
-            spec = self.car.spec
-            self._car_body = self._world.add_car(spec.length, spec.width, spec.height)
+        self._world = self._build_world()
         self._actor_bodies = []
         self._waypoints = tuple(self.track.waypoints)
         self._waypoint_distances = waypoint_distances(self.track)
@@ -416,6 +410,17 @@ class DeepRacerEnv(gym.Env):
             np.linspace(-cfg["lidar_fov"] / 2, cfg["lidar_fov"] / 2, cfg["lidar_rays"])
         )
         self._lidar_angles = angles
+
+    def _build_world(self) -> World | None:
+        """A PyBullet world holding the car's body, only where something stands on the track to
+        be hit or seen (boxes, bot cars): without one the lidar's rays reach their range, and a
+        time trial runs where PyBullet is not installed."""
+        if not self.traffic.present:
+            return None
+        world = World()
+        spec = self.car.spec
+        self._car_body = world.add_car(spec.length, spec.width, spec.height)
+        return world
 
     def _observe(self) -> dict[str, np.ndarray]:
         c = self.car
