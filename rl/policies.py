@@ -30,8 +30,12 @@ class Policy:
     weights_module: torch.nn.Module
 
     @classmethod
-    def build(cls, algorithm: str, architecture: str, observation_space, action_space) -> Policy:
-        """``architecture``: the model's network as ``networks.architecture`` names it."""
+    def build(
+        cls, algorithm: str, architecture: str, observation_space, action_space,
+        device: str = "cpu",
+    ) -> Policy:  # fmt: skip
+        """``architecture``: the model's network as ``networks.architecture`` names it;
+        ``device``: where it runs (torch's name: "cpu", "cuda")."""
         kwargs = policy_kwargs(algorithm, architecture)
         spaces = (observation_space, action_space)
         if algorithm == PPO:
@@ -45,15 +49,19 @@ class Policy:
             policy = MultiInputPolicy(*spaces, lambda _: 0.0, **kwargs)
             module = policy.actor
         policy.set_training_mode(False)
+        policy.to(device)
         return cls(algorithm, policy, module)
 
     @classmethod
-    def for_environment(cls, algorithm: str, architecture: str, environment: dict) -> Policy:
+    def for_environment(
+        cls, algorithm: str, architecture: str, environment: dict, device: str = "cpu"
+    ) -> Policy:
         """The policy for the environment that ``environment`` (``gymnasium.make``'s keyword
-        arguments) describes, built from its spaces."""
+        arguments) describes, built from its spaces, on ``device``."""
         env = gymnasium.make(simulator.ENV_ID, **environment)
         try:
-            return cls.build(algorithm, architecture, env.observation_space, env.action_space)
+            spaces = (env.observation_space, env.action_space)
+            return cls.build(algorithm, architecture, *spaces, device)
         finally:
             env.close()
 
@@ -83,7 +91,8 @@ class Policy:
     @staticmethod
     def generator(seed: int) -> torch.Generator:
         """A random stream of its own for one car's sampling (``explore``): a car's actions then
-        depend on its seed alone, never on the cars it drives beside."""
+        depend on its seed alone, never on the cars it drives beside. On the CPU whatever the
+        policy's device: a car draws the same actions from the same probabilities on either."""
         return torch.Generator().manual_seed(seed)
 
     def explore(
@@ -99,7 +108,7 @@ class Policy:
                 actor = self.network.actor
                 mean, log_std, kwargs = actor.get_action_dist_params(tensor)
                 distribution = actor.action_dist.proba_distribution(mean, log_std, **kwargs)
-                return _sample(distribution, generators).numpy(), None, None
+                return _sample(distribution, generators).cpu().numpy(), None, None
             network = self.network  # SB3's ActorCriticPolicy.forward, its sampling apart
             features = network.extract_features(tensor)
             if network.share_features_extractor:
@@ -111,7 +120,7 @@ class Policy:
             distribution = network._get_action_dist_from_latent(latent_pi)
             actions = _sample(distribution, generators)
             log_probs = distribution.log_prob(actions)
-        return actions.numpy(), values.numpy(), log_probs.numpy()
+        return actions.cpu().numpy(), values.cpu().numpy(), log_probs.cpu().numpy()
 
     def drive(self, observation: dict) -> np.ndarray:
         """The deterministic action alone, as evaluations drive: PPO's critic, a network of its
@@ -122,7 +131,7 @@ class Policy:
                 action = self.network.get_distribution(tensor).get_actions(deterministic=True)
             else:
                 action = self.network.actor(tensor, deterministic=True)
-        return action[0].numpy()
+        return action[0].cpu().numpy()
 
     @staticmethod
     def command(action: np.ndarray, discrete: bool):
@@ -133,18 +142,34 @@ class Policy:
 def _sample(distribution, generators: list[torch.Generator | None]) -> torch.Tensor:
     """One action per row of ``distribution`` (SB3's categorical, Gaussian or squashed
     Gaussian), row ``i`` drawn from ``generators[i]``: the draw a row gets does not depend on the
-    rows beside it."""
+    rows beside it. The draws are made on the CPU, where the generators are (the probabilities
+    of a policy on the GPU brought over, a few numbers a car), and the actions go back."""
     inner = distribution.distribution
     if isinstance(inner, torch.distributions.Categorical):
+        probs = inner.probs.cpu()
         return torch.cat([
-            torch.multinomial(inner.probs[row], 1, generator=generator)
+            torch.multinomial(probs[row], 1, generator=generator)
             for row, generator in enumerate(generators)
-        ])  # fmt: skip
+        ]).to(inner.probs.device)  # fmt: skip
     noise = torch.stack([
         torch.randn(inner.loc.shape[1:], generator=generator) for generator in generators
-    ])  # fmt: skip
+    ]).to(inner.loc.device)  # fmt: skip
     actions = inner.loc + inner.scale * noise
     if isinstance(distribution, SquashedDiagGaussianDistribution):
         distribution.gaussian_actions = actions
         return torch.tanh(actions)
     return actions
+
+
+def rollout_device(setting: str) -> str:
+    """Where a rollout worker runs its policy for ``PITLANE_ROLLOUT_DEVICE``'s ``setting``: "auto"
+    is "cuda" where PyTorch finds a GPU, else "cpu". ``ValueError``, in words, for "cuda" where
+    it finds none."""
+    if setting == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if setting == "cuda" and not torch.cuda.is_available():
+        raise ValueError(
+            "PITLANE_ROLLOUT_DEVICE is cuda, but PyTorch finds no GPU on this simulation "
+            "machine: set it to auto or cpu, or give the machine a GPU PyTorch can use."
+        )
+    return setting

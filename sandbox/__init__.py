@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from sandbox.protocol import Late, ProtocolError, pack, read_frame, write_by
+from sandbox.served import PolicyServer
 from simulator.rewards import RewardError, checked_reward
 
 logger = logging.getLogger(__name__)
@@ -106,6 +107,8 @@ class Sandbox:
     env: dict | None = None
     cars: int = 1
     policy: dict | None = None  # {"algorithm", "architecture", "seed"}: a policy to act with
+    policy_device: str | None = None  # where this process serves the child its policy ("cuda",
+    # "cpu": ``sandbox.served``); None: the child holds it
     samples: dict | None = None  # {"track", "direction"}: sample situations, made before sealing
     call_timeout: float = 1.0  # [s] per call of the reward function
     memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing,
@@ -124,6 +127,7 @@ class Sandbox:
         self._closed = threading.Event()
         self.stderr_tail = b""
         self.driving = 0  # cars with episodes under way, as the child last said
+        self.server: PolicyServer | None = None  # the policy served to the child, if it is
 
     def __enter__(self) -> Sandbox:
         self.start()
@@ -133,7 +137,17 @@ class Sandbox:
         self.close()
 
     def start(self) -> dict:
-        """Start the child and wait until it is sealed; what it reports of its seals."""
+        """Start the child and wait until it is sealed; what it reports of its seals. The policy
+        served to it, if it is, is built first (and run once: its device made ready)."""
+        env, policy = portable_env(self.env), self.policy
+        if policy is not None and self.policy_device is not None:
+            try:
+                self.server = _policy_server(policy, env, self.cars, self.policy_device)
+            except Exception as error:  # the device's own: out of memory, its driver
+                where = _device_words(self.policy_device)
+                message = f"The policy could not be made ready on {where}: {error}"
+                raise SandboxFailure("policy", message[:500]) from None
+            policy = {**policy, "served": True}
         self._process = subprocess.Popen(
             [sys.executable, "-s", "-m", "sandbox.child"],
             cwd=ROOT,
@@ -149,8 +163,7 @@ class Sandbox:
         threading.Thread(target=self._read_stderr, daemon=True).start()
         self.report = self._request({
             "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
-            "car_memory": self.car_memory, "env": portable_env(self.env), "cars": self.cars,
-            "policy": self.policy,
+            "car_memory": self.car_memory, "env": env, "cars": self.cars, "policy": policy,
             "samples": portable_env(self.samples), "op": "start",
         }, {"ready"}, self.start_timeout)  # fmt: skip
         return self.report
@@ -195,7 +208,11 @@ class Sandbox:
             raise SandboxFailure("value", str(error)) from None
 
     def set_weights(self, version: int, data: bytes) -> None:
-        """Act with the policy weights of ``version`` from now on."""
+        """Act with the policy weights of ``version`` from now on: loaded where the policy is
+        (here, where it is served), the child told the version its episodes are of."""
+        if self.server is not None:
+            self.server.policy.load_published(data)
+            data = b""
         self._request({"op": "weights", "version": version, "data": data}, {"weights"},
                       WEIGHTS_TIMEOUT)  # fmt: skip
 
@@ -245,6 +262,8 @@ class Sandbox:
         return [str(item) for item in reply.get("escaped", [])]
 
     def close(self) -> None:
+        if self.server is not None:
+            self.server.close()
         process = self._process
         if process is None:
             return
@@ -323,6 +342,10 @@ class Sandbox:
                 steps, deadline = now, time.monotonic() + stall
                 on_progress(now)
                 continue
+            if kind == "act" and stall is not None and self.server is not None:
+                self._send({"op": "acted", **self._served(frame)}, time.monotonic() + GRACE)
+                deadline = time.monotonic() + stall  # the time this process took is not the child's
+                continue
             if kind == "frame" and (stall is not None or what == "show"):
                 if self.on_frame is not None:
                     self.on_frame(frame)
@@ -340,6 +363,25 @@ class Sandbox:
             raise SandboxFailure(
                 "protocol", f"The sandbox answered {str(kind)[:20]!r} to {what!r}."
             )
+
+    def _served(self, request: dict) -> dict:
+        """The served policy's answer to the child's ``act`` request. A request out of protocol
+        is the child's failure; a policy that fails or hangs on its device, this process's."""
+        try:
+            return self.server.answer(request)
+        except ProtocolError as error:
+            self._kill()
+            raise SandboxFailure(
+                "protocol", f"The sandbox asked for actions wrongly: {error}"
+            ) from None
+        except TimeoutError as error:  # a device that hangs
+            self._kill()
+            where = _device_words(self.server.device)
+            raise SandboxFailure("policy", f"The policy on {where} gave {error}.") from None
+        except Exception as error:  # the device's own: out of memory, its driver
+            self._kill()
+            message = f"The policy on {_device_words(self.server.device)} failed: {error}"
+            raise SandboxFailure("policy", message[:500]) from None
 
     def take_logs(self) -> tuple[list[str], int]:
         """The printed lines kept since the last take, and how many more were not kept."""
@@ -407,6 +449,19 @@ class Sandbox:
                 self.stderr_tail = (self.stderr_tail + chunk)[-STDERR_KEEP:]
         except OSError:
             pass
+
+
+def _policy_server(policy: dict, env: dict | None, cars: int, device: str) -> PolicyServer:
+    """The policy ``policy`` describes, for the cars of ``env``, served from ``device``."""
+    from rl.policies import Policy  # torch: only where a policy is served
+
+    built = Policy.for_environment(policy["algorithm"], policy["architecture"], env or {}, device)
+    return PolicyServer(built, int(policy.get("seed", 0)), cars)
+
+
+def _device_words(device: str) -> str:
+    """``device`` (torch's name) as a racer reads it."""
+    return "the GPU" if device.startswith("cuda") else "the CPU"
 
 
 def _ignore(steps: int) -> None:

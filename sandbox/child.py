@@ -27,7 +27,7 @@ import msgpack
 
 from rl import episode
 from rl.experience import encode_arrays
-from sandbox import seal
+from sandbox import seal, served
 from sandbox.protocol import pack, read_frame
 from sandbox.reward import RewardFailure, RewardProcess
 from simulator.config import VIEWS
@@ -125,23 +125,47 @@ class Child:
         return envs
 
     def _build_policy(self, settings: dict) -> None:
-        """The policy network the rollout acts with, built and run once before sealing."""
-        import torch
-
-        from rl.policies import Policy
-
-        torch.set_num_threads(1)
-        self.policy = Policy.build(
-            settings["algorithm"], settings["architecture"],
-            self.env.observation_space, self.env.action_space,
-        )  # fmt: skip
-        self.ppo = self.policy.ppo
+        """The policy the rollout acts with: its network, built and run once before sealing;
+        or, where the worker serves it (``served``), its stand-in, and torch never loaded."""
         # Car k takes seed + k: the worker gives each of its children seeds of their own.
         seeds = [int(settings.get("seed", 0)) + car for car in range(len(self.envs))]
         observations = [env.reset(seed=seed)[0] for env, seed in zip(self.envs, seeds, strict=True)]
-        self.policy.explore(observations, [None] * len(observations))
+        if settings.get("served"):
+            self.policy = served.ServedPolicy(settings["algorithm"], self.ask)
+        else:
+            import torch
+
+            from rl.policies import Policy
+
+            torch.set_num_threads(1)
+            self.policy = Policy.build(
+                settings["algorithm"], settings["architecture"],
+                self.env.observation_space, self.env.action_space,
+            )  # fmt: skip
+            self.policy.explore(observations, [None] * len(observations))
+        self.ppo = self.policy.ppo
         self.fleet = episode.Fleet(self.envs, self.policy, seeds)
         self.version = -1
+
+    def ask(self, message: dict) -> dict:
+        """The worker's answer to ``message`` (its served policy's ``acted``), the watch requests
+        that come before it taken. A worker silent past ``served.CHILD_PATIENCE`` is told, and
+        this child ends: never a wait for ever."""
+        self.send(message)
+        deadline = time.monotonic() + served.CHILD_PATIENCE
+        while self._requests_ready.poll(max(int((deadline - time.monotonic()) * 1000), 0)):
+            request = read_frame(self.requests)
+            if request is None or request.get("op") == "exit":
+                os._exit(0)
+            if request.get("op") == "acted":
+                return request
+            if request.get("op") == "watch":
+                self.op_watch(request)
+                continue
+            break
+        self.send({"type": "error", "kind": "policy",
+                   "message": "The worker did not answer with the cars' actions."})  # fmt: skip
+        os._exit(75)
 
     # Requests
 

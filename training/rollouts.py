@@ -2,10 +2,12 @@
 
 It starts a sandbox child that holds the simulator (``PITLANE_CARS_PER_WORKER`` cars, driven
 together), the policy network and the racer's reward function, keeps the child's weights at the
-newest published version, and relays what the child drives: training episodes to the experience
-buffer as each car ends one, evaluation results after each update, and what the reward function
-printed. It never writes the job's rows; a failure of the racer's code
-is reported to the trainer, which fails the job.
+newest published version, and relays what the child drives. Where the policy runs on the GPU
+(``PITLANE_ROLLOUT_DEVICE``), this process holds it and answers the child's cars each step
+(``sandbox.served``): the child, which runs racers' code, is never given the GPU. It relays
+training episodes to the experience buffer as each car ends one, evaluation results after each
+update, and what the reward function printed. It never writes the job's rows; a failure of the
+racer's code is reported to the trainer, which fails the job.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import contextlib
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 import msgpack
 import redis
@@ -22,6 +25,7 @@ from django.conf import settings
 from common.redis_client import redis_client
 from rl import hyperparameters as hp
 from rl.experience import JobChannel, LogEntry
+from rl.policies import rollout_device
 from rl.weights_cache import WeightsCache
 from sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
 from training import live
@@ -72,31 +76,22 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
         logger.info("Rollout %s/%s is stale or its job ended; nothing to do", job_id, worker)
         return
     model = job.model
+    name = f"Simulation worker {worker + 1}"
     try:
         verified()
+        device = rollout_device(settings.PITLANE_ROLLOUT_DEVICE)
     except SandboxUnavailable as error:
         channel.report_failure(str(error))
         return
-    cars = cars_for(model.algorithm)
-    policy = {
-        "algorithm": model.algorithm,
-        "architecture": model.architecture,
-        "seed": model.seed + worker * cars,  # its car k takes this + k: a seed each
-    }
-    name = f"Simulation worker {worker + 1}"
+    except ValueError as error:
+        channel.report_failure(f"{name} cannot drive: {error}")
+        return
+    sandbox = _sandboxes(model, worker, track, device)
     label = name if model.workers > 1 else ""
     printed = Printed(label)
-
-    def sandbox(cars: int) -> Sandbox:
-        return Sandbox(
-            env=model.environment_settings(track), cars=cars, policy=policy,
-            call_timeout=REWARD_CALL_LIMIT, memory_allowance=MEMORY_ALLOWANCE,
-            car_memory=CAR_MEMORY,
-        )  # fmt: skip
-
     try:
         with contextlib.ExitStack() as stack:
-            driver = stack.enter_context(sandbox(cars))
+            driver = stack.enter_context(sandbox(cars_for(model.algorithm)))
             driver.load(model.reward_function)
             evaluator = None
             if worker == 0:  # DeepRacer's first worker evaluates (simapp
@@ -106,7 +101,9 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
                 evaluator.sandbox.load(model.reward_function)
                 stack.callback(evaluator.close)
             shown = Track.objects.filter(name=track).values_list("display_name", flat=True)
-            channel.push_log([LogEntry("worker", f"{name} is driving {shown.first() or track}.")])
+            where = ", its cars' policy on the GPU" if device != "cpu" else ""
+            driving = f"{name} is driving {shown.first() or track}{where}."
+            channel.push_log([LogEntry("worker", driving)])
             with live.FramePublisher(channel.client, live.training_group(job_id)) as publisher:
                 viewing = Viewing(driver, publisher, worker)
                 try:
@@ -116,7 +113,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
                     why = "the training ended; the episode it was driving was abandoned"
                 channel.push_log([*printed.close(), LogEntry("worker", f"{name} stopped: {why}.")])
     except SandboxFailure as failure:
-        channel.report_failure(f"Your reward function failed {_where(failure, worker)}: {failure}")
+        channel.report_failure(failure_words(failure, worker))
     except redis.RedisError as error:
         logger.warning("Rollout %s/%s lost Redis: %s", job_id, worker, error)
 
@@ -126,6 +123,25 @@ def cars_for(algorithm: str) -> int:
     wants one episode per update and would never start a second car (so would build seven
     environments, and take their memory, for nothing)."""
     return 1 if algorithm == hp.SAC else settings.PITLANE_CARS_PER_WORKER
+
+
+def _sandboxes(model, worker: int, track: str, device: str) -> Callable[[int], Sandbox]:
+    """The worker's sandboxes, of so many cars, each holding ``model``'s policy; where
+    ``device`` is not the CPU, it is served to them from this process (``sandbox.served``)."""
+    policy = {
+        "algorithm": model.algorithm,
+        "architecture": model.architecture,
+        "seed": model.seed + worker * cars_for(model.algorithm),  # car k takes this + k
+    }
+
+    def sandbox(cars: int) -> Sandbox:
+        return Sandbox(
+            env=model.environment_settings(track), cars=cars, policy=policy,
+            policy_device=None if device == "cpu" else device, call_timeout=REWARD_CALL_LIMIT,
+            memory_allowance=MEMORY_ALLOWANCE, car_memory=CAR_MEMORY,
+        )  # fmt: skip
+
+    return sandbox
 
 
 class Viewing:
@@ -364,6 +380,14 @@ def _await_next_version(
         time.sleep(WAIT_POLL)
     viewing.resume()
     return True
+
+
+def failure_words(failure: SandboxFailure, worker: int) -> str:
+    """What the job's failure says of ``failure`` in ``worker``: the racer's code's, or (its
+    policy failing on its device) the worker's own."""
+    if failure.kind == "policy":
+        return f"Simulation worker {worker + 1} failed (not your reward function): {failure}"
+    return f"Your reward function failed {_where(failure, worker)}: {failure}"
 
 
 def _where(failure: SandboxFailure, worker: int) -> str:
