@@ -10,7 +10,10 @@ The loop drives a ``Fleet``: one car (``drive``) or several, each in an environm
 with an episode of its own, stepped together so that the policy runs once a step for all the
 cars exploring (one batched forward pass, the costly part of a step). Each car draws its actions
 from random streams of its own (``Policy.generator``, its action space's), so a car drives the
-same episodes, step for step, whether it drives alone or beside others.
+same episodes, step for step, whether it drives alone or beside others. Given a scorer
+(``score``), a fleet asks the reward function for every car's reward in one call a step (the
+sandbox's reward process answers it in one round trip); without one, each car's environment
+calls its own ``reward_fn``.
 """
 
 from __future__ import annotations
@@ -60,12 +63,22 @@ class Car:
     driven: Driven = field(default_factory=Driven)
 
 
+Score = Callable[[list[tuple[int, dict]]], list[float]]
+
+
 class Fleet:
     """Cars driven together by one policy. ``seeds[i]`` seeds car ``i``'s sampling and its
-    action space (their environments are seeded by their resets)."""
+    action space (their environments are seeded by their resets). ``score``, where given,
+    takes each car's (index, params) of a step and gives their rewards, in one call for all the
+    cars; a call that fails raises, naming the failing car's index in the exception's ``car``
+    where it knows it."""
 
-    def __init__(self, envs: list, policy: Policy, seeds: list[int] | None = None) -> None:
+    def __init__(
+        self, envs: list, policy: Policy, seeds: list[int] | None = None,
+        score: Score | None = None,
+    ) -> None:  # fmt: skip
         self.policy = policy
+        self.score = score
         self.cars: list[Car] = []
         self.stepping: Car | None = None  # the car whose step raised, when one did
         for index, env in enumerate(envs):
@@ -102,16 +115,57 @@ class Fleet:
         that explore), then each car's environment steps in turn, ``on_step(car, observation,
         info, done)`` after each. The cars whose episodes ended, now idle with ``driven``
         whole. The reward function's failures propagate; the failing car (``stepping``) is
-        left idle, its episode abandoned."""
+        left idle, its episode abandoned (with a scorer, every car of the step is: none of
+        their steps can end without the rewards)."""
         driving = self.driving()
         chosen = self._actions(driving)
+        if self.score is not None:
+            return self._step_together(driving, chosen, on_step)
         finished = []
         for car, (action, value, log_prob) in zip(driving, chosen, strict=True):
             self.stepping = car
             try:
-                done = self._step(car, action, value, log_prob, on_step)
+                outcome = car.env.step(self._command(car, action))
+                done = self._record(car, action, value, log_prob, outcome, on_step)
             except BaseException:
                 car.mode = None
+                raise
+            if done:
+                car.mode = None
+                finished.append(car)
+        self.stepping = None
+        return finished
+
+    def _step_together(self, driving: list[Car], chosen: list[tuple], on_step) -> list[Car]:
+        """``step`` with one call of the scorer for every car's reward: each car's environment
+        advances to its reward params, the scorer gives all the rewards, then each concludes.
+        Where the scorer fails, ``stepping`` is the car its exception names (None if none)."""
+        advanced, self.stepping = [], None
+        try:
+            for car, (action, _value, _log_prob) in zip(driving, chosen, strict=True):
+                self.stepping = car
+                advanced.append(car.env.unwrapped.advance(self._command(car, action)))
+            self.stepping = None
+            calls = [(car.index, params) for car, params in zip(driving, advanced, strict=True)
+                     if params is not None]  # fmt: skip
+            rewards = iter(self.score(calls) if calls else [])
+        except BaseException as error:
+            if self.stepping is None:  # the scorer's failure
+                named = getattr(error, "car", None)
+                self.stepping = next((car for car in driving if car.index == named), None)
+            for car in driving:
+                car.mode = None
+            raise
+        finished = []
+        for place, (car, params) in enumerate(zip(driving, advanced, strict=True)):
+            self.stepping = car
+            action, value, log_prob = chosen[place]
+            try:
+                outcome = car.env.unwrapped.conclude(None if params is None else next(rewards))
+                done = self._record(car, action, value, log_prob, outcome, on_step)
+            except BaseException:
+                for unfinished in driving[place:]:  # their steps cannot end now
+                    unfinished.mode = None
                 raise
             if done:
                 car.mode = None
@@ -140,13 +194,15 @@ class Fleet:
                 chosen[car.index] = (self.policy.drive(car.observation), 0.0, 0.0)
         return [chosen[car.index] for car in cars]
 
-    def _step(self, car: Car, action, value: float, log_prob: float, on_step) -> bool:
-        """Step ``car``'s environment with ``action``; whether its episode ended."""
-        env, driven = car.env, car.driven
-        discrete = hasattr(env.action_space, "n")
-        observation, reward, terminated, truncated, info = env.step(
-            self.policy.command(action, discrete)
-        )
+    def _command(self, car: Car, action):
+        """What ``car``'s environment takes for ``action``."""
+        return self.policy.command(action, hasattr(car.env.action_space, "n"))
+
+    def _record(self, car: Car, action, value: float, log_prob: float, outcome, on_step) -> bool:
+        """Record ``car``'s step (the environment's ``outcome`` of ``action``), then
+        ``on_step``; whether its episode ended."""
+        observation, reward, terminated, truncated, info = outcome
+        driven = car.driven
         car.observation = observation
         driven.rewards.append(reward)
         driven.last_observation = observation

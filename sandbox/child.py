@@ -144,7 +144,8 @@ class Child:
             )  # fmt: skip
             self.policy.explore(observations, [None] * len(observations))
         self.ppo = self.policy.ppo
-        self.fleet = episode.Fleet(self.envs, self.policy, seeds)
+        # One round trip to the reward process a step for all the cars (RewardProcess.calls).
+        self.fleet = episode.Fleet(self.envs, self.policy, seeds, score=self.reward.calls)
         self.version = -1
 
     def ask(self, message: dict) -> dict:
@@ -215,6 +216,9 @@ class Child:
                 while not (ended := fleet.step(stepped)):
                     pass
             except (RewardFailure, RewardError) as error:
+                if fleet.stepping is None:  # stopped past a step's deadline: no car to name
+                    self.send(_failure(error), log=True)
+                    return
                 env, car = fleet.stepping.env.unwrapped, fleet.stepping.index
                 which = {"car": car} if len(fleet.cars) > 1 else {}
                 self.send(_failure(error, step=env.steps, status=env.status, **which), log=True)

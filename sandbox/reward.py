@@ -9,9 +9,14 @@ deadline (an alarm ignored, a frame begun and never finished) gets this process 
 call fails with the reason. The child checks every reward it is sent (``checked_reward``): what
 this process says is never trusted.
 
-Messages are protocol frames: ``{"op": "load", "source"}``, ``{"op": "call", "params"}`` (the
-waypoints only when they change: ``{"op": "waypoints", "waypoints"}`` first) and
+Messages are protocol frames: ``{"op": "load", "source"}``, ``{"op": "call", "params", "car"}``,
+``{"op": "calls", "calls": [[car, params], ...]}`` (a step of all a rollout's cars, answered by
+``{"type": "rewards", "values"}``, or by the error of the first call that failed, naming its
+``car``), the waypoints only when they change (``{"op": "waypoints", "waypoints"}`` first) and
 ``{"op": "probe", ...}``; each answered by one frame with ``log`` (the lines printed meanwhile).
+
+Long because it is both ends of one protocol, the child's handle and the reward process's
+host, kept side by side so that each request is read beside its answer.
 """
 
 from __future__ import annotations
@@ -27,7 +32,7 @@ import time
 import traceback
 from typing import Any
 
-from sandbox import CHILD_ENVIRONMENT, seal
+from sandbox import CHILD_ENVIRONMENT, _int_or_none, seal
 from sandbox.protocol import Late, ProtocolError, pack, read_frame, read_frame_by, write_by
 from simulator.rewards import RewardError, checked_reward
 
@@ -51,11 +56,15 @@ class CallTimeout(BaseException):
 
 class RewardFailure(Exception):
     """The racer's code failed, or its process misbehaved; ``error`` is the error frame
-    (``kind``, ``message``, ``line``) for the worker."""
+    (``kind``, ``message``, ``line``) for the worker, ``car`` the car whose call failed where
+    several called (None where it is not known: a process stopped past a batch's deadline)."""
 
-    def __init__(self, kind: str, message: str, line: int | None = None) -> None:
+    def __init__(
+        self, kind: str, message: str, line: int | None = None, car: int | None = None
+    ) -> None:
         super().__init__(message)
         self.error = _error(kind, message, line)
+        self.car = car
 
 
 # The child's side
@@ -89,6 +98,7 @@ class RewardProcess:
     def __init__(self, call_timeout: float, memory_allowance: int) -> None:
         self.call_timeout = call_timeout
         self.printed = Printed()
+        self.round_trips = 0  # requests answered or failed: one a step for all a rollout's cars
         self._waypoints: list | None = None
         parent = os.getpid()
         request_read, self.requests = os.pipe()
@@ -123,14 +133,55 @@ class RewardProcess:
     def call(self, params: dict, car: int = 0) -> float:
         """The reward for ``params`` from car ``car``'s copy of the function, checked here
         (``RewardError`` if it is not one)."""
-        params = dict(params)
-        waypoints = params.pop("waypoints", None)
-        if waypoints is not None and waypoints != self._waypoints:
-            self._ask({"op": "waypoints", "waypoints": waypoints}, "waypoints", 5.0)
-            self._waypoints = waypoints
+        params = self._sent([params])[0]
         reply = self._ask({"op": "call", "params": params, "car": car}, "reward",
                           self.call_timeout + KILL_GRACE)  # fmt: skip
         return checked_reward(reply.get("value"))
+
+    def calls(self, calls: list[tuple[int, dict]]) -> list[float]:
+        """The rewards for a step of several cars, ``calls`` of (car, params), in one round
+        trip: each call is timed as ``call``'s is (by the reward process's own alarm), and the
+        reply is due by the sum of the calls' limits. The first call that fails ends the
+        batch: ``RewardFailure`` naming its ``car``, with the reason ``call`` would give; the
+        rewards of the cars before it are not sent, as a failure in any car fails the job. A
+        reply not whole by its deadline names no car (the process is stopped mid-batch)."""
+        if not calls:
+            return []
+        cars = [car for car, _ in calls]
+        sent = zip(cars, self._sent([params for _, params in calls]), strict=True)
+        request = {"op": "calls", "calls": [[car, params] for car, params in sent]}
+        try:
+            reply = self._ask(request, "rewards", len(calls) * self.call_timeout + KILL_GRACE)
+        except RewardFailure as failure:
+            if failure.car is None or failure.car in cars:
+                raise
+            self.stop()
+            raise RewardFailure(
+                "protocol", "The reward function's process named a car it was not asked about."
+            ) from None
+        values = reply.get("values")
+        if not isinstance(values, list) or len(values) != len(calls):
+            self.stop()
+            raise RewardFailure("protocol", "The reward function's process lost count of calls.")
+        rewards = []
+        for car, value in zip(cars, values, strict=True):
+            try:
+                rewards.append(checked_reward(value))
+            except RewardError as error:  # a value it was never given: refused here
+                raise RewardFailure("value", str(error), None, car) from None
+        return rewards
+
+    def _sent(self, params: list[dict]) -> list[dict]:
+        """Each of ``params`` as sent, its waypoints apart: sent first (once) where they
+        changed. The params of one batch share their waypoints (a rollout's cars one track)."""
+        waypoints = params[0].get("waypoints")
+        if any(each.get("waypoints") != waypoints for each in params[1:]):
+            raise ValueError("The cars of one call of the reward function drive one track.")
+        if waypoints is not None and waypoints != self._waypoints:
+            self._ask({"op": "waypoints", "waypoints": waypoints}, "waypoints", 5.0)
+            self._waypoints = waypoints
+        return [{name: value for name, value in each.items() if name != "waypoints"}
+                for each in params]  # fmt: skip
 
     def probe(self, request: dict) -> list[str]:
         reply = self._ask({**request, "op": "probe"}, "probe", 30.0)
@@ -149,6 +200,7 @@ class RewardProcess:
         if self.pid is None:
             raise RewardFailure("stopped", "The reward function is no longer running.")
         deadline = time.monotonic() + limit
+        self.round_trips += 1
         try:
             write_by(self.requests, pack(request), deadline)
             reply = read_frame_by(self.replies, deadline, MAX_REPLY)
@@ -172,10 +224,9 @@ class RewardProcess:
         if kind == expected:
             return reply
         if kind == "error" and reply.get("kind") in KINDS:
-            line = reply.get("line")
             raise RewardFailure(
                 reply["kind"], str(reply.get("message", ""))[:500],
-                line if isinstance(line, int) and not isinstance(line, bool) else None,
+                _int_or_none(reply.get("line")), _int_or_none(reply.get("car")),
             )  # fmt: skip
         self.stop()
         raise RewardFailure("protocol", f"The reward function's process answered {kind!r}.")
@@ -288,15 +339,33 @@ class _Host:
         self.send({"type": "loaded"})
 
     def op_call(self, request: dict) -> None:
-        params = _params(request["params"], self.waypoints)
+        value = self._reward(request["car"], request["params"])
+        self.send(value if isinstance(value, dict) else {"type": "reward", "value": value})
+
+    def op_calls(self, request: dict) -> None:
+        """A step of several cars: each car's call in turn, each within the time limit (its
+        own alarm); the first that fails ends the step, its error naming its car."""
+        values = []
+        for car, params in request["calls"]:
+            value = self._reward(car, params)
+            if isinstance(value, dict):
+                self.send({**value, "car": car})
+                return
+            values.append(value)
+        self.send({"type": "rewards", "values": values})
+
+    def _reward(self, car: int, params: dict) -> float | dict[str, Any]:
+        """The reward from car ``car``'s copy of the function, or the error frame of its
+        failure. The value is checked within the call's time limit too: a number's own
+        ``__float__`` or ``__repr__`` is the racer's code."""
+        params = _params(params, self.waypoints)
+        function = self.functions[car]
         try:
-            value = checked_reward(self._limited(self.functions[request["car"]], params))
+            return self._limited(lambda: checked_reward(function(params)))
         except RewardError as error:
-            self.send(_error("value", str(error), None))
+            return _error("value", str(error), None)
         except BaseException as error:  # user code may raise anything
-            self.send(_exception("exception", error, self.call_timeout))
-        else:
-            self.send({"type": "reward", "value": value})
+            return _exception("exception", error, self.call_timeout)
 
     def op_probe(self, request: dict) -> None:
         """Try what sealed code must not be able to do; report what got through."""

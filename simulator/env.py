@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import cv2
 import gymnasium as gym
@@ -65,6 +65,15 @@ def default_config() -> dict[str, Any]:
 
 
 TERMINAL = ("off_track", "crashed", "reversed", "immobilized", "lap_complete")
+
+
+class _Advanced(NamedTuple):
+    """A step ``advance`` began and ``conclude`` ends: its action, status and reward params
+    (None for a penalty's pause, which has none)."""
+
+    action: Any
+    status: str
+    params: dict | None
 
 
 class DeepRacerEnv(gym.Env):
@@ -211,9 +220,20 @@ class DeepRacerEnv(gym.Env):
         )
         self._trail = [self.car.position]
         self._last_params: dict | None = None
+        self._pending: _Advanced | None = None  # the step advance() began, until concluded
         return self._observe(), self._info("prepare", None, 0.0, False)
 
     def step(self, action):
+        params = self.advance(action)
+        return self.conclude(None if params is None else self.reward_fn(params))
+
+    def advance(self, action) -> dict | None:
+        """A step up to its reward: the clock, the car's and the traffic's motion, the status,
+        and the reward function's ``params`` returned (None for a step that calls no reward
+        function: a penalty's pause). ``conclude`` with the reward ends the step. ``step`` is
+        the two with the reward function between them; a fleet of cars advances every car,
+        asks the racer's code for their rewards in one call, then concludes each
+        (``rl.episode.Fleet``), and drives the same episodes."""
         self.steps += 1
         self.clock += self.dt
         self.sim_time = (self.steps - 1) * self.dt
@@ -221,7 +241,8 @@ class DeepRacerEnv(gym.Env):
             self.lap += 1
             self._lap_finished = False
         if self._pause_left > 0:
-            return self._paused_step()
+            self._pending = _Advanced(action, "pause", None)
+            return None
         steering, speed = self._command(action)
         moved = self.car.step(speed, steering, self.dt)
         self.traffic.step(self.dt, self.sim_time, self.np_random)
@@ -255,7 +276,20 @@ class DeepRacerEnv(gym.Env):
 
         self.status = status  # known before the reward function runs, for reporting its failures
         params = self._params(projection, on_track, crashed, steering, speed, status)
-        reward = self._reward(params)
+        self._pending = _Advanced(action, status, params)
+        return params
+
+    def conclude(self, reward: float | None):
+        """End the step ``advance`` began, with ``reward``: the reward function's value for the
+        params it returned (``RewardError`` if it is not a reward), ignored for a step that had
+        none. Gymnasium's (observation, reward, terminated, truncated, info), as ``step``."""
+        advanced, self._pending = self._pending, None
+        if advanced is None:
+            raise RuntimeError("conclude() ends a step that advance() began.")
+        action, status, params = advanced
+        if params is None:
+            return self._paused_step()
+        reward = checked_reward(reward)
         terminated, truncated = self._outcome(status)
         self._trail.append(self.car.position)
         info = self._info(status, params, reward, terminated or truncated, action=action)
@@ -553,9 +587,6 @@ class DeepRacerEnv(gym.Env):
             if along >= 0.2 and abs(across) <= along * math.tan(half_fov):
                 return True
         return False
-
-    def _reward(self, params: dict) -> float:
-        return checked_reward(self.reward_fn(params))
 
     def _wheels_on_track(self, params: dict | None) -> bool:
         """all_wheels_on_track for the trace: the params' value, or the wheels' where there are no

@@ -1,18 +1,25 @@
 """A rollout's child that drives several cars together (``Sandbox(cars=...)``,
-``rl.episode.Fleet``): each car drives the episodes a child of one car would, step for step, and a
-reward function that fails in one car fails with its reason, as it does where one car drives."""
+``rl.episode.Fleet``): each car drives the episodes a child of one car would, step for step, the
+reward process is asked once a step for all the cars, and a reward function that fails in one car
+fails with its reason, as it does where one car drives."""
 
 import contextlib
+import functools
 from collections.abc import Iterator
 
+import gymnasium
 import msgpack
 import numpy as np
 import pytest
 
 import sandbox as sandbox_package
+import simulator
+from rl.episode import Fleet
 from rl.learner import weights_bytes
 from rl.policies import Policy
 from sandbox import MiB, Sandbox, SandboxFailure
+from sandbox.reward import RewardProcess
+from simulator.trace import FIELDS
 from tests.sandbox.test_sandbox import POLICY, assert_stopped, outcome, reward
 
 ENV = {"track": "pitlane-oval"}
@@ -32,9 +39,13 @@ def reward_function(params):
 
 
 @pytest.fixture(scope="module")
-def weights() -> bytes:
+def policy() -> Policy:
+    return Policy.for_environment(POLICY["algorithm"], POLICY["architecture"], ENV)
+
+
+@pytest.fixture(scope="module")
+def weights(policy) -> bytes:
     """One network for every child: each would otherwise draw its own initial weights."""
-    policy = Policy.for_environment(POLICY["algorithm"], POLICY["architecture"], ENV)
     return weights_bytes(policy.weights_module.state_dict())
 
 
@@ -93,38 +104,103 @@ def array(payload: dict, name: str) -> np.ndarray:
     return decode_array(payload["arrays"][name], "float32", (None,))
 
 
-# The car that starts a third of the lap on (car 1 of 3) alone meets this, at its third step.
-CAR_1_ONLY = """\
-third = len(params['waypoints']) / 3
-if params['steps'] == 3 and third < params['closest_waypoints'][0] < 2 * third:
-{}
+STATUS = FIELDS.index("episode_status")  # a trace row's
+
+
+def fleet_driven(policy: Policy, *, together: bool) -> tuple[list, int, int]:
+    """Four cars' evaluation episodes, driven at random, their rewards from a reward process
+    of their own: asked for all four in one call a step (``together``), or by each car's
+    environment in turn. (Each car's episode, the fleet's steps, the process's round trips.)"""
+    cars = 4
+    process = RewardProcess(1.0, 1024 * MiB)
+    try:
+        process.wait_ready(60.0)
+        process.load(REWARD, copies=cars)
+        # Penalties leave the car still, its steps paused without a reward call; the third
+        # time off the track ends the episode.
+        envs = [
+            gymnasium.make(simulator.ENV_ID, **ENV, mode="evaluation", max_resets=2,
+                           start=car / cars, reward_fn=functools.partial(process.call, car=car))
+            for car in range(cars)
+        ]  # fmt: skip
+        score = process.calls if together else None
+        fleet = Fleet(envs, policy, [SEED + car for car in range(cars)], score=score)
+        for car in fleet.cars:
+            fleet.start(car, "random", seed=SEED)
+        asked, steps = process.round_trips, 0
+        while fleet.driving():
+            fleet.step()
+            steps += 1
+        return [car.driven for car in fleet.cars], steps, process.round_trips - asked
+    finally:
+        process.stop()
+
+
+def test_a_fleet_asks_the_reward_process_once_a_step_for_all_its_cars_and_drives_the_same_episodes(
+    policy,
+):
+    one_by_one, _, asked_by_each = fleet_driven(policy, together=False)
+    together, steps, asked_together = fleet_driven(policy, together=True)
+    statuses = [row[STATUS] for driven in one_by_one for row in driven.trace[1:]]
+    calls, paused = len(statuses) - statuses.count("pause"), statuses.count("pause")
+    assert paused > 0  # steps that call no reward function were among them
+    assert asked_by_each == calls + 1  # each call a round trip, and the waypoints once
+    # A round trip a step (but for those where every car driving is paused), and the waypoints
+    # once. Each car's trace has a row per step of the fleet's, the reset's first.
+    scored = sum(
+        any(len(driven.trace) > step and driven.trace[step][STATUS] != "pause"
+            for driven in together)
+        for step in range(1, steps + 1)
+    )  # fmt: skip
+    assert asked_together == scored + 1
+    for alone, beside in zip(one_by_one, together, strict=True):
+        assert beside.trace == alone.trace  # every row: place, action, reward, status
+        assert beside.rewards == alone.rewards
+        for name, frames in alone.observations.items():
+            assert np.array_equal(np.stack(beside.observations[name]), np.stack(frames))
+
+
+# Car k of n, which starts k / n of the lap on, alone meets this at its third step: the calls
+# of the cars before it in the step's batch have returned.
+ONE_CAR_ONLY = """\
+share = params['closest_waypoints'][0] / len(params['waypoints'])
+if params['steps'] == 3 and abs(share - {car} / {cars}) < 0.1:
+{failing}
 return 1.0
 """
 
 
 @pytest.mark.parametrize(
-    ("failing", "kind", "message"),
+    ("cars", "car", "failing", "kind", "message", "named"),
     [
-        ("    return {}['missing']", "exception", "at step 3 (in_progress), line 4: KeyError"),
-        (
-            "    while True: pass",
-            "timeout",
-            "at step 3 (in_progress), line 4: The reward function took longer than 1 s",
-        ),
+        (3, 1, "    return {}['missing']", "exception", "line 4: KeyError", 1),
+        (4, 3, "    while True: pass", "timeout",
+         "line 4: The reward function took longer than 1 s", 3),
+        (4, 2, "    x = bytearray(2 * 1024 ** 3)", "memory",
+         "line 4: The reward function ran out of memory", 2),
+        # An alarm ignored: the step's call stopped by its deadline, no car known to name.
+        (2, 1, "    __import__('signal').signal(14, lambda *_: None)\n    while True: pass",
+         "timeout", "The reward function took longer than 1 s; it was stopped", None),
     ],
-)
+    ids=["exception", "timeout", "memory", "ignored-alarm"],
+)  # fmt: skip
 def test_a_reward_function_that_fails_in_one_of_several_cars_fails_with_its_reason(
-    weights, failing, kind, message
+    weights, cars, car, failing, kind, message, named
 ):
-    with Sandbox(env=ENV, cars=3, policy=POLICY, memory_allowance=1024 * MiB) as sandbox:
-        sandbox.load(reward(CAR_1_ONLY.format(failing)))
+    source = reward(ONE_CAR_ONLY.format(car=car, cars=cars, failing=failing))
+    with Sandbox(env=ENV, cars=cars, policy=POLICY, memory_allowance=1024 * MiB) as sandbox:
+        sandbox.load(source)
         sandbox.set_weights(1, weights)
         with pytest.raises(SandboxFailure) as failed:
-            for _ in range(3):  # car 1 fails at its third step, before any car's episode ends
-                sandbox.episode("explore", start=3)
+            for _ in range(cars):  # the car fails at its third step, before any episode ends
+                sandbox.episode("explore", start=cars)
     failure = failed.value
-    assert (failure.kind, failure.car) == (kind, 1)
+    assert (failure.kind, failure.car) == (kind, named)
     assert message in str(failure)
+    if named is not None:
+        assert (failure.step, failure.status) == (3, "in_progress")
+    else:
+        assert failure.step is None
 
 
 def test_the_racers_code_gets_the_same_memory_however_many_cars_its_worker_drives():

@@ -3,18 +3,20 @@ kernel. It forges frames, ignores its alarm, floods standard error, breaks off a
 its worker. Each test asserts the bound that holds: the call ends by its deadline, the worker's
 memory stays put, nothing outlives the worker, and the racer reads why."""
 
+import contextlib
 import os
 import signal
 import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import Iterator
 
 import pytest
 
-from sandbox import GRACE, STDERR_KEEP, Sandbox, SandboxFailure
+from sandbox import GRACE, STDERR_KEEP, MiB, Sandbox, SandboxFailure
 from sandbox.protocol import HEADER, Late, pack, read_frame_by, write_by
-from sandbox.reward import KILL_GRACE
+from sandbox.reward import KILL_GRACE, RewardFailure, RewardProcess
 from training.rewards import reward_validate, static_problems
 
 PARAMS = {"x": 1.0, "y": 2.0, "track_width": 0.76, "distance_from_center": 0.1}
@@ -97,6 +99,51 @@ def test_a_forged_reply_is_checked_as_a_reward():
     assert isinstance(result, SandboxFailure), result
     assert result.kind == "value", str(result)
     assert "finite number" in str(result)
+
+
+@contextlib.contextmanager
+def reward_process(source: str, cars: int) -> Iterator[RewardProcess]:
+    """The reward process a rollout's child of ``cars`` cars forks, forked here, with a copy of
+    ``source`` loaded per car."""
+    process = RewardProcess(LIMIT, 1024 * MiB)
+    try:
+        process.wait_ready(60.0)
+        process.load(source, copies=cars)
+        yield process
+    finally:
+        process.stop()
+
+
+def test_a_step_of_four_cars_each_near_its_limit_passes_and_each_cars_prints_arrive():
+    # The time limit is per call: four calls of 0.3 s (1.2 s in all) in one step, under a
+    # limit of 0.5 s each, are not late.
+    source = reward("time.sleep(0.3)\nprint('car', params['x'])\nreturn params['x']",
+                    head="import time\n")  # fmt: skip
+    with reward_process(source, cars=4) as process:
+        asked = process.round_trips
+        rewards = process.calls([(car, {**PARAMS, "x": float(car)}) for car in range(4)])
+        assert process.round_trips == asked + 1
+        lines, dropped = process.printed.take()
+    assert rewards == [0.0, 1.0, 2.0, 3.0]
+    assert (lines, dropped) == (["car 0.0", "car 1.0", "car 2.0", "car 3.0"], 0)
+
+
+@pytest.mark.parametrize(
+    ("forgery", "message"),
+    [
+        ({"type": "error", "kind": "exception", "message": "x", "car": 7}, "not asked about"),
+        ({"type": "rewards", "values": [1.0]}, "lost count"),
+    ],
+    ids=["unknown-car", "short-reply"],
+)
+def test_a_forged_reply_to_a_step_of_several_cars_is_a_protocol_failure(forgery, message):
+    source = reward(f"everywhere({forged(forgery)})\nreturn 1.0", head=WRITE_EVERYWHERE)
+    with reward_process(source, cars=2) as process:
+        with pytest.raises(RewardFailure) as failed:
+            process.calls([(0, PARAMS), (1, PARAMS)])
+        assert process.pid is None  # stopped: nothing it says is read again
+    assert failed.value.error["kind"] == "protocol"
+    assert message in str(failed.value)
 
 
 def test_a_frame_over_the_size_limit_gets_the_process_killed():
