@@ -10,7 +10,10 @@ episode's encoding.
 
 ``--cars 1 4 8``: the rollouts alone with that many cars in one sandbox (``Sandbox(cars=...)``,
 driven as a rollout worker drives them: every idle car starts an episode, each step one batched
-forward pass for all): steps/s of all the cars together, on the same one core.
+forward pass for all): steps/s of all the cars together, on the same one core. With
+``--served``, each beside the same with the policy served to the child from this process
+(``Sandbox(policy_device="cpu")``, as a worker serves it from the GPU): the cost of the round trip
+a step, the cars' observations sent and their actions read back, on that same core.
 """
 
 from __future__ import annotations
@@ -57,7 +60,7 @@ def in_process() -> float:
     return steps / elapsed
 
 
-def in_sandbox(cars: int = 1, steps_wanted: int = STEPS) -> float:
+def in_sandbox(cars: int = 1, steps_wanted: int = STEPS, device: str | None = None) -> float:
     """Steps/s of all the cars together, from the steps the child says it has driven as it
     drives (its progress messages): every step driven in the timed window counts, of episodes
     that end in it or not, and none driven before it."""
@@ -66,7 +69,7 @@ def in_sandbox(cars: int = 1, steps_wanted: int = STEPS) -> float:
     def progress(steps: int) -> None:
         seen.append((steps, time.perf_counter()))
 
-    with Sandbox(env={"track": TRACK}, cars=cars, policy=POLICY,
+    with Sandbox(env={"track": TRACK}, cars=cars, policy=POLICY, policy_device=device,
                  memory_allowance=1024 * MiB, car_memory=384 * MiB) as sandbox:  # fmt: skip
         sandbox.load(reward_source())
         driving = sandbox.episode(start=cars)["driving"]  # warm-up
@@ -77,19 +80,33 @@ def in_sandbox(cars: int = 1, steps_wanted: int = STEPS) -> float:
     return (last - first) / (ended - started)
 
 
+def cars_alone(options: argparse.Namespace) -> None:
+    """``--cars``' figures: steps/s with the policy in the child (and, ``--served``, served)."""
+    if options.served:
+        import torch
+
+        torch.set_num_threads(1)  # the served policy's, on the one core, as the child's
+    places = {"in the child": None, **({"served": "cpu"} if options.served else {})}
+    print(f"{'cars in one sandbox, one core':<32}" + "".join(f"{p:>20}" for p in places))
+    for cars in options.cars:
+        rates = []
+        for device in places.values():
+            runs = [in_sandbox(cars, options.steps, device) for _ in range(options.rounds)]
+            rates.append(statistics.median(runs))
+        print(f"{cars:<32}" + "".join(f"{rate:>20,.0f}" for rate in rates))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--cars", type=int, nargs="+", help="rollouts alone, with these cars")
     parser.add_argument("--steps", type=int, default=STEPS, help="steps timed per figure")
     parser.add_argument("--rounds", type=int, default=ROUNDS, help="figures a median is of")
+    parser.add_argument("--served", action="store_true", help="and with the policy served")
     options = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # the child inherits it
     if options.cars:
-        print(f"{'cars in one sandbox, one core':<52}{'steps/s':>10}")
-        for cars in options.cars:
-            rate = statistics.median(in_sandbox(cars, options.steps) for _ in range(options.rounds))
-            print(f"{cars:<52}{rate:>10,.0f}")
+        cars_alone(options)
         return
     direct = statistics.median(in_process() for _ in range(ROUNDS))
     sandboxed = statistics.median(in_sandbox() for _ in range(ROUNDS))

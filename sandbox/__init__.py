@@ -8,7 +8,10 @@ to the worker by it. Here, every request has a deadline from the moment it is se
 a step at least every call's limit and ``GRACE``), every write to the child has one, the frames
 read ahead and the standard error kept are bounded, and a child that breaks the protocol is
 killed; so no reward function can hang, flood or take down a worker. The child dies with the
-worker. This package imports no Django: the child imports it too.
+worker. Where the worker serves the child its policy (``policy_device``, ``served.py``: how a
+rollout infers on the GPU, which the child is never given), the child asks for its cars' actions
+each step and the worker's time answering is never counted as the child's. This package imports
+no Django: the child imports it too.
 
 Long because every bound above lives in the one client class, where a reader checks them all.
 """
