@@ -13,7 +13,8 @@ driven as a rollout worker drives them: every idle car starts an episode, each s
 forward pass for all): steps/s of all the cars together, on the same one core. With
 ``--served``, each beside the same with the policy served to the child from this process
 (``Sandbox(policy_device="cpu")``, as a worker serves it from the GPU): the cost of the round trip
-a step, the cars' observations sent and their actions read back, on that same core.
+a step, the cars' observations sent and their actions read back, on that same core; ``--served
+cuda``, served from the GPU, as a rollout worker on a GPU machine drives.
 """
 
 from __future__ import annotations
@@ -86,7 +87,8 @@ def cars_alone(options: argparse.Namespace) -> None:
         import torch
 
         torch.set_num_threads(1)  # the served policy's, on the one core, as the child's
-    places = {"in the child": None, **({"served": "cpu"} if options.served else {})}
+    served = {f"served ({options.served})": options.served} if options.served else {}
+    places = {"in the child": None, **served}
     print(f"{'cars in one sandbox, one core':<32}" + "".join(f"{p:>20}" for p in places))
     for cars in options.cars:
         rates = []
@@ -101,7 +103,8 @@ def main() -> None:
     parser.add_argument("--cars", type=int, nargs="+", help="rollouts alone, with these cars")
     parser.add_argument("--steps", type=int, default=STEPS, help="steps timed per figure")
     parser.add_argument("--rounds", type=int, default=ROUNDS, help="figures a median is of")
-    parser.add_argument("--served", action="store_true", help="and with the policy served")
+    parser.add_argument("--served", nargs="?", const="cpu", choices=("cpu", "cuda"),
+                        help="and with the policy served from this device (cpu)")  # fmt: skip
     options = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # the child inherits it

@@ -198,6 +198,19 @@ def test_the_rollout_device_is_the_gpu_where_torch_finds_one_and_a_gpu_asked_for
     assert rollout_device("auto") == "cuda"
 
 
+def test_a_rollout_worker_serves_its_sandboxes_the_policy_where_it_runs_off_the_cpu():
+    from types import SimpleNamespace
+
+    from training.rollouts import _sandboxes, cars_for
+
+    model = SimpleNamespace(algorithm="clipped_ppo", architecture=POLICY["architecture"], seed=3,
+                            environment_settings=lambda track: {"track": track})  # fmt: skip
+    for device, served_from in (("cuda", "cuda"), ("cpu", None)):
+        sandbox = _sandboxes(model, 1, "pitlane-oval", device)(2)  # made, not started
+        assert (sandbox.policy_device, sandbox.cars) == (served_from, 2)
+        assert sandbox.policy["seed"] == 3 + cars_for("clipped_ppo")  # after worker 0's cars
+
+
 @needs_cuda
 def test_a_child_whose_policy_is_served_from_the_gpu_drives_its_cars(weights):
     sandbox = started(weights, cars=CARS, device="cuda")
