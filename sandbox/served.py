@@ -158,6 +158,8 @@ class PolicyServer:
             name: unpack_array(packed[name], str(space.dtype), (None, *space.shape))
             for name, space in self.spaces.items()
         }
+        if any(a.dtype.kind == "f" and not np.isfinite(a).all() for a in batch.values()):
+            raise ProtocolError("observations that are not finite numbers")
         count = {len(array) for array in batch.values()}
         most = len(self.generators) if how == "explore" else 1
         if len(count) != 1 or not 1 <= (cars := count.pop()) <= most:

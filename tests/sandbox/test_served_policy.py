@@ -5,6 +5,7 @@ policy is never counted against the reward function; a policy that fails or give
 fails the worker in words; and a request for the policy out of protocol is refused."""
 
 import time
+from types import SimpleNamespace
 
 import msgpack
 import numpy as np
@@ -186,6 +187,29 @@ def test_an_observation_of_another_kind_is_refused_before_the_network_sees_it(po
         server.close()
 
 
+def test_a_sensor_reading_that_is_not_a_finite_number_is_refused_before_the_network_sees_it():
+    import gymnasium
+
+    ran = []
+    lidar = gymnasium.spaces.Box(0.0, 1.0, (8,), np.float32)
+    stand_in = SimpleNamespace(  # a policy on a lidar's readings, which counts what it runs
+        network=SimpleNamespace(observation_space=gymnasium.spaces.Dict({"LIDAR": lidar})),
+        generator=Policy.generator,
+        explore=lambda *args: ran.append(args),
+    )
+    server = PolicyServer(stand_in, SEED, cars=1)
+    ran.clear()  # its run once, made ready
+    readings = np.full((1, 8), 0.5, np.float32)
+    readings[0, 3] = np.nan
+    try:
+        with pytest.raises(ProtocolError, match="not finite"):
+            server.answer({"how": "explore", "seeds": [SEED],
+                           "observations": {"LIDAR": pack_array(readings)}})  # fmt: skip
+    finally:
+        server.close()
+    assert ran == []
+
+
 def test_the_rollout_device_is_the_gpu_where_torch_finds_one_and_a_gpu_asked_for_must_be_there(
     monkeypatch,
 ):
@@ -199,8 +223,6 @@ def test_the_rollout_device_is_the_gpu_where_torch_finds_one_and_a_gpu_asked_for
 
 
 def test_a_rollout_worker_serves_its_sandboxes_the_policy_where_it_runs_off_the_cpu():
-    from types import SimpleNamespace
-
     from training.rollouts import _sandboxes, cars_for
 
     model = SimpleNamespace(algorithm="clipped_ppo", architecture=POLICY["architecture"], seed=3,
