@@ -45,7 +45,7 @@ def unpack_array(packed: Any, dtype: str, shape: tuple[int | None, ...]) -> np.n
     declared = packed.get("shape")
     if (
         not isinstance(declared, list) or len(declared) != len(shape)
-        or not all(isinstance(size, int) and size >= 0 for size in declared)
+        or not all(type(size) is int and 0 <= size < 2**31 for size in declared)
         or any(want is not None and want != got for want, got in zip(shape, declared, strict=True))
     ):  # fmt: skip
         raise ProtocolError(f"expected shape {shape}, got {declared}")
@@ -166,8 +166,9 @@ class PolicyServer:
             raise ProtocolError("observations for no car, or for more than it has")
         seeds = request.get("seeds")
         if how == "explore" and (
-            not isinstance(seeds, list) or len(seeds) != cars or len(set(seeds)) != cars
+            not isinstance(seeds, list) or len(seeds) != cars
             or not all(type(seed) is int and seed in self.generators for seed in seeds)
+            or len(set(seeds)) != cars
         ):  # fmt: skip
             raise ProtocolError("seeds of no car it drives")
         return (

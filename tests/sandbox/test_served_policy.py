@@ -156,6 +156,7 @@ def test_the_worker_answers_each_car_from_its_own_stream_as_the_policy_would(pol
     [
         (2, {"seeds": [SEED, SEED + 5]}, "explore"),  # a car the child does not drive
         (2, {"seeds": [SEED, SEED]}, "explore"),  # one car's stream twice
+        (2, {"seeds": [SEED, [SEED]]}, "explore"),
         (4, {}, "explore"),  # more cars than it drives
         (2, {}, "drive"),  # evaluations drive one car
         (1, {}, "train"),
@@ -174,13 +175,14 @@ def test_a_request_for_the_policy_out_of_protocol_is_refused(policy, cars, chang
 def test_an_observation_of_another_kind_is_refused_before_the_network_sees_it(policy):
     server = PolicyServer(policy, SEED, cars=3)
     shape = (1, *policy.network.observation_space["FRONT_FACING_CAMERA"].shape)
-    cases = {
-        "expected uint8": pack_array(np.zeros(shape, np.float64)),
-        "expected shape": pack_array(np.zeros((1, 3, 4), np.uint8)),
-        "bytes do not match": {**pack_array(np.zeros(shape, np.uint8)), "data": b"\0" * 10},
-    }
+    cases = [
+        ("expected uint8", pack_array(np.zeros(shape, np.float64))),
+        ("expected shape", pack_array(np.zeros((1, 3, 4), np.uint8))),
+        ("expected shape", {**pack_array(np.zeros(shape, np.uint8)), "shape": [2**70, *shape[1:]]}),
+        ("bytes do not match", {**pack_array(np.zeros(shape, np.uint8)), "data": b"\0" * 10}),
+    ]
     try:
-        for message, packed in cases.items():
+        for message, packed in cases:
             with pytest.raises(ProtocolError, match=message):
                 server.answer(request(policy, 1, observations={"FRONT_FACING_CAMERA": packed}))
     finally:
