@@ -29,7 +29,9 @@ Models trained before Pitlane's networks matched DeepRacer's (layout 1) keep the
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
 
 import gymnasium
 import torch
@@ -156,7 +158,36 @@ class Embedder(nn.Module):
         return x.flatten(start_dim=1)
 
 
-class DeepRacerFeatures(BaseFeaturesExtractor):
+class LowerPrecision:
+    """A features extractor whose convolutions and middleware may run in a lower precision
+    (``precision``: None, float32, unless ``lower_precision`` says otherwise for a while). The
+    weights stay float32, as do the features it returns: autocast casts copies of the weights
+    for the matrix products, where the FLOPs are, and the heads, losses, log-probabilities and
+    optimiser see float32 as ever."""
+
+    precision: torch.dtype | None = None
+
+    def _precision(self, like: torch.Tensor) -> contextlib.AbstractContextManager:
+        if self.precision is None:
+            return contextlib.nullcontext()
+        return torch.autocast(like.device.type, dtype=self.precision)
+
+
+@contextlib.contextmanager
+def lower_precision(module: nn.Module, precision: torch.dtype | None) -> Iterator[None]:
+    """Within: every features extractor in ``module`` computes in ``precision`` (None: float32),
+    as a policy update may; acting and the exports stay float32."""
+    extractors = [m for m in module.modules() if isinstance(m, LowerPrecision)]
+    for extractor in extractors:
+        extractor.precision = precision
+    try:
+        yield
+    finally:
+        for extractor in extractors:
+            extractor.precision = None
+
+
+class DeepRacerFeatures(LowerPrecision, BaseFeaturesExtractor):
     """DeepRacer's embedders, one per sensor, and its middleware."""
 
     def __init__(self, observation_space: gymnasium.spaces.Dict, network: str = SHALLOW) -> None:
@@ -168,11 +199,13 @@ class DeepRacerFeatures(BaseFeaturesExtractor):
         self.middleware = nn.Linear(sum(e.size for e in embedders.values()), MIDDLEWARE)
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
-        embedded = [self.embedders[s](observations[s].float()) for s in self.sensors]
-        return torch.relu(self.middleware(torch.cat(embedded, dim=1)))
+        with self._precision(observations[self.sensors[0]]):
+            embedded = [self.embedders[s](observations[s].float()) for s in self.sensors]
+            features = torch.relu(self.middleware(torch.cat(embedded, dim=1)))
+        return features.float()
 
 
-class PitlaneV1Features(BaseFeaturesExtractor):
+class PitlaneV1Features(LowerPrecision, BaseFeaturesExtractor):
     """Layout 1, before the networks were DeepRacer's: a camera CNN (3-layer as DeepRacer's; the
     "5-layer" 32@5x5/2, 32@3x3/1, 64@3x3/2, 64@3x3/1, 128@3x3/2) into dense 512, and the lidar
     through a dense layer of its own, concatenated; heads of 64 on a shared extractor."""
@@ -206,11 +239,12 @@ class PitlaneV1Features(BaseFeaturesExtractor):
             self.lidar_head = nn.Sequential(nn.Linear(size, self.V1_LIDAR[lidar]), nn.ReLU())
 
     def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
-        features = self.camera_head(self.cnn(observations[self.camera]))
-        if self.lidar is None:
-            return features
-        lidar = observations[self.lidar].float().flatten(start_dim=1)
-        return torch.cat([features, self.lidar_head(lidar)], dim=1)
+        with self._precision(observations[self.camera]):
+            features = self.camera_head(self.cnn(observations[self.camera]))
+            if self.lidar is not None:
+                lidar = observations[self.lidar].float().flatten(start_dim=1)
+                features = torch.cat([features, self.lidar_head(lidar)], dim=1)
+        return features.float()
 
 
 def optimizer_kwargs(algorithm: str) -> dict:

@@ -236,6 +236,7 @@ class Trainer:
             observation_space=self.spaces[0],
             action_space=self.spaces[1],
             seed=model.seed,
+            precision=settings.PITLANE_TRAINER_PRECISION,
         )
         if job.last_checkpoint:
             self.learner.restore(artifacts.read(job.last_checkpoint))

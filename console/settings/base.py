@@ -11,6 +11,7 @@ from pathlib import Path
 
 import dj_database_url
 from celery.schedules import crontab
+from django.core.exceptions import ImproperlyConfigured
 
 from console.env import env
 from console.kept_secrets import kept_secret
@@ -212,6 +213,17 @@ PITLANE_TRAINERS = env.int("PITLANE_TRAINERS", 1, minimum=1)
 PITLANE_TRAINER_THREADS = env.int(
     "PITLANE_TRAINER_THREADS", max(1, (os.cpu_count() or 1) // PITLANE_TRAINERS), minimum=1
 )
+# What a trainer's policy updates compute the features in, the camera's convolutions and the
+# middleware (rl.learner.update_precision): "fp32"; "bf16", autocast, the weights, heads, losses
+# and optimiser in float32 (log-probabilities within 0.013 of fp32's on the same weights and
+# frames, beside PPO's clip of 0.2); "auto": bf16 where the device computes it natively (a GPU
+# that has it, a CPU with AVX-512 BF16 or AMX). fp32 until bf16 is shown to learn as well.
+PITLANE_TRAINER_PRECISION = env.str("PITLANE_TRAINER_PRECISION", "fp32")
+if PITLANE_TRAINER_PRECISION not in ("fp32", "bf16", "auto"):
+    raise ImproperlyConfigured(
+        f"The environment variable PITLANE_TRAINER_PRECISION must be fp32, bf16 or auto, not "
+        f"{PITLANE_TRAINER_PRECISION!r}."
+    )
 # A rollout worker silent this long is taken for dead and replaced; a new one may take longer to
 # start (torch, the simulator and the sandbox load first).
 PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [s]
