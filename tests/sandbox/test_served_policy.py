@@ -4,7 +4,9 @@ loads torch, drives the same episodes as one holding the policy; the worker's ti
 policy is never counted against the reward function; a policy that fails or gives no answer
 fails the worker in words; and a request for the policy out of protocol is refused."""
 
+import contextlib
 import time
+from collections.abc import Iterator
 from types import SimpleNamespace
 
 import msgpack
@@ -37,15 +39,15 @@ def weights(policy) -> bytes:
     return weights_bytes(policy.weights_module.state_dict())
 
 
-def started(weights: bytes, *, cars: int = 1, device: str | None, **settings) -> Sandbox:
+@contextlib.contextmanager
+def started(weights: bytes, *, cars: int = 1, device: str | None) -> Iterator[Sandbox]:
     """A rollout's child of ``cars`` cars seeded ``SEED``, its policy served from ``device``
     (None: held in the child), its reward function loaded and acting with ``weights``."""
-    sandbox = Sandbox(env=ENV, cars=cars, policy={**POLICY, "seed": SEED}, policy_device=device,
-                      memory_allowance=1024 * MiB, **settings)  # fmt: skip
-    sandbox.start()
-    sandbox.load(REWARD)
-    sandbox.set_weights(1, weights)
-    return sandbox
+    with Sandbox(env=ENV, cars=cars, policy={**POLICY, "seed": SEED}, policy_device=device,
+                 memory_allowance=1024 * MiB) as sandbox:  # fmt: skip
+        sandbox.load(REWARD)
+        sandbox.set_weights(1, weights)
+        yield sandbox
 
 
 def torch_loaded(sandbox: Sandbox) -> bool:
@@ -59,13 +61,10 @@ def test_a_child_whose_policy_is_served_drives_the_episodes_one_holding_it_would
 ):
     driven, evaluated, loaded = {}, {}, {}
     for device in (None, "cpu"):
-        sandbox = started(weights, cars=CARS, device=device)
-        try:
+        with started(weights, cars=CARS, device=device) as sandbox:
             loaded[device] = torch_loaded(sandbox)
             driven[device] = episodes_by_car(sandbox, EPISODES)
             evaluated[device] = sandbox.episode("evaluate", start=1)["summary"]  # as Evaluator
-        finally:
-            sandbox.close()
     assert loaded == {None: True, "cpu": False}
     assert evaluated["cpu"] == evaluated[None]
     for car in range(CARS):
@@ -92,11 +91,8 @@ def test_the_time_the_worker_takes_over_the_policy_is_not_counted_against_the_re
         return answered(self, *args)
 
     monkeypatch.setattr(PolicyServer, "_run", slow_run)
-    sandbox = started(weights, device="cpu")
-    try:
+    with started(weights, device="cpu") as sandbox:
         reply = sandbox.episode("explore", start=1)
-    finally:
-        sandbox.close()
     assert msgpack.unpackb(reply["payload"])["steps"] > 1
 
 
@@ -107,12 +103,8 @@ def test_a_policy_that_gives_no_answer_fails_the_worker_in_words_rather_than_han
 
     monkeypatch.setattr(served, "ANSWER_TIMEOUT", 0.5)
     monkeypatch.setattr(PolicyServer, "_run", lambda self, *args: time.sleep(3.0))
-    sandbox = started(weights, device="cpu")
-    try:
-        with pytest.raises(SandboxFailure) as failed:
-            sandbox.episode("explore", start=1)
-    finally:
-        sandbox.close()
+    with started(weights, device="cpu") as sandbox, pytest.raises(SandboxFailure) as failed:
+        sandbox.episode("explore", start=1)
     assert failed.value.kind == "policy"
     assert str(failed.value) == "The policy on the CPU gave no answer in 0.5 s."
     assert failure_words(failed.value, 1) == (
@@ -237,14 +229,11 @@ def test_a_rollout_worker_serves_its_sandboxes_the_policy_where_it_runs_off_the_
 
 @needs_cuda
 def test_a_child_whose_policy_is_served_from_the_gpu_drives_its_cars(weights):
-    sandbox = started(weights, cars=CARS, device="cuda")
-    try:
+    with started(weights, cars=CARS, device="cuda") as sandbox:
         assert sandbox.server.device.startswith("cuda")
         assert not torch_loaded(sandbox)
         driven = episodes_by_car(sandbox, 1)
         evaluated = sandbox.episode("evaluate", start=1)["summary"]
-    finally:
-        sandbox.close()
     assert all(len(episodes) == 1 and episodes[0]["steps"] > 0 for episodes in driven.values())
     assert evaluated["steps"] > 0
 
