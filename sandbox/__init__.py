@@ -35,8 +35,8 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from sandbox import served
 from sandbox.protocol import Late, ProtocolError, pack, read_frame, write_by
-from sandbox.served import PolicyServer
 from simulator.rewards import RewardError, checked_reward
 
 logger = logging.getLogger(__name__)
@@ -130,7 +130,7 @@ class Sandbox:
         self._closed = threading.Event()
         self.stderr_tail = b""
         self.driving = 0  # cars with episodes under way, as the child last said
-        self.server: PolicyServer | None = None  # the policy served to the child, if it is
+        self.server: served.PolicyServer | None = None  # the policy served to the child, if so
 
     def __enter__(self) -> Sandbox:
         self.start()
@@ -150,7 +150,7 @@ class Sandbox:
                 where = _device_words(self.policy_device)
                 message = f"The policy could not be made ready on {where}: {error}"
                 raise SandboxFailure("policy", message[:500]) from None
-            policy = {**policy, "served": True}
+            policy = {**policy, "served": {"patience": served.CHILD_PATIENCE}}
         self._process = subprocess.Popen(
             [sys.executable, "-s", "-m", "sandbox.child"],
             cwd=ROOT,
@@ -346,7 +346,11 @@ class Sandbox:
                 on_progress(now)
                 continue
             if kind == "act" and stall is not None and self.server is not None:
-                self._send({"op": "acted", **self._served(frame)}, time.monotonic() + GRACE)
+                answer = self._served(frame)
+                try:
+                    self._send({"op": "acted", **answer}, time.monotonic() + GRACE)
+                except SandboxFailure as failure:  # the child gone meanwhile: why, if it said
+                    raise self._words_left() or failure from None
                 deadline = time.monotonic() + stall  # the time this process took is not the child's
                 continue
             if kind == "frame" and (stall is not None or what == "show"):
@@ -356,12 +360,7 @@ class Sandbox:
             if kind in expected:
                 return frame
             if kind == "error":
-                raise SandboxFailure(
-                    str(frame.get("kind", "error"))[:20], str(frame.get("message", ""))[:500],
-                    _int_or_none(frame.get("line")), _int_or_none(frame.get("step")),
-                    str(frame["status"])[:20] if frame.get("status") else None,
-                    _int_or_none(frame.get("car")),
-                )  # fmt: skip
+                raise _failure_of(frame)
             self._kill()
             raise SandboxFailure(
                 "protocol", f"The sandbox answered {str(kind)[:20]!r} to {what!r}."
@@ -385,6 +384,17 @@ class Sandbox:
             self._kill()
             message = f"The policy on {_device_words(self.server.device)} failed: {error}"
             raise SandboxFailure("policy", message[:500]) from None
+
+    def _words_left(self) -> SandboxFailure | None:
+        """The error the child sent before it ended, where one waits unread: a child that gave
+        up waiting for the served policy's answer says so, then ends."""
+        try:
+            while (frame := self._frames.get(timeout=1.0)) is not None:
+                if isinstance(frame, dict) and frame.get("type") == "error":
+                    return _failure_of(frame)
+        except queue.Empty:
+            pass
+        return None
 
     def take_logs(self) -> tuple[list[str], int]:
         """The printed lines kept since the last take, and how many more were not kept."""
@@ -454,12 +464,22 @@ class Sandbox:
             pass
 
 
-def _policy_server(policy: dict, env: dict | None, cars: int, device: str) -> PolicyServer:
+def _failure_of(frame: dict) -> SandboxFailure:
+    """The failure an error frame of the child's tells, its parts bounded."""
+    return SandboxFailure(
+        str(frame.get("kind", "error"))[:20], str(frame.get("message", ""))[:500],
+        _int_or_none(frame.get("line")), _int_or_none(frame.get("step")),
+        str(frame["status"])[:20] if frame.get("status") else None,
+        _int_or_none(frame.get("car")),
+    )  # fmt: skip
+
+
+def _policy_server(policy: dict, env: dict | None, cars: int, device: str) -> served.PolicyServer:
     """The policy ``policy`` describes, for the cars of ``env``, served from ``device``."""
     from rl.policies import Policy  # torch: only where a policy is served
 
     built = Policy.for_environment(policy["algorithm"], policy["architecture"], env or {}, device)
-    return PolicyServer(built, int(policy.get("seed", 0)), cars)
+    return served.PolicyServer(built, int(policy.get("seed", 0)), cars)
 
 
 def _device_words(device: str) -> str:

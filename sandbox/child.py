@@ -132,6 +132,7 @@ class Child:
         observations = [env.reset(seed=seed)[0] for env, seed in zip(self.envs, seeds, strict=True)]
         if settings.get("served"):
             self.policy = served.ServedPolicy(settings["algorithm"], self.ask)
+            self.patience = float(settings["served"]["patience"])  # [s] for each answer
         else:
             import torch
 
@@ -150,10 +151,10 @@ class Child:
 
     def ask(self, message: dict) -> dict:
         """The worker's answer to ``message`` (its served policy's ``acted``), the watch requests
-        that come before it taken. A worker silent past ``served.CHILD_PATIENCE`` is told, and
-        this child ends: never a wait for ever."""
+        that come before it taken. A worker silent past ``patience`` is told, and this child
+        ends: never a wait for ever."""
         self.send(message)
-        deadline = time.monotonic() + served.CHILD_PATIENCE
+        deadline = time.monotonic() + self.patience
         while self._requests_ready.poll(max(int((deadline - time.monotonic()) * 1000), 0)):
             request = read_frame(self.requests)
             if request is None or request.get("op") == "exit":

@@ -113,6 +113,22 @@ def test_a_policy_that_gives_no_answer_fails_the_worker_in_words_rather_than_han
     )
 
 
+def test_a_child_left_without_an_answer_gives_up_and_says_so_rather_than_wait_for_ever(
+    weights, monkeypatch
+):
+    # The worker stalls past the child's patience (elsewhere than over the policy, which has a
+    # limit of its own): the child ends, and the worker reads why.
+    monkeypatch.setattr(served, "CHILD_PATIENCE", 0.5)
+    answered = PolicyServer.answer
+    monkeypatch.setattr(
+        PolicyServer, "answer", lambda self, request: time.sleep(2.0) or answered(self, request)
+    )
+    with started(weights, device="cpu") as sandbox, pytest.raises(SandboxFailure) as failed:
+        sandbox.episode("explore", start=1)
+    assert failed.value.kind == "policy"
+    assert str(failed.value) == "The worker did not answer with the cars' actions."
+
+
 def request(policy: Policy, cars: int, how: str = "explore", **changes) -> dict:
     """A child's request for the policy's answer for ``cars`` cars seeded ``SEED`` on."""
     spaces = policy.network.observation_space.spaces
