@@ -3,11 +3,13 @@
 #   make test  lint and run the whole test suite against real Redis, Celery, Channels and Chromium
 #   make cluster  serve the console as several machines would (PostgreSQL, Redis, S3, one web, one
 #              training and two simulation machines, each with its own code and var/) on :8000
+#   make device-bundle  fetch into var/device/ what the device machine's bench carries (wheels,
+#              Debian's Redis) and print the command a session with a GPU runs
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: run test cluster lint format bench lock clean help
+.PHONY: run test cluster lint format bench device-bundle lock clean help
 
 help:
 	@sed -n 's/^#   //p' $(firstword $(MAKEFILE_LIST))
@@ -45,6 +47,9 @@ bench: $(VENV)/.test-installed
 
 lock:
 	scripts/lock.sh
+
+device-bundle: $(VENV)/.run-installed
+	PYTHON=$(BIN)/python scripts/device-bundle.sh
 
 $(VENV)/bin/python:
 	@$(PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 11))' || \

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -83,3 +84,58 @@ def running_console(concurrency: int = 2, settings: dict[str, str] | None = None
         finally:
             console.send_signal(signal.SIGINT)
             console.wait(120)
+
+
+@contextlib.contextmanager
+def private_redis(var_dir: str | Path, executable: str | None = None) -> Iterator[str]:
+    """A Redis of the benchmark's own on a free port of 127.0.0.1, its data under ``var_dir``,
+    until the block ends; yields its URL. ``executable``: the redis-server to run (the one on
+    the PATH unless said: on the device machine, Debian's package unpacked under /tmp)."""
+    executable = executable or shutil.which("redis-server")
+    if executable is None:
+        sys.exit("redis-server is not installed (scripts/device-bundle.sh carries Debian's).")
+    port = free_port()
+    server = subprocess.Popen(
+        [executable, "--bind", "127.0.0.1", "--port", str(port), "--dir", str(var_dir),
+         "--save", "", "--appendonly", "no", "--logfile", str(Path(var_dir) / "redis.log")],
+        stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 30
+        while True:
+            with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), 1):
+                break
+            if server.poll() is not None or time.monotonic() > deadline:
+                sys.exit(f"Redis did not start; see {Path(var_dir) / 'redis.log'}.")
+            time.sleep(0.1)
+        yield f"redis://127.0.0.1:{port}/0"
+    finally:
+        server.terminate()
+        server.wait(30)
+
+
+@contextlib.contextmanager
+def started(commands: dict[str, list[str]], env: dict[str, str], log_dir: str | Path):
+    """Run each of ``commands`` (name: argv) from the repository's root, each in its own session
+    with its output in ``log_dir/<name>.log``, until the block ends; then SIGTERM each (SIGKILL
+    past a minute) and what it started. Yields the processes by name."""
+    processes = {}
+    try:
+        for name, argv in commands.items():
+            with open(Path(log_dir) / f"{name}.log", "wb") as log:
+                processes[name] = subprocess.Popen(
+                    argv, cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=log,
+                    stderr=subprocess.STDOUT, start_new_session=True,
+                )  # fmt: skip
+        yield processes
+    finally:
+        for process in reversed(processes.values()):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(process.pid, signal.SIGTERM)
+            try:
+                process.wait(60)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(process.pid, signal.SIGKILL)
