@@ -8,9 +8,15 @@ defaults, the default discrete action space, the camera) and lets them train.
 - Throughput: environment steps per second over 20 minutes of training (``--minutes``), policy
   updates included, with 1 and with 2 rollout workers, per iteration with where its time went,
   and the mean over the iterations whose training episodes completed a lap.
-- With --update, the policy update alone: milliseconds per environment step, as Pitlane learns,
-  with PyTorch's stock layers, and with the changes tried and not adopted (channels-last
-  tensors, torch.compile), on one thread and on all.
+- With --update, the policy update alone, no console: milliseconds per environment step (SAC:
+  per gradient step, one a step) on random camera frames, as Pitlane learns and with each change
+  measured beside it (``UPDATE_VARIANTS``: stock layers, Adam not fused, SB3's minibatches
+  copied one by one, bf16 features, channels-last tensors, torch.compile), on one thread and on
+  all; ``--algorithm sac`` for SAC; ``--device cuda`` on a GPU, where torch.compile's
+  reduce-overhead mode and a CUDA graph of PPO's whole minibatch step are measured too. A GPU
+  session runs, each a minute or two on an H100:
+  `python -m bench.bench_training --update --device cuda --steps 5000` and
+  `python -m bench.bench_training --update --device cuda --algorithm sac --steps 2000`.
 - Time to qualify (--qualify): for each seed, train; every time a new checkpoint appears, drive
   it (deterministically, outside training) in an evaluation of 3 laps; the figure is the training
   minutes until a checkpoint drives 3 consecutive laps without leaving the track.
@@ -192,82 +198,280 @@ def throughput(owner, workers: int, minutes: float) -> None:
           f"{rate(lapping)}", flush=True)  # fmt: skip
 
 
-def update_speed(steps: int = 2000) -> None:
-    """[ms] a PPO update takes per environment step, DeepRacer's defaults (3-layer CNN, camera,
-    10 epochs of minibatches of 64) on random camera frames: as Pitlane learns, with the first
-    convolution and Adam as PyTorch's stock layers run them, and with the changes tried and not
-    adopted (channels-last tensors, torch.compile), on one thread and on all."""
+def _update_spaces(algorithm: str):
+    """The camera's observation space and DeepRacer's default action space for ``algorithm``
+    (discrete for PPO; SAC's continuous, steering -30..30 degrees, speed 1..2 m/s)."""
     import gymnasium
-    import numpy as np
-    import torch
-    from torch import nn
 
     import simulator
-    from rl import hyperparameters, networks
-    from rl.experience import Episode
-    from rl.learner import Learner
 
-    env = gymnasium.make(simulator.ENV_ID, track="rookie-loop")
-    spaces = env.observation_space, env.action_space
+    actions = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 1, "high": 2}}
+    settings = {"action_space": actions} if algorithm == SAC else {}
+    env = gymnasium.make(simulator.ENV_ID, track="rookie-loop", **settings)
     env.close()
+    return env.observation_space, env.action_space
+
+
+def _update_episodes(spaces, steps: int, per_episode: int = 100) -> list:
+    """``steps`` of random camera frames and actions, in episodes of ``per_episode``."""
+    import numpy as np
+
+    from rl.experience import Episode
+
     rng = np.random.default_rng(0)
-    per_episode = 100
+    per_episode = min(per_episode, steps)
     frames = {
         name: rng.integers(0, 256, (per_episode + 1, *space.shape), dtype=np.uint8)
         for name, space in spaces[0].spaces.items()
     }
+    action_space = spaces[1]
+
+    def actions():
+        if hasattr(action_space, "n"):
+            return rng.integers(0, action_space.n, per_episode)
+        low, high = action_space.low, action_space.high
+        return rng.uniform(low, high, (per_episode, *low.shape)).astype(np.float32)
 
     def episode() -> Episode:
         return Episode(
-            worker=0, version=0, observations=frames,
-            actions=rng.integers(0, spaces[1].n, per_episode),
+            worker=0, version=0, observations=frames, actions=actions(),
             rewards=rng.random(per_episode, dtype=np.float32),
             values=rng.random(per_episode, dtype=np.float32),
             log_probs=np.full(per_episode, -2.3, np.float32), terminated=True, final_value=0.0,
             progress=10.0, status="off_track", lap_time=None, trace=[],
         )  # fmt: skip
 
-    episodes = [episode() for _ in range(steps // per_episode)]
+    return [episode() for _ in range(max(1, steps // per_episode))]
 
-    def stock(built: Learner) -> None:
+
+def _stock_layers(built) -> None:
+    from torch import nn
+
+    from rl import networks
+
+    policy = built.model.policy
+    for module in policy.modules():
+        if isinstance(module, networks.CameraConv2d):
+            module.__class__ = nn.Conv2d
+    _adam(built, fused=False)
+
+
+def _adam(built, **options) -> None:
+    """PPO's Adam rebuilt with ``options`` (unfused by default)."""
+    import torch
+
+    policy = built.model.policy
+    learning_rate = policy.optimizer.param_groups[0]["lr"]
+    policy.optimizer = torch.optim.Adam(policy.parameters(), lr=learning_rate, eps=1e-5, **options)
+
+
+def _compiled(mode: str | None):
+    def change(built) -> None:
+        import torch
+
         policy = built.model.policy
-        for module in policy.modules():
-            if isinstance(module, networks.CameraConv2d):
-                module.__class__ = nn.Conv2d
-        policy.optimizer = torch.optim.Adam(policy.parameters(), lr=policy.optimizer.
-                                            param_groups[0]["lr"], eps=1e-5)  # fmt: skip
+        for name in ("pi_features_extractor", "vf_features_extractor"):
+            setattr(policy, name, torch.compile(getattr(policy, name), mode=mode))
 
-    def channels_last(built: Learner) -> None:
-        built.model.policy.to(memory_format=torch.channels_last)
+    return change
 
-    def compiled(built: Learner) -> None:
-        policy = built.model.policy
-        policy.pi_features_extractor = torch.compile(policy.pi_features_extractor)
-        policy.vf_features_extractor = torch.compile(policy.vf_features_extractor)
 
-    variants = {  # tried and measured; what Pitlane adopts is "Pitlane"
-        "stock layers": stock,
-        "Pitlane": lambda built: None,
-        "Pitlane, channels last": channels_last,
-        "Pitlane, torch.compile": compiled,
-    }
-    print(f"PPO update, DeepRacer's defaults, {steps} steps [ms per step; warm-up s]:")
-    for threads in sorted({1, os.cpu_count() or 1}):
+def _channels_last(built) -> None:
+    import torch
+
+    built.model.policy.to(memory_format=torch.channels_last)
+
+
+def _sb3_minibatches(built) -> None:
+    from rl.ppo import sb3_minibatches
+
+    built.model._minibatches = lambda: sb3_minibatches(built.model)
+
+
+def _bf16(built) -> None:
+    import torch
+
+    built.precision = torch.bfloat16
+
+
+def _sb3_sac_step(built) -> None:
+    from stable_baselines3 import SAC as SB3SAC
+
+    model = built.model
+    model.replay_buffer.sample = lambda size, env=None: model.replay.sample(size)
+    model.train = lambda gradient_steps, batch_size: SB3SAC.train(model, gradient_steps, batch_size)
+
+
+def _batch_tensors(batch) -> list:
+    """A PPO minibatch's or a SAC batch's tensors, in a fixed order."""
+    return [
+        value
+        for field in batch
+        if field is not None
+        for value in (field.values() if isinstance(field, dict) else [field])
+    ]
+
+
+def _captured(step, optimizers: list):
+    """``step`` (a whole gradient step on fixed input tensors) as a CUDA graph: warmed up off
+    the default stream, as torch.cuda.graph asks, its gradients made in the graph's memory."""
+    import torch
+
+    side = torch.cuda.Stream()
+    side.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side):
+        for _ in range(3):
+            for optimizer in optimizers:
+                optimizer.zero_grad(set_to_none=True)
+            step()
+    torch.cuda.current_stream().wait_stream(side)
+    graph = torch.cuda.CUDAGraph()
+    for optimizer in optimizers:
+        optimizer.zero_grad(set_to_none=True)
+    with torch.cuda.graph(graph):
+        step()
+    return graph
+
+
+def _capturable(module, **options) -> None:
+    """``module``'s Adam rebuilt fused and capturable (its step state on the GPU), as a CUDA
+    graph needs; a distribution's argument checks (a wait on the GPU each) left out."""
+    import torch
+
+    learning_rate = module.optimizer.param_groups[0]["lr"]
+    module.optimizer = torch.optim.Adam(
+        module.parameters(), lr=learning_rate, fused=True, capturable=True, **options
+    )
+    torch.distributions.Distribution.set_default_validate_args(False)
+
+
+def _cuda_graph(built) -> None:
+    """PPO's whole minibatch step (forward, backward, gradient clip and fused Adam) captured
+    once as a CUDA graph and replayed for each full minibatch, its inputs copied into the
+    graph's; the smaller last minibatch of each epoch is left out (the figure is still per
+    step of the rollout)."""
+    import torch
+
+    model, policy = built.model, built.model.policy
+    _capturable(policy, eps=1e-5)
+    captured = {}
+
+    def step() -> None:
+        loss, _, _ = model._loss(captured["batch"])
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(policy.parameters(), model.max_grad_norm)
+        policy.optimizer.step()
+
+    def train() -> None:
+        rollout, size, batch_size = model.rollout, model.rollout.size, model.batch_size
+        policy.set_training_mode(True)
+        if model.normalize_advantage:
+            advantages = rollout.advantages
+            advantages[:] = (advantages - advantages.mean()) / (advantages.std(correction=0) + 1e-8)
+        if "graph" not in captured:
+            captured["batch"] = rollout.minibatch(torch.arange(batch_size, device=model.device))
+            captured["graph"] = _captured(step, [policy.optimizer])
+        for _ in range(model.n_epochs):
+            shuffled = torch.randperm(size, device=model.device)
+            for start in range(0, size - batch_size + 1, batch_size):
+                fresh = rollout.minibatch(shuffled[start : start + batch_size])
+                torch._foreach_copy_(_batch_tensors(captured["batch"]), _batch_tensors(fresh))
+                captured["graph"].replay()
+
+    model.train = train
+
+
+def _sac_cuda_graph(built) -> None:
+    """SAC's whole gradient step (critics, actor, target critics; the actor's draws from the
+    default generator, which CUDA graphs replay anew) captured once as a CUDA graph and
+    replayed for each step, each sampled batch copied into the graph's."""
+    import torch
+
+    model = built.model
+    _capturable(model.actor)
+    _capturable(model.critic)
+    captured = {}
+
+    def train(gradient_steps: int, batch_size: int) -> None:
+        model.policy.set_training_mode(True)
+        if "graph" not in captured:
+            captured["batch"] = model.replay.sample(batch_size)
+            step = lambda: model.gradient_step(captured["batch"])  # noqa: E731
+            captured["graph"] = _captured(step, [model.actor.optimizer, model.critic.optimizer])
+        for _ in range(gradient_steps):
+            fresh = _batch_tensors(model.replay.sample(batch_size))
+            torch._foreach_copy_(_batch_tensors(captured["batch"]), fresh)
+            captured["graph"].replay()
+
+    model.train = train
+
+
+# name: (the change to a Pitlane learner, CUDA only); what Pitlane adopts is "Pitlane"
+UPDATE_VARIANTS = {
+    PPO: {
+        "stock layers, Adam not fused": (_stock_layers, False),
+        "Pitlane": (lambda built: None, False),
+        "Pitlane, bf16 features": (_bf16, False),
+        "Pitlane, Adam not fused": (lambda built: _adam(built), False),
+        "Pitlane, SB3's minibatches (copied each)": (_sb3_minibatches, False),
+        "Pitlane, channels last": (_channels_last, False),
+        "Pitlane, torch.compile": (_compiled(None), False),
+        "Pitlane, torch.compile reduce-overhead": (_compiled("reduce-overhead"), True),
+        "Pitlane, CUDA graph of the minibatch step": (_cuda_graph, True),
+    },
+    SAC: {
+        "SB3's gradient step": (_sb3_sac_step, False),
+        "Pitlane": (lambda built: None, False),
+        "Pitlane, bf16 features": (_bf16, False),
+        "Pitlane, CUDA graph of the gradient step": (_sac_cuda_graph, True),
+    },
+}
+
+
+def update_speed(steps: int = 2000, *, algorithm: str = PPO, device: str = "cpu") -> None:
+    """[ms] an update takes per environment step with DeepRacer's defaults (3-layer CNN, camera;
+    PPO: 10 epochs of minibatches of 64, SAC: a gradient step of 64 per step) on random camera
+    frames, on ``device``: as Pitlane learns and with each change measured (``UPDATE_VARIANTS``),
+    on one thread and on all (on a GPU, once)."""
+    import torch
+
+    from rl import hyperparameters, networks
+    from rl.learner import Learner
+
+    spaces = _update_spaces(algorithm)
+    episodes = _update_episodes(spaces, steps)
+    warm_up = _update_episodes(spaces, 8 if algorithm == SAC else 200, per_episode=8)
+    counts = sorted({1, os.cpu_count() or 1}) if device == "cpu" else [torch.get_num_threads()]
+    print(f"{algorithm} update on {device}, DeepRacer's defaults, {steps} steps "
+          f"[ms per step; warm-up s]:")  # fmt: skip
+    for threads in counts:
         torch.set_num_threads(threads)
-        for name, change in variants.items():
+        for name, (change, cuda_only) in UPDATE_VARIANTS[algorithm].items():
+            if cuda_only and not device.startswith("cuda"):
+                print(f"  {name}: needs --device cuda", flush=True)
+                continue
             built = Learner(
-                algorithm=PPO, hyperparameters=hyperparameters.defaults(PPO),
+                algorithm=algorithm, hyperparameters=hyperparameters.defaults(algorithm),
                 architecture=networks.SHALLOW, observation_space=spaces[0],
-                action_space=spaces[1],
+                action_space=spaces[1], device=device,
             )  # fmt: skip
             change(built)
             started = time.perf_counter()
-            built.learn(episodes[:2])  # warm up (and compile)
-            warm_up = time.perf_counter() - started
+            built.learn(warm_up)  # (and compile, capture)
+            _synchronise(device)
+            warmed = time.perf_counter() - started
             started = time.perf_counter()
             built.learn(episodes)
-            took = (time.perf_counter() - started) / steps * 1000
-            print(f"  {threads} thread(s), {name}: {took:.1f}; {warm_up:.1f}", flush=True)
+            _synchronise(device)
+            took = (time.perf_counter() - started) / sum(e.steps for e in episodes) * 1000
+            print(f"  {threads} thread(s), {name}: {took:.2f}; {warmed:.1f}", flush=True)
+
+
+def _synchronise(device: str) -> None:
+    import torch
+
+    if device.startswith("cuda"):
+        torch.cuda.synchronize()
 
 
 def qualifies(model, checkpoint: str) -> tuple[bool, list[float], str]:
@@ -423,6 +627,9 @@ def main() -> None:
         "--steps", type=int, default=2000, help="with --update, the steps learnt from"
     )
     parser.add_argument(
+        "--device", default="cpu", help="with --update, where to learn: cpu, cuda (or cuda:N)"
+    )
+    parser.add_argument(
         "--minutes",
         type=float,
         default=THROUGHPUT_MINUTES,
@@ -462,7 +669,7 @@ def main() -> None:
     )  # fmt: skip
     parser.add_argument(
         "--algorithm", choices=(PPO, SAC), default=PPO,
-        help="with --fast, PPO (DeepRacer's default) or SAC",
+        help="with --fast or --update, PPO (DeepRacer's default) or SAC",
     )  # fmt: skip
     parser.add_argument(
         "--hyperparameter", type=_setting, action="extend", nargs="+", default=[],
@@ -483,7 +690,7 @@ def main() -> None:
         import django
 
         django.setup()
-        update_speed(arguments.steps)
+        update_speed(arguments.steps, algorithm=arguments.algorithm, device=arguments.device)
         return
     with running_console(concurrency=3) as console:
         os.environ.update(console["env"])

@@ -159,11 +159,11 @@ class Embedder(nn.Module):
 
 
 class LowerPrecision:
-    """A features extractor whose convolutions and middleware may run in a lower precision
-    (``precision``: None, float32, unless ``lower_precision`` says otherwise for a while). The
-    weights stay float32, as do the features it returns: autocast casts copies of the weights
-    for the matrix products, where the FLOPs are, and the heads, losses, log-probabilities and
-    optimiser see float32 as ever."""
+    """A features extractor whose convolutions and middleware may run in a lower precision, its
+    ``precision`` (None: float32, unless ``lower_precision`` sets it for a while). The weights
+    stay float32, as do the features it returns: autocast casts copies of the weights for the
+    convolutions and matrix products, where the FLOPs are, and the heads, losses,
+    log-probabilities and optimiser see float32 as ever."""
 
     precision: torch.dtype | None = None
 

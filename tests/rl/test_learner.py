@@ -291,3 +291,40 @@ def test_a_trainer_precision_it_does_not_know_stops_the_console_at_start_up():
     )  # fmt: skip
     assert started.returncode != 0
     assert "PITLANE_TRAINER_PRECISION must be fp32, bf16 or auto, not 'fp16'" in started.stderr
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a GPU")
+def test_on_a_gpu_a_ppo_update_learns_there_what_it_learns_on_the_cpu(env, monkeypatch):
+    monkeypatch.setattr(torch.backends.cudnn, "allow_tf32", False)  # float32 as the CPU's
+    monkeypatch.setattr(torch.backends.cuda.matmul, "allow_tf32", False)
+    weights, episode = {}, None
+    for device in ("cpu", "cuda"):
+        learner = Learner(
+            algorithm="clipped_ppo",
+            hyperparameters={**hyperparameters.defaults("clipped_ppo"), "num_epochs": 2,
+                             "batch_size": 16},
+            architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+            observation_space=env.observation_space, action_space=env.action_space, seed=7,
+            device=device,
+        )  # fmt: skip
+        assert learner.device.startswith(device)
+        episode = episode or driven(learner, env, steps=40)
+        np.random.seed(3)
+        learner.learn([episode])
+        weights[device] = {k: v.cpu() for k, v in learner.model.policy.state_dict().items()}
+    for name, tensor in weights["cpu"].items():
+        torch.testing.assert_close(weights["cuda"][name], tensor, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a GPU")
+def test_on_a_gpu_sac_keeps_its_replay_buffer_and_learns_there(env):
+    learner = Learner(
+        algorithm="sac", hyperparameters={**hyperparameters.defaults("sac"), "batch_size": 8},
+        architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+        observation_space=env.observation_space, action_space=env.action_space, device="cuda",
+    )  # fmt: skip
+    before = learner.model.actor.mu.weight.clone()
+    learner.learn([synthetic_episode(env, steps=6)])
+    assert learner.model.replay.rewards.device.type == "cuda"
+    assert learner.model.replay.size == 6
+    assert not torch.equal(before, learner.model.actor.mu.weight)
