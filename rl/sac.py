@@ -37,8 +37,10 @@ class Replay:
         self.size = self.position = 0
 
         def frames(space) -> torch.Tensor:
+            """Room for ``capacity`` observations, taking no memory until written (a camera's:
+            10,000 frames of 19,200 bytes, twice); none is read past ``size``."""
             dtype = torch.from_numpy(np.zeros(0, dtype=space.dtype)).dtype
-            return torch.zeros((capacity, *space.shape), dtype=dtype, device=self.device)
+            return torch.empty((capacity, *space.shape), dtype=dtype, device=self.device)
 
         spaces = observation_space.spaces
         self.observations = {name: frames(space) for name, space in spaces.items()}
