@@ -630,6 +630,10 @@ def main() -> None:
         "--device", default="cpu", help="with --update, where to learn: cpu, cuda (or cuda:N)"
     )
     parser.add_argument(
+        "--precision", choices=("fp32", "bf16", "auto"), default="fp32",
+        help="the trainer's PITLANE_TRAINER_PRECISION, for the throughput and --qualify",
+    )  # fmt: skip
+    parser.add_argument(
         "--minutes",
         type=float,
         default=THROUGHPUT_MINUTES,
@@ -692,7 +696,8 @@ def main() -> None:
         django.setup()
         update_speed(arguments.steps, algorithm=arguments.algorithm, device=arguments.device)
         return
-    with running_console(concurrency=3) as console:
+    precision = {"PITLANE_TRAINER_PRECISION": arguments.precision}
+    with running_console(concurrency=3, settings=precision) as console:
         os.environ.update(console["env"])
         import django
 

@@ -69,7 +69,7 @@ class Replay:
         count = kept.stop - kept.start
         slots = (self.position + torch.arange(count, device=self.device)) % self.capacity
         for store, values in columns:
-            store[slots] = torch.as_tensor(values[kept]).to(self.device)
+            store[slots] = torch.tensor(values[kept], device=self.device)  # decoded: read-only
         self.position = (self.position + count) % self.capacity
         self.size = min(self.size + count, self.capacity)
 

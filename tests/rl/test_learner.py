@@ -6,6 +6,7 @@ import getpass
 import os
 import subprocess
 import sys
+import warnings
 
 import gymnasium
 import numpy as np
@@ -213,7 +214,11 @@ def test_the_replay_buffer_overwrites_its_oldest_and_marks_only_an_ending_done(e
     first, second = synthetic_episode(env, steps=3), synthetic_episode(env, steps=3)
     first.rewards, second.rewards = np.array([1, 2, 3], "f"), np.array([4, 5, 6], "f")
     second.terminated = False  # truncated: its last state is not terminal
-    replay.add(first)
+    for frames in first.observations.values():
+        frames.flags.writeable = False  # as decoded from Redis (np.frombuffer)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # torch warns of a read-only array it would share
+        replay.add(first)
     replay.add(second)
     assert (replay.size, replay.position) == (5, 1)
     assert replay.rewards.flatten().tolist() == [6, 2, 3, 4, 5]
