@@ -139,7 +139,9 @@ class Fleet:
     def _step_together(self, driving: list[Car], chosen: list[tuple], on_step) -> list[Car]:
         """``step`` with one call of the scorer for every car's reward: each car's environment
         advances to its reward params, the scorer gives all the rewards, then each concludes.
-        Where the scorer fails, ``stepping`` is the car its exception names (None if none)."""
+        Where the scorer fails, ``stepping`` is the car its exception names (None if none).
+        The environments are stepped unwrapped (``DeepRacerEnv.advance`` and ``conclude``):
+        what a wrapper's ``step`` adds is not run (Gymnasium's order check alone, in ours)."""
         advanced, self.stepping = [], None
         try:
             for car, (action, _value, _log_prob) in zip(driving, chosen, strict=True):
