@@ -100,7 +100,10 @@ class DeepRacerPPO(PPO):
             self.progress(done + 1, total)
         if len(losses) < total:  # a target KL ended it early: it is done all the same
             self.progress(total, total)
-        means = torch.stack(losses).mean(dim=0).tolist() if losses else []  # read once, at the end
+        if not losses:  # stopped before its first minibatch: the episodes were far off-policy
+            self.last_losses = {}
+            return
+        means = torch.stack(losses).mean(dim=0).tolist()  # read once, at the end
         self.last_losses = dict(zip(("policy", "value", "entropy"), means, strict=True))
 
     def _minibatches(self) -> Iterator:

@@ -125,6 +125,18 @@ def test_a_target_kl_stops_the_update_before_the_step_that_passes_it(env):
     assert 1 <= len(taken) < 9  # the first minibatch is the policy that drove: KL 0, a step
 
 
+def test_an_update_stopped_before_its_first_minibatch_ends_cleanly_with_no_losses(env):
+    learner = learner_for(env, num_epochs=3, batch_size=16)
+    episode = driven(learner, env)
+    with torch.no_grad():
+        learner.model.policy.action_net.bias.add_(0.5)  # the episodes were another policy's
+    learner.model.target_kl = 1e-6  # so the first minibatch is already past 1.5 times it
+    taken = steps_taken(learner)
+    learner.learn([episode])
+    assert taken == []
+    assert learner.model.last_losses == {}
+
+
 def test_a_checkpoint_says_what_made_it(env):
     learner = learner_for(env)
     metadata = weights_metadata(learner.checkpoint())
