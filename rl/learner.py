@@ -199,19 +199,19 @@ class Learner:
 
 def update_precision(precision: str, device: torch.device) -> torch.dtype | None:
     """What an update computes the features in: None (float32) for "fp32"; bfloat16 for "bf16",
-    and for "auto" where the device computes it natively (a GPU that has it, a CPU with AVX-512
-    BF16 or AMX). The heads, losses, log-probabilities and optimiser stay float32 whatever it
-    is, as do the rollouts."""
+    and for "auto" where ``device`` computes it natively (a GPU of compute capability 8 or more,
+    not one that emulates it, slower than float32; a CPU with AVX-512 BF16 or AMX). The heads,
+    losses, log-probabilities and optimiser stay float32 whatever it is, as do the rollouts."""
     if precision not in PRECISIONS:
         raise ValueError(
             f"the trainer's precision is one of {', '.join(PRECISIONS)}, not {precision!r}"
         )
     if precision == "auto":
-        native = (
-            torch.cuda.is_bf16_supported()
-            if device.type == "cuda"
-            else torch.cpu._is_avx512_bf16_supported() or torch.cpu._is_amx_tile_supported()
-        )
+        if device.type == "cuda":
+            with torch.cuda.device(device):  # the learner's GPU, not the process's current one
+                native = torch.cuda.is_bf16_supported(including_emulation=False)
+        else:
+            native = torch.cpu._is_avx512_bf16_supported() or torch.cpu._is_amx_tile_supported()
         precision = "bf16" if native else "fp32"
     return torch.bfloat16 if precision == "bf16" else None
 

@@ -1,6 +1,7 @@
 """DeepRacer's PPO update: each of SB3's options keeps its meaning in it, and a checkpoint says
 what made it."""
 
+import contextlib
 import copy
 import getpass
 import os
@@ -293,12 +294,35 @@ def test_a_learner_computes_its_updates_features_in_the_precision_it_is_given(en
     learner.learn([driven(learner, env, steps=8)])
     assert set(seen[1:]) == {torch.bfloat16}  # the first: driven's, outside the update
     assert extractor.precision is None
-    cpu = torch.device("cpu")
-    assert update_precision("fp32", cpu) is None
-    native = torch.cpu._is_avx512_bf16_supported() or torch.cpu._is_amx_tile_supported()
-    assert update_precision("auto", cpu) == (torch.bfloat16 if native else None)
+    assert update_precision("fp32", torch.device("cpu")) is None
     with pytest.raises(ValueError, match="one of fp32, bf16, auto, not 'fp16'"):
-        update_precision("fp16", cpu)
+        update_precision("fp16", torch.device("cpu"))
+
+
+def test_auto_precision_is_bf16_only_where_the_learners_device_computes_it_natively(monkeypatch):
+    asked = []
+
+    @contextlib.contextmanager
+    def on(device):
+        asked.append(("on", device))
+        yield
+
+    def gpu_has_bf16(including_emulation: bool = True) -> bool:
+        asked.append(("emulation", including_emulation))
+        return native
+
+    monkeypatch.setattr(torch.cuda, "device", on)
+    monkeypatch.setattr(torch.cuda, "is_bf16_supported", gpu_has_bf16)
+    second_gpu = torch.device("cuda:1")
+    for native in (True, False):
+        for avx512, amx in ((native, False), (False, native)):
+            monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda v=avx512: v)
+            monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda v=amx: v)
+            chosen = torch.bfloat16 if native else None
+            assert update_precision("auto", torch.device("cpu")) == chosen
+        assert update_precision("auto", second_gpu) == chosen
+    # A GPU that only emulates bf16 (before Ampere) is not native; asked of the learner's own GPU.
+    assert asked == [("on", second_gpu), ("emulation", False)] * 2
 
 
 def test_a_trainer_precision_it_does_not_know_stops_the_console_at_start_up():
