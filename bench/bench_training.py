@@ -618,6 +618,8 @@ def _setting(text: str) -> tuple[str, float]:
 
 
 def main() -> None:
+    from rl.learner import PRECISIONS
+
     parser = argparse.ArgumentParser()
     parser.add_argument("--qualify", action="store_true", help="measure the time to qualify")
     parser.add_argument(
@@ -630,7 +632,7 @@ def main() -> None:
         "--device", default="cpu", help="with --update, where to learn: cpu, cuda (or cuda:N)"
     )
     parser.add_argument(
-        "--precision", choices=("fp32", "bf16", "auto"), default="fp32",
+        "--precision", choices=PRECISIONS, default="fp32",
         help="the trainer's PITLANE_TRAINER_PRECISION, for the throughput and --qualify",
     )  # fmt: skip
     parser.add_argument(

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import dj_database_url
 from celery.schedules import crontab
-from django.core.exceptions import ImproperlyConfigured
 
 from console.env import env
 from console.kept_secrets import kept_secret
@@ -218,14 +217,11 @@ PITLANE_TRAINER_THREADS = env.int(
 # and optimiser in float32 (log-probabilities within 0.013 of fp32's on the same weights and
 # frames, beside PPO's clip of 0.2; on the dev box's 2 AVX-512 BF16 cores a PPO update took
 # 10.5 ms a step against 15.0, SAC 80 ms a gradient step against 130); "auto": bf16 where the
-# device computes it natively (a GPU that has it, a CPU with AVX-512 BF16 or AMX). fp32 until
+# device computes it natively (a GPU from Ampere on, a CPU with AVX-512 BF16 or AMX). fp32 until
 # bf16 is shown to learn as well (bench.bench_training --qualify --precision bf16).
-PITLANE_TRAINER_PRECISION = env.str("PITLANE_TRAINER_PRECISION", "fp32")
-if PITLANE_TRAINER_PRECISION not in ("fp32", "bf16", "auto"):
-    raise ImproperlyConfigured(
-        f"The environment variable PITLANE_TRAINER_PRECISION must be fp32, bf16 or auto, not "
-        f"{PITLANE_TRAINER_PRECISION!r}."
-    )
+PITLANE_TRAINER_PRECISION = env.choice(
+    "PITLANE_TRAINER_PRECISION", "fp32", choices=("fp32", "bf16", "auto")
+)  # rl.learner.PRECISIONS, not imported here: it would load torch into every process
 # A rollout worker silent this long is taken for dead and replaced; a new one may take longer to
 # start (torch, the simulator and the sandbox load first).
 PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [s]
