@@ -1,17 +1,17 @@
 """Running racers' code: a sandbox child per use, and the worker's self-test of the sandbox.
 
-``Sandbox`` starts ``sandbox.child`` as a fresh interpreter (fork and exec, not a fork of
-the worker) with an empty environment and only its three standard pipes, waits until it has sealed
-itself, then sends it the racer's code and requests. The racer's code runs in a process of its
-own beneath the child (``reward.py``), which times each call from outside and cannot be written
-to the worker by it. Here, every request has a deadline from the moment it is sent (an episode:
-a step at least every call's limit and ``GRACE``), every write to the child has one, the frames
-read ahead and the standard error kept are bounded, and a child that breaks the protocol is
+``Sandbox`` starts ``sandbox.child`` as a fresh interpreter (fork and exec, not a fork of the
+worker) with an empty environment and only its three standard pipes, waits until it has sealed
+itself, then sends it the racer's code and requests. The racer's code runs in a process of its own
+beneath the child (``reward.py``), which times each call from outside and cannot be written to the
+worker by it. Here, every request has a deadline from the moment it is sent (an episode: a step at
+least every ``GRACE`` past its cars' calls' deadlines), every write to the child has one, the
+frames read ahead and the standard error kept are bounded, and a child that breaks the protocol is
 killed; so no reward function can hang, flood or take down a worker. The child dies with the
 worker. Where the worker serves the child its policy (``policy_device``, ``served.py``: how a
 rollout infers on the GPU, which the child is never given), the child asks for its cars' actions
-each step and the worker's time answering is never counted as the child's. This package imports
-no Django: the child imports it too.
+each step and the worker's time answering is never counted as the child's. This package imports no
+Django: the child imports it too.
 
 Long because every bound above lives in the one client class, where a reader checks them all.
 """
@@ -43,6 +43,8 @@ logger = logging.getLogger(__name__)
 ROOT = Path(__file__).resolve().parents[1]
 MiB = 1024 * 1024
 GRACE = 2.0  # [s] past a call's own time limit before the child is killed
+KILL_GRACE = 0.5  # [s] past a call's time limit (which the reward process enforces on itself,
+# to name the line) before the child kills that process from outside
 LOG_KEEP = 1000  # printed lines kept until taken; later ones are counted in ``logs_dropped``
 FRAMES_AHEAD = 64  # frames read from the child and not yet taken; the reader waits beyond
 STDERR_KEEP = 16 * 1024  # [bytes] the end of the child's standard error, kept for the log
@@ -231,7 +233,7 @@ class Sandbox:
         than the cars idle (``cars - driving``); the child starts them all, so each answer's
         ``driving`` must be the last answer's, plus ``start``, less the one sent."""
         request = {"op": "episode", "mode": mode, "worker": worker, "start": start}
-        reply = self._request(request, {"episode"}, None, on_progress or _ignore)
+        reply = self._request(request, {"episode"}, self._step_limit(), on_progress or _ignore)
         if not isinstance(reply.get("summary"), dict):
             self._kill()
             raise SandboxFailure("protocol", "The sandbox sent an episode without a summary.")
@@ -293,8 +295,14 @@ class Sandbox:
         step at least that often."""
         deadline = time.monotonic() + (timeout or self.call_timeout) + GRACE
         self._send(message, deadline)
-        stall = self.call_timeout + GRACE if on_progress is not None else None
+        stall = self._step_limit() + GRACE if on_progress is not None else None
         return self._wait(expected, deadline, message["op"], on_progress, stall)
+
+    def _step_limit(self) -> float:
+        """[s] the most a step of all the cars may hold the child: the reward process is
+        asked once for them all, and the child gives each car's call its own deadline, the
+        call's limit and ``KILL_GRACE`` after the car before it answered."""
+        return self.cars * (self.call_timeout + KILL_GRACE)
 
     def _send(self, message: dict, deadline: float) -> None:
         if self._process is None:

@@ -10,10 +10,13 @@ call fails with the reason. The child checks every reward it is sent (``checked_
 this process says is never trusted.
 
 Messages are protocol frames: ``{"op": "load", "source"}``, ``{"op": "call", "params", "car"}``,
-``{"op": "calls", "calls": [[car, params], ...]}`` (a step of all a rollout's cars, answered by
-``{"type": "rewards", "values"}``, or by the error of the first call that failed, naming its
-``car``), the waypoints only when they change (``{"op": "waypoints", "waypoints"}`` first) and
-``{"op": "probe", ...}``; each answered by one frame with ``log`` (the lines printed meanwhile).
+``{"op": "calls", "calls": [[car, params], ...]}`` (a step of all a rollout's cars in one
+request, answered one frame a call as each ends: ``{"type": "reward", "value", "car"}``, or the
+error of the first call that failed, naming its ``car``, after which no more are called), the
+waypoints only when they change (``{"op": "waypoints", "waypoints"}`` first) and
+``{"op": "probe", ...}``; each frame carries ``log`` (the lines printed meanwhile). The child
+reads each of a step's frames by its call's own deadline, from the frame before it: so the bound
+on every call, and the car it names, are a single call's, whatever the cars.
 
 Long because it is both ends of one protocol, the child's handle and the reward process's
 host, kept side by side so that each request is read beside its answer.
@@ -32,7 +35,7 @@ import time
 import traceback
 from typing import Any
 
-from sandbox import CHILD_ENVIRONMENT, _int_or_none, seal
+from sandbox import CHILD_ENVIRONMENT, KILL_GRACE, _int_or_none, seal
 from sandbox.protocol import Late, ProtocolError, pack, read_frame, read_frame_by, write_by
 from simulator.rewards import RewardError, checked_reward
 
@@ -44,10 +47,9 @@ PRELOADED = (
     "encodings.idna",  # so that code reaching for the network meets the seal, not a missing codec
 )  # fmt: skip
 MAX_LOG = 200  # characters per printed line kept, and lines kept between two messages
-KILL_GRACE = 0.5  # [s] past a call's time limit (which the process enforces on itself, to name
-# the line) before the child kills it from outside
 MAX_REPLY = 1024 * 1024  # [bytes] the largest reply frame: a reward and 200 printed lines
 KINDS = {"syntax", "import", "exception", "definition", "value", "timeout", "memory"}
+OUT_OF_TURN = "The reward function's process answered for a car other than the one asked about."
 
 
 class CallTimeout(BaseException):
@@ -56,8 +58,8 @@ class CallTimeout(BaseException):
 
 class RewardFailure(Exception):
     """The racer's code failed, or its process misbehaved; ``error`` is the error frame
-    (``kind``, ``message``, ``line``) for the worker, ``car`` the car whose call failed where
-    several called (None where it is not known: a process stopped past a batch's deadline)."""
+    (``kind``, ``message``, ``line``) for the worker, ``car`` the car whose call failed (None
+    where no car's call was under way: loading the code, a process already stopped)."""
 
     def __init__(
         self, kind: str, message: str, line: int | None = None, car: int | None = None
@@ -135,40 +137,42 @@ class RewardProcess:
         (``RewardError`` if it is not one)."""
         params = self._sent([params])[0]
         reply = self._ask({"op": "call", "params": params, "car": car}, "reward",
-                          self.call_timeout + KILL_GRACE)  # fmt: skip
+                          self.call_timeout + KILL_GRACE, car)  # fmt: skip
         return checked_reward(reply.get("value"))
 
     def calls(self, calls: list[tuple[int, dict]]) -> list[float]:
-        """The rewards for a step of several cars, ``calls`` of (car, params), in one round
-        trip: each call is timed as ``call``'s is (by the reward process's own alarm), and the
-        reply is due by the sum of the calls' limits. The first call that fails ends the
-        batch: ``RewardFailure`` naming its ``car``, with the reason ``call`` would give; the
-        rewards of the cars before it are not sent, as a failure in any car fails the job. A
-        reply not whole by its deadline names no car (the process is stopped mid-batch)."""
+        """The rewards for a step of several cars, ``calls`` of (car, params), asked in one
+        request. The reward process answers each call as it ends, a frame a car (its reward or
+        its error), and each frame is due by the call's own deadline, ``call_timeout`` and
+        ``KILL_GRACE`` after the frame before it (after the request, for the first): each call
+        is held to ``call``'s bound, from outside, however many cars. The first call that fails
+        ends the step with ``RewardFailure`` naming its ``car``, whatever the reason (a process
+        killed past that call's deadline, or crashed, included); the cars after it are not
+        called, and those before it are not given their rewards: any car's failure fails the
+        job."""
         if not calls:
             return []
         cars = [car for car, _ in calls]
         sent = zip(cars, self._sent([params for _, params in calls]), strict=True)
         request = {"op": "calls", "calls": [[car, params] for car, params in sent]}
-        try:
-            reply = self._ask(request, "rewards", len(calls) * self.call_timeout + KILL_GRACE)
-        except RewardFailure as failure:
-            if failure.car is None or failure.car in cars:
-                raise
-            self.stop()
-            raise RewardFailure(
-                "protocol", "The reward function's process named a car it was not asked about."
-            ) from None
-        values = reply.get("values")
-        if not isinstance(values, list) or len(values) != len(calls):
-            self.stop()
-            raise RewardFailure("protocol", "The reward function's process lost count of calls.")
+        limit = self.call_timeout + KILL_GRACE
+        deadline = self._send(request, limit, cars[0])
         rewards = []
-        for car, value in zip(cars, values, strict=True):
+        for car in cars:
             try:
-                rewards.append(checked_reward(value))
+                reply = self._answer("reward", deadline, car)
+            except RewardFailure as failure:
+                if failure.car == car:
+                    raise
+                reply = {"car": failure.car}  # an error frame for another car: out of turn
+            if reply.get("car") != car or isinstance(reply.get("car"), bool):
+                self.stop()
+                raise RewardFailure("protocol", OUT_OF_TURN, None, car)
+            try:
+                rewards.append(checked_reward(reply.get("value")))
             except RewardError as error:  # a value it was never given: refused here
                 raise RewardFailure("value", str(error), None, car) from None
+            deadline = time.monotonic() + limit
         return rewards
 
     def _sent(self, params: list[dict]) -> list[dict]:
@@ -195,41 +199,62 @@ class RewardProcess:
             os.kill(self.pid, signal.SIGKILL)
         self._reap()
 
-    def _ask(self, request: dict, expected: str, limit: float) -> dict:
-        """Send ``request`` and take its answer, all within ``limit`` seconds from now."""
+    def _ask(self, request: dict, expected: str, limit: float, car: int | None = None) -> dict:
+        """Send ``request`` and take its answer, all within ``limit`` seconds from now; a
+        failure names ``car``, whose call it was."""
+        return self._answer(expected, self._send(request, limit, car), car)
+
+    def _send(self, request: dict, limit: float, car: int | None) -> float:
+        """Send ``request`` within ``limit`` seconds from now; that deadline."""
         if self.pid is None:
-            raise RewardFailure("stopped", "The reward function is no longer running.")
+            raise RewardFailure("stopped", "The reward function is no longer running.", None, car)
         deadline = time.monotonic() + limit
         self.round_trips += 1
         try:
             write_by(self.requests, pack(request), deadline)
+        except Late:
+            raise self._late(car) from None
+        except OSError:  # a broken pipe: the process is gone
+            raise RewardFailure("crashed", self._ended(), None, car) from None
+        return deadline
+
+    def _answer(self, expected: str, deadline: float, car: int | None) -> dict:
+        """The next reply, whole by ``deadline``: of type ``expected``, else the failure it
+        tells (an error frame names its car; a failure of the process's, ``car``)."""
+        try:
             reply = read_frame_by(self.replies, deadline, MAX_REPLY)
         except Late:
-            self.stop()
-            raise RewardFailure(
-                "timeout",
-                f"The reward function took longer than {self.call_timeout:g} s; it was stopped.",
-            ) from None
+            raise self._late(car) from None
         except ProtocolError as error:
             self.stop()
             raise RewardFailure(
-                "protocol", f"The reward function's process broke the protocol ({error})."
-            ) from None
-        except OSError:  # a broken pipe: the process is gone
+                "protocol", f"The reward function's process broke the protocol ({error}).",
+                None, car,
+            ) from None  # fmt: skip
+        except OSError:  # the process is gone
             reply = None
         if reply is None:
-            raise RewardFailure("crashed", self._ended())
+            raise RewardFailure("crashed", self._ended(), None, car)
         self.printed.add(reply.get("log"), reply.get("log_dropped"))
         kind = reply.get("type")
         if kind == expected:
             return reply
         if kind == "error" and reply.get("kind") in KINDS:
+            named = _int_or_none(reply.get("car"))
             raise RewardFailure(
                 reply["kind"], str(reply.get("message", ""))[:500],
-                _int_or_none(reply.get("line")), _int_or_none(reply.get("car")),
+                _int_or_none(reply.get("line")), car if named is None else named,
             )  # fmt: skip
         self.stop()
-        raise RewardFailure("protocol", f"The reward function's process answered {kind!r}.")
+        raise RewardFailure(
+            "protocol", f"The reward function's process answered {kind!r}.", None, car
+        )
+
+    def _late(self, car: int | None) -> RewardFailure:
+        """The failure of a call not answered by its deadline, the process stopped."""
+        self.stop()
+        message = f"The reward function took longer than {self.call_timeout:g} s; it was stopped."
+        return RewardFailure("timeout", message, None, car)
 
     def _ended(self) -> str:
         status = self._reap()
@@ -344,15 +369,14 @@ class _Host:
 
     def op_calls(self, request: dict) -> None:
         """A step of several cars: each car's call in turn, each within the time limit (its
-        own alarm); the first that fails ends the step, its error naming its car."""
-        values = []
+        own alarm), its reward sent as it ends, so the child times each call from the last;
+        the first that fails ends the step, its error naming its car."""
         for car, params in request["calls"]:
             value = self._reward(car, params)
             if isinstance(value, dict):
                 self.send({**value, "car": car})
                 return
-            values.append(value)
-        self.send({"type": "rewards", "values": values})
+            self.send({"type": "reward", "value": value, "car": car})
 
     def _reward(self, car: int, params: dict) -> float | dict[str, Any]:
         """The reward from car ``car``'s copy of the function, or the error frame of its

@@ -178,9 +178,9 @@ return 1.0
          "line 4: The reward function took longer than 1 s", 3),
         (4, 2, "    x = bytearray(2 * 1024 ** 3)", "memory",
          "line 4: The reward function ran out of memory", 2),
-        # An alarm ignored: the step's call stopped by its deadline, no car known to name.
+        # An alarm ignored: the car's call stopped by its own deadline, its car named.
         (2, 1, "    __import__('signal').signal(14, lambda *_: None)\n    while True: pass",
-         "timeout", "The reward function took longer than 1 s; it was stopped", None),
+         "timeout", "The reward function took longer than 1 s; it was stopped", 1),
     ],
     ids=["exception", "timeout", "memory", "ignored-alarm"],
 )  # fmt: skip
@@ -197,10 +197,19 @@ def test_a_reward_function_that_fails_in_one_of_several_cars_fails_with_its_reas
     failure = failed.value
     assert (failure.kind, failure.car) == (kind, named)
     assert message in str(failure)
-    if named is not None:
-        assert (failure.step, failure.status) == (3, "in_progress")
-    else:
-        assert failure.step is None
+    assert (failure.step, failure.status) == (3, "in_progress")
+
+
+def test_a_step_of_four_cars_each_call_near_its_limit_is_not_late(weights, monkeypatch):
+    # One request a step for the four cars' calls, each 0.4 s under a limit of 0.5 s: the
+    # worker waits for a whole step (at the first and the second), not for one call.
+    monkeypatch.setattr(sandbox_package, "GRACE", 0.5)  # 1 s a step would once have been late
+    slow = "import time\n" + reward("if params['steps'] <= 2:\n    time.sleep(0.4)\nreturn 1.0")
+    with Sandbox(env=ENV, cars=4, policy=POLICY, call_timeout=0.5,
+                 memory_allowance=1024 * MiB) as sandbox:  # fmt: skip
+        sandbox.load(slow)
+        sandbox.set_weights(1, weights)
+        assert sandbox.episode("random", start=4)["summary"]["steps"] > 2
 
 
 def test_the_racers_code_gets_the_same_memory_however_many_cars_its_worker_drives():

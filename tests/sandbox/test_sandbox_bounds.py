@@ -128,13 +128,28 @@ def test_a_step_of_four_cars_each_near_its_limit_passes_and_each_cars_prints_arr
     assert (lines, dropped) == (["car 0.0", "car 1.0", "car 2.0", "car 3.0"], 0)
 
 
+def test_a_call_that_outlives_its_alarm_in_one_of_four_cars_is_stopped_by_its_own_deadline():
+    # Car 2 catches its alarm and returns 1 s late: within the deadline of a step of four
+    # calls, past its own call's. Each car's reply is due by its own call's deadline.
+    late = "try:\n    time.sleep(5)\nexcept BaseException:\n    time.sleep(1.0)\nreturn 1.0"
+    source = reward(f"if params['x'] == 2:\n{textwrap.indent(late, '    ')}\nreturn 1.0",
+                    head="import time\n")  # fmt: skip
+    with reward_process(source, cars=4) as process:
+        with pytest.raises(RewardFailure) as failed:
+            process.calls([(car, {**PARAMS, "x": float(car)}) for car in range(4)])
+        assert process.pid is None  # killed from outside
+    assert (failed.value.error["kind"], failed.value.car) == ("timeout", 2)
+    assert f"took longer than {LIMIT:g} s; it was stopped" in str(failed.value)
+
+
 @pytest.mark.parametrize(
     ("forgery", "message"),
     [
-        ({"type": "error", "kind": "exception", "message": "x", "car": 7}, "not asked about"),
-        ({"type": "rewards", "values": [1.0]}, "lost count"),
+        ({"type": "error", "kind": "exception", "message": "x", "car": 7}, "other than the one"),
+        ({"type": "reward", "value": 1.0, "car": 1}, "other than the one"),  # car 0's turn
+        ({"type": "rewards", "values": [1.0, 1.0]}, "answered 'rewards'"),  # a whole step's
     ],
-    ids=["unknown-car", "short-reply"],
+    ids=["unknown-car", "out-of-turn", "whole-step"],
 )
 def test_a_forged_reply_to_a_step_of_several_cars_is_a_protocol_failure(forgery, message):
     source = reward(f"everywhere({forged(forgery)})\nreturn 1.0", head=WRITE_EVERYWHERE)
