@@ -23,7 +23,8 @@ bench.bench_training --update --algorithm sac): twice PPO's is out of reach whil
 SAC takes a step of 64 for every step driven.
 
 DeepRacer's alpha is fixed (``sac_alpha``, rl_coach's SAC has no automatic entropy tuning:
-agents/soft_actor_critic_agent.py), so SB3's entropy optimiser is never built.
+agents/soft_actor_critic_agent.py), so SB3's entropy optimiser is never built; nor are SB3's
+``target_update_interval`` other than 1 and ``use_sde`` followed: ``DeepRacerSAC`` refuses them.
 """
 
 from __future__ import annotations
@@ -103,6 +104,10 @@ class DeepRacerSAC(SAC):
         super().__init__(*args, buffer_size=1, **kwargs)
         if self.ent_coef_optimizer is not None:
             raise ValueError("DeepRacer's SAC has a fixed alpha (sac_alpha), not 'auto'")
+        if self.target_update_interval != 1:  # gradient_step follows them every time
+            raise ValueError("DeepRacer's SAC updates its target critics every gradient step")
+        if self.use_sde:  # no reset_noise between steps, as SB3's SAC.train would call
+            raise ValueError("DeepRacer's SAC has no state-dependent exploration (use_sde)")
         action_dim = int(np.prod(self.action_space.shape))
         self.replay = Replay(
             replay_size, self.observation_space, action_dim, self.device, self.seed or 0

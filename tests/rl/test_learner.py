@@ -13,15 +13,18 @@ import stable_baselines3
 import torch
 from stable_baselines3 import SAC
 from stable_baselines3.common.utils import FloatSchedule
+from stable_baselines3.common.vec_env import DummyVecEnv
 
 import simulator
 from rl import hyperparameters
-from rl.learner import Learner, code_version, update_precision, weights_metadata
+from rl.learner import Learner, SpacesOnly, code_version, update_precision, weights_metadata
 from rl.networks import lower_precision
 from rl.ppo import sb3_minibatches
-from rl.sac import Replay
+from rl.sac import DeepRacerSAC, Replay
 from tests.training.test_stop import synthetic_episode
 
+SMALL_OBSERVATIONS = gymnasium.spaces.Dict({"lidar": gymnasium.spaces.Box(0, 1, (4,))})
+SMALL_ACTIONS = gymnasium.spaces.Box(-1, 1, (2,))
 CONTINUOUS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}}
 
 
@@ -189,6 +192,20 @@ def sac_learner_for(env, **values) -> Learner:
         architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
         observation_space=env.observation_space, action_space=env.action_space, seed=7,
     )  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    "option, refusal",
+    [
+        ({"ent_coef": "auto"}, "a fixed alpha"),
+        ({"target_update_interval": 2}, "its target critics every gradient step"),
+        ({"use_sde": True}, "no state-dependent exploration"),
+    ],
+)
+def test_sac_refuses_the_sb3_options_its_gradient_step_does_not_follow(option, refusal):
+    spaces_only = DummyVecEnv([lambda: SpacesOnly(SMALL_OBSERVATIONS, SMALL_ACTIONS)])
+    with pytest.raises(ValueError, match=refusal):
+        DeepRacerSAC("MultiInputPolicy", spaces_only, replay_size=8, **{"ent_coef": 0.2, **option})
 
 
 def test_sacs_gradient_steps_learn_as_sb3s_from_the_same_batches(env, monkeypatch):
