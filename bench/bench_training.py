@@ -335,7 +335,9 @@ def _captured(step, optimizers: list):
 
 def _capturable(module, **options) -> None:
     """``module``'s Adam rebuilt fused and capturable (its step state on the GPU), as a CUDA
-    graph needs; a distribution's argument checks (a wait on the GPU each) left out."""
+    graph needs; a distribution's argument checks (a wait on the GPU each) left out: for every
+    distribution the process builds after, not the module's alone (torch has only a default
+    for all), so ``update_speed`` puts the default back after the variant."""
     import torch
 
     learning_rate = module.optimizer.param_groups[0]["lr"]
@@ -455,6 +457,7 @@ def update_speed(steps: int = 2000, *, algorithm: str = PPO, device: str = "cpu"
                 architecture=networks.SHALLOW, observation_space=spaces[0],
                 action_space=spaces[1], device=device,
             )  # fmt: skip
+            validating = torch.distributions.Distribution._validate_args  # _capturable's to undo
             change(built)
             started = time.perf_counter()
             built.learn(warm_up)  # (and compile, capture)
@@ -464,6 +467,7 @@ def update_speed(steps: int = 2000, *, algorithm: str = PPO, device: str = "cpu"
             built.learn(episodes)
             _synchronise(device)
             took = (time.perf_counter() - started) / sum(e.steps for e in episodes) * 1000
+            torch.distributions.Distribution.set_default_validate_args(validating)
             print(f"  {threads} thread(s), {name}: {took:.2f}; {warmed:.1f}", flush=True)
 
 
