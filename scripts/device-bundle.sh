@@ -45,7 +45,7 @@ for package in $PACKAGES; do specs="$specs $(pinned "$package")"; done
 (cd "$OUT/debs" && apt-get download $DEBS >/dev/null)
 
 carried=$(du -sb "$OUT" | cut -f1)
-tracked=$(git ls-files -z | xargs -0 du -cb | tail -1 | cut -f1)
+tracked=$(git ls-files -z | du -cb --files0-from=- | tail -1 | cut -f1)  # one total: xargs may split it
 echo "var/device: $(du -sh "$OUT/wheels" | cut -f1) of wheels ($(ls "$OUT/wheels" | wc -l)), \
 $(du -sh "$OUT/debs" | cut -f1) of Debian packages; with the project's tracked files \
 $(((carried + tracked) / 1048576)) MiB of the 64 MiB a call carries."
