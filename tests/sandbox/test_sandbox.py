@@ -234,14 +234,31 @@ def test_an_episode_runs_the_simulator_and_the_reward_inside_the_sandbox():
     assert "payload" not in episodes[2]  # an evaluation sends its summary alone
 
 
-def test_an_episode_names_the_step_and_status_where_the_reward_function_failed():
-    with driving({"track": "pitlane-oval"}) as sandbox:
-        sandbox.load(reward("if params['steps'] == 3:\n    return {}['missing']\nreturn 1.0"))
+CRASH = "ctypes.cast(ctypes.c_void_p(8), ctypes.POINTER(ctypes.c_long)).contents.value"
+
+
+@pytest.mark.parametrize(
+    ("failing", "expected"),
+    [
+        ("return {}['missing']", "at step 3 (in_progress), line 4: KeyError: 'missing'"),
+        # The reward process stopped from outside, or gone: its call was the step's (car 0's).
+        (f"return float({CRASH})", "at step 3 (in_progress): The reward function's process "
+         "stopped: it was killed by SIGSEGV (a crash, for example from ctypes)."),
+        ("signal.signal(signal.SIGALRM, signal.SIG_IGN)\n    while True: pass",
+         "at step 3 (in_progress): The reward function took longer than 0.5 s; it was stopped."),
+    ],
+    ids=["exception", "crashed", "ignored-alarm"],
+)  # fmt: skip
+def test_an_episode_names_the_step_and_status_where_the_reward_function_failed(failing, expected):
+    source = "import ctypes, signal\n" + reward(
+        f"if params['steps'] == 3:\n    {failing}\nreturn 1.0"
+    )
+    with Sandbox(env={"track": "pitlane-oval"}, policy=POLICY, call_timeout=0.5,
+                 memory_allowance=1024 * MiB) as sandbox:  # fmt: skip
+        sandbox.load(source)
         with pytest.raises(SandboxFailure) as failed:
             sandbox.episode("random")
-    failure = failed.value
-    assert (failure.step, failure.status, failure.line) == (3, "in_progress", 3)
-    assert str(failure) == "at step 3 (in_progress), line 3: KeyError: 'missing'"
+    assert str(failed.value) == expected
 
 
 def test_nothing_was_left_behind_in_tmp():
