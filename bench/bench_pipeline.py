@@ -11,14 +11,23 @@ camera, the 3-layer CNN, 20 episodes between updates, the Rookie Loop) train at 
 iterations' steps over their wall time, updates included) and where that time went
 (``Iteration.time_split``), and the machine's total.
 
-Rollout workers and cars, unless ``--workers`` and ``--cars`` say. A rollout worker steps its cars
-in turn in one sandbox child, so it keeps one core busy: a job gets ``cores // jobs`` workers, at
-most ``MAX_WORKERS`` (4, what a racer may ask for), so that every core simulates where the jobs
-allow. Its cars between them cover the iteration's 20 episodes and no more (more would stand
-idle: a worker starts no more episodes of a version than the trainer wants, rl.experience's
-reservations): ``ceil(20 / workers)`` cars a worker, at most 8 (PITLANE_CARS_PER_WORKER's
-default). The trainers learn while their workers wait for the new weights, on the GPU where
-PyTorch finds one (each gets ``cores // jobs`` threads, PITLANE_TRAINER_THREADS' rule).
+Rollout workers and cars, unless ``--workers`` and ``--cars`` say (``layout``). The figure the
+issue asks for is one job with every core simulating and the GPU learning, so a job may have more
+rollout workers here than the 4 a racer may ask for (``MAX_WORKERS``; ``round_models`` sets the
+count on the models past model_create's check, a benchmark's licence only). A rollout worker
+steps its cars in one sandbox child, so it keeps one core busy; each job keeps one more for its
+trainer, which reads, decodes and feeds the GPU the episodes while its workers drive: a job gets
+``(cores - jobs) // jobs`` workers, at least 1 (on the 16-core device machine 15 for one job, 7
+each for 2, 3 for 4, 1 for 8; on the 2-core dev box 1). Its cars between them cover the
+iteration's 20 episodes and no more (more would stand idle: a worker reserves no more episodes
+of a version than the trainer still wants, rl.experience's reservations, the first to ask first):
+``ceil(20 / workers)`` cars a worker, at most 8 (PITLANE_CARS_PER_WORKER's default). Where 20
+does not divide, some stand idle: one job's 15 workers of 2 cars drive the 20 episodes on the 10
+workers that reserve first (two cars a core, one batched forward pass a step), then wait with the
+other 5 for the new weights; ``--cars 1`` drives 15 at once, then 5. What each round prints says
+its cores: simulating (its jobs' workers) and feeding (its trainers) of the machine's. The
+trainers learn while their workers wait for the new weights, on the GPU where PyTorch finds one
+(each gets ``cores // jobs`` threads, PITLANE_TRAINER_THREADS' rule).
 
 Runs wherever the project's packages are: here on the CPU in a short form (``--minutes 2 --jobs
 1``), on the device machine from the wheels scripts/device-bundle.sh fetches (the command it
@@ -36,7 +45,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench.stack import _sigterm_exits, private_redis, started
+from bench.stack import private_redis, sigterm_exits, started
 
 EPISODES = 20  # DeepRacer's episodes between policy updates (REFERENCE section 3)
 MAX_CARS = 8  # PITLANE_CARS_PER_WORKER's default
@@ -45,12 +54,27 @@ STOP_LIMIT = 300.0  # [s] for every job to finish once stopped (its last checkpo
 
 
 def layout(cores: int, jobs: int, workers: int | None, cars: int | None) -> tuple[int, int]:
-    """(rollout workers per job, cars per worker) for ``jobs`` at once on ``cores``: the module's
-    docstring says why."""
+    """(rollout workers per job, cars per worker) for ``jobs`` at once on ``cores``: a core for
+    each job's trainer, the rest simulating, shared equally; the module's docstring says why."""
+    chosen = workers or max((cores - jobs) // jobs, 1)
+    return chosen, cars or min(math.ceil(EPISODES / chosen), MAX_CARS)
+
+
+def round_models(owner, jobs: int, workers: int) -> list:
+    """``jobs`` models with DeepRacer's defaults, each of ``workers`` rollout workers, the count
+    set past the ``MAX_WORKERS`` a racer may ask for (model_create's check) where the layout
+    wants more. Made before the round's Celery workers start: their trainer tasks wait in the
+    broker until then, so no trainer reads a model before its count is set."""
+    from bench.bench_training import default_model
     from training.configuration import MAX_WORKERS
 
-    chosen = workers or min(max(cores // jobs, 1), MAX_WORKERS)
-    return chosen, cars or min(math.ceil(EPISODES / chosen), MAX_CARS)
+    models = []
+    for n in range(jobs):
+        model = default_model(owner, f"pipeline-{jobs}-{n}", workers=min(workers, MAX_WORKERS))
+        model.workers = workers
+        model.save(update_fields=["workers"])
+        models.append(model)
+    return models
 
 
 def worker_commands(jobs: int, workers: int) -> dict[str, list[str]]:
@@ -78,14 +102,14 @@ def wait_for(what: str, done, limit: float, log_dir: Path) -> None:
         time.sleep(1)
 
 
-def train_round(owner, jobs: int, workers: int, minutes: float) -> list:
-    """Create ``jobs`` default models of ``workers`` rollout workers each, let them train
-    ``minutes`` once all drive, stop them and wait for their ends; their jobs."""
-    from bench.bench_training import default_model, job_of
+def train_round(models: list, minutes: float) -> list:
+    """Let ``models`` train ``minutes`` once all drive, stop them and wait for their ends; their
+    jobs."""
+    from bench.bench_training import job_of
     from training.models import TrainingJob
     from training.services import training_stop
 
-    models = [default_model(owner, f"pipeline-{jobs}-{n}", workers=workers) for n in range(jobs)]
+    jobs = len(models)
     log_dir = Path(os.environ["PITLANE_VAR_DIR"])
 
     def statuses() -> list[str]:
@@ -159,8 +183,8 @@ def arguments() -> argparse.Namespace:
     chosen = parser.parse_args()
     if any(jobs < 1 for jobs in chosen.jobs):
         parser.error("--jobs takes counts of 1 or more")
-    if chosen.workers is not None and not 1 <= chosen.workers <= 4:
-        parser.error("--workers takes 1 to 4 (what a racer may ask for)")
+    if chosen.workers is not None and chosen.workers < 1:
+        parser.error("--workers takes a count of 1 or more")
     if chosen.cars is not None and not 1 <= chosen.cars <= 64:
         parser.error("--cars takes 1 to 64 (PITLANE_CARS_PER_WORKER's range)")
     return chosen
@@ -182,20 +206,23 @@ def rounds(chosen: argparse.Namespace, var_dir: str, redis_url: str) -> None:
 
     owner = bench_racer()
     print(f"Training throughput without the web tier, DeepRacer's defaults: {machine_words()}")
+    cores = os.cpu_count() or 1
     for jobs in chosen.jobs:
-        workers, cars = layout(os.cpu_count() or 1, jobs, chosen.workers, chosen.cars)
+        workers, cars = layout(cores, jobs, chosen.workers, chosen.cars)
         round_env = {**env, "PITLANE_CARS_PER_WORKER": str(cars), "PITLANE_TRAINERS": str(jobs)}
         os.environ.update(round_env)
         print(f"{jobs} job(s), each {workers} rollout worker(s) of {cars} car(s), "
-              f"{chosen.minutes:g} min:", flush=True)  # fmt: skip
+              f"{chosen.minutes:g} min; cores: {jobs * workers} simulating, {jobs} feeding "
+              f"the trainers, of {cores}:", flush=True)  # fmt: skip
+        models = round_models(owner, jobs, workers)
         with started(worker_commands(jobs, workers), round_env, var_dir):
-            report(train_round(owner, jobs, workers, chosen.minutes))
+            report(train_round(models, chosen.minutes))
 
 
 def main() -> None:
     chosen = arguments()
     with (
-        _sigterm_exits(),  # ``timeout`` stops the workers too, as Ctrl-C does
+        sigterm_exits(),  # ``timeout`` stops the workers too, as Ctrl-C does
         tempfile.TemporaryDirectory(prefix="pitlane-pipeline-") as var_dir,
         private_redis(var_dir, chosen.redis_server) as redis_url,
     ):

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 @contextlib.contextmanager
-def _sigterm_exits() -> Iterator[None]:
+def sigterm_exits() -> Iterator[None]:
     """Within the block, SIGTERM (``kill``) raises SystemExit as Ctrl-C raises KeyboardInterrupt,
     so that the ``finally`` clauses run: a benchmark stopped either way stops its console."""
 
@@ -44,7 +44,7 @@ def running_console(concurrency: int = 2, settings: dict[str, str] | None = None
     """Serve the console (its own Redis, a Celery worker per queue, Daphne) until the block ends;
     yields {"url", "var_dir", "ready_seconds", "env"}; ``env`` points Django at the same database.
     ``settings``: more environment variables for the console (``PITLANE_TRAINERS``, a rate)."""
-    with _sigterm_exits(), tempfile.TemporaryDirectory(prefix="pitlane-bench-") as var_dir:
+    with sigterm_exits(), tempfile.TemporaryDirectory(prefix="pitlane-bench-") as var_dir:
         port = free_port()
         env = {k: v for k, v in os.environ.items() if not k.startswith(("DJANGO_", "PITLANE_"))}
         env.pop("REDIS_URL", None)
