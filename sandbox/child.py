@@ -13,6 +13,7 @@ naming the line. Since the racer's code cannot write to the worker, the frames t
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import select
@@ -33,6 +34,7 @@ from sandbox.reward import RewardFailure, RewardProcess
 from simulator.config import VIEWS
 from simulator.rewards import RewardError
 from simulator.spectator import FRAME_INTERVAL, jpeg, view_image
+from simulator.world import WorldUnavailable
 
 PROGRESS_EVERY = 0.25  # [s] between progress messages during a rollout
 LOOK_EVERY = 0.05  # [s] between looks for a watch request during an episode
@@ -81,13 +83,17 @@ class Child:
         self.reward = RewardProcess(float(init["call_timeout"]), int(init["memory_allowance"]))
         cv2.setNumThreads(0)  # no worker threads: the sealed process cannot start any
         cars = int(init.get("cars", 1))
-        if init.get("env") is not None:
-            self.envs = self._build_envs(init["env"], cars)
-            self.env = self.envs[0]
-        if init.get("policy") is not None:
-            self._build_policy(init["policy"])
-        if init.get("samples") is not None:
-            self.samples = _situations(init["samples"])
+        try:
+            if init.get("env") is not None:
+                self.envs = self._build_envs(init["env"], cars)
+                self.env = self.envs[0]
+            if init.get("policy") is not None:
+                self._build_policy(init["policy"])
+            if init.get("samples") is not None:
+                self.samples = _situations(init["samples"])
+        except WorldUnavailable as error:  # a box within the lidar's reach at a reset
+            self.send(_unavailable(error))
+            return
         self.reward.wait_ready(60.0)
         allowance = int(init["memory_allowance"]) + (cars - 1) * int(init.get("car_memory", 0))
         address_space = seal.current_address_space() + allowance
@@ -103,7 +109,10 @@ class Child:
             if handler is None:
                 self.send({"type": "error", "kind": "protocol", "message": "unknown request"})
                 continue
-            handler(request)
+            try:
+                handler(request)
+            except WorldUnavailable as error:  # a car near a box where PyBullet is missing
+                self.send(_unavailable(error))
 
     def _build_envs(self, settings: dict, cars: int) -> list:
         """An environment per car. Car ``k`` of ``cars`` starts its training episodes
@@ -119,6 +128,9 @@ class Child:
             placed = settings if cars == 1 else {**settings, "start": (first + car / cars) % 1.0}
             reward_fn = functools.partial(self.reward.call, car=car)  # its own copy of it
             envs.append(gymnasium.make(simulator.ENV_ID, reward_fn=reward_fn, **placed))
+        for env in envs:  # PyBullet, where boxes or bots need it, connected before sealing
+            with contextlib.suppress(WorldUnavailable):  # said when a car comes near one
+                env.unwrapped.connect_world()
         observation, _ = envs[0].reset(seed=0)
         for view in VIEWS:  # the spectator's textures and the JPEG codec, before sealing
             jpeg(view_image(envs[0].unwrapped, view, observation))
@@ -353,6 +365,12 @@ def _situations(settings: dict) -> list[dict]:
 
     found = situations(settings["track"], settings["direction"])
     return [{"name": s.name, "description": s.description, "params": s.params} for s in found]
+
+
+def _unavailable(error: WorldUnavailable) -> dict[str, Any]:
+    """The error frame for a simulator that needs PyBullet where it is missing: the worker's
+    failure (``kind`` "simulation"), not the racer's code's."""
+    return {"type": "error", "kind": "simulation", "message": str(error)[:500]}
 
 
 def _failure(error: RewardFailure | RewardError, **where: Any) -> dict[str, Any]:

@@ -314,6 +314,12 @@ class DeepRacerEnv(gym.Env):
         if self._world is not None:
             self._world.close()
 
+    def connect_world(self) -> None:
+        """Connect the collision world, where there is one, to PyBullet now (``World.connect``):
+        a sandbox child does before it seals. ``WorldUnavailable`` where PyBullet is missing."""
+        if self._world is not None:
+            self._world.connect()
+
     # Motion and statuses
 
     def _command(self, action) -> tuple[float, float]:

@@ -47,17 +47,25 @@ class WorldUnavailable(RuntimeError):
     """PyBullet, which boxes and bot cars need, cannot be imported on this machine."""
 
 
+UNAVAILABLE = (
+    "Object avoidance and head-to-bot races need PyBullet, which is not installed on this "
+    "simulation machine; time trials run without it."
+)
+_missing = False  # PyBullet was looked for and not found: a sealed process cannot look again
+
+
 def _import_pybullet():
     """The ``pybullet`` module and its ``BulletClient``, imported quietly on first use."""
+    global _missing
+    if _missing:
+        raise WorldUnavailable(UNAVAILABLE)
     try:
         with _quiet_stdout():
             import pybullet
             from pybullet_utils.bullet_client import BulletClient
     except ImportError as error:
-        raise WorldUnavailable(
-            "Object avoidance and head-to-bot races need PyBullet, which is not installed on "
-            "this simulation machine; time trials run without it."
-        ) from error
+        _missing = True
+        raise WorldUnavailable(UNAVAILABLE) from error
     return pybullet, BulletClient
 
 
@@ -148,6 +156,13 @@ class World:
             [hit[2] if hit[0] not in (-1, car) else 1.0 for hit in hits], dtype=np.float64
         )
         return fractions * max_range
+
+    def connect(self) -> None:
+        """Connect to PyBullet now, importing it, rather than once something comes near: a
+        process that seals itself (a sandbox child) can open no file afterwards, neither
+        PyBullet's nor /dev/null to quiet it. ``WorldUnavailable`` where it is not installed
+        (and each time the world needs it from then on, without looking again)."""
+        self._bullet()
 
     def _bullet(self):
         """The PyBullet client, connected (and PyBullet imported) on first need, with every body

@@ -384,8 +384,8 @@ def _await_next_version(
 
 def failure_words(failure: SandboxFailure, worker: int) -> str:
     """What the job's failure says of ``failure`` in ``worker``: the racer's code's, or (its
-    policy failing on its device) the worker's own."""
-    if failure.kind == "policy":
+    policy failing on its device, its simulator missing PyBullet) the worker's own."""
+    if failure.kind in ("policy", "simulation"):
         return f"Simulation worker {worker + 1} failed (not your reward function): {failure}"
     return f"Your reward function failed {_where(failure, worker)}: {failure}"
 

@@ -8,8 +8,11 @@ import socket
 import textwrap
 from pathlib import Path
 
+import msgpack
 import pytest
 
+import sandbox as sandbox_package
+from rl.experience import decode_array
 from sandbox import CHILD_ENVIRONMENT, MiB, Sandbox, SandboxFailure, self_test
 
 POLICY = {"algorithm": "clipped_ppo", "architecture": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"}
@@ -259,6 +262,51 @@ def test_an_episode_names_the_step_and_status_where_the_reward_function_failed(f
         with pytest.raises(SandboxFailure) as failed:
             sandbox.episode("random")
     assert str(failed.value) == expected
+
+
+BOXES = {"track": "pitlane-oval", "race_type": "OBJECT_AVOIDANCE", "objects": {"count": 6},
+         "sensors": ["FRONT_FACING_CAMERA", "LIDAR"]}  # fmt: skip
+
+
+def test_a_rollouts_car_sees_boxes_through_pybullet_in_the_sealed_child():
+    # PyBullet is connected before the child seals: it can open no file after.
+    with Sandbox(env=BOXES, policy=POLICY, memory_allowance=1024 * MiB) as sandbox:
+        sandbox.load(reward("return 1.0"))
+        for _ in range(20):
+            payload = msgpack.unpackb(sandbox.episode("random")["payload"])
+            lidar = decode_array(payload["arrays"]["obs:LIDAR"], "float32", (None, None))
+            if (lidar < 1.0).any():  # a ray stopped short of its range: at a box
+                break
+        else:
+            pytest.fail("no box seen in 20 episodes")
+
+
+@pytest.mark.parametrize(
+    "sensors",
+    [["FRONT_FACING_CAMERA"], ["FRONT_FACING_CAMERA", "LIDAR"]],
+    ids=["touching-while-driving", "seen-at-the-start"],
+)
+def test_a_rollout_without_pybullet_says_so_when_its_car_nears_a_box(
+    tmp_path, monkeypatch, sensors
+):
+    from training.rollouts import failure_words
+
+    (tmp_path / "pybullet.py").write_text("raise ImportError('not installed')\n")
+    monkeypatch.setattr(
+        sandbox_package, "CHILD_ENVIRONMENT", {**CHILD_ENVIRONMENT, "PYTHONPATH": str(tmp_path)}
+    )
+    env = {**BOXES, "sensors": sensors}
+    sandbox = Sandbox(env=env, policy=POLICY, memory_allowance=1024 * MiB)
+    with pytest.raises(SandboxFailure) as failed, sandbox:  # at the start, or in an episode
+        sandbox.load(reward("return 1.0"))
+        for _ in range(20):
+            sandbox.episode("random")
+    assert failed.value.kind == "simulation"
+    assert failure_words(failed.value, 0) == (
+        "Simulation worker 1 failed (not your reward function): Object avoidance and "
+        "head-to-bot races need PyBullet, which is not installed on this simulation machine; "
+        "time trials run without it."
+    )
 
 
 def test_nothing_was_left_behind_in_tmp():
