@@ -135,7 +135,11 @@ class Sandbox:
         self.server: served.PolicyServer | None = None  # the policy served to the child, if so
 
     def __enter__(self) -> Sandbox:
-        self.start()
+        try:
+            self.start()
+        except BaseException:  # a served policy, the child, its readers: none outlives it
+            self.close()
+            raise
         return self
 
     def __exit__(self, *exc_info: object) -> None:

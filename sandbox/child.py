@@ -14,7 +14,6 @@ naming the line. Since the racer's code cannot write to the worker, the frames t
 from __future__ import annotations
 
 import contextlib
-import functools
 import os
 import select
 import sys
@@ -126,8 +125,10 @@ class Child:
         envs, first = [], float(settings.get("start", 0.0))
         for car in range(cars):
             placed = settings if cars == 1 else {**settings, "start": (first + car / cars) % 1.0}
-            reward_fn = functools.partial(self.reward.call, car=car)  # its own copy of it
-            envs.append(gymnasium.make(simulator.ENV_ID, reward_fn=reward_fn, **placed))
+            # No reward_fn: the fleet scores every car's step, all of a step's in one request
+            # (RewardProcess.calls, each car's call its own copy of the function), and no
+            # environment here is stepped with env.step.
+            envs.append(gymnasium.make(simulator.ENV_ID, **placed))
         for env in envs:  # PyBullet, where boxes or bots need it, connected before sealing
             with contextlib.suppress(WorldUnavailable):  # said when a car comes near one
                 env.unwrapped.connect_world()

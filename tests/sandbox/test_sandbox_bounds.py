@@ -14,6 +14,7 @@ from collections.abc import Iterator
 
 import pytest
 
+import sandbox as sandbox_package
 from sandbox import GRACE, STDERR_KEEP, MiB, Sandbox, SandboxFailure
 from sandbox.protocol import HEADER, Late, pack, read_frame_by, write_by
 from sandbox.reward import KILL_GRACE, RewardFailure, RewardProcess
@@ -159,6 +160,15 @@ def test_a_forged_reply_to_a_step_of_several_cars_is_a_protocol_failure(forgery,
         assert process.pid is None  # stopped: nothing it says is read again
     assert failed.value.error["kind"] == "protocol"
     assert message in str(failed.value)
+
+
+def test_a_sandbox_whose_start_fails_is_closed(monkeypatch):
+    monkeypatch.setattr(sandbox_package, "GRACE", 0.0)
+    sandbox = Sandbox(start_timeout=0.001)  # late by the time it has started
+    with pytest.raises(SandboxFailure, match="did not start"), sandbox:
+        pass
+    assert sandbox._process is None  # closed: its pipes, and its readers told to stop
+    assert sandbox._closed.is_set()
 
 
 def test_a_frame_over_the_size_limit_gets_the_process_killed():
