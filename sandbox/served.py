@@ -22,37 +22,13 @@ from typing import Any
 
 import numpy as np
 
+from rl.experience import decode_array, encode_arrays
 from rl.hyperparameters import PPO
 from rl.wire import ProtocolError
 
 ANSWER_TIMEOUT = 30.0  # [s] for the worker's policy to answer one step (its first run included)
 CHILD_PATIENCE = ANSWER_TIMEOUT + 5.0  # [s] a child waits for the answer before it gives up
 HOW = ("explore", "drive", "value")
-
-
-def pack_array(array: np.ndarray) -> dict:
-    """An array as a message carries it across the child's pipe: its bytes as they are (a pipe
-    gains nothing from compression, and a step's camera frames are 19 KB a car)."""
-    array = np.ascontiguousarray(array)
-    return {"dtype": str(array.dtype), "shape": list(array.shape), "data": array.tobytes()}
-
-
-def unpack_array(packed: Any, dtype: str, shape: tuple[int | None, ...]) -> np.ndarray:
-    """The array ``pack_array`` made, which must have ``dtype`` and ``shape`` (None: any
-    length); ``ProtocolError`` otherwise."""
-    if not isinstance(packed, dict) or packed.get("dtype") != dtype:
-        raise ProtocolError(f"expected {dtype} data")
-    declared = packed.get("shape")
-    if (
-        not isinstance(declared, list) or len(declared) != len(shape)
-        or not all(type(size) is int and 0 <= size < 2**31 for size in declared)
-        or any(want is not None and want != got for want, got in zip(shape, declared, strict=True))
-    ):  # fmt: skip
-        raise ProtocolError(f"expected shape {shape}, got {declared}")
-    data = packed.get("data")
-    if not isinstance(data, bytes) or len(data) != np.dtype(dtype).itemsize * np.prod(declared):
-        raise ProtocolError("an array whose bytes do not match its shape")
-    return np.frombuffer(bytearray(data), dtype=dtype).reshape(declared)  # writable, for torch
 
 
 class ServedPolicy:
@@ -94,11 +70,11 @@ class ServedPolicy:
         batch = {name: np.stack([seen[name] for seen in observations]) for name in observations[0]}
         answer = self.ask({
             "type": "act", "how": how, "seeds": seeds,
-            "observations": {name: pack_array(array) for name, array in batch.items()},
+            "observations": encode_arrays(batch, compress=False),  # 19 KB a car's camera
         })  # fmt: skip
         # The worker is trusted: its arrays are taken as they say they are.
         return {
-            name: unpack_array(packed, packed["dtype"], tuple(packed["shape"]))
+            name: decode_array(packed, packed["dtype"], tuple(packed["shape"]), compressed=False)
             for name, packed in answer["arrays"].items()
         }
 
@@ -128,8 +104,7 @@ class PolicyServer:
         timeout = ANSWER_TIMEOUT if timeout is None else timeout
         work = self._runner.submit(self._run, how, observations, seeds)
         try:
-            return {"arrays": {name: pack_array(array) for name, array in
-                               work.result(timeout).items()}}  # fmt: skip
+            return {"arrays": encode_arrays(work.result(timeout), compress=False)}
         except concurrent.futures.TimeoutError:
             raise TimeoutError(f"no answer in {timeout:g} s") from None
 
@@ -155,7 +130,9 @@ class PolicyServer:
         if how not in HOW or not isinstance(packed, dict) or set(packed) != set(self.spaces):
             raise ProtocolError("a request for the policy that is not one")
         batch = {
-            name: unpack_array(packed[name], str(space.dtype), (None, *space.shape))
+            name: decode_array(
+                packed[name], str(space.dtype), (None, *space.shape), compressed=False
+            )
             for name, space in self.spaces.items()
         }
         if any(a.dtype.kind == "f" and not np.isfinite(a).all() for a in batch.values()):

@@ -6,6 +6,7 @@ fails the worker in words; and a request for the policy out of protocol is refus
 
 import contextlib
 import time
+import zlib
 from collections.abc import Iterator
 from types import SimpleNamespace
 
@@ -15,11 +16,12 @@ import pytest
 import torch
 
 import sandbox as sandbox_package
+from rl.experience import decode_array, encode_arrays
 from rl.learner import weights_bytes
 from rl.policies import Policy, rollout_device
 from rl.wire import ProtocolError
 from sandbox import MiB, Sandbox, SandboxFailure, served
-from sandbox.served import PolicyServer, pack_array
+from sandbox.served import PolicyServer
 from tests.sandbox.test_cars import ENV, REWARD, SEED, array, episodes_by_car
 from tests.sandbox.test_sandbox import POLICY
 
@@ -129,6 +131,11 @@ def test_a_child_left_without_an_answer_gives_up_and_says_so_rather_than_wait_fo
     assert str(failed.value) == "The worker did not answer with the cars' actions."
 
 
+def pack_array(array: np.ndarray) -> dict:
+    """An array as a child's request carries it (uncompressed, over a pipe)."""
+    return encode_arrays({"array": array}, compress=False)["array"]
+
+
 def request(policy: Policy, cars: int, how: str = "explore", **changes) -> dict:
     """A child's request for the policy's answer for ``cars`` cars seeded ``SEED`` on."""
     spaces = policy.network.observation_space.spaces
@@ -195,6 +202,27 @@ def test_an_observation_of_another_kind_is_refused_before_the_network_sees_it(po
                 server.answer(request(policy, 1, observations={"FRONT_FACING_CAMERA": packed}))
     finally:
         server.close()
+
+
+@pytest.mark.parametrize("compressed", [False, True], ids=["served", "experience"])
+def test_an_array_is_held_to_its_shape_served_or_from_the_experience_buffer(compressed):
+    # One decoder for both: each size a whole number under 2**31, exactly its shape's bytes.
+    def encoded(array: np.ndarray, **changes) -> dict:
+        return {**encode_arrays({"a": array}, compress=compressed)["a"], **changes}
+
+    frames = np.arange(24, dtype=np.uint8).reshape(2, 3, 4)
+    decoded = decode_array(encoded(frames), "uint8", (None, 3, 4), compressed=compressed)
+    assert np.array_equal(decoded, frames)
+    inflating = zlib.compress(bytes(1 << 20)) if compressed else bytes(1 << 20)  # 1 MB for 24 B
+    cases = [
+        ("expected shape", encoded(frames, shape=[2.0, 3, 4])),
+        ("expected shape", encoded(frames, shape=[2**31, 3, 4])),
+        ("do not match its shape", encoded(frames, data=inflating)),
+        ("do not match its shape", encoded(frames[:1], shape=[2, 3, 4])),
+    ]
+    for message, case in cases:
+        with pytest.raises(ProtocolError, match=message):
+            decode_array(case, "uint8", (None, 3, 4), compressed=compressed)
 
 
 def test_a_sensor_reading_that_is_not_a_finite_number_is_refused_before_the_network_sees_it():
