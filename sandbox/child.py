@@ -230,7 +230,7 @@ class Child:
                 while not (ended := fleet.step(stepped)):
                     pass
             except (RewardFailure, RewardError) as error:
-                if fleet.stepping is None:  # stopped past a step's deadline: no car to name
+                if fleet.stepping is None:  # no car's call failed (sending the waypoints)
                     self.send(_failure(error), log=True)
                     return
                 env, car = fleet.stepping.env.unwrapped, fleet.stepping.index
