@@ -131,7 +131,6 @@ class Fleet:
                 car.mode = None
                 raise
             if done:
-                car.mode = None
                 finished.append(car)
         self.stepping = None
         return finished
@@ -170,7 +169,6 @@ class Fleet:
                     unfinished.mode = None
                 raise
             if done:
-                car.mode = None
                 finished.append(car)
         self.stepping = None
         return finished
@@ -202,7 +200,7 @@ class Fleet:
 
     def _record(self, car: Car, action, value: float, log_prob: float, outcome, on_step) -> bool:
         """Record ``car``'s step (the environment's ``outcome`` of ``action``), then
-        ``on_step``; whether its episode ended."""
+        ``on_step``; whether its episode ended (the car is then idle)."""
         observation, reward, terminated, truncated, info = outcome
         driven = car.driven
         car.observation = observation
@@ -219,6 +217,7 @@ class Fleet:
         if on_step is not None:
             on_step(car, observation, info, done)
         if done:
+            car.mode = None
             driven.info, driven.terminated, driven.truncated = (
                 info,
                 bool(terminated),

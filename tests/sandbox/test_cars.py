@@ -15,7 +15,6 @@ import pytest
 import sandbox as sandbox_package
 import simulator
 from rl.episode import Fleet
-from rl.learner import weights_bytes
 from rl.policies import Policy
 from sandbox import MiB, Sandbox, SandboxFailure
 from sandbox.reward import RewardProcess
@@ -36,17 +35,6 @@ def reward_function(params):
     calls += 1
     return params["progress"] + params["speed"] + abs(params["heading"]) / 100 + calls / 1000
 """
-
-
-@pytest.fixture(scope="module")
-def policy() -> Policy:
-    return Policy.for_environment(POLICY["algorithm"], POLICY["architecture"], ENV)
-
-
-@pytest.fixture(scope="module")
-def weights(policy) -> bytes:
-    """One network for every child: each would otherwise draw its own initial weights."""
-    return weights_bytes(policy.weights_module.state_dict())
 
 
 @contextlib.contextmanager

@@ -17,7 +17,6 @@ import torch
 
 import sandbox as sandbox_package
 from rl.experience import decode_array, encode_arrays
-from rl.learner import weights_bytes
 from rl.policies import Policy, rollout_device
 from rl.wire import ProtocolError
 from sandbox import MiB, Sandbox, SandboxFailure, served
@@ -28,17 +27,6 @@ from tests.sandbox.test_sandbox import POLICY
 CARS = 2
 EPISODES = 2  # per car
 needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA on this machine")
-
-
-@pytest.fixture(scope="module")
-def policy() -> Policy:
-    return Policy.for_environment(POLICY["algorithm"], POLICY["architecture"], ENV)
-
-
-@pytest.fixture(scope="module")
-def weights(policy) -> bytes:
-    """One network for every child: each would otherwise draw its own initial weights."""
-    return weights_bytes(policy.weights_module.state_dict())
 
 
 @contextlib.contextmanager
