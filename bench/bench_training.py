@@ -685,6 +685,11 @@ def main() -> None:
         "--hyperparameter", type=_setting, action="extend", nargs="+", default=[],
         metavar="NAME=VALUE", help="with --qualify, a racer's own value (DeepRacer's names)",
     )  # fmt: skip
+    parser.add_argument(
+        "--cars", type=int, default=None,
+        help="the console's PITLANE_CARS_PER_WORKER: cars a rollout worker drives together "
+        "(default: the console's, 8; 1 is how a worker drove before issue 43)",
+    )  # fmt: skip
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument(
         "--limit",
@@ -702,14 +707,21 @@ def main() -> None:
         django.setup()
         update_speed(arguments.steps, algorithm=arguments.algorithm, device=arguments.device)
         return
-    precision = {"PITLANE_TRAINER_PRECISION": arguments.precision}
-    with running_console(concurrency=3, settings=precision) as console:
+    if arguments.cars is not None and not 1 <= arguments.cars <= 64:
+        parser.error("--cars takes 1 to 64 (PITLANE_CARS_PER_WORKER's range)")
+    console_settings = {"PITLANE_TRAINER_PRECISION": arguments.precision}
+    if arguments.cars is not None:
+        console_settings["PITLANE_CARS_PER_WORKER"] = str(arguments.cars)
+    with running_console(concurrency=3, settings=console_settings) as console:
         os.environ.update(console["env"])
         import django
 
         django.setup()
+        from django.conf import settings as dj_settings
 
         owner = bench_racer()
+        cars = arguments.cars or dj_settings.PITLANE_CARS_PER_WORKER
+        print(f"Trainer precision {arguments.precision}; {cars} car(s) a rollout worker")
         if arguments.qualify:
             under = f", each under {arguments.under:g} s" if arguments.under else ""
             print(f"Time to qualify (3 clean consecutive laps{under}), training minutes:")
