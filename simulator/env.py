@@ -61,6 +61,18 @@ def default_config() -> dict[str, Any]:
         # filters/observation/observation_sector_discretize_filter.py:53-71 (01f5f01).
         "sector_lidar_sectors": 8,
         "sector_lidar_clipping": 0.5,  # [m]
+        # Gazebo's noise, where ``noise`` asks for it (an evaluation's trials). The lidar's rays:
+        # Gaussian, mean 0, deviation 0.01 m (simapp urdf/deepracer/racecar.xacro:26-27,
+        # racecar.gazebo:156-159, 01f5f01); its cameras have no <noise> (racecar.gazebo:58-132).
+        "lidar_noise": 0.01,  # [m] standard deviation
+        # A step's action takes hold late: simapp pauses the physics only once a step's image has
+        # come, so it runs on with the old action until the pause lands, "the step duration won't
+        # be exactly same" (environments/deepracer_racetrack_env.py:157-177). Up to 9 of
+        # Gazebo's 1 ms physics steps, drawn evenly: a DeepRacer evaluation's steps last 66.7 ms
+        # with a deviation of 3.2-4.2 ms (deepracer-utils' sample console evaluation,
+        # tests/deepracer/logs/sample-console-logs/sim-trace/evaluation/20220612082523-*,
+        # three trials), as the difference of two such delays has (4.1 ms).
+        "command_latency": 9,  # [physics steps of 1 ms] the most an action waits
     }
 
 
@@ -115,7 +127,9 @@ class DeepRacerEnv(gym.Env):
     ``sensors``, ``action_space``, ``race_type``, ``objects`` ({count, randomize}), ``bots``
     ({count, speed, lane_changes}), ``mode``, ``laps``, ``penalties`` ({off_track, crash} in
     seconds), ``max_resets``, ``start`` (fraction of the lap), ``reward_fn``, ``seed``,
-    ``render_mode`` ("rgb_array": the 640 x 480 spectator view), ``car`` (a ``CarSpec``),
+    ``noise`` (Gazebo's, drawn from the episode's seed: the lidar's and each action's delay;
+    off, the same actions give the same episode), ``render_mode`` ("rgb_array": the 640 x 480
+    spectator view), ``car`` (a ``CarSpec``),
     ``car_colour`` (BGR).
     """
 
@@ -137,6 +151,7 @@ class DeepRacerEnv(gym.Env):
         start: float = 0.0,
         reward_fn: Callable[[dict], float] | None = None,
         seed: int | None = None,
+        noise: bool = False,
         render_mode: str | None = None,
         car: CarSpec | None = None,
         car_colour: tuple[int, int, int] = (40, 40, 220),
@@ -160,6 +175,7 @@ class DeepRacerEnv(gym.Env):
         self.max_resets = config.resets(max_resets)
         self.start = config.fraction("The start", start)
         self.reward_fn = reward_fn or follow_centre_line
+        self.noise = bool(noise)
         self.render_mode = config.choice("The render mode", render_mode, (None, "rgb_array"))
         self.car_colour = tuple(int(channel) for channel in car_colour)  # JSON gives a list
 
@@ -219,6 +235,7 @@ class DeepRacerEnv(gym.Env):
             ("off_tracks", "crashes", "reversed", "immobilized", "resets"), 0
         )
         self._trail = [self.car.position]
+        self._held = (0.0, 0.0)  # the commands (steering, speed) the car drives by: at rest
         self._last_params: dict | None = None
         self._pending: _Advanced | None = None  # the step advance() began, until concluded
         return self._observe(), self._info("prepare", None, 0.0, False)
@@ -244,7 +261,7 @@ class DeepRacerEnv(gym.Env):
             self._pending = _Advanced(action, "pause", None)
             return None
         steering, speed = self._command(action)
-        moved = self.car.step(speed, steering, self.dt)
+        moved = self._drive(steering, speed)
         self.traffic.step(self.dt, self.sim_time, self.np_random)
         self._sync_actor_bodies()
 
@@ -326,6 +343,17 @@ class DeepRacerEnv(gym.Env):
         if isinstance(self.actions, DiscreteActions):
             return self.actions.actions[int(action)]
         return self.actions.scale(np.asarray(action, dtype=np.float64))
+
+    def _drive(self, steering: float, speed: float) -> float:
+        """Drive one step toward the commands; the distance moved [m]. With ``noise``, the
+        commands before hold for the first 0-``command_latency`` physics steps of it."""
+        held, self._held = self._held, (steering, speed)
+        if not self.noise:
+            return self.car.step(speed, steering, self.dt)
+        ticks = int(self.np_random.integers(0, self.config["command_latency"] + 1))
+        late = ticks * self.car.spec.control_period
+        moved = self.car.step(held[1], held[0], late) if ticks else 0.0
+        return moved + self.car.step(speed, steering, self.dt - late)
 
     def _place_car(self, distance: float) -> None:
         """Put the car at rest so that its reported position is at ``distance`` on the centre."""
@@ -469,6 +497,8 @@ class DeepRacerEnv(gym.Env):
         observation = {self.camera_name: np.stack(frames)}
         if self.lidar_name is not None:
             distances = self._lidar()
+            if self.noise:
+                distances = self._noisy(distances)
             if self.lidar_name == "LIDAR":
                 observation["LIDAR"] = distances.astype(np.float32)
             else:
@@ -480,6 +510,13 @@ class DeepRacerEnv(gym.Env):
         1 when its nearest return is under the clipping distance (0.5 m)."""
         sectors = distances.reshape(self.config["sector_lidar_sectors"], -1).min(axis=1)
         return (sectors < self.config["sector_lidar_clipping"]).astype(np.int8)
+
+    def _noisy(self, distances: np.ndarray) -> np.ndarray:
+        """The rays that hit something within range, with the lidar's noise, clipped again;
+        a ray that reaches its range saw nothing, and Gazebo's noise leaves it so."""
+        low, high = self.config["lidar_range"]
+        noise = self.np_random.normal(0.0, self.config["lidar_noise"], distances.shape)
+        return np.where(distances < high, np.clip(distances + noise, low, high), distances)
 
     def _lidar(self) -> np.ndarray:
         low, high = self.config["lidar_range"]
