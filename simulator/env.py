@@ -24,6 +24,7 @@ from simulator.camera import Lens, Mount, PerspectiveView
 from simulator.car import Car, CarSpec
 from simulator.config import ContinuousActions, DiscreteActions
 from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
+from simulator.randomisation import Scene
 from simulator.rewards import checked_reward, follow_centre_line
 from simulator.texture import render
 from simulator.trace import SimTraceRow
@@ -130,7 +131,9 @@ class DeepRacerEnv(gym.Env):
     ``noise`` (Gazebo's, drawn from the episode's seed: the lidar's and each action's delay;
     off, the same actions give the same episode), ``render_mode`` ("rgb_array": the 640 x 480
     spectator view), ``car`` (a ``CarSpec``),
-    ``car_colour`` (BGR).
+    ``car_colour`` (BGR), ``randomise`` (domain randomisation: each episode's light, colours,
+    textures, camera noise, blur and mount, and the car's grip, drawn from the episode's seed;
+    ``simulator.randomisation``).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
@@ -155,6 +158,7 @@ class DeepRacerEnv(gym.Env):
         render_mode: str | None = None,
         car: CarSpec | None = None,
         car_colour: tuple[int, int, int] = (40, 40, 220),
+        randomise: bool = False,
     ) -> None:
         self.config = default_config()
         self.track: Track = load(track).with_direction(config.choice(
@@ -183,6 +187,8 @@ class DeepRacerEnv(gym.Env):
         self.dt = 1.0 / self.config["control_hz"]
         self._build_spaces()
         self._build_sensors()
+        self._scene = (Scene(self._cameras, self.car.spec, self.config["camera_sky"])
+                       if randomise else None)  # fmt: skip
         self._world = self._build_world()
         self._actor_bodies = []
         self._waypoints = tuple(self.track.waypoints)
@@ -209,6 +215,8 @@ class DeepRacerEnv(gym.Env):
         else:
             fraction = self.start
         start = self.traffic.reset(fraction * length, self.np_random)
+        if self._scene is not None:  # domain randomisation: this episode's look, from its seed
+            self._cameras, self.car.spec, self.look = self._scene.draw(self.np_random)
         self._sync_actor_bodies()
         self._place_car(start)
         # The reset is DeepRacer's prepare step: step 1 of the episode, the car held at its start,
