@@ -26,6 +26,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 DATA_DIR = Path(__file__).resolve().parent / "data"
+DEEPRACER_DIR = DATA_DIR / "deepracer"  # DeepRacer's catalogue: see its NOTICE and deepracer.py
 MIN_POINTS = 3  # different waypoints: the fewest that close a loop
 REPEAT = 1e-9  # [m] a centre point that moved no further repeats the one before it
 GRID_CELLS = 4  # grid cells a border segment covers, on average, in the crossing check
@@ -60,8 +61,10 @@ class Track:
 
     ``inner`` and ``outer`` keep their names whatever the direction; ``direction`` says which way
     the waypoints run ("counterclockwise" or "clockwise", read from the route as loaded), and
-    ``with_direction`` reverses them to run the other way; ``reversed`` says the waypoints run
-    against the route file's own order (DeepRacer's ``REVERSE_DIR``).
+    ``with_direction`` turns them to run the other way: onto the route file DeepRacer drives that
+    way where ``routes`` names one (``world_name`` is the file loaded), else by reversing them;
+    ``reversed`` says the waypoints run against the route file's own order (DeepRacer's
+    ``REVERSE_DIR``). ``season`` is the year DeepRacer raced it (None: one of Pitlane's own).
     """
 
     name: str
@@ -75,6 +78,9 @@ class Track:
     direction: str = "counterclockwise"
     reversed: bool = False
     source: Path | None = field(default=None, compare=False)
+    season: int | None = None
+    world_name: str = ""
+    routes: Mapping[str, str] = field(default_factory=dict, compare=False)
 
     # Geometry
 
@@ -192,6 +198,9 @@ class Track:
             raise TrackError(f"{self.display_name} cannot be driven {direction}.")
         if direction == self.direction:
             return self
+        route = self.routes.get(direction)
+        if route and route != self.world_name:
+            return _builtin(self.name, route).with_direction(direction)
         return replace(
             self,
             centre=self.centre[::-1].copy(),
@@ -208,9 +217,29 @@ class Track:
         return every.min(axis=0), every.max(axis=0)
 
 
-def names() -> list[str]:
-    """The built-in tracks, in catalogue order."""
-    return list(_catalog())
+def names(*, origin: str | None = None) -> list[str]:
+    """The built-in tracks, in catalogue order: Pitlane's own then DeepRacer's, or those of one
+    ``origin`` ("pitlane": made by generate.py; "deepracer": brought by deepracer.py)."""
+    return [name for name, entry in _catalog().items() if origin in (None, entry["origin"])]
+
+
+def world(world_name: str) -> tuple[str, str] | None:
+    """The built-in track a DeepRacer ``WORLD_NAME`` (a route file's name) is, and the direction
+    that file is driven: ``2022_april_open_cw`` is ("2022_april_open", "clockwise"); None for a
+    name that is not one of DeepRacer's route files."""
+    for name, entry in _catalog().items():
+        if world_name in entry.get("world_names", ()):
+            return name, entry["world_names"][world_name]
+    return None
+
+
+def entry(name: str) -> dict:
+    """A built-in track's catalogue entry (display name, directions, season, length and width
+    [m] for DeepRacer's, ...), for lists that need no geometry; ``TrackError`` when unknown."""
+    try:
+        return _catalog()[name]
+    except KeyError:
+        raise TrackError(f"No track named {name!r}.") from None
 
 
 Resolver = Callable[[str], "Mapping[str, Any] | None"]
@@ -251,16 +280,10 @@ def load(source: str | Path | Mapping[str, Any]) -> Track:
         return _from_inline(source)
     catalog = _catalog()
     if isinstance(source, str) and source in catalog:
-        meta = catalog[source]
-        return _from_array(
-            np.load(DATA_DIR / f"{source}.npy"),
-            name=source,
-            display_name=meta["display_name"],
-            description=meta["description"],
-            difficulty=meta["difficulty"],
-            directions=tuple(meta["directions"]),
-            source=DATA_DIR / f"{source}.npy",
-        )
+        return _builtin(source)
+    found = world(source) if isinstance(source, str) else None
+    if found is not None:  # a WORLD_NAME: its track, driven as that file is
+        return _builtin(found[0], source).with_direction(found[1])
     if isinstance(source, str) and not source.endswith(".npy"):
         for resolver in _resolvers:
             found = resolver(source)
@@ -268,8 +291,11 @@ def load(source: str | Path | Mapping[str, Any]) -> Track:
                 return _from_inline(found)
     path = Path(source)
     if path.suffix != ".npy" or not path.is_file():
-        known = ", ".join(catalog)
-        raise TrackError(f"No track named {str(source)!r}. Built-in tracks: {known}.")
+        known = ", ".join(names(origin="pitlane"))
+        raise TrackError(
+            f"No track named {str(source)!r}. Built-in tracks: {known}, and DeepRacer's "
+            f"{len(names(origin='deepracer'))} by their WORLD_NAME, like reInvent2019_track."
+        )
     return _from_array(read_route(path.read_bytes(), path.name), name=path.stem,
                        display_name=path.stem, source=path)  # fmt: skip
 
@@ -305,9 +331,7 @@ def read_route(data: bytes, filename: str = "The route file") -> np.ndarray:
 
 def preview_path(name: str) -> Path:
     """The top-down preview image of a built-in track."""
-    if name not in _catalog():
-        raise TrackError(f"No track named {name!r}.")
-    return DATA_DIR / f"{name}.png"
+    return entry(name)["folder"] / f"{name}.png"
 
 
 def validate_array(array: np.ndarray) -> None:
@@ -532,7 +556,32 @@ def _orientation(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
     )
 
 
+def _builtin(name: str, route: str | None = None) -> Track:
+    """A catalogue track on ``route`` (a WORLD_NAME it drives; its first direction's when None)."""
+    meta = _catalog()[name]
+    routes = meta.get("routes", {})
+    route = route or routes.get(meta["directions"][0], name)
+    path = meta["folder"] / ("routes" if routes else "") / f"{route}.npy"
+    return _from_array(
+        np.load(path),
+        name=name,
+        display_name=meta["display_name"],
+        description=meta["description"],
+        difficulty=meta["difficulty"],
+        directions=tuple(meta["directions"]),
+        source=path,
+        season=meta.get("season"),
+        world_name=route,
+        routes=routes,
+    )
+
+
 @cache
 def _catalog() -> dict[str, dict]:
-    with open(DATA_DIR / "catalog.json") as file:
-        return {entry["name"]: entry for entry in json.load(file)}
+    """Pitlane's tracks (``catalog.json``, made by generate.py), then DeepRacer's."""
+    found = {}
+    for origin, folder in (("pitlane", DATA_DIR), ("deepracer", DEEPRACER_DIR)):
+        with open(folder / "catalog.json") as file:
+            for item in json.load(file):
+                found[item["name"]] = {"season": None, **item, "folder": folder, "origin": origin}
+    return found

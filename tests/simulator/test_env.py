@@ -73,7 +73,18 @@ def test_different_seeds_place_random_boxes_differently(environments):
     assert first != [a.distance for a in env.unwrapped.traffic.actors]
 
 
-LAPS = [(name, direction) for name in tracks.names() for direction in tracks.load(name).directions]
+# Pitlane's tracks both ways, and six of DeepRacer's route files: the shortest and the longest,
+# a clockwise-only one, one with a file for each way, a textured copy and the newest.
+DEEPRACER_LAPS = [
+    ("reInvent2019_wide", "clockwise"), ("penbay_pro", "clockwise"), ("Albert", "clockwise"),
+    ("2022_summit_speedway", "counterclockwise"), ("reinvent_carpet", "clockwise"),
+    ("2024_reinvent_champ", "counterclockwise"),
+]  # fmt: skip
+LAPS = [
+    (name, direction)
+    for name in tracks.names(origin="pitlane")
+    for direction in tracks.load(name).directions
+] + DEEPRACER_LAPS
 
 
 @pytest.mark.parametrize(("name", "direction"), LAPS, ids=[f"{n}-{d}" for n, d in LAPS])
@@ -178,7 +189,7 @@ def test_time_up_truncates_the_episode(environments):
     assert endings == [(False, False)] * 38 + [(False, True)]
 
 
-@pytest.mark.parametrize("name", tracks.names())
+@pytest.mark.parametrize("name", tracks.names(origin="pitlane"))
 def test_the_reward_params_have_every_key_with_the_right_types_and_ranges(environments, name):
     env = environments(track=name, race_type="HEAD_TO_BOT", bots={"count": 2})
     env.reset(seed=0)
