@@ -202,6 +202,7 @@ class Evaluator:
         self.trace: list[SimTraceRow] = []
         self.metrics: list[dict] = []
         self.results: list[EvaluationTrial] = []
+        self._seed: int | None = None  # the seed of the episode driving
         self._renewed = self._looked = time.monotonic()
         self.stopped = False  # the racer stopped it: it ends with the trials it finished
 
@@ -259,8 +260,11 @@ class Evaluator:
         self._last_live = self._last_step = 0.0
         for number in range(1 if evaluation.continuous_laps else evaluation.trials):
             self._counts, self._laps_done = LapCounts(), 0
+            # Each trial's own seed draws its noise; one from before seeds drives without.
+            self._seed = evaluation.trial_seed(number)
             driven = episode.drive(
-                env, policy, "evaluate", record=False, seed=number,
+                env, policy, "evaluate", record=False,
+                seed=number if self._seed is None else self._seed,
                 on_reset=self._started, on_step=self._stepped,
             )  # fmt: skip
             status = "time_up" if driven.truncated else driven.info["status"]
@@ -364,6 +368,7 @@ class Evaluator:
             off_tracks=off_tracks,
             crashes=crashes,
             resets=now["resets"] - before.resets,
+            seed=self._seed,
             penalty_ms=round(
                 1000
                 * (off_tracks * evaluation.off_track_penalty + crashes * evaluation.crash_penalty)

@@ -6,6 +6,9 @@ models, reward functions, vehicles, jobs, iterations, log lines, evaluations, tr
 
 from __future__ import annotations
 
+import secrets
+
+import numpy as np
 from django.conf import settings
 from django.core.validators import RegexValidator
 from django.db import models
@@ -32,6 +35,30 @@ class Network(models.TextChoices):
 class Algorithm(models.TextChoices):
     PPO = hyperparameters.PPO, "PPO"
     SAC = hyperparameters.SAC, "SAC"
+
+
+class BestCheckpointBy(models.TextChoices):
+    """How training picks a model's best checkpoint: by its evaluation episodes' mean progress
+    (DeepRacer's), total reward or lap time. DeepRacer for Cloud's DR_TRAIN_BEST_MODEL_METRIC
+    (defaults/template-run.env:33, scripts/training/prepare-config.py:58), read by simapp as
+    BEST_MODEL_METRIC (bundle/markov/metrics/constants.py:163-167, s3_metrics.py:267, 01f5f01)."""
+
+    PROGRESS = "progress", "Progress (DeepRacer's)"
+    REWARD = "reward", "Reward"
+    LAPTIME = "laptime", "Lap time"
+
+
+class Checkpoint(models.TextChoices):
+    """Which of a model's checkpoints an evaluation, a race entry, a download or a clone uses."""
+
+    BEST = "best", "Best (highest evaluation completion)"
+    LAST = "last", "Last"
+
+
+def new_seed() -> int:
+    """A seed for a run that is to be replayable: 31 bits, which every database's integer
+    holds."""
+    return secrets.randbelow(2**31)
 
 
 class ShellColour(models.TextChoices):
@@ -194,9 +221,17 @@ class RLModel(RaceConditions):
         default=list, blank=True, help_text="More tracks to train on, one per extra worker."
     )
     seed = models.IntegerField(default=0)
+    best_checkpoint_by = models.CharField(
+        max_length=8, choices=BestCheckpointBy.choices, default=BestCheckpointBy.PROGRESS,
+        help_text="How training picks the best checkpoint (DR_TRAIN_BEST_MODEL_METRIC).",
+    )  # fmt: skip
     cloned_from = models.ForeignKey(
         "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="clones"
     )
+    cloned_checkpoint = models.CharField(
+        max_length=8, choices=Checkpoint.choices, blank=True,
+        help_text="A clone's start: its source's best or last checkpoint.",
+    )  # fmt: skip
     vehicle = models.ForeignKey(
         "Vehicle", null=True, blank=True, on_delete=models.SET_NULL, related_name="rl_models"
     )
@@ -415,6 +450,14 @@ class Iteration(models.Model):
     evaluation_points = models.JSONField(
         default=list, help_text="Progress [%] of each evaluation episode, for the graph."
     )
+    evaluation_reward = models.FloatField(
+        null=True, blank=True, help_text="Mean total reward of the evaluation episodes."
+    )
+    evaluation_lap_ms = models.FloatField(
+        null=True, blank=True,
+        help_text="[ms] mean lap time of the evaluation episodes, 999999 for each unfinished "
+        "one (DeepRacer's best-model lap time).",
+    )  # fmt: skip
     created_at = models.DateTimeField(auto_now_add=True)
 
     class Meta:
@@ -460,9 +503,7 @@ class EvaluationJob(RaceConditions):
     Status = TrainingJob.Status
     ACTIVE = TrainingJob.ACTIVE
 
-    class Checkpoint(models.TextChoices):
-        BEST = "best", "Best (highest evaluation completion)"
-        LAST = "last", "Last"
+    Checkpoint = Checkpoint
 
     model = models.ForeignKey(RLModel, on_delete=models.CASCADE, related_name="evaluations")
     track = models.ForeignKey(Track, on_delete=models.PROTECT, related_name="evaluations")
@@ -482,6 +523,11 @@ class EvaluationJob(RaceConditions):
     checkpoint_iteration = models.PositiveIntegerField(
         null=True, blank=True, help_text="The training iteration whose weights were used."
     )
+    seed = models.PositiveIntegerField(
+        null=True, blank=True, default=new_seed,
+        help_text="Seeds its trials' noise; the same seed drives them again exactly. Empty: "
+        "driven without noise (before seeds).",
+    )  # fmt: skip
     status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
     message = models.CharField(max_length=255, blank=True)
     failure_reason = models.TextField(blank=True)
@@ -529,7 +575,16 @@ class EvaluationJob(RaceConditions):
             "laps": self.laps,
             "penalties": {"off_track": self.off_track_penalty, "crash": self.crash_penalty},
             "max_resets": self.max_resets,
+            "noise": self.seed is not None,
         }
+
+    def trial_seed(self, number: int) -> int | None:
+        """The seed of the episode of trial ``number`` (0 on; continuous laps drive one):
+        drawn from the evaluation's, so that no two trials or evaluations share one."""
+        if self.seed is None:
+            return None
+        state = np.random.SeedSequence([self.seed, number]).generate_state(1)
+        return int(state[0]) & 0x7FFFFFFF
 
 
 class EvaluationTrial(models.Model):
@@ -550,6 +605,9 @@ class EvaluationTrial(models.Model):
     crashes = models.PositiveIntegerField(default=0)
     resets = models.PositiveIntegerField(default=0)
     penalty_ms = models.PositiveIntegerField(default=0)
+    seed = models.PositiveIntegerField(
+        null=True, blank=True, help_text="The seed of the episode it was driven in."
+    )
 
     class Meta:
         ordering = ["evaluation", "number"]

@@ -470,11 +470,18 @@ class EvaluationRefused(Refused):
     """The model cannot be evaluated now; the message says why."""
 
 
-def evaluation_start(*, model: RLModel, settings: dict, enqueue: bool = True) -> EvaluationJob:
+def evaluation_start(
+    *, model: RLModel, settings: dict, seed: int | None = None, enqueue: bool = True
+) -> EvaluationJob:
     """Check the settings (``configuration.Invalid``), then queue an evaluation of a ready model
     and mark the model EVALUATING; the task is enqueued once committed (unless ``enqueue`` is
-    False: ``manage.py evaluate`` runs it in its own process)."""
+    False: ``manage.py evaluate`` runs it in its own process). ``seed``: an earlier
+    evaluation's or race's, to drive its trials again exactly; None, a new one."""
     clean = configuration.check_evaluation(settings, model=model)
+    if seed is not None:
+        if not 0 <= seed < 2**31:
+            raise configuration.Invalid({"seed": "A seed is a whole number from 0 to 2147483647."})
+        clean["seed"] = seed
     with transaction.atomic():
         evaluation = evaluation_reserve(model=model, purpose=RLModel.Status.EVALUATING, **clean)
         if enqueue:

@@ -355,3 +355,61 @@ def test_a_run_overtaken_while_it_saves_leaves_the_evaluation_and_its_model_to_t
     assert after.status == EvaluationJob.Status.IN_PROGRESS and after.lease_owner == taker
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.EVALUATING
     assert not alice.notifications.exists()
+
+
+def _trial_paths(evaluation: EvaluationJob) -> list[list[tuple[str, str]]]:
+    """Each trial's positions, row after row, from its stored trace."""
+    rows = csv.DictReader(io.StringIO(stored(evaluation, TRACE).decode()))
+    paths: dict[str, list] = {}
+    for row in rows:
+        paths.setdefault(row["episode"], []).append((row["X"], row["Y"]))
+    return list(paths.values())
+
+
+@pytest.mark.django_db
+def test_three_trials_differ_and_the_evaluate_command_replays_them_by_their_seed(alice, capsys):
+    model = ready_model(alice)  # straight ahead, off at the first bend: short trials
+    call_command("evaluate", model.name, "--trials", "3", "--max-resets", "0")
+    first = EvaluationJob.objects.get(model=model)
+    assert f"seed {first.seed}" in capsys.readouterr().out
+    paths = _trial_paths(first)
+    assert len(paths) == 3 and paths[0] != paths[1] != paths[2] != paths[0]
+    seeds = [trial.seed for trial in first.trial_rows.all()]
+    assert len(set(seeds)) == 3 and seeds == [first.trial_seed(n) for n in range(3)]
+
+    call_command("evaluate", model.name, "--max-resets", "0", "--seed", str(first.seed))
+    again = EvaluationJob.objects.exclude(pk=first.pk).get(model=model)
+    assert again.seed == first.seed
+    assert _trial_paths(again) == paths
+    times = [[t.time_ms for t in e.trial_rows.all()] for e in (first, again)]
+    assert times[0] == times[1]
+
+
+@pytest.mark.django_db
+def test_an_evaluation_made_before_seeds_drives_its_trials_without_noise(alice):
+    model = ready_model(alice)
+    evaluation = services.evaluation_start(model=model, settings={"max_resets": 0}, enqueue=False)
+    EvaluationJob.objects.filter(pk=evaluation.pk).update(seed=None)
+    evaluations.run(evaluation.pk)
+    evaluation.refresh_from_db()
+    paths = _trial_paths(evaluation)
+    assert paths[0] == paths[1] == paths[2]
+    assert [trial.seed for trial in evaluation.trial_rows.all()] == [None] * 3
+
+
+@pytest.mark.django_db
+def test_the_evaluation_page_shows_its_seed(client, alice):
+    model = ready_model(alice)
+    evaluation = services.evaluation_start(
+        model=model, settings={"trials": 3}, seed=1234, enqueue=False
+    )
+    client.force_login(alice)
+    page = client.get(reverse("training:evaluation-detail", args=[model.pk, evaluation.pk]))
+    assert "seed 1234" in page.content.decode()
+
+
+@pytest.mark.django_db
+def test_a_seed_out_of_range_is_refused_in_words(alice):
+    with pytest.raises(configuration.Invalid) as refused:
+        services.evaluation_start(model=ready_model(alice), settings={}, seed=-1, enqueue=False)
+    assert refused.value.errors == {"seed": "A seed is a whole number from 0 to 2147483647."}

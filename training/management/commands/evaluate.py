@@ -35,6 +35,11 @@ class Command(BaseCommand):
             help="resets a trial may use before it ends (default 100; -1: no limit)",
         )  # fmt: skip
         parser.add_argument("--checkpoint", choices=["best", "last"], default="best")
+        parser.add_argument(
+            "--seed", type=int,
+            help="drive the trials of the evaluation or race that had this seed again, exactly "
+            "(its page shows it); default: a new one",
+        )  # fmt: skip
 
     def handle(self, *args, **options) -> None:
         model = find_model(options["model"], options["owner"])
@@ -56,11 +61,14 @@ class Command(BaseCommand):
         if options["bots"] is not None:
             settings["bots"] = {"count": options["bots"]}
         try:
-            job = services.evaluation_start(model=model, settings=settings, enqueue=False)
+            job = services.evaluation_start(
+                model=model, settings=settings, seed=options["seed"], enqueue=False
+            )
         except Refused as refused:
             raise CommandError(refused.told("The evaluation was not started")) from None
         self.stdout.write(
-            f"Evaluating {model.name} on {job.track} ({job.direction}), {job.trials} trials…"
+            f"Evaluating {model.name} on {job.track} ({job.direction}), {job.trials} trials, "
+            f"seed {job.seed}…"
         )
         evaluation.run(job.pk)
         job.refresh_from_db()
