@@ -21,6 +21,44 @@ from simulator.texture import TrackTexture
 NEAR = 0.01  # [m] faces nearer than this to the camera plane are clipped
 DRAW_DISTANCE = 12.0  # [m] beyond which a solid is smaller than a pixel
 
+# DeepRacer's simulated camera (simapp at 01f5f01; the same numbers at 2fc2d75c, the ROS 1
+# simulator the console ran): Gazebo renders 640 x 480 pixels 1.13 rad across
+# (bundle/urdf/deepracer/racecar.gazebo:67-70), which the agent resizes to 160 x 120
+# (bundle/markov/sensors/sensors_rollout.py:174, environments/constants.py:21), so the 160 x 120
+# picture keeps the 1.13 rad. Its object-in-camera frustum uses the same angle
+# (bundle/markov/cameras/frustum.py:43).
+SIMAPP_FOV = math.degrees(1.13)  # [deg] horizontal: 64.7
+# The physical car's lens, for racers matching their own car: 120 degrees across, as DeepRacer's
+# console described the car's camera in its garage. The car's camera package
+# (aws-deepracer-camera-pkg, camera_pkg/src/camera_node.cpp:29-30,153-154) only resizes the
+# frames to 160 x 120 and publishes no field of view, so the 120 degrees is the console's word;
+# the lens's barrel distortion is not modelled (a pinhole of the same width).
+CAR_FOV = 120.0  # [deg]
+LENSES = {"simulator": SIMAPP_FOV, "wide": CAR_FOV}  # a model's camera_lens -> horizontal fov
+
+# Where the lens sits: the joint chain of bundle/urdf/deepracer/deepracer_single_cam.urdf
+# (01f5f01): base_link -> chassis (base_link_joint, :41, in simulator.car), -> zed_camera_link
+# (zed_camera_joint, :413-415), pitched down, -> camera_link, the lens Gazebo renders from
+# (camera_joint, :516-517, in zed_camera_link's pitched frame).
+ZED_CAMERA_JOINT = (0.091711, 0.080023)  # [m] forward, up in the chassis frame: :414
+CAMERA_PITCH = 0.2618  # [rad] down (URDF pitch about y; a positive one tips x down): :415
+CAMERA_JOINT = (0.044755, 0.04)  # [m] forward, up in zed_camera_link's frame: :517
+# The stereo pair: zed_camera_joint_leftcam at y +0.03, _rightcam at -0.03, otherwise the single
+# camera's chain (deepracer_stereo_cam.urdf:398, :511, :453, :566).
+STEREO_BASELINE = 0.06  # [m]
+
+
+def deepracer_mount() -> tuple[float, float, float]:
+    """simapp's lens as (forward of our car's origin, the middle of the rear axle [m]; height
+    above the ground [m]; pitch down [deg]): 0.227 m, 0.127 m, 15 degrees."""
+    from simulator.car import CHASSIS_Z, REAR_AXLE_X, REAR_AXLE_Z, CarSpec
+
+    c, s = math.cos(CAMERA_PITCH), math.sin(CAMERA_PITCH)
+    forward = ZED_CAMERA_JOINT[0] + CAMERA_JOINT[0] * c + CAMERA_JOINT[1] * s  # of base_link
+    up = ZED_CAMERA_JOINT[1] - CAMERA_JOINT[0] * s + CAMERA_JOINT[1] * c  # above the chassis
+    ground = REAR_AXLE_Z + CHASSIS_Z - CarSpec.wheel_radius  # the tread, above base_link
+    return forward - REAR_AXLE_X, up + CHASSIS_Z - ground, math.degrees(CAMERA_PITCH)
+
 
 @dataclass(frozen=True)
 class Lens:

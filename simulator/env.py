@@ -20,7 +20,14 @@ from gymnasium import spaces
 
 from simulator import config
 from simulator.actors import Traffic
-from simulator.camera import Lens, Mount, PerspectiveView
+from simulator.camera import (
+    LENSES,
+    STEREO_BASELINE,
+    Lens,
+    Mount,
+    PerspectiveView,
+    deepracer_mount,
+)
 from simulator.car import Car, CarSpec
 from simulator.config import ContinuousActions, DiscreteActions
 from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
@@ -32,8 +39,9 @@ from simulator.tracks import Track, load
 from simulator.world import World
 
 
-def default_config() -> dict[str, Any]:
-    """The physical constants of the simulation, with their units."""
+def default_config(camera_lens: str = "simulator") -> dict[str, Any]:
+    """The physical constants of the simulation, with their units, for a camera lens of
+    ``simulator.camera.LENSES``."""
     return {
         "control_hz": config.CONTROL_HZ,  # [Hz] one step is 1/15 s
         "physics_substeps": 8,  # per control step (120 Hz integration)
@@ -45,10 +53,13 @@ def default_config() -> dict[str, Any]:
         "start_advance": 0.05,  # [fraction of the lap] the training start moves per episode
         "stall_steps": 15,  # consecutive steps that make reversed or immobilized
         "immobilized_distance": 0.0003,  # [m] moved per step under which the car is stuck
-        "camera_size": (160, 120),  # [px] width, height
-        "camera_fov": 120.0,  # [deg] horizontal
-        "camera_mount": (0.12, 0.12, 25.0),  # forward [m], height [m], pitch down [deg]
-        "stereo_baseline": 0.06,  # [m] between the stereo cameras
+        "camera_size": (160, 120),  # [px] width, height: simapp environments/constants.py:21
+        # simapp's camera (simulator.camera cites each number): 1.13 rad across, or the car's
+        # wide lens with camera_lens="wide"; the lens 0.227 m ahead of the rear axle, 0.127 m
+        # above the ground, pitched 15° down, from the URDF's joint chain.
+        "camera_fov": LENSES[config.choice("The camera lens", camera_lens, LENSES)],  # [deg]
+        "camera_mount": deepracer_mount(),  # forward [m], height [m], pitch down [deg]
+        "stereo_baseline": STEREO_BASELINE,  # [m] between the stereo cameras
         "camera_texture_ppm": 64,  # [px/m] of the track image the camera projects
         "camera_sky": 150,  # gray level above the horizon
         # simapp launch/racecar.launch.py:37-45, sensors/constants.py:20-28 (01f5f01): 64 rays
@@ -131,9 +142,10 @@ class DeepRacerEnv(gym.Env):
     ``noise`` (Gazebo's, drawn from the episode's seed: the lidar's and each action's delay;
     off, the same actions give the same episode), ``render_mode`` ("rgb_array": the 640 x 480
     spectator view), ``car`` (a ``CarSpec``),
-    ``car_colour`` (BGR), ``randomise`` (domain randomisation: each episode's light, colours,
-    textures, camera noise, blur and mount, and the car's grip, drawn from the episode's seed;
-    ``simulator.randomisation``).
+    ``car_colour`` (BGR), ``camera_lens`` ("simulator": DeepRacer's simulated camera, 64.7°
+    across; "wide": the physical car's 120° lens), ``randomise`` (domain randomisation: each
+    episode's light, colours, textures, camera noise, blur and mount, and the car's grip, drawn
+    from the episode's seed; ``simulator.randomisation``).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
@@ -158,9 +170,10 @@ class DeepRacerEnv(gym.Env):
         render_mode: str | None = None,
         car: CarSpec | None = None,
         car_colour: tuple[int, int, int] = (40, 40, 220),
+        camera_lens: str = "simulator",
         randomise: bool = False,
     ) -> None:
-        self.config = default_config()
+        self.config = default_config(camera_lens)
         self.track: Track = load(track).with_direction(config.choice(
             "The direction", direction, ("counterclockwise", "clockwise")))  # fmt: skip
         self.camera_name, self.lidar_name = config.sensors(sensors)

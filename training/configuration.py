@@ -16,7 +16,16 @@ from typing import TypedDict
 from common.refusals import Refused
 from rl import hyperparameters as hp
 from simulator import config as sim
-from training.models import Algorithm, Direction, Network, RLModel, ShellColour, Track, Vehicle
+from training.models import (
+    Algorithm,
+    CameraLens,
+    Direction,
+    Network,
+    RLModel,
+    ShellColour,
+    Track,
+    Vehicle,
+)
 from training.rewards import Validation, reward_validate
 
 NAME = re.compile(r"^[A-Za-z0-9-]{1,64}$")
@@ -45,6 +54,7 @@ class Draft(TypedDict, total=False):
     bots: dict | None
     vehicle: Vehicle | None
     shell_colour: str
+    camera_lens: str
     sensors: list[str]
     network: str
     action_space: list | dict | str  # "unreadable": a discrete table that is not JSON
@@ -86,6 +96,7 @@ class ModelSettings:
     seed: int
     reward_function: str
     cloned_from: RLModel | None = None
+    camera_lens: str = CameraLens.SIMULATOR
     # a clone's weights are for its source's network, whatever this console's layout now is
     network_layout: int = hp.NETWORK_LAYOUT
 
@@ -104,7 +115,8 @@ class ModelSettings:
             name=self.name, description=self.description, track=self.track.name,
             direction=self.direction, race_type=self.race_type, boxes=self.boxes,
             bots=self.bots, vehicle=self.vehicle, shell_colour=self.shell_colour,
-            sensors=list(self.sensors), network=self.network, action_space=self.action_space,
+            camera_lens=self.camera_lens, sensors=list(self.sensors), network=self.network,
+            action_space=self.action_space,
             algorithm=self.algorithm, hyperparameters=dict(self.hyperparameters),
             max_minutes=self.max_minutes, workers=self.workers,
             extra_tracks=list(self.extra_tracks), seed=self.seed,
@@ -356,6 +368,9 @@ def _check_car(settings: dict, clean: dict, errors: dict, owner) -> None:
     )
     if clean["shell_colour"] not in ShellColour.values:
         errors["shell_colour"] = "Choose one of the garage's colours."
+    clean["camera_lens"] = settings.get("camera_lens") or CameraLens.SIMULATOR
+    if clean["camera_lens"] not in CameraLens.values:
+        errors["camera_lens"] = "Choose DeepRacer's simulated camera or the car's wide lens."
     sensors = settings.get("sensors") or ["FRONT_FACING_CAMERA"]
     try:
         camera, lidar = sim.sensors(sensors)

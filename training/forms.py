@@ -16,7 +16,15 @@ from common.forms import RacerWords
 from rl import hyperparameters
 from simulator import config as sim
 from training import configuration, imports, selectors
-from training.models import Algorithm, EvaluationJob, Network, RaceType, Track, Vehicle
+from training.models import (
+    Algorithm,
+    CameraLens,
+    EvaluationJob,
+    Network,
+    RaceType,
+    Track,
+    Vehicle,
+)
 from training.rewards import MAX_SOURCE_SIZE
 
 
@@ -290,6 +298,18 @@ class ModelCreateForm(TrackAndRaceFields):
     lidar = forms.ChoiceField(
         choices=Vehicle.Lidar.choices, required=False, widget=forms.RadioSelect, initial=""
     )
+    camera_lens = forms.ChoiceField(
+        label="Camera lens",
+        choices=CameraLens.choices,
+        required=False,
+        widget=forms.RadioSelect,
+        initial=CameraLens.SIMULATOR,
+        help_text="DeepRacer's console trained with its simulated camera; choose the wide lens "
+        "to train for the physical car's camera.",
+        error_messages={
+            "invalid_choice": "Choose DeepRacer's simulated camera or the car's wide lens."
+        },
+    )
     network = forms.ChoiceField(
         choices=Network.choices, widget=forms.RadioSelect, initial=Network.SHALLOW
     )
@@ -433,6 +453,7 @@ class ModelCreateForm(TrackAndRaceFields):
             "camera": next((s for s in model.sensors if s in Vehicle.Camera.values), ""),
             "lidar": next((s for s in model.sensors if s in ("LIDAR", "SECTOR_LIDAR")), ""),
             "vehicle": model.vehicle.pk if model.vehicle else None,
+            "camera_lens": model.camera_lens,
             "network": model.network,
             "action_space_type": model.action_space_type,
             "algorithm": model.algorithm,
@@ -495,6 +516,7 @@ class ModelCreateForm(TrackAndRaceFields):
             **self.race_settings(),
             "sensors": sensors,
             "vehicle": vehicle,
+            "camera_lens": data.get("camera_lens") or CameraLens.SIMULATOR,
             "network": data["network"],
             "action_space": action_space,
             "algorithm": algorithm,
@@ -585,7 +607,8 @@ SECTIONS = (
     Section("section-track", "Track", ("track", "direction")),
     Section("section-race-type", "Race type", ("race_type", "box_count", "box_randomize",
                                                "bot_count", "bot_speed", "bot_lane_changes")),
-    Section("section-car", "Car: sensors and network", ("vehicle", "camera", "lidar", "network")),
+    Section("section-car", "Car: sensors and network", ("vehicle", "camera", "lidar",
+                                                        "camera_lens", "network")),
     Section("section-action-space", "Action space", ("action_space_type", "actions",
                                                      "steering_low", "steering_high",
                                                      "speed_low", "speed_high")),

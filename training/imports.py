@@ -60,6 +60,7 @@ from training import (
 )
 from training.models import (
     Algorithm,
+    CameraLens,
     Network,
     RLModel,
     ShellColour,
@@ -193,6 +194,7 @@ class ImportPreview:
             bots=settings.get("bots"), sensors=settings["sensors"], network=settings["network"],
             action_space_type="discrete" if isinstance(space, list) else "continuous",
             action_space=space, algorithm=settings["algorithm"], workers=settings["workers"],
+            camera_lens=settings.get("camera_lens") or CameraLens.SIMULATOR,
         )  # fmt: skip
 
 
@@ -697,6 +699,7 @@ def _settings(
     if ours.get("track"):  # a Pitlane export: its settings; training_params.yaml repeats them
         for key in ("track", "direction", "race_type", "boxes", "bots", "shell_colour"):
             settings[key] = ours.get(key)
+        settings["camera_lens"] = ours.get("camera_lens")  # None before it was written: the default
         settings["workers"] = ours.get("workers", 1)
         return settings
     on_track: list[str] = []

@@ -37,6 +37,13 @@ class Algorithm(models.TextChoices):
     SAC = hyperparameters.SAC, "SAC"
 
 
+class CameraLens(models.TextChoices):
+    """The camera's lens a model sees the track through (simulator.camera.LENSES)."""
+
+    SIMULATOR = "simulator", "DeepRacer's simulated camera (64.7°)"
+    WIDE = "wide", "The physical car's wide lens (120°)"
+
+
 class BestCheckpointBy(models.TextChoices):
     """How training picks a model's best checkpoint: by its evaluation episodes' mean progress
     (DeepRacer's), total reward or lap time. DeepRacer for Cloud's DR_TRAIN_BEST_MODEL_METRIC
@@ -239,6 +246,11 @@ class RLModel(RaceConditions):
         max_length=7, choices=ShellColour.choices, default=ShellColour.BLACK,
         help_text="The car's colour in the video: its vehicle's when it was created.",
     )  # fmt: skip
+    camera_lens = models.CharField(
+        max_length=10, choices=CameraLens.choices, default=CameraLens.SIMULATOR,
+        help_text="DeepRacer's simulated camera, as its console trained with, or the physical "
+        "car's wide lens, for a model meant for a car.",
+    )  # fmt: skip
     import_notes = models.JSONField(
         default=list, blank=True,
         help_text="What an import rebuilt or left out, in a racer's words: shown on the model's "
@@ -266,6 +278,7 @@ class RLModel(RaceConditions):
             "objects": self.boxes,
             "bots": self.bots,
             "car_colour": ShellColour.bgr(self.shell_colour),
+            "camera_lens": self.camera_lens,
         }
 
     @property

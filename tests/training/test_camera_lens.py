@@ -1,0 +1,66 @@
+"""The camera lens a racer picks for a model: DeepRacer's simulated camera by default, or the
+physical car's wide lens. It travels from the create-model page into the environment the model
+trains and races in, onto the model's page, and through our own export into an import."""
+
+import io
+import json
+
+import gymnasium
+import pytest
+from django.urls import reverse
+
+import simulator
+from simulator.camera import CAR_FOV, SIMAPP_FOV
+from tests.training.test_imports import deepracer_export, tar_gz
+from tests.training.test_model_form import post
+from tests.training.test_training import settings as training_settings
+from training import configuration, exports, imports
+from training.forms import ModelCreateForm
+from training.models import CameraLens, RLModel
+
+pytestmark = pytest.mark.django_db
+
+
+def test_the_lens_a_racer_picks_travels_from_the_form_into_the_environment(client, alice, tracks):
+    response = post(client, alice, camera_lens="wide")
+    model = RLModel.objects.get(owner=alice)
+    assert response.status_code == 302 and model.camera_lens == CameraLens.WIDE
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+    assert env.unwrapped.config["camera_fov"] == CAR_FOV
+    page = client.get(reverse("training:model-detail", args=[model.pk]))
+    assert "The physical car&#x27;s wide lens (120°)" in page.text
+
+
+def test_a_model_made_without_choosing_sees_through_deepracers_simulated_camera(
+    client, alice, tracks
+):
+    post(client, alice)
+    model = RLModel.objects.get(owner=alice)
+    assert model.camera_lens == CameraLens.SIMULATOR
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
+    assert env.unwrapped.config["camera_fov"] == SIMAPP_FOV
+
+
+def test_a_lens_that_is_not_offered_is_refused_at_its_field_in_words(client, alice, tracks):
+    words = "Choose DeepRacer&#x27;s simulated camera or the car&#x27;s wide lens."
+    response = post(client, alice, camera_lens="fisheye")
+    assert not RLModel.objects.filter(owner=alice).exists()
+    assert words in response.text
+    with pytest.raises(configuration.Invalid) as refused:
+        configuration.check(training_settings(camera_lens="fisheye"), owner=alice,
+                            validate_reward=False)  # fmt: skip
+    assert refused.value.errors == {"camera_lens": words.replace("&#x27;", "'")}
+
+
+def test_a_clone_and_our_own_export_keep_the_lens(alice, bob, tracks):
+    checked = configuration.check(training_settings(camera_lens="wide"), owner=alice,
+                                  validate_reward=False)  # fmt: skip
+    original = RLModel.objects.create(owner=alice, **checked.row())
+    clone_page = ModelCreateForm.initial_from(configuration.ModelSettings.of(original))
+    assert clone_page["camera_lens"] == CameraLens.WIDE
+    # pitlane.json carries it (DeepRacer's model_metadata.json has no field for a lens).
+    ours = exports.pitlane_settings(original)
+    assert ours["camera_lens"] == CameraLens.WIDE
+    archive = tar_gz(deepracer_export(**{"pitlane.json": json.dumps(ours).encode()}))
+    imported = imports.import_model(owner=bob, archive=io.BytesIO(archive))
+    assert imported.model.camera_lens == CameraLens.WIDE
