@@ -3,6 +3,9 @@ both come through here, and a model is saved only when everything is valid.
 
 Settings use DeepRacer's vocabulary: sensors and action space as in ``model_metadata.json``,
 hyperparameters under the names of ``hyperparameters.json``.
+
+Long because every setting of a model and of an evaluation is checked here, beside the others
+it depends on, so that no page or command can save one unchecked.
 """
 
 from __future__ import annotations
@@ -55,6 +58,7 @@ class Draft(TypedDict, total=False):
     vehicle: Vehicle | None
     shell_colour: str
     camera_lens: str
+    domain_randomisation: bool
     sensors: list[str]
     network: str
     action_space: list | dict | str  # "unreadable": a discrete table that is not JSON
@@ -97,6 +101,7 @@ class ModelSettings:
     reward_function: str
     cloned_from: RLModel | None = None
     camera_lens: str = CameraLens.SIMULATOR
+    domain_randomisation: bool = False
     # a clone's weights are for its source's network, whatever this console's layout now is
     network_layout: int = hp.NETWORK_LAYOUT
 
@@ -120,6 +125,7 @@ class ModelSettings:
             algorithm=self.algorithm, hyperparameters=dict(self.hyperparameters),
             max_minutes=self.max_minutes, workers=self.workers,
             extra_tracks=list(self.extra_tracks), seed=self.seed,
+            domain_randomisation=self.domain_randomisation,
             reward_function=self.reward_function, cloned_from=self.cloned_from,
         )  # fmt: skip
 
@@ -219,6 +225,7 @@ def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
         errors["extra_tracks"] = "Choose extra tracks from the listed ones."
     clean["extra_tracks"] = extra
     clean["seed"] = _integer(settings.get("seed", 0)) or 0
+    clean["domain_randomisation"] = _switch(settings, "domain_randomisation", errors)
 
 
 def _reward_problem(
@@ -298,6 +305,7 @@ def check_evaluation(settings: dict, *, model: RLModel) -> dict:
     if checkpoint not in ("best", "last"):
         errors["checkpoint"] = "Evaluate the best or the last checkpoint."
     clean["checkpoint"] = checkpoint
+    clean["domain_randomisation"] = _switch(settings, "domain_randomisation", errors)
     if errors:
         raise Invalid(errors)
     return clean
@@ -400,6 +408,14 @@ def _check_car(settings: dict, clean: dict, errors: dict, owner) -> None:
 
 def _directions(track: Track) -> list[str]:
     return [name for name in ("counterclockwise", "clockwise") if getattr(track, name)]
+
+
+def _switch(settings: dict, name: str, errors: dict) -> bool:
+    """An on-off setting (false when left out); anything but true or false is refused."""
+    value = settings.get(name, False)
+    if not isinstance(value, bool):
+        errors[name] = f"{name.replace('_', ' ').capitalize()} is on or off: true or false."
+    return value is True
 
 
 def _number(value) -> float | None:

@@ -208,6 +208,7 @@ def pitlane_settings(model: RLModel) -> dict:
         "network_layout": model.network_layout,
         "shell_colour": model.shell_colour,
         "camera_lens": model.camera_lens,
+        "domain_randomisation": model.domain_randomisation,
         "training_seconds": round(model.jobs.aggregate(s=Sum("training_seconds"))["s"] or 0, 1),
     }
 

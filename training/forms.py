@@ -218,6 +218,13 @@ def limit(field: forms.Field, low: float, high: float, step: float | str = "any"
     field.widget.attrs.update(min=_number(low), max=_number(high), step=step)
 
 
+RANDOMISATION_HELP = (
+    "Each episode in a scene of its own (light, colours, textures, camera noise and blur, a "
+    "little camera and grip jitter), as DeepRacer for Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION: "
+    "a model that copes with scenes it has not seen."
+)
+
+
 class TrackAndRaceFields(RacerWords, forms.Form):
     """Where and how the car races: the fields the create-model and evaluation pages share."""
 
@@ -284,6 +291,10 @@ class ModelCreateForm(TrackAndRaceFields):
         help_text="Optional, up to 255 characters.",
     )  # fmt: skip
     field_order = ["name", "description", "track", "direction", "race_type"]
+    domain_randomisation = forms.BooleanField(
+        label="Domain randomisation", required=False,
+        help_text=RANDOMISATION_HELP + " Off by default, as in DeepRacer.",
+    )  # fmt: skip
     vehicle = forms.ModelChoiceField(
         queryset=Vehicle.objects.none(),
         required=False,
@@ -461,6 +472,7 @@ class ModelCreateForm(TrackAndRaceFields):
             "workers": model.workers,
             "extra_tracks": list(model.extra_tracks),
             "reward_function": model.reward_function,
+            "domain_randomisation": model.domain_randomisation,
         }
         if model.boxes:
             initial.update(box_count=model.boxes.get("count"),
@@ -533,6 +545,7 @@ class ModelCreateForm(TrackAndRaceFields):
             "workers": data["workers"],
             "extra_tracks": [track.name for track in data.get("extra_tracks") or []],
             "reward_function": data["reward_function"],
+            "domain_randomisation": bool(data.get("domain_randomisation")),
         }
         return draft
 
@@ -604,7 +617,7 @@ class Section:
 
 SECTIONS = (
     Section("section-name", "Name", ("name", "description")),
-    Section("section-track", "Track", ("track", "direction")),
+    Section("section-track", "Track", ("track", "direction", "domain_randomisation")),
     Section("section-race-type", "Race type", ("race_type", "box_count", "box_randomize",
                                                "bot_count", "bot_speed", "bot_lane_changes")),
     Section("section-car", "Car: sensors and network", ("vehicle", "camera", "lidar",
@@ -684,6 +697,11 @@ class EvaluationForm(TrackAndRaceFields):
         f"first; empty, never. Range 0-{sim.MAX_RESETS:,}, default {sim.DEFAULT_MAX_RESETS} "
         "(DeepRacer for Cloud's DR_EVAL_MAX_RESETS).",
     )  # fmt: skip
+    domain_randomisation = forms.BooleanField(
+        label="Randomised scenes", required=False,
+        help_text=RANDOMISATION_HELP.replace("Each episode", "Each trial")
+        + " Off: the plain scene, whatever the model trained in.",
+    )  # fmt: skip
     checkpoint = forms.ChoiceField(
         choices=EvaluationJob.Checkpoint.choices, initial=EvaluationJob.Checkpoint.BEST,
         widget=forms.RadioSelect,
@@ -702,5 +720,6 @@ class EvaluationForm(TrackAndRaceFields):
         return {
             **self.race_settings(),
             **{name: data[name] for name in ("trials", "continuous_laps", "off_track_penalty",
-                                             "crash_penalty", "max_resets", "checkpoint")},
+                                             "crash_penalty", "max_resets", "checkpoint",
+                                             "domain_randomisation")},
         }  # fmt: skip

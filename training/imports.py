@@ -700,6 +700,7 @@ def _settings(
         for key in ("track", "direction", "race_type", "boxes", "bots", "shell_colour"):
             settings[key] = ours.get(key)
         settings["camera_lens"] = ours.get("camera_lens")  # None before it was written: the default
+        settings["domain_randomisation"] = ours.get("domain_randomisation", False)
         settings["workers"] = ours.get("workers", 1)
         return settings
     on_track: list[str] = []
@@ -710,6 +711,7 @@ def _settings(
     settings.update(_deepracer_race(params, notes))
     settings["workers"] = _deepracer_workers(params, notes)
     settings["shell_colour"] = _deepracer_colour(params, notes)
+    settings["domain_randomisation"] = _deepracer_randomisation(params, notes)
     _params_left_out(params, notes)
     return settings
 
@@ -936,9 +938,26 @@ def _deepracer_colour(params: dict, notes: list[str]) -> str:
     return found
 
 
+def _deepracer_randomisation(params: dict, notes: list[str]) -> bool:
+    """``ENABLE_DOMAIN_RANDOMIZATION`` (DeepRacer for Cloud writes DR_ENABLE_DOMAIN_RANDOMIZATION
+    there, scripts/training/prepare-config.py:54), true or false as simapp reads it
+    (bundle/markov/utils.py:129-135, rollout_worker.py:774, 01f5f01)."""
+    given = params.get("ENABLE_DOMAIN_RANDOMIZATION")
+    text = str(given).strip().lower()
+    if given is None or text in ("", "false"):
+        return False
+    if text == "true":
+        return True
+    notes.append(
+        f"Not carried over from training_params.yaml: ENABLE_DOMAIN_RANDOMIZATION "
+        f"{_shown(given)}, neither true nor false. Domain randomisation is off."
+    )
+    return False
+
+
 # training_params.yaml's keys the settings above take.
 PARAMS_TAKEN = {"WORLD_NAME", "TRACK_DIRECTION_CLOCKWISE", "REVERSE_DIR", "RACE_TYPE",
-                "CAR_NAME", "NUM_WORKERS", "CAR_COLOR",
+                "CAR_NAME", "NUM_WORKERS", "CAR_COLOR", "ENABLE_DOMAIN_RANDOMIZATION",
                 *RACE_KEYS["OBJECT_AVOIDANCE"], *RACE_KEYS["HEAD_TO_BOT"]}  # fmt: skip
 # Where DeepRacer kept its files and streams, and who ran it: nothing a model here could use.
 PARAMS_PLACES = re.compile(

@@ -251,6 +251,11 @@ class RLModel(RaceConditions):
         help_text="DeepRacer's simulated camera, as its console trained with, or the physical "
         "car's wide lens, for a model meant for a car.",
     )  # fmt: skip
+    domain_randomisation = models.BooleanField(
+        default=False,
+        help_text="Each episode in a scene of its own: light, colours, textures, camera noise "
+        "(simulator.randomisation); DeepRacer for Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION.",
+    )  # fmt: skip
     import_notes = models.JSONField(
         default=list, blank=True,
         help_text="What an import rebuilt or left out, in a racer's words: shown on the model's "
@@ -279,6 +284,7 @@ class RLModel(RaceConditions):
             "bots": self.bots,
             "car_colour": ShellColour.bgr(self.shell_colour),
             "camera_lens": self.camera_lens,
+            "randomise": self.domain_randomisation,
         }
 
     @property
@@ -536,6 +542,9 @@ class EvaluationJob(RaceConditions):
     checkpoint_iteration = models.PositiveIntegerField(
         null=True, blank=True, help_text="The training iteration whose weights were used."
     )
+    domain_randomisation = models.BooleanField(
+        default=False, help_text="Each trial in a randomised scene, whatever the model trained in."
+    )
     seed = models.PositiveIntegerField(
         null=True, blank=True, default=new_seed,
         help_text="Seeds its trials' noise; the same seed drives them again exactly. Empty: "
@@ -589,6 +598,7 @@ class EvaluationJob(RaceConditions):
             "penalties": {"off_track": self.off_track_penalty, "crash": self.crash_penalty},
             "max_resets": self.max_resets,
             "noise": self.seed is not None,
+            "randomise": self.domain_randomisation,
         }
 
     def trial_seed(self, number: int) -> int | None:

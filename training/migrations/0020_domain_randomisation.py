@@ -1,4 +1,4 @@
-from django.db import migrations
+from django.db import migrations, models
 
 
 class Migration(migrations.Migration):
@@ -6,4 +6,23 @@ class Migration(migrations.Migration):
         ("training", "0019_trial_seeds_and_checkpoints"),
     ]
 
-    operations = []
+    operations = [
+        migrations.AddField(
+            model_name="rlmodel",
+            name="domain_randomisation",
+            field=models.BooleanField(
+                default=False,
+                help_text="Each episode in a scene of its own: light, colours, textures, camera "
+                "noise (simulator.randomisation); DeepRacer for Cloud's "
+                "DR_ENABLE_DOMAIN_RANDOMIZATION.",
+            ),
+        ),
+        migrations.AddField(
+            model_name="evaluationjob",
+            name="domain_randomisation",
+            field=models.BooleanField(
+                default=False,
+                help_text="Each trial in a randomised scene, whatever the model trained in.",
+            ),
+        ),
+    ]

@@ -36,6 +36,11 @@ class Command(BaseCommand):
         )  # fmt: skip
         parser.add_argument("--checkpoint", choices=["best", "last"], default="best")
         parser.add_argument(
+            "--randomise", action="store_true",
+            help="each trial in a randomised scene (domain randomisation), whatever the model "
+            "trained in",
+        )  # fmt: skip
+        parser.add_argument(
             "--seed", type=int,
             help="drive the trials of the evaluation or race that had this seed again, exactly "
             "(its page shows it); default: a new one",
@@ -51,6 +56,7 @@ class Command(BaseCommand):
             "crash_penalty": options["crash_penalty"],
             "max_resets": None if options["max_resets"] == -1 else options["max_resets"],
             "checkpoint": options["checkpoint"],
+            "domain_randomisation": options["randomise"],
         }
         if options["track"]:
             settings["track"] = options["track"]
@@ -68,7 +74,7 @@ class Command(BaseCommand):
             raise CommandError(refused.told("The evaluation was not started")) from None
         self.stdout.write(
             f"Evaluating {model.name} on {job.track} ({job.direction}), {job.trials} trials, "
-            f"seed {job.seed}…"
+            f"seed {job.seed}{', randomised scenes' if job.domain_randomisation else ''}…"
         )
         evaluation.run(job.pk)
         job.refresh_from_db()

@@ -1,0 +1,131 @@
+"""Domain randomisation, a model's training option (off by default, as in DeepRacer): it travels
+from the create-model page into the environment the model trains in, onto its page, into a
+clone and through our own export; an evaluation may drive its trials in randomised scenes
+whatever the model trained in, from the Evaluate page or ``manage.py evaluate --randomise``."""
+
+import io
+import json
+
+import gymnasium
+import pytest
+import yaml
+from django.core.management import call_command
+from django.urls import reverse
+
+import simulator
+from simulator.randomisation import LookView
+from tests.training.factories import ready_model, trained_model
+from tests.training.test_imports import DEEPRACER_PARAMS, deepracer_export, tar_gz
+from tests.training.test_model_form import post
+from tests.training.test_training import settings as training_settings
+from training import configuration, exports, imports, services
+from training.forms import ModelCreateForm
+from training.models import EvaluationJob, RLModel
+
+pytestmark = pytest.mark.django_db
+
+
+def test_a_racer_who_ticks_it_trains_in_a_new_scene_each_episode(client, alice, tracks):
+    response = post(client, alice, domain_randomisation="on")
+    model = RLModel.objects.get(owner=alice)
+    assert response.status_code == 302 and model.domain_randomisation
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings()).unwrapped
+    env.reset(seed=1)
+    first = env.look
+    env.reset()
+    assert isinstance(env._cameras[0], LookView) and env.look != first
+    page = client.get(reverse("training:model-detail", args=[model.pk]))
+    assert "Domain randomisation: each episode in a scene of its own" in page.text
+
+
+def test_a_model_made_without_ticking_it_trains_in_the_plain_scene(client, alice, tracks):
+    post(client, alice)
+    model = RLModel.objects.get(owner=alice)
+    assert model.domain_randomisation is False
+    assert model.environment_settings()["randomise"] is False
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings()).unwrapped
+    env.reset(seed=1)
+    assert env._scene is None and not hasattr(env, "look")
+    page = client.get(reverse("training:model-detail", args=[model.pk]))
+    assert "DeepRacer's plain scene (no domain randomisation)" in page.text
+
+
+def test_the_create_page_offers_it_with_a_line_that_says_what_it_does(client, alice, tracks):
+    client.force_login(alice)
+    page = client.get(reverse("training:model-create")).text
+    assert 'name="domain_randomisation"' in page
+    assert "DR_ENABLE_DOMAIN_RANDOMIZATION" in page and "Off by default, as in DeepRacer." in page
+
+
+def test_anything_but_on_or_off_is_refused_in_words(alice, tracks):
+    with pytest.raises(configuration.Invalid) as refused:
+        configuration.check(training_settings(domain_randomisation="yes"), owner=alice,
+                            validate_reward=False)  # fmt: skip
+    assert refused.value.errors == {
+        "domain_randomisation": "Domain randomisation is on or off: true or false."
+    }
+
+
+def test_a_clone_and_our_own_export_keep_it(alice, bob, tracks):
+    original = trained_model(alice, "shifty", domain_randomisation=True)
+    clone_page = ModelCreateForm.initial_from(configuration.ModelSettings.of(original))
+    assert clone_page["domain_randomisation"] is True
+    ours = exports.pitlane_settings(original)
+    assert ours["domain_randomisation"] is True
+    archive = deepracer_export(**{exports.PITLANE_SETTINGS: json.dumps(ours).encode()})
+    imported = imports.import_model(owner=bob, archive=io.BytesIO(tar_gz(archive)))
+    assert imported.model.domain_randomisation is True
+
+
+@pytest.mark.parametrize(("given", "expected"), [("True", True), ("sometimes", False)])
+def test_a_deepracer_archive_brings_its_enable_domain_randomization(given, expected, alice, tracks):
+    params = {**DEEPRACER_PARAMS, "ENABLE_DOMAIN_RANDOMIZATION": given}
+    archive = deepracer_export(**{"training_params.yaml": yaml.safe_dump(params).encode()})
+    imported = imports.import_model(owner=alice, archive=io.BytesIO(tar_gz(archive)))
+    assert imported.model.domain_randomisation is expected
+    notes = [note for note in imported.notes if "ENABLE_DOMAIN_RANDOMIZATION" in note]
+    assert notes == ([
+        "Not carried over from training_params.yaml: ENABLE_DOMAIN_RANDOMIZATION sometimes, "
+        "neither true nor false. Domain randomisation is off."
+    ] if given == "sometimes" else [])  # fmt: skip
+
+
+def test_an_evaluation_drives_in_randomised_scenes_only_when_asked(alice, tracks):
+    model = trained_model(alice, "shifty", domain_randomisation=True)
+    plain = services.evaluation_start(model=model, settings={}, enqueue=False)
+    assert plain.domain_randomisation is False
+    assert plain.environment_settings()["randomise"] is False  # not the model's training option
+    plain.delete()
+    RLModel.objects.filter(pk=model.pk).update(status=RLModel.Status.READY)
+    asked = services.evaluation_start(
+        model=model, settings={"domain_randomisation": True}, enqueue=False
+    )
+    assert asked.environment_settings()["randomise"] is True
+
+
+def test_the_evaluate_page_offers_randomised_scenes(client, alice, tracks):
+    model = ready_model(alice)
+    client.force_login(alice)
+    url = reverse("training:evaluation-create", args=[model.pk])
+    assert 'name="domain_randomisation"' in client.get(url).text
+    response = client.post(
+        url,
+        {"track": "pitlane-oval", "direction": "counterclockwise", "race_type": "TIME_TRIAL",
+         "trials": "3", "off_track_penalty": "2", "crash_penalty": "5", "checkpoint": "best",
+         "domain_randomisation": "on"},
+    )  # fmt: skip
+    assert response.status_code == 302
+    evaluation = EvaluationJob.objects.get()
+    assert evaluation.domain_randomisation and not model.domain_randomisation
+    detail = client.get(response["Location"]).text
+    assert "randomised scenes" in detail
+
+
+def test_manage_py_evaluate_randomise_drives_the_trials_in_randomised_scenes(alice, tracks, capsys):
+    model = ready_model(alice)
+    call_command("evaluate", model.name, "--track", "pitlane-oval", "--trials", "3",
+                 "--max-resets", "0", "--randomise")  # fmt: skip
+    evaluation = EvaluationJob.objects.get(model=model)
+    assert evaluation.status == EvaluationJob.Status.COMPLETED
+    assert evaluation.domain_randomisation
+    assert "randomised scenes" in capsys.readouterr().out
