@@ -16,7 +16,7 @@ from racing import selectors
 from racing.models import Event, RaceType, RankingMethod
 from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
 from training import selectors as training_selectors
-from training.models import RLModel, Track
+from training.models import EvaluationJob, RLModel, Track
 
 LOCAL = "%Y-%m-%dT%H:%M"  # what <input type="datetime-local"> sends
 RACE_LENGTH = timedelta(days=7)  # a new community race closes a week after it opens
@@ -33,7 +33,13 @@ class SubmissionForm(RacerWords, forms.Form):
     model = forms.ModelChoiceField(
         queryset=RLModel.objects.none(), empty_label="Choose a model",
         error_messages={"invalid_choice": "Choose one of your ready models."},
-        help_text="Your ready models. The race drives its best checkpoint.",
+        help_text="Your ready models.",
+    )  # fmt: skip
+    checkpoint = forms.ChoiceField(
+        choices=EvaluationJob.Checkpoint.choices, initial=EvaluationJob.Checkpoint.BEST,
+        widget=forms.RadioSelect,
+        help_text="Which of the model's checkpoints races: the best its training measured "
+        "(by its best-checkpoint setting) or the last it saved.",
     )  # fmt: skip
 
     def __init__(self, *args, racer, **kwargs) -> None:

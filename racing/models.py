@@ -244,6 +244,17 @@ class Submission(models.Model):
     evaluation = models.OneToOneField(
         EvaluationJob, null=True, blank=True, on_delete=models.SET_NULL, related_name="submission"
     )
+    # Kept here as well as on its evaluation, which goes with the model: what drove the race.
+    checkpoint = models.CharField(
+        max_length=8, choices=EvaluationJob.Checkpoint.choices,
+        default=EvaluationJob.Checkpoint.BEST, help_text="The model's best or last checkpoint.",
+    )  # fmt: skip
+    checkpoint_iteration = models.PositiveIntegerField(
+        null=True, blank=True, help_text="The training iteration whose weights raced."
+    )
+    seed = models.PositiveIntegerField(
+        null=True, blank=True, help_text="Its evaluation's seed: the same seed races it again."
+    )
     status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
     failure_reason = models.TextField(blank=True)
     created_at = models.DateTimeField("submitted", auto_now_add=True, db_index=True)

@@ -74,10 +74,16 @@ class SubmissionRefused(Refused):
 # Submitting and scoring
 
 
-def submission_create(*, racer: AbstractBaseUser, event: Event, model: RLModel) -> Submission:
-    """Enter ``model`` in ``event``: checked (``SubmissionRefused`` says why not), then a race
-    evaluation under the event's rules is queued and the model is SUBMITTING until it ends. The
-    racer's row is locked meanwhile, so two submissions at once cannot overrun the limit."""
+def submission_create(
+    *, racer: AbstractBaseUser, event: Event, model: RLModel, checkpoint: str = "best"
+) -> Submission:
+    """Enter ``model`` in ``event`` with its ``checkpoint`` ("best" or "last"): checked
+    (``SubmissionRefused`` says why not), then a race evaluation under the event's rules is
+    queued, with a seed of its own that the submission keeps, and the model is SUBMITTING until
+    it ends. The racer's row is locked meanwhile, so two submissions at once cannot overrun the
+    limit."""
+    if checkpoint not in EvaluationJob.Checkpoint.values:
+        raise SubmissionRefused("Race the model's best or its last checkpoint.")
     with transaction.atomic():
         _lock(racer)
         if _lock_event(event) is None:
@@ -87,22 +93,24 @@ def submission_create(*, racer: AbstractBaseUser, event: Event, model: RLModel) 
             raise SubmissionRefused(reason)
         try:
             evaluation = training_services.evaluation_reserve(
-                model=model, purpose=RLModel.Status.SUBMITTING, **race_rules(event)
-            )
+                model=model, purpose=RLModel.Status.SUBMITTING,
+                **race_rules(event, checkpoint=checkpoint),
+            )  # fmt: skip
         except training_services.EvaluationRefused as refused:
             raise SubmissionRefused(str(refused)) from None
         submission = Submission.objects.create(
-            event=event, racer=racer, model=model, model_name=model.name, evaluation=evaluation
-        )
+            event=event, racer=racer, model=model, model_name=model.name, evaluation=evaluation,
+            checkpoint=checkpoint, seed=evaluation.seed,
+        )  # fmt: skip
         # A send that fails (the broker unreachable) is logged, not the racer's error: the
         # workers send a queued task that is not in the broker again (tasks.resend_lost).
         transaction.on_commit(lambda: tasks.race.delay(submission.pk), robust=True)
     return submission
 
 
-def race_rules(event: Event) -> dict:
+def race_rules(event: Event, *, checkpoint: str = "best") -> dict:
     """The evaluation a submission to ``event`` drives: its track and race, its laps one after
-    another, its penalties, the model's best checkpoint."""
+    another, its penalties, the model's ``checkpoint`` (best or last)."""
     return {
         "track": event.track,
         "direction": event.direction,
@@ -113,7 +121,7 @@ def race_rules(event: Event) -> dict:
         "continuous_laps": True,
         "off_track_penalty": event.off_track_penalty_s,
         "crash_penalty": event.crash_penalty_s,
-        "checkpoint": EvaluationJob.Checkpoint.BEST,
+        "checkpoint": checkpoint,
     }
 
 
@@ -142,6 +150,10 @@ def submission_run(*, submission_id: int) -> Submission | None:
         )
         live.announce_submission(submission)
         return submission
+    Submission.objects.filter(pk=submission.pk).update(
+        checkpoint_iteration=evaluation.checkpoint_iteration
+    )  # the weights that raced, kept when the evaluation goes with its model
+    submission.checkpoint_iteration = evaluation.checkpoint_iteration
     return submission_score(
         submission=submission,
         trials=list(evaluation.trial_rows.all()),

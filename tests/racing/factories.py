@@ -58,5 +58,7 @@ def scored(
     return services.submission_score(submission=submission, trials=trials)
 
 
-def race_evaluation(model, event: Event) -> EvaluationJob:
-    return EvaluationJob.objects.create(model=model, **services.race_rules(event))
+def race_evaluation(model, event: Event, *, checkpoint: str = "best", **fields) -> EvaluationJob:
+    return EvaluationJob.objects.create(
+        model=model, **services.race_rules(event, checkpoint=checkpoint), **fields
+    )

@@ -14,9 +14,11 @@ from django.utils import timezone
 
 from racing import selectors, services
 from racing.models import Division, Event, Racer, RaceType, Ranking, Submission
-from tests.racing.factories import DAY, event, scored
-from tests.training.factories import ready_model
+from tests.racing.factories import DAY, event, race_evaluation, scored
+from tests.training.factories import ready_model, with_a_later_checkpoint
+from tests.training.test_evaluation import trial_paths
 from tests.training.test_live import viewer
+from training import evaluation as evaluations
 from training.models import EvaluationJob, RLModel
 
 pytestmark = pytest.mark.usefixtures("tracks")
@@ -349,3 +351,42 @@ def _assert_raced_under_the_rules(pk: int, trial: Event, model: RLModel) -> None
     assert default_storage.exists(submission.video) and submission.video.startswith("league/")
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
     assert services.submission_run(submission_id=submission.pk) is None  # never twice
+
+
+# The checkpoint that races, and the seed that replays it
+
+
+@pytest.mark.django_db
+def test_a_race_drives_the_checkpoint_chosen_and_keeps_it_and_its_seed(client, alice):
+    trial = event(laps_required=1, laps_to_drive=1)
+    model = with_a_later_checkpoint(ready_model(alice))
+    submission = services.submission_create(
+        racer=alice, event=trial, model=model, checkpoint="last"
+    )
+    assert submission.evaluation.checkpoint == submission.checkpoint == "last"
+    assert submission.seed == submission.evaluation.seed is not None
+    services.submission_run(submission_id=submission.pk)
+    submission.refresh_from_db()
+    assert submission.status == Submission.Status.COMPLETED
+    assert submission.checkpoint_iteration == submission.evaluation.checkpoint_iteration == 2
+    client.force_login(alice)
+    page = client.get(submission.get_absolute_url()).text
+    assert f"Last checkpoint (iteration 2) · seed {submission.seed}" in page
+    model_page = client.get(reverse("training:model-detail", args=[model.pk])).text
+    assert f"Last checkpoint (iteration 2) · seed {submission.seed}" in model_page
+
+    # The same seed, the same rules and checkpoint: the same race, row for row.
+    replay = race_evaluation(model, trial, checkpoint="last", seed=submission.seed)
+    evaluations.run(replay.pk)
+    assert trial_paths(replay) == trial_paths(submission.evaluation)
+    assert [lap.time_ms for lap in submission.laps.all()] == [
+        trial.time_ms for trial in replay.trial_rows.all()
+    ]
+
+
+@pytest.mark.django_db
+def test_a_race_entry_names_a_checkpoint_the_model_has(alice):
+    with pytest.raises(services.SubmissionRefused, match="best or its last checkpoint"):
+        services.submission_create(
+            racer=alice, event=event(), model=ready_model(alice), checkpoint="newest"
+        )

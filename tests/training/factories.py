@@ -106,3 +106,15 @@ def sensor_frames(environment: dict, count: int = 12) -> list[dict]:
         seen.append(observation)
     env.close()
     return seen
+
+
+def with_a_later_checkpoint(model: RLModel, number: int = 2) -> RLModel:
+    """``model`` trained on to iteration ``number`` with its first weights again: its best
+    checkpoint stays iteration 1, its last is iteration ``number``."""
+    job = model.jobs.get()
+    weights = artifacts.read(job.best_checkpoint)
+    name = artifacts.save(model, artifacts.checkpoint(number), weights)
+    TrainingJob.objects.filter(pk=job.pk).update(
+        iterations=number, weights_version=number, last_checkpoint=name
+    )
+    return model

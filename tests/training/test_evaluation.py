@@ -357,7 +357,7 @@ def test_a_run_overtaken_while_it_saves_leaves_the_evaluation_and_its_model_to_t
     assert not alice.notifications.exists()
 
 
-def _trial_paths(evaluation: EvaluationJob) -> list[list[tuple[str, str]]]:
+def trial_paths(evaluation: EvaluationJob) -> list[list[tuple[str, str]]]:
     """Each trial's positions, row after row, from its stored trace."""
     rows = csv.DictReader(io.StringIO(stored(evaluation, TRACE).decode()))
     paths: dict[str, list] = {}
@@ -372,7 +372,7 @@ def test_three_trials_differ_and_the_evaluate_command_replays_them_by_their_seed
     call_command("evaluate", model.name, "--trials", "3", "--max-resets", "0")
     first = EvaluationJob.objects.get(model=model)
     assert f"seed {first.seed}" in capsys.readouterr().out
-    paths = _trial_paths(first)
+    paths = trial_paths(first)
     assert len(paths) == 3 and paths[0] != paths[1] != paths[2] != paths[0]
     seeds = [trial.seed for trial in first.trial_rows.all()]
     assert len(set(seeds)) == 3 and seeds == [first.trial_seed(n) for n in range(3)]
@@ -380,7 +380,7 @@ def test_three_trials_differ_and_the_evaluate_command_replays_them_by_their_seed
     call_command("evaluate", model.name, "--max-resets", "0", "--seed", str(first.seed))
     again = EvaluationJob.objects.exclude(pk=first.pk).get(model=model)
     assert again.seed == first.seed
-    assert _trial_paths(again) == paths
+    assert trial_paths(again) == paths
     times = [[t.time_ms for t in e.trial_rows.all()] for e in (first, again)]
     assert times[0] == times[1]
 
@@ -392,7 +392,7 @@ def test_an_evaluation_made_before_seeds_drives_its_trials_without_noise(alice):
     EvaluationJob.objects.filter(pk=evaluation.pk).update(seed=None)
     evaluations.run(evaluation.pk)
     evaluation.refresh_from_db()
-    paths = _trial_paths(evaluation)
+    paths = trial_paths(evaluation)
     assert paths[0] == paths[1] == paths[2]
     assert [trial.seed for trial in evaluation.trial_rows.all()] == [None] * 3
 
