@@ -150,6 +150,7 @@ class DeepRacerEnv(gym.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 15}
 
+    # Long because its signature is Gymnasium's keyword arguments, one a line, each checked here.
     def __init__(
         self,
         track: str | Path = "rookie-loop",
