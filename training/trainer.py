@@ -38,7 +38,7 @@ from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stop
 from sandbox.protocol import unpack
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, jobs, lifecycle, live, services, signals
+from training import artifacts, checkpoints, jobs, lifecycle, live, services, signals
 from training.jobs import LeaseLost
 from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 
@@ -129,7 +129,6 @@ class Trainer:
         ]
         self.metrics: list[dict] = []
         self.evaluations: dict[int, list[dict]] = {}  # version: the results come so far
-        self.best: tuple[float, int] | None = None  # (evaluation completion, iteration)
         self.session_started: float | None = None  # when this run's clock started [monotonic]
         self.waiting_since = time.monotonic()  # for its first simulation worker
         self.first_run = job.started_at is None
@@ -475,14 +474,10 @@ class Trainer:
         )  # fmt: skip
 
     def _recall_progress(self) -> None:
-        """On resuming: the metrics written so far, and the best evaluation so far."""
+        """On resuming: the metrics written so far."""
         metrics = artifacts.path(self.model, artifacts.TRAINING_METRICS)
         if default_storage.exists(metrics):
             self.metrics = json.loads(artifacts.read(metrics))["metrics"]
-        evaluated = Iteration.objects.filter(job=self.job, evaluation_completion__isnull=False)
-        best = evaluated.order_by("-evaluation_completion", "-number").first()
-        if best is not None:
-            self.best = (best.evaluation_completion, best.number)
 
     # Checkpoints, metrics, traces
 
@@ -503,7 +498,8 @@ class Trainer:
         signals.trace_recorded.send(TrainingJob, document=trace, job=self.job, iteration=number)
 
     def _save_metrics(self) -> None:
-        artifacts.save(self.model, artifacts.TRAINING_METRICS, metrics_document(self.metrics))
+        document = metrics_document(self.metrics, self.model.best_checkpoint_by)
+        artifacts.save(self.model, artifacts.TRAINING_METRICS, document)
 
     def _take_evaluations(self) -> None:
         by_version: dict[int, list[dict]] = {}
@@ -515,9 +511,11 @@ class Trainer:
             except (ValueError, KeyError, TypeError):
                 continue
             lap, seconds = result.get("lap_time"), result.get("seconds")
+            reward = result.get("reward")
             by_version.setdefault(version, []).append(
                 {
                     "progress": progress,
+                    "reward": float(reward) if isinstance(reward, int | float) else 0.0,
                     "lap_time": float(lap) if isinstance(lap, int | float) else None,
                     "status": str(result.get("status", ""))[:20],
                     "steps": int(result.get("steps", 0)),
@@ -533,12 +531,11 @@ class Trainer:
                 self._record_evaluation(version, self.evaluations.pop(version))
 
     def _record_evaluation(self, version: int, results: list[dict]) -> None:
-        completion = sum(r["progress"] for r in results) / len(results)
         row = Iteration.objects.filter(job=self.job, number=version).first()
         if row is None:
             return
         Iteration.objects.filter(pk=row.pk).update(
-            evaluation_completion=completion,
+            **checkpoints.evaluation_means(results),
             evaluation_points=[round(r["progress"], 2) for r in results],
             evaluation_seconds=round(sum(r["seconds"] for r in results), 3),
         )
@@ -550,16 +547,13 @@ class Trainer:
             self.metrics, evaluation_metrics(results, now=time.time()), episodes=learnt_from or 0
         )
         self._save_metrics()
-        # DeepRacer's best model: the highest mean progress of the evaluation episodes, a tie
-        # going to the newer checkpoint (simapp 01f5f01, bundle/markov/metrics/s3_metrics.py:
-        # 430-442, ">=" over evaluations that come in order; ours may come out of order).
-        score = (completion, version)
-        if self.best is None or score > self.best:
-            self.best = score
-            jobs.write(
-                self.job,
-                best_checkpoint=artifacts.path(self.model, artifacts.checkpoint(version)),
-            )
+        # DeepRacer's best model by the model's metric, over every iteration evaluated so far
+        # (ours may come out of order, where simapp's come in order): checkpoints.best_iteration.
+        evaluated = Iteration.objects.filter(job=self.job)
+        best = checkpoints.best_iteration(rows=evaluated, metric=self.model.best_checkpoint_by)
+        name = artifacts.path(self.model, artifacts.checkpoint(best.number)) if best else ""
+        if name and name != self.job.best_checkpoint:
+            jobs.write(self.job, best_checkpoint=name)
 
     # Workers and the racer
 
@@ -767,10 +761,10 @@ def with_evaluation(metrics: list[dict], evaluation: list[dict], *, episodes: in
     return metrics[:position] + placed + metrics[position:]
 
 
-def metrics_document(metrics: list[dict]) -> str:
-    """The training metrics file: simapp bundle/markov/metrics/s3_metrics.py:351-353 and
-    bundle/markov/constants.py:16 (01f5f01)."""
-    return json.dumps({"metrics": metrics, "version": 2.0, "best_model_metric": "progress"})
+def metrics_document(metrics: list[dict], best_model_metric: str = "progress") -> str:
+    """The training metrics file, naming the metric that picks the best checkpoint: simapp
+    bundle/markov/metrics/s3_metrics.py:351-353 and bundle/markov/constants.py:16 (01f5f01)."""
+    return json.dumps({"metrics": metrics, "version": 2.0, "best_model_metric": best_model_metric})
 
 
 def training_trace(episodes: list[Episode], *, before: int) -> str:

@@ -218,9 +218,43 @@ def test_of_checkpoints_that_evaluate_alike_the_newer_is_best_as_in_deepracer(al
     run._take_evaluations()
     assert reload(job).best_checkpoint.endswith(artifacts.checkpoint(3))
 
+    # A resumed trainer picks among all the job's evaluated iterations, not only its own.
     resumed = trainer.Trainer(reload(job), start_rollouts=lambda *args: None)
     resumed._recall_progress()
-    assert resumed.best == (100.0, 3)
+    Iteration.objects.create(job=job, number=4, reward=1.0, completion=10.0,
+                             episodes=5, steps=50, wall_seconds=1.0)  # fmt: skip
+    results(4, 90.0, None)
+    resumed._take_evaluations()
+    assert reload(job).best_checkpoint.endswith(artifacts.checkpoint(3))
+
+
+@pytest.mark.django_db(transaction=True)
+def test_the_models_best_checkpoint_metric_picks_the_best_as_dr_train_best_model_metric(
+    alice, tracks
+):
+    """By lap time the faster checkpoint is best, by reward the better rewarded, where by
+    progress (all 100%) the newer would be."""
+    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    for number in (1, 2):
+        Iteration.objects.create(job=job, number=number, reward=1.0, completion=10.0,
+                                 episodes=5, steps=50, wall_seconds=1.0)  # fmt: skip
+    picked = {}
+    for metric in ("laptime", "reward", "progress"):
+        RLModel.objects.filter(pk=job.model_id).update(best_checkpoint_by=metric)
+        run = trainer.Trainer(reload(job), start_rollouts=lambda *args: None)
+        for version, lap_time, reward in ((1, 7.0, 50.0), (2, 7.5, 80.0)):
+            for _ in range(5):
+                run.channel.push_evaluation(msgpack.packb(
+                    {"version": version, "progress": 100.0, "lap_time": lap_time,
+                     "reward": reward, "status": "lap_complete", "steps": 105, "seconds": 0.5}
+                ))  # fmt: skip
+        run._take_evaluations()
+        picked[metric] = artifacts.checkpoint_iteration(reload(job).best_checkpoint)
+        metrics = json.loads(artifacts.read(artifacts.path(job.model, artifacts.TRAINING_METRICS)))
+        assert metrics["best_model_metric"] == metric  # as simapp writes it
+    assert picked == {"laptime": 1, "reward": 2, "progress": 2}
+    row = Iteration.objects.get(job=job, number=1)
+    assert (row.evaluation_reward, row.evaluation_lap_ms) == (50.0, 7000.0)
 
 
 @pytest.mark.django_db(transaction=True)
