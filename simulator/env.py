@@ -33,7 +33,7 @@ from simulator.config import ContinuousActions, DiscreteActions
 from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
 from simulator.randomisation import Scene
 from simulator.rewards import checked_reward, follow_centre_line
-from simulator.texture import render
+from simulator.texture import SIMAPP, WALL, render
 from simulator.trace import SimTraceRow
 from simulator.tracks import Track, load
 from simulator.world import World
@@ -60,8 +60,13 @@ def default_config(camera_lens: str = "simulator") -> dict[str, Any]:
         "camera_fov": LENSES[config.choice("The camera lens", camera_lens, LENSES)],  # [deg]
         "camera_mount": deepracer_mount(),  # forward [m], height [m], pitch down [deg]
         "stereo_baseline": STEREO_BASELINE,  # [m] between the stereo cameras
-        "camera_texture_ppm": 64,  # [px/m] of the track image the camera projects
-        "camera_sky": 150,  # gray level above the horizon
+        # [px/m] of the track image the camera projects: 4 px across the 1 in centre line, and
+        # about one per camera pixel at the foot of the picture (2.4 mm of ground)
+        "camera_texture_ppm": 160,
+        # gray level above the horizon: simapp's tracks stand in a field walled 1 m high, which
+        # fills the camera's view above the grass (simulator.texture.WALL)
+        "camera_sky": WALL[0],
+        "track_style": SIMAPP,  # how the track image is drawn: simapp's lines and colours
         # simapp launch/racecar.launch.py:37-45, sensors/constants.py:20-28 (01f5f01): 64 rays
         # over ±150°; LIDAR is clipped to 0.15-1.0 m (sensors/utils.py:56-57).
         "lidar_rays": 64,
@@ -484,7 +489,8 @@ class DeepRacerEnv(gym.Env):
 
     def _build_sensors(self) -> None:
         cfg = self.config
-        texture = render(self.track, pixels_per_metre=cfg["camera_texture_ppm"])
+        texture = render(self.track, pixels_per_metre=cfg["camera_texture_ppm"],
+                         style=cfg["track_style"])  # fmt: skip
         lens = Lens(*cfg["camera_size"], cfg["camera_fov"])
         forward, height, pitch = cfg["camera_mount"]
         if self.camera_name == "STEREO_CAMERAS":

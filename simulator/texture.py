@@ -1,8 +1,25 @@
 """Top-down images of a track: what the camera projects, what spectators see, and track previews.
 
 The track is flat, so one image of it, drawn once, stands in for the ground: cameras project it
-through a homography instead of rendering 3D geometry. It looks like a DeepRacer track: a dark
-surface, white borders, a dashed centre line and a start line, on light surroundings.
+through a homography instead of rendering 3D geometry. It is drawn as simapp draws its tracks:
+a dark road whose white borders lie inside its edges, a dashed orange centre line and a
+chequered start line, on grass, with the field's walls round it.
+
+Every number is simapp's (at 01f5f01), from the meshes and textures nearly all its tracks share
+(bundle/meshes/<track>/textures: 120 tracks use the same road, line and centre-line images, 117
+the same grass, 102 the same wall). The widths are the meshes' own (reInvent2019_track.dae and
+2022_reinvent_champ_ccw.dae alike): each border a 0.0762 m (3 in) band from the road's edge
+inward (ol-verts and il-verts pair the road's outer vertices with ones 0.0762 m in), the centre
+line dashes 0.0254 m wide and 0.0508 m long every 0.1016 m (cl-verts: 228 quads round the 23.1 m
+re:Invent 2019, 328 round the 2022 championship), the start line a strip 0.066 m wide of two
+rows of squares (2022_reinvent_champ_ccw.dae's Plane-mesh, textures/startline.png).
+
+The colours are each texture's mean, as lit: Gazebo shaded the ground to 0.93 of its textures'
+colours and the walls to 0.39 in the frames of simapp's camera that deepracer-utils publishes
+(tests/deepracer/model/sample-model/pictures/dr-demo-{1,2,3}.png, MIT: the centre line's orange
+(225, 143, 0) reads (214, 128, 1), the borders' 223 read 212, the wall's (36, 70, 81) reads
+(14, 28, 32)). The camera's gray is rl_coach's luma of the colour, as the agent's to_grayscale
+filter takes it (bundle/rl_coach/rl_coach/filters/observation/observation_rgb_to_y_filter.py:45).
 """
 
 from __future__ import annotations
@@ -14,17 +31,48 @@ import numpy as np
 
 from simulator.tracks import Track
 
-BORDER_WIDTH = 0.05  # [m] DeepRacer's border tape is about 2 inches
-CENTRE_LINE_WIDTH = 0.03  # [m]
-DASH = 0.15  # [m] dash and gap of the centre line
-MARGIN = 1.0  # [m] of surroundings around the track
+BORDER_WIDTH = 0.0762  # [m] each border, inside the track's edge
+CENTRE_LINE_WIDTH = 0.0254  # [m]
+DASH = 0.0508  # [m] dash and gap of the centre line
+START_LINE_WIDTH = 0.066  # [m] along the track
+MARGIN = 1.0  # [m] of grass around the track: reInvent2019_track.dae's field reaches about 1 m
+GROUND_LIGHT = 0.93  # Gazebo's shading of the flat ground
+WALL_LIGHT = 0.39  # and of the walls
 
-# (grayscale, BGR colour) for each part of the picture
-SURROUNDINGS = (196, (200, 212, 216))
-SURFACE = (58, (62, 60, 58))
-BORDER = (250, (250, 250, 250))
-CENTRE_LINE = (214, (40, 200, 240))
-START_LINE = (250, (250, 250, 250))
+
+def lit(rgb: tuple[float, float, float], light: float) -> tuple[int, tuple[int, int, int]]:
+    """A texture's mean colour under ``light``: (the camera's gray level, BGR colour)."""
+    red, green, blue = (min(255.0, channel * light) for channel in rgb)
+    gray = round(0.2989 * red + 0.5870 * green + 0.1140 * blue)
+    return gray, (round(blue), round(green), round(red))
+
+
+# (grayscale, BGR colour) for each part of the picture, from each texture's mean RGB
+SURROUNDINGS = lit((126.3, 133.2, 64.7), GROUND_LIGHT)  # field.png: grass
+SURFACE = lit((63.6, 62.9, 61.3), GROUND_LIGHT)  # road.png
+BORDER = lit((222.7, 222.6, 222.4), GROUND_LIGHT)  # outerLine.png (both borders)
+CENTRE_LINE = lit((224.9, 143.4, 0.0), GROUND_LIGHT)  # centerLine.png: orange
+START_LINE = lit((141.5, 141.5, 141.5), GROUND_LIGHT)  # startline.png: its squares' mean
+WALL = lit((36.0, 70.0, 81.0), WALL_LIGHT)  # wall.png: what the camera sees above the grass
+
+
+@dataclass(frozen=True)
+class Style:
+    """How a track is drawn: each part's (gray, BGR) and the lines' widths [m]."""
+
+    surroundings: tuple = SURROUNDINGS
+    surface: tuple = SURFACE
+    border: tuple = BORDER
+    centre_line: tuple = CENTRE_LINE
+    start_line: tuple = START_LINE
+    border_width: float = BORDER_WIDTH
+    centre_line_width: float = CENTRE_LINE_WIDTH
+    dash: float = DASH
+    start_line_width: float = START_LINE_WIDTH
+    borders_inside: bool = True  # each border a band inside the edge, else a line centred on it
+
+
+SIMAPP = Style()
 
 
 @dataclass(frozen=True)
@@ -52,7 +100,9 @@ class TrackTexture:
         )
 
 
-def render(track: Track, *, pixels_per_metre: float, colour: bool = False) -> TrackTexture:
+def render(
+    track: Track, *, pixels_per_metre: float, colour: bool = False, style: Style = SIMAPP
+) -> TrackTexture:
     """Draw ``track`` at ``pixels_per_metre``, in grayscale (the camera's) or BGR colour."""
     low, high = track.bounds
     origin = low - MARGIN
@@ -60,7 +110,7 @@ def render(track: Track, *, pixels_per_metre: float, colour: bool = False) -> Tr
     pick = 1 if colour else 0
     shape = (size[1], size[0], 3) if colour else (size[1], size[0])
     image = np.empty(shape, dtype=np.uint8)
-    image[:] = SURROUNDINGS[pick]
+    image[:] = style.surroundings[pick]
     texture = TrackTexture(image=image, pixels_per_metre=pixels_per_metre, origin=origin)
 
     shift = 4  # sub-pixel precision for OpenCV's drawing functions
@@ -72,27 +122,36 @@ def render(track: Track, *, pixels_per_metre: float, colour: bool = False) -> Tr
     inner, outer = fixed(track.inner), fixed(track.outer)
     for i in range(len(inner) - 1):  # the surface, one quad per segment, whichever way it winds
         quad = np.array([inner[i], inner[i + 1], outer[i + 1], outer[i]])
-        cv2.fillConvexPoly(image, quad, SURFACE[pick], cv2.LINE_AA, shift)
+        cv2.fillConvexPoly(image, quad, style.surface[pick], cv2.LINE_AA, shift)
 
     def line(points: np.ndarray, width: float, value) -> None:
         thickness = max(1, round(width * pixels_per_metre))
         cv2.polylines(image, [fixed(points)], False, value, thickness, cv2.LINE_AA, shift)
 
-    # The dashed centre line: alternate stretches of DASH metres.
-    distances = np.arange(0.0, track.length, DASH / 4)
-    xs, ys, _ = track.point_at(distances)
-    on = (distances // DASH).astype(int) % 2 == 0
-    starts = np.flatnonzero(on & ~np.roll(on, 1))
-    for start in starts:
-        stop = start
-        while stop + 1 < len(on) and on[stop + 1]:
-            stop += 1
-        line(np.column_stack([xs[start : stop + 1], ys[start : stop + 1]]), CENTRE_LINE_WIDTH,
-             CENTRE_LINE[pick])  # fmt: skip
+    def band(edge: np.ndarray, inside: np.ndarray, value) -> None:
+        for i in range(len(edge) - 1):
+            quad = np.array([edge[i], edge[i + 1], inside[i + 1], inside[i]])
+            cv2.fillConvexPoly(image, quad, value, cv2.LINE_AA, shift)
 
-    line(track.inner, BORDER_WIDTH, BORDER[pick])
-    line(track.outer, BORDER_WIDTH, BORDER[pick])
-    line(np.array([track.inner[0], track.outer[0]]), BORDER_WIDTH, START_LINE[pick])
+    # The dashed centre line: quads centre_line_width across and dash long, a dash apart.
+    half = style.centre_line_width / 2
+    for start in np.arange(0.0, track.length - style.dash / 2, 2 * style.dash):
+        along = np.linspace(start, start + style.dash, 5)
+        left = np.column_stack(track.point_at(along, half)[:2])
+        right = np.column_stack(track.point_at(along[::-1], -half)[:2])
+        cv2.fillPoly(image, [fixed(np.vstack([left, right]))], style.centre_line[pick],
+                     cv2.LINE_AA, shift)  # fmt: skip
+
+    if style.borders_inside:  # bands from each edge border_width toward the other edge
+        across = track.outer - track.inner
+        inward = across / np.linalg.norm(across, axis=1, keepdims=True) * style.border_width
+        band(inner, fixed(track.inner + inward), style.border[pick])
+        band(outer, fixed(track.outer - inward), style.border[pick])
+    else:
+        line(track.inner, style.border_width, style.border[pick])
+        line(track.outer, style.border_width, style.border[pick])
+    start = np.array([track.inner[0], track.outer[0]])
+    line(start, style.start_line_width, style.start_line[pick])
     return texture
 
 
