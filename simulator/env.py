@@ -33,7 +33,7 @@ from simulator.config import ContinuousActions, DiscreteActions
 from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
 from simulator.randomisation import Scene
 from simulator.rewards import checked_reward, follow_centre_line
-from simulator.texture import SIMAPP, WALL, render
+from simulator.texture import WALL, render, style_for
 from simulator.trace import SimTraceRow
 from simulator.tracks import Track, load
 from simulator.world import World
@@ -66,7 +66,7 @@ def default_config(camera_lens: str = "simulator") -> dict[str, Any]:
         # gray level above the horizon: simapp's tracks stand in a field walled 1 m high, which
         # fills the camera's view above the grass (simulator.texture.WALL)
         "camera_sky": WALL[0],
-        "track_style": SIMAPP,  # how the track image is drawn: simapp's lines and colours
+        "track_style": None,  # a texture.Style for the track image; None: simapp's for the track
         # simapp launch/racecar.launch.py:37-45, sensors/constants.py:20-28 (01f5f01): 64 rays
         # over ±150°; LIDAR is clipped to 0.15-1.0 m (sensors/utils.py:56-57).
         "lidar_rays": 64,
@@ -490,7 +490,7 @@ class DeepRacerEnv(gym.Env):
     def _build_sensors(self) -> None:
         cfg = self.config
         texture = render(self.track, pixels_per_metre=cfg["camera_texture_ppm"],
-                         style=cfg["track_style"])  # fmt: skip
+                         style=cfg["track_style"] or style_for(self.track))  # fmt: skip
         lens = Lens(*cfg["camera_size"], cfg["camera_fov"])
         forward, height, pitch = cfg["camera_mount"]
         if self.camera_name == "STEREO_CAMERAS":

@@ -14,12 +14,15 @@ line dashes 0.0254 m wide and 0.0508 m long every 0.1016 m (cl-verts: 228 quads 
 re:Invent 2019, 328 round the 2022 championship), the start line a strip 0.066 m wide of two
 rows of squares (2022_reinvent_champ_ccw.dae's Plane-mesh, textures/startline.png).
 
-The colours are each texture's mean, as lit: Gazebo shaded the ground to 0.93 of its textures'
-colours and the walls to 0.39 in the frames of simapp's camera that deepracer-utils publishes
-(tests/deepracer/model/sample-model/pictures/dr-demo-{1,2,3}.png, MIT: the centre line's orange
-(225, 143, 0) reads (214, 128, 1), the borders' 223 read 212, the wall's (36, 70, 81) reads
-(14, 28, 32)). The camera's gray is rl_coach's luma of the colour, as the agent's to_grayscale
+The colours are each texture's mean, as lit: in the frames of simapp's camera that
+deepracer-utils publishes (tests/deepracer/model/sample-model/pictures/dr-demo-{1,2,3}.png, MIT),
+frames of re:Invent 2018 (reinvent_base, whose bundle/meshes/reinvent/textures are its own), each
+part of the ground reads 1.09-1.12 times its texture's luma (the road 51 for 46.6, the grass 135
+for 119.9, the borders 212 for 193.4, the centre line 138 for 126.5) and the walls 14-24 for
+wall.png's 61. The camera's gray is rl_coach's luma of the colour, as the agent's to_grayscale
 filter takes it (bundle/rl_coach/rl_coach/filters/observation/observation_rgb_to_y_filter.py:45).
+Other worlds light their tracks much alike (a sun and a few lamps); that they give the same 1.10
+is assumed.
 """
 
 from __future__ import annotations
@@ -36,8 +39,8 @@ CENTRE_LINE_WIDTH = 0.0254  # [m]
 DASH = 0.0508  # [m] dash and gap of the centre line
 START_LINE_WIDTH = 0.066  # [m] along the track
 MARGIN = 1.0  # [m] of grass around the track: reInvent2019_track.dae's field reaches about 1 m
-GROUND_LIGHT = 0.93  # Gazebo's shading of the flat ground
-WALL_LIGHT = 0.39  # and of the walls
+GROUND_LIGHT = 1.10  # Gazebo's shading of the flat ground
+WALL_LIGHT = 0.33  # and of the walls
 
 
 def lit(rgb: tuple[float, float, float], light: float) -> tuple[int, tuple[int, int, int]]:
@@ -73,6 +76,22 @@ class Style:
 
 
 SIMAPP = Style()
+# re:Invent 2018 (reinvent_base): bundle/meshes/reinvent/textures' Road_DIFF, Grass_DIFF,
+# SolidLine_DIFF and DashedLine_DIFF (as road.png, field.png, outerLine.png, centerLine.png), on
+# the same widths (reinvent_base.dae: il/cl quads of 0.0762 and 0.0254 x 0.0508 m)
+REINVENT_2018 = Style(
+    surroundings=lit((95.2, 135.6, 104.3), GROUND_LIGHT),
+    surface=lit((36.1, 48.5, 64.0), GROUND_LIGHT),
+    border=lit((194.4, 193.6, 189.8), GROUND_LIGHT),
+    centre_line=lit((194.4, 116.5, 0.0), GROUND_LIGHT),
+    start_line=lit((36.1, 48.5, 64.0), GROUND_LIGHT),  # none: the road
+)
+STYLES = {"reinvent_base": REINVENT_2018}  # by WORLD_NAME; the others' textures are SIMAPP's
+
+
+def style_for(track: Track) -> Style:
+    """How simapp draws ``track``: its own textures where they differ from the common ones."""
+    return STYLES.get(track.name, SIMAPP)
 
 
 @dataclass(frozen=True)

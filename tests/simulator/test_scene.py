@@ -10,7 +10,17 @@ import numpy as np
 import pytest
 
 from simulator.env import DeepRacerEnv
-from simulator.texture import BORDER, CENTRE_LINE, SURFACE, SURROUNDINGS, WALL, render
+from simulator.texture import (
+    BORDER,
+    CENTRE_LINE,
+    REINVENT_2018,
+    SIMAPP,
+    SURFACE,
+    SURROUNDINGS,
+    WALL,
+    render,
+    style_for,
+)
 from simulator.tracks import load
 
 PPM = 400  # [px/m]: a millimetre-fine image for measuring
@@ -67,13 +77,26 @@ def test_the_centre_line_is_dashed_51_mm_on_and_51_mm_off_and_25_mm_wide(ring):
 
 @pytest.mark.parametrize(
     ("part", "seen_by_simapp"),
-    # simapp's camera in deepracer-utils' sample frames (pictures/dr-demo-*.png, rl_coach's luma):
-    # the orange centre line 138-140, the white borders 199-225, the walls 14-24.
-    [(CENTRE_LINE, (132, 146)), (BORDER, (199, 225)), (WALL, (14, 24))],
-)
-def test_the_camera_sees_each_part_at_the_level_simapps_camera_does(part, seen_by_simapp):
+    # simapp's camera on re:Invent 2018 in deepracer-utils' sample frames (pictures/dr-demo-*.png,
+    # rl_coach's luma): the road 45-58, the grass 130-140, the borders 199-225, the orange centre
+    # line 136-141, the walls 14-24.
+    [("surface", (45, 58)), ("surroundings", (130, 140)), ("border", (199, 225)),
+     ("centre_line", (136, 141))],
+)  # fmt: skip
+def test_the_camera_sees_each_part_of_reinvent_2018_at_the_level_simapps_camera_does(
+    part, seen_by_simapp
+):
     low, high = seen_by_simapp
-    assert low <= part[0] <= high
+    assert low <= getattr(REINVENT_2018, part)[0] <= high
+    assert 14 <= WALL[0] <= 24
+
+
+def test_reinvent_2018_is_drawn_with_its_own_textures_and_the_others_with_the_common_ones():
+    assert (
+        DeepRacerEnv(track="reinvent_base")._cameras[0].texture.image.min()
+        == (REINVENT_2018.surface[0])
+    )
+    assert style_for(load("reInvent2019_track")) == SIMAPP
 
 
 def test_the_camera_sees_the_road_darker_than_the_grass_and_the_walls_above_the_horizon():
