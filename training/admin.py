@@ -42,7 +42,7 @@ class TrackUploadForm(forms.ModelForm):
         fields = ["name", "display_name", "description", "difficulty"]
         help_texts = {
             "name": "As DeepRacer's WORLD_NAME names it (letters, digits, '_' and '-'), e.g. "
-            "reInvent2019_track, so imported models trained on it find it."
+            "H_track, so imported models trained on it find it."
         }
 
     def clean(self) -> dict:

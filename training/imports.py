@@ -851,7 +851,12 @@ def _variant(name: str) -> str:
 
 
 def _route_direction(name: str) -> str:
-    """The way a track's route runs: what DeepRacer drives on a world without a suffix."""
+    """The way a track's route runs: what DeepRacer drives on a world without a suffix (a
+    built-in DeepRacer track's own file, which may run against the console's default way:
+    reInvent2019_wide.npy runs counter-clockwise, the console offered it clockwise first)."""
+    found = sim_tracks.world(name)
+    if found is not None:
+        return found[1]
     try:
         return sim_tracks.load(name).direction
     except (ValueError, OSError, EOFError):  # a route that cannot be read: the default way

@@ -111,12 +111,22 @@ class Track(models.Model):
 
     name = models.SlugField(max_length=64, unique=True, help_text="The simulator's track name.")
     display_name = models.CharField(max_length=100)
-    description = models.CharField(max_length=255, blank=True)
+    # DeepRacer's console describes its tracks in up to 381 characters.
+    description = models.CharField(max_length=500, blank=True)
     difficulty = models.CharField(max_length=16, choices=Difficulty.choices)
     length_m = models.FloatField("length [m]")
     width_m = models.FloatField("width [m]")
     counterclockwise = models.BooleanField(default=True)
     clockwise = models.BooleanField(default=True)
+    default_direction = models.CharField(
+        max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE,
+        help_text="The direction offered first (DeepRacer's console: defaultDirection).",
+    )  # fmt: skip
+    season = models.PositiveSmallIntegerField(
+        null=True, blank=True,
+        help_text="The year DeepRacer raced it, as deepracer-utils' track_meta groups the tracks "
+        "(2019: 2019 and earlier); empty for Pitlane's own and added tracks.",
+    )  # fmt: skip
     position = models.PositiveSmallIntegerField(
         default=0, help_text="Where the track comes in the simulator's catalogue."
     )
@@ -144,6 +154,20 @@ class Track(models.Model):
     @property
     def directions(self) -> list[str]:
         return [d.label for d in Direction if getattr(self, d.value)]
+
+    @property
+    def direction_values(self) -> list[str]:
+        """The directions it is driven, as stored, the default first."""
+        driven = [d.value for d in Direction if getattr(self, d.value)]
+        return sorted(driven, key=lambda d: d != self.default_direction)
+
+    @property
+    def season_label(self) -> str:
+        """As deepracer-utils' track_meta heads its groups: "2022", "2019 and earlier"; "Pitlane"
+        for our own."""
+        if self.season is None:
+            return "Pitlane"
+        return f"{self.season} and earlier" if self.season <= 2019 else str(self.season)
 
     @property
     def builtin(self) -> bool:

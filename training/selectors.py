@@ -14,7 +14,7 @@ from datetime import datetime
 import redis
 from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
-from django.db.models import Count, F, FloatField, Prefetch, QuerySet, Sum
+from django.db.models import Count, F, FloatField, Prefetch, Q, QuerySet, Sum
 from django.db.models.functions import Least, Lower
 from django.utils import timezone
 
@@ -76,6 +76,32 @@ def job_imported_only(*, job: TrainingJob | None) -> bool:
 
 def tracks_available() -> QuerySet[Track]:
     return Track.objects.all()
+
+
+# The track picker's orders (static/training/track_picker.js sorts the same way in the page):
+# the catalogue's, by name, by length or width (shortest, narrowest first), by season (newest
+# first, Pitlane's own before DeepRacer's).
+TRACK_SORTS = {
+    "": ("position", "name"),
+    "name": (Lower("display_name"), "name"),
+    "length": ("length_m", "position"),
+    "width": ("width_m", "position"),
+    "season": (F("season").desc(nulls_first=True), "position"),
+}
+
+
+def tracks_listed(*, search: str = "", sort: str = "") -> QuerySet[Track]:
+    """The tracks whose display name, name (DeepRacer's WORLD_NAME) or season holds every word of
+    ``search``, in the order ``sort`` names (one of ``TRACK_SORTS``; another is the catalogue's)."""
+    tracks = Track.objects.all()
+    for word in search.split():
+        matches = Q(display_name__icontains=word) | Q(name__icontains=word)
+        if word.isdigit():
+            matches |= Q(season=int(word))
+        elif "pitlane".startswith(word.lower()):
+            matches |= Q(season__isnull=True)
+        tracks = tracks.filter(matches)
+    return tracks.order_by(*TRACK_SORTS.get(sort, TRACK_SORTS[""]))
 
 
 def track_added_preview(*, name: str) -> bytes | None:

@@ -60,12 +60,15 @@ from training.models import Algorithm, EvaluationJob, JobLogLine, RewardFunction
 
 @login_required
 def model_list(request: HttpRequest) -> HttpResponse:
+    search, sort = request.GET.get("q", "")[:100], request.GET.get("sort", "")
     return render(
         request,
         "training/model_list.html",
         {
             "models": selectors.models_with_training(racer=request.user),
-            "tracks": selectors.tracks_available(),
+            "tracks": selectors.tracks_listed(search=search, sort=sort),
+            "track_search": search,
+            "track_sort": sort,
         },
     )
 

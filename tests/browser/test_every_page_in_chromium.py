@@ -117,7 +117,7 @@ def test_a_model_form_with_a_mistake_keeps_everything_the_racer_chose(page: Page
     page.goto("/models/create/")
     page.get_by_label("Name").fill("keep-it-all")
     page.get_by_label("Description").fill("Everything I typed")
-    page.locator(".track-choice", has_text="Speedway").click()
+    page.locator(".track-choice:has(input[value=speedway])").click()  # ours, not Ace Speedway
     page.get_by_label("Direction").select_option("clockwise")
     page.get_by_label("Steering angles").select_option("7")
     page.get_by_label("Speeds").select_option("1")
@@ -132,7 +132,7 @@ def test_a_model_form_with_a_mistake_keeps_everything_the_racer_chose(page: Page
     expect(page.get_by_text("The maximum training time is 10 to 1440 minutes.")).to_be_visible()
     expect(page.get_by_label("Name")).to_have_value("keep-it-all")
     expect(page.get_by_label("Description")).to_have_value("Everything I typed")
-    expect(page.locator(".track-choice", has_text="Speedway").locator("input")).to_be_checked()
+    expect(page.locator(".track-choice input[value=speedway]")).to_be_checked()
     expect(page.get_by_label("Direction")).to_have_value("clockwise")
     expect(page.get_by_label("SAC", exact=True)).to_be_checked()
     expect(page.get_by_label("Continuous", exact=True)).to_be_checked()

@@ -43,6 +43,33 @@ def test_a_racer_creates_a_model_with_a_generated_action_space(page: Page, alice
     assert {a["speed"] for a in model.action_space} == {1.5}
 
 
+def test_the_track_picker_narrows_sorts_and_chooses_a_one_way_deepracer_track(
+    page: Page, alice, tracks
+):
+    log_in(page, "alice", PASSWORD)
+    page.goto("/models/create/")
+    page.get_by_label("Name").fill("yun-car")
+    shown = page.locator(".track-choice:visible")
+    expect(shown).to_have_count(len(tracks))
+    page.get_by_role("searchbox", name="Find a track").fill("speedway 2022")
+    found = [t for t in tracks if "speedway" in t.display_name.lower() and t.season == 2022]
+    expect(shown).to_have_count(len(found))
+    expect(page.locator("[data-track-count]")).to_have_text(f"{len(found)} of {len(tracks)} tracks")
+    page.get_by_role("button", name="Length", exact=True).click()
+    shortest_first = sorted(found, key=lambda t: (t.length_m, t.position))
+    expect(shown.locator("strong")).to_have_text([t.display_name for t in shortest_first])
+
+    page.get_by_role("searchbox", name="Find a track").fill("yun")
+    page.locator(".track-choice", has_text="Yun Speedway").click()
+    direction = page.get_by_label("Direction")
+    expect(direction).to_have_value("clockwise")  # the only way it is driven
+    expect(direction.locator("option[value=counterclockwise]")).to_be_disabled()
+    page.get_by_role("button", name="Create model and start training").click()
+    expect(page.get_by_text("yun-car is created; its training is queued.")).to_be_visible()
+    model = RLModel.objects.get(name="yun-car")
+    assert (model.track.name, model.direction) == ("Albert", "clockwise")
+
+
 def open_create_page(page: Page, name: str) -> None:
     log_in(page, "alice", PASSWORD)
     page.goto("/models/create/")

@@ -101,7 +101,7 @@ def test_an_import_says_what_it_creates_and_asks_before_it_trains(
         page.get_by_role("heading", name="Import a model: check what it creates")
     ).to_be_visible()
     expect(page.locator("[data-preview-notes]")).to_contain_text(
-        "the track reInvent2019_track, which is not loaded here"
+        "the track H_track, which is not loaded here"
     )
     expect(page.locator("[data-preview-track]")).to_have_text("Rookie Loop (counter-clockwise)")
     assert not RLModel.objects.filter(name="my-deepracer-car").exists()

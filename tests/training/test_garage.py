@@ -1,3 +1,5 @@
+import re
+
 import gymnasium
 import pytest
 from django.core.management import call_command
@@ -19,7 +21,7 @@ def test_loadtracks_mirrors_the_simulator_catalogue_and_can_run_again(capsys):
     assert oval.length_m == 16.5
     assert oval.directions == ["Counter-clockwise", "Clockwise"]
     assert Track.objects.get(name="championship-circuit").directions == ["Counter-clockwise"]
-    assert "8 built-in tracks loaded" in capsys.readouterr().out
+    assert f"{len(simulator_tracks.names())} built-in tracks loaded" in capsys.readouterr().out
 
 
 def test_a_racer_builds_a_vehicle(client, alice):
@@ -63,7 +65,34 @@ def test_the_models_page_lists_the_tracks_to_train_on(client, alice, tracks):
     assert "You have no models yet." in response.text
     assert "Clover Loop" in response.text
     assert "24.00 m long" in response.text
-    assert response.text.count('src="/tracks/') == 8
+    assert response.text.count('src="/tracks/') == len(tracks)
+
+
+def cards(page: str) -> list[str]:
+    """The Tracks list's cards, in page order, by their names."""
+    return re.findall(r'src="/tracks/([\w-]+)\.png"', page)
+
+
+def test_the_tracks_list_searches_and_sorts_without_javascript(client, alice, tracks):
+    client.force_login(alice)
+    url = reverse("training:model-list")
+    found = cards(client.get(url, {"q": "speedway 2022"}).text)
+    assert found[:2] == ["2022_april_open", "2022_april_pro"] and "speedway" not in found
+    assert len(found) == Track.objects.filter(display_name__icontains="speedway",
+                                              season=2022).count()  # fmt: skip
+    assert cards(client.get(url, {"q": "pitlane"}).text) == simulator_tracks.names(origin="pitlane")
+    by_length = cards(client.get(url, {"sort": "length"}).text)
+    lengths = dict(Track.objects.values_list("name", "length_m"))
+    assert [lengths[n] for n in by_length] == sorted(lengths.values())
+    assert by_length[-1] == "penbay_pro"  # 89.24 m, the longest
+    by_season = cards(client.get(url, {"sort": "season"}).text)
+    assert by_season[:8] == simulator_tracks.names(origin="pitlane")  # Pitlane's, then 2024
+    seasons = dict(Track.objects.values_list("name", "season"))
+    assert [seasons[n] for n in by_season[8:]] == sorted(
+        (s for s in seasons.values() if s), reverse=True
+    )  # 2024 first, "2019 and earlier" last
+    page = client.get(url, {"q": "monza"}).text
+    assert "No track matches “monza”." in page and 'aria-pressed="true">Catalogue' in page
 
 
 def test_a_track_preview_is_a_cacheable_png(client):

@@ -49,7 +49,7 @@ def test_a_folder_without_weights_is_previewed_and_nothing_is_created_until_conf
     assert [(a["steering_angle"], a["speed"]) for a in preview.model.action_space] == [
         (-30.0, 0.6), (0.0, 1.2), (30.0, 0.6)
     ]  # fmt: skip
-    assert any("the track reInvent2019_track, which is not loaded here" in n for n in preview.notes)
+    assert any("the track H_track, which is not loaded here" in n for n in preview.notes)
 
     # Confirmed with another name, track and time: the model is created as the racer chose.
     changes = {"name": "my-car", "track": "pitlane-oval", "direction": "clockwise",
@@ -62,7 +62,7 @@ def test_a_folder_without_weights_is_previewed_and_nothing_is_created_until_conf
         "my-car", "pitlane-oval", "clockwise", 30,
     )  # fmt: skip
     # The model's notes say what was not carried over, and what the racer chose instead.
-    assert "Not carried over from training_params.yaml: the track reInvent2019_track, which is " \
+    assert "Not carried over from training_params.yaml: the track H_track, which is " \
         "not loaded here." in model.import_notes  # fmt: skip
     assert "You chose the track on the import's preview: Pitlane Oval, clockwise." in (
         model.import_notes

@@ -42,8 +42,10 @@ DEEPRACER_HYPERPARAMETERS = {
     "lr": 0.0003, "num_episodes_between_training": 20, "num_epochs": 10, "stack_size": 1,
     "term_cond_avg_score": 350.0, "term_cond_max_episodes": 1000,
 }  # fmt: skip
+# H_track: a DeepRacer world (deepracer-utils' track_meta names it) whose route simapp does not
+# ship, so it is not one of the built-in tracks: the archive's track is not loaded here.
 DEEPRACER_PARAMS = {
-    "WORLD_NAME": "reInvent2019_track", "REVERSE_DIR": False, "RACE_TYPE": "TIME_TRIAL",
+    "WORLD_NAME": "H_track", "REVERSE_DIR": False, "RACE_TYPE": "TIME_TRIAL",
     "CAR_NAME": "my-deepracer-car",
 }  # fmt: skip
 
@@ -153,7 +155,7 @@ def test_a_deepracer_export_for_a_car_we_lack_brings_its_settings_and_trains_ane
     said = out.getvalue()
     assert "queued for training" in said
     assert "TensorFlow weights were not carried over: they are for sensors" in said
-    assert "the track reInvent2019_track, which is not loaded here" in said
+    assert "the track H_track, which is not loaded here" in said
     model = RLModel.objects.get(owner=alice)
     assert model.name == "my-deepracer-car" and model.status == RLModel.Status.QUEUED
     assert [a["speed"] for a in model.action_space] == [0.6, 1.2, 0.6]
@@ -546,6 +548,40 @@ def test_world_name_finds_the_loaded_track_and_its_direction(params, expected, n
         assert len(notes) == 1 and noted in notes[0], notes
     else:
         assert notes == []
+
+
+@pytest.mark.parametrize(
+    ("params", "expected", "noted"),
+    [
+        ({"WORLD_NAME": "2022_april_open_cw"}, ("2022_april_open", "clockwise"), ""),
+        ({"WORLD_NAME": "2022_april_open", "TRACK_DIRECTION_CLOCKWISE": True},
+         ("2022_april_open", "clockwise"), ""),
+        # Without a suffix, the file's own way, though the console offered it clockwise first.
+        ({"WORLD_NAME": "reInvent2019_wide"}, ("reInvent2019_wide", "counterclockwise"), ""),
+        ({"WORLD_NAME": "reinvent_carpet", "REVERSE_DIR": True},
+         ("reinvent_carpet", "clockwise"), ""),
+        ({"WORLD_NAME": "Albert", "TRACK_DIRECTION_CLOCKWISE": False}, ("Albert", "clockwise"),
+         "Yun Speedway is not driven counter-clockwise here: the model drives it clockwise."),
+    ],
+)  # fmt: skip
+def test_a_deepracer_world_name_lands_on_the_built_in_track_and_its_direction(
+    tracks, params, expected, noted
+):
+    notes = []
+    assert imports._deepracer_track(params, notes) == expected
+    assert notes == ([noted] if noted else [])
+
+
+def test_a_deepracer_export_imports_onto_its_own_track(alice, tracks, tmp_path):
+    archive = tmp_path / "deepracer.tar.gz"
+    params = {**DEEPRACER_PARAMS, "WORLD_NAME": "reInvent2019_track_cw"}
+    archive.write_bytes(tar_gz(deepracer_export(**{
+        "training_params.yaml": yaml.safe_dump(params).encode(),
+    })))  # fmt: skip
+    call_command("importmodel", str(archive), "--owner", "alice", stdout=io.StringIO())
+    model = RLModel.objects.get(owner=alice)
+    assert (model.track.display_name, model.direction) == ("Smile Speedway", "clockwise")
+    assert not [note for note in model.import_notes if "track" in note.lower()]
 
 
 @CHECKED_IMPORT

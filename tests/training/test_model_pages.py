@@ -40,6 +40,31 @@ def test_the_create_page_offers_every_setting_with_its_default(client, alice, tr
     assert 'value="rookie-loop" checked' in response.text
 
 
+def test_the_track_picker_offers_every_catalogue_track_with_its_directions(client, alice, tracks):
+    client.force_login(alice)
+    page = client.get(reverse("training:model-create")).text
+    assert page.count('name="track"') == len(tracks) == 78
+    assert "data-track-picker" in page and "data-track-search" in page  # the picker's tools
+    assert 'data-track="yun speedway albert 2020"' in page  # what the search box searches
+    albert = page[page.index('value="Albert"') :]
+    assert albert.split(">")[0].endswith('data-directions="clockwise"')
+    wide = page[page.index('value="reInvent2019_wide"') :]
+    assert wide.split(">")[0].endswith('data-directions="clockwise counterclockwise"')
+
+
+def test_a_clockwise_only_track_refuses_counterclockwise_in_the_form(client, alice, tracks):
+    client.force_login(alice)
+    response = client.post(reverse("training:model-create"),
+                           form_data(track="Albert", direction="counterclockwise"))  # fmt: skip
+    assert response.status_code == 400 and not RLModel.objects.exists()
+    assert "Yun Speedway cannot be driven counter-clockwise." in response.text
+    response = client.post(reverse("training:model-create"),
+                           form_data(track="Albert", direction="clockwise"))  # fmt: skip
+    assert response.status_code == 302
+    model = RLModel.objects.get()
+    assert (model.track.display_name, model.direction) == ("Yun Speedway", "clockwise")
+
+
 def test_a_racer_creates_a_model_and_its_training_is_queued(client, alice, tracks):
     client.force_login(alice)
     response = client.post(reverse("training:model-create"), form_data())

@@ -10,8 +10,8 @@ class Command(BaseCommand):
     help = (
         "Without a file: load the simulator's built-in tracks into the database (safe to run "
         "again). With a DeepRacer route file (.npy): add it as a track racers can train, evaluate "
-        "and race on, e.g. loadtracks reInvent2019_track.npy --name reInvent2019_track "
-        '--display-name "re:Invent 2019".'
+        "and race on, e.g. loadtracks H_track.npy --name H_track "
+        '--display-name "H track" (DeepRacer\'s own tracks are built in).'
     )
 
     def add_arguments(self, parser) -> None:
@@ -43,8 +43,11 @@ class Command(BaseCommand):
             if options["name"] or options["replace"]:
                 raise CommandError("--name and --replace go with a route file to add.")
             synced = tracks_sync()
-            names = ", ".join(track.display_name for track in synced)
-            self.stdout.write(f"{len(synced)} built-in tracks loaded: {names}.")
+            deepracer = sum(track.season is not None for track in synced)
+            self.stdout.write(
+                f"{len(synced)} built-in tracks loaded: {len(synced) - deepracer} of Pitlane's "
+                f"and {deepracer} of DeepRacer's."
+            )
             return
         path = Path(options["file"])
         try:
