@@ -128,11 +128,12 @@ def bench_racer(name: str = "bench"):
 def default_model(
     owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False,
     steering: float = 30, speed: tuple[float, float] = FAST_SPEED, algorithm: str = PPO,
-    hyperparameters: dict | None = None, reward: str = "road-ahead",
+    hyperparameters: dict | None = None, reward: str = "road-ahead", randomise: bool = False,
 ):  # fmt: skip
     """A model with DeepRacer's defaults on the Rookie Loop; ``hyperparameters``: the racer's
     own values of some (DeepRacer's names), over the algorithm's defaults; with ``fast``,
-    ``reward`` names the reward function (``REWARDS``)."""
+    ``reward`` names the reward function (``REWARDS``); ``randomise``: trained with domain
+    randomisation."""
     from rl.hyperparameters import defaults
     from training.rewards import EXAMPLES
     from training.services import model_create
@@ -144,6 +145,7 @@ def default_model(
         "workers": workers,
         "seed": seed,
         "max_minutes": 1440,
+        "domain_randomisation": randomise,
     }
     if fast:
         actions = {
