@@ -7,11 +7,11 @@ param computed; the driver's own planning is not counted), what the car's dynami
 cost, camera frames per second, and spectator frames per second. DeepRacer's Gazebo simulation
 runs at 15 steps per second.
 
-Grip, for each built-in track (its first direction): the highest constant speed, in steps of
-0.1 m/s, at which the scripted centre-line driver laps cleanly (no reset), and its lap time; the
-fastest clean lap of the braking driver (a speed profile from the track's curvature, planned on
-a share of the car's grip from 0.5 to 1.0 in steps of 0.025, top speed 4 m/s), and the share
-that gave it.
+Grip, for each of Pitlane's own built-in tracks (its first direction; bench_tracks laps
+DeepRacer's): the highest constant speed, in steps of 0.1 m/s, at which the scripted centre-line
+driver laps cleanly (no reset), and its lap time; the fastest clean lap of the braking driver (a
+speed profile from the track's curvature, planned on a share of the car's grip from 0.5 to 1.0 in
+steps of 0.025, top speed 4 m/s), and the share that gave it.
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ def braking_lap(track: str) -> tuple[float | None, float | None]:
 def grip_table() -> None:
     print(f"\n{'track':<22}{'length':>8}{'best constant':>15}{'its lap':>9}"
           f"{'braking lap':>13}{'grip share':>12}{'at 4 m/s':>10}")  # fmt: skip
-    for name in tracks.names():
+    for name in tracks.names(origin="pitlane"):
         best = next(
             ((tenths / 10, time) for tenths in range(40, 4, -1)
              if (time := lap(name, lambda env, v=tenths / 10: CentreLineDriver(env, speed=v)))),

@@ -13,6 +13,7 @@ from django.http import FileResponse, HttpResponse, HttpResponseRedirect
 
 from common.transactions import outside_transaction
 from rl.hyperparameters import deepracer_json
+from simulator import tracks as sim_tracks
 from training.models import EvaluationJob, RLModel
 
 TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE section 5
@@ -153,9 +154,10 @@ def write_model_files(model: RLModel) -> None:
 
 def training_params(model: RLModel) -> dict:
     """The environment side of the configuration, as DeepRacer's training_params.yaml names it."""
+    world_name, reverse = sim_tracks.deepracer_world(model.track.name, model.direction)
     params = {
-        "WORLD_NAME": model.track.name,
-        "REVERSE_DIR": model.direction == "clockwise",
+        "WORLD_NAME": world_name,
+        "REVERSE_DIR": reverse,
         "RACE_TYPE": model.race_type,
         "ALTERNATE_DRIVING_DIRECTION": False,
         "CHANGE_START_POSITION": True,

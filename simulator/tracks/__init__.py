@@ -233,6 +233,19 @@ def world(world_name: str) -> tuple[str, str] | None:
     return None
 
 
+def deepracer_world(name: str, direction: str) -> tuple[str, bool]:
+    """(WORLD_NAME, REVERSE_DIR) that have DeepRacer drive track ``name`` ``direction``, as a
+    training_params.yaml says it: the route file DeepRacer drives that way where there is one
+    (``2022_april_open`` clockwise is ``2022_april_open_cw``, not reversed, the name simapp's
+    yaml_file.py:228-246 writes back), else the track's own file, reversed when it runs the
+    other way (``Albert`` clockwise is ``Albert`` as it is: its file runs clockwise)."""
+    track = load(name)
+    route = track.routes.get(direction)
+    if route:
+        return route, False
+    return (track.world_name or track.name), direction != track.direction
+
+
 def entry(name: str) -> dict:
     """A built-in track's catalogue entry (display name, directions, season, length and width
     [m] for DeepRacer's, ...), for lists that need no geometry; ``TrackError`` when unknown."""

@@ -132,3 +132,19 @@ def test_the_catalogue_file_names_a_route_file_for_every_direction_or_reverses_i
             assert entry["world_names"][world_name] == direction
         if len(entry["routes"]) < len(entry["directions"]):
             assert not entry["console"]  # the 8 the console never listed
+
+
+@pytest.mark.parametrize(
+    ("name", "direction", "said"),
+    [("2022_april_open", "clockwise", ("2022_april_open_cw", False)),
+     ("2022_april_open", "counterclockwise", ("2022_april_open_ccw", False)),
+     ("Albert", "clockwise", ("Albert", False)),  # its file runs clockwise
+     ("reinvent_carpet", "clockwise", ("reinvent_carpet", True)),
+     ("pitlane-oval", "clockwise", ("pitlane-oval", True))],
+)  # fmt: skip
+def test_a_track_and_direction_are_written_as_deepracer_names_them(name, direction, said):
+    assert tracks.deepracer_world(name, direction) == said
+    world_name, reverse = said
+    # and read back, as an import reads training_params.yaml: the same track, the same way
+    back = tracks.load(world_name).with_direction(direction)
+    assert (back.name, back.reversed) == (name, reverse)

@@ -661,4 +661,22 @@ def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(
     assert list(json.loads(written)) == sorted(expected)  # as simapp writes it: sorted keys
     imported = imports.import_model(owner=bob, archive=io.BytesIO(virtual_archive(original)))
     assert imported.model.hyperparameters == expected
+    assert imported.model.best_checkpoint_by == "reward"  # pitlane.json carries it
     assert not [note for note in imported.notes if "carried over" in note]
+
+
+@pytest.mark.parametrize(
+    ("track", "direction"),
+    [("2022_april_open", "clockwise"), ("Albert", "clockwise"), ("reinvent_carpet", "clockwise"),
+     ("pitlane-oval", "counterclockwise")],
+)  # fmt: skip
+def test_an_exported_track_names_deepracers_world_and_imports_back_onto_itself(
+    alice, tracks, track, direction
+):
+    model = RLModel(owner=alice, name="round-trip", track=Track.objects.get(name=track),
+                    direction=direction)  # fmt: skip
+    params = artifacts.training_params(model)
+    if track == "2022_april_open":  # the file DeepRacer drives clockwise, not the base reversed
+        assert (params["WORLD_NAME"], params["REVERSE_DIR"]) == ("2022_april_open_cw", False)
+    notes = []
+    assert imports._deepracer_track(params, notes) == (track, direction) and notes == []
