@@ -69,7 +69,11 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m simulator", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
     drive = commands.add_parser("demo", help="drive a lap along the centre line and film it")
-    drive.add_argument("--track", required=True, help=f"one of: {', '.join(tracks.names())}")
+    drive.add_argument(
+        "--track", required=True,
+        help=f"one of: {', '.join(tracks.names(origin='pitlane'))}, or one of DeepRacer's by its "
+        "WORLD_NAME (reInvent2019_track, 2022_april_open_cw, ...)",
+    )  # fmt: skip
     drive.add_argument("--direction", default="counterclockwise",
                        choices=["counterclockwise", "clockwise"])  # fmt: skip
     drive.add_argument(
