@@ -45,6 +45,7 @@ def test_the_track_picker_offers_every_catalogue_track_with_its_directions(clien
     page = client.get(reverse("training:model-create")).text
     assert page.count('name="track"') == len(tracks) == 78
     assert "data-track-picker" in page and "data-track-search" in page  # the picker's tools
+    assert "{#" not in page and "Expects:" not in page  # its templates' comments stay in them
     assert 'data-track="yun speedway albert 2020"' in page  # what the search box searches
     albert = page[page.index('value="Albert"') :]
     assert albert.split(">")[0].endswith('data-directions="clockwise"')
