@@ -88,7 +88,9 @@ def main() -> None:
 
         django.setup()
         owner = bench_racer()
-        print(f"Training two models, {arguments.minutes:g} min each (seed {arguments.seed}):")
+        # flushed: a reward function's check forks a child, which would print it again
+        print(f"Training two models, {arguments.minutes:g} min each (seed {arguments.seed}):",
+              flush=True)  # fmt: skip
         models = {
             trained: train(owner, randomise=trained == "randomised", minutes=arguments.minutes,
                            seed=arguments.seed, fast=arguments.fast)
