@@ -21,7 +21,9 @@ from rl import hyperparameters as hp
 from simulator import config as sim
 from training.models import (
     Algorithm,
+    BestCheckpointBy,
     CameraLens,
+    Checkpoint,
     Direction,
     Network,
     RLModel,
@@ -68,6 +70,8 @@ class Draft(TypedDict, total=False):
     workers: int | float | str
     extra_tracks: list[str]
     seed: int | str
+    best_checkpoint_by: str
+    cloned_checkpoint: str  # a clone's start: its source's "best" or "last" checkpoint
     reward_function: str
     cloned_from: RLModel | None
 
@@ -100,6 +104,8 @@ class ModelSettings:
     seed: int
     reward_function: str
     cloned_from: RLModel | None = None
+    cloned_checkpoint: str = ""
+    best_checkpoint_by: str = BestCheckpointBy.PROGRESS
     camera_lens: str = CameraLens.SIMULATOR
     domain_randomisation: bool = False
     # a clone's weights are for its source's network, whatever this console's layout now is
@@ -127,6 +133,7 @@ class ModelSettings:
             extra_tracks=list(self.extra_tracks), seed=self.seed,
             domain_randomisation=self.domain_randomisation,
             reward_function=self.reward_function, cloned_from=self.cloned_from,
+            best_checkpoint_by=self.best_checkpoint_by, cloned_checkpoint=self.cloned_checkpoint,
         )  # fmt: skip
 
     def replace(self, **changes) -> ModelSettings:
@@ -176,6 +183,9 @@ def check(
     if isinstance(source_model, RLModel):
         errors.update(_clone_errors(source_model, clean))
         clean["cloned_from"] = source_model
+        clean["cloned_checkpoint"] = settings.get("cloned_checkpoint") or Checkpoint.BEST
+        if clean["cloned_checkpoint"] not in Checkpoint.values:
+            errors["cloned_checkpoint"] = "Start the clone from the best or the last checkpoint."
     if errors:
         raise Invalid(errors)
     return ModelSettings(**clean)
@@ -225,6 +235,9 @@ def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
         errors["extra_tracks"] = "Choose extra tracks from the listed ones."
     clean["extra_tracks"] = extra
     clean["seed"] = _integer(settings.get("seed", 0)) or 0
+    clean["best_checkpoint_by"] = settings.get("best_checkpoint_by") or BestCheckpointBy.PROGRESS
+    if clean["best_checkpoint_by"] not in BestCheckpointBy.values:
+        errors["best_checkpoint_by"] = "Pick the best checkpoint by progress, reward or lap time."
     clean["domain_randomisation"] = _switch(settings, "domain_randomisation", errors)
 
 

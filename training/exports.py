@@ -209,6 +209,7 @@ def pitlane_settings(model: RLModel) -> dict:
         "shell_colour": model.shell_colour,
         "camera_lens": model.camera_lens,
         "domain_randomisation": model.domain_randomisation,
+        "best_checkpoint_by": model.best_checkpoint_by,
         "training_seconds": round(model.jobs.aggregate(s=Sum("training_seconds"))["s"] or 0, 1),
     }
 

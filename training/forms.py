@@ -18,6 +18,7 @@ from simulator import config as sim
 from training import configuration, imports, selectors
 from training.models import (
     Algorithm,
+    BestCheckpointBy,
     CameraLens,
     EvaluationJob,
     Network,
@@ -360,6 +361,19 @@ class ModelCreateForm(TrackAndRaceFields):
         choices=Algorithm.choices, widget=forms.RadioSelect, initial=Algorithm.PPO
     )
     max_minutes = forms.IntegerField(label="Maximum training time [min]", initial=60)
+    best_checkpoint_by = forms.ChoiceField(
+        label="Best checkpoint by", choices=BestCheckpointBy.choices, required=False,
+        initial=BestCheckpointBy.PROGRESS,
+        help_text="After each policy update a few evaluation episodes drive the new checkpoint; "
+        "the best is the one whose episodes went furthest on average (DeepRacer's), earned the "
+        "most reward, or lapped fastest (an unfinished lap counts 999.999 s). DeepRacer for "
+        "Cloud's DR_TRAIN_BEST_MODEL_METRIC.",
+    )  # fmt: skip
+    cloned_checkpoint = forms.ChoiceField(
+        label="Start from", choices=EvaluationJob.Checkpoint.choices, required=False,
+        initial=EvaluationJob.Checkpoint.BEST, widget=forms.RadioSelect,
+        help_text="Which of its source's checkpoints the clone's training starts from.",
+    )  # fmt: skip
     workers = forms.IntegerField(
         label="Simulations at once", initial=1,
         help_text=range_help(1, configuration.MAX_WORKERS, 1,
@@ -398,6 +412,8 @@ class ModelCreateForm(TrackAndRaceFields):
         limit(self.fields["workers"], 1, configuration.MAX_WORKERS, 1)
         if source is not None:
             self._lock_what_a_clone_keeps()
+            if checkpoints := selectors.model_checkpoint_choices(model=source):
+                self.fields["cloned_checkpoint"].choices = [(c.which, c.label) for c in checkpoints]
 
     @staticmethod
     def _hyperparameter_field(setting: hyperparameters.Setting) -> forms.Field:
@@ -473,6 +489,7 @@ class ModelCreateForm(TrackAndRaceFields):
             "extra_tracks": list(model.extra_tracks),
             "reward_function": model.reward_function,
             "domain_randomisation": model.domain_randomisation,
+            "best_checkpoint_by": model.best_checkpoint_by,
         }
         if model.boxes:
             initial.update(box_count=model.boxes.get("count"),
@@ -546,7 +563,10 @@ class ModelCreateForm(TrackAndRaceFields):
             "extra_tracks": [track.name for track in data.get("extra_tracks") or []],
             "reward_function": data["reward_function"],
             "domain_randomisation": bool(data.get("domain_randomisation")),
+            "best_checkpoint_by": data.get("best_checkpoint_by") or BestCheckpointBy.PROGRESS,
         }
+        if self.source is not None:
+            draft["cloned_checkpoint"] = data.get("cloned_checkpoint") or "best"
         return draft
 
     def _kept_hyperparameters(self, algorithm: str) -> dict:
@@ -616,7 +636,7 @@ class Section:
 
 
 SECTIONS = (
-    Section("section-name", "Name", ("name", "description")),
+    Section("section-name", "Name", ("name", "description", "cloned_checkpoint")),
     Section("section-track", "Track", ("track", "direction", "domain_randomisation")),
     Section("section-race-type", "Race type", ("race_type", "box_count", "box_randomize",
                                                "bot_count", "bot_speed", "bot_lane_changes")),
@@ -628,7 +648,7 @@ SECTIONS = (
     Section("section-algorithm", "Training algorithm and hyperparameters", ("algorithm",),
             prefixed=True),
     Section("section-stop", "Stop condition and workers", ("max_minutes", "workers",
-                                                           "extra_tracks")),
+                                                           "extra_tracks", "best_checkpoint_by")),
     Section("section-reward-function", "Reward function", ("reward_function",)),
 )  # fmt: skip
 

@@ -693,6 +693,7 @@ def _settings(
         "max_minutes": ours.get("max_minutes", 60),
         "extra_tracks": ours.get("extra_tracks", []),
         "seed": ours.get("seed", 0),
+        "best_checkpoint_by": ours.get("best_checkpoint_by"),  # None before it was written
         "reward_function": reward,
     }
     _metadata_left_out(metadata, notes)

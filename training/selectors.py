@@ -24,6 +24,7 @@ from rl.stopwatch import PHASES
 from training import artifacts, jobs
 from training.jobs import IMPORTED
 from training.models import (
+    BestCheckpointBy,
     EvaluationJob,
     EvaluationTrial,
     Iteration,
@@ -386,12 +387,15 @@ class CheckpointChoice:
     iteration: int | None  # None: weights that came with an import
     evaluation_completion: float | None  # [%] in that iteration's evaluation episodes
     trained: bool = True  # ``checkpoint_trained``
+    metric: str = BestCheckpointBy.PROGRESS  # the model's: how its training picks the best
 
     @property
     def label(self) -> str:
         if self.iteration is None:
             return EvaluationJob.Checkpoint(self.which).label
         name = "Best" if self.which == EvaluationJob.Checkpoint.BEST else "Last"
+        if name == "Best" and self.metric != BestCheckpointBy.PROGRESS:
+            name += f" by {BestCheckpointBy(self.metric).label.lower()}"
         if self.iteration == 0:
             started = f"{name}: the weights training started from"
             return started if self.trained else f"{started}, {UNTRAINED}"
@@ -420,6 +424,7 @@ def model_checkpoint_choices(*, model: RLModel) -> list[CheckpointChoice]:
             number,
             completions.get(number),
             trained=checkpoint_trained(model=model, name=names[which]),
+            metric=model.best_checkpoint_by,
         )
         for which, number in iterations.items()
     ]

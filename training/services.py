@@ -309,7 +309,7 @@ CLONE_COPY_FAILED = (
 
 
 def clone_weights_copy(*, model: RLModel, weights: str | None = None) -> str | None:
-    """Copy the clone ``model``'s starting weights, its source's best trained checkpoint
+    """Copy the clone ``model``'s starting weights, its source's chosen trained checkpoint
     (``weights``, when the caller has looked it up), to where its training starts from
     (``artifacts.CLONED_WEIGHTS``); None once copied, else why not, in the racer's words, for
     ``CLONE_COPY_FAILED``. File work (a checkpoint may be hundreds of MiB), so never inside a
@@ -318,7 +318,8 @@ def clone_weights_copy(*, model: RLModel, weights: str | None = None) -> str | N
     (its request died before it made one) makes it."""
     if weights is None:
         source = RLModel.objects.filter(pk=model.cloned_from_id).first()
-        weights = selectors.model_trained_checkpoint(model=source) if source else None
+        which = model.cloned_checkpoint or "best"
+        weights = selectors.model_trained_checkpoint(model=source, which=which) if source else None
     if weights is None:
         return "that model was deleted"
     try:
@@ -408,7 +409,10 @@ def _model_save(
     source = settings.cloned_from
     if source is not None and source.owner_id != owner.pk:
         raise configuration.Invalid({"cloned_from": "You can clone only your own models."})
-    weights = selectors.model_trained_checkpoint(model=source) if source is not None else None
+    weights = (
+        selectors.model_trained_checkpoint(model=source, which=settings.cloned_checkpoint)
+        if source is not None else None
+    )  # fmt: skip
     if source is not None and weights is None:
         raise configuration.Invalid({"cloned_from": (
             f"{source.name} is {selectors.UNTRAINED}: it has no trained weights to clone."

@@ -124,3 +124,21 @@ def test_a_models_pages_show_no_internal_status_names_or_track_slugs(client, ali
     assert "Rookie Loop" in pages["model"] and "S-Bend" in pages["model"]
     assert pages["evaluation"].count("Lap complete") == 2
     assert "Time up" in pages["evaluation"]
+
+
+def test_the_model_page_says_which_checkpoint_each_evaluation_drove_and_how_best_is_picked(
+    client, alice, evaluated
+):
+    model = trained_for_five_iterations(alice)
+    RLModel.objects.filter(pk=model.pk).update(best_checkpoint_by="laptime")
+    best, last = evaluated(model, "best"), evaluated(model, "last")
+    client.force_login(alice)
+
+    page = visible_text(
+        client.get(reverse("training:model-detail", args=[model.pk])).content.decode()
+    )
+
+    assert "Best checkpoint by Lap time" in page
+    assert f"Best, iteration 3 · seed {best.seed}" in page
+    assert f"Last, iteration 5 · seed {last.seed}" in page
+    assert "Best by lap time: iteration 3, 85% evaluation completion" in page  # the downloads

@@ -7,7 +7,12 @@ import pytest
 from django.urls import reverse
 
 from rl.learner import load_tensors
-from tests.training.factories import STRAIGHT_AHEAD, ready_model, trained_model
+from tests.training.factories import (
+    STRAIGHT_AHEAD,
+    ready_model,
+    trained_model,
+    with_a_later_checkpoint,
+)
 from tests.training.test_model_pages import form_data
 from tests.training.test_training import settings as training_settings
 from tests.training.test_training import wait_for_job
@@ -53,6 +58,32 @@ def test_a_clone_starts_from_the_sources_best_weights(alice, tracks, client):
     assert artifacts.read(artifacts.path(clone, artifacts.CLONED_WEIGHTS)) == artifacts.read(best)
 
 
+def test_a_clone_may_start_from_the_sources_last_weights_and_says_so(alice, tracks, client):
+    source = with_a_later_checkpoint(ready_model(alice))
+    job = source.jobs.get()
+    artifacts.save(source, artifacts.checkpoint(2), b"not the best weights")
+    client.force_login(alice)
+    page = client.get(clone_url(source)).text
+    assert "Best: iteration 1" in page and "Last: iteration 2" in page  # the choice, named
+    response = client.post(clone_url(source), cloned_form(cloned_checkpoint="last"))
+    assert response.status_code == 302
+    clone = RLModel.objects.get(name="straight-ahead-clone")
+    assert clone.cloned_checkpoint == "last"
+    copied = artifacts.read(artifacts.path(clone, artifacts.CLONED_WEIGHTS))
+    assert copied == artifacts.read(job.last_checkpoint) == b"not the best weights"
+    shown = client.get(reverse("training:model-detail", args=[clone.pk])).text
+    assert "straight-ahead</a>, its last checkpoint" in shown
+
+
+def test_a_clone_of_a_checkpoint_that_is_neither_best_nor_last_is_refused(alice, tracks, client):
+    source = ready_model(alice)
+    client.force_login(alice)
+    response = client.post(clone_url(source), cloned_form(cloned_checkpoint="first"))
+    assert response.status_code == 400
+    assert response.context["form"].errors["cloned_checkpoint"]
+    assert not RLModel.objects.filter(name="straight-ahead-clone").exists()
+
+
 @pytest.mark.parametrize("settings", [
     {},
     {"algorithm": "sac", "hyperparameters": {}, "race_type": "OBJECT_AVOIDANCE",
@@ -75,7 +106,7 @@ def test_a_clone_posted_as_the_page_shows_it_has_every_setting_of_its_source(
     assert response.status_code == 302, response.context["form"].errors
     clone = RLModel.objects.get(cloned_from=source)
     assert ModelSettings.of(clone) == ModelSettings.of(source).replace(
-        name="source-clone", cloned_from=source
+        name="source-clone", cloned_from=source, cloned_checkpoint="best"
     )
 
 

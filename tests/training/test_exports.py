@@ -19,7 +19,7 @@ from django.urls import reverse
 from rl import cargraph, hyperparameters
 from rl.policies import Policy
 from tests.training.factories import sensor_frames, trained_model
-from training import artifacts
+from training import artifacts, exports
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db
@@ -206,3 +206,15 @@ def test_the_model_page_offers_the_archives_to_its_owner_only(alice, bob, tracks
     client.force_login(bob)
     assert client.get(url).status_code == 404
     assert client.get(reverse("training:model-export-virtual", args=[model.pk])).status_code == 404
+
+
+def test_a_download_holds_the_checkpoint_chosen_best_or_last(alice, tracks):
+    model = trained_model(alice, "two-checkpoints")
+    later = artifacts.read(
+        trained_model(alice, "later", weights=decisive).jobs.get().last_checkpoint
+    )
+    name = artifacts.save(model, artifacts.checkpoint(2), later)
+    model.jobs.update(last_checkpoint=name, iterations=2)
+    best, last = exports.onnx(model, "best"), exports.onnx(model, "last")
+    assert last.name.endswith(f"/exports/onnx-{exports._digest(later)}.tar.gz")
+    assert best.name != last.name  # each archive is named by the weights it holds

@@ -648,7 +648,9 @@ def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(
               "exploration_type": "e-greedy", "sac_alpha": 0.3,
               "discount_factor": 0.99}  # fmt: skip
     stored.pop("stack_size")  # a model from before the kept keys: the export fills them in
-    RLModel.objects.filter(pk=original.pk).update(hyperparameters=stored)
+    RLModel.objects.filter(pk=original.pk).update(
+        hyperparameters=stored, best_checkpoint_by="reward"
+    )
     original.refresh_from_db()
     members = {}
     with tarfile.open(fileobj=io.BytesIO(virtual_archive(original)), mode="r:gz") as tar:
