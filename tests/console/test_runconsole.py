@@ -94,7 +94,7 @@ def test_it_serves_the_console_with_redis_and_a_worker_per_queue(console_running
     output = str(printed)
     port = env["PITLANE_PORT"]
     assert f"Pitlane is running: http://127.0.0.1:{port}" in output
-    assert "8 built-in tracks loaded" in output
+    assert "78 built-in tracks loaded: 8 of Pitlane's and 70 of DeepRacer's." in output
     assert (Path(env["PITLANE_VAR_DIR"]) / "secret_key").stat().st_mode & 0o777 == 0o600
     assert (Path(env["PITLANE_VAR_DIR"]) / "redis" / "appendonlydir").is_dir()
     with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=10) as response:
