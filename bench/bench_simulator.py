@@ -151,6 +151,8 @@ def main() -> None:
     dynamic = Car()  # a steady turn at 2 m/s
     figures = [
         ("environment steps/s, camera, time trial", environment_steps()),
+        ("  environment steps/s, the same with domain randomisation",
+         environment_steps(randomise=True)),
         ("environment steps/s, stereo + lidar, 3 bot cars",
          environment_steps(sensors=["STEREO_CAMERAS", "LIDAR"], race_type="HEAD_TO_BOT")),
         ("car dynamics steps/s (Car.step alone, 8 sub-steps)",
