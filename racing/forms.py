@@ -37,7 +37,7 @@ class SubmissionForm(RacerWords, forms.Form):
     )  # fmt: skip
     checkpoint = forms.ChoiceField(
         choices=EvaluationJob.Checkpoint.choices, initial=EvaluationJob.Checkpoint.BEST,
-        widget=forms.RadioSelect,
+        widget=forms.RadioSelect, required=False,
         help_text="Which of the model's checkpoints races: the best its training measured "
         "(by its best-checkpoint setting) or the last it saved.",
     )  # fmt: skip

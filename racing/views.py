@@ -104,7 +104,7 @@ def submission_create(request: HttpRequest) -> HttpResponse:
                 racer=request.user,
                 event=form.cleaned_data["event"],
                 model=form.cleaned_data["model"],
-                checkpoint=form.cleaned_data["checkpoint"],
+                checkpoint=form.cleaned_data["checkpoint"] or "best",
             )
         except services.SubmissionRefused as refused:
             form.add_error(None, str(refused))

@@ -86,10 +86,12 @@ def test_the_submit_page_keeps_the_choice_and_says_why_it_is_refused(client, ali
     assert "Choose one of the open events listed." in response.text
     assert f'<option value="{model.pk}" selected>' in response.text
     response = client.post(
-        reverse("racing:submission-create"), {"event": trial.pk, "model": model.pk}
+        reverse("racing:submission-create"),
+        {"event": trial.pk, "model": model.pk, "checkpoint": "last"},
     )
     submission = Submission.objects.get()
     assert response.status_code == 302 and response.url == submission.get_absolute_url()
+    assert submission.checkpoint == submission.evaluation.checkpoint == "last"
     detail = client.get(submission.get_absolute_url())
     assert "Queued" in detail.text and "Watch it race live" in detail.text
     assert client.get(reverse("racing:submission-list")).text.count(trial.name) == 1
