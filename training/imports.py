@@ -32,6 +32,7 @@ from datetime import timedelta
 from pathlib import PurePosixPath
 from typing import IO, TYPE_CHECKING
 
+import numpy as np
 import yaml
 from django.contrib.auth.models import AbstractBaseUser
 from django.contrib.sessions.backends.base import SessionBase
@@ -844,7 +845,32 @@ def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str]:
         notes.append(f"{track.display_name} is not driven {said} here: the model drives it "
                      f"{instead}.")  # fmt: skip
         direction = other
+    if track is not None and (note := _bare_world_note(world, track.name, direction)):
+        notes.append(note)
     return (track.name if track else DEFAULT_TRACK), direction
+
+
+def _bare_world_note(world: str, name: str, direction: str) -> str | None:
+    """What DeepRacer drove where it is not what we drive: DeepRacer for Cloud writes a track's
+    WORLD_NAME bare (defaults/template-worker.env:1, DR_WORLD_NAME=reInvent2019_track;
+    scripts/droa/import_model.py:371), simapp drives that file, X.npy, and we drive the route file
+    the console drives that way, X_ccw.npy or X_cw.npy, which for some tracks holds other
+    waypoints (reInvent2019_track.npy 154, reInvent2019_track_ccw.npy 79)."""
+    theirs_file = sim_tracks.route_file(world) if world == name else None
+    if theirs_file is None:
+        return None
+    ours = sim_tracks.load(name).with_direction(direction)
+    if ours.source == theirs_file:
+        return None
+    theirs = sim_tracks.load(theirs_file)
+    mine, drove = np.asarray(ours.waypoints), np.asarray(theirs.waypoints)
+    if mine.shape == drove.shape and (np.allclose(mine, drove) or np.allclose(mine, drove[::-1])):
+        return None
+    return (f"DeepRacer drove {theirs_file.name} ({len(theirs.waypoints)} waypoints); Pitlane "
+            f"drives {ours.display_name} {configuration.direction_words(direction)} on "
+            f"{ours.source.name} ({len(ours.waypoints)} waypoints), the route DeepRacer's console "
+            "drives that way: a reward function that reads waypoints by index sees another "
+            "route.")  # fmt: skip
 
 
 def _variant(name: str) -> str:

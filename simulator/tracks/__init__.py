@@ -233,6 +233,15 @@ def world(world_name: str) -> tuple[str, str] | None:
     return None
 
 
+def route_file(world_name: str) -> Path | None:
+    """The route file a DeepRacer ``WORLD_NAME`` names (simapp drives ``X.npy`` for WORLD_NAME
+    X, bare or suffixed); None for a name that is not one of DeepRacer's route files."""
+    found = world(world_name)
+    if found is None:
+        return None
+    return _catalog()[found[0]]["folder"] / "routes" / f"{world_name}.npy"
+
+
 def deepracer_world(name: str, direction: str) -> tuple[str, bool]:
     """(WORLD_NAME, REVERSE_DIR) that have DeepRacer drive track ``name`` ``direction``, as a
     training_params.yaml says it: the route file DeepRacer drives that way where there is one

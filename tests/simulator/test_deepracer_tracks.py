@@ -37,8 +37,10 @@ def test_the_catalogue_holds_every_looped_route_file_of_simapp_as_70_tracks():
 def test_a_world_name_resolves_to_its_track_and_the_direction_its_file_runs(
     world_name, name, direction, driven
 ):
-    """A WORLD_NAME that is a track's own name (DeepRacer for Cloud's, without a suffix) loads
-    the track; driven that way, it is on the route file the console drove."""
+    """A WORLD_NAME resolves to its track and the way its file runs; the track driven that way
+    is on the route file the console drives (X_ccw/X_cw). For a bare name, which DeepRacer for
+    Cloud writes, that is not always the file simapp drove (reInvent2019_track.npy holds 154
+    waypoints, reInvent2019_track_ccw.npy 79): an import says so in its notes."""
     assert tracks.world(world_name) == (name, direction)
     loaded = tracks.load(world_name).with_direction(direction)
     assert (loaded.name, loaded.direction, loaded.world_name) == (name, direction, driven)

@@ -514,18 +514,25 @@ def track_row(name: str, **changes) -> Track:
     return Track.objects.create(name=name, **fields)
 
 
+SMILE_BARE = (
+    "DeepRacer drove reInvent2019_track.npy (154 waypoints); Pitlane drives Smile Speedway "
+)
+
+
 @pytest.mark.parametrize(
     ("params", "expected", "noted"),
     [
-        ({"WORLD_NAME": "reInvent2019_track"}, ("reInvent2019_track", "counterclockwise"), ""),
+        # DeepRacer for Cloud's bare name: simapp drove reInvent2019_track.npy, we drive _ccw.
+        ({"WORLD_NAME": "reInvent2019_track"}, ("reInvent2019_track", "counterclockwise"),
+         SMILE_BARE + "counter-clockwise on reInvent2019_track_ccw.npy (79 waypoints)"),
         ({"WORLD_NAME": "reInvent2019_track_cw"}, ("reInvent2019_track", "clockwise"), ""),
         ({"WORLD_NAME": "reInvent2019_track_ccw"}, ("reInvent2019_track", "counterclockwise"), ""),
         ({"WORLD_NAME": "reInvent2019_track_ccw", "REVERSE_DIR": True},
          ("reInvent2019_track", "clockwise"), ""),
         ({"WORLD_NAME": "reInvent2019_track", "TRACK_DIRECTION_CLOCKWISE": "true"},
-         ("reInvent2019_track", "clockwise"), ""),
+         ("reInvent2019_track", "clockwise"), SMILE_BARE + "clockwise on"),
         ({"WORLD_NAME": "reInvent2019_track", "TRACK_DIRECTION_CLOCKWISE": False,
-          "REVERSE_DIR": "True"}, ("reInvent2019_track", "clockwise"), ""),
+          "REVERSE_DIR": "True"}, ("reInvent2019_track", "clockwise"), SMILE_BARE + "clockwise"),
         # The exact name comes first: a track whose own name ends in _cw.
         ({"WORLD_NAME": "Oval_cw"}, ("Oval_cw", "counterclockwise"), ""),
         # Then lower-case, with hyphens for underscores; the suffix still gives the direction.
@@ -555,9 +562,11 @@ def test_world_name_finds_the_loaded_track_and_its_direction(params, expected, n
     [
         ({"WORLD_NAME": "2022_april_open_cw"}, ("2022_april_open", "clockwise"), ""),
         ({"WORLD_NAME": "2022_april_open", "TRACK_DIRECTION_CLOCKWISE": True},
-         ("2022_april_open", "clockwise"), ""),
+         ("2022_april_open", "clockwise"), "DeepRacer drove 2022_april_open.npy (168 waypoints); "
+         "Pitlane drives Ace Speedway clockwise on 2022_april_open_cw.npy (170 waypoints)"),
         # Without a suffix, the file's own way, though the console offered it clockwise first.
-        ({"WORLD_NAME": "reInvent2019_wide"}, ("reInvent2019_wide", "counterclockwise"), ""),
+        ({"WORLD_NAME": "reInvent2019_wide"}, ("reInvent2019_wide", "counterclockwise"),
+         "DeepRacer drove reInvent2019_wide.npy (111 waypoints); Pitlane drives"),
         ({"WORLD_NAME": "reinvent_carpet", "REVERSE_DIR": True},
          ("reinvent_carpet", "clockwise"), ""),
         ({"WORLD_NAME": "Albert", "TRACK_DIRECTION_CLOCKWISE": False}, ("Albert", "clockwise"),
@@ -569,7 +578,10 @@ def test_a_deepracer_world_name_lands_on_the_built_in_track_and_its_direction(
 ):
     notes = []
     assert imports._deepracer_track(params, notes) == expected
-    assert notes == ([noted] if noted else [])
+    if noted:
+        assert len(notes) == 1 and noted in notes[0], notes
+    else:
+        assert notes == []
 
 
 def test_a_deepracer_export_imports_onto_its_own_track(alice, tracks, tmp_path):
