@@ -121,10 +121,16 @@ def track_check(
     if not TRACK_NAME.fullmatch(name or ""):
         raise TrackRefused("name", (
             "A track name is 1 to 64 letters, digits, '_' or '-', starting with a letter or "
-            "digit, like DeepRacer's reInvent2019_track."
+            "digit, like my_track_2."
         ))  # fmt: skip
     if name in simulator_tracks.names():
         raise TrackRefused("name", f"{name} is a built-in track; choose another name.")
+    if (builtin := simulator_tracks.world(name)) is not None:  # load(name) would find it first
+        shown = simulator_tracks.entry(builtin[0])["display_name"]
+        raise TrackRefused("name", (
+            f"{name} is DeepRacer's name for the built-in {shown} ({builtin[1]}); choose "
+            "another name."
+        ))  # fmt: skip
     existing = Track.objects.filter(name=name).first()
     if existing is not None and (existing.builtin or not replace):
         raise TrackRefused("name", (

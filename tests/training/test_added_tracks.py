@@ -191,3 +191,13 @@ def test_a_model_on_an_added_track_validates_its_reward_and_drives_it_in_the_san
         result = sandbox.episode("random")
     assert result["summary"]["steps"] >= 1
     assert set(sandbox.logs) == {"20.68"}, sandbox.logs
+
+
+def test_a_deepracer_route_name_is_refused_as_it_would_load_the_catalogue_track(tracks):
+    """load() finds a WORLD_NAME in the catalogue before any added track, so 2022_april_open_cw
+    stored as an added track would never be the one driven."""
+    refused = r"^name: 2022_april_open_cw is DeepRacer's name for the built-in Ace Speedway"
+    with pytest.raises(TrackRefused, match=refused + r" \(clockwise\); choose another name"):
+        track_add(name="2022_april_open_cw", display_name="", directions=["clockwise"],
+                  route=routes.route_bytes("clockwise"))  # fmt: skip
+    assert not Track.objects.filter(name="2022_april_open_cw").exists()
