@@ -167,6 +167,10 @@ def training_params(model: RLModel) -> dict:
         "NUM_WORKERS": model.workers,
         "MULTI_TRACK": [model.track.name, *model.extra_tracks],
         "CAR_NAME": model.name,
+        # DeepRacer for Cloud's scripts/training/prepare-config.py:54 and :58; simapp's values
+        # (bundle/markov/metrics/constants.py:163-167, 01f5f01) are our BestCheckpointBy's.
+        "ENABLE_DOMAIN_RANDOMIZATION": model.domain_randomisation,
+        "BEST_MODEL_METRIC": model.best_checkpoint_by,
     }
     if model.boxes:
         params["NUMBER_OF_OBSTACLES"] = model.boxes.get("count", 3)

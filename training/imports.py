@@ -61,6 +61,7 @@ from training import (
 )
 from training.models import (
     Algorithm,
+    BestCheckpointBy,
     CameraLens,
     Network,
     RLModel,
@@ -714,6 +715,7 @@ def _settings(
     settings["workers"] = _deepracer_workers(params, notes)
     settings["shell_colour"] = _deepracer_colour(params, notes)
     settings["domain_randomisation"] = _deepracer_randomisation(params, notes)
+    settings["best_checkpoint_by"] = _deepracer_best_metric(params, notes)
     _params_left_out(params, notes)
     return settings
 
@@ -972,13 +974,15 @@ def _deepracer_colour(params: dict, notes: list[str]) -> str:
 
 def _deepracer_randomisation(params: dict, notes: list[str]) -> bool:
     """``ENABLE_DOMAIN_RANDOMIZATION`` (DeepRacer for Cloud writes DR_ENABLE_DOMAIN_RANDOMIZATION
-    there, scripts/training/prepare-config.py:54), true or false as simapp reads it
-    (bundle/markov/utils.py:129-135, rollout_worker.py:774, 01f5f01)."""
+    there, scripts/training/prepare-config.py:54). simapp reads it with str2bool
+    (bundle/markov/utils.py:129-136, rollout_worker.py:774, 01f5f01), which makes booleans of
+    true and false alone and passes any other text on, where deepracer_racetrack_env.py:222's
+    ``if`` takes it as on ('yes', '1', even 'no'). We take true or false, and leave anything
+    else off with a note rather than guess."""
     given = params.get("ENABLE_DOMAIN_RANDOMIZATION")
-    text = str(given).strip().lower()
-    if given is None or text in ("", "false"):
+    if given is None or given is False or str(given).strip().lower() in ("", "false"):
         return False
-    if text == "true":
+    if _truthy(given):
         return True
     notes.append(
         f"Not carried over from training_params.yaml: ENABLE_DOMAIN_RANDOMIZATION "
@@ -987,9 +991,27 @@ def _deepracer_randomisation(params: dict, notes: list[str]) -> bool:
     return False
 
 
+def _deepracer_best_metric(params: dict, notes: list[str]) -> str:
+    """``BEST_MODEL_METRIC`` (DR_TRAIN_BEST_MODEL_METRIC, prepare-config.py:58): progress,
+    reward or laptime in any case, as simapp reads it (s3_metrics.py:267-268,
+    metrics/constants.py:163-167, 01f5f01); else progress, DeepRacer's default, with a note."""
+    given = params.get("BEST_MODEL_METRIC")
+    if given is None or str(given).strip() == "":
+        return BestCheckpointBy.PROGRESS
+    metric = str(given).strip().lower()
+    if metric in BestCheckpointBy.values:
+        return metric
+    notes.append(
+        f"Not carried over from training_params.yaml: BEST_MODEL_METRIC {_shown(given)}, "
+        "neither progress, reward nor laptime. Training picks the best checkpoint by progress."
+    )
+    return BestCheckpointBy.PROGRESS
+
+
 # training_params.yaml's keys the settings above take.
 PARAMS_TAKEN = {"WORLD_NAME", "TRACK_DIRECTION_CLOCKWISE", "REVERSE_DIR", "RACE_TYPE",
                 "CAR_NAME", "NUM_WORKERS", "CAR_COLOR", "ENABLE_DOMAIN_RANDOMIZATION",
+                "BEST_MODEL_METRIC",
                 *RACE_KEYS["OBJECT_AVOIDANCE"], *RACE_KEYS["HEAD_TO_BOT"]}  # fmt: skip
 # Where DeepRacer kept its files and streams, and who ran it: nothing a model here could use.
 PARAMS_PLACES = re.compile(

@@ -18,7 +18,7 @@ from tests.training.factories import ready_model, trained_model
 from tests.training.test_imports import DEEPRACER_PARAMS, deepracer_export, tar_gz
 from tests.training.test_model_form import post
 from tests.training.test_training import settings as training_settings
-from training import configuration, exports, imports, services
+from training import artifacts, configuration, exports, imports, services
 from training.forms import ModelCreateForm
 from training.models import EvaluationJob, RLModel
 
@@ -88,6 +88,33 @@ def test_a_deepracer_archive_brings_its_enable_domain_randomization(given, expec
         "Not carried over from training_params.yaml: ENABLE_DOMAIN_RANDOMIZATION sometimes, "
         "neither true nor false. Domain randomisation is off."
     ] if given == "sometimes" else [])  # fmt: skip
+
+
+def test_training_params_carry_it_and_the_best_metric_through_a_deepracer_archive(
+    alice, bob, tracks
+):
+    """Without our pitlane.json, training_params.yaml alone brings both back, spelt as DeepRacer
+    for Cloud writes them (ENABLE_DOMAIN_RANDOMIZATION, BEST_MODEL_METRIC)."""
+    original = trained_model(alice, "shifty", domain_randomisation=True,
+                             best_checkpoint_by="laptime")  # fmt: skip
+    params = artifacts.training_params(original)
+    assert (params["ENABLE_DOMAIN_RANDOMIZATION"], params["BEST_MODEL_METRIC"]) == (True, "laptime")
+    archive = deepracer_export(**{"training_params.yaml": yaml.safe_dump(params).encode()})
+    imported = imports.import_model(owner=bob, archive=io.BytesIO(tar_gz(archive)))
+    assert (imported.model.domain_randomisation, imported.model.best_checkpoint_by) == (
+        True, "laptime")  # fmt: skip
+    assert not [note for note in imported.notes if "BEST_MODEL_METRIC" in note]
+
+
+def test_a_best_model_metric_deepracer_does_not_know_is_noted_and_progress_kept(alice, tracks):
+    params = {**DEEPRACER_PARAMS, "BEST_MODEL_METRIC": "speed"}
+    archive = deepracer_export(**{"training_params.yaml": yaml.safe_dump(params).encode()})
+    imported = imports.import_model(owner=alice, archive=io.BytesIO(tar_gz(archive)))
+    assert imported.model.best_checkpoint_by == "progress"
+    assert (
+        "Not carried over from training_params.yaml: BEST_MODEL_METRIC speed, neither "
+        "progress, reward nor laptime." in " ".join(imported.notes)
+    )
 
 
 def test_an_evaluation_drives_in_randomised_scenes_only_when_asked(alice, tracks):
