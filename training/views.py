@@ -60,7 +60,9 @@ from training.models import Algorithm, EvaluationJob, JobLogLine, RewardFunction
 
 @login_required
 def model_list(request: HttpRequest) -> HttpResponse:
-    search, sort = request.GET.get("q", "")[:100], request.GET.get("sort", "")
+    # A NUL is dropped: PostgreSQL refuses one in a query's text (a 500 on ?q=%00).
+    search = request.GET.get("q", "").replace("\x00", "")[:100]
+    sort = request.GET.get("sort", "")
     return render(
         request,
         "training/model_list.html",
