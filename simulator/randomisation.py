@@ -50,8 +50,8 @@ AMBIENT = 0.6  # brightness under a black light
 LIGHT_GAIN = 0.8  # brightness added by a white light's luma of 1
 INTENSITY = (0.85, 1.15)  # [x] the light's strength
 # Ours: each gray level that a part of the track image is drawn in (surface, borders, centre
-# line, ground...) moves by up to this much, independently: the surface stays far darker than
-# the borders (58 and 250 today: at least 112 levels apart).
+# line, ground...) moves by up to this much, independently: texture.Style's road is darker
+# than its borders by well over twice this, so the surface stays far darker than the borders.
 PART_SHIFT = 40  # [gray levels of 255]
 TEXTURE_STRENGTH = (0.0, 0.12)  # [x] a mottled texture brightens or darkens by up to this
 TEXTURE_SIZE = (0.2, 1.0)  # [m] the size of its patches
@@ -239,9 +239,13 @@ class Scene:
         return cameras, car, look
 
 
+# What a randomised episode varies, in a racer's words: the model's field, the create and
+# evaluate pages' help say it; describe() says by how much (the model page).
+SUMMARY = "light, colours, textures, camera noise and blur, a little camera, grip and motor jitter"
+
+
 def describe() -> list[tuple[str, str]]:
-    """What a randomised episode varies and by how much, in a racer's words: for pages and the
-    exported training settings."""
+    """What a randomised episode varies and by how much, in a racer's words (the model page)."""
     low, high = AMBIENT * INTENSITY[0], (AMBIENT + LIGHT_GAIN) * INTENSITY[1]
     forward, height, pitch, left = MOUNT_JITTER
     return [

@@ -15,6 +15,7 @@ from django import forms
 from common.forms import RacerWords
 from rl import hyperparameters
 from simulator import config as sim
+from simulator import randomisation
 from training import configuration, imports, selectors
 from training.models import (
     Algorithm,
@@ -220,9 +221,8 @@ def limit(field: forms.Field, low: float, high: float, step: float | str = "any"
 
 
 RANDOMISATION_HELP = (
-    "Each episode in a scene of its own (light, colours, textures, camera noise and blur, a "
-    "little camera and grip jitter), as DeepRacer for Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION: "
-    "a model that copes with scenes it has not seen."
+    f"Each episode in a scene of its own ({randomisation.SUMMARY}), as DeepRacer for Cloud's "
+    "DR_ENABLE_DOMAIN_RANDOMIZATION: a model that copes with scenes it has not seen."
 )
 
 

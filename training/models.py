@@ -14,6 +14,7 @@ from django.core.validators import RegexValidator
 from django.db import models
 
 from rl import hyperparameters
+from simulator import randomisation
 
 
 class Direction(models.TextChoices):
@@ -277,7 +278,7 @@ class RLModel(RaceConditions):
     )  # fmt: skip
     domain_randomisation = models.BooleanField(
         default=False,
-        help_text="Each episode in a scene of its own: light, colours, textures, camera noise "
+        help_text=f"Each episode in a scene of its own: {randomisation.SUMMARY} "
         "(simulator.randomisation); DeepRacer for Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION.",
     )  # fmt: skip
     import_notes = models.JSONField(

@@ -13,8 +13,8 @@ class Migration(migrations.Migration):
             field=models.BooleanField(
                 default=False,
                 help_text="Each episode in a scene of its own: light, colours, textures, camera "
-                "noise (simulator.randomisation); DeepRacer for Cloud's "
-                "DR_ENABLE_DOMAIN_RANDOMIZATION.",
+                "noise and blur, a little camera, grip and motor jitter (simulator.randomisation); "
+                "DeepRacer for Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION.",
             ),
         ),
         migrations.AddField(
