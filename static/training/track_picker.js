@@ -35,18 +35,25 @@ function enhance(picker) {
   };
 
   search.addEventListener("input", apply);
-  // Enter searches here; it does not submit the form the picker is in.
-  search.addEventListener("keydown", (event) => {
-    if (event.key === "Enter") {
-      event.preventDefault();
-      apply();
-    }
-  });
-  tools.querySelector("[data-track-find]")?.setAttribute("hidden", "");
+  // In a form that picks a track, Enter searches here rather than submit that form. The Tracks
+  // list's search is a GET form of its own: there Enter and Find ask the server again, which can
+  // widen a list it narrowed (?q=smile), where this only narrows what the page holds.
+  if (search.form?.method !== "get") {
+    search.addEventListener("keydown", (event) => {
+      if (event.key === "Enter") {
+        event.preventDefault();
+        apply();
+      }
+    });
+    tools.querySelector("[data-track-find]")?.setAttribute("hidden", "");
+  }
   for (const button of buttons) {
     button.addEventListener("click", (event) => {
       event.preventDefault();
       sort = button.dataset.trackSort;
+      // The Tracks list's form asks the server in the order shown when it searches again.
+      const kept = tools.querySelector("input[type=hidden][name=sort]");
+      if (kept) kept.value = sort;
       for (const other of buttons) other.setAttribute("aria-pressed", String(other === button));
       apply();
     });

@@ -7,6 +7,7 @@ from tests.browser.checks import page_problems
 from tests.browser.test_accounts_in_chromium import log_in
 from tests.conftest import PASSWORD
 from tests.training.factories import ready_model
+from training import selectors
 from training.models import RLModel
 from training.rewards import EXAMPLES
 from training.services import model_create
@@ -68,6 +69,20 @@ def test_the_track_picker_narrows_sorts_and_chooses_a_one_way_deepracer_track(
     expect(page.get_by_text("yun-car is created; its training is queued.")).to_be_visible()
     model = RLModel.objects.get(name="yun-car")
     assert (model.track.name, model.direction) == ("Albert", "clockwise")
+
+
+def test_the_tracks_lists_search_asks_the_server_again_and_widens_a_narrowed_list(
+    page: Page, alice, tracks
+):
+    log_in(page, "alice", PASSWORD)
+    page.goto("/models/?q=smile")
+    shown = page.locator("[data-track-list] [data-track]:visible")
+    expect(shown).to_have_count(1)
+    expect(page.get_by_role("button", name="Find", exact=True)).to_be_visible()
+    page.get_by_role("searchbox", name="Find a track").fill("speedway")
+    page.get_by_role("searchbox", name="Find a track").press("Enter")
+    expect(page).to_have_url(re.compile(r"q=speedway"))
+    expect(shown).to_have_count(len(selectors.tracks_listed(search="speedway", sort="")))
 
 
 def open_create_page(page: Page, name: str) -> None:
