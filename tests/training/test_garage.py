@@ -21,7 +21,8 @@ def test_loadtracks_mirrors_the_simulator_catalogue_and_can_run_again(capsys):
     assert oval.length_m == 16.5
     assert oval.directions == ["Counter-clockwise", "Clockwise"]
     assert Track.objects.get(name="championship-circuit").directions == ["Counter-clockwise"]
-    assert f"{len(simulator_tracks.names())} built-in tracks loaded" in capsys.readouterr().out
+    said = f"{len(simulator_tracks.names())} built-in tracks loaded: 8 of Pitlane's and 70 of "
+    assert said + "DeepRacer's." in capsys.readouterr().out
 
 
 def test_a_racer_builds_a_vehicle(client, alice):

@@ -171,6 +171,8 @@ def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, track
     page = response.content.decode()
     assert "What the import creates" in page and "which is not loaded here" in page
     assert "<dd data-preview-track>Rookie Loop (counter-clockwise)</dd>" in page  # the site's words
+    # The track's directions, its default first (the console offered reInvent2019_wide clockwise).
+    assert '"reInvent2019_wide" data-directions="clockwise counterclockwise"' in page
     # The car as the model page shows it: the race type, the action space's fan and table.
     assert "<dt>Race type</dt><dd>\nTime trial\n</dd>" in page
     assert "<dt>Action space</dt><dd>Discrete:\n  3 actions" in page and "data-action-fan" in page

@@ -2,6 +2,7 @@ from pathlib import Path
 
 from django.core.management.base import BaseCommand, CommandError
 
+from simulator import tracks as simulator_tracks
 from training.models import Direction, Track
 from training.services import TrackRefused, track_add, tracks_sync
 
@@ -43,7 +44,8 @@ class Command(BaseCommand):
             if options["name"] or options["replace"]:
                 raise CommandError("--name and --replace go with a route file to add.")
             synced = tracks_sync()
-            deepracer = sum(track.season is not None for track in synced)
+            deepracers = set(simulator_tracks.names(origin="deepracer"))
+            deepracer = sum(track.name in deepracers for track in synced)
             self.stdout.write(
                 f"{len(synced)} built-in tracks loaded: {len(synced) - deepracer} of Pitlane's "
                 f"and {deepracer} of DeepRacer's."
