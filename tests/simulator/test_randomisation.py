@@ -100,15 +100,20 @@ def test_part_levels_are_an_images_most_common_gray_levels():
 def test_a_randomised_car_has_its_grip_and_motor_jittered_within_range():
     env = DeepRacerEnv(track="rookie-loop", randomise=True)
     plain = DeepRacerEnv(track="rookie-loop").car.spec
-    grips = set()
+    grips, motors = set(), set()
     for seed in range(5):
         env.reset(seed=seed)
         spec = env.car.spec
         low, high = randomisation.FRICTION
         assert plain.friction * low <= spec.friction <= plain.friction * high
+        # The motor's calibration: the same command turns the wheels up to MOTOR times as fast.
+        motor = plain.command_radius / spec.command_radius
+        assert randomisation.MOTOR[0] <= motor <= randomisation.MOTOR[1]
+        assert abs(motor - env.look.motor) < 1e-9
         assert env.car.hinge.spec is spec  # the episode's car drives with it
         grips.add(spec.friction)
-    assert len(grips) == 5
+        motors.add(motor)
+    assert len(grips) == len(motors) == 5
 
 
 def test_boxes_take_the_looks_colours():
