@@ -16,11 +16,17 @@ end, averaged, for the model seeing through the camera and track image Pitlane h
 44 (``bench_camera_figure.BEFORE_*``), the same model through simapp's (after), and a policy
 choosing among the same 12 actions at random (its seed the start's number). The tracks are
 DeepRacer's (``simulator.tracks.load`` reads simapp's route files by WORLD_NAME).
+
+``--old-parts`` finds which part of the scene the model reads: the after column is driven with
+the named parts of the old look (Style fields such as ``surroundings`` or ``border_width``, or
+the camera's ``camera_sky`` and ``camera_texture_ppm``) and the rest of simapp's, through
+simapp's camera: ``--old-parts camera_sky,surroundings`` gives the model the old grass and sky.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import subprocess
 import sys
@@ -30,11 +36,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.bench_camera_figure import before
+from bench.bench_camera_figure import BEFORE_CAMERA, BEFORE_STYLE, before
 from rl import tfgraph, tfweights
 from rl.networks import architecture
 from rl.policies import Policy
 from simulator.env import DeepRacerEnv
+from simulator.texture import style_for
 
 VERSION = "1.5.6"
 MODEL = "tests/deepracer/model/sample-model/model"
@@ -81,14 +88,28 @@ def progress(env: DeepRacerEnv, act) -> float:
     return 100.0 if info["status"] == "lap_complete" else float(info["progress"])
 
 
-def drive(track: str, settings: dict, starts: int, act_for, old: bool = False) -> float:
+def with_old_parts(env: DeepRacerEnv, parts: list[str]) -> DeepRacerEnv:
+    """``env`` seeing ``parts`` of the scene as before issue 44, the rest as simapp's."""
+    camera = {part: BEFORE_CAMERA[part] for part in parts if part in BEFORE_CAMERA}
+    fields = {part: getattr(BEFORE_STYLE, part) for part in parts if part not in camera}
+    env.config.update(camera, track_style=dataclasses.replace(style_for(env.track), **fields))
+    env._build_sensors()  # the cameras again, from the changed config
+    return env
+
+
+def drive(track: str, settings: dict, starts: int, act_for, old: bool = False,
+          old_parts: list[str] = ()) -> float:  # fmt: skip
     """Mean progress from ``starts`` points round ``track``; ``act_for(start)`` gives the
     policy for each."""
     results = []
     for number in range(starts):
         env = DeepRacerEnv(track=track, mode="evaluation", laps=1, max_resets=0,
                            start=number / starts, **settings)  # fmt: skip
-        results.append(progress(before(env) if old else env, act_for(number)))
+        if old:
+            env = before(env)
+        elif old_parts:
+            env = with_old_parts(env, old_parts)
+        results.append(progress(env, act_for(number)))
     return float(np.mean(results))
 
 
@@ -97,7 +118,14 @@ def main() -> None:
     parser.add_argument("--tracks", default=",".join(TRACKS))
     parser.add_argument("--starts", type=int, default=3, help="points round the lap")
     parser.add_argument("--utils", type=Path, help="deepracer-utils' unpacked source")
+    parser.add_argument("--old-parts", default="", help="drive 'after' with these parts of the "
+                        "old look, e.g. camera_sky,surroundings")  # fmt: skip
     args = parser.parse_args()
+    old_parts = [part for part in args.old_parts.split(",") if part]
+    known = {*BEFORE_CAMERA, *(field.name for field in dataclasses.fields(BEFORE_STYLE))}
+    if unknown := sorted(set(old_parts) - known):
+        parser.error(f"--old-parts: no part named {', '.join(unknown)}; "
+                     f"the parts are {', '.join(sorted(known))}")  # fmt: skip
     policy, settings = deepracer_policy(utils_folder(args.utils))
     actions = len(settings["action_space"])
 
@@ -111,11 +139,13 @@ def main() -> None:
     started = time.perf_counter()
     print(f"deepracer-utils {VERSION} model_48.pb, {args.starts} starts a track, one lap, "
           "ended at the first time off the track: mean progress [%]")  # fmt: skip
+    if old_parts:
+        print(f"after: simapp's camera and scene but the old {', '.join(old_parts)}")
     print(f"{'track':<22}{'random':>8}{'before':>8}{'after':>8}")
     for track in args.tracks.split(","):
         row = [drive(track, settings, args.starts, random),
                drive(track, settings, args.starts, model, old=True),
-               drive(track, settings, args.starts, model)]  # fmt: skip
+               drive(track, settings, args.starts, model, old_parts=old_parts)]  # fmt: skip
         print(f"{track:<22}" + "".join(f"{value:8.1f}" for value in row), flush=True)
     print(f"({time.perf_counter() - started:.0f} s)")
 
