@@ -22,6 +22,7 @@ from simulator import config
 from simulator.actors import Traffic
 from simulator.camera import (
     LENSES,
+    SIMAPP_FOV,
     STEREO_BASELINE,
     Lens,
     Mount,
@@ -540,8 +541,9 @@ class DeepRacerEnv(gym.Env):
         return (sectors < self.config["sector_lidar_clipping"]).astype(np.int8)
 
     def _noisy(self, distances: np.ndarray) -> np.ndarray:
-        """The rays that hit something within range, with the lidar's noise, clipped again;
-        a ray that reaches its range saw nothing, and Gazebo's noise leaves it so."""
+        """The rays that hit something within our range (lidar_range: Gazebo's reaches 6 m,
+        simapp racecar.xacro:24, we clip at ours), with the lidar's noise, clipped again; a ray
+        that reaches the range saw nothing, and is left so."""
         low, high = self.config["lidar_range"]
         noise = self.np_random.normal(0.0, self.config["lidar_noise"], distances.shape)
         return np.where(distances < high, np.clip(distances + noise, low, high), distances)
@@ -637,9 +639,10 @@ class DeepRacerEnv(gym.Env):
 
     def _in_camera(self, actor) -> bool:
         """Whether the object is in the front camera's view: its centre or a corner of its
-        footprint lies within the lens's horizontal field of view, at least 0.2 m ahead of the
-        camera. simapp track_geom/track_data.py:554-590 and cameras/frustum.py:41-42,117-122
-        (near plane 0.2 m; the far plane, 300 m, is beyond any track) (01f5f01)."""
+        footprint lies within 1.13 rad across, at least 0.2 m ahead of the camera. simapp
+        track_geom/track_data.py:554-590 and cameras/frustum.py:41-43,117-122 (near plane 0.2 m;
+        the far plane, 300 m, is beyond any track; 1.13 rad hard-coded whatever the camera, so
+        the reward param is DeepRacer's with the wide lens too) (01f5f01)."""
         c = self.car
         forward, _height, _pitch = self.config["camera_mount"]
         cx, cy = c.point_ahead(forward)
@@ -650,7 +653,7 @@ class DeepRacerEnv(gym.Env):
              actor.y + u * half_l * sin_a + v * half_w * cos_a)
             for u in (-1, 1) for v in (-1, 1)
         ]  # fmt: skip
-        half_fov = math.radians(self.config["camera_fov"]) / 2
+        half_fov = math.radians(SIMAPP_FOV) / 2
         cos_y, sin_y = math.cos(c.yaw), math.sin(c.yaw)
         for x, y in points:
             along = (x - cx) * cos_y + (y - cy) * sin_y

@@ -175,6 +175,20 @@ def test_object_in_camera_is_whether_the_next_object_is_in_view(env, monkeypatch
     assert looking_away["object_in_camera"] is False
 
 
+def test_object_in_camera_keeps_simapps_113_rad_with_the_wide_lens(env, monkeypatch):
+    # frustum.py:43 hard-codes 1.13 rad whatever the camera: a box 50° off the wide lens's axis
+    # is in its 120° picture but not in DeepRacer's param.
+    racer = env(race_type="OBJECT_AVOIDANCE", objects={"count": 1}, camera_lens="wide")
+    assert racer.unwrapped.config["camera_fov"] == 120.0
+    (box,) = racer.unwrapped.traffic.actors
+    box.distance, box.offset = 4.0, 0.0  # on the first straight, at x = 4
+    racer.unwrapped.traffic._update_poses()
+    racer.unwrapped._sync_actor_bodies()
+    assert held_at(racer, monkeypatch, 2.0, -2.0)["params"]["object_in_camera"] is True
+    turned = held_at(racer, monkeypatch, 2.0, -2.0, math.pi / 4)["params"]
+    assert turned["object_in_camera"] is False
+
+
 @pytest.mark.parametrize(("gap", "sectors"), [(0.4, [0, 0, 0, 1, 1, 0, 0, 0]), (0.6, [0] * 8)])
 def test_sector_lidar_marks_a_sector_whose_nearest_return_is_under_half_a_metre(
     env, monkeypatch, gap, sectors
