@@ -59,14 +59,16 @@ class BestCheckpointBy(models.TextChoices):
 class Checkpoint(models.TextChoices):
     """Which of a model's checkpoints an evaluation, a race entry, a download or a clone uses."""
 
-    BEST = "best", "Best (highest evaluation completion)"
+    BEST = "best", "Best"  # by the model's best_checkpoint_by
     LAST = "last", "Last"
 
 
+SEEDS = 2**31  # a replayable run's seed is below it: 31 bits, which every database's integer holds
+
+
 def new_seed() -> int:
-    """A seed for a run that is to be replayable: 31 bits, which every database's integer
-    holds."""
-    return secrets.randbelow(2**31)
+    """A seed for a run that is to be replayable (below ``SEEDS``)."""
+    return secrets.randbelow(SEEDS)
 
 
 class ShellColour(models.TextChoices):
@@ -275,6 +277,12 @@ class RLModel(RaceConditions):
         max_length=10, choices=CameraLens.choices, default=CameraLens.SIMULATOR,
         help_text="DeepRacer's simulated camera, as its console trained with, or the physical "
         "car's wide lens, for a model meant for a car.",
+    )  # fmt: skip
+    camera_before_deepracer = models.BooleanField(
+        default=False, editable=False,
+        help_text="Trained on this console before issue 44 gave the car DeepRacer's camera "
+        "(migration 0018): it learnt Pitlane's 120°, 25° down view, and now drives with the "
+        "64.7° one.",
     )  # fmt: skip
     domain_randomisation = models.BooleanField(
         default=False,
@@ -628,7 +636,7 @@ class EvaluationJob(RaceConditions):
 
     def trial_seed(self, number: int) -> int | None:
         """The seed of the episode of trial ``number`` (0 on; continuous laps drive one):
-        drawn from the evaluation's, so that no two trials or evaluations share one."""
+        drawn from the evaluation's, so that trials differ."""
         if self.seed is None:
             return None
         state = np.random.SeedSequence([self.seed, number]).generate_state(1)

@@ -334,9 +334,9 @@ def checkpoint_trained(*, model: RLModel, name: str) -> bool:
     definition of "trained" that races, downloads, clones and the model's status go by.
 
     Weights saved after a policy update (iteration 1 on) are trained, and so are those an import
-    brought and a clone's starting weights (its source's trained best). The weights a new model
-    starts from (iteration 0) are not: a model stopped before its first policy update has only
-    those, random ones."""
+    brought and a clone's starting weights (its source's best or last, as the clone chose). The
+    weights a new model starts from (iteration 0) are not: a model stopped before its first
+    policy update has only those, random ones."""
     if artifacts.checkpoint_iteration(name) != 0:
         return True
     return default_storage.exists(artifacts.path(model, artifacts.CLONED_WEIGHTS))
@@ -388,6 +388,8 @@ class CheckpointChoice:
     evaluation_completion: float | None  # [%] in that iteration's evaluation episodes
     trained: bool = True  # ``checkpoint_trained``
     metric: str = BestCheckpointBy.PROGRESS  # the model's: how its training picks the best
+    evaluation_reward: float | None = None  # mean total reward of those episodes
+    evaluation_lap_ms: float | None = None  # [ms] their mean lap time, 999999 when unfinished
 
     @property
     def label(self) -> str:
@@ -399,10 +401,19 @@ class CheckpointChoice:
         if self.iteration == 0:
             started = f"{name}: the weights training started from"
             return started if self.trained else f"{started}, {UNTRAINED}"
-        text = f"{name}: iteration {self.iteration}"
-        if self.evaluation_completion is not None:
-            text += f", {self.evaluation_completion:.0f}% evaluation completion"
-        return text
+        return f"{name}: iteration {self.iteration}{self._figure()}"
+
+    def _figure(self) -> str:
+        """The evaluation figure that made the best the best (the model's metric), or the last's
+        completion."""
+        by = self.metric if self.which == EvaluationJob.Checkpoint.BEST else None
+        if by == BestCheckpointBy.REWARD and self.evaluation_reward is not None:
+            return f", {self.evaluation_reward:.1f} mean evaluation reward"
+        if by == BestCheckpointBy.LAPTIME and self.evaluation_lap_ms is not None:
+            return f", {self.evaluation_lap_ms / 1000:.3f} s mean evaluation lap time"
+        if self.evaluation_completion is None:
+            return ""
+        return f", {self.evaluation_completion:.0f}% evaluation completion"
 
 
 def model_checkpoint_choices(*, model: RLModel) -> list[CheckpointChoice]:
@@ -413,18 +424,19 @@ def model_checkpoint_choices(*, model: RLModel) -> list[CheckpointChoice]:
         return []
     names = {which: _checkpoint_of(job, which) for which in EvaluationJob.Checkpoint.values}
     iterations = {which: artifacts.checkpoint_iteration(name) for which, name in names.items()}
-    completions = dict(
-        Iteration.objects.filter(job=job, number__in=iterations.values()).values_list(
-            "number", "evaluation_completion"
+    figures = {
+        row.pop("number"): row
+        for row in Iteration.objects.filter(job=job, number__in=iterations.values()).values(
+            "number", "evaluation_completion", "evaluation_reward", "evaluation_lap_ms"
         )
-    )
+    }
     return [
         CheckpointChoice(
             which,
             number,
-            completions.get(number),
             trained=checkpoint_trained(model=model, name=names[which]),
             metric=model.best_checkpoint_by,
+            **figures.get(number, {"evaluation_completion": None}),
         )
         for which, number in iterations.items()
     ]

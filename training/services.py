@@ -23,6 +23,7 @@ from common.transactions import SlowStepInTransaction, outside_transaction
 from simulator import tracks as simulator_tracks
 from training import artifacts, configuration, jobs, lifecycle, live, rewards, selectors, tasks
 from training.models import (
+    SEEDS,
     Direction,
     EvaluationJob,
     Quota,
@@ -515,10 +516,10 @@ def evaluation_start(
     """Check the settings (``configuration.Invalid``), then queue an evaluation of a ready model
     and mark the model EVALUATING; the task is enqueued once committed (unless ``enqueue`` is
     False: ``manage.py evaluate`` runs it in its own process). ``seed``: an earlier
-    evaluation's or race's, to drive its trials again exactly; None, a new one."""
+    evaluation's or race's, to drive its trials again with the same settings; None, a new one."""
     clean = configuration.check_evaluation(settings, model=model)
     if seed is not None:
-        if not 0 <= seed < 2**31:
+        if not 0 <= seed < SEEDS:
             raise configuration.Invalid({"seed": "A seed is a whole number from 0 to 2147483647."})
         clean["seed"] = seed
     with transaction.atomic():

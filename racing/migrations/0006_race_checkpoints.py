@@ -12,7 +12,7 @@ class Migration(migrations.Migration):
             model_name="submission",
             name="checkpoint",
             field=models.CharField(
-                choices=[("best", "Best (highest evaluation completion)"), ("last", "Last")],
+                choices=[("best", "Best"), ("last", "Last")],
                 default="best",
                 help_text="The model's best or last checkpoint.",
                 max_length=8,

@@ -2,6 +2,7 @@
 physical car's wide lens. It travels from the create-model page into the environment the model
 trains and races in, onto the model's page, and through our own export into an import."""
 
+import importlib
 import io
 import json
 
@@ -14,9 +15,9 @@ from simulator.camera import CAR_FOV, SIMAPP_FOV
 from tests.training.test_imports import deepracer_export, tar_gz
 from tests.training.test_model_form import post
 from tests.training.test_training import settings as training_settings
-from training import configuration, exports, imports
+from training import configuration, exports, imports, jobs
 from training.forms import ModelCreateForm
-from training.models import CameraLens, RLModel
+from training.models import CameraLens, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
 
@@ -64,3 +65,28 @@ def test_a_clone_and_our_own_export_keep_the_lens(alice, bob, tracks):
     archive = tar_gz(deepracer_export(**{"pitlane.json": json.dumps(ours).encode()}))
     imported = imports.import_model(owner=bob, archive=io.BytesIO(archive))
     assert imported.model.camera_lens == CameraLens.WIDE
+
+
+def test_a_model_trained_before_deepracers_camera_says_so_on_its_page(client, alice, tracks):
+    from django.apps import apps
+
+    def trained(name: str, **job) -> RLModel:
+        checked = configuration.check(training_settings(name=name), owner=alice,
+                                      validate_reward=False)  # fmt: skip
+        model = RLModel.objects.create(owner=alice, **checked.row())
+        TrainingJob.objects.create(model=model, iterations=3, **job)
+        return model
+
+    before = trained("before")  # trained here, as every model before migration 0018
+    imported = trained("imported", lease_owner=jobs.IMPORTED)  # an import never trained here
+    migration = importlib.import_module("training.migrations.0018_camera_lens")
+
+    migration.mark_camera_before_deepracer(apps, None)
+    since = trained("since")  # trained after the migration: with DeepRacer's camera
+
+    said = "it now drives with DeepRacer's 64.7° camera: retrain or clone to adapt."
+    client.force_login(alice)
+    pages = {m.name: client.get(reverse("training:model-detail", args=[m.pk])).text
+             for m in (before, imported, since)}  # fmt: skip
+    assert said in pages["before"]
+    assert said not in pages["imported"] and said not in pages["since"]

@@ -7,15 +7,15 @@ import pytest
 from django.urls import reverse
 
 from tests.training.factories import ready_model
-from training import artifacts, evaluation, services
+from training import artifacts, evaluation, selectors, services
 from training.models import EvaluationJob, EvaluationTrial, Iteration, RLModel, Track
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 
 
 def trained_for_five_iterations(owner) -> RLModel:
-    """A ready model whose best checkpoint is iteration 3 (85% in evaluation) and whose last is
-    iteration 5 (60%)."""
+    """A ready model whose best checkpoint is iteration 3 (85% in evaluation, a mean reward of
+    120.5, a mean lap of 12.345 s) and whose last is iteration 5 (60%)."""
     model = ready_model(owner)
     job = model.jobs.get()
     weights = artifacts.read(job.last_checkpoint)
@@ -26,6 +26,8 @@ def trained_for_five_iterations(owner) -> RLModel:
         Iteration.objects.create(
             job=job, number=number, reward=10.0 * number, completion=12.0 * number,
             evaluation_completion={3: 85.0, 5: 60.0}.get(number, 20.0),
+            evaluation_reward={3: 120.5, 5: 80.0}.get(number, 10.0),
+            evaluation_lap_ms={3: 12_345.0, 5: 999_999.0}.get(number, 999_999.0),
             episodes=5, steps=500, wall_seconds=1.0,
         )  # fmt: skip
     return model
@@ -139,6 +141,38 @@ def test_the_model_page_says_which_checkpoint_each_evaluation_drove_and_how_best
     )
 
     assert "Best checkpoint by Lap time" in page
-    assert f"Best, iteration 3 · seed {best.seed}" in page
-    assert f"Last, iteration 5 · seed {last.seed}" in page
-    assert "Best by lap time: iteration 3, 85% evaluation completion" in page  # the downloads
+    assert f"Best checkpoint (iteration 3) · seed {best.seed}" in page
+    assert f"Last checkpoint (iteration 5) · seed {last.seed}" in page
+    # The downloads: the figure that made it best, the last's completion.
+    assert "Best by lap time: iteration 3, 12.345 s mean evaluation lap time" in page
+    assert "Last: iteration 5, 60% evaluation completion" in page
+
+
+def test_a_best_by_reward_is_named_with_its_mean_evaluation_reward(alice):
+    model = trained_for_five_iterations(alice)
+    RLModel.objects.filter(pk=model.pk).update(best_checkpoint_by="reward")
+    model.refresh_from_db()
+
+    labels = [choice.label for choice in selectors.model_checkpoint_choices(model=model)]
+
+    assert labels == [
+        "Best by reward: iteration 3, 120.5 mean evaluation reward",
+        "Last: iteration 5, 60% evaluation completion",
+    ]
+
+
+def test_every_page_names_the_starting_weights_alike_never_as_iteration_0(client, alice):
+    model = trained_for_five_iterations(alice)
+    started = EvaluationJob.objects.create(
+        model=model, track=Track.objects.get(name="rookie-loop"), trials=3,
+        status=EvaluationJob.Status.COMPLETED, checkpoint="last", checkpoint_iteration=0,
+    )  # fmt: skip
+    client.force_login(alice)
+
+    for url in (
+        reverse("training:model-detail", args=[model.pk]),
+        reverse("training:evaluation-detail", args=[model.pk, started.pk]),
+    ):
+        text = visible_text(client.get(url).content.decode())
+        assert "Last checkpoint (the weights training started from)" in text
+        assert "iteration 0" not in text

@@ -129,7 +129,7 @@ def test_an_archive_from_elsewhere_says_on_the_models_page_what_was_rebuilt_and_
     model = imported(bob, tar_gz(bare))
     rebuilt = figures(model)
     assert len(rebuilt) == 3 and rebuilt != figures(RLModel.objects.get(owner=alice))
-    assert labels(model) == ["Best (highest evaluation completion)", "Last"]  # not which iteration
+    assert labels(model) == ["Best", "Last"]  # not which iteration
     client.force_login(bob)
     page = client.get(reverse("training:model-detail", args=[model.pk])).text
     notes = page[page.index("data-import-notes") :]

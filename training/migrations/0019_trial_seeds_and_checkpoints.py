@@ -2,7 +2,7 @@ from django.db import migrations, models
 
 import training.models
 
-CHECKPOINTS = [("best", "Best (highest evaluation completion)"), ("last", "Last")]
+CHECKPOINTS = [("best", "Best"), ("last", "Last")]
 
 
 class Migration(migrations.Migration):
@@ -68,6 +68,12 @@ class Migration(migrations.Migration):
                 "Empty: driven without noise (before seeds).",
                 null=True,
             ),
+        ),
+        # "Best" is picked by the model's best_checkpoint_by, not always by completion.
+        migrations.AlterField(
+            model_name="evaluationjob",
+            name="checkpoint",
+            field=models.CharField(choices=CHECKPOINTS, default="best", max_length=8),
         ),
         migrations.AddField(
             model_name="evaluationtrial",

@@ -42,8 +42,9 @@ class Command(BaseCommand):
         )  # fmt: skip
         parser.add_argument(
             "--seed", type=int,
-            help="drive the trials of the evaluation or race that had this seed again, exactly "
-            "(its page shows it); default: a new one",
+            help="drive the trials of the evaluation or race entry that had this seed again, "
+            "given the same options: the evaluation's, or the event's race rules, track and the "
+            "entry's --checkpoint (their pages show the seed); default: a new one",
         )  # fmt: skip
 
     def handle(self, *args, **options) -> None:
