@@ -170,7 +170,7 @@ def training_params(model: RLModel) -> dict:
         # DeepRacer for Cloud's scripts/training/prepare-config.py:54 and :58; simapp's values
         # (bundle/markov/metrics/constants.py:163-167, 01f5f01) are our BestCheckpointBy's.
         "ENABLE_DOMAIN_RANDOMIZATION": model.domain_randomisation,
-        "BEST_MODEL_METRIC": model.best_checkpoint_by,
+        "BEST_MODEL_METRIC": str(model.best_checkpoint_by),  # an enum until read back
     }
     if model.boxes:
         params["NUMBER_OF_OBSTACLES"] = model.boxes.get("count", 3)
