@@ -84,7 +84,7 @@ def test_a_model_trained_before_deepracers_camera_says_so_on_its_page(client, al
     migration.mark_camera_before_deepracer(apps, None)
     since = trained("since")  # trained after the migration: with DeepRacer's camera
 
-    said = "it now drives with DeepRacer's 64.7° camera: retrain or clone to adapt."
+    said = "it now drives with DeepRacer's 64.7° camera: clone it and train the clone to adapt."
     client.force_login(alice)
     pages = {m.name: client.get(reverse("training:model-detail", args=[m.pk])).text
              for m in (before, imported, since)}  # fmt: skip
