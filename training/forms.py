@@ -15,7 +15,7 @@ from django import forms
 from common.forms import RacerWords
 from rl import hyperparameters
 from simulator import config as sim
-from simulator import randomisation
+from simulator import randomisation_ranges
 from training import configuration, imports, selectors
 from training.models import (
     Algorithm,
@@ -221,8 +221,8 @@ def limit(field: forms.Field, low: float, high: float, step: float | str = "any"
 
 
 RANDOMISATION_HELP = (
-    f"Each episode in a scene of its own ({randomisation.SUMMARY}), as DeepRacer for Cloud's "
-    "DR_ENABLE_DOMAIN_RANDOMIZATION: a model that copes with scenes it has not seen."
+    f"Each episode in a scene of its own ({randomisation_ranges.SUMMARY}), as DeepRacer for "
+    "Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION: a model that copes with scenes it has not seen."
 )
 
 

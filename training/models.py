@@ -14,7 +14,7 @@ from django.core.validators import RegexValidator
 from django.db import models
 
 from rl import hyperparameters
-from simulator import randomisation
+from simulator import randomisation_ranges
 
 
 class Direction(models.TextChoices):
@@ -286,7 +286,7 @@ class RLModel(RaceConditions):
     )  # fmt: skip
     domain_randomisation = models.BooleanField(
         default=False,
-        help_text=f"Each episode in a scene of its own: {randomisation.SUMMARY} "
+        help_text=f"Each episode in a scene of its own: {randomisation_ranges.SUMMARY} "
         "(simulator.randomisation); DeepRacer for Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION.",
     )  # fmt: skip
     import_notes = models.JSONField(

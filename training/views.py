@@ -32,7 +32,7 @@ from common import ratelimits
 from common.refusals import Refused
 from sandbox import SandboxFailure, SandboxUnavailable
 from simulator import config as sim_config
-from simulator import randomisation
+from simulator import randomisation_ranges
 from simulator import tracks as simulator_tracks
 from training import (
     artifacts,
@@ -455,7 +455,9 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "log_source": log_source,
             "log_sources": JobLogLine.Source.choices,
             "files": selectors.model_files(model=model),
-            "randomised_scene": randomisation.describe() if model.domain_randomisation else [],
+            "randomised_scene": randomisation_ranges.describe()
+            if model.domain_randomisation
+            else [],
             "imported_only": selectors.job_imported_only(job=job),
             "training_settings": training_settings_shown(
                 algorithm=model.algorithm,

@@ -13,7 +13,7 @@ from django.core.management import call_command
 from django.urls import reverse
 
 import simulator
-from simulator import randomisation
+from simulator import randomisation_ranges
 from simulator.randomisation import LookView
 from tests.training.factories import ready_model, trained_model
 from tests.training.test_imports import DEEPRACER_PARAMS, deepracer_export, tar_gz
@@ -37,7 +37,7 @@ def test_a_racer_who_ticks_it_trains_in_a_new_scene_each_episode(client, alice, 
     assert isinstance(env._cameras[0], LookView) and env.look != first
     page = client.get(reverse("training:model-detail", args=[model.pk]))
     assert "Domain randomisation: each episode in a scene of its own" in page.text
-    varies = dict(randomisation.describe())  # what it varies, by how much: the one source
+    varies = dict(randomisation_ranges.describe())  # what it varies, by how much: the one source
     assert f"Car ({varies['Car']})" in page.text and "motor x0.98-1.02" in varies["Car"]
 
 
