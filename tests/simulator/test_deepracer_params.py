@@ -166,13 +166,18 @@ def test_a_bot_cars_heading_is_in_radians_and_every_object_has_the_bot_speed(env
 def test_object_in_camera_is_whether_the_next_object_is_in_view(env, monkeypatch):
     # simapp track_data.py:422-426 with the camera frustum (cameras/frustum.py).
     racer = env(race_type="OBJECT_AVOIDANCE", objects={"count": 1})
-    (box,) = racer.unwrapped.traffic.actors
-    box.distance, box.offset = 4.0, 0.0  # on the first straight, at x = 4
-    racer.unwrapped.traffic._update_poses()
-    racer.unwrapped._sync_actor_bodies()
+    _box_on_the_first_straight(racer)
     assert held_at(racer, monkeypatch, 2.0, -2.0)["params"]["object_in_camera"] is True
     looking_away = held_at(racer, monkeypatch, 2.0, -2.0, math.pi / 2)["params"]
     assert looking_away["object_in_camera"] is False
+
+
+def _box_on_the_first_straight(racer) -> None:
+    """Put the race's one box on the first straight, at x = 4, on the centre line."""
+    (box,) = racer.unwrapped.traffic.actors
+    box.distance, box.offset = 4.0, 0.0
+    racer.unwrapped.traffic._update_poses()
+    racer.unwrapped._sync_actor_bodies()
 
 
 def test_object_in_camera_keeps_simapps_113_rad_with_the_wide_lens(env, monkeypatch):
@@ -180,10 +185,7 @@ def test_object_in_camera_keeps_simapps_113_rad_with_the_wide_lens(env, monkeypa
     # is in its 120° picture but not in DeepRacer's param.
     racer = env(race_type="OBJECT_AVOIDANCE", objects={"count": 1}, camera_lens="wide")
     assert racer.unwrapped.config["camera_fov"] == 120.0
-    (box,) = racer.unwrapped.traffic.actors
-    box.distance, box.offset = 4.0, 0.0  # on the first straight, at x = 4
-    racer.unwrapped.traffic._update_poses()
-    racer.unwrapped._sync_actor_bodies()
+    _box_on_the_first_straight(racer)
     assert held_at(racer, monkeypatch, 2.0, -2.0)["params"]["object_in_camera"] is True
     turned = held_at(racer, monkeypatch, 2.0, -2.0, math.pi / 4)["params"]
     assert turned["object_in_camera"] is False
