@@ -21,15 +21,19 @@ PYTHON=${PYTHON:-.venv/bin/python}
 PACKAGES="Django asgiref sqlparse celery kombu billiard vine amqp click-didyoumean click-plugins
 click-repl prompt_toolkit wcwidth tzlocal channels channels_redis redis dj-database-url
 whitenoise django-ratelimit gymnasium Farama-Notifications stable_baselines3 pyseccomp shapely"
+# and for the GPU-only tests, the versions requirements/test.txt pins (the image's pytest may be
+# older than pytest-asyncio takes; scripts/device-run.sh puts these first on the tests' path)
+TEST_PACKAGES="pytest pytest-django pytest-asyncio pytest-timeout pluggy iniconfig deepracer-utils boto3
+botocore s3transfer jmespath"
 # libssl3 and libsystemd0, which redis-tools also needs, are in the image (its Python and apt
 # load them); libatomic1 travels in case its compilers did not bring it.
 DEBS="redis-server redis-tools libjemalloc2 liblzf1 libatomic1 libseccomp2"
 
-pinned() {
+pinned() {  # pinned PACKAGE [FILE]
+	file=${2:-requirements/run.txt}
 	name=$(echo "$1" | tr 'A-Z_' 'a-z-')
-	line=$(grep -i "^$1==" requirements/run.txt ||
-		tr 'A-Z_' 'a-z-' <requirements/run.txt | grep "^$name==" || true)
-	[ -n "$line" ] || { echo "$1 is not pinned in requirements/run.txt" >&2; exit 1; }
+	line=$(grep -i "^$1==" "$file" || tr 'A-Z_' 'a-z-' <"$file" | grep "^$name==" || true)
+	[ -n "$line" ] || { echo "$1 is not pinned in $file" >&2; exit 1; }
 	echo "$line"
 }
 
@@ -37,6 +41,7 @@ rm -rf "$OUT/wheels" "$OUT/debs"
 mkdir -p "$OUT/wheels" "$OUT/debs"
 specs="tzdata==2026.2"
 for package in $PACKAGES; do specs="$specs $(pinned "$package")"; done
+for package in $TEST_PACKAGES; do specs="$specs $(pinned "$package" requirements/test.txt)"; done
 # shellcheck disable=SC2086  # one argument per requirement
 "$PYTHON" -m pip download --quiet --no-deps --only-binary=:all: --python-version 3.12 \
 	--implementation cp --abi cp312 --platform manylinux_2_28_x86_64 \
@@ -50,11 +55,6 @@ echo "var/device: $(du -sh "$OUT/wheels" | cut -f1) of wheels ($(ls "$OUT/wheels
 $(du -sh "$OUT/debs" | cut -f1) of Debian packages; with the project's tracked files \
 $(((carried + tracked) / 1048576)) MiB of the 64 MiB a call carries."
 [ $((carried + tracked)) -lt $((64 * 1048576)) ] || { echo "That is too much for one call." >&2; exit 1; }
-cat <<'EOF'
-
-A session with a GPU runs, with carry ["var/device"] and timeout_s 600 (each round: about a
-minute to start, --minutes of training, seconds to stop; a round's lines print as it ends, so
-a run cut short by timeout still returns the rounds before):
-
-set -e; D=/tmp/pitlane-debs; for f in var/device/debs/*.deb; do dpkg -x $f $D; done; echo $D/usr/lib/x86_64-linux-gnu >/etc/ld.so.conf.d/zz-pitlane.conf; ldconfig; python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site var/device/wheels/*.whl; echo /tmp/site >"$(python3 -c 'import site; print(site.getsitepackages()[0])')/pitlane.pth"; export PATH=$D/usr/bin:$PATH PYTHONUNBUFFERED=1; nvidia-smi -L; timeout 560 python3 -m bench.bench_pipeline --minutes 1 --jobs 1 2 4 8 2>&1 | tee $OUT/pipeline.txt
-EOF
+echo
+echo 'A session with a GPU runs `sh scripts/device-run.sh` there, with carry ["var/device"] and'
+echo 'timeout_s 540 (what it measures: the script says).'

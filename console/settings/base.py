@@ -243,9 +243,12 @@ PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", 8, minimum=1, maxim
 # the GPU (the sandbox child, which runs racers' code, is never given the GPU's driver: it sends
 # the cars' observations each step and reads back their actions), "cpu" runs it inside the
 # child, "auto" is "cuda" where PyTorch finds a GPU (read by the worker, not here: no Django
-# process imports PyTorch to start).
+# process imports PyTorch to start). "cpu" by default, GPU or not: on an H200 machine of 16 cores
+# (2026-11-27, bench_pipeline --minutes 1 --jobs 1: 15 workers of 2 cars) a job trained at 291.5
+# steps/s with "cpu" and 157.8 with "cuda", the workers' 15 CUDA contexts taking turns on the one
+# GPU for forward passes of 2 observations; the GPU earns its keep in the trainer's update.
 PITLANE_ROLLOUT_DEVICE = env.choice(
-    "PITLANE_ROLLOUT_DEVICE", "auto", choices=("auto", "cpu", "cuda")
+    "PITLANE_ROLLOUT_DEVICE", "cpu", choices=("auto", "cpu", "cuda")
 )
 # Where a machine's rollout workers share the policy weights they drive with (rl.weights_cache):
 # Redis sends each iteration's weights once per machine, not once per worker. On disk under var/

@@ -1,0 +1,35 @@
+#!/bin/sh
+# What a session lent a GPU runs there, in one call (run with carry ["var/device"], timeout_s
+# 540), after `make device-bundle` has filled var/device/ here:
+#
+#   sh scripts/device-run.sh
+#
+# It installs the bundle's wheels and Redis under /tmp (never over /), then measures, each step
+# under its own timeout so that one failing or running long still leaves the others' figures:
+#   1. the policy update alone on the GPU, PPO and SAC, with each variant (bench_training --update)
+#   2. the GPU-only tests (4 of them skip on a machine without CUDA)
+#   3. training throughput without the web tier, 1 and 4 jobs at once (bench_pipeline)
+# under bench/pipeline_settings.py: Daphne, the web tier's server, is not carried.
+# Each step's output lands in $OUT (the device tool brings it back) as well as on stdout.
+set -u
+D=/tmp/pitlane-debs
+for f in var/device/debs/*.deb; do dpkg -x "$f" "$D"; done
+echo "$D/usr/lib/x86_64-linux-gnu" >/etc/ld.so.conf.d/zz-pitlane.conf
+ldconfig
+python3 -m pip install -q --no-index --no-deps --no-compile --target /tmp/site var/device/wheels/*.whl
+# after the image's own packages: its PyTorch, OpenCV and NumPy stay the ones it was built with
+echo /tmp/site >"$(python3 -c 'import site; print(site.getsitepackages()[0])')/pitlane.pth"
+export PATH="$D/usr/bin:$PATH" PYTHONUNBUFFERED=1 DJANGO_SETTINGS_MODULE=bench.pipeline_settings
+OUT=${OUT:-var/device/out}
+mkdir -p "$OUT"
+nvidia-smi -L
+python3 -c 'import torch; print("PyTorch", torch.__version__, torch.cuda.get_device_name())'
+
+timeout 75 python3 -m bench.bench_training --update --device cuda --steps 2000 2>&1 |
+	tee "$OUT/update-ppo.txt"
+timeout 45 python3 -m bench.bench_training --update --device cuda --algorithm sac --steps 500 \
+	2>&1 | tee "$OUT/update-sac.txt"
+PYTHONPATH=/tmp/site timeout 90 python3 -m pytest --ds bench.pipeline_settings -q -rs \
+	-p no:cacheprovider tests/rl/test_learner.py tests/sandbox/test_served_policy.py -k gpu 2>&1 |
+	tail -25 | tee "$OUT/gpu-tests.txt"
+timeout 280 python3 -m bench.bench_pipeline --minutes 1 --jobs 1 4 2>&1 | tee "$OUT/pipeline.txt"
