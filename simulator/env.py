@@ -141,7 +141,9 @@ class DeepRacerEnv(gym.Env):
     DeepRacer's evaluation does with NUMBER_OF_RESETS (simapp rollout_agent_ctrl.py:1042-1053,
     its count cleared per episode at :1076, 01f5f01); None puts it back for ever.
 
-    **Arguments**: ``track`` (a built-in name or a DeepRacer ``.npy`` path), ``direction``,
+    **Arguments**: ``track`` (a built-in name or a DeepRacer ``.npy`` path), ``route`` (one of
+    the track's DeepRacer route files by WORLD_NAME, driven as simapp drives it:
+    ``Track.on_route``; None: the file the console drives ``direction``), ``direction``,
     ``sensors``, ``action_space``, ``race_type``, ``objects`` ({count, randomize}), ``bots``
     ({count, speed, lane_changes}), ``mode``, ``laps``, ``penalties`` ({off_track, crash} in
     seconds), ``max_resets``, ``start`` (fraction of the lap), ``reward_fn``, ``seed``,
@@ -179,9 +181,11 @@ class DeepRacerEnv(gym.Env):
         car_colour: tuple[int, int, int] = (40, 40, 220),
         camera_lens: str = "simulator",
         randomise: bool = False,
+        route: str | None = None,
     ) -> None:
         self.config = default_config(camera_lens)
-        self.track: Track = load(track).with_direction(config.choice(
+        loaded = load(track) if route is None else load(track).on_route(route)
+        self.track: Track = loaded.with_direction(config.choice(
             "The direction", direction, ("counterclockwise", "clockwise")))  # fmt: skip
         self.camera_name, self.lidar_name = config.sensors(sensors)
         self.actions = config.action_space(action_space)

@@ -154,7 +154,12 @@ def write_model_files(model: RLModel) -> None:
 
 def training_params(model: RLModel) -> dict:
     """The environment side of the configuration, as DeepRacer's training_params.yaml names it."""
-    world_name, reverse = sim_tracks.deepracer_world(model.track.name, model.direction)
+    if model.world_name:  # its own route file, reversed as simapp reverses it
+        world_name = model.world_name
+        held = sim_tracks.load(model.track.name).on_route(world_name)
+        reverse = held.direction != model.direction
+    else:
+        world_name, reverse = sim_tracks.deepracer_world(model.track.name, model.direction)
     params = {
         "WORLD_NAME": world_name,
         "REVERSE_DIR": reverse,

@@ -19,6 +19,7 @@ from typing import TypedDict
 from common.refusals import Refused
 from rl import hyperparameters as hp
 from simulator import config as sim
+from simulator import tracks as sim_tracks
 from training.models import (
     Algorithm,
     BestCheckpointBy,
@@ -54,6 +55,7 @@ class Draft(TypedDict, total=False):
     description: str
     track: str
     direction: str
+    world_name: str  # one of the track's DeepRacer route files (an import's); a clone's source's
     race_type: str
     boxes: dict | None
     bots: dict | None
@@ -108,6 +110,7 @@ class ModelSettings:
     best_checkpoint_by: str = BestCheckpointBy.PROGRESS
     camera_lens: str = CameraLens.SIMULATOR
     domain_randomisation: bool = False
+    world_name: str = ""  # blank: the route file the console drives the direction
     # a clone's weights are for its source's network, whatever this console's layout now is
     network_layout: int = hp.NETWORK_LAYOUT
 
@@ -131,7 +134,7 @@ class ModelSettings:
             algorithm=self.algorithm, hyperparameters=dict(self.hyperparameters),
             max_minutes=self.max_minutes, workers=self.workers,
             extra_tracks=list(self.extra_tracks), seed=self.seed,
-            domain_randomisation=self.domain_randomisation,
+            domain_randomisation=self.domain_randomisation, world_name=self.world_name,
             reward_function=self.reward_function, cloned_from=self.cloned_from,
             best_checkpoint_by=self.best_checkpoint_by, cloned_checkpoint=self.cloned_checkpoint,
         )  # fmt: skip
@@ -166,6 +169,7 @@ def check(
     clean: dict = {}
     _check_identity(settings, clean, errors, owner)
     track = _check_track(settings, clean, errors)
+    clean["world_name"] = _world_name(settings, track)
     _check_race(settings, clean, errors)
     _check_car(settings, clean, errors, owner)
     _check_algorithm(settings, clean, errors)
@@ -361,6 +365,18 @@ def _check_track(settings: dict, clean: dict, errors: dict) -> Track | None:
         errors["direction"] = f"{track} cannot be driven {direction_words(direction)}."
     clean["direction"] = direction
     return track
+
+
+def _world_name(settings: dict, track: Track | None) -> str:
+    """The route file the model drives (``RLModel.world_name``): an import's, or a clone's
+    source's where the clone keeps its track; none where it is not one of ``track``'s files (a
+    racer who chose another track chose that track's route)."""
+    world_name = str(settings.get("world_name") or "")
+    source = settings.get("cloned_from")
+    if not world_name and isinstance(source, RLModel) and track is not None:
+        world_name = source.world_name if source.track_id == track.pk else ""
+    found = sim_tracks.world(world_name) if world_name and track is not None else None
+    return world_name if found and found[0] == track.name else ""
 
 
 def _check_race(settings: dict, clean: dict, errors: dict) -> None:

@@ -198,6 +198,7 @@ def pitlane_settings(model: RLModel) -> dict:
         "description": model.description,
         "track": model.track.name,
         "direction": model.direction,
+        "world_name": model.world_name,
         "race_type": model.race_type,
         "boxes": model.boxes,
         "bots": model.bots,

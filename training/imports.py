@@ -256,6 +256,8 @@ def import_start(
     settings = {**plan.settings, **{key: value for key, value in (changes or {}).items()
                                     if key in PREVIEW_CHANGES}}  # fmt: skip
     notes = _track_notes(plan, settings)
+    if notes != plan.notes:  # the racer chose the track: the route the console drives it
+        settings["world_name"] = ""
     where = configuration.reward_sample_track(settings)
     validation = rewards.reward_validate(source=plan.reward, track=where[0], direction=where[1]) \
         if where else None  # fmt: skip
@@ -704,10 +706,13 @@ def _settings(
             settings[key] = ours.get(key)
         settings["camera_lens"] = ours.get("camera_lens")  # None before it was written: the default
         settings["domain_randomisation"] = ours.get("domain_randomisation", False)
+        settings["world_name"] = ours.get("world_name", "")
         settings["workers"] = ours.get("workers", 1)
         return settings
     on_track: list[str] = []
-    settings["track"], settings["direction"] = _deepracer_track(params, on_track)
+    settings["track"], settings["direction"], settings["world_name"] = _deepracer_track(
+        params, on_track
+    )
     notes += on_track
     if track_notes is not None:
         track_notes += on_track
@@ -808,10 +813,11 @@ def _truthy(value) -> bool:
     return value is True or str(value).strip().lower() == "true"
 
 
-def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str]:
-    """``WORLD_NAME`` as one of our tracks, and the direction to drive it. The name as it is
-    first; then without DeepRacer's ``_cw``/``_ccw`` suffix, which also gives the direction
-    (simapp bundle/markov/boto/s3/files/yaml_file.py:228-244, 01f5f01; constants.py
+def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str, str]:
+    """``WORLD_NAME`` as one of our tracks, the direction to drive it, and the route file to
+    drive where DeepRacer drove one the console does not (``RLModel.world_name``, else ""). The
+    name as it is first; then without DeepRacer's ``_cw``/``_ccw`` suffix, which also gives the
+    direction (simapp bundle/markov/boto/s3/files/yaml_file.py:228-244, 01f5f01; constants.py
     WorldNameSuffix); then lower-cased with hyphens for underscores. Without a suffix,
     ``TRACK_DIRECTION_CLOCKWISE`` gives the direction, else the route's own; ``REVERSE_DIR``
     turns it round. A track not loaded here is noted, and the model gets ``DEFAULT_TRACK``."""
@@ -847,32 +853,35 @@ def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str]:
         notes.append(f"{track.display_name} is not driven {said} here: the model drives it "
                      f"{instead}.")  # fmt: skip
         direction = other
-    if track is not None and (note := _bare_world_note(world, track.name, direction)):
-        notes.append(note)
-    return (track.name if track else DEFAULT_TRACK), direction
+    if track is None:
+        return DEFAULT_TRACK, direction, ""
+    driven = world  # the file simapp drove: suffixed by TRACK_DIRECTION_CLOCKWISE where given
+    if "TRACK_DIRECTION_CLOCKWISE" in params and suffix_direction is None:
+        driven += "_cw" if _truthy(params["TRACK_DIRECTION_CLOCKWISE"]) else "_ccw"
+    route = _own_route(driven, track.name, direction)
+    if route:
+        drove = sim_tracks.load(track.name).on_route(route).with_direction(direction)
+        notes.append(f"Trains on {route}.npy ({len(drove.waypoints)} waypoints), the route file "
+                     f"DeepRacer drove for WORLD_NAME {world}, not the one DeepRacer's console "
+                     f"drives {track.display_name} {configuration.direction_words(direction)}: "
+                     "a reward function that reads waypoints by index sees the route it was "
+                     "written for.")  # fmt: skip
+    return track.name, direction, route
 
 
-def _bare_world_note(world: str, name: str, direction: str) -> str | None:
-    """What DeepRacer drove where it is not what we drive: DeepRacer for Cloud writes a track's
-    WORLD_NAME bare (defaults/template-worker.env:1, DR_WORLD_NAME=reInvent2019_track;
-    scripts/droa/import_model.py:371), simapp drives that file, X.npy, and we drive the route file
-    the console drives that way, X_ccw.npy or X_cw.npy, which for some tracks holds other
-    waypoints (reInvent2019_track.npy 154, reInvent2019_track_ccw.npy 79)."""
-    theirs_file = sim_tracks.route_file(world) if world == name else None
-    if theirs_file is None:
-        return None
+def _own_route(driven: str, name: str, direction: str) -> str:
+    """``driven`` (the route file simapp drove: WORLD_NAME, suffixed where
+    TRACK_DIRECTION_CLOCKWISE was given) where it is one of track ``name``'s files and its
+    waypoints, driven ``direction``, are not those of the file the console drives that way (by
+    DeepRacer for Cloud's bare WORLD_NAME: defaults/template-worker.env:1,
+    DR_WORLD_NAME=reInvent2019_track; scripts/droa/import_model.py:371); else ""."""
+    found = sim_tracks.world(driven)
+    if found is None or found[0] != name:
+        return ""
     ours = sim_tracks.load(name).with_direction(direction)
-    if ours.source == theirs_file:
-        return None
-    theirs = sim_tracks.load(theirs_file)
+    theirs = sim_tracks.load(name).on_route(driven).with_direction(direction)
     mine, drove = np.asarray(ours.waypoints), np.asarray(theirs.waypoints)
-    if mine.shape == drove.shape and (np.allclose(mine, drove) or np.allclose(mine, drove[::-1])):
-        return None
-    return (f"DeepRacer drove {theirs_file.name} ({len(theirs.waypoints)} waypoints); Pitlane "
-            f"drives {ours.display_name} {configuration.direction_words(direction)} on "
-            f"{ours.source.name} ({len(ours.waypoints)} waypoints), the route DeepRacer's console "
-            "drives that way: a reward function that reads waypoints by index sees another "
-            "route.")  # fmt: skip
+    return "" if mine.shape == drove.shape and np.allclose(mine, drove) else driven
 
 
 def _variant(name: str) -> str:

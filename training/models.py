@@ -259,6 +259,12 @@ class RLModel(RaceConditions):
         max_length=8, choices=BestCheckpointBy.choices, default=BestCheckpointBy.PROGRESS,
         help_text="How training picks the best checkpoint (DR_TRAIN_BEST_MODEL_METRIC).",
     )  # fmt: skip
+    world_name = models.CharField(
+        max_length=64, blank=True,
+        help_text="The track's DeepRacer route file it drives, by WORLD_NAME, where that is not "
+        "the one the console drives its direction: a DeepRacer for Cloud model's bare "
+        "WORLD_NAME (simulator.tracks.Track.on_route). Blank: the console's.",
+    )  # fmt: skip
     cloned_from = models.ForeignKey(
         "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="clones"
     )
@@ -306,10 +312,13 @@ class RLModel(RaceConditions):
         return self.name
 
     def environment_settings(self, track: str | None = None) -> dict:
-        """The keyword arguments of ``gymnasium.make("Pitlane/DeepRacer-v0", ...)``."""
+        """The keyword arguments of ``gymnasium.make("Pitlane/DeepRacer-v0", ...)``; on another
+        ``track`` than its own, that track's route for the direction."""
+        own = track in (None, self.track.name)
         return {
             "track": track or self.track.name,
             "direction": self.direction,
+            "route": (self.world_name or None) if own else None,
             "sensors": list(self.sensors),
             "action_space": self.action_space,
             "race_type": self.race_type,

@@ -210,6 +210,23 @@ class Track:
             reversed=not self.reversed,
         )
 
+    def on_route(self, world_name: str) -> Track:
+        """This track on its route file ``world_name``, held to it: ``with_direction`` reverses
+        that file's waypoints rather than moving to the file the console drives the other way.
+        That is how simapp drives a WORLD_NAME: the file of that name, in its own order or, with
+        REVERSE_DIR, reversed (bundle/markov/track_geom/track_data.py:104-105, 185 and 195,
+        01f5f01; the name is suffixed _cw/_ccw only where TRACK_DIRECTION_CLOCKWISE is given,
+        bundle/markov/boto/s3/files/yaml_file.py:228-246);
+        DeepRacer for Cloud gives one bare (defaults/template-worker.env:1,
+        DR_WORLD_NAME=reInvent2019_track), and reInvent2019_track.npy holds 154 waypoints where
+        reInvent2019_track_ccw.npy, the console's, holds 79. ``TrackError`` for a name that is
+        not one of this track's route files."""
+        found = world(world_name)
+        if found is None or found[0] != self.name:
+            raise TrackError(f"{world_name} is not one of {self.display_name}'s route files.")
+        track = _builtin(self.name, world_name)
+        return replace(track, direction=found[1], routes={})
+
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The (min x, min y) and (max x, max y) corners of the track with its borders."""

@@ -4,9 +4,11 @@ file DeepRacer drives that way, every WORLD_NAME resolving (data/deepracer/, its
 import json
 
 import cv2
+import gymnasium
 import numpy as np
 import pytest
 
+import simulator
 from simulator import tracks
 from simulator.tracks import DEEPRACER_DIR, TrackError
 from simulator.tracks.deepracer import difficulty, track_meta
@@ -40,7 +42,7 @@ def test_a_world_name_resolves_to_its_track_and_the_direction_its_file_runs(
     """A WORLD_NAME resolves to its track and the way its file runs; the track driven that way
     is on the route file the console drives (X_ccw/X_cw). For a bare name, which DeepRacer for
     Cloud writes, that is not always the file simapp drove (reInvent2019_track.npy holds 154
-    waypoints, reInvent2019_track_ccw.npy 79): an import says so in its notes."""
+    waypoints, reInvent2019_track_ccw.npy 79): an import keeps that file (``on_route``, below)."""
     assert tracks.world(world_name) == (name, direction)
     loaded = tracks.load(world_name).with_direction(direction)
     assert (loaded.name, loaded.direction, loaded.world_name) == (name, direction, driven)
@@ -62,6 +64,29 @@ def test_each_direction_drives_the_route_file_deepracer_drives_that_way():
     assert (clockwise.world_name, clockwise.reversed) == ("2022_april_open_cw", False)
     np.testing.assert_array_equal(clockwise.centre, route("2022_april_open_cw")[:, :2])
     assert clockwise.with_direction("counterclockwise").world_name == "2022_april_open_ccw"
+
+
+def test_a_track_held_to_one_route_file_drives_that_file_backwards_the_other_way():
+    """What a model imported with a bare WORLD_NAME drives (RLModel.world_name), as simapp
+    drives it: the file named, reversed by REVERSE_DIR, never the console's file that way."""
+    held = tracks.load("reInvent2019_track").on_route("reInvent2019_track")
+    assert (held.world_name, held.direction, len(held.waypoints)) == (
+        "reInvent2019_track", "counterclockwise", 154
+    )  # fmt: skip
+    backwards = held.with_direction("clockwise")
+    assert (backwards.world_name, backwards.reversed, len(backwards.waypoints)) == (
+        "reInvent2019_track", True, 154
+    )  # fmt: skip
+    from_file = tracks.load(DEEPRACER_DIR / "routes" / "reInvent2019_track.npy")
+    np.testing.assert_array_equal(held.centre, from_file.centre)
+    np.testing.assert_array_equal(backwards.centre, held.centre[::-1])
+    env = gymnasium.make(simulator.ENV_ID, track="reInvent2019_track", direction="clockwise",
+                         route="reInvent2019_track")  # fmt: skip
+    driven = env.unwrapped.track
+    assert (driven.world_name, driven.direction) == ("reInvent2019_track", "clockwise")
+    np.testing.assert_array_equal(driven.centre, backwards.centre)
+    with pytest.raises(TrackError, match="2022_april_open_cw is not one of Smile Speedway's"):
+        held.on_route("2022_april_open_cw")
 
 
 def test_the_console_default_direction_comes_first():

@@ -19,6 +19,7 @@ from safetensors.torch import save as save_tensors
 from rl.learner import load_tensors
 from tests.training.factories import ready_model
 from training import artifacts, exports, history, imports, selectors
+from training.configuration import ModelSettings, check
 from training.models import RLModel, ShellColour, Track, TrainingJob
 from training.rewards import EXAMPLES
 
@@ -514,32 +515,37 @@ def track_row(name: str, **changes) -> Track:
     return Track.objects.create(name=name, **fields)
 
 
-SMILE_BARE = (
-    "DeepRacer drove reInvent2019_track.npy (154 waypoints); Pitlane drives Smile Speedway "
-)
+DROVE = "Trains on {} ({} waypoints), the route file DeepRacer drove for WORLD_NAME "
 
 
 @pytest.mark.parametrize(
     ("params", "expected", "noted"),
     [
-        # DeepRacer for Cloud's bare name: simapp drove reInvent2019_track.npy, we drive _ccw.
-        ({"WORLD_NAME": "reInvent2019_track"}, ("reInvent2019_track", "counterclockwise"),
-         SMILE_BARE + "counter-clockwise on reInvent2019_track_ccw.npy (79 waypoints)"),
-        ({"WORLD_NAME": "reInvent2019_track_cw"}, ("reInvent2019_track", "clockwise"), ""),
-        ({"WORLD_NAME": "reInvent2019_track_ccw"}, ("reInvent2019_track", "counterclockwise"), ""),
+        # DeepRacer for Cloud's bare name: simapp drove reInvent2019_track.npy (154 waypoints),
+        # the console drives reInvent2019_track_ccw.npy (79): the model keeps simapp's file.
+        ({"WORLD_NAME": "reInvent2019_track"},
+         ("reInvent2019_track", "counterclockwise", "reInvent2019_track"),
+         DROVE.format("reInvent2019_track.npy", 154) + "reInvent2019_track, not the one"),
+        ({"WORLD_NAME": "reInvent2019_track_cw"}, ("reInvent2019_track", "clockwise", ""), ""),
+        ({"WORLD_NAME": "reInvent2019_track_ccw"},
+         ("reInvent2019_track", "counterclockwise", ""), ""),
+        # REVERSE_DIR drives the file named backwards, which is not the _cw file's order.
         ({"WORLD_NAME": "reInvent2019_track_ccw", "REVERSE_DIR": True},
-         ("reInvent2019_track", "clockwise"), ""),
+         ("reInvent2019_track", "clockwise", "reInvent2019_track_ccw"),
+         DROVE.format("reInvent2019_track_ccw.npy", 79)),
+        # TRACK_DIRECTION_CLOCKWISE suffixes the name: simapp drove the console's file.
         ({"WORLD_NAME": "reInvent2019_track", "TRACK_DIRECTION_CLOCKWISE": "true"},
-         ("reInvent2019_track", "clockwise"), SMILE_BARE + "clockwise on"),
+         ("reInvent2019_track", "clockwise", ""), ""),
         ({"WORLD_NAME": "reInvent2019_track", "TRACK_DIRECTION_CLOCKWISE": False,
-          "REVERSE_DIR": "True"}, ("reInvent2019_track", "clockwise"), SMILE_BARE + "clockwise"),
+          "REVERSE_DIR": "True"}, ("reInvent2019_track", "clockwise", "reInvent2019_track_ccw"),
+         DROVE.format("reInvent2019_track_ccw.npy", 79)),
         # The exact name comes first: a track whose own name ends in _cw.
-        ({"WORLD_NAME": "Oval_cw"}, ("Oval_cw", "counterclockwise"), ""),
+        ({"WORLD_NAME": "Oval_cw"}, ("Oval_cw", "counterclockwise", ""), ""),
         # Then lower-case, with hyphens for underscores; the suffix still gives the direction.
-        ({"WORLD_NAME": "Kidney_Bean_cw"}, ("kidney-bean", "clockwise"), ""),
-        ({"WORLD_NAME": "One_Way_cw"}, ("one-way", "counterclockwise"),
+        ({"WORLD_NAME": "Kidney_Bean_cw"}, ("kidney-bean", "clockwise", ""), ""),
+        ({"WORLD_NAME": "One_Way_cw"}, ("one-way", "counterclockwise", ""),
          "One Way is not driven clockwise here: the model drives it counter-clockwise."),
-        ({"WORLD_NAME": "monza_ccw"}, ("rookie-loop", "counterclockwise"),
+        ({"WORLD_NAME": "monza_ccw"}, ("rookie-loop", "counterclockwise", ""),
          "Not carried over from training_params.yaml: the track monza_ccw, which is not loaded "
          "here. The model trains on Rookie Loop;"),  # its display name, not its slug
     ],
@@ -560,16 +566,17 @@ def test_world_name_finds_the_loaded_track_and_its_direction(params, expected, n
 @pytest.mark.parametrize(
     ("params", "expected", "noted"),
     [
-        ({"WORLD_NAME": "2022_april_open_cw"}, ("2022_april_open", "clockwise"), ""),
+        ({"WORLD_NAME": "2022_april_open_cw"}, ("2022_april_open", "clockwise", ""), ""),
+        # simapp drove 2022_april_open_cw.npy (yaml_file.py:228-246), as the console does.
         ({"WORLD_NAME": "2022_april_open", "TRACK_DIRECTION_CLOCKWISE": True},
-         ("2022_april_open", "clockwise"), "DeepRacer drove 2022_april_open.npy (168 waypoints); "
-         "Pitlane drives Ace Speedway clockwise on 2022_april_open_cw.npy (170 waypoints)"),
+         ("2022_april_open", "clockwise", ""), ""),
         # Without a suffix, the file's own way, though the console offered it clockwise first.
-        ({"WORLD_NAME": "reInvent2019_wide"}, ("reInvent2019_wide", "counterclockwise"),
-         "DeepRacer drove reInvent2019_wide.npy (111 waypoints); Pitlane drives"),
+        ({"WORLD_NAME": "reInvent2019_wide"},
+         ("reInvent2019_wide", "counterclockwise", "reInvent2019_wide"),
+         DROVE.format("reInvent2019_wide.npy", 111)),
         ({"WORLD_NAME": "reinvent_carpet", "REVERSE_DIR": True},
-         ("reinvent_carpet", "clockwise"), ""),
-        ({"WORLD_NAME": "Albert", "TRACK_DIRECTION_CLOCKWISE": False}, ("Albert", "clockwise"),
+         ("reinvent_carpet", "clockwise", ""), ""),
+        ({"WORLD_NAME": "Albert", "TRACK_DIRECTION_CLOCKWISE": False}, ("Albert", "clockwise", ""),
          "Yun Speedway is not driven counter-clockwise here: the model drives it clockwise."),
     ],
 )  # fmt: skip
@@ -582,6 +589,34 @@ def test_a_deepracer_world_name_lands_on_the_built_in_track_and_its_direction(
         assert len(notes) == 1 and noted in notes[0], notes
     else:
         assert notes == []
+
+
+def test_a_bare_world_name_trains_on_simapps_own_file_and_a_clone_on_that_track_keeps_it(
+    alice, tracks, tmp_path, client
+):
+    archive = tmp_path / "deepracer.tar.gz"
+    params = {**DEEPRACER_PARAMS, "WORLD_NAME": "reInvent2019_track"}  # DeepRacer for Cloud's
+    archive.write_bytes(tar_gz(deepracer_export(**{
+        "training_params.yaml": yaml.safe_dump(params).encode(),
+    })))  # fmt: skip
+    call_command("importmodel", str(archive), "--owner", "alice", stdout=io.StringIO())
+    model = RLModel.objects.get(owner=alice)
+    assert (model.track.name, model.direction, model.world_name) == (
+        "reInvent2019_track", "counterclockwise", "reInvent2019_track"
+    )  # fmt: skip
+    assert any(note.startswith("Trains on reInvent2019_track.npy (154 waypoints)")
+               for note in model.import_notes)  # fmt: skip
+    assert model.environment_settings()["route"] == "reInvent2019_track"
+    client.force_login(alice)
+    page = client.get(reverse("training:model-detail", args=[model.pk])).text
+    assert "(counter-clockwise, on DeepRacer's route file reInvent2019_track.npy)" in page
+    assert model.environment_settings("pitlane-oval")["route"] is None  # another track's route
+    model.status = RLModel.Status.READY  # as once its training ends: a clone's source
+    clone = {**ModelSettings.of(model).draft(), "name": "clone", "world_name": "",
+             "cloned_from": model}  # fmt: skip
+    assert check(clone, owner=alice, validate_reward=False).world_name == "reInvent2019_track"
+    elsewhere = {**clone, "track": "2022_april_open"}
+    assert check(elsewhere, owner=alice, validate_reward=False).world_name == ""
 
 
 def test_a_deepracer_export_imports_onto_its_own_track(alice, tracks, tmp_path):
@@ -680,17 +715,23 @@ def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(
 
 
 @pytest.mark.parametrize(
-    ("track", "direction"),
-    [("2022_april_open", "clockwise"), ("Albert", "clockwise"), ("reinvent_carpet", "clockwise"),
-     ("pitlane-oval", "counterclockwise")],
+    ("track", "direction", "world_name"),
+    [("2022_april_open", "clockwise", ""), ("Albert", "clockwise", ""),
+     ("reinvent_carpet", "clockwise", ""), ("pitlane-oval", "counterclockwise", ""),
+     ("reInvent2019_track", "counterclockwise", "reInvent2019_track"),
+     ("reInvent2019_track", "clockwise", "reInvent2019_track_ccw")],
 )  # fmt: skip
 def test_an_exported_track_names_deepracers_world_and_imports_back_onto_itself(
-    alice, tracks, track, direction
+    alice, tracks, track, direction, world_name
 ):
     model = RLModel(owner=alice, name="round-trip", track=Track.objects.get(name=track),
-                    direction=direction)  # fmt: skip
+                    direction=direction, world_name=world_name)  # fmt: skip
     params = artifacts.training_params(model)
     if track == "2022_april_open":  # the file DeepRacer drives clockwise, not the base reversed
         assert (params["WORLD_NAME"], params["REVERSE_DIR"]) == ("2022_april_open_cw", False)
+    if world_name:  # its own file, backwards where it runs the other way
+        reverse = world_name.endswith("_ccw")
+        assert (params["WORLD_NAME"], params["REVERSE_DIR"]) == (world_name, reverse)
     notes = []
-    assert imports._deepracer_track(params, notes) == (track, direction) and notes == []
+    assert imports._deepracer_track(params, notes) == (track, direction, world_name)
+    assert len(notes) == bool(world_name)
