@@ -2,9 +2,9 @@
 
 A camera mounted on the car sees the ground plane through a homography: one OpenCV perspective
 warp of the pre-drawn track image gives the whole picture, thousands of times a second, where
-rendering 3D geometry would manage a few hundred. Above the horizon there is only the sky (the
-room, for a DeepRacer track). Boxes and cars are solids: their faces are projected and filled,
-farthest first.
+rendering 3D geometry would manage a few hundred. Above the horizon there is the room: the walls
+round the field and the background over them (``Room``). Boxes and cars are solids: their faces
+are projected and filled, farthest first.
 """
 
 from __future__ import annotations
@@ -89,6 +89,20 @@ class Mount:
 
 
 @dataclass(frozen=True)
+class Room:
+    """The walls round the field and what shows above them. simapp's tracks stand in a field
+    walled ``height`` high at its edge (reinvent_base_wall_field_only.dae: its wallShape rises
+    0 to 1 m round fieldShape, 0.91 m beyond the track each side), and above the walls the camera
+    sees the world's background: SDF's default 0.7 gray where the world names no sky
+    (reinvent_base.world's <scene> has none; sdformat's scene.sdf), 178 in the camera's gray,
+    which deepracer-utils' frame dr-demo-2.png shows above its walls. The field is the track
+    image's extent (``texture.MARGIN`` beyond the track)."""
+
+    height: float  # [m]
+    background: int | tuple[int, int, int]  # gray level, or BGR colour
+
+
+@dataclass(frozen=True)
 class Solid:
     """A box standing on the ground: an obstacle, a bot car, or the agent's car for spectators."""
 
@@ -111,11 +125,17 @@ class PerspectiveView:
     """A camera's picture of the track and the solids on it."""
 
     def __init__(
-        self, texture: TrackTexture, lens: Lens, mount: Mount, sky: int | tuple[int, int, int]
+        self,
+        texture: TrackTexture,
+        lens: Lens,
+        mount: Mount,
+        sky: int | tuple[int, int, int],
+        room: Room | None = None,
     ) -> None:
         self.texture = texture
         self.lens = lens
         self.mount = mount
+        self.room = room
         self._k = lens.matrix
         self._texture_from_world = texture.world_to_pixel
         pitch = math.radians(mount.pitch)
@@ -126,6 +146,14 @@ class PerspectiveView:
         self._sky = np.empty((self._sky_rows, lens.width, *channels), dtype=np.uint8)
         self._sky[:] = sky
         self._border = sky if isinstance(sky, int) else tuple(int(c) for c in sky)
+        if room is not None:  # each column's ray at the horizon, in (right, down, forward)
+            pixels = np.stack([np.arange(lens.width), np.full(lens.width, horizon),
+                               np.ones(lens.width)])  # fmt: skip
+            self._column_rays = (np.linalg.inv(self._k) @ pixels).T
+            self._rows = np.arange(self._sky_rows)[:, None]
+            height, width = texture.image.shape[:2]
+            low = np.asarray(texture.origin, dtype=np.float64)
+            self._field = (low, low + np.array([width, height]) / texture.pixels_per_metre)
 
     def pose(self, x: float, y: float, yaw: float) -> tuple[np.ndarray, np.ndarray]:
         """The world-to-camera rotation (rows: right, down, forward) and the camera's position."""
@@ -161,9 +189,29 @@ class PerspectiveView:
             borderValue=self._border,
         )
         image[: self._sky_rows] = self._sky
+        if self.room is not None:
+            image[: self._sky_rows][self._over_the_walls(rotation, position)] = self.room.background
         if solids:
             self.draw_solids(image, solids, rotation, position)
         return image
+
+    def _over_the_walls(self, rotation: np.ndarray, position: np.ndarray) -> np.ndarray:
+        """Which sky pixels look over the field's walls: in each column, those above the top of
+        the wall that the column's ray at the horizon meets (the camera does not roll, so a
+        wall's edge stays within a fraction of a pixel of one row per column)."""
+        rays = self._column_rays
+        directions = rays @ rotation  # in the world's axes
+        low, high = self._field
+        across = 1.0 / (directions[:, :2] + 1e-12)
+        here = position[:2]
+        reach = np.maximum((high - here) * across, (low - here) * across).min(axis=1)
+        reach = np.maximum(reach, 0.01)  # a camera beyond the field: its walls at the lens
+        # the wall's top above where the ray meets it, in the camera's axes: reach times the ray,
+        # raised to the wall's height along the world's up axis (rotation's third column)
+        rise = self.room.height - position[2] - reach * directions[:, 2]
+        down = reach * rays[:, 1] + rise * rotation[1, 2]
+        ahead = reach * rays[:, 2] + rise * rotation[2, 2]
+        return self._rows < self._k[1, 1] * down / ahead + self._k[1, 2]
 
     def draw_solids(
         self, image: np.ndarray, solids: list[Solid], rotation: np.ndarray, position: np.ndarray

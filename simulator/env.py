@@ -27,6 +27,7 @@ from simulator.camera import (
     Lens,
     Mount,
     PerspectiveView,
+    Room,
     deepracer_mount,
 )
 from simulator.car import Car, CarSpec
@@ -34,7 +35,7 @@ from simulator.config import ContinuousActions, DiscreteActions
 from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
 from simulator.randomisation import Scene
 from simulator.rewards import checked_reward, follow_centre_line
-from simulator.texture import WALL, render, style_for
+from simulator.texture import BACKGROUND, WALL, WALL_HEIGHT, render, style_for
 from simulator.trace import SimTraceRow
 from simulator.tracks import Track, load
 from simulator.world import World
@@ -65,8 +66,11 @@ def default_config(camera_lens: str = "simulator") -> dict[str, Any]:
         # about one per camera pixel at the foot of the picture (2.4 mm of ground)
         "camera_texture_ppm": 160,
         # gray level above the horizon: simapp's tracks stand in a field walled 1 m high, which
-        # fills the camera's view above the grass (simulator.texture.WALL)
+        # fills the camera's view above the grass (simulator.texture.WALL), and the background
+        # over the walls (simulator.camera.Room); a wall_height of None: walls without end
         "camera_sky": WALL[0],
+        "camera_background": BACKGROUND[0],
+        "wall_height": WALL_HEIGHT,  # [m]
         "track_style": None,  # a texture.Style for the track image; None: simapp's for the track
         # simapp launch/racecar.launch.py:37-45, sensors/constants.py:20-28 (01f5f01): 64 rays
         # over ±150°; LIDAR is clipped to 0.15-1.0 m (sensors/utils.py:56-57).
@@ -503,8 +507,11 @@ class DeepRacerEnv(gym.Env):
             lefts = (half, -half)
         else:
             lefts = (0.0,)
+        room = None if cfg["wall_height"] is None else Room(cfg["wall_height"],
+                                                            cfg["camera_background"])  # fmt: skip
         self._cameras = [
-            PerspectiveView(texture, lens, Mount(forward, height, pitch, left), cfg["camera_sky"])
+            PerspectiveView(texture, lens, Mount(forward, height, pitch, left), cfg["camera_sky"],
+                            room)  # fmt: skip
             for left in lefts
         ]
         angles = np.radians(

@@ -172,7 +172,10 @@ class LookView(PerspectiveView):
         m = plain.mount
         mount = dataclasses.replace(m, forward=m.forward + forward, height=m.height + height,
                                     pitch=m.pitch + pitch, left=m.left + left)  # fmt: skip
-        super().__init__(texture, plain.lens, mount, sky)
+        room = plain.room and dataclasses.replace(
+            plain.room, background=_scaled(plain.room.background, look.brightness)
+        )
+        super().__init__(texture, plain.lens, mount, sky, room)
         self.look = look
         self._rng = rng  # shared by a stereo pair's two views, drawn in the order they render
         self._shades = [_scaled(shade, look.brightness) for shade in look.shades]

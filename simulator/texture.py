@@ -57,6 +57,9 @@ BORDER = lit((222.7, 222.6, 222.4), GROUND_LIGHT)  # outerLine.png (both borders
 CENTRE_LINE = lit((224.9, 143.4, 0.0), GROUND_LIGHT)  # centerLine.png: orange
 START_LINE = lit((141.5, 141.5, 141.5), GROUND_LIGHT)  # startline.png: its squares' mean
 WALL = lit((36.0, 70.0, 81.0), WALL_LIGHT)  # wall.png: what the camera sees above the grass
+# and over the walls the world's background, unlit: SDF's default 0.7 gray (simulator.camera.Room)
+BACKGROUND = (178, (178, 178, 178))
+WALL_HEIGHT = 1.0  # [m] reinvent_base_wall_field_only.dae's wallShape
 
 
 @dataclass(frozen=True)
@@ -73,6 +76,7 @@ class Style:
     dash: float = DASH
     start_line_width: float = START_LINE_WIDTH
     borders_inside: bool = True  # each border a band inside the edge, else a line centred on it
+    field_margin: float = MARGIN  # [m] of field beyond the track's extent, to the walls
 
 
 SIMAPP = Style()
@@ -85,6 +89,9 @@ REINVENT_2018 = Style(
     border=lit((194.4, 193.6, 189.8), GROUND_LIGHT),
     centre_line=lit((194.4, 116.5, 0.0), GROUND_LIGHT),
     start_line=lit((36.1, 48.5, 64.0), GROUND_LIGHT),  # none: the road
+    # reinvent_base_wall_field_only.dae's fieldShape, (-0.587, -0.613) to (8.575, 5.795) m:
+    # 0.90-0.92 m beyond the route's extent each side
+    field_margin=0.91,
 )
 STYLES = {"reinvent_base": REINVENT_2018}  # by WORLD_NAME; the others' textures are SIMAPP's
 
@@ -124,8 +131,8 @@ def render(
 ) -> TrackTexture:
     """Draw ``track`` at ``pixels_per_metre``, in grayscale (the camera's) or BGR colour."""
     low, high = track.bounds
-    origin = low - MARGIN
-    size = np.ceil((high - low + 2 * MARGIN) * pixels_per_metre).astype(int)
+    origin = low - style.field_margin
+    size = np.ceil((high - low + 2 * style.field_margin) * pixels_per_metre).astype(int)
     pick = 1 if colour else 0
     shape = (size[1], size[0], 3) if colour else (size[1], size[0])
     image = np.empty(shape, dtype=np.uint8)

@@ -15,6 +15,7 @@ from simulator.camera import (
     Lens,
     Mount,
     PerspectiveView,
+    Room,
     deepracer_mount,
 )
 from simulator.config import ConfigError
@@ -87,9 +88,29 @@ def test_the_horizon_sits_on_row_26_of_120():
 
 
 def sky_rows(env: DeepRacerEnv) -> int:
-    """How many rows at the top of the car's first camera frame are all sky."""
+    """How many rows at the top of the car's first camera frame are all room: walls, or the
+    background over them."""
     frame = env.reset(seed=0)[0]["FRONT_FACING_CAMERA"][0]
-    return int((frame == env.config["camera_sky"]).all(axis=1).sum())
+    room = (env.config["camera_sky"], env.config["camera_background"])
+    return int(np.isin(frame, room).all(axis=1).sum())
+
+
+@pytest.mark.parametrize(("wall", "background_rows"), [(2.0, 0), (6.0, 6), (12.0, 17)])
+def test_over_the_walls_the_camera_sees_the_background(wall, background_rows):
+    # simapp's field walled 1 m high (reinvent_base_wall_field_only.dae): from 0.127 m up, the
+    # top of a wall ``wall`` metres ahead is atan(0.873 / wall) above level, so 15° + that above
+    # the lens's axis: row 60 - 126.3 tan(15° + atan(0.873 / wall)), -40.8 for 2 m (the wall
+    # fills the view), 5.6 for 6 m, 16.1 for 12 m. Above it the background, below it the wall,
+    # down to the horizon (row 26.2).
+    forward, height, pitch = deepracer_mount()
+    texture = ground_changing_at(forward + 100.0, pixels_per_metre=20, size=2 * (forward + wall))
+    lens = Lens(160, 120, SIMAPP_FOV)
+    view = PerspectiveView(texture, lens, Mount(forward, height, pitch), SKY, Room(1.0, 178))
+    frame = view.render(0.0, 0.0, 0.0)
+    top = 60 - lens.focal * math.tan(math.radians(pitch) + math.atan((1.0 - height) / wall))
+    column = frame[:, 80]
+    assert (column == 178).sum() == background_rows == max(0, math.ceil(top))
+    assert (column[background_rows:26] == SKY).all()
 
 
 def test_the_wide_lens_is_the_racers_choice_and_widens_the_picture():
