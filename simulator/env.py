@@ -507,11 +507,11 @@ class DeepRacerEnv(gym.Env):
             lefts = (half, -half)
         else:
             lefts = (0.0,)
-        room = None if cfg["wall_height"] is None else Room(cfg["wall_height"],
-                                                            cfg["camera_background"])  # fmt: skip
+        walls = cfg["wall_height"]
+        room = None if walls is None else Room(walls, cfg["camera_background"])
+        sky = cfg["camera_sky"]
         self._cameras = [
-            PerspectiveView(texture, lens, Mount(forward, height, pitch, left), cfg["camera_sky"],
-                            room)  # fmt: skip
+            PerspectiveView(texture, lens, Mount(forward, height, pitch, left), sky, room)
             for left in lefts
         ]
         angles = np.radians(
