@@ -96,7 +96,7 @@ class Room:
     sees the world's background: SDF's default 0.7 gray where the world names no sky
     (reinvent_base.world's <scene> has none; sdformat's scene.sdf), 178 in the camera's gray,
     which deepracer-utils' frame dr-demo-2.png shows above its walls. The field is the track
-    image's extent (``texture.MARGIN`` beyond the track)."""
+    image's extent (its style's ``field_margin`` beyond the track)."""
 
     height: float  # [m]
     background: int | tuple[int, int, int]  # gray level, or BGR colour

@@ -216,11 +216,11 @@ class Track:
         That is how simapp drives a WORLD_NAME: the file of that name, in its own order or, with
         REVERSE_DIR, reversed (bundle/markov/track_geom/track_data.py:104-105, 185 and 195,
         01f5f01; the name is suffixed _cw/_ccw only where TRACK_DIRECTION_CLOCKWISE is given,
-        bundle/markov/boto/s3/files/yaml_file.py:228-246);
-        DeepRacer for Cloud gives one bare (defaults/template-worker.env:1,
-        DR_WORLD_NAME=reInvent2019_track), and reInvent2019_track.npy holds 154 waypoints where
-        reInvent2019_track_ccw.npy, the console's, holds 79. ``TrackError`` for a name that is
-        not one of this track's route files."""
+        bundle/markov/boto/s3/files/yaml_file.py:228-246). DeepRacer for Cloud gives one bare
+        (defaults/template-worker.env:1, DR_WORLD_NAME=reInvent2019_track), and
+        reInvent2019_track.npy holds 154 waypoints where reInvent2019_track_ccw.npy, the
+        console's, holds 79. ``TrackError`` for a name that is not one of this track's route
+        files."""
         found = world(world_name)
         if found is None or found[0] != self.name:
             raise TrackError(f"{world_name} is not one of {self.display_name}'s route files.")
@@ -248,15 +248,6 @@ def world(world_name: str) -> tuple[str, str] | None:
         if world_name in entry.get("world_names", ()):
             return name, entry["world_names"][world_name]
     return None
-
-
-def route_file(world_name: str) -> Path | None:
-    """The route file a DeepRacer ``WORLD_NAME`` names (simapp drives ``X.npy`` for WORLD_NAME
-    X, bare or suffixed); None for a name that is not one of DeepRacer's route files."""
-    found = world(world_name)
-    if found is None:
-        return None
-    return _catalog()[found[0]]["folder"] / "routes" / f"{world_name}.npy"
 
 
 def deepracer_world(name: str, direction: str) -> tuple[str, bool]:
