@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 import redis
+from channels.layers import channel_layers
 from django.conf import settings
 from django.contrib.auth.models import User
 
@@ -27,6 +28,16 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         if item.path.is_relative_to(BROWSER_TESTS):
             item.add_marker(pytest.mark.browser)
     items.sort(key=lambda item: item.path.is_relative_to(BROWSER_TESTS))
+
+
+@pytest.fixture(autouse=True)
+def _fresh_channel_layers() -> Iterator[None]:
+    """Every test gets its own channel layer: channels_redis's layer keeps asyncio locks of the
+    event loop that first used them, and each async test runs in a loop of its own, so a receive
+    lock left held when an earlier test's loop closed stopped a later test's consumer
+    ("... is bound to a different event loop"; the full suite, 2026-11-27)."""
+    yield
+    channel_layers.backends.clear()
 
 
 @pytest.fixture(autouse=True)
