@@ -27,7 +27,7 @@ is assumed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -93,7 +93,11 @@ REINVENT_2018 = Style(
     # 0.90-0.92 m beyond the route's extent each side
     field_margin=0.91,
 )
-STYLES = {"reinvent_base": REINVENT_2018}  # by WORLD_NAME; the others' textures are SIMAPP's
+# re:Invent 2019 (reInvent2019_track.dae): the common textures, its fieldmesh0 (-0.995, -1.116)
+# to (9.643, 7.449) m round a road (roadmesh0) of (-0.232, -0.354) to (8.880, 6.687): 0.76 m
+REINVENT_2019 = replace(SIMAPP, field_margin=0.76)
+# by WORLD_NAME; the others draw SIMAPP's textures in a field 1 m beyond the track (MARGIN)
+STYLES = {"reinvent_base": REINVENT_2018, "reInvent2019_track": REINVENT_2019}
 
 
 def style_for(track: Track) -> Style:
