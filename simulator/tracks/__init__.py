@@ -224,8 +224,7 @@ class Track:
         found = world(world_name)
         if found is None or found[0] != self.name:
             raise TrackError(f"{world_name} is not one of {self.display_name}'s route files.")
-        track = _builtin(self.name, world_name)
-        return replace(track, direction=found[1], routes={})
+        return replace(_builtin(self.name, world_name), routes={})
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
