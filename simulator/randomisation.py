@@ -234,7 +234,3 @@ class Scene:
         car = dataclasses.replace(self.car, friction=self.car.friction * look.friction,
                                   command_radius=self.car.command_radius / look.motor)  # fmt: skip
         return cameras, car, look
-
-
-# What a randomised episode varies, in a racer's words: the model's field, the create and
-# evaluate pages' help say it; describe() says by how much (the model page).

@@ -563,10 +563,10 @@ class ModelCreateForm(TrackAndRaceFields):
             "extra_tracks": [track.name for track in data.get("extra_tracks") or []],
             "reward_function": data["reward_function"],
             "domain_randomisation": bool(data.get("domain_randomisation")),
-            "best_checkpoint_by": data.get("best_checkpoint_by") or BestCheckpointBy.PROGRESS,
+            "best_checkpoint_by": data.get("best_checkpoint_by"),  # blank: check's default
         }
         if self.source is not None:
-            draft["cloned_checkpoint"] = data.get("cloned_checkpoint") or "best"
+            draft["cloned_checkpoint"] = data.get("cloned_checkpoint")  # blank: the best
         return draft
 
     def _kept_hyperparameters(self, algorithm: str) -> dict:
