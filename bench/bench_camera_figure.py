@@ -21,12 +21,13 @@ import cv2
 import numpy as np
 
 from simulator.env import DeepRacerEnv
+from simulator.room import Room
 from simulator.texture import Style
 
 # Pitlane's camera and track image before issue 44 (simulator/env.py and texture.py at d6827f9).
 BEFORE_CAMERA = {
-    "camera_fov": 120.0, "camera_mount": (0.12, 0.12, 25.0), "camera_sky": 150,
-    "camera_texture_ppm": 64, "wall_height": None,
+    "camera_fov": 120.0, "camera_mount": (0.12, 0.12, 25.0), "camera_texture_ppm": 64,
+    "room": Room(height=None, background=150),  # no walls: a light sky from the horizon up
 }  # fmt: skip
 BEFORE_STYLE = Style(
     surroundings=(196, (200, 212, 216)), surface=(58, (62, 60, 58)),

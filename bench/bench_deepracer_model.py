@@ -1,6 +1,6 @@
 """A real DeepRacer model, trained in DeepRacer's simulator, driving here before and after issue
 44's camera and scene: `python -m bench.bench_deepracer_model [--tracks reinvent_base,...]
-[--starts 3] [--utils DIR]`.
+[--starts 12] [--utils DIR]`.
 
 The model is deepracer-utils' sample model (tests/deepracer/model/sample-model/model/
 model_48.pb with its model_metadata.json: PPO, the 3-layer CNN on the front camera, 12 discrete
@@ -19,8 +19,8 @@ DeepRacer's (``simulator.tracks.load`` reads simapp's route files by WORLD_NAME)
 
 ``--old-parts`` finds which part of the scene the model reads: the after column is driven with
 the named parts of the old look (Style fields such as ``surroundings`` or ``border_width``, or
-the camera's ``camera_sky`` and ``camera_texture_ppm``) and the rest of simapp's, through
-simapp's camera: ``--old-parts camera_sky,surroundings`` gives the model the old grass and sky.
+the camera's ``room`` and ``camera_texture_ppm``) and the rest of simapp's, through simapp's
+camera: ``--old-parts room,surroundings`` gives the model the old grass and sky.
 """
 
 from __future__ import annotations
@@ -116,10 +116,10 @@ def drive(track: str, settings: dict, starts: int, act_for, old: bool = False,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--tracks", default=",".join(TRACKS))
-    parser.add_argument("--starts", type=int, default=3, help="points round the lap")
+    parser.add_argument("--starts", type=int, default=12, help="points round the lap")
     parser.add_argument("--utils", type=Path, help="deepracer-utils' unpacked source")
     parser.add_argument("--old-parts", default="", help="drive 'after' with these parts of the "
-                        "old look, e.g. camera_sky,surroundings")  # fmt: skip
+                        "old look, e.g. room,surroundings")  # fmt: skip
     args = parser.parse_args()
     old_parts = [part for part in args.old_parts.split(",") if part]
     known = {*BEFORE_CAMERA, *(field.name for field in dataclasses.fields(BEFORE_STYLE))}

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from simulator.room import Room
 from simulator.texture import TrackTexture
 
 NEAR = 0.01  # [m] faces nearer than this to the camera plane are clipped
@@ -89,20 +90,6 @@ class Mount:
 
 
 @dataclass(frozen=True)
-class Room:
-    """The walls round the field and what shows above them. simapp's tracks stand in a field
-    walled ``height`` high at its edge (reinvent_base_wall_field_only.dae: its wallShape rises
-    0 to 1 m round fieldShape, 0.91 m beyond the track each side), and above the walls the camera
-    sees the world's background: SDF's default 0.7 gray where the world names no sky
-    (reinvent_base.world's <scene> has none; sdformat's scene.sdf), 178 in the camera's gray,
-    which deepracer-utils' frame dr-demo-2.png shows above its walls. The field is the track
-    image's extent (its style's ``field_margin`` beyond the track)."""
-
-    height: float  # [m]
-    background: int | tuple[int, int, int]  # gray level, or BGR colour
-
-
-@dataclass(frozen=True)
 class Solid:
     """A box standing on the ground: an obstacle, a bot car, or the agent's car for spectators."""
 
@@ -146,14 +133,23 @@ class PerspectiveView:
         self._sky = np.empty((self._sky_rows, lens.width, *channels), dtype=np.uint8)
         self._sky[:] = sky
         self._border = sky if isinstance(sky, int) else tuple(int(c) for c in sky)
-        if room is not None:  # each column's ray at the horizon, in (right, down, forward)
+        # a world's field runs on to its edge beyond the part of it the track image holds: the
+        # image's own edge, grass, repeated (recoloured with it in a randomised look); where the
+        # image is the whole field, beyond it is nothing
+        beyond = room is not None and room.field is not None
+        self._border_mode = cv2.BORDER_REPLICATE if beyond else cv2.BORDER_CONSTANT
+        if room is not None and room.height is not None:  # each column's ray at the horizon
             pixels = np.stack([np.arange(lens.width), np.full(lens.width, horizon),
                                np.ones(lens.width)])  # fmt: skip
             self._column_rays = (np.linalg.inv(self._k) @ pixels).T
-            self._rows = np.arange(self._sky_rows)[:, None]
-            height, width = texture.image.shape[:2]
-            low = np.asarray(texture.origin, dtype=np.float64)
-            self._field = (low, low + np.array([width, height]) / texture.pixels_per_metre)
+            self._rows = np.arange(lens.height)[:, None]
+            self._levels = np.array([[room.height], [0.0]])  # the edge's top and foot [m]
+            if room.field is None:
+                height, width = texture.image.shape[:2]
+                low = np.asarray(texture.origin, dtype=np.float64)
+                self._field = (low, low + np.array([width, height]) / texture.pixels_per_metre)
+            else:
+                self._field = (np.array(room.field[:2]), np.array(room.field[2:]))
 
     def pose(self, x: float, y: float, yaw: float) -> tuple[np.ndarray, np.ndarray]:
         """The world-to-camera rotation (rows: right, down, forward) and the camera's position."""
@@ -185,33 +181,44 @@ class PerspectiveView:
             texture_from_image,
             (self.lens.width, self.lens.height),
             flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-            borderMode=cv2.BORDER_CONSTANT,
+            borderMode=self._border_mode,
             borderValue=self._border,
         )
-        image[: self._sky_rows] = self._sky
-        if self.room is not None:
-            image[: self._sky_rows][self._over_the_walls(rotation, position)] = self.room.background
+        if self.room is None or self.room.height is None:
+            image[: self._sky_rows] = self._sky
+        else:
+            top, foot = self._edge_rows(rotation, position)
+            seen = min(self.lens.height, math.ceil(foot.max()))  # rows down to the lowest foot
+            rows, block = self._rows[:seen], image[:seen]
+            block[rows < foot] = self._border  # the edge, down to where it meets the ground
+            block[rows < top] = self.room.background  # and over its top
         if solids:
             self.draw_solids(image, solids, rotation, position)
         return image
 
-    def _over_the_walls(self, rotation: np.ndarray, position: np.ndarray) -> np.ndarray:
-        """Which sky pixels look over the field's walls: in each column, those above the top of
-        the wall that the column's ray at the horizon meets (the camera does not roll, so a
-        wall's edge stays within a fraction of a pixel of one row per column)."""
+    def _edge_rows(
+        self, rotation: np.ndarray, position: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where the field's edge shows in each column: the rows of its top and of its foot,
+        where the column's ray at the horizon meets it (the camera does not roll, so the edge's
+        top and foot each stay within a fraction of a pixel of one row per column). Below the
+        horizon the foot hides the ground beyond the field; above, the top meets the
+        background."""
         rays = self._column_rays
         directions = rays @ rotation  # in the world's axes
         low, high = self._field
         across = 1.0 / (directions[:, :2] + 1e-12)
         here = position[:2]
         reach = np.maximum((high - here) * across, (low - here) * across).min(axis=1)
-        reach = np.maximum(reach, 0.01)  # a camera beyond the field: its walls at the lens
-        # the wall's top above where the ray meets it, in the camera's axes: reach times the ray,
-        # raised to the wall's height along the world's up axis (rotation's third column)
-        rise = self.room.height - position[2] - reach * directions[:, 2]
+        reach = np.maximum(reach, 0.01)  # a camera beyond the field: its edge at the lens
+        # a point of the edge above where the ray meets it, in the camera's axes: reach times
+        # the ray, raised along the world's up axis (rotation's third column) to the edge's top,
+        # or lowered to the ground
+        rise = self._levels - (position[2] + reach * directions[:, 2])  # (2, width)
         down = reach * rays[:, 1] + rise * rotation[1, 2]
         ahead = reach * rays[:, 2] + rise * rotation[2, 2]
-        return self._rows < self._k[1, 1] * down / ahead + self._k[1, 2]
+        top, foot = self._k[1, 1] * down / ahead + self._k[1, 2]
+        return top, foot
 
     def draw_solids(
         self, image: np.ndarray, solids: list[Solid], rotation: np.ndarray, position: np.ndarray

@@ -27,7 +27,6 @@ from simulator.camera import (
     Lens,
     Mount,
     PerspectiveView,
-    Room,
     deepracer_mount,
 )
 from simulator.car import Car, CarSpec
@@ -35,7 +34,8 @@ from simulator.config import ContinuousActions, DiscreteActions
 from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
 from simulator.randomisation import Scene
 from simulator.rewards import checked_reward, follow_centre_line
-from simulator.texture import BACKGROUND, WALL, WALL_HEIGHT, render, style_for
+from simulator.room import room_for
+from simulator.texture import render, style_for
 from simulator.trace import SimTraceRow
 from simulator.tracks import Track, load
 from simulator.world import World
@@ -65,12 +65,9 @@ def default_config(camera_lens: str = "simulator") -> dict[str, Any]:
         # [px/m] of the track image the camera projects: 4 px across the 1 in centre line, and
         # about one per camera pixel at the foot of the picture (2.4 mm of ground)
         "camera_texture_ppm": 160,
-        # gray level above the horizon: simapp's tracks stand in a field walled 1 m high, which
-        # fills the camera's view above the grass (simulator.texture.WALL), and the background
-        # over the walls (simulator.camera.Room); a wall_height of None: walls without end
-        "camera_sky": WALL[0],
-        "camera_background": BACKGROUND[0],
-        "wall_height": WALL_HEIGHT,  # [m]
+        # what the camera sees round the field and above it (a simulator.camera.Room); None:
+        # the track's DeepRacer world's, read from its meshes (walls 1 m high round Pitlane's)
+        "room": None,
         "track_style": None,  # a texture.Style for the track image; None: simapp's for the track
         # simapp launch/racecar.launch.py:37-45, sensors/constants.py:20-28 (01f5f01): 64 rays
         # over ±150°; LIDAR is clipped to 0.15-1.0 m (sensors/utils.py:56-57).
@@ -215,8 +212,7 @@ class DeepRacerEnv(gym.Env):
         self.dt = 1.0 / self.config["control_hz"]
         self._build_spaces()
         self._build_sensors()
-        self._scene = (Scene(self._cameras, self.car.spec, self.config["camera_sky"])
-                       if randomise else None)  # fmt: skip
+        self._scene = Scene(self._cameras, self.car.spec, self._sky) if randomise else None
         self._world = self._build_world()
         self._actor_bodies = []
         self._waypoints = tuple(self.track.waypoints)
@@ -498,8 +494,10 @@ class DeepRacerEnv(gym.Env):
 
     def _build_sensors(self) -> None:
         cfg = self.config
-        texture = render(self.track, pixels_per_metre=cfg["camera_texture_ppm"],
-                         style=cfg["track_style"] or style_for(self.track))  # fmt: skip
+        style = cfg["track_style"] or style_for(self.track)
+        room = cfg["room"] or room_for(self.track, style)
+        texture = render(self.track, pixels_per_metre=cfg["camera_texture_ppm"], style=style,
+                         field=room.field)  # fmt: skip
         lens = Lens(*cfg["camera_size"], cfg["camera_fov"])
         forward, height, pitch = cfg["camera_mount"]
         if self.camera_name == "STEREO_CAMERAS":
@@ -507,11 +505,9 @@ class DeepRacerEnv(gym.Env):
             lefts = (half, -half)
         else:
             lefts = (0.0,)
-        walls = cfg["wall_height"]
-        room = None if walls is None else Room(walls, cfg["camera_background"])
-        sky = cfg["camera_sky"]
+        self._sky = room.sky
         self._cameras = [
-            PerspectiveView(texture, lens, Mount(forward, height, pitch, left), sky, room)
+            PerspectiveView(texture, lens, Mount(forward, height, pitch, left), room.sky, room)
             for left in lefts
         ]
         angles = np.radians(

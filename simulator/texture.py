@@ -27,7 +27,7 @@ is assumed.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -38,7 +38,8 @@ BORDER_WIDTH = 0.0762  # [m] each border, inside the track's edge
 CENTRE_LINE_WIDTH = 0.0254  # [m]
 DASH = 0.0508  # [m] dash and gap of the centre line
 START_LINE_WIDTH = 0.066  # [m] along the track
-MARGIN = 1.0  # [m] of grass around the track: reInvent2019_track.dae's field reaches about 1 m
+MARGIN = 1.0  # [m] of grass round Pitlane's own tracks, and round every track's preview
+FIELD_DRAWN = 3.0  # [m] of a world's field drawn beyond the track: plain grass further out
 GROUND_LIGHT = 1.10  # Gazebo's shading of the flat ground
 WALL_LIGHT = 0.33  # and of the walls
 
@@ -76,7 +77,6 @@ class Style:
     dash: float = DASH
     start_line_width: float = START_LINE_WIDTH
     borders_inside: bool = True  # each border a band inside the edge, else a line centred on it
-    field_margin: float = MARGIN  # [m] of field beyond the track's extent, to the walls
 
 
 SIMAPP = Style()
@@ -89,15 +89,9 @@ REINVENT_2018 = Style(
     border=lit((194.4, 193.6, 189.8), GROUND_LIGHT),
     centre_line=lit((194.4, 116.5, 0.0), GROUND_LIGHT),
     start_line=lit((36.1, 48.5, 64.0), GROUND_LIGHT),  # none: the road
-    # reinvent_base_wall_field_only.dae's fieldShape, (-0.587, -0.613) to (8.575, 5.795) m:
-    # 0.90-0.92 m beyond the route's extent each side
-    field_margin=0.91,
 )
-# re:Invent 2019 (reInvent2019_track.dae): the common textures, its fieldmesh0 (-0.995, -1.116)
-# to (9.643, 7.449) m round a road (roadmesh0) of (-0.232, -0.354) to (8.880, 6.687): 0.76 m
-REINVENT_2019 = replace(SIMAPP, field_margin=0.76)
-# by WORLD_NAME; the others draw SIMAPP's textures in a field 1 m beyond the track (MARGIN)
-STYLES = {"reinvent_base": REINVENT_2018, "reInvent2019_track": REINVENT_2019}
+# by WORLD_NAME; the others draw SIMAPP's textures (each world's field: simulator.camera.Room)
+STYLES = {"reinvent_base": REINVENT_2018}
 
 
 def style_for(track: Track) -> Style:
@@ -130,13 +124,30 @@ class TrackTexture:
         )
 
 
-def render(
-    track: Track, *, pixels_per_metre: float, colour: bool = False, style: Style = SIMAPP
-) -> TrackTexture:
-    """Draw ``track`` at ``pixels_per_metre``, in grayscale (the camera's) or BGR colour."""
+def _extent(track: Track, field: tuple[float, float, float, float] | None):
+    """The corners of the ground a track image holds: MARGIN round the track, or its world's
+    field as far as FIELD_DRAWN beyond it (a camera in a room sees the grass run on past the
+    image's edge to the field's)."""
     low, high = track.bounds
-    origin = low - style.field_margin
-    size = np.ceil((high - low + 2 * style.field_margin) * pixels_per_metre).astype(int)
+    if field is None:
+        return low - MARGIN, high + MARGIN
+    low = np.maximum(np.minimum(field[:2], low), low - FIELD_DRAWN)
+    return low, np.minimum(np.maximum(field[2:], high), high + FIELD_DRAWN)
+
+
+def render(
+    track: Track,
+    *,
+    pixels_per_metre: float,
+    colour: bool = False,
+    style: Style = SIMAPP,
+    field: tuple[float, float, float, float] | None = None,
+) -> TrackTexture:
+    """Draw ``track`` at ``pixels_per_metre``, in grayscale (the camera's) or BGR colour, on
+    ``field`` (x0, y0, x1, y1 [m]: its world's, as far as FIELD_DRAWN beyond the track) or
+    MARGIN of grass round it."""
+    origin, high = _extent(track, field)
+    size = np.ceil((high - origin) * pixels_per_metre).astype(int)
     pick = 1 if colour else 0
     shape = (size[1], size[0], 3) if colour else (size[1], size[0])
     image = np.empty(shape, dtype=np.uint8)

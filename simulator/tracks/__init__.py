@@ -249,6 +249,18 @@ def world(world_name: str) -> tuple[str, str] | None:
     return None
 
 
+def surroundings(world_name: str) -> dict | None:
+    """What stands round DeepRacer's world ``world_name`` (its field, the field's edge, its sky:
+    read from simapp's meshes by surroundings.py), or None for a world that is not DeepRacer's."""
+    return _surroundings().get(world_name)
+
+
+@cache
+def _surroundings() -> dict[str, dict]:
+    with open(DEEPRACER_DIR / "surroundings.json") as file:
+        return json.load(file)
+
+
 def deepracer_world(name: str, direction: str) -> tuple[str, bool]:
     """(WORLD_NAME, REVERSE_DIR) that have DeepRacer drive track ``name`` ``direction``, as a
     training_params.yaml says it: the route file DeepRacer drives that way where there is one

@@ -15,11 +15,11 @@ from simulator.camera import (
     Lens,
     Mount,
     PerspectiveView,
-    Room,
     deepracer_mount,
 )
 from simulator.config import ConfigError
 from simulator.env import DeepRacerEnv, default_config
+from simulator.room import Room
 from simulator.texture import TrackTexture
 
 SKY, NEAR_GROUND, FAR_GROUND = 250, 40, 200
@@ -91,26 +91,30 @@ def sky_rows(env: DeepRacerEnv) -> int:
     """How many rows at the top of the car's first camera frame are all room: walls, or the
     background over them."""
     frame = env.reset(seed=0)[0]["FRONT_FACING_CAMERA"][0]
-    room = (env.config["camera_sky"], env.config["camera_background"])
-    return int(np.isin(frame, room).all(axis=1).sum())
+    room = env._cameras[0].room
+    return int(np.isin(frame, (room.edge, room.background)).all(axis=1).sum())
 
 
-@pytest.mark.parametrize(("wall", "background_rows"), [(2.0, 0), (6.0, 6), (12.0, 17)])
-def test_over_the_walls_the_camera_sees_the_background(wall, background_rows):
+@pytest.mark.parametrize(
+    ("wall", "background_rows", "foot_row"), [(2.0, 0, 35), (6.0, 6, 30), (12.0, 17, 28)]
+)
+def test_over_the_walls_the_camera_sees_the_background(wall, background_rows, foot_row):
     # simapp's field walled 1 m high (reinvent_base_wall_field_only.dae): from 0.127 m up, the
     # top of a wall ``wall`` metres ahead is atan(0.873 / wall) above level, so 15° + that above
     # the lens's axis: row 60 - 126.3 tan(15° + atan(0.873 / wall)), -40.8 for 2 m (the wall
     # fills the view), 5.6 for 6 m, 16.1 for 12 m. Above it the background, below it the wall,
-    # down to the horizon (row 26.2).
+    # past the horizon (row 26.2) down to its foot, atan(0.127 / wall) below level: row
+    # 60 - 126.3 tan(15° - atan(0.127 / wall)), 34.6 for 2 m, 29.2 for 6 m, 27.7 for 12 m.
     forward, height, pitch = deepracer_mount()
     texture = ground_changing_at(forward + 100.0, pixels_per_metre=20, size=2 * (forward + wall))
     lens = Lens(160, 120, SIMAPP_FOV)
-    view = PerspectiveView(texture, lens, Mount(forward, height, pitch), SKY, Room(1.0, 178))
+    view = PerspectiveView(texture, lens, Mount(forward, height, pitch), SKY, Room(1.0, 178, SKY))
     frame = view.render(0.0, 0.0, 0.0)
     top = 60 - lens.focal * math.tan(math.radians(pitch) + math.atan((1.0 - height) / wall))
     column = frame[:, 80]
     assert (column == 178).sum() == background_rows == max(0, math.ceil(top))
-    assert (column[background_rows:26] == SKY).all()
+    assert (column[background_rows:foot_row] == SKY).all()
+    assert (column[foot_row:] == NEAR_GROUND).all()
 
 
 def test_the_wide_lens_is_the_racers_choice_and_widens_the_picture():

@@ -343,8 +343,8 @@ def test_the_camera_sees_a_dark_track_below_the_horizon_and_stereo_differs(envir
     assert left.shape == (120, 160)
     # above the horizon (row 26.2), the walls round simapp's fields and the background over
     # them; ahead, the dark road
-    config = env.unwrapped.config
-    assert np.isin(left[:26], (config["camera_sky"], config["camera_background"])).all()
+    room = env.unwrapped._cameras[0].room
+    assert np.isin(left[:26], (room.edge, room.background)).all()
     assert np.median(left[90:]) < 100
     assert np.abs(left.astype(int) - right.astype(int)).mean() > 0.5
 

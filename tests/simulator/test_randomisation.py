@@ -61,7 +61,7 @@ def test_off_the_frames_are_the_plain_cameras_frames():
     # a camera built here from the track's image, without the randomisation module
     plain = PerspectiveView(
         render(env.track, pixels_per_metre=env.config["camera_texture_ppm"]),
-        camera.lens, camera.mount, env.config["camera_sky"], camera.room,
+        camera.lens, camera.mount, camera.room.sky, camera.room,
     )  # fmt: skip
     for seed in (1, 2, None):
         seen = frame(env, seed)

@@ -5,7 +5,6 @@ file)."""
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,7 +13,6 @@ from simulator.env import DeepRacerEnv
 from simulator.texture import (
     BORDER,
     CENTRE_LINE,
-    MARGIN,
     REINVENT_2018,
     SIMAPP,
     SURFACE,
@@ -99,11 +97,7 @@ def test_reinvent_2018_is_drawn_with_its_own_textures_and_the_others_with_the_co
         == (REINVENT_2018.surface[0])
     )
     assert style_for(load("Bowtie_track")) == SIMAPP
-    # re:Invent 2019 draws the common textures in its own, narrower field (its .dae's)
-    assert replace(style_for(load("reInvent2019_track")), field_margin=MARGIN) == SIMAPP
-    texture = DeepRacerEnv(track="reInvent2019_track")._cameras[0].texture
-    low, _high = load("reInvent2019_track").bounds
-    np.testing.assert_allclose(texture.origin, low - 0.76)
+    assert style_for(load("reInvent2019_track")) == SIMAPP
 
 
 def test_the_camera_sees_the_road_darker_than_the_grass_and_the_walls_above_the_horizon():
