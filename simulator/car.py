@@ -58,6 +58,19 @@ CHASSIS_Z = 0.023249  # [m] chassis above base_link: URDF:35-36 (base_link_joint
 REAR_AXLE_Z, FRONT_AXLE_Z = 0.01575, 0.011759  # [m] wheel centres above the chassis: URDF:81, 178
 
 
+# The lidar (deepracer_single_cam_lidar.urdf:532-541, 01f5f01): hokuyo_joint puts the laser link
+# 0.02913 m ahead of the chassis origin and 0.16145 m above it, turned half round (rpy 0 0
+# 3.1416): its scan faces backwards.
+LIDAR_JOINT = (0.02913, 0.16145)  # [m] forward, up in the chassis frame
+
+
+def lidar_mount(wheel_radius: float = 0.036) -> tuple[float, float]:
+    """simapp's lidar as (forward of our car's origin, the middle of the rear axle [m]; height
+    above the ground [m]): 0.111 m, 0.182 m."""
+    ground = REAR_AXLE_Z + CHASSIS_Z - wheel_radius  # the tread, above base_link
+    return LIDAR_JOINT[0] - REAR_AXLE_X, LIDAR_JOINT[1] + CHASSIS_Z - ground
+
+
 @dataclass(frozen=True)
 class Part:
     """A rigid part of the car: its mass, where its centre is (chassis frame, x forward, z up,
@@ -93,7 +106,10 @@ class CarSpec:
     # The body, for collisions, the lidar and drawing.
     length: float = 0.32  # [m] bumper to bumper
     width: float = 0.20  # [m]
-    height: float = 0.12  # [m] of the body above the ground
+    # [m] of the body above the ground: its shell's top, 0.195 m above car_body_link
+    # (bundle/meshes/deepracer/car_body_link_v3.STL, its highest vertex), which sits 2e-5 m
+    # above the chassis (deepracer_single_cam_lidar.urdf:583-586, 01f5f01), itself 0.020 m up
+    height: float = 0.215
     rear_overhang: float = 0.075  # [m] rear axle to rear bumper
     wheel_track: float = 2 * REAR_WHEEL_Y  # [m] between the rear wheels' contact points
     # [m] ahead of base_link: the point that params["x"], ["y"] and the trace's X, Y report. simapp

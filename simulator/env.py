@@ -29,7 +29,7 @@ from simulator.camera import (
     PerspectiveView,
     deepracer_mount,
 )
-from simulator.car import Car, CarSpec
+from simulator.car import Car, CarSpec, lidar_mount
 from simulator.config import ContinuousActions, DiscreteActions
 from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
 from simulator.randomisation import Scene
@@ -70,11 +70,15 @@ def default_config(camera_lens: str = "simulator") -> dict[str, Any]:
         "room": None,
         "track_style": None,  # a texture.Style for the track image; None: simapp's for the track
         # simapp launch/racecar.launch.py:37-45, sensors/constants.py:20-28 (01f5f01): 64 rays
-        # over ±150°; LIDAR is clipped to 0.15-1.0 m (sensors/utils.py:56-57).
+        # over ±150° of the laser's own heading; LIDAR is clipped to 0.15-1.0 m
+        # (sensors/utils.py:56-57). The laser faces backwards (simulator.car.LIDAR_JOINT): its
+        # first ray points 30° left of the car's heading and they sweep round behind the car to
+        # 30° right, blind 30° either side of straight ahead, where the camera looks.
         "lidar_rays": 64,
         "lidar_fov": 300.0,  # [deg] ±150
+        "lidar_heading": 180.0,  # [deg] the laser's, from the car's
         "lidar_range": (0.15, 1.0),  # [m] after clipping
-        "lidar_height": 0.1,  # [m] above the ground
+        "lidar_mount": lidar_mount(),  # [m] forward of the rear axle, above the ground
         # SECTOR_LIDAR: 8 sectors of 8 consecutive rays, 1 when the nearest return in the sector
         # is under 0.5 m. simapp environments/constants.py:27,29 and
         # filters/observation/observation_sector_discretize_filter.py:53-71 (01f5f01).
@@ -510,9 +514,8 @@ class DeepRacerEnv(gym.Env):
             PerspectiveView(texture, lens, Mount(forward, height, pitch, left), room.sky, room)
             for left in lefts
         ]
-        angles = np.radians(
-            np.linspace(-cfg["lidar_fov"] / 2, cfg["lidar_fov"] / 2, cfg["lidar_rays"])
-        )
+        half = cfg["lidar_fov"] / 2
+        angles = np.radians(cfg["lidar_heading"] + np.linspace(-half, half, cfg["lidar_rays"]))
         self._lidar_angles = angles
 
     def _build_world(self) -> World | None:
@@ -562,7 +565,8 @@ class DeepRacerEnv(gym.Env):
         c = self.car
         angles = c.yaw + self._lidar_angles
         directions = np.column_stack([np.cos(angles), np.sin(angles)])
-        origin = (*c.point_ahead(c.spec.centre_offset), self.config["lidar_height"])
+        forward, height = self.config["lidar_mount"]
+        origin = (*c.point_ahead(forward), height)
         return np.clip(self._world.cast_rays(origin, directions, high), low, high)
 
     def _where(self):

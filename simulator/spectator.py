@@ -29,6 +29,9 @@ SLIDE_COLOUR = (40, 120, 255)  # BGR: orange
 TEXT_COLOUR = (255, 255, 255)
 TYRE_SHADE = (30, 30, 30)  # BGR: dark on every shell colour
 GLASS_SHADE = (78, 56, 40)  # BGR: tinted windows
+# [m] the drawn car's roof: a 1/18 car's body and cabin, without the shell's camera mast
+# (CarSpec.height, the shell's top at 0.215 m, is what the lidar and collisions meet)
+DRAWN_HEIGHT = 0.12
 WHEEL = (0.066, 0.034)  # [m] diameter and width of a 1/18 car's wheel
 MAP_CAR_SCALE = 1.0  # [px] per unit of ``_MAP_CAR_BODY``: larger than the car at the map's scale
 # The map's car in units of MAP_CAR_SCALE px, (forward, left) of its middle: nose at +9.
@@ -147,9 +150,9 @@ def car_solids(car: Car, colour: tuple[int, int, int]) -> list[Solid]:
         *((along, side * spec.wheel_track / 2, steer, diameter, tyre, diameter, TYRE_SHADE)
           for along, steer in ((0.0, 0.0), (spec.wheelbase, car.steering))
           for side in (1, -1)),
-        (spec.centre_offset, 0.0, 0.0, spec.length, body_width, spec.height / 2, colour),
+        (spec.centre_offset, 0.0, 0.0, spec.length, body_width, DRAWN_HEIGHT / 2, colour),
         (spec.centre_offset - 0.02, 0.0, 0.0, 0.45 * spec.length, 0.85 * body_width,
-         spec.height, colour),
+         DRAWN_HEIGHT, colour),
     ]  # fmt: skip
     c, s = math.cos(car.yaw), math.sin(car.yaw)
     return [

@@ -17,6 +17,7 @@ from simulator.camera import (
     PerspectiveView,
     deepracer_mount,
 )
+from simulator.car import CarSpec, lidar_mount
 from simulator.config import ConfigError
 from simulator.env import DeepRacerEnv, default_config
 from simulator.room import Room
@@ -50,6 +51,19 @@ def test_the_stereo_pair_is_simapps_6_cm_apart():
     # deepracer_stereo_cam.urdf:398 (left camera at y +0.03) and :511 (right at -0.03).
     assert pytest.approx(0.06) == STEREO_BASELINE
     assert default_config()["stereo_baseline"] == STEREO_BASELINE
+
+
+def test_the_lidar_sits_where_simapps_does_facing_backwards_above_bot_cars_shells():
+    # deepracer_single_cam_lidar.urdf:536-537: hokuyo_joint 0.02913 m ahead of the chassis and
+    # 0.16145 m above it, turned half round; the chassis 0.0817 m ahead of the rear axle and
+    # 0.020 m above the ground. The shell (car_body_link_v3.STL) tops out 0.215 m up, so the
+    # laser's rays meet another car's shell, as they meet a 0.3 m box.
+    forward, height = lidar_mount()
+    assert forward == pytest.approx(0.111, abs=5e-4)
+    assert height == pytest.approx(0.182, abs=5e-4)
+    config = default_config()
+    assert config["lidar_mount"] == (forward, height) and config["lidar_heading"] == 180.0
+    assert height < CarSpec().height == pytest.approx(0.215, abs=5e-4)
 
 
 def view_of(texture: TrackTexture) -> PerspectiveView:

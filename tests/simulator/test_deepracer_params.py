@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from simulator.car import CarSpec
+from simulator.car import CarSpec, lidar_mount
 from tests.simulator.conftest import make
 
 WIDTH = 1.0668  # [m]
@@ -195,16 +195,18 @@ def test_object_in_camera_keeps_simapps_113_rad_with_the_wide_lens(env, monkeypa
 def test_sector_lidar_marks_a_sector_whose_nearest_return_is_under_half_a_metre(
     env, monkeypatch, gap, sectors
 ):
-    # simapp: 64 rays over ±150° in 8 groups of 8 from -150°, 1 when the sector's minimum is under
-    # 0.5 m (environments/constants.py:27,29; observation_sector_discretize_filter.py:53-71).
+    # simapp: 64 rays over ±150° of the laser's heading in 8 groups of 8 from -150°, 1 when the
+    # sector's minimum is under 0.5 m (environments/constants.py:27,29;
+    # observation_sector_discretize_filter.py:53-71). The laser faces backwards
+    # (deepracer_single_cam_lidar.urdf:537): the middle sectors look behind the car.
     racer = env(race_type="OBJECT_AVOIDANCE", objects={"count": 1},
                 sensors=["FRONT_FACING_CAMERA", "SECTOR_LIDAR"])  # fmt: skip
     (box,) = racer.unwrapped.traffic.actors
-    box.distance, box.offset = 4.0, 0.0  # its near face at x = 4 - 0.25
+    box.distance, box.offset = 4.0, 0.0  # its far face at x = 4 + 0.25
     racer.unwrapped.traffic._update_poses()
     racer.unwrapped._sync_actor_bodies()
-    lidar_x = 4.0 - box.length / 2 - gap  # the lidar sits over the middle of the body
+    lidar_x = 4.0 + box.length / 2 + gap  # the car drives away from it
     car = racer.unwrapped.car
-    car.place(lidar_x - SPEC.centre_offset, -2.0, 0.0)
+    car.place(lidar_x - lidar_mount()[0], -2.0, 0.0)
     observation = racer.unwrapped._observe()
     assert observation["SECTOR_LIDAR"].tolist() == sectors

@@ -314,7 +314,7 @@ def test_the_training_start_advances_five_percent_each_episode(environments):
         assert env.unwrapped._distance == pytest.approx((0.1 + 0.05 * episode) * length, abs=0.02)
 
 
-def test_lidar_sees_a_box_ahead_and_sector_lidar_marks_its_sector(environments):
+def test_lidar_sees_a_box_behind_and_sector_lidar_marks_its_sector(environments):
     for lidar in ("LIDAR", "SECTOR_LIDAR"):
         env = environments(
             track="pitlane-oval",
@@ -325,13 +325,14 @@ def test_lidar_sees_a_box_ahead_and_sector_lidar_marks_its_sector(environments):
         env.reset(seed=0)
         car = env.unwrapped
         (box,) = car.traffic.actors
-        x, y, heading = car.track.point_at(box.distance - 0.75, box.offset)
+        # the car 0.55 m past the box, driving on: simapp's laser faces backwards
+        x, y, heading = car.track.point_at(box.distance + 0.55, box.offset)
         car.car.place(float(x), float(y), float(heading))
         observation = car._observe()[lidar]
         if lidar == "LIDAR":
             assert observation.shape == (64,) and observation.dtype == np.float32
-            assert observation[28:36].max() < 0.6  # straight ahead
-            assert observation[:8].min() == 1.0  # behind on the right: nothing
+            assert observation[28:36].max() < 0.6  # straight behind
+            assert observation[:8].min() == 1.0  # ahead on the left: nothing
         else:
             assert observation.tolist() == [0, 0, 0, 1, 1, 0, 0, 0]
 

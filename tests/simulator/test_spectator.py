@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from simulator.camera import Solid
-from simulator.spectator import WHEEL, view_image
+from simulator.spectator import DRAWN_HEIGHT, WHEEL, view_image
 from tests.simulator.conftest import drive
 
 RED = (47, 36, 209)  # BGR of the garage's red shell
@@ -26,7 +26,7 @@ def _as_one_box(env) -> np.ndarray:
     """The same scene with the car drawn as the box it used to be."""
     car, spec, spectator = env.car, env.car.spec, env.spectator
     x, y = car.point_ahead(spec.centre_offset)
-    box = Solid(x, y, car.yaw, spec.length, spec.width, spec.height, env.car_colour)
+    box = Solid(x, y, car.yaw, spec.length, spec.width, DRAWN_HEIGHT, env.car_colour)
     return spectator.chase.render(car.x, car.y, car.yaw, [box])
 
 
@@ -46,7 +46,7 @@ def test_the_racers_car_has_dark_wheels_at_its_corners_and_a_shell_coloured_body
         boxed = box[row - 1 : row + 2, column - 1 : column + 2].reshape(-1, 3)
         assert (np.abs(boxed.astype(int) - RED).sum(axis=1) < 120).all(), "a box is red there"
     blue, green, red = frame[
-        _pixel(spectator, car, spec.centre_offset + 0.12, 0.0, spec.height / 2)
+        _pixel(spectator, car, spec.centre_offset + 0.12, 0.0, DRAWN_HEIGHT / 2)
     ]
     assert red > 150 and green < 60 and blue < 70  # the bonnet, in the shell colour
 
@@ -58,7 +58,7 @@ def test_the_racers_car_shows_its_rear_window_to_the_chase_camera(environments):
     frame = view_image(env.unwrapped, "spectator")
     spec = car.spec
     rear_of_cabin = spec.centre_offset - 0.02 - 0.45 * spec.length / 2
-    blue, green, red = frame[_pixel(spectator, car, rear_of_cabin, 0.0, 0.75 * spec.height)]
+    blue, green, red = frame[_pixel(spectator, car, rear_of_cabin, 0.0, 0.75 * DRAWN_HEIGHT)]
     assert blue > red and max(blue, green, red) < 110  # tinted glass, not the red shell
 
 
