@@ -290,6 +290,12 @@ class RLModel(RaceConditions):
         "(migration 0018): it learnt Pitlane's 120°, 25° down view, and now drives with the "
         "64.7° one.",
     )  # fmt: skip
+    lidar_before_deepracer = models.BooleanField(
+        default=False, editable=False,
+        help_text="Trained with a lidar on this console before issue 44 put it on simapp's "
+        "mount (migration 0022): it learnt a lidar facing forwards 0.1 m up, and now reads one "
+        "facing backwards 0.182 m up.",
+    )  # fmt: skip
     domain_randomisation = models.BooleanField(
         default=False,
         help_text=f"Each episode in a scene of its own: {randomisation_ranges.SUMMARY} "

@@ -90,3 +90,33 @@ def test_a_model_trained_before_deepracers_camera_says_so_on_its_page(client, al
              for m in (before, imported, since)}  # fmt: skip
     assert said in pages["before"]
     assert said not in pages["imported"] and said not in pages["since"]
+
+
+def test_a_model_trained_with_a_lidar_before_simapps_mount_says_so_on_its_page(
+    client, alice, tracks
+):
+    from django.apps import apps
+
+    def trained(name: str, sensors: list[str], **job) -> RLModel:
+        checked = configuration.check(training_settings(name=name, sensors=sensors),
+                                      owner=alice, validate_reward=False)  # fmt: skip
+        model = RLModel.objects.create(owner=alice, **checked.row())
+        TrainingJob.objects.create(model=model, iterations=3, **job)
+        return model
+
+    lidar = ["FRONT_FACING_CAMERA", "LIDAR"]
+    before = trained("before", lidar)
+    camera_only = trained("camera-only", ["FRONT_FACING_CAMERA"])
+    imported = trained("imported", ["FRONT_FACING_CAMERA", "SECTOR_LIDAR"],
+                       lease_owner=jobs.IMPORTED)  # fmt: skip
+    migration = importlib.import_module("training.migrations.0022_lidar_mount")
+
+    migration.mark_lidar_before_deepracer(apps, None)
+    since = trained("since", lidar)
+
+    said = "it now reads DeepRacer's, facing backwards 0.182 m up"
+    client.force_login(alice)
+    pages = {m.name: client.get(reverse("training:model-detail", args=[m.pk])).text
+             for m in (before, camera_only, imported, since)}  # fmt: skip
+    assert said in pages["before"]
+    assert not any(said in pages[name] for name in ("camera-only", "imported", "since"))
