@@ -111,7 +111,7 @@ class EventAdmin(admin.ModelAdmin):
     actions = ["close_events", "recompute_rankings"]
     fieldsets = [
         (None, {"fields": ["season", "name", "slug", "division"]}),
-        ("Race", {"fields": ["track", "direction", "race_type"]}),
+        ("Race", {"fields": ["track", "direction", "race_type", "physical"]}),
         ("Object avoidance", {"fields": ["box_count", "box_randomize"]}),
         ("Head-to-bot", {"fields": ["bot_count", "bot_speed", "bot_lane_changes"]}),
         ("When", {"fields": ["opens_at", "closes_at"]}),

@@ -198,3 +198,24 @@ class CommunityRaceForm(RaceObstaclesForm):
     def fields_for_service(self) -> dict:
         data = {name: self.cleaned_data[name] for name in self.Meta.fields}
         return {**data, "boxes": self.instance.boxes, "bots": self.instance.bots}
+
+
+class TimedRunForm(RacerWords, forms.Form):
+    """A real car about to be timed: whose it is, the model it runs, and which car."""
+
+    racer = forms.CharField(
+        label="Racer", max_length=150, help_text="Their user name on this console."
+    )
+    model_name = forms.CharField(
+        label="Model", max_length=64, help_text="The model loaded on the car, as it is known."
+    )
+    car = forms.CharField(label="Car", max_length=64, help_text="Its number or name.")
+
+    def clean_racer(self):
+        from django.contrib.auth import get_user_model
+
+        name = self.cleaned_data["racer"].strip()
+        racer = get_user_model().objects.filter(username__iexact=name, is_active=True).first()
+        if racer is None:
+            raise ValidationError(f"No racer goes by the name {name} here: check the spelling.")
+        return racer

@@ -2,14 +2,19 @@
 
 A leaderboard page listens to its event's group; when a submission is scored, disqualified or
 removed, it hears a ``leaderboard`` message and fetches its table again. The racer's own
-submission page hears its ``submission`` messages (status, then the score).
+submission page hears its ``submission`` messages (status, then the score). A physical event's
+timekeeper and broadcast pages hear ``timing``: the car on the track, its laps, and when the lap
+on track started (``racing.timing``); the broadcast hears ``winner`` when the organiser shows it.
 """
 
 from __future__ import annotations
 
+import time
+
 from django.db import transaction
 
-from racing.models import Event, Submission
+from accounts.selectors import racer_name
+from racing.models import Event, PhysicalRun, Submission
 from training import live
 
 
@@ -38,6 +43,59 @@ def announce_submission(submission: Submission, *, ranked: bool = False) -> None
         "ranked": ranked,
     }
     transaction.on_commit(lambda: live.send(event_group(submission.event_id), _update(message)))
+
+
+def timing_state(run: PhysicalRun | None) -> dict:
+    """The car on the track as the timing pages show it (None: nobody is on the track)."""
+    if run is None:
+        return {"type": "timing", "on_track": False, "server_ms": _now_ms()}
+    submission = run.submission
+    laps = [
+        {"number": lap.number, "time_ms": lap.time_ms, "penalty_ms": lap.penalty_ms,
+         "off_tracks": lap.off_tracks, "resets": lap.resets, "counted": lap.counted}
+        for lap in submission.laps.order_by("number")
+    ]  # fmt: skip
+    started = run.line_crossed_at
+    return {
+        "type": "timing",
+        "event": submission.event_id,
+        "on_track": submission.status == Submission.Status.IN_PROGRESS,
+        "submission": submission.pk,
+        "racer": racer_name(racer=submission.racer),
+        "model_name": submission.model_name,
+        "car": run.car,
+        "laps": laps,
+        "off_tracks": run.off_tracks,
+        "resets": run.resets,
+        # the lap on track started then, in the server's epoch milliseconds; with server_ms a page
+        # sets its timer against its own clock, whatever that clock says
+        "lap_started_ms": None if started is None else round(started.timestamp() * 1000),
+        "server_ms": _now_ms(),
+        "score_ms": submission.score_ms,
+        "qualified": submission.qualified,
+    }
+
+
+def announce_timing(run: PhysicalRun) -> None:
+    """The car on the track changed (a crossing, an off-track, an undo, the finish)."""
+    event_id = run.submission.event_id
+
+    def send() -> None:
+        run.refresh_from_db()
+        run.submission.refresh_from_db()
+        live.send(event_group(event_id), _update(timing_state(run)))
+
+    transaction.on_commit(send)
+
+
+def announce_winner(event: Event, ranking: dict | None) -> None:
+    """The organiser shows the winner on the broadcast: ``ranking`` is the leader (None: none)."""
+    message = {"type": "winner", "event": event.pk, "winner": ranking}
+    transaction.on_commit(lambda: live.send(event_group(event.pk), _update(message)))
+
+
+def _now_ms() -> int:
+    return round(time.time() * 1000)
 
 
 def _update(message: dict) -> dict:

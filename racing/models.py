@@ -133,6 +133,16 @@ class Event(RaceConditions):
         help_text="The one-time token of the form that created this community race: the same "
         "form sent twice (Back and submit again, a double click) gives back this race.",
     )  # fmt: skip
+    physical = models.BooleanField(
+        "raced by real cars", default=False,
+        help_text="Real cars at a venue: a timekeeper records each lap (the event's timekeeper "
+        "page, or a timing device), and the laps are scored by the same rules.",
+    )  # fmt: skip
+    timing_token_hash = models.CharField(
+        max_length=64, blank=True, editable=False,
+        help_text="SHA-256 of the token a timing device sends (racing.timing); the token itself "
+        "is shown once, when it is made.",
+    )  # fmt: skip
     created_at = models.DateTimeField(auto_now_add=True, null=True, editable=False)
 
     class Meta:
@@ -266,6 +276,9 @@ class Submission(models.Model):
     video = models.CharField(max_length=255, blank=True, help_text="Storage name of the video.")
     disqualified = models.BooleanField(default=False)
     disqualification_reason = models.CharField(max_length=255, blank=True)
+    physical = models.BooleanField(
+        default=False, help_text="A real car's laps, timed at the track (racing.timing)."
+    )
 
     class Meta:
         ordering = ["-created_at", "-pk"]
@@ -298,6 +311,34 @@ class Submission(models.Model):
     def ranked_score(self) -> int | None:
         """The score that may rank: a qualified, not disqualified submission's."""
         return self.score_ms if self.qualified and not self.disqualified else None
+
+
+class PhysicalRun(models.Model):
+    """A real car on the track: its physical submission's timing while the timekeeper records it
+    (racing.timing). Lap times are differences of one clock's readings, the timekeeper page's or
+    the timing device's, so neither clock need agree with the server's."""
+
+    submission = models.OneToOneField(
+        Submission, on_delete=models.CASCADE, related_name="physical_run"
+    )
+    car = models.CharField(max_length=64, help_text="Which car: its number or name.")
+    timekeeper = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    line_crossed_ms = models.BigIntegerField(
+        null=True, blank=True, help_text="The clock's reading when the car last crossed the line: "
+        "the lap on track started then. Empty until the first crossing.",
+    )  # fmt: skip
+    line_crossed_at = models.DateTimeField(
+        null=True,
+        blank=True,
+        help_text="When the server heard that crossing (the broadcast's timer).",
+    )
+    off_tracks = models.PositiveIntegerField(default=0, help_text="Of the lap on track.")
+    resets = models.PositiveIntegerField(default=0, help_text="Of the lap on track.")
+
+    def __str__(self) -> str:
+        return f"{self.car} for {self.submission}"
 
 
 class Lap(models.Model):

@@ -77,7 +77,8 @@ def submission_visible_to(*, submission: Submission, user: AbstractBaseUser) -> 
 def leaderboard_page(*, event: Event, page: int | str = 1) -> Page:
     """One page of the event's rankings in order, each with its ``position`` and ``gap_ms`` to
     first. An out-of-range page number gives the last page."""
-    rankings = event.rankings.select_related("racer__profile").order_by(*RANKING_ORDER)
+    rankings = event.rankings.select_related("racer__profile", "submission")
+    rankings = rankings.order_by(*RANKING_ORDER)
     current = Paginator(rankings, LEADERBOARD_PAGE).get_page(page)
     current.object_list = list(current.object_list)
     leader = current.object_list[0] if current.number == 1 and current.object_list else None
@@ -86,6 +87,12 @@ def leaderboard_page(*, event: Event, page: int | str = 1) -> Page:
         ranking.position = current.start_index() + offset
         ranking.gap_ms = ranking.score_ms - best
     return current
+
+
+def leaders(*, event: Event, count: int) -> list[Ranking]:
+    """The event's first ``count`` rankings, in order."""
+    rankings = event.rankings.select_related("racer__profile", "submission")
+    return list(rankings.order_by(*RANKING_ORDER)[:count])
 
 
 def ranking_of(*, event: Event, racer: AbstractBaseUser) -> Ranking | None:
@@ -159,6 +166,8 @@ def submission_refusal(
     can (the model's own state is checked when the race is reserved)."""
     if model is not None and model.owner_id != racer.pk:
         return "You can submit only your own models."
+    if event.physical:
+        return f"{event.name} is raced by real cars: its timekeeper times each car at the track."
     state = event.state
     if state == Event.State.UPCOMING:
         return f"{event.name} opens on {local_text(event.opens_at)}; submit then."
@@ -205,7 +214,7 @@ def events_open_to(*, racer: AbstractBaseUser) -> list[Event]:
     now = timezone.now()
     division = Racer.of(racer).division
     return list(
-        Event.objects.filter(opens_at__lte=now, closes_at__gt=now)
+        Event.objects.filter(opens_at__lte=now, closes_at__gt=now, physical=False)
         .filter(Q(public=True, division=division) | Q(public=False, participants=racer))
         .select_related("track", "season")
         .distinct()

@@ -1,6 +1,6 @@
 from django.urls import path
 
-from racing import views
+from racing import timing_views, views
 
 app_name = "racing"
 urlpatterns = [
@@ -26,4 +26,15 @@ urlpatterns = [
     path("leaderboards/", views.leaderboard_list, name="leaderboard-list"),
     path("leaderboards/<slug:slug>/", views.leaderboard, name="leaderboard"),
     path("seasons/<int:pk>/", views.season_standings, name="season-standings"),
+    path("events/<slug:slug>/timekeeper/", timing_views.timekeeper, name="timekeeper"),
+    path("events/<slug:slug>/timekeeper/signal", timing_views.timekeeper_signal,
+         name="timekeeper-signal"),
+    path("events/<slug:slug>/timekeeper/token", timing_views.timekeeper_token,
+         name="timekeeper-token"),
+    path("events/<slug:slug>/timekeeper/winner", timing_views.timekeeper_winner,
+         name="timekeeper-winner"),
+    path("events/<slug:slug>/broadcast/", timing_views.broadcast, name="broadcast"),
+    path("events/<slug:slug>/broadcast/state", timing_views.broadcast_state,
+         name="broadcast-state"),
+    path("api/timing/<slug:slug>/", timing_views.device, name="timing-device"),
 ]  # fmt: skip

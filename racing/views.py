@@ -10,7 +10,7 @@ from django.views.decorators.http import require_POST
 
 from accounts.selectors import racer_name
 from common import ratelimits
-from racing import selectors, services
+from racing import selectors, services, timing
 from racing.forms import CommunityRaceForm, SubmissionForm
 from racing.models import Division, Event, Season, Submission
 from training import artifacts
@@ -64,6 +64,7 @@ def leaderboard(request: HttpRequest, slug: str) -> HttpResponse:
         context["can_submit"] = not selectors.submission_refusal(
             racer=request.user, event=event, model=None
         )
+        context["may_keep_time"] = timing.may_keep_time(event=event, user=request.user)
     return render(request, "racing/leaderboard.html", context)
 
 

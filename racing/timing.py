@@ -1,0 +1,215 @@
+"""Physical events: real cars timed at the track, scored into the same leaderboards.
+
+A timekeeper (staff, or a community race's organiser) starts a run for a racer's car; each time
+the car crosses the line the timekeeper presses a key on the event's timekeeper page, or a timing
+device posts a crossing (``device_signal``). The first crossing starts the clock, each later one
+ends a lap: its time is the difference of two readings of the same clock (the page's or the
+device's), plus the event's off-track penalty for each off-track marked during it. A lap counts
+when it has no more off-tracks than the event allows. Finishing the run scores its laps by the
+event's ranking method (best lap, first N consecutive, best average of N, total time:
+``racing.scoring``) and offers the score to the racer's ranking, as a simulated race's is.
+
+Signals, from the page's keys or the device's ``signal``:
+
+- ``crossing`` (the space bar): the car crossed the line, at the clock's ``at_ms``;
+- ``off_track`` (O): the car left the track and drove back on;
+- ``reset`` (R): the car left the track and was put back by hand (it counts as an off-track too,
+  as a simulated car's reset follows its off-track);
+- ``undo`` (U): the last crossing was a mistake: its lap goes, its off-tracks and resets return to
+  the lap on track (the first crossing undone stops the clock);
+- ``finish`` (F): the run is over: score it.
+
+The DeepRacer Event Manager times physical events the same way: a timekeeper records each lap and
+its resets, and its leaderboards take the best lap or the best average of X laps.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import secrets
+from dataclasses import dataclass
+from datetime import timedelta
+
+from django.contrib.auth.models import AbstractBaseUser
+from django.db import transaction
+from django.utils import timezone
+
+from common.refusals import Refused
+from notifications import services as notifications
+from racing import live, scoring, selectors
+from racing.models import Event, Lap, PhysicalRun, Submission
+from racing.services import SUBMISSION, ranking_offer
+
+SIGNALS = ("crossing", "off_track", "reset", "undo", "finish")
+MIN_LAP_MS = 1_000  # a second crossing sooner than this is the same crossing pressed twice
+MAX_CLOCK_MS = 2**62  # readings beyond this are not a clock's
+
+
+class TimingRefused(Refused):
+    """The signal cannot be taken; the message says why, in the timekeeper's words."""
+
+
+@dataclass(frozen=True)
+class Signal:
+    kind: str
+    at_ms: int | None = None  # the clock's reading, for a crossing
+
+
+def timing_token_renew(*, event: Event) -> str:
+    """A new token for the event's timing device (the old one stops working): shown once, kept
+    only as its hash."""
+    token = secrets.token_urlsafe(32)
+    Event.objects.filter(pk=event.pk).update(timing_token_hash=_digest(token))
+    event.timing_token_hash = _digest(token)
+    return token
+
+
+def timing_token_matches(*, event: Event, token: str) -> bool:
+    """Whether ``token`` is the event's device token (compared in constant time)."""
+    if not event.timing_token_hash or not token:
+        return False
+    return hmac.compare_digest(event.timing_token_hash, _digest(token))
+
+
+def _digest(token: str) -> str:
+    return hashlib.sha256(token.encode()).hexdigest()
+
+
+def physical_run_start(
+    *, event: Event, racer: AbstractBaseUser, model_name: str, car: str, timekeeper
+) -> PhysicalRun:
+    """A racer's car on the track: a physical submission, its clock not yet started. One car is
+    timed at a time in an event."""
+    if not event.physical:
+        raise TimingRefused(f"{event.name} is not raced by real cars: its laps are simulated.")
+    if event.state == Event.State.CLOSED:
+        raise TimingRefused(f"{event.name} has closed: no more runs are timed.")
+    with transaction.atomic():
+        Event.objects.select_for_update().filter(pk=event.pk).first()  # one start at a time
+        if (running := running_run(event=event)) is not None:
+            raise TimingRefused(
+                f"{running.car} ({running.submission.racer}) is still on the track: finish "
+                "that run first."
+            )
+        submission = Submission.objects.create(
+            event=event, racer=racer, model_name=model_name, physical=True
+        )
+        SUBMISSION.move(submission, Submission.Status.IN_PROGRESS)
+        run = PhysicalRun.objects.create(submission=submission, car=car, timekeeper=timekeeper)
+    live.announce_timing(run)
+    return run
+
+
+def running_run(*, event: Event) -> PhysicalRun | None:
+    """The run on the track in ``event``, if any."""
+    return (
+        PhysicalRun.objects.select_related("submission__racer", "submission__event")
+        .filter(submission__event=event, submission__status=Submission.Status.IN_PROGRESS)
+        .first()
+    )
+
+
+def run_signal(*, run: PhysicalRun, signal: Signal) -> PhysicalRun:
+    """Apply one signal to the run on the track; its pages hear the new state."""
+    if signal.kind not in SIGNALS:
+        raise TimingRefused(f"Unknown signal {signal.kind!r}: one of {', '.join(SIGNALS)}.")
+    if signal.kind == "finish":
+        return physical_run_finish(run=run)
+    with transaction.atomic():
+        run = _locked(run)
+        if signal.kind == "crossing":
+            _crossing(run, signal.at_ms)
+        elif signal.kind == "undo":
+            _undo(run)
+        else:
+            run.off_tracks += 1
+            run.resets += signal.kind == "reset"
+            run.save(update_fields=["off_tracks", "resets"])
+    live.announce_timing(run)
+    return run
+
+
+def _locked(run: PhysicalRun) -> PhysicalRun:
+    locked = (
+        PhysicalRun.objects.select_for_update()
+        .select_related("submission__event", "submission__racer")
+        .filter(pk=run.pk)
+        .first()
+    )
+    if locked is None or locked.submission.status != Submission.Status.IN_PROGRESS:
+        raise TimingRefused("That run is over: start the next one.")
+    return locked
+
+
+def _crossing(run: PhysicalRun, at_ms: int | None) -> None:
+    if at_ms is None or not 0 <= at_ms < MAX_CLOCK_MS:
+        raise TimingRefused("A crossing needs the clock's reading, at_ms: whole milliseconds.")
+    if run.line_crossed_ms is not None:
+        lap_ms = at_ms - run.line_crossed_ms
+        if lap_ms < MIN_LAP_MS:
+            raise TimingRefused(
+                f"A lap of {lap_ms} ms: the same crossing twice, or the clock went back."
+            )
+        event = run.submission.event
+        penalty_ms = round(run.off_tracks * event.off_track_penalty_s * 1000)
+        limit = event.max_off_tracks_per_lap
+        Lap.objects.create(
+            submission=run.submission, number=run.submission.laps.count() + 1,
+            time_ms=lap_ms + penalty_ms, penalty_ms=penalty_ms, status="lap_complete",
+            off_tracks=run.off_tracks, resets=run.resets,
+            counted=limit is None or run.off_tracks <= limit,
+        )  # fmt: skip
+    run.line_crossed_ms, run.line_crossed_at = at_ms, timezone.now()
+    run.off_tracks = run.resets = 0
+    run.save(update_fields=["line_crossed_ms", "line_crossed_at", "off_tracks", "resets"])
+
+
+def _undo(run: PhysicalRun) -> None:
+    last = run.submission.laps.order_by("-number").first()
+    if last is None:
+        if run.line_crossed_ms is None:
+            raise TimingRefused("Nothing to undo: the car has not crossed the line yet.")
+        run.line_crossed_ms = run.line_crossed_at = None  # the clock stops again
+    else:
+        run.line_crossed_ms -= last.time_ms - last.penalty_ms
+        run.line_crossed_at = (run.line_crossed_at or timezone.now()) - timedelta(
+            milliseconds=last.time_ms - last.penalty_ms
+        )
+        run.off_tracks += last.off_tracks
+        run.resets += last.resets
+        last.delete()
+    run.save(update_fields=["line_crossed_ms", "line_crossed_at", "off_tracks", "resets"])
+
+
+def physical_run_finish(*, run: PhysicalRun) -> PhysicalRun:
+    """The run is over: score its laps by the event's rules, offer the score to the racer's
+    ranking, and tell the racer."""
+    with transaction.atomic():
+        run = _locked(run)
+        submission, event = run.submission, run.submission.event
+        laps = list(submission.laps.order_by("number"))
+        score = scoring.score(
+            [lap.scoring_lap() for lap in laps],
+            method=event.ranking_method,
+            size=event.laps_required,
+        )
+        SUBMISSION.move(
+            submission, Submission.Status.COMPLETED, finished_at=timezone.now(), score_ms=score,
+            qualified=score is not None, laps_completed=len(laps),
+            off_tracks=sum(lap.off_tracks for lap in laps),
+        )  # fmt: skip
+        ranked = ranking_offer(submission=submission)
+    live.announce_submission(submission, ranked=ranked)
+    live.announce_timing(run)
+    notifications.submission_scored(submission=submission)
+    return run
+
+
+def may_keep_time(*, event: Event, user: AbstractBaseUser) -> bool:
+    """Staff time any physical event; a community race's organiser times their own."""
+    if not user.is_authenticated or not event.physical:
+        return False
+    if user.is_staff:
+        return selectors.event_visible_to(event=event, user=user)
+    return event.organiser_id == user.pk

@@ -1,0 +1,46 @@
+// Shared by the timekeeper and broadcast pages of a physical event: the event's websocket, and
+// the running lap's clock, set against this browser's clock by the server's time in each message.
+export function listen(eventId, onMessage) {
+  let retry = 1000;
+  function connect() {
+    const scheme = location.protocol === "https:" ? "wss" : "ws";
+    const socket = new WebSocket(`${scheme}://${location.host}/ws/events/${eventId}/`);
+    socket.addEventListener("open", () => { retry = 1000; document.body.dataset.listening = "true"; });
+    socket.addEventListener("message", (message) => onMessage(JSON.parse(message.data)));
+    socket.addEventListener("close", () => {
+      document.body.dataset.listening = "false";
+      setTimeout(connect, retry);
+      retry = Math.min(retry * 2, 30000);
+    });
+  }
+  connect();
+}
+
+export function laptime(milliseconds) {
+  if (milliseconds === null || milliseconds === undefined) return "—";
+  const total = Math.max(0, Math.round(milliseconds));
+  const minutes = Math.floor(total / 60000);
+  const seconds = Math.floor((total % 60000) / 1000);
+  const millis = total % 1000;
+  return `${minutes}:${String(seconds).padStart(2, "0")}.${String(millis).padStart(3, "0")}`;
+}
+
+// The lap on track's time: started at the server's lap_started_ms; the server said server_ms
+// when it sent the state, which this browser heard at receivedAt (its own clock).
+export class LapClock {
+  constructor(element) {
+    this.element = element;
+    this.started = null;
+    this.offset = 0;
+    const tick = () => {
+      this.element.textContent = this.started === null ? laptime(0) : laptime(this.now() - this.started);
+      requestAnimationFrame(tick);
+    };
+    requestAnimationFrame(tick);
+  }
+  set(state) {
+    this.offset = state.server_ms - Date.now();
+    this.started = state.on_track ? state.lap_started_ms : null;
+  }
+  now() { return Date.now() + this.offset; }
+}
