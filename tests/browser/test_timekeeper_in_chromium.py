@@ -1,0 +1,79 @@
+"""A physical event in Chromium: the timekeeper records a real car's laps by keyboard, undoes a
+mistaken crossing, finishes the run; the broadcast page follows it live and ranks it, and the
+leaderboard marks the run as a real car's."""
+
+import re
+
+import pytest
+from playwright.sync_api import Page, expect
+
+from accounts.selectors import racer_name
+from racing.models import RankingMethod, Submission
+from tests.browser.test_accounts_in_chromium import log_in
+from tests.conftest import PASSWORD
+from tests.racing.factories import event
+
+pytestmark = pytest.mark.django_db(transaction=True)
+LAP = 1_100  # [ms] between crossings: laps shorter than a second are refused as a double press
+
+
+def test_the_timekeeper_times_a_real_car_by_keyboard_and_the_broadcast_follows(
+    page: Page, alice, stella, tracks
+):
+    race = event("Summit live", physical=True, laps_required=2, laps_to_drive=3,
+                 ranking_method=RankingMethod.BEST_LAP, off_track_penalty_s=2.0)  # fmt: skip
+    screen = page.context.new_page()
+    screen.goto(f"/events/{race.slug}/broadcast/")
+    expect(screen.locator("body")).to_have_attribute("data-listening", "true")
+    expect(screen.locator("[data-racer]")).to_have_text("Waiting for the next car")
+
+    log_in(page, "stella", PASSWORD)
+    page.goto(f"/events/{race.slug}/timekeeper/")
+    page.get_by_label("Racer").fill("alice")
+    page.get_by_label("Model").fill("sim2real-v3")
+    page.get_by_label("Car").fill("7")
+    page.get_by_role("button", name="Put the car on the track").click()
+    keeper = page.locator("[data-timekeeper]")
+    expect(page.locator("[data-on-track]")).to_be_visible()
+    expect(page.locator("body")).to_have_attribute("data-listening", "true")
+    name = racer_name(racer=alice)
+    expect(screen.locator("[data-racer]")).to_have_text(name)
+
+    page.keyboard.press(" ")  # the car crosses the line: the clock starts
+    expect(page.locator("[data-waiting]")).to_be_hidden()
+    page.wait_for_timeout(LAP)
+    page.keyboard.press(" ")
+    expect(keeper).to_have_attribute("data-laps", "1")
+    page.keyboard.press("o")  # an off-track on lap 2
+    expect(page.locator("[data-off-tracks]")).to_have_text("1")
+    page.wait_for_timeout(LAP)
+    page.keyboard.press(" ")
+    expect(keeper).to_have_attribute("data-laps", "2")
+    expect(screen.locator("[data-laps] li")).to_have_count(2)
+    page.keyboard.press("u")  # that crossing was a mistake: lap 2 runs on, its off-track with it
+    expect(keeper).to_have_attribute("data-laps", "1")
+    expect(page.locator("[data-off-tracks]")).to_have_text("1")
+    expect(screen.locator("[data-laps] li")).to_have_count(1)
+    page.wait_for_timeout(LAP)
+    page.keyboard.press(" ")
+    expect(keeper).to_have_attribute("data-laps", "2")
+
+    page.once("dialog", lambda dialog: dialog.accept())
+    page.keyboard.press("f")
+    expect(page.locator("[data-last-result]")).to_have_text(re.compile(f"^{name}'s run scored"))
+    submission = Submission.objects.get(event=race, racer=alice)
+    laps = list(submission.laps.order_by("number"))
+    assert submission.physical and submission.score_ms == min(lap.time_ms for lap in laps)
+    assert laps[1].off_tracks == 1 and laps[1].penalty_ms == 2_000
+    assert laps[1].time_ms - laps[1].penalty_ms >= 2 * LAP  # from lap 1's end, through the undo
+
+    top = screen.locator("[data-top] li")
+    expect(top).to_have_count(1)
+    expect(top.first).to_contain_text(name)
+    expect(top.first).to_contain_text("real car")
+    page.get_by_role("button", name="Show the winner on the broadcast").click()
+    expect(screen.locator("[data-winner]")).to_be_visible()
+    expect(screen.locator("[data-winner-racer]")).to_have_text(name)
+
+    page.goto(race.get_absolute_url())
+    expect(page.locator("[data-physical]")).to_have_text("Real car")
