@@ -11,4 +11,5 @@ websocket_urlpatterns = [
     path("ws/jobs/<int:pk>/", training_consumers.TrainingConsumer.as_asgi()),
     path("ws/evaluations/<int:pk>/", training_consumers.EvaluationConsumer.as_asgi()),
     path("ws/events/<int:pk>/", racing_consumers.EventConsumer.as_asgi()),
+    path("ws/live-turns/<int:pk>/", racing_consumers.LiveTurnConsumer.as_asgi()),
 ]

@@ -131,6 +131,17 @@ def submission_scored(*, submission) -> Notification | None:
 
 
 @_quietly
+def live_turn_next(*, entry) -> Notification | None:
+    """A racer in a live race's queue is next: their turn starts when the one driving ends."""
+    event = entry.session.event
+    text = f"You are next in {event.name}'s live race: {entry.model_name} drives when the turn "
+    text += "on the track ends."
+    return notification_send(
+        recipient=entry.racer, text=text, url=reverse("racing:live-race", args=[event.slug])
+    )
+
+
+@_quietly
 def submission_disqualified(*, submission) -> Notification | None:
     """League staff disqualified a race submission: the racer is told why."""
     text = (

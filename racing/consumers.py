@@ -2,7 +2,10 @@
 
 Anyone who may see the event may listen (public events need no login). Messages are JSON:
 ``leaderboard`` when the rankings changed, ``submission`` when a submission's status or score
-did (see ``racing.live``). The page refetches its table on either.
+did, ``queue``, ``timing`` and ``winner`` for live and physical races (see ``racing.live``).
+
+``ws/live-turns/<evaluation id>/`` streams a live race's turn (its evaluation's frames, as
+``training.consumers`` streams an evaluation to its owner) to everyone who may see the event.
 """
 
 from __future__ import annotations
@@ -14,7 +17,10 @@ from channels.generic.websocket import AsyncWebsocketConsumer
 
 from racing import selectors
 from racing.live import event_group
-from racing.models import Event
+from racing.models import Event, LiveEntry
+from training import selectors as training_selectors
+from training.consumers import LiveConsumer
+from training.live import evaluation_group
 
 REFUSED = 4404
 
@@ -44,3 +50,24 @@ class EventConsumer(AsyncWebsocketConsumer):
         if user is None:
             return event.public
         return selectors.event_visible_to(event=event, user=user)
+
+
+class LiveTurnConsumer(LiveConsumer):
+    """A live race's turn on the race and broadcast pages: its frames, status and laps."""
+
+    anonymous = True
+
+    def group_for(self, pk: int) -> str:
+        return evaluation_group(pk)
+
+    def snapshot_for(self, user, pk: int) -> dict | None:
+        entry = (
+            LiveEntry.objects.select_related("submission__evaluation", "session__event")
+            .filter(submission__evaluation_id=pk)
+            .first()
+        )
+        if entry is None or not EventConsumer.may_watch(
+            user if user.is_authenticated else None, entry.session.event_id
+        ):
+            return None
+        return training_selectors.evaluation_snapshot(evaluation=entry.submission.evaluation)

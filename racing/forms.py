@@ -219,3 +219,47 @@ class TimedRunForm(RacerWords, forms.Form):
         if racer is None:
             raise ValidationError(f"No racer goes by the name {name} here: check the spelling.")
         return racer
+
+
+class LiveJoinForm(RacerWords, forms.Form):
+    """A racer's place in a live race's queue: a ready model and its speed multiplier."""
+
+    model = forms.ModelChoiceField(
+        queryset=RLModel.objects.none(), empty_label="Choose a model",
+        error_messages={"invalid_choice": "Choose one of your ready models."},
+    )  # fmt: skip
+    speed = forms.FloatField(
+        label="Speed multiplier", initial=1.0,
+        help_text="Your model's speeds times this during your turn.",
+    )  # fmt: skip
+
+    def __init__(self, *args, racer, session, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.fields["model"].queryset = selectors.models_ready_for(racer=racer)
+        self.fields["model"].label_from_instance = _model_label
+        speed = self.fields["speed"]
+        speed.min_value, speed.max_value = session.min_speed, session.max_speed
+        speed.widget.attrs.update(min=session.min_speed, max=session.max_speed, step=0.1)
+        speed.help_text += f" From {session.min_speed:g} to {session.max_speed:g}."
+
+
+class LiveSessionForm(RacerWords, forms.Form):
+    """The facilitator's settings of a live race."""
+
+    min_speed = forms.FloatField(label="Slowest speed multiplier", initial=0.5, min_value=0.1,
+                                 max_value=2.0)  # fmt: skip
+    max_speed = forms.FloatField(label="Fastest speed multiplier", initial=1.5, min_value=0.1,
+                                 max_value=2.0)  # fmt: skip
+    autolaunch = forms.BooleanField(
+        label="Launch each turn as soon as the last one ends", required=False
+    )
+
+    def clean(self) -> dict:
+        data = super().clean()
+        if (
+            data.get("min_speed")
+            and data.get("max_speed")
+            and data["min_speed"] > data["max_speed"]
+        ):
+            raise ValidationError("The slowest multiplier is above the fastest: swap them.")
+        return data

@@ -14,7 +14,7 @@ import time
 from django.db import transaction
 
 from accounts.selectors import racer_name
-from racing.models import Event, PhysicalRun, Submission
+from racing.models import Event, LiveSession, PhysicalRun, Submission
 from training import live
 
 
@@ -84,6 +84,45 @@ def announce_timing(run: PhysicalRun) -> None:
         run.refresh_from_db()
         run.submission.refresh_from_db()
         live.send(event_group(event_id), _update(timing_state(run)))
+
+    transaction.on_commit(send)
+
+
+def queue_state(session: LiveSession | None) -> dict:
+    """A live session's queue as the race and broadcast pages show it: the turn driving (with
+    its evaluation, whose frames the pages watch), then the racers waiting, in order."""
+    if session is None:
+        return {"type": "queue", "open": False, "entries": [], "driving": None}
+    entries = session.entries.select_related("racer__profile", "submission").order_by(
+        "position", "pk"
+    )
+    shown, driving = [], None
+    for entry in entries:
+        row = {
+            "id": entry.pk, "racer": racer_name(racer=entry.racer), "racer_id": entry.racer_id,
+            "model_name": entry.model_name, "speed": entry.speed, "status": entry.status,
+            "submission": entry.submission_id,
+            "evaluation": entry.submission.evaluation_id if entry.submission else None,
+            "score_ms": entry.submission.score_ms if entry.submission else None,
+        }  # fmt: skip
+        if entry.status == entry.Status.DRIVING:
+            driving = row
+        elif entry.status != entry.Status.REMOVED:
+            shown.append(row)
+    return {
+        "type": "queue", "open": True, "event": session.event_id,
+        "autolaunch": session.autolaunch, "min_speed": session.min_speed,
+        "max_speed": session.max_speed, "entries": shown, "driving": driving,
+    }  # fmt: skip
+
+
+def announce_queue(session: LiveSession) -> None:
+    """A live session's queue or turn changed."""
+    event_id = session.event_id
+
+    def send() -> None:
+        current = LiveSession.objects.filter(pk=session.pk).first()
+        live.send(event_group(event_id), _update(queue_state(current)))
 
     transaction.on_commit(send)
 

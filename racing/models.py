@@ -1,5 +1,11 @@
 """The league: seasons hold events; racers submit models to events; a submission's laps give its
-score, and a racer's best qualifying score per event is their ranking."""
+score, and a racer's best qualifying score per event is their ranking. Live sessions queue an
+event's turns, and physical runs time real cars' laps into the same submissions.
+
+Long because the league's rows are one schema that its services, pages and admin read together:
+an event's rules, its submissions, their laps and rankings, and the live and physical races
+that make submissions, side by side as a reader of a race's data expects them.
+"""
 
 from __future__ import annotations
 
@@ -311,6 +317,62 @@ class Submission(models.Model):
     def ranked_score(self) -> int | None:
         """The score that may rank: a qualified, not disqualified submission's."""
         return self.score_ms if self.qualified and not self.disqualified else None
+
+
+class LiveSession(models.Model):
+    """An event raced live (racing.live_races): racers queue their models, the facilitator orders
+    the queue and launches each turn, and everyone on the race page watches it drive."""
+
+    event = models.OneToOneField(Event, on_delete=models.CASCADE, related_name="live_session")
+    facilitator = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    autolaunch = models.BooleanField(
+        default=False, help_text="Launch the next turn as soon as one ends."
+    )
+    min_speed = models.FloatField(
+        "slowest speed multiplier", default=0.5,
+        validators=[MinValueValidator(0.1), MaxValueValidator(2.0)],
+    )  # fmt: skip
+    max_speed = models.FloatField(
+        "fastest speed multiplier", default=1.5,
+        validators=[MinValueValidator(0.1), MaxValueValidator(2.0)],
+    )  # fmt: skip
+    created_at = models.DateTimeField(auto_now_add=True)
+
+    def __str__(self) -> str:
+        return f"{self.event} live"
+
+
+class LiveEntry(models.Model):
+    """A racer's place in a live session's queue, and the turn it drove."""
+
+    class Status(models.TextChoices):
+        WAITING = "waiting", "Waiting"
+        DRIVING = "driving", "Driving"
+        DONE = "done", "Done"
+        REMOVED = "removed", "Removed"
+
+    session = models.ForeignKey(LiveSession, on_delete=models.CASCADE, related_name="entries")
+    racer = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="live_entries"
+    )
+    model = models.ForeignKey(RLModel, null=True, on_delete=models.SET_NULL, related_name="+")
+    model_name = models.CharField(max_length=64)
+    speed = models.FloatField("speed multiplier", default=1.0)
+    position = models.PositiveIntegerField(help_text="Its place in the queue: lower goes first.")
+    status = models.CharField(max_length=8, choices=Status.choices, default=Status.WAITING)
+    submission = models.OneToOneField(
+        Submission, null=True, blank=True, on_delete=models.SET_NULL, related_name="live_entry"
+    )
+    joined_at = models.DateTimeField(auto_now_add=True)
+
+    class Meta:
+        ordering = ["session", "position", "pk"]
+        verbose_name_plural = "live entries"
+
+    def __str__(self) -> str:
+        return f"{self.model_name} in {self.session}"
 
 
 class PhysicalRun(models.Model):

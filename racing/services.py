@@ -75,13 +75,20 @@ class SubmissionRefused(Refused):
 
 
 def submission_create(
-    *, racer: AbstractBaseUser, event: Event, model: RLModel, checkpoint: str = "best"
+    *,
+    racer: AbstractBaseUser,
+    event: Event,
+    model: RLModel,
+    checkpoint: str = "best",
+    speed_multiplier: float = 1.0,
+    real_time: bool = False,
 ) -> Submission:
     """Enter ``model`` in ``event`` with its ``checkpoint`` ("best" or "last"): checked
     (``SubmissionRefused`` says why not), then a race evaluation under the event's rules is
     queued, with a seed of its own that the submission keeps, and the model is SUBMITTING until
     it ends. The racer's row is locked meanwhile, so two submissions at once cannot overrun the
-    limit."""
+    limit. A live race's turn drives at ``speed_multiplier`` times the model's speeds, in
+    ``real_time`` (racing.live_races)."""
     if checkpoint not in EvaluationJob.Checkpoint.values:
         raise SubmissionRefused("Race the model's best or its last checkpoint.")
     with transaction.atomic():
@@ -94,7 +101,8 @@ def submission_create(
         try:
             evaluation = training_services.evaluation_reserve(
                 model=model, purpose=RLModel.Status.SUBMITTING,
-                **race_rules(event, checkpoint=checkpoint),
+                **race_rules(event, checkpoint=checkpoint), speed_multiplier=speed_multiplier,
+                real_time=real_time,
             )  # fmt: skip
         except training_services.EvaluationRefused as refused:
             raise SubmissionRefused(str(refused)) from None
@@ -149,16 +157,26 @@ def submission_run(*, submission_id: int) -> Submission | None:
             submission, Submission.Status.FAILED, failure_reason=reason, finished_at=timezone.now()
         )
         live.announce_submission(submission)
+        _live_turn_ended(submission)
         return submission
     Submission.objects.filter(pk=submission.pk).update(
         checkpoint_iteration=evaluation.checkpoint_iteration
     )  # the weights that raced, kept when the evaluation goes with its model
     submission.checkpoint_iteration = evaluation.checkpoint_iteration
-    return submission_score(
+    submission_score(
         submission=submission,
         trials=list(evaluation.trial_rows.all()),
         video=evaluation.video,
     )
+    _live_turn_ended(submission)
+    return submission
+
+
+def _live_turn_ended(submission: Submission) -> None:
+    """A live race's turn has ended, scored or failed: its session moves on."""
+    from racing import live_races  # it enters races through this module's submission_create
+
+    live_races.live_turn_ended(submission=submission)
 
 
 def submission_score(

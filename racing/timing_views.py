@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 
+from django.conf import settings
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.http import Http404, HttpRequest, HttpResponse, JsonResponse
@@ -23,9 +24,9 @@ from django.views.decorators.csrf import csrf_exempt
 from django.views.decorators.http import require_POST
 
 from accounts.selectors import racer_name
-from racing import live, selectors, timing
+from racing import live, live_races, selectors, timing
 from racing.forms import TimedRunForm
-from racing.models import Event
+from racing.models import Event, LiveSession
 from racing.views import _get_event_for_user
 
 TOP = 10  # the broadcast's leaderboard
@@ -80,24 +81,38 @@ def timekeeper_token(request: HttpRequest, slug: str) -> HttpResponse:
 
 @login_required
 @require_POST
-def timekeeper_winner(request: HttpRequest, slug: str) -> HttpResponse:
-    event = _event_to_time(request, slug)
+def winner(request: HttpRequest, slug: str) -> HttpResponse:
+    """The broadcast's winner overlay, shown by the timekeeper or the live race's facilitator."""
+    event = _get_event_for_user(request, slug)
+    user = request.user
+    if event.physical and timing.may_keep_time(event=event, user=user):
+        back = "racing:timekeeper"
+    elif live_races.may_facilitate(event=event, user=user):
+        back = "racing:live-race"
+    else:
+        raise Http404("No such event to run.")
     leaders = _top(event, 1)
     live.announce_winner(event, leaders[0] if leaders else None)
     messages.success(request, "The broadcast shows the winner.")
-    return redirect("racing:timekeeper", slug=event.slug)
+    return redirect(back, slug=event.slug)
 
 
 def broadcast(request: HttpRequest, slug: str) -> HttpResponse:
     event = _get_event_for_user(request, slug)
-    return render(request, "racing/broadcast.html", {"event": event})
+    speedup = settings.PITLANE_WATCHED_SPEEDUP
+    return render(request, "racing/broadcast.html", {"event": event, "speedup": speedup})
 
 
 def broadcast_state(request: HttpRequest, slug: str) -> JsonResponse:
-    """What the broadcast shows: the car on the track (physical events) and the top ten."""
+    """What the broadcast shows: the car on the track (a physical event's run, or a live race's
+    turn) and the top ten."""
     event = _get_event_for_user(request, slug)
     run = timing.running_run(event=event) if event.physical else None
-    return JsonResponse({"timing": live.timing_state(run), "top": _top(event, TOP)})
+    session = None if event.physical else LiveSession.objects.filter(event=event).first()
+    return JsonResponse({
+        "timing": live.timing_state(run), "queue": live.queue_state(session),
+        "top": _top(event, TOP),
+    })  # fmt: skip
 
 
 def _top(event: Event, count: int) -> list[dict]:

@@ -1,6 +1,6 @@
 from django.urls import path
 
-from racing import timing_views, views
+from racing import live_views, timing_views, views
 
 app_name = "racing"
 urlpatterns = [
@@ -31,10 +31,14 @@ urlpatterns = [
          name="timekeeper-signal"),
     path("events/<slug:slug>/timekeeper/token", timing_views.timekeeper_token,
          name="timekeeper-token"),
-    path("events/<slug:slug>/timekeeper/winner", timing_views.timekeeper_winner,
-         name="timekeeper-winner"),
+    path("events/<slug:slug>/winner", timing_views.winner, name="winner"),
     path("events/<slug:slug>/broadcast/", timing_views.broadcast, name="broadcast"),
     path("events/<slug:slug>/broadcast/state", timing_views.broadcast_state,
          name="broadcast-state"),
     path("api/timing/<slug:slug>/", timing_views.device, name="timing-device"),
+    path("events/<slug:slug>/live/", live_views.live_race, name="live-race"),
+    path("events/<slug:slug>/live/open", live_views.live_race_open, name="live-race-open"),
+    path("events/<slug:slug>/live/launch", live_views.live_race_launch, name="live-race-launch"),
+    path("events/<slug:slug>/live/entries/<int:pk>/<str:action>", live_views.live_entry_action,
+         name="live-entry-action"),
 ]  # fmt: skip

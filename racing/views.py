@@ -10,9 +10,9 @@ from django.views.decorators.http import require_POST
 
 from accounts.selectors import racer_name
 from common import ratelimits
-from racing import selectors, services, timing
+from racing import live_races, selectors, services, timing
 from racing.forms import CommunityRaceForm, SubmissionForm
-from racing.models import Division, Event, Season, Submission
+from racing.models import Division, Event, LiveSession, Season, Submission
 from training import artifacts
 from training import selectors as training_selectors
 
@@ -65,6 +65,8 @@ def leaderboard(request: HttpRequest, slug: str) -> HttpResponse:
             racer=request.user, event=event, model=None
         )
         context["may_keep_time"] = timing.may_keep_time(event=event, user=request.user)
+        context["may_facilitate"] = live_races.may_facilitate(event=event, user=request.user)
+    context["live_race"] = LiveSession.objects.filter(event=event).exists()
     return render(request, "racing/leaderboard.html", context)
 
 

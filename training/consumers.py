@@ -42,10 +42,11 @@ class LiveConsumer(AsyncWebsocketConsumer):
     """What the training and evaluation streams share: who may watch, flow control, viewers."""
 
     workers = 1
+    anonymous = False  # whether a visitor who has not logged in may watch (``snapshot_for``)
 
     async def connect(self) -> None:
         user = self.scope.get("user")
-        if user is None or not user.is_authenticated:
+        if user is None or not (user.is_authenticated or self.anonymous):
             await self.close(code=REFUSED_ANONYMOUS)
             return
         pk = self.scope["url_route"]["kwargs"]["pk"]

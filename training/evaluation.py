@@ -298,7 +298,7 @@ class Evaluator:
         if watched and now - self._last_live >= FRAME_INTERVAL:
             self._last_live = now
             self._show(self._publisher, watched, unwrapped, frame, observation)
-        if watched:  # keep to real time (or PITLANE_WATCHED_SPEEDUP times) for them
+        if watched or self.evaluation.real_time:  # real time (or PITLANE_WATCHED_SPEEDUP times)
             time.sleep(max(0.0, self._pace - (time.monotonic() - self._last_step)))
         self._last_step = time.monotonic()
         while len(info["lap_times"]) > self._laps_done:
@@ -348,6 +348,7 @@ class Evaluator:
             publisher.offer(live.frame_event(
                 0, view, jpeg(image), step=unwrapped.steps, status=unwrapped.status,
                 progress=unwrapped.progress, episode=len(self.results) + 1,
+                lap_ms=round((unwrapped.sim_time - self._counts.started) * 1000),
             ))  # fmt: skip
 
     def _record(

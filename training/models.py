@@ -598,6 +598,14 @@ class EvaluationJob(RaceConditions):
         help_text="Seeds its trials' noise; the same seed drives them again exactly. Empty: "
         "driven without noise (before seeds).",
     )  # fmt: skip
+    speed_multiplier = models.FloatField(
+        default=1.0, help_text="Each action's speed times this: a live race's racer's choice, "
+        "as DeepRacer's LIVE races let racers drive at 0.5-1.5 times their model's speeds.",
+    )  # fmt: skip
+    real_time = models.BooleanField(
+        default=False, help_text="Driven at the speed of real time even when nobody watches: "
+        "a live race's turn, which its audience sees as it happens.",
+    )  # fmt: skip
     status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
     message = models.CharField(max_length=255, blank=True)
     failure_reason = models.TextField(blank=True)
@@ -647,6 +655,7 @@ class EvaluationJob(RaceConditions):
             "max_resets": self.max_resets,
             "noise": self.seed is not None,
             "randomise": self.domain_randomisation,
+            "action_space": scaled_speeds(self.model.action_space, self.speed_multiplier),
         }
 
     def trial_seed(self, number: int) -> int | None:
@@ -736,3 +745,14 @@ class Quota(models.Model):
             defaults={"max_models": defaults.max_models,
                       "max_minutes_per_month": defaults.max_minutes_per_month},
         )[0]  # fmt: skip
+
+
+def scaled_speeds(action_space, multiplier: float):
+    """``action_space`` (DeepRacer's: a list of discrete actions, or continuous ranges) with every
+    speed times ``multiplier``; itself when that is 1."""
+    if multiplier == 1.0:
+        return action_space
+    if isinstance(action_space, dict):
+        speed = action_space["speed"]
+        return {**action_space, "speed": {key: value * multiplier for key, value in speed.items()}}
+    return [{**action, "speed": action["speed"] * multiplier} for action in action_space]

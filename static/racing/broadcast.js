@@ -1,9 +1,17 @@
-// The broadcast: the car on the track with its running lap, its laps, the top ten, and the
-// winner when the organiser shows it; kept current over the event's websocket.
+// The broadcast: the car on the track (a physical event's run with its running lap, or a live
+// race's turn with its video), its laps, the top ten, and the winner when the organiser shows
+// it; kept current over the event's websocket.
 import { LapClock, laptime, listen } from "./timing.js";
+import { Turn } from "./turn.js";
 
 const root = document.querySelector("[data-broadcast]");
-const clock = new LapClock(root.querySelector("[data-timer]"));
+const physical = root.dataset.physical === "true";
+const find = (name) => root.querySelector(`[data-${name}]`);
+const clock = physical ? new LapClock(find("timer")) : null;
+const turn = physical ? null : new Turn({
+  frame: find("frame"), timer: find("timer"), laps: find("laps"),
+  speedup: Number(root.dataset.speedup || 1),
+});
 
 function item(text, className) {
   const li = document.createElement("li");
@@ -12,28 +20,34 @@ function item(text, className) {
   return li;
 }
 
+function showCar(racer, detail) {
+  find("racer").textContent = racer || "Waiting for the next car";
+  find("detail").textContent = detail || "";
+}
+
 function showTiming(state) {
   clock.set(state);
-  const racer = root.querySelector("[data-racer]");
-  const detail = root.querySelector("[data-detail]");
   if (!state.submission) {
-    racer.textContent = "Waiting for the next car";
-    detail.textContent = "";
-    root.querySelector("[data-laps]").replaceChildren();
+    showCar();
+    find("laps").replaceChildren();
     return;
   }
-  racer.textContent = state.racer;
-  const result = state.on_track ? `car ${state.car} · ${state.model_name}`
-    : state.qualified ? `finished: ${laptime(state.score_ms)}` : "finished: did not qualify";
-  detail.textContent = result;
-  root.querySelector("[data-laps]").replaceChildren(...state.laps.map((lap) =>
+  showCar(state.racer, state.on_track ? `car ${state.car} · ${state.model_name}`
+    : state.qualified ? `finished: ${laptime(state.score_ms)}` : "finished: did not qualify");
+  find("laps").replaceChildren(...state.laps.map((lap) =>
     item(`${laptime(lap.time_ms)}${lap.off_tracks ? ` (${lap.off_tracks} off)` : ""}`,
       lap.counted ? "" : "not-counted")));
   root.dataset.laps = String(state.laps.length);
 }
 
+function showQueue(queue) {
+  const driving = queue.driving;
+  showCar(driving && driving.racer, driving && `${driving.model_name} · ${driving.speed.toFixed(1)}× speed`);
+  turn.watch(driving ? driving.evaluation : null);
+}
+
 function showTop(top) {
-  root.querySelector("[data-top]").replaceChildren(...top.map((entry) => {
+  find("top").replaceChildren(...top.map((entry) => {
     const li = document.createElement("li");
     const who = document.createElement("span");
     who.textContent = entry.racer;
@@ -54,20 +68,21 @@ async function refresh() {
   const response = await fetch(root.dataset.stateUrl);
   if (!response.ok) return;
   const state = await response.json();
-  showTiming(state.timing);
+  if (physical) showTiming(state.timing);
+  else showQueue(state.queue);
   showTop(state.top);
 }
 
 listen(root.dataset.event, (message) => {
-  if (message.type === "timing") showTiming(message);
+  if (message.type === "timing" && physical) showTiming(message);
+  if (message.type === "queue" && !physical) showQueue(message);
   if (message.type === "leaderboard" || (message.type === "submission" && message.ranked)) refresh();
   if (message.type === "winner") {
-    const winner = root.querySelector("[data-winner]");
+    const winner = find("winner");
     winner.hidden = !message.winner;
     if (message.winner) {
-      root.querySelector("[data-winner-racer]").textContent = message.winner.racer;
-      root.querySelector("[data-winner-detail]").textContent =
-        `${message.winner.model_name} · ${laptime(message.winner.score_ms)}`;
+      find("winner-racer").textContent = message.winner.racer;
+      find("winner-detail").textContent = `${message.winner.model_name} · ${laptime(message.winner.score_ms)}`;
     }
   }
 });

@@ -1,0 +1,89 @@
+// A live race's turn, as the race and broadcast pages show it: its frames over
+// ws/live-turns/<evaluation>/ (each acknowledged once drawn, as the evaluation page's are), its
+// laps as they end, and the lap on track's time. Each frame says the simulated time of the lap
+// so far (lap_ms); between frames the clock runs on at the simulation's pace (speedup times
+// real time), at most a frame and a half ahead of the last frame's word.
+import { laptime } from "./timing.js";
+
+const decoder = new TextDecoder();
+const FRAME_MS = 1000 / 15;
+
+export class Turn {
+  constructor({ frame, timer, laps, speedup = 1, onLap = () => {} }) {
+    Object.assign(this, { frame, timer, laps, speedup, onLap });
+    this.socket = null;
+    this.evaluation = null;
+    this.lapMs = null;
+    this.at = 0;
+    this.url = null;
+    const tick = () => {
+      this.timer.textContent = laptime(this.now());
+      requestAnimationFrame(tick);
+    };
+    requestAnimationFrame(tick);
+  }
+
+  now() {
+    if (this.lapMs === null) return 0;
+    const ahead = Math.min((performance.now() - this.at) * this.speedup, 1.5 * FRAME_MS);
+    return this.lapMs + ahead;
+  }
+
+  watch(evaluation) {
+    if (evaluation === this.evaluation) return;
+    this.evaluation = evaluation;
+    if (this.socket) this.socket.close();
+    this.socket = null;
+    this.lapMs = null;
+    this.laps.replaceChildren();
+    if (!evaluation) {
+      this.frame.hidden = true;
+      return;
+    }
+    const scheme = location.protocol === "https:" ? "wss" : "ws";
+    const socket = new WebSocket(`${scheme}://${location.host}/ws/live-turns/${evaluation}/`);
+    socket.binaryType = "arraybuffer";
+    socket.addEventListener("open", () => socket.send(JSON.stringify({ type: "watch", worker: 0, view: "spectator" })));
+    socket.addEventListener("message", (message) => {
+      if (message.data instanceof ArrayBuffer) this.show(socket, message.data);
+      else this.receive(JSON.parse(message.data));
+    });
+    this.socket = socket;
+  }
+
+  show(socket, data) {
+    const length = new DataView(data).getUint32(0);
+    const header = JSON.parse(decoder.decode(new Uint8Array(data, 4, length)));
+    if (header.lap_ms !== undefined) {
+      this.lapMs = header.lap_ms;
+      this.at = performance.now();
+    }
+    const url = URL.createObjectURL(new Blob([new Uint8Array(data, 4 + length)], { type: "image/jpeg" }));
+    const image = new Image();
+    image.src = url;
+    image.decode().then(() => {
+      const old = this.frame.src;
+      this.frame.src = url;
+      this.frame.hidden = false;
+      this.frame.dataset.frames = String(Number(this.frame.dataset.frames || 0) + 1);
+      if (old.startsWith("blob:")) URL.revokeObjectURL(old);
+    }).catch(() => URL.revokeObjectURL(url))
+      .finally(() => socket.send(JSON.stringify({ type: "ack", seq: header.seq })));
+  }
+
+  receive(message) {
+    if (message.type === "state") message.history.forEach((row) => this.addLap(row));
+    if (message.type === "trial") this.addLap(message);
+  }
+
+  addLap(row) {
+    if (this.laps.querySelector(`[data-lap="${row.number}"]`)) return;
+    const item = document.createElement("li");
+    item.dataset.lap = row.number;
+    item.textContent = row.status === "lap_complete"
+      ? `${laptime(row.time_ms + row.penalty_ms)}${row.off_tracks ? ` (${row.off_tracks} off-track${row.off_tracks > 1 ? "s" : ""})` : ""}`
+      : `${row.status_display} at ${row.progress.toFixed(0)}%`;
+    this.laps.append(item);
+    this.onLap(row);
+  }
+}
