@@ -15,6 +15,7 @@ from django.db import models
 
 from rl import hyperparameters
 from simulator import randomisation_ranges
+from simulator.config import SPEED_RANGE
 
 
 class Direction(models.TextChoices):
@@ -749,10 +750,15 @@ class Quota(models.Model):
 
 def scaled_speeds(action_space, multiplier: float):
     """``action_space`` (DeepRacer's: a list of discrete actions, or continuous ranges) with every
-    speed times ``multiplier``; itself when that is 1."""
+    speed times ``multiplier``, kept within the car's 0.1-4 m/s; itself when that is 1."""
     if multiplier == 1.0:
         return action_space
+    low, high = SPEED_RANGE
+
+    def scaled(speed: float) -> float:
+        return min(max(speed * multiplier, low), high)
+
     if isinstance(action_space, dict):
         speed = action_space["speed"]
-        return {**action_space, "speed": {key: value * multiplier for key, value in speed.items()}}
-    return [{**action, "speed": action["speed"] * multiplier} for action in action_space]
+        return {**action_space, "speed": {key: scaled(value) for key, value in speed.items()}}
+    return [{**action, "speed": scaled(action["speed"])} for action in action_space]

@@ -10,11 +10,14 @@ const turn = new Turn({
   speedup: Number(root.dataset.speedup || 1),
 });
 
+let last = null; // the turn that drove last: shown until the next one starts
+
 function showDriving(queue) {
   const driving = queue.driving;
+  if (driving) last = driving;
   find("racer").textContent = driving
     ? `${driving.racer} · ${driving.model_name} · ${driving.speed.toFixed(1)}× speed`
-    : "Nobody is driving.";
+    : last ? `Last turn: ${last.racer} · ${last.model_name}` : "Nobody is driving.";
   root.dataset.driving = driving ? String(driving.evaluation) : "";
   turn.watch(driving ? driving.evaluation : null);
 }

@@ -14,6 +14,7 @@ export class Turn {
     this.socket = null;
     this.evaluation = null;
     this.lapMs = null;
+    this.finished = null;
     this.at = 0;
     this.url = null;
     const tick = () => {
@@ -24,22 +25,23 @@ export class Turn {
   }
 
   now() {
+    if (this.evaluation === null && this.finished !== null) return this.finished;
     if (this.lapMs === null) return 0;
     const ahead = Math.min((performance.now() - this.at) * this.speedup, 1.5 * FRAME_MS);
     return this.lapMs + ahead;
   }
 
+  // The turn driving (its evaluation's id), or none: the turn that ended stays shown, its last
+  // frame, its laps and its last lap's time, until the next one starts.
   watch(evaluation) {
     if (evaluation === this.evaluation) return;
     this.evaluation = evaluation;
     if (this.socket) this.socket.close();
     this.socket = null;
     this.lapMs = null;
+    if (!evaluation) return;
+    this.finished = null;
     this.laps.replaceChildren();
-    if (!evaluation) {
-      this.frame.hidden = true;
-      return;
-    }
     const scheme = location.protocol === "https:" ? "wss" : "ws";
     const socket = new WebSocket(`${scheme}://${location.host}/ws/live-turns/${evaluation}/`);
     socket.binaryType = "arraybuffer";
@@ -84,6 +86,7 @@ export class Turn {
       ? `${laptime(row.time_ms + row.penalty_ms)}${row.off_tracks ? ` (${row.off_tracks} off-track${row.off_tracks > 1 ? "s" : ""})` : ""}`
       : `${row.status_display} at ${row.progress.toFixed(0)}%`;
     this.laps.append(item);
+    this.finished = row.time_ms + row.penalty_ms;
     this.onLap(row);
   }
 }

@@ -9,6 +9,7 @@ from racing import live_races
 from racing.models import LiveEntry, Submission
 from tests.racing.factories import event
 from tests.training.factories import ready_model
+from training.models import scaled_speeds
 
 pytestmark = pytest.mark.django_db
 
@@ -59,6 +60,10 @@ def test_a_turn_is_a_real_time_submission_at_the_racers_speed_and_the_next_racer
     model_speeds = [action["speed"] for action in entry.model.action_space]
     driven = [action["speed"] for action in evaluation.environment_settings()["action_space"]]
     assert driven == [speed * 0.5 for speed in model_speeds]
+    # never past the car's 4 m/s, nor under its 0.1
+    fast = [{"steering_angle": 0.0, "speed": 3.0}, {"steering_angle": 0.0, "speed": 0.1}]
+    assert [a["speed"] for a in scaled_speeds(fast, 1.5)] == pytest.approx([4.0, 0.15])
+    assert [a["speed"] for a in scaled_speeds(fast, 0.5)] == [1.5, 0.1]
     assert bob.notifications.filter(text__startswith="You are next in Live cup").exists()
     with pytest.raises(live_races.LiveRefused, match="A turn is driving"):
         live_races.live_turn_launch(session=session)
