@@ -53,6 +53,9 @@ def main() -> None:
     args = parser.parse_args()
     with running_console(concurrency=3) as console:
         os.environ.update(console["env"])
+        # Playwright's sync API runs an event loop in this thread; the ORM calls between its
+        # calls are still plain synchronous ones (as in tests/browser/conftest.py)
+        os.environ.setdefault("DJANGO_ALLOW_ASYNC_UNSAFE", "true")
         import django
 
         django.setup()
