@@ -24,6 +24,7 @@ import os
 import shutil
 import statistics
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 from bench.bench_live import Viewer, audience
 from bench.stack import running_console
@@ -91,7 +92,10 @@ def main() -> None:
             page.wait_for_selector("body[data-listening=true]")
             page.evaluate(RECORD_LAPS)
 
-            turn = live_races.live_turn_launch(session=session)
+            # announcing the turn sends to the channel layer, which may not run in the thread of
+            # Playwright's event loop
+            with ThreadPoolExecutor(max_workers=1) as thread:
+                turn = thread.submit(live_races.live_turn_launch, session=session).result()
             evaluation = turn.submission.evaluation_id
             url = console["url"].replace("http", "ws", 1) + f"/ws/live-turns/{evaluation}/"
             context = multiprocessing.get_context("spawn")
