@@ -100,7 +100,8 @@ def main() -> None:
             url = console["url"].replace("http", "ws", 1) + f"/ws/live-turns/{evaluation}/"
             context = multiprocessing.get_context("spawn")
             pipe, theirs = context.Pipe()
-            crowd = context.Process(target=audience, args=(url, {}, args.watchers, theirs))
+            origin = {"Origin": console["url"]}  # as a browser on the page sends it
+            crowd = context.Process(target=audience, args=(url, origin, args.watchers, theirs))
             crowd.start()
             while Submission.objects.get(pk=turn.submission_id).is_active:
                 time.sleep(0.5)
