@@ -298,15 +298,17 @@ class Evaluator:
         if watched and now - self._last_live >= FRAME_INTERVAL:
             self._last_live = now
             self._show(self._publisher, watched, unwrapped, frame, observation)
-        if watched or self.evaluation.real_time:  # real time (or PITLANE_WATCHED_SPEEDUP times)
-            time.sleep(max(0.0, self._pace - (time.monotonic() - self._last_step)))
-        self._last_step = time.monotonic()
+        # a lap that ended is announced with its last frame, before the wait below: a live
+        # race's lap timer stops on the lap's time, not a step's wait after it
         while len(info["lap_times"]) > self._laps_done:
             self._laps_done += 1
             lap_time = info["lap_times"][self._laps_done - 1]
             self._counts = self._record(
                 unwrapped, info, self._counts, lap_time, status="lap_complete"
             )
+        if watched or self.evaluation.real_time:  # real time (or PITLANE_WATCHED_SPEEDUP times)
+            time.sleep(max(0.0, self._pace - (time.monotonic() - self._last_step)))
+        self._last_step = time.monotonic()
 
     def _look_for_stop(self) -> None:
         """``_StopAsked`` once the racer has asked to stop (looked for twice a second)."""
