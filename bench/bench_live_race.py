@@ -10,10 +10,10 @@ simulation worker drives ``--laps`` laps in real time (racing.live_races).
   (the event is public), each acknowledging each frame as the race page does once drawn; from
   the frame's render in the simulation to its arrival, p50 and p95 over every frame every
   watcher got (bench_live's viewers, in a process of their own at the lowest CPU priority).
-- The lap timer: Chromium shows the broadcast page; as each lap's line is added to its list, the
-  page's timer (the frame's simulated lap time, run on between frames) is read and set against
-  the lap's simulated time (the trial's time_ms, penalties apart). Printed: each lap's
-  difference and the largest.
+- The lap timer: Chromium shows the broadcast page; as each lap ends, the page's running timer
+  (the frames' simulated lap time, run on between frames: static/racing/turn.js) is read at the
+  line and set against the lap's simulated time (the trial's time_ms, penalties apart), which the
+  timer then stops on. Printed: each lap's difference and the largest.
 """
 
 from __future__ import annotations
@@ -29,14 +29,14 @@ from concurrent.futures import ThreadPoolExecutor
 from bench.bench_live import Viewer, audience
 from bench.stack import running_console
 
-# Read the timer as the page showed it when each lap's line came: the page draws its timer every
-# animation frame, so its text is at most a frame (16 ms) old then.
+# Read the running timer as each lap's line comes: the page notes its reading at the line
+# (data-at-line) before the timer stops on the lap's time.
 RECORD_LAPS = """
 window.lapsSeen = [];
 new MutationObserver((changes) => {
   for (const change of changes) for (const node of change.addedNodes) {
-    const timer = document.querySelector("[data-timer]").textContent;
-    window.lapsSeen.push({lap: node.dataset.lap, timer});
+    const timer = document.querySelector("[data-timer]");
+    window.lapsSeen.push({lap: node.dataset.lap, timer: timer.dataset.atLine});
   }
 }).observe(document.querySelector("[data-laps]"), {childList: true});
 """

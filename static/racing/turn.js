@@ -1,8 +1,11 @@
 // A live race's turn, as the race and broadcast pages show it: its frames over
 // ws/live-turns/<evaluation>/ (each acknowledged once drawn, as the evaluation page's are), its
 // laps as they end, and the lap on track's time. Each frame says the simulated time of the lap
-// so far (lap_ms); between frames the clock runs on at the simulation's pace (speedup times
-// real time), at most a frame and a half ahead of the last frame's word.
+// so far (lap_ms). The clock runs at the simulation's pace (speedup times real time) from the
+// frame that came soonest after its render (the largest lap_ms less its arrival: a frame that
+// waited on the way would set it back), never more than a frame and a half past the newest
+// frame's word (a simulation that falls behind real time). At the line it stops on the lap's
+// time for a second, as a race's timing screen does, then runs on with the next lap.
 import { laptime } from "./timing.js";
 
 const decoder = new TextDecoder();
@@ -14,8 +17,9 @@ export class Turn {
     this.socket = null;
     this.evaluation = null;
     this.lapMs = null;
+    this.offset = 0;
     this.finished = null;
-    this.at = 0;
+    this.stoppedUntil = 0;
     this.url = null;
     const tick = () => {
       this.timer.textContent = laptime(this.now());
@@ -26,9 +30,13 @@ export class Turn {
 
   now() {
     if (this.evaluation === null && this.finished !== null) return this.finished;
+    if (performance.now() < this.stoppedUntil) return this.finished;
+    return this.running();
+  }
+
+  running() {
     if (this.lapMs === null) return 0;
-    const ahead = Math.min((performance.now() - this.at) * this.speedup, 1.5 * FRAME_MS);
-    return this.lapMs + ahead;
+    return Math.min(performance.now() * this.speedup + this.offset, this.lapMs + 1.5 * FRAME_MS);
   }
 
   // The turn driving (its evaluation's id), or none: the turn that ended stays shown, its last
@@ -57,8 +65,10 @@ export class Turn {
     const length = new DataView(data).getUint32(0);
     const header = JSON.parse(decoder.decode(new Uint8Array(data, 4, length)));
     if (header.lap_ms !== undefined) {
+      const offset = header.lap_ms - performance.now() * this.speedup;
+      const newLap = this.lapMs === null || header.lap_ms < this.lapMs;
+      this.offset = newLap ? offset : Math.max(this.offset, offset);
       this.lapMs = header.lap_ms;
-      this.at = performance.now();
     }
     const url = URL.createObjectURL(new Blob([new Uint8Array(data, 4 + length)], { type: "image/jpeg" }));
     const image = new Image();
@@ -85,8 +95,12 @@ export class Turn {
     item.textContent = row.status === "lap_complete"
       ? `${laptime(row.time_ms + row.penalty_ms)}${row.off_tracks ? ` (${row.off_tracks} off-track${row.off_tracks > 1 ? "s" : ""})` : ""}`
       : `${row.status_display} at ${row.progress.toFixed(0)}%`;
+    if (this.lapMs !== null && row.status === "lap_complete") { // a lap ending as it drives
+      this.timer.dataset.atLine = laptime(this.running()); // the running clock at the line
+      this.stoppedUntil = performance.now() + 1000;
+    }
+    this.finished = row.time_ms;
     this.laps.append(item);
-    this.finished = row.time_ms + row.penalty_ms;
     this.onLap(row);
   }
 }
