@@ -2,14 +2,16 @@
 // ws/live-turns/<evaluation>/ (each acknowledged once drawn, as the evaluation page's are), its
 // laps as they end, and the lap on track's time. Each frame says the simulated time of the lap
 // so far (lap_ms). The clock runs at the simulation's pace (speedup times real time) from the
-// frame that came soonest after its render (the largest lap_ms less its arrival: a frame that
-// waited on the way would set it back), never more than a frame and a half past the newest
-// frame's word (a simulation that falls behind real time). At the line it stops on the lap's
+// frame of the last few that came soonest after its render (the largest lap_ms less its
+// arrival: a frame that waited on the way would set it back; only the last few, as the
+// simulation drifts from real time), never more than a frame and a half past the newest frame's
+// word (a simulation that falls behind). At the line it stops on the lap's
 // time for a second, as a race's timing screen does, then runs on with the next lap.
 import { laptime } from "./timing.js";
 
 const decoder = new TextDecoder();
 const FRAME_MS = 1000 / 15;
+const RECENT = 6; // frames the clock is set from: the soonest of the last 0.4 s
 
 export class Turn {
   constructor({ frame, timer, laps, speedup = 1, onLap = () => {} }) {
@@ -18,6 +20,7 @@ export class Turn {
     this.evaluation = null;
     this.lapMs = null;
     this.offset = 0;
+    this.recent = [];
     this.finished = null;
     this.stoppedUntil = 0;
     this.url = null;
@@ -65,9 +68,9 @@ export class Turn {
     const length = new DataView(data).getUint32(0);
     const header = JSON.parse(decoder.decode(new Uint8Array(data, 4, length)));
     if (header.lap_ms !== undefined) {
-      const offset = header.lap_ms - performance.now() * this.speedup;
-      const newLap = this.lapMs === null || header.lap_ms < this.lapMs;
-      this.offset = newLap ? offset : Math.max(this.offset, offset);
+      if (this.lapMs === null || header.lap_ms < this.lapMs) this.recent = []; // a new lap
+      this.recent = [...this.recent.slice(1 - RECENT), header.lap_ms - performance.now() * this.speedup];
+      this.offset = Math.max(...this.recent);
       this.lapMs = header.lap_ms;
     }
     const url = URL.createObjectURL(new Blob([new Uint8Array(data, 4 + length)], { type: "image/jpeg" }));
