@@ -47,6 +47,7 @@ def racer_pages(alice) -> list[str]:
         "/races/submissions/", submission.get_absolute_url(), "/leaderboards/",
         trial.get_absolute_url(), f"/seasons/{season.pk}/", "/races/community/new/",
         "/notifications/", "/accounts/password/", f"/models/{model.pk}/analysis/",
+        f"/events/{trial.slug}/live/", f"/events/{trial.slug}/broadcast/",
     ]  # fmt: skip
 
 
