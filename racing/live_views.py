@@ -13,7 +13,7 @@ from django.views.decorators.http import require_POST
 from racing import live, live_races
 from racing.forms import LiveJoinForm, LiveSessionForm
 from racing.models import Event, LiveEntry, LiveSession
-from racing.views import _get_event_for_user
+from racing.views import _get_event_for_user, _get_event_run_by
 
 MOVES = {"up": -1, "down": 1}
 
@@ -57,10 +57,7 @@ def _settings(session: LiveSession | None) -> dict:
 
 
 def _facilitated(request: HttpRequest, slug: str) -> Event:
-    event = _get_event_for_user(request, slug)
-    if not live_races.may_facilitate(event=event, user=request.user):
-        raise Http404("No such live race to run.")
-    return event
+    return _get_event_run_by(request, slug, live_races.may_facilitate)
 
 
 @login_required

@@ -27,16 +27,13 @@ from accounts.selectors import racer_name
 from racing import live, live_races, selectors, timing
 from racing.forms import TimedRunForm
 from racing.models import Event, LiveSession
-from racing.views import _get_event_for_user
+from racing.views import _get_event_for_user, _get_event_run_by
 
 TOP = 10  # the broadcast's leaderboard
 
 
 def _event_to_time(request: HttpRequest, slug: str) -> Event:
-    event = _get_event_for_user(request, slug)
-    if not timing.may_keep_time(event=event, user=request.user):
-        raise Http404("No such event to time.")
-    return event
+    return _get_event_run_by(request, slug, timing.may_keep_time)
 
 
 @login_required

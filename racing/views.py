@@ -46,6 +46,15 @@ def _get_event_for_user(request: HttpRequest, slug: str) -> Event:
     return event
 
 
+def _get_event_run_by(request: HttpRequest, slug: str, may) -> Event:
+    """The event, if this user may see it and ``may(event=, user=)`` run it (its timekeeper, its
+    live race's facilitator); 404 otherwise."""
+    event = _get_event_for_user(request, slug)
+    if not may(event=event, user=request.user):
+        raise Http404("No such event to run.")
+    return event
+
+
 def leaderboard(request: HttpRequest, slug: str) -> HttpResponse:
     event = _get_event_for_user(request, slug)
     page = selectors.leaderboard_page(event=event, page=request.GET.get("page", 1))
