@@ -18,6 +18,7 @@ BOT_SHADE = (120, (200, 90, 40))  # (gray, BGR): a blue bot car
 LANE_CHANGE_TIME = 1.0  # [s] to move from one lane to the other
 LANE_CHANGE_EVERY = (3.0, 8.0)  # [s] between a bot's lane changes, drawn at random
 START_CLEARANCE = (-0.6, 1.2)  # [m] before and after the car's start no box may stand
+FAR_AWAY = 1e4  # [m] where a rival waits until the race places it
 
 
 @dataclass
@@ -39,16 +40,21 @@ class Actor:
 class Traffic:
     """The boxes (OBJECT_AVOIDANCE) or bot cars (HEAD_TO_BOT) of one episode."""
 
-    def __init__(self, track: Track, objects: Objects | None, bots: Bots | None) -> None:
+    def __init__(
+        self, track: Track, objects: Objects | None, bots: Bots | None, rivals: int = 0,
+        rival_shades: tuple = (),
+    ) -> None:  # fmt: skip
         self.track = track
         self.objects = objects
         self.bots = bots
+        self.rivals = rivals  # other racers' cars, placed from outside (simulator.head_to_head)
+        self.rival_shades = rival_shades  # each rival's (gray, BGR); BOT_SHADE where none
         self.lane = track.width / 4
         self.actors: list[Actor] = []
 
     @property
     def present(self) -> bool:
-        return self.objects is not None or self.bots is not None
+        return self.objects is not None or self.bots is not None or self.rivals > 0
 
     def reset(self, car_distance: float, rng: np.random.Generator) -> float:
         """Place the actors for an episode starting at ``car_distance``; returns the start
@@ -89,8 +95,19 @@ class Traffic:
                 if self.bots.lane_changes:
                     bot.next_lane_change = float(rng.uniform(*LANE_CHANGE_EVERY))
                 self.actors.append(bot)
+        spec = CarSpec()
+        for _ in range(self.rivals):  # off the field until the race places them
+            rival = Actor("rival", 0.0, 0.0, spec.length, spec.width, spec.height)
+            rival.x = rival.y = FAR_AWAY
+            self.actors.append(rival)
         self._update_poses()
         return car_distance
+
+    def place_rivals(self, poses) -> None:
+        """Where the other racers' cars are now: (x, y, yaw) of each, in order."""
+        rivals = [actor for actor in self.actors if actor.kind == "rival"]
+        for rival, (x, y, yaw) in zip(rivals, poses, strict=True):
+            rival.x, rival.y, rival.yaw = float(x), float(y), float(yaw)
 
     def step(self, dt: float, sim_time: float, rng: np.random.Generator) -> None:
         """Drive the bot cars on for ``dt`` seconds."""
@@ -98,6 +115,8 @@ class Traffic:
             return
         lateral_rate = 2 * self.lane / LANE_CHANGE_TIME
         for bot in self.actors:
+            if bot.kind != "bot":
+                continue
             if sim_time >= bot.next_lane_change:
                 bot.target_offset = -bot.target_offset
                 bot.next_lane_change = sim_time + float(rng.uniform(*LANE_CHANGE_EVERY))
@@ -108,26 +127,25 @@ class Traffic:
 
     def solids(self, colour: bool = False) -> list[Solid]:
         pick = 1 if colour else 0
+        shades, rivals = [], iter(self.rival_shades)
+        for actor in self.actors:
+            if actor.kind == "rival":
+                shades.append(next(rivals, BOT_SHADE)[pick])
+            else:
+                shades.append((BOX_SHADE if actor.kind == "box" else BOT_SHADE)[pick])
         return [
-            Solid(
-                a.x,
-                a.y,
-                a.yaw,
-                a.length,
-                a.width,
-                a.height,
-                (BOX_SHADE if a.kind == "box" else BOT_SHADE)[pick],
-            )
-            for a in self.actors
+            Solid(a.x, a.y, a.yaw, a.length, a.width, a.height, shade)
+            for a, shade in zip(self.actors, shades, strict=True)
         ]
 
     def _update_poses(self) -> None:
-        if not self.actors:
+        driven = [actor for actor in self.actors if actor.kind != "rival"]
+        if not driven:
             return
-        distances = np.array([a.distance for a in self.actors])
-        offsets = np.array([a.offset for a in self.actors])
+        distances = np.array([a.distance for a in driven])
+        offsets = np.array([a.offset for a in driven])
         xs, ys, headings = self.track.point_at(distances, offsets)
-        for actor, x, y, heading in zip(self.actors, xs, ys, headings, strict=True):
+        for actor, x, y, heading in zip(driven, xs, ys, headings, strict=True):
             actor.x, actor.y, actor.yaw = float(x), float(y), float(heading)
 
     def _clear_start(self, car_distance: float) -> float:

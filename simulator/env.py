@@ -187,6 +187,9 @@ class DeepRacerEnv(gym.Env):
         camera_lens: str = "simulator",
         randomise: bool = False,
         route: str | None = None,
+        rivals: int = 0,
+        rival_colours: Sequence[tuple[int, int, int]] = (),
+        grid: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         self.config = default_config(camera_lens)
         loaded = load(track) if route is None else load(track).on_route(route)
@@ -200,8 +203,11 @@ class DeepRacerEnv(gym.Env):
         if race_type == "HEAD_TO_BOT" and bots is None:
             bots = {}
         self.traffic = Traffic(
-            self.track, config.objects(objects, race_type), config.bots(bots, race_type)
-        )
+            self.track, config.objects(objects, race_type), config.bots(bots, race_type),
+            rivals=config.positive_int("The number of rivals", rivals, 0, 3),
+            rival_shades=tuple(_shade(colour) for colour in rival_colours),
+        )  # fmt: skip
+        self.grid = (float(grid[0]), float(grid[1]))  # [m] along the track from the start, left
         self.mode = config.choice("The mode", mode, config.MODES)
         self.laps = config.positive_int("The number of laps", laps, 1, 100)
         self.penalties = config.penalties(penalties)
@@ -246,7 +252,7 @@ class DeepRacerEnv(gym.Env):
         if self._scene is not None:  # domain randomisation: this episode's look, from its seed
             self._cameras, self.car.spec, self.look = self._scene.draw(self.np_random)
         self._sync_actor_bodies()
-        self._place_car(start)
+        self._place_car(start + self.grid[0], self.grid[1])
         # The reset is DeepRacer's prepare step: step 1 of the episode, the car held at its start,
         # reward 0 and the reward function not called; so the first step() is step 2 and the first
         # reward call sees steps == 2.0. simapp rollout_agent_ctrl.py:180,643,779-780,1079-1086
@@ -261,12 +267,12 @@ class DeepRacerEnv(gym.Env):
         self.status = "prepare"
         self.lap_times: list[float] = []
         self._lap_started = 0.0
-        self._travelled = 0.0
+        self._travelled = min(self.grid[0], 0.0)  # a car on the grid behind the line starts short
         self.progress = 0.0
         self._falling = self._stuck = 0
         self._pause_left = 0
         self._pause_duration = 0.0
-        self._resume_at, self._resume_travelled = self._distance, 0.0
+        self._resume_at, self._resume_travelled = self._distance, self._travelled
         self.counts = dict.fromkeys(
             ("off_tracks", "crashes", "reversed", "immobilized", "resets"), 0
         )
@@ -391,9 +397,10 @@ class DeepRacerEnv(gym.Env):
         moved = self.car.step(held[1], held[0], late) if ticks else 0.0
         return moved + self.car.step(speed, steering, self.dt - late)
 
-    def _place_car(self, distance: float) -> None:
-        """Put the car at rest so that its reported position is at ``distance`` on the centre."""
-        x, y, heading = self.track.point_at(distance)
+    def _place_car(self, distance: float, left: float = 0.0) -> None:
+        """Put the car at rest so that its reported position is at ``distance``, ``left`` of the
+        centre line."""
+        x, y, heading = self.track.point_at(distance % self.track.length, left)
         back = self.car.spec.report_offset
         self.car.place(float(x) - back * math.cos(heading), float(y) - back * math.sin(heading),
                        float(heading))  # fmt: skip
@@ -417,6 +424,19 @@ class DeepRacerEnv(gym.Env):
             )
         for body, actor in zip(self._actor_bodies, actors, strict=False):
             self._world.place(body, actor.x, actor.y, actor.yaw)
+
+    def place_rivals(self, poses) -> None:
+        """Where the other racers' cars stand now, (x, y, yaw) of each (``rivals`` of them): the
+        camera and lidar see them and the car crashes into them, as into bot cars."""
+        self.traffic.place_rivals(poses)
+        self._sync_actor_bodies()
+
+    @property
+    def body_pose(self) -> tuple[float, float, float]:
+        """The middle of the car's body and its heading: where a rival's camera sees it."""
+        c = self.car
+        x, y = c.point_ahead(c.spec.centre_offset)
+        return float(x), float(y), float(c.yaw)
 
     def _crashed(self) -> bool:
         if not self.traffic.present:
@@ -724,3 +744,9 @@ class DeepRacerEnv(gym.Env):
                 immobilized=self.counts["immobilized"],
             )
         return info
+
+
+def _shade(bgr: Sequence[int]) -> tuple[int, tuple[int, int, int]]:
+    """A car's colour as the cameras draw it: (gray level, BGR)."""
+    blue, green, red = (int(channel) for channel in bgr)
+    return round(0.2989 * red + 0.5870 * green + 0.1140 * blue), (blue, green, red)
