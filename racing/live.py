@@ -99,7 +99,7 @@ def queue_state(session: LiveSession | None) -> dict:
     shown, driving = [], None
     for entry in entries:
         row = {
-            "id": entry.pk, "racer": racer_name(racer=entry.racer), "racer_id": entry.racer_id,
+            "id": entry.pk, "racer": racer_name(racer=entry.racer),
             "model_name": entry.model_name, "speed": entry.speed, "status": entry.status,
             "submission": entry.submission_id,
             "evaluation": entry.submission.evaluation_id if entry.submission else None,
