@@ -17,7 +17,16 @@ from django.template.response import TemplateResponse
 from common.formatting import laptime
 from racing import services
 from racing.forms import LOCAL, RaceObstaclesForm
-from racing.models import Event, Lap, Racer, Ranking, Season, Submission
+from racing.models import (
+    Event,
+    Lap,
+    LiveEntry,
+    LiveSession,
+    Racer,
+    Ranking,
+    Season,
+    Submission,
+)
 
 
 class EventInlineForm(forms.ModelForm):
@@ -187,14 +196,14 @@ class SubmissionAdmin(admin.ModelAdmin):
         "pk", "event", "racer", "model_name", "status", "score", "qualified", "disqualified",
         "created_at",
     ]  # fmt: skip
-    list_filter = ["event__season", "event", "status", "qualified", "disqualified"]
+    list_filter = ["event__season", "event", "status", "qualified", "disqualified", "physical"]
     search_fields = ["racer__username", "model_name", "event__name"]
     date_hierarchy = "created_at"
     list_select_related = ["event", "racer"]
     readonly_fields = [
         "event", "racer", "model", "model_name", "evaluation", "status", "failure_reason",
         "created_at", "finished_at", "score_ms", "qualified", "laps_completed", "off_tracks",
-        "video",
+        "video", "physical",
     ]  # fmt: skip
     fields = [*readonly_fields, "disqualified", "disqualification_reason"]
     form = SubmissionAdminForm
@@ -289,3 +298,26 @@ class RacerAdmin(admin.ModelAdmin):
 
     def has_add_permission(self, request) -> bool:
         return False  # every racer gets one on first use
+
+
+class LiveEntryInline(admin.TabularInline):
+    model = LiveEntry
+    fields = readonly_fields = ["position", "racer", "model_name", "speed", "status", "submission"]
+    extra = 0
+
+    def has_add_permission(self, request, obj=None) -> bool:
+        return False  # racers join from the race page
+
+
+@admin.register(LiveSession)
+class LiveSessionAdmin(admin.ModelAdmin):
+    """Live races: opened and run from each event's race page; here staff see their queues and
+    may change their settings."""
+
+    list_display = ["event", "facilitator", "autolaunch", "min_speed", "max_speed", "created_at"]
+    fields = ["event", "facilitator", "autolaunch", "min_speed", "max_speed"]
+    readonly_fields = ["event", "facilitator"]
+    inlines = [LiveEntryInline]
+
+    def has_add_permission(self, request) -> bool:
+        return False  # opened on the event's race page

@@ -46,6 +46,7 @@ def test_race_staff_manage_events_but_not_users(client, race_staff):
     client.force_login(race_staff)
     assert client.get(reverse("admin:racing_event_add")).status_code == 200
     assert client.get(reverse("admin:racing_season_changelist")).status_code == 200
+    assert client.get(reverse("admin:racing_livesession_changelist")).status_code == 200
     assert client.get(reverse("admin:auth_user_changelist")).status_code == 403
 
 
