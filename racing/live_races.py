@@ -24,9 +24,22 @@ from common.refusals import Refused
 from notifications import services as notifications
 from racing import live, selectors, services
 from racing.models import Event, LiveEntry, LiveSession, Submission
+from training.lifecycle import Lifecycle
 from training.models import RLModel
 
 _E = LiveEntry.Status
+# A queue entry's status and its moves (see training.lifecycle): it waits, drives its turn, is
+# done; a facilitator takes a waiting one out, and puts one that is done or out back to wait.
+LIVE_ENTRY = Lifecycle(
+    LiveEntry,
+    {
+        _E.WAITING: frozenset({_E.DRIVING, _E.REMOVED}),
+        _E.DRIVING: frozenset({_E.DONE}),
+        _E.DONE: frozenset({_E.WAITING}),
+        _E.REMOVED: frozenset({_E.WAITING}),
+    },
+    born=frozenset({_E.WAITING}),
+)
 
 
 class LiveRefused(Refused):
@@ -106,7 +119,7 @@ def live_entry_move(*, entry: LiveEntry, places: int) -> LiveEntry:
 
 def live_entry_remove(*, entry: LiveEntry) -> None:
     """Take a waiting racer out of the queue."""
-    if not LiveEntry.objects.filter(pk=entry.pk, status=_E.WAITING).update(status=_E.REMOVED):
+    if not LIVE_ENTRY.move(entry, _E.REMOVED, only_from=frozenset({_E.WAITING})):
         raise LiveRefused("Only a racer still waiting can be taken out: a turn drives to its end.")
     live.announce_queue(entry.session)
 
@@ -115,10 +128,9 @@ def live_entry_restart(*, entry: LiveEntry) -> LiveEntry:
     """A racer whose turn ended (or who was taken out) races again: back at the queue's head."""
     with transaction.atomic():
         waiting = list(_waiting(entry.session, lock=True))
-        restarted = LiveEntry.objects.filter(pk=entry.pk, status__in=(_E.DONE, _E.REMOVED))
-        if not restarted.update(status=_E.WAITING, submission=None):
+        again = frozenset({_E.DONE, _E.REMOVED})
+        if not LIVE_ENTRY.move(entry, _E.WAITING, only_from=again, submission=None):
             raise LiveRefused("Only a racer whose turn has ended can race again.")
-        entry.refresh_from_db()
         _number([entry, *waiting])
     live.announce_queue(entry.session)
     return entry
@@ -142,8 +154,7 @@ def live_turn_launch(*, session: LiveSession) -> LiveEntry:
             )  # fmt: skip
         except services.SubmissionRefused as refused:
             raise LiveRefused(f"{entry.model_name} cannot race now: {refused}") from None
-        LiveEntry.objects.filter(pk=entry.pk).update(status=_E.DRIVING, submission=submission)
-        entry.refresh_from_db()
+        LIVE_ENTRY.move(entry, _E.DRIVING, submission=submission)
         following = _waiting(session).select_related("session__event").first()
     live.announce_queue(session)
     if following is not None:
@@ -158,7 +169,7 @@ def live_turn_ended(*, submission: Submission) -> None:
     entry = LiveEntry.objects.select_related("session__event").filter(submission=submission).first()
     if entry is None:
         return
-    LiveEntry.objects.filter(pk=entry.pk, status=_E.DRIVING).update(status=_E.DONE)
+    LIVE_ENTRY.move(entry, _E.DONE)
     session = entry.session
     live.announce_queue(session)
     if session.autolaunch and _waiting(session).exists():

@@ -1,5 +1,6 @@
 """Statuses move only as their lifecycle lists (training.lifecycle: a model, a training job, an
-evaluation; racing.services.SUBMISSION: a race entry), one conditional write at a time."""
+evaluation; racing.services.SUBMISSION: a race entry; racing.live_races.LIVE_ENTRY: a place in a
+live race's queue), one conditional write at a time."""
 
 import ast
 from datetime import timedelta
@@ -8,6 +9,7 @@ from pathlib import Path
 import pytest
 from django.utils import timezone
 
+from racing.live_races import LIVE_ENTRY
 from racing.models import Submission
 from racing.services import SUBMISSION
 from tests.training.factories import ready_model
@@ -29,6 +31,7 @@ LIFECYCLES = {
     # the racer may stop an evaluation (stopping, then canceled); a race entry runs to its end
     "evaluation": (lifecycle.EVALUATION, set()),
     "race entry": (SUBMISSION, {Job.INITIALIZING, Job.STOPPING, Job.CANCELED}),
+    "live race's queue entry": (LIVE_ENTRY, set()),
 }
 
 
