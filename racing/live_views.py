@@ -39,8 +39,12 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
             else:
                 messages.success(request, "You are in the queue: the page shows your turn.")
                 return redirect("racing:live-race", slug=event.slug)
+    mine = set()
+    if session is not None and user.is_authenticated:
+        waiting = session.entries.filter(racer=user, status=LiveEntry.Status.WAITING)
+        mine = set(waiting.values_list("pk", flat=True))
     context = {
-        "event": event, "session": session, "facilitator": facilitator, "join": join,
+        "event": event, "session": session, "facilitator": facilitator, "join": join, "mine": mine,
         "queue": live.queue_state(session), "speedup": settings.PITLANE_WATCHED_SPEEDUP,
         "settings_form": LiveSessionForm(initial=_settings(session)) if facilitator else None,
     }  # fmt: skip
@@ -106,4 +110,19 @@ def live_entry_action(request: HttpRequest, slug: str, pk: int, action: str) -> 
             raise Http404("No such action.")
     except live_races.LiveRefused as refused:
         messages.error(request, str(refused))
+    return redirect("racing:live-race", slug=event.slug)
+
+
+@login_required
+@require_POST
+def live_entry_leave(request: HttpRequest, slug: str, pk: int) -> HttpResponse:
+    """A racer takes their own place out of the queue."""
+    event = _get_event_for_user(request, slug)
+    entry = get_object_or_404(LiveEntry, pk=pk, session__event=event, racer=request.user)
+    try:
+        live_races.live_entry_remove(entry=entry)
+    except live_races.LiveRefused as refused:
+        messages.error(request, str(refused))
+    else:
+        messages.success(request, "You left the queue.")
     return redirect("racing:live-race", slug=event.slug)

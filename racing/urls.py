@@ -39,6 +39,8 @@ urlpatterns = [
     path("events/<slug:slug>/live/", live_views.live_race, name="live-race"),
     path("events/<slug:slug>/live/open", live_views.live_race_open, name="live-race-open"),
     path("events/<slug:slug>/live/launch", live_views.live_race_launch, name="live-race-launch"),
+    path("events/<slug:slug>/live/entries/<int:pk>/leave", live_views.live_entry_leave,
+         name="live-entry-leave"),
     path("events/<slug:slug>/live/entries/<int:pk>/<str:action>", live_views.live_entry_action,
          name="live-entry-action"),
 ]  # fmt: skip

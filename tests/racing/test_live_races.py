@@ -98,3 +98,21 @@ def test_only_staff_and_the_organiser_run_a_live_race_and_never_a_physical_one(
     page = reverse("racing:live-race", args=[race.slug])
     assert "is not raced live yet" in client.get(page).text
     assert client.post(reverse("racing:live-race-launch", args=[race.slug])).status_code == 404
+
+
+def test_a_racer_leaves_the_queue_and_nobody_else_can_take_them_out(
+    client, tracks, alice, bob, stella
+):
+    from django.urls import reverse
+
+    race = event("Live cup")
+    session = live_races.live_session_open(event=race, facilitator=stella)
+    entry = live_races.live_entry_join(session=session, racer=alice, model=ready_model(alice))
+    leave = reverse("racing:live-entry-leave", args=[race.slug, entry.pk])
+    client.force_login(bob)
+    assert client.post(leave).status_code == 404
+    client.force_login(alice)
+    assert "Leave the queue" in client.get(reverse("racing:live-race", args=[race.slug])).text
+    assert "You left the queue." in client.post(leave, follow=True).text
+    entry.refresh_from_db()
+    assert entry.status == _E.REMOVED
