@@ -35,6 +35,7 @@ from django.contrib.auth.models import AbstractBaseUser
 from django.db import transaction
 from django.utils import timezone
 
+from accounts.selectors import racer_name
 from common.refusals import Refused
 from notifications import services as notifications
 from racing import live, scoring, selectors
@@ -89,8 +90,8 @@ def physical_run_start(
         Event.objects.select_for_update().filter(pk=event.pk).first()  # one start at a time
         if (running := running_run(event=event)) is not None:
             raise TimingRefused(
-                f"{running.car} ({running.submission.racer}) is still on the track: finish "
-                "that run first."
+                f"{running.car} ({racer_name(racer=running.submission.racer)}) is still on the "
+                "track: finish that run first."
             )
         submission = Submission.objects.create(
             event=event, racer=racer, model_name=model_name, physical=True
