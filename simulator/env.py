@@ -410,10 +410,7 @@ class DeepRacerEnv(gym.Env):
     def _sync_car_body(self) -> None:
         if self._world is None:
             return
-        c = self.car
-        offset = c.spec.centre_offset
-        self._world.place(self._car_body, c.x + offset * math.cos(c.yaw),
-                          c.y + offset * math.sin(c.yaw), c.yaw)  # fmt: skip
+        self._world.place(self._car_body, *self.body_pose)
 
     def _sync_actor_bodies(self) -> None:
         actors = self.traffic.actors
