@@ -1,26 +1,9 @@
 // An event's leaderboard, kept current: when a submission is scored (or a ranking changes), the
 // event's group says so over the websocket and the page fetches its table again.
+import { listen } from "./timing.js";
+
 const root = document.querySelector("[data-leaderboard]");
 const note = root.querySelector("[data-live-note]");
-let socket = null;
-let retry = 1000;
-
-function connect() {
-  const scheme = location.protocol === "https:" ? "wss" : "ws";
-  socket = new WebSocket(`${scheme}://${location.host}/ws/events/${root.dataset.event}/`);
-  socket.addEventListener("open", () => { retry = 1000; });
-  socket.addEventListener("message", (message) => {
-    const update = JSON.parse(message.data);
-    const own = root.querySelector(`[data-my-submission="${update.submission}"]`);
-    if (update.type === "leaderboard" || (update.type === "submission" && (update.ranked || own))) {
-      refresh(update);
-    }
-  });
-  socket.addEventListener("close", () => {
-    setTimeout(connect, retry);
-    retry = Math.min(retry * 2, 30000);
-  });
-}
 
 async function refresh(update) {
   const url = new URL(location.href);
@@ -38,4 +21,9 @@ async function refresh(update) {
     : `The standings changed (${new Date().toLocaleTimeString()}).`;
 }
 
-connect();
+listen(root.dataset.event, (update) => {
+  const own = root.querySelector(`[data-my-submission="${update.submission}"]`);
+  if (update.type === "leaderboard" || (update.type === "submission" && (update.ranked || own))) {
+    refresh(update);
+  }
+});

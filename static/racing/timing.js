@@ -1,5 +1,6 @@
-// Shared by the timekeeper and broadcast pages of a physical event: the event's websocket, and
-// the running lap's clock, set against this browser's clock by the server's time in each message.
+// The event's websocket (reconnecting, its page's body marked data-listening while connected),
+// shared by the leaderboard, live race, timekeeper and broadcast pages; and a physical event's
+// running lap clock, set against this browser's clock by the server's time in each message.
 export function listen(eventId, onMessage) {
   let retry = 1000;
   function connect() {
