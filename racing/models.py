@@ -20,6 +20,7 @@ from django.urls import reverse
 from django.utils import timezone
 
 from racing import scoring
+from simulator.config import MAX_CARS
 from training import configuration
 from training.configuration import PENALTY_MAX
 from training.models import EvaluationJob, RaceConditions, RaceType, RLModel, Track
@@ -139,6 +140,12 @@ class Event(RaceConditions):
         help_text="The one-time token of the form that created this community race: the same "
         "form sent twice (Back and submit again, a double click) gives back this race.",
     )  # fmt: skip
+    cars = models.PositiveSmallIntegerField(
+        "cars a race", default=1, validators=[MinValueValidator(1), MaxValueValidator(MAX_CARS)],
+        help_text="Model against model (DeepRacer for Cloud's HEAD_TO_MODEL): 2 to 4 racers' "
+        "models on the track at once, each entry against the leaders' models (or, raced live, "
+        "the next racers in the queue). 1: each model alone.",
+    )  # fmt: skip
     physical = models.BooleanField(
         "raced by real cars", default=False,
         help_text="Real cars at a venue: a timekeeper records each lap (the event's timekeeper "
@@ -178,6 +185,12 @@ class Event(RaceConditions):
             errors["race_type"] = (
                 "Open events are time trials; object avoidance and head-to-bot are Pro events."
             )
+        if self.public and self.division == Division.OPEN and self.cars > 1:
+            errors["cars"] = "Open events are time trials, one car at a time; model against "
+            errors["cars"] += "model is a Pro event."
+        if self.physical and self.cars > 1:
+            errors["cars"] = "Real cars are timed one at a time: an event raced by real cars has "
+            errors["cars"] += "one car a race."
         # An inline event of a season being added holds the unsaved season, not its id yet.
         cached = self._meta.get_field("season").is_cached(self)
         season = self.season if self.season_id or cached else None

@@ -57,6 +57,7 @@ class Car:
     env: Any
     index: int
     generator: Any = None  # a torch.Generator, or None for torch's global stream
+    policy: Policy | None = None  # its own, where it evaluates another's (model against model)
     mode: str | None = None
     record: bool = True
     observation: dict | None = None
@@ -67,11 +68,12 @@ Score = Callable[[list[tuple[int, dict]]], list[float]]
 
 
 class Fleet:
-    """Cars driven together by one policy. ``seeds[i]`` seeds car ``i``'s sampling and its
-    action space (their environments are seeded by their resets). ``score``, where given,
-    takes each car's (index, params) of a step and gives their rewards, in one call for all the
-    cars; a call that fails raises, naming the failing car's index in the exception's ``car``
-    where it knows it."""
+    """Cars driven together by one policy (a car that evaluates may have its own,
+    ``Car.policy``: racers' models against each other, ``training.evaluation``). ``seeds[i]``
+    seeds car ``i``'s sampling and its action space (their environments are seeded by their
+    resets). ``score``, where given, takes each car's (index, params) of a step and gives their
+    rewards, in one call for all the cars; a call that fails raises, naming the failing car's
+    index in the exception's ``car`` where it knows it."""
 
     def __init__(
         self, envs: list, policy: Policy, seeds: list[int] | None = None,
@@ -191,12 +193,15 @@ class Fleet:
             if car.mode == "random":
                 chosen[car.index] = (car.env.action_space.sample(), 0.0, 0.0)
             elif car.mode == "evaluate":
-                chosen[car.index] = (self.policy.drive(car.observation), 0.0, 0.0)
+                chosen[car.index] = (self._policy(car).drive(car.observation), 0.0, 0.0)
         return [chosen[car.index] for car in cars]
 
     def _command(self, car: Car, action):
         """What ``car``'s environment takes for ``action``."""
-        return self.policy.command(action, hasattr(car.env.action_space, "n"))
+        return self._policy(car).command(action, hasattr(car.env.action_space, "n"))
+
+    def _policy(self, car: Car) -> Policy:
+        return car.policy or self.policy
 
     def _record(self, car: Car, action, value: float, log_prob: float, outcome, on_step) -> bool:
         """Record ``car``'s step (the environment's ``outcome`` of ``action``), then

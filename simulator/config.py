@@ -18,6 +18,7 @@ CAMERAS = ("FRONT_FACING_CAMERA", "STEREO_CAMERAS")
 # bundle/markov/boto/s3/files/model_metadata.py:229-241, 01f5f01).
 LEGACY_CAMERA = "observation"
 LIDARS = ("SECTOR_LIDAR", "LIDAR")
+MAX_CARS = 4  # on the track at once in a race of racers' models (simulator.head_to_head)
 RACE_TYPES = ("TIME_TRIAL", "OBJECT_AVOIDANCE", "HEAD_TO_BOT")
 MODES = ("training", "evaluation")
 VIEWS = ("spectator", "camera")  # what a live viewer can watch (simulator.spectator.view_image)

@@ -31,6 +31,7 @@ from simulator.camera import (
 )
 from simulator.car import Car, CarSpec, lidar_mount
 from simulator.config import ContinuousActions, DiscreteActions
+from simulator.head_to_head import grid_place
 from simulator.params import heading, object_param_defaults, prev_next, waypoint_distances
 from simulator.randomisation import Scene
 from simulator.rewards import checked_reward, follow_centre_line
@@ -189,7 +190,7 @@ class DeepRacerEnv(gym.Env):
         route: str | None = None,
         rivals: int = 0,
         rival_colours: Sequence[tuple[int, int, int]] = (),
-        grid: tuple[float, float] = (0.0, 0.0),
+        grid: int | None = None,
     ) -> None:
         self.config = default_config(camera_lens)
         loaded = load(track) if route is None else load(track).on_route(route)
@@ -204,10 +205,14 @@ class DeepRacerEnv(gym.Env):
             bots = {}
         self.traffic = Traffic(
             self.track, config.objects(objects, race_type), config.bots(bots, race_type),
-            rivals=config.positive_int("The number of rivals", rivals, 0, 3),
+            rivals=config.positive_int("The number of rivals", rivals, 0, config.MAX_CARS - 1),
             rival_shades=tuple(_shade(colour) for colour in rival_colours),
         )  # fmt: skip
-        self.grid = (float(grid[0]), float(grid[1]))  # [m] along the track from the start, left
+        # [m] along the track from the start, left of the centre line: the centre line's start
+        # alone, or place ``grid`` (0 first) on simapp's grid of a race of several cars
+        if grid is not None:
+            grid = config.positive_int("The place on the grid", grid, 0, config.MAX_CARS - 1)
+        self.grid = (0.0, 0.0) if grid is None else grid_place(self.track, grid)
         self.mode = config.choice("The mode", mode, config.MODES)
         self.laps = config.positive_int("The number of laps", laps, 1, 100)
         self.penalties = config.penalties(penalties)

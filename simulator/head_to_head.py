@@ -19,14 +19,18 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from simulator.actors import FAR_AWAY
-from simulator.env import DeepRacerEnv
+from simulator.config import MAX_CARS
 from simulator.trace import SimTraceRow
+
+if TYPE_CHECKING:  # the environment places itself on the grid through ``grid_place``
+    from simulator.env import DeepRacerEnv
+    from simulator.tracks import Track
 
 START_OFFSET = 0.75  # [m] between one car's start and the next one's, behind it
 DONE_CONDITIONS = ("any", "all")
-MAX_CARS = 4
 
 
 @dataclass
@@ -40,16 +44,29 @@ class CarResult:
     trace: list[SimTraceRow] = field(default_factory=list)
 
 
-def grid(track, cars: int) -> list[tuple[float, float]]:
+def grid(track: Track, cars: int) -> list[tuple[float, float]]:
     """Each car's place on simapp's grid: (metres along the track from the start, metres left of
     the centre line)."""
+    return [grid_place(track, index) for index in range(cars)]
+
+
+def grid_place(track: Track, index: int) -> tuple[float, float]:
+    """Car ``index``'s place on simapp's grid (0 first): (metres along the track from the start,
+    metres left of the centre line)."""
     inner_is_left = bool(track.project_points(track.inner[:1]).is_left[0])
     lane = track.width / 4
-    places = []
-    for index in range(cars):
-        inner = index % 2 == 1
-        places.append((-START_OFFSET * index, lane if inner == inner_is_left else -lane))
-    return places
+    inner = index % 2 == 1
+    return -START_OFFSET * index, lane if inner == inner_is_left else -lane
+
+
+def place_rivals(envs: Sequence[DeepRacerEnv], driving: Sequence[bool]) -> None:
+    """Tell each of ``envs`` where the others' cars stand now; a car no longer ``driving`` (its
+    race over) is parked off the field, as simapp parks it."""
+    if len(envs) < 2:
+        return
+    poses = [env.body_pose if on else _parked() for env, on in zip(envs, driving, strict=True)]
+    for index, env in enumerate(envs):
+        env.place_rivals([pose for other, pose in enumerate(poses) if other != index])
 
 
 def race(
@@ -73,11 +90,7 @@ def race(
         results[index].trace.append(info["trace"])
     finished = [False] * len(envs)
     while not (any(finished) if done == "any" else all(finished)):
-        poses = [
-            _parked() if over else env.body_pose for env, over in zip(envs, finished, strict=True)
-        ]
-        for index, env in enumerate(envs):
-            env.place_rivals([pose for other, pose in enumerate(poses) if other != index])
+        place_rivals(envs, [not over for over in finished])
         for index, env in enumerate(envs):
             if finished[index]:
                 continue

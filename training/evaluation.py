@@ -44,6 +44,7 @@ from common.transactions import outside_transaction
 from notifications import services as notifications
 from rl import episode
 from rl.policies import Policy
+from simulator import head_to_head
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
@@ -59,6 +60,10 @@ RUNNABLE = (
     EvaluationJob.Status.STOPPING,
 )
 VIDEO_CODEC = "VP80"
+INTERNAL_ERROR = (
+    "The evaluation stopped on an internal error; the model is unchanged. "
+    "Try again, and tell the league staff if it happens again."
+)
 LEASE_RENEWAL = 3.0  # [s] between renewals of a run's lease while it drives
 
 
@@ -126,61 +131,150 @@ def run(evaluation_id: int) -> EvaluationJob | None:
     """Run evaluation ``evaluation_id`` if it is waiting; None when it has ended or vanished, or
     another run drives it.
 
-    The run holds a lease on the evaluation while it drives (renewed every few seconds), as a
+    An evaluation may be one car of a race of several (model against model): the run of the
+    race's first car (its ``grid_leader``) drives them all together, each car on simapp's grid
+    with its own model, trials, trace, video and live frames; a run asked for another car
+    drives its race's first.
+
+    The run holds a lease on the evaluations while it drives (renewed every few seconds), as a
     trainer holds its job's. One that is under way with a lapsed lease lost its worker (the
     heartbeat's ``jobs.lapsed_evaluations`` sent for this run, or Celery redelivered the task,
     which it acknowledges late): it starts over, so the racer gets a whole evaluation, not half
     of one. One whose lease is alive is a duplicate delivery, and is left to its run.
 
-    The racer may stop it (``services.evaluation_stop``): the run looks twice a second, and ends
-    it CANCELED with the trials it finished, their video and trace (one whose run died as it
-    was being stopped ends with the trials recorded)."""
+    The racer may stop an evaluation that drives alone (``services.evaluation_stop``): the run
+    looks twice a second, and ends it CANCELED with the trials it finished, their video and
+    trace (one whose run died as it was being stopped ends with the trials recorded)."""
     owner = f"{socket.gethostname()}:{os.getpid()}:{secrets.token_hex(4)}"
     with transaction.atomic():
         evaluation = EvaluationJob.objects.select_for_update().filter(pk=evaluation_id).first()
-        if evaluation is None or evaluation.status not in RUNNABLE:
-            logger.info("Evaluation %s is not waiting; nothing to do", evaluation_id)
-            return None
-        now = timezone.now()
-        if evaluation.status != EvaluationJob.Status.QUEUED:
-            held = evaluation.lease_owner not in ("", jobs.RESUMING)
-            if held and evaluation.lease_expires and evaluation.lease_expires > now:
-                logger.info("Evaluation %s is being driven by another run", evaluation_id)
-                return None
-            if evaluation.status == EvaluationJob.Status.STOPPING:
-                _end_stopped(evaluation)
-                return None
-            logger.warning("Evaluation %s was interrupted; starting it over", evaluation_id)
-            evaluation.trial_rows.all().delete()
-        lifecycle.EVALUATION.move(
-            evaluation, EvaluationJob.Status.INITIALIZING, started_at=now,
-            message="Loading the model", lease_owner=owner, lease_expires=now + jobs.lease(),
-        )  # fmt: skip
-    evaluation = EvaluationJob.objects.select_related("model", "track").get(pk=evaluation_id)
-    _announce(evaluation)
-    evaluator = Evaluator(evaluation)
+        leader = evaluation.grid_leader_id if evaluation is not None else None
+        race = [] if leader is not None else _claim(evaluation, owner)
+    if leader is not None:
+        logger.info("Evaluation %s drives in evaluation %s's race", evaluation_id, leader)
+        return run(leader)
+    if not race:
+        return None
+    race = [EvaluationJob.objects.select_related("model", "track").get(pk=car.pk) for car in race]
+    for car in race:
+        _announce(car)
+    cars = [Evaluator(car) for car in race]
     try:
         with _one_torch_thread():
-            evaluator.run()
+            _race(cars)
     except jobs.LeaseLost:
         logger.warning("Evaluation %s was taken over by another run; this one stops", evaluation_id)
         return None
     except EvaluationFailed as failure:
-        _finish(evaluation, EvaluationJob.Status.FAILED, str(failure))
+        for car in cars:
+            _finish(car.evaluation, EvaluationJob.Status.FAILED, str(failure))
     except Exception:
         logger.exception("Evaluation %s failed", evaluation_id)
-        _finish(
-            evaluation,
-            EvaluationJob.Status.FAILED,
-            "The evaluation stopped on an internal error; the model is unchanged. "
-            "Try again, and tell the league staff if it happens again.",
-        )
+        for car in cars:
+            _finish(car.evaluation, EvaluationJob.Status.FAILED, INTERNAL_ERROR)
     else:
-        if evaluator.stopped:
-            _finish(evaluation, EvaluationJob.Status.CANCELED, jobs.EVALUATION_STOPPED)
-        else:
-            _finish(evaluation, EvaluationJob.Status.COMPLETED)
-    return evaluation
+        for car in cars:
+            if car.failure:
+                _finish(car.evaluation, EvaluationJob.Status.FAILED, car.failure)
+            elif car.stopped:
+                _finish(car.evaluation, EvaluationJob.Status.CANCELED, jobs.EVALUATION_STOPPED)
+            else:
+                _finish(car.evaluation, EvaluationJob.Status.COMPLETED)
+    return race[0]
+
+
+def _claim(evaluation: EvaluationJob | None, owner: str) -> list[EvaluationJob]:
+    """Within the transaction that locked ``evaluation`` (the first car of its race, or alone):
+    its race's cars that are waiting, in grid order, each INITIALIZING under ``owner``'s lease;
+    none when it has ended, another run drives it, or the racer stopped it as its run died."""
+    if evaluation is None or evaluation.status not in RUNNABLE:
+        logger.info("Evaluation %s is not waiting; nothing to do", getattr(evaluation, "pk", None))
+        return []
+    now = timezone.now()
+    if evaluation.status != EvaluationJob.Status.QUEUED:
+        held = evaluation.lease_owner not in ("", jobs.RESUMING)
+        if held and evaluation.lease_expires and evaluation.lease_expires > now:
+            logger.info("Evaluation %s is being driven by another run", evaluation.pk)
+            return []
+        if evaluation.status == EvaluationJob.Status.STOPPING:
+            _end_stopped(evaluation)
+            return []
+        logger.warning("Evaluation %s was interrupted; starting it over", evaluation.pk)
+    others = evaluation.grid.select_for_update().filter(status__in=RUNNABLE)
+    race = [evaluation, *others.order_by("grid_position", "pk")]
+    for car in race:
+        if car.status != EvaluationJob.Status.QUEUED:
+            car.trial_rows.all().delete()
+        lifecycle.EVALUATION.move(
+            car, EvaluationJob.Status.INITIALIZING, started_at=now, message="Loading the model",
+            lease_owner=owner, lease_expires=now + jobs.lease(),
+        )  # fmt: skip
+    return race
+
+
+def _race(cars: list[Evaluator]) -> None:
+    """Drive ``cars`` (one evaluation, or a race's) from their weights to their saved files: a
+    car whose weights cannot be read is left out (it fails with the reason); the others drive
+    together."""
+    for car in cars:
+        try:
+            car.load()
+        except EvaluationFailed as failure:
+            car.failure = str(failure)
+    racing = [car for car in cars if not car.failure]
+    if not racing:
+        return
+    race = [car.evaluation for car in racing]
+    for car in racing:
+        car.prepare(race)
+    if not all([car.begin() for car in racing]):  # the racer stopped it as it loaded
+        for car in racing:
+            car.stopped = True
+            car.env.close()
+        return
+    with contextlib.ExitStack() as recordings:
+        for car in racing:
+            recordings.enter_context(car.recording())
+        try:
+            _drive(racing)
+        except _StopAsked:
+            racing[0].stopped = True  # the trials it finished, and what was driven, are saved
+
+
+def _drive(cars: list[Evaluator]) -> None:
+    """The trials: each car's an episode of one fleet (``rl.episode.Fleet``; continuous laps
+    are one episode), each car with its own policy, every car of a race reset on its place on
+    the grid and stepping together, each knowing where the others stand before it steps (a car
+    whose trial is over parked off the field, as simapp parks it: DONE_CONDITION "all",
+    evaluation_worker.py:343, 01f5f01, so that every racer drives its own laps). Each step,
+    every car's trace row, video frame and live frames, and each lap recorded as it ends
+    (``Evaluator.stepped``); then one wait, while someone watches or the race is live, so that
+    the step takes real time (or PITLANE_WATCHED_SPEEDUP times less)."""
+    fleet = episode.Fleet([car.env for car in cars], cars[0].policy)
+    for driving, car in zip(fleet.cars, cars, strict=True):
+        driving.policy = car.policy
+    envs = [car.env.unwrapped for car in cars]
+    pace = envs[0].dt / settings.PITLANE_WATCHED_SPEEDUP  # [s] of real time a step
+    leader = cars[0].evaluation
+    last_step = 0.0
+    paced: list[bool] = []  # this step's cars: whether each should take real time
+
+    def stepped(driving: episode.Car, *seen) -> None:
+        paced.append(cars[driving.index].stepped(*seen))
+
+    for number in range(1 if leader.continuous_laps else leader.trials):
+        for driving, car in zip(fleet.cars, cars, strict=True):
+            seed = car.trial_begins(number)
+            car.started(*fleet.start(driving, "evaluate", record=False, seed=seed))
+        while fleet.driving():
+            head_to_head.place_rivals(envs, [driving.mode is not None for driving in fleet.cars])
+            paced.clear()
+            fleet.step(stepped)
+            if any(paced):
+                time.sleep(max(0.0, pace - (time.monotonic() - last_step)))
+            last_step = time.monotonic()
+        for driving, car in zip(fleet.cars, cars, strict=True):
+            car.trial_ends(driving.driven)
 
 
 @dataclass
@@ -196,84 +290,93 @@ class LapCounts:
 
 
 class Evaluator:
+    """One car of an evaluation's run: its model's policy and environment, the trials it
+    records, its trace, video, live frames and lease, and its files once driven."""
+
     def __init__(self, evaluation: EvaluationJob) -> None:
         self.evaluation = evaluation
         self.model: RLModel = evaluation.model
         self.trace: list[SimTraceRow] = []
         self.metrics: list[dict] = []
         self.results: list[EvaluationTrial] = []
+        self.failure = ""  # why it cannot drive (its weights), when it cannot
+        self.stopped = False  # the racer stopped it: it ends with the trials it finished
         self._seed: int | None = None  # the seed of the episode driving
         self._renewed = self._looked = time.monotonic()
-        self.stopped = False  # the racer stopped it: it ends with the trials it finished
+        self._last_live = 0.0  # when it last offered live frames
+        self._weights = b""
 
-    def run(self) -> None:
-        evaluation = self.evaluation
-        checkpoint = selectors.model_checkpoint(model=self.model, which=evaluation.checkpoint)
+    def load(self) -> None:
+        """Read the model's weights (``EvaluationFailed`` says why it cannot)."""
+        checkpoint = selectors.model_checkpoint(model=self.model, which=self.evaluation.checkpoint)
         if checkpoint is None:
-            raise EvaluationFailed("This model has no trained weights to evaluate.")
-        env = gymnasium.make(simulator.ENV_ID, **evaluation.environment_settings())
-        policy = Policy.build(
-            self.model.algorithm, self.model.architecture, env.observation_space, env.action_space
-        )
-        try:
-            policy.load_checkpoint(artifacts.read(checkpoint))
-        except (ValueError, OSError) as error:
-            raise EvaluationFailed(f"The model's weights could not be loaded: {error}") from None
+            raise EvaluationFailed(f"The model {self.model.name} has no trained weights.")
+        self._weights = artifacts.read(checkpoint)
         _update(
-            evaluation,
+            self.evaluation,
             checkpoint_name=checkpoint,
             checkpoint_iteration=artifacts.checkpoint_iteration(checkpoint),
         )
-        if not lifecycle.EVALUATION.move(
-            evaluation, EvaluationJob.Status.IN_PROGRESS, message="Racing"
-        ):  # the racer stopped it as it loaded
-            self.stopped = True
-            env.close()
-            return
-        _announce(evaluation)
+
+    def prepare(self, race: list[EvaluationJob]) -> None:
+        """Its environment, in ``race`` (this car alone, or the race's cars in grid order), and
+        its policy with the weights read."""
+        self.env = gymnasium.make(simulator.ENV_ID, **self.evaluation.environment_settings(race))
+        self.policy = Policy.build(
+            self.model.algorithm, self.model.architecture,
+            self.env.observation_space, self.env.action_space,
+        )  # fmt: skip
+        try:
+            self.policy.load_checkpoint(self._weights)
+        except (ValueError, OSError) as error:
+            self.env.close()
+            raise EvaluationFailed(
+                f"The weights of {self.model.name} could not be loaded: {error}"
+            ) from None
+
+    def begin(self) -> bool:
+        """IN_PROGRESS, and said so; False when the racer stopped it as it loaded."""
+        moved = lifecycle.EVALUATION.move(
+            self.evaluation, EvaluationJob.Status.IN_PROGRESS, message="Racing"
+        )
+        if moved:
+            _announce(self.evaluation)
+        return moved
+
+    @contextlib.contextmanager
+    def recording(self) -> Iterator[None]:
+        """While the car drives: its video's encoder and its live frames' publisher; then its
+        trace, metrics and video saved (unless the drive failed)."""
         with tempfile.TemporaryDirectory(prefix="pitlane-evaluation-") as directory:
             video_path = Path(directory) / artifacts.EVALUATION_VIDEO
-            writer = _VideoWriter(video_path)
-            group = live.evaluation_group(evaluation.pk)
+            self._writer = _VideoWriter(video_path)
+            group = live.evaluation_group(self.evaluation.pk)
             try:
-                with live.FramePublisher(redis_client(timeout=5.0), group) as publisher:
-                    self._drive(env, policy, writer, publisher)
-            except _StopAsked:
-                self.stopped = True  # the trials it finished, and what was driven, are saved
+                with live.FramePublisher(redis_client(timeout=5.0), group) as self._publisher:
+                    yield
             finally:
-                writer.close()
-                env.close()
+                self._writer.close()
+                self.env.close()
             self._renew()  # the uploads below may take a while: hold the lease through them
             self._save(video_path)
 
     # Driving
 
-    def _drive(
-        self, env, policy: Policy, writer: _VideoWriter, publisher: live.FramePublisher
-    ) -> None:
-        """The trials, each an episode of the one episode loop (``rl.episode.drive``; continuous
-        laps are one episode): each step's trace row, video frame and live frames, and each lap
-        recorded as it ends (``_stepped``)."""
-        evaluation = self.evaluation
-        self._unwrapped, self._writer, self._publisher = env.unwrapped, writer, publisher
-        self._pace = env.unwrapped.dt / settings.PITLANE_WATCHED_SPEEDUP  # [s] of real time a step
-        self._last_live = self._last_step = 0.0
-        for number in range(1 if evaluation.continuous_laps else evaluation.trials):
-            self._counts, self._laps_done = LapCounts(), 0
-            # Each trial's own seed draws its noise; one from before seeds drives without.
-            self._seed = evaluation.trial_seed(number)
-            driven = episode.drive(
-                env, policy, "evaluate", record=False,
-                seed=number if self._seed is None else self._seed,
-                on_reset=self._started, on_step=self._stepped,
-            )  # fmt: skip
-            status = "time_up" if driven.truncated else driven.info["status"]
-            if status != "lap_complete" and len(self.results) < evaluation.trials:
-                # Out of time, or out of resets (``max_resets``): the part of a lap it drove.
-                seconds = self._unwrapped.sim_time - self._counts.started
-                self._record(self._unwrapped, driven.info, self._counts, seconds, status=status)
+    def trial_begins(self, number: int) -> int:
+        """Trial ``number`` (0 on) begins: the seed of its episode."""
+        self._counts, self._laps_done = LapCounts(), 0
+        # Each trial's own seed draws its noise; one from before seeds drives without.
+        self._seed = self.evaluation.trial_seed(number)
+        return number if self._seed is None else self._seed
 
-    def _started(self, observation: dict, info: dict) -> None:
+    def trial_ends(self, driven: episode.Driven) -> None:
+        status = "time_up" if driven.truncated else driven.info["status"]
+        if status != "lap_complete" and len(self.results) < self.evaluation.trials:
+            # Out of time, or out of resets (``max_resets``): the part of a lap it drove.
+            seconds = self.env.unwrapped.sim_time - self._counts.started
+            self._record(self.env.unwrapped, driven.info, self._counts, seconds, status=status)
+
+    def started(self, observation: dict, info: dict) -> None:
         # Trace rows are numbered by trials done, so each lap of continuous laps is its own
         # episode, as DeepRacer's evaluation numbers them (simapp rollout_agent_ctrl.py:819);
         # the seeded reset restarts the env's clock, so tstamp runs on from the last row.
@@ -286,10 +389,11 @@ class Evaluator:
             episode=len(self.results), tstamp=self._clock + trace.tstamp, wall_clock=time.time()
         )
 
-    def _stepped(self, observation: dict, info: dict, done: bool) -> None:
+    def stepped(self, observation: dict, info: dict, done: bool) -> bool:
+        """Record a step; whether it should take real time (watched, or a live race's)."""
         self._renew()
         self._look_for_stop()
-        unwrapped = self._unwrapped
+        unwrapped = self.env.unwrapped
         self.trace.append(self._row(info))
         frame = unwrapped.spectator.render(unwrapped)
         self._writer.write(frame)
@@ -298,7 +402,7 @@ class Evaluator:
         if watched and now - self._last_live >= FRAME_INTERVAL:
             self._last_live = now
             self._show(self._publisher, watched, unwrapped, frame, observation)
-        # a lap that ended is announced with its last frame, before the wait below: a live
+        # a lap that ended is announced with its last frame, before the step's wait: a live
         # race's lap timer stops on the lap's time, not a step's wait after it
         while len(info["lap_times"]) > self._laps_done:
             self._laps_done += 1
@@ -306,9 +410,7 @@ class Evaluator:
             self._counts = self._record(
                 unwrapped, info, self._counts, lap_time, status="lap_complete"
             )
-        if watched or self.evaluation.real_time:  # real time (or PITLANE_WATCHED_SPEEDUP times)
-            time.sleep(max(0.0, self._pace - (time.monotonic() - self._last_step)))
-        self._last_step = time.monotonic()
+        return bool(watched) or self.evaluation.real_time
 
     def _look_for_stop(self) -> None:
         """``_StopAsked`` once the racer has asked to stop (looked for twice a second)."""
@@ -437,8 +539,10 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
     ):  # fmt: skip
         logger.warning("Evaluation %s was taken over by another run; it ends it", evaluation.pk)
         return
-    _model_free(evaluation)
     _announce(evaluation)
+    if evaluation.rival:  # another racer's model, raced against theirs: neither held nor told
+        return
+    _model_free(evaluation)
     if status != EvaluationJob.Status.CANCELED:  # the racer stopped it: they know
         notifications.evaluation_ended(evaluation=evaluation)
 

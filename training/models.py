@@ -7,6 +7,7 @@ models, reward functions, vehicles, jobs, iterations, log lines, evaluations, tr
 from __future__ import annotations
 
 import secrets
+from collections.abc import Sequence
 
 import numpy as np
 from django.conf import settings
@@ -607,6 +608,21 @@ class EvaluationJob(RaceConditions):
         default=False, help_text="Driven at the speed of real time even when nobody watches: "
         "a live race's turn, which its audience sees as it happens.",
     )  # fmt: skip
+    # Model against model: the cars of one race are evaluations driven together by the run of
+    # the first (its ``grid_leader``, None), each of its own model with its own trials, trace and
+    # video, as DeepRacer for Cloud's head-to-model evaluation writes each model's files under
+    # its own prefix (scripts/evaluation/prepare-config.py:119-143, deepracer-for-cloud).
+    grid_leader = models.ForeignKey(
+        "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="grid",
+        help_text="The first car of the race this car drove in; empty for the first or alone.",
+    )  # fmt: skip
+    grid_position = models.PositiveSmallIntegerField(
+        default=0, help_text="Its place on the grid: 0 in front, each next car 0.75 m behind."
+    )
+    rival = models.BooleanField(
+        default=False, help_text="Another racer's model raced against this one's: its model was "
+        "not reserved, and its owner is not told.",
+    )  # fmt: skip
     status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
     message = models.CharField(max_length=255, blank=True)
     failure_reason = models.TextField(blank=True)
@@ -642,8 +658,18 @@ class EvaluationJob(RaceConditions):
         """Laps per episode: all the trials in one with continuous laps, else one."""
         return self.trials if self.continuous_laps else 1
 
-    def environment_settings(self) -> dict:
-        """The evaluation's ``gymnasium.make`` keyword arguments."""
+    def environment_settings(self, race: Sequence[EvaluationJob] = ()) -> dict:
+        """The evaluation's ``gymnasium.make`` keyword arguments; in a ``race`` of several cars
+        (this one among them, in grid order), its place on the grid and the others' colours."""
+        together = {}
+        if len(race) > 1:
+            together = {
+                "rivals": len(race) - 1,
+                "grid": [car.pk for car in race].index(self.pk),
+                "rival_colours": [
+                    ShellColour.bgr(car.model.shell_colour) for car in race if car.pk != self.pk
+                ],
+            }
         return {
             **self.model.environment_settings(self.track.name),
             "direction": self.direction,
@@ -657,6 +683,7 @@ class EvaluationJob(RaceConditions):
             "noise": self.seed is not None,
             "randomise": self.domain_randomisation,
             "action_space": scaled_speeds(self.model.action_space, self.speed_multiplier),
+            **together,
         }
 
     def trial_seed(self, number: int) -> int | None:
