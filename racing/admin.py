@@ -60,7 +60,8 @@ class EventAdminForm(RaceObstaclesForm, EventInlineForm):
     class Meta:
         model = Event
         fields = [
-            "season", "name", "slug", "division", "track", "direction", "race_type", "opens_at",
+            "season", "name", "slug", "division", "track", "direction", "race_type", "cars",
+            "opens_at",
             "closes_at", "ranking_method", "laps_required", "laps_to_drive",
             "off_track_penalty_s", "crash_penalty_s", "max_off_tracks_per_lap",
             "submissions_per_racer", "public", "organiser", "participants", "removed",
@@ -120,7 +121,7 @@ class EventAdmin(admin.ModelAdmin):
     actions = ["close_events", "recompute_rankings"]
     fieldsets = [
         (None, {"fields": ["season", "name", "slug", "division"]}),
-        ("Race", {"fields": ["track", "direction", "race_type", "physical"]}),
+        ("Race", {"fields": ["track", "direction", "race_type", "cars", "physical"]}),
         ("Object avoidance", {"fields": ["box_count", "box_randomize"]}),
         ("Head-to-bot", {"fields": ["bot_count", "bot_speed", "bot_lane_changes"]}),
         ("When", {"fields": ["opens_at", "closes_at"]}),

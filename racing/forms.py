@@ -153,7 +153,7 @@ class CommunityRaceForm(RaceObstaclesForm):
     class Meta:
         model = Event
         fields = [
-            "name", "track", "direction", "race_type", "opens_at", "closes_at",
+            "name", "track", "direction", "race_type", "cars", "opens_at", "closes_at",
             "ranking_method", "laps_required", "laps_to_drive", "off_track_penalty_s",
             "crash_penalty_s", "max_off_tracks_per_lap", "submissions_per_racer",
         ]  # fmt: skip

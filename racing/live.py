@@ -89,14 +89,14 @@ def announce_timing(run: PhysicalRun) -> None:
 
 
 def queue_state(session: LiveSession | None) -> dict:
-    """A live session's queue as the race and broadcast pages show it: the turn driving (with
-    its evaluation, whose frames the pages watch), then the racers waiting, in order."""
+    """A live session's queue as the race and broadcast pages show it: the turn driving (its
+    first car, with its evaluation, whose frames the pages watch, and every car of it in grid
+    order), then the racers waiting, in order."""
     if session is None:
-        return {"type": "queue", "open": False, "entries": [], "driving": None}
-    entries = session.entries.select_related("racer__profile", "submission").order_by(
-        "position", "pk"
-    )
-    shown, driving = [], None
+        return {"type": "queue", "open": False, "entries": [], "driving": None, "cars": []}
+    entries = session.entries.select_related("racer__profile", "submission__evaluation")
+    entries = entries.order_by("position", "pk")
+    shown, cars = [], []
     for entry in entries:
         row = {
             "id": entry.pk, "racer": racer_name(racer=entry.racer),
@@ -106,13 +106,16 @@ def queue_state(session: LiveSession | None) -> dict:
             "score_ms": entry.submission.score_ms if entry.submission else None,
         }  # fmt: skip
         if entry.status == entry.Status.DRIVING:
-            driving = row
+            evaluation = entry.submission.evaluation if entry.submission else None
+            cars.append((evaluation.grid_position if evaluation else 0, row))
         elif entry.status != entry.Status.REMOVED:
             shown.append(row)
+    cars = [row for _, row in sorted(cars, key=lambda car: car[0])]
     return {
         "type": "queue", "open": True, "event": session.event_id,
         "autolaunch": session.autolaunch, "min_speed": session.min_speed,
-        "max_speed": session.max_speed, "entries": shown, "driving": driving,
+        "max_speed": session.max_speed, "entries": shown, "driving": cars[0] if cars else None,
+        "cars": cars,
     }  # fmt: skip
 
 

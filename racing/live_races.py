@@ -137,29 +137,35 @@ def live_entry_restart(*, entry: LiveEntry) -> LiveEntry:
 
 
 def live_turn_launch(*, session: LiveSession) -> LiveEntry:
-    """The first waiting racer's turn: their submission, queued to drive in real time."""
+    """The next turn: the first waiting racer's submission, queued to drive in real time, with
+    the racers after them on the grid behind where the event puts several cars on the track
+    (``Event.cars``: fewer when fewer wait); its first entry."""
     with transaction.atomic():
         session = LiveSession.objects.select_for_update().select_related("event").get(pk=session.pk)
         if session.entries.filter(status=_E.DRIVING).exists():
             raise LiveRefused("A turn is driving: launch the next when it ends.")
-        entry = _waiting(session).first()
-        if entry is None:
+        entries = list(_waiting(session)[: session.event.cars])
+        if not entries:
             raise LiveRefused("Nobody is waiting: racers join the queue from the race page.")
-        if entry.model is None:
-            raise LiveRefused(f"{entry.model_name} was deleted: take it out of the queue.")
-        try:
-            submission = services.submission_create(
-                racer=entry.racer, event=session.event, model=entry.model,
-                speed_multiplier=entry.speed, real_time=True,
-            )  # fmt: skip
-        except services.SubmissionRefused as refused:
-            raise LiveRefused(f"{entry.model_name} cannot race now: {refused}") from None
-        LIVE_ENTRY.move(entry, _E.DRIVING, submission=submission)
+        leader = None
+        for position, entry in enumerate(entries):
+            if entry.model is None:
+                raise LiveRefused(f"{entry.model_name} was deleted: take it out of the queue.")
+            try:
+                submission = services.submission_create(
+                    racer=entry.racer, event=session.event, model=entry.model,
+                    speed_multiplier=entry.speed, real_time=True, against_leaders=False,
+                    grid_leader=leader, grid_position=position,
+                )  # fmt: skip
+            except services.SubmissionRefused as refused:
+                raise LiveRefused(f"{entry.model_name} cannot race now: {refused}") from None
+            leader = leader or submission.evaluation
+            LIVE_ENTRY.move(entry, _E.DRIVING, submission=submission)
         following = _waiting(session).select_related("session__event").first()
     live.announce_queue(session)
     if following is not None:
         notifications.live_turn_next(entry=following)
-    return entry
+    return entries[0]
 
 
 def live_turn_ended(*, submission: Submission) -> None:

@@ -82,13 +82,21 @@ def submission_create(
     checkpoint: str = "best",
     speed_multiplier: float = 1.0,
     real_time: bool = False,
+    grid_leader: EvaluationJob | None = None,
+    grid_position: int = 0,
+    against_leaders: bool = True,
 ) -> Submission:
     """Enter ``model`` in ``event`` with its ``checkpoint`` ("best" or "last"): checked
     (``SubmissionRefused`` says why not), then a race evaluation under the event's rules is
     queued, with a seed of its own that the submission keeps, and the model is SUBMITTING until
     it ends. The racer's row is locked meanwhile, so two submissions at once cannot overrun the
     limit. A live race's turn drives at ``speed_multiplier`` times the model's speeds, in
-    ``real_time`` (racing.live_races)."""
+    ``real_time`` (racing.live_races).
+
+    Where the event puts several cars on the track (``Event.cars``), the model races
+    ``against_leaders``' models (``selectors.rivals_for``), or, with ``grid_leader``, it is
+    car ``grid_position`` of that evaluation's race (a live turn's next racers), driven by
+    that race's run rather than a task of its own."""
     if checkpoint not in EvaluationJob.Checkpoint.values:
         raise SubmissionRefused("Race the model's best or its last checkpoint.")
     with transaction.atomic():
@@ -102,7 +110,7 @@ def submission_create(
             evaluation = training_services.evaluation_reserve(
                 model=model, purpose=RLModel.Status.SUBMITTING,
                 **race_rules(event, checkpoint=checkpoint), speed_multiplier=speed_multiplier,
-                real_time=real_time,
+                real_time=real_time, grid_leader=grid_leader, grid_position=grid_position,
             )  # fmt: skip
         except training_services.EvaluationRefused as refused:
             raise SubmissionRefused(str(refused)) from None
@@ -110,6 +118,15 @@ def submission_create(
             event=event, racer=racer, model=model, model_name=model.name, evaluation=evaluation,
             checkpoint=checkpoint, seed=evaluation.seed,
         )  # fmt: skip
+        if grid_leader is not None:
+            return submission  # its race's first car's run drives it, and scores it
+        if against_leaders:
+            rivals = selectors.rivals_for(event=event, racer=racer)
+            for position, rival in enumerate(rivals, start=1):
+                training_services.evaluation_rival_add(
+                    leader=evaluation, model=rival.model, position=position,
+                    **race_rules(event, checkpoint=rival.checkpoint),
+                )  # fmt: skip
         # A send that fails (the broker unreachable) is logged, not the racer's error: the
         # workers send a queued task that is not in the broker again (tasks.resend_lost).
         transaction.on_commit(lambda: tasks.race.delay(submission.pk), robust=True)
@@ -143,13 +160,27 @@ def submission_run(*, submission_id: int) -> Submission | None:
     if submission is None or not submission.is_active:
         logger.info("Submission %s is not waiting; nothing to do", submission_id)
         return None
-    SUBMISSION.move(submission, Submission.Status.IN_PROGRESS)
-    live.announce_submission(submission)
+    race = [submission]  # with the submissions racing with it (a live turn's next racers)
+    if submission.evaluation_id is not None:
+        race += Submission.objects.select_related("event").filter(
+            evaluation__grid_leader=submission.evaluation_id, status__in=Submission.ACTIVE
+        ).order_by("evaluation__grid_position")  # fmt: skip
+    for entry in race:
+        SUBMISSION.move(entry, Submission.Status.IN_PROGRESS)
+        live.announce_submission(entry)
     if submission.evaluation_id is not None:
         evaluations.run(submission.evaluation_id)
+    for entry in race[1:]:
+        _conclude(entry)
+    return _conclude(submission)
+
+
+def _conclude(submission: Submission) -> Submission | None:
+    """Once its evaluation has driven: score the submission, or fail it with the reason; None
+    while another run drives its evaluation (that run scores it)."""
     evaluation = EvaluationJob.objects.filter(pk=submission.evaluation_id).first()
     if evaluation is not None and evaluation.is_active:
-        logger.info("Submission %s is raced by another run", submission_id)
+        logger.info("Submission %s is raced by another run", submission.pk)
         return None  # a duplicate delivery: the run holding the evaluation's lease scores it
     if evaluation is None or evaluation.status != EvaluationJob.Status.COMPLETED:
         reason = (evaluation.failure_reason if evaluation else "") or "The race did not finish."

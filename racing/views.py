@@ -174,6 +174,7 @@ def submission_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "submission": submission,
             "event": submission.event,
             "laps": list(submission.laps.all()),
+            "cars": selectors.race_cars(submission=submission),
             "ranking": ranking,
             "own": request.user.pk == submission.racer_id,
         },

@@ -23,7 +23,7 @@ FAR_AWAY = 1e4  # [m] where a rival waits until the race places it
 
 @dataclass
 class Actor:
-    kind: str  # "box" or "bot"
+    kind: str  # "box", "bot" or "rival"
     distance: float  # [m] along the centre line
     offset: float  # [m] left of the centre line
     length: float
@@ -35,6 +35,7 @@ class Actor:
     x: float = 0.0
     y: float = 0.0
     yaw: float = 0.0  # [rad]
+    ghost: bool = False  # a rival serving a crash's penalty: seen, but nothing crashes into it
 
 
 class Traffic:
@@ -103,11 +104,13 @@ class Traffic:
         self._update_poses()
         return car_distance
 
-    def place_rivals(self, poses) -> None:
-        """Where the other racers' cars are now: (x, y, yaw) of each, in order."""
+    def place_rivals(self, poses, ghosts=None) -> None:
+        """Where the other racers' cars are now: (x, y, yaw) of each, in order, and whether each
+        is a ghost (``ghosts``; none by default)."""
         rivals = [actor for actor in self.actors if actor.kind == "rival"]
-        for rival, (x, y, yaw) in zip(rivals, poses, strict=True):
-            rival.x, rival.y, rival.yaw = float(x), float(y), float(yaw)
+        ghosts = [False] * len(rivals) if ghosts is None else ghosts
+        for rival, (x, y, yaw), ghost in zip(rivals, poses, ghosts, strict=True):
+            rival.x, rival.y, rival.yaw, rival.ghost = float(x), float(y), float(yaw), bool(ghost)
 
     def step(self, dt: float, sim_time: float, rng: np.random.Generator) -> None:
         """Drive the bot cars on for ``dt`` seconds."""

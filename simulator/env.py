@@ -234,6 +234,7 @@ class DeepRacerEnv(gym.Env):
         self._waypoint_distances = waypoint_distances(self.track)
         self._spectator = None
         self._episode = -1
+        self._ghost = self._into_rival = False  # (reset sets them each episode)
         self._seed = seed
         # The worker's simulation clock [s]: it runs on through resets and never backwards, as
         # Gazebo's clock does in simapp (rollout_agent_ctrl.py:245, 01f5f01). The trace's tstamp and
@@ -276,6 +277,7 @@ class DeepRacerEnv(gym.Env):
         self.progress = 0.0
         self._falling = self._stuck = 0
         self._pause_left = 0
+        self._ghost = self._into_rival = False
         self._pause_duration = 0.0
         self._resume_at, self._resume_travelled = self._distance, self._travelled
         self.counts = dict.fromkeys(
@@ -427,11 +429,20 @@ class DeepRacerEnv(gym.Env):
         for body, actor in zip(self._actor_bodies, actors, strict=False):
             self._world.place(body, actor.x, actor.y, actor.yaw)
 
-    def place_rivals(self, poses) -> None:
+    def place_rivals(self, poses, ghosts=None) -> None:
         """Where the other racers' cars stand now, (x, y, yaw) of each (``rivals`` of them): the
-        camera and lidar see them and the car crashes into them, as into bot cars."""
-        self.traffic.place_rivals(poses)
+        camera and lidar see them and the car crashes into them, as into bot cars, unless they
+        are ``ghosts`` (serving a crash's penalty, ``ghost``)."""
+        self.traffic.place_rivals(poses, ghosts)
         self._sync_actor_bodies()
+
+    @property
+    def ghost(self) -> bool:
+        """Whether the car is a ghost: since it crashed into a rival, it has served its penalty
+        where it stood, out of the collisions (as simapp's crashed car, blinking, leaves the
+        collision list: rollout_agent_ctrl.py:897-915, 01f5f01), and has not yet come clear of
+        the cars it touched. It crashes into no rival and no rival into it meanwhile."""
+        return self._ghost
 
     @property
     def body_pose(self) -> tuple[float, float, float]:
@@ -441,10 +452,21 @@ class DeepRacerEnv(gym.Env):
         return float(x), float(y), float(c.yaw)
 
     def _crashed(self) -> bool:
+        """Whether the car touches a box, a bot car or a rival's car (``_into_rival``: only a
+        rival's); a ghost touches no rival, nor any rival a ghost."""
+        self._into_rival = False
         if not self.traffic.present:
             return False
         self._sync_car_body()
-        return bool(self._world.car_touches())
+        touched = set(self._world.car_touches())
+        hit = [a for a, body in zip(self.traffic.actors, self._actor_bodies, strict=False)
+               if body in touched]  # fmt: skip
+        rivals = [actor for actor in hit if actor.kind == "rival"]
+        if self._ghost and self._pause_left == 0 and not rivals:
+            self._ghost = False  # clear of the cars: it races again
+        solid = [a for a in hit if a.kind != "rival" or not (a.ghost or self._ghost)]
+        self._into_rival = bool(solid) and all(actor.kind == "rival" for actor in solid)
+        return bool(solid)
 
     def _outcome(self, status: str) -> tuple[bool, bool]:
         """(terminated, truncated) after a step with ``status``; applies evaluation's rules."""
@@ -464,7 +486,9 @@ class DeepRacerEnv(gym.Env):
                 return True, False
             seconds = self.penalties.off_track if status == "off_track" else self.penalties.crash
             self._pause_left = round(seconds / self.dt)
-            if self._pause_left == 0:
+            # into a rival's car: the penalty served where it stands, as a ghost (``ghost``)
+            self._ghost = status == "crashed" and self._into_rival
+            if self._pause_left == 0 and not self._ghost:
                 self._put_back()
         elif status in ("reversed", "immobilized"):
             self.counts[status] += 1
@@ -481,7 +505,7 @@ class DeepRacerEnv(gym.Env):
         """A step frozen by a penalty: the clock runs, the car waits, then goes back on track."""
         self._pause_left -= 1
         self._pause_duration += self.dt
-        if self._pause_left == 0:
+        if self._pause_left == 0 and not self._ghost:
             self._put_back()
         truncated = self.steps >= self.config["max_steps"]
         return self._observe(), 0.0, False, truncated, self._info("pause", None, 0.0, truncated)

@@ -65,8 +65,10 @@ def place_rivals(envs: Sequence[DeepRacerEnv], driving: Sequence[bool]) -> None:
     if len(envs) < 2:
         return
     poses = [env.body_pose if on else _parked() for env, on in zip(envs, driving, strict=True)]
+    ghosts = [env.ghost for env in envs]
     for index, env in enumerate(envs):
-        env.place_rivals([pose for other, pose in enumerate(poses) if other != index])
+        others = [other for other in range(len(envs)) if other != index]
+        env.place_rivals([poses[other] for other in others], [ghosts[other] for other in others])
 
 
 def race(

@@ -142,8 +142,8 @@ def lapsed_evaluations() -> list[EvaluationJob]:
     statuses = EvaluationJob.Status
     lapsed = EvaluationJob.objects.filter(
         status__in=(statuses.INITIALIZING, statuses.IN_PROGRESS, statuses.STOPPING),
-        lease_expires__lt=now,
-    ).exclude(lease_owner="")
+        lease_expires__lt=now, grid_leader__isnull=True,  # a race's first car's run drives all
+    ).exclude(lease_owner="")  # fmt: skip
     claimed = []
     for evaluation in lapsed:
         rows = EvaluationJob.objects.filter(
@@ -178,7 +178,8 @@ def lost_queued_evaluations(*, waiting: set[int]) -> list[EvaluationJob]:
     """The queued evaluations (race entries' too) whose task is gone (not among ``waiting``),
     each claimed for one new send as ``lost_queued_claim`` claims jobs."""
     now = timezone.now()
-    lost = _unclaimed(EvaluationJob.objects.all(), waiting, now)
+    # the other cars of a race have no task: their race's first car's drives them
+    lost = _unclaimed(EvaluationJob.objects.filter(grid_leader__isnull=True), waiting, now)
     return [e for e in lost if _claim(EvaluationJob.objects.filter(pk=e.pk), e, now)]
 
 

@@ -478,6 +478,12 @@ def model_delete(*, model: RLModel) -> int:
                 f"The model is {locked.get_status_display().lower()}; it can be deleted once it "
                 "is ready (stop its training first) or has failed."
             )
+        racing = EvaluationJob.objects.filter(model=locked, status__in=EvaluationJob.ACTIVE)
+        if racing.exists():  # another racer's race, against this one (the move rolls back)
+            raise ModelBusy(
+                f"{locked.name} is racing against another racer's model in their race; delete "
+                "it once that race ends (a few minutes)."
+            )
         waiting = _clone_waiting(locked)
         if waiting is not None:  # (the move to DELETING rolls back)
             raise ModelBusy(
@@ -560,6 +566,18 @@ def evaluation_reserve(*, model: RLModel, purpose: str, **fields) -> EvaluationJ
     return evaluation
 
 
+def evaluation_rival_add(
+    *, leader: EvaluationJob, model: RLModel, position: int, **fields
+) -> EvaluationJob:
+    """Within the transaction that made ``leader`` (a race's first car): another racer's
+    ``model`` raced against it at grid ``position`` under the same ``fields`` (race rules). The
+    model is not reserved: it may train or race meanwhile, as the leaderboard's models do; its
+    weights are read when the race starts, and it cannot be deleted until the race ends."""
+    return EvaluationJob.objects.create(
+        model=model, grid_leader=leader, grid_position=position, rival=True, **fields
+    )
+
+
 def evaluation_stop(*, evaluation: EvaluationJob) -> EvaluationJob:
     """The racer's "Stop evaluation" (DeepRacer's console had it): one still waiting is canceled
     at once and its model is ready again; a running one is asked to stop (STOPPING), and its run
@@ -568,6 +586,10 @@ def evaluation_stop(*, evaluation: EvaluationJob) -> EvaluationJob:
     one that has ended is returned as it is."""
     if EvaluationJob.objects.filter(pk=evaluation.pk, submission__isnull=False).exists():
         raise EvaluationRefused("A race entry drives to its end; it cannot be stopped.")
+    if EvaluationJob.objects.filter(pk=evaluation.pk, rival=True).exists():
+        raise EvaluationRefused(
+            "Your model is racing against another racer's in their race: it drives to its end."
+        )
     statuses = EvaluationJob.Status
     with transaction.atomic():
         evaluation = EvaluationJob.objects.select_for_update().get(pk=evaluation.pk)

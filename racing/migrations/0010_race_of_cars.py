@@ -5,15 +5,22 @@ from django.db import migrations, models
 
 
 class Migration(migrations.Migration):
-
     dependencies = [
-        ('racing', '0009_race_staff_live_and_physical'),
+        ("racing", "0009_race_staff_live_and_physical"),
     ]
 
     operations = [
         migrations.AddField(
-            model_name='event',
-            name='cars',
-            field=models.PositiveSmallIntegerField(default=1, help_text="Model against model (DeepRacer for Cloud's HEAD_TO_MODEL): 2 to 4 racers' models on the track at once, each entry against the leaders' models (or, raced live, the next racers in the queue). 1: each model alone.", validators=[django.core.validators.MinValueValidator(1), django.core.validators.MaxValueValidator(4)], verbose_name='cars a race'),
+            model_name="event",
+            name="cars",
+            field=models.PositiveSmallIntegerField(
+                default=1,
+                help_text="Model against model (DeepRacer for Cloud's HEAD_TO_MODEL): 2 to 4 racers' models on the track at once, each entry against the leaders' models (or, raced live, the next racers in the queue). 1: each model alone.",
+                validators=[
+                    django.core.validators.MinValueValidator(1),
+                    django.core.validators.MaxValueValidator(4),
+                ],
+                verbose_name="cars a race",
+            ),
         ),
     ]

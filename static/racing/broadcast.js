@@ -41,9 +41,10 @@ function showTiming(state) {
 }
 
 function showQueue(queue) {
-  const driving = queue.driving;
-  showCar(driving && driving.racer, driving && `${driving.model_name} · ${driving.speed.toFixed(1)}× speed`);
-  turn.watch(driving ? driving.evaluation : null);
+  const cars = queue.cars || [];
+  showCar(cars.length ? cars.map((car) => car.racer).join(" vs ") : null,
+    cars.map((car) => `${car.model_name} · ${car.speed.toFixed(1)}×`).join(" vs "));
+  turn.watch(cars.length ? cars[0].evaluation : null); // the first car on the grid
 }
 
 function showTop(top) {

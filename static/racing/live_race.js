@@ -11,15 +11,33 @@ const turn = new Turn({
 });
 
 let last = null; // the turn that drove last: shown until the next one starts
+let watched = null; // the car followed: the first of a turn, or the one the viewer chose
+
+const described = (cars, speed = true) => cars.map((car) =>
+  `${car.racer} · ${car.model_name}${speed ? ` · ${car.speed.toFixed(1)}× speed` : ""}`).join(" vs ");
 
 function showDriving(queue) {
-  const driving = queue.driving;
-  if (driving) last = driving;
-  find("racer").textContent = driving
-    ? `${driving.racer} · ${driving.model_name} · ${driving.speed.toFixed(1)}× speed`
-    : last ? `Last turn: ${last.racer} · ${last.model_name}` : "Nobody is driving.";
-  root.dataset.driving = driving ? String(driving.evaluation) : "";
-  turn.watch(driving ? driving.evaluation : null);
+  const cars = queue.cars || [];
+  if (cars.length) last = cars;
+  find("racer").textContent = cars.length ? described(cars)
+    : last ? `Last turn: ${described(last, false)}` : "Nobody is driving.";
+  if (!cars.some((car) => car.evaluation === watched)) watched = cars.length ? cars[0].evaluation : null;
+  // a turn of several cars (model against model): the viewer picks the car the video follows
+  const choice = find("cars");
+  choice.hidden = cars.length < 2;
+  choice.replaceChildren(...(cars.length < 2 ? [] : cars).map((car, place) => {
+    const button = document.createElement("button");
+    button.type = "button";
+    button.className = car.evaluation === watched ? "button" : "button button-secondary";
+    button.textContent = `Follow car ${place + 1}: ${car.racer}`;
+    button.addEventListener("click", () => {
+      watched = car.evaluation;
+      showDriving(queue);
+    });
+    return button;
+  }));
+  root.dataset.driving = watched === null ? "" : String(watched);
+  turn.watch(watched);
 }
 
 async function refreshQueue() {

@@ -62,3 +62,24 @@ def test_a_faster_car_behind_runs_into_the_slower_one_and_both_have_their_traces
 def test_a_race_needs_two_to_four_cars():
     with pytest.raises(ValueError, match="2 to 4 cars"):
         race(cars()[:1], [lambda _: np.zeros(2, dtype=np.float32)])
+
+
+def test_a_car_that_hits_a_rival_serves_its_penalty_where_it_stands_as_a_ghost():
+    leader, follower = cars()
+    for env in (leader, follower):
+        env.reset(seed=0)
+    ahead = np.array([0.0, 0.5], dtype=np.float32)  # straight on, slowly
+    follower.place_rivals([follower.body_pose])  # a rival's car on the follower's own spot
+    follower.step(ahead)
+    assert follower.status == "crashed" and follower.ghost and follower.counts["crashes"] == 1
+    stood = follower.car.position
+    for _ in range(round(2.0 / follower.dt)):  # the crash penalty: 2 s, in place
+        follower.step(ahead)
+    assert follower.counts["resets"] == 0 and np.allclose(follower.car.position, stood)
+    # nothing crashes into a ghost, nor a ghost into anything, until it comes clear
+    leader.place_rivals([leader.body_pose], [True])
+    leader.step(ahead)
+    assert leader.status != "crashed" and follower.counts["crashes"] == 1
+    while follower.ghost:
+        follower.step(ahead)
+    assert follower.status == "in_progress" and follower.counts["crashes"] == 1

@@ -5,25 +5,37 @@ from django.db import migrations, models
 
 
 class Migration(migrations.Migration):
-
     dependencies = [
-        ('training', '0023_live_turns'),
+        ("training", "0023_live_turns"),
     ]
 
     operations = [
         migrations.AddField(
-            model_name='evaluationjob',
-            name='grid_leader',
-            field=models.ForeignKey(blank=True, help_text='The first car of the race this car drove in; empty for the first or alone.', null=True, on_delete=django.db.models.deletion.SET_NULL, related_name='grid', to='training.evaluationjob'),
+            model_name="evaluationjob",
+            name="grid_leader",
+            field=models.ForeignKey(
+                blank=True,
+                help_text="The first car of the race this car drove in; empty for the first or alone.",
+                null=True,
+                on_delete=django.db.models.deletion.SET_NULL,
+                related_name="grid",
+                to="training.evaluationjob",
+            ),
         ),
         migrations.AddField(
-            model_name='evaluationjob',
-            name='grid_position',
-            field=models.PositiveSmallIntegerField(default=0, help_text='Its place on the grid: 0 in front, each next car 0.75 m behind.'),
+            model_name="evaluationjob",
+            name="grid_position",
+            field=models.PositiveSmallIntegerField(
+                default=0,
+                help_text="Its place on the grid: 0 in front, each next car 0.75 m behind.",
+            ),
         ),
         migrations.AddField(
-            model_name='evaluationjob',
-            name='rival',
-            field=models.BooleanField(default=False, help_text="Another racer's model raced against this one's: its model was not reserved, and its owner is not told."),
+            model_name="evaluationjob",
+            name="rival",
+            field=models.BooleanField(
+                default=False,
+                help_text="Another racer's model raced against this one's: its model was not reserved, and its owner is not told.",
+            ),
         ),
     ]
