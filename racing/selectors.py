@@ -21,7 +21,7 @@ from racing.models import (
     Submission,
 )
 from training import selectors as training_selectors
-from training.models import EvaluationJob, RLModel, TrainingJob
+from training.models import RLModel, TrainingJob
 
 LEADERBOARD_PAGE = 100  # rankings per page
 # Season points by place in an event, 1st to 10th (Formula 1's table); lower places score none.
@@ -116,49 +116,6 @@ def rivals_for(*, event: Event, racer: AbstractBaseUser) -> list[Submission]:
         if len(found) == event.cars - 1:
             break
     return found
-
-
-@dataclass
-class RaceCar:
-    """A car of a race of several (model against model), as a submission's page lists it."""
-
-    evaluation: int
-    place: int  # on the grid, 1 in front
-    racer: str
-    model_name: str
-    status: str
-    laps: int  # completed
-    time_ms: int  # of the completed laps, penalties included
-    crashes: int
-    off_tracks: int
-
-
-def race_cars(*, submission: Submission) -> list[RaceCar]:
-    """The cars of the race ``submission`` drove in, in grid order, each with its own laps and
-    counts; [] when it drove alone (or its evaluation went with its model)."""
-    if submission.evaluation_id is None:
-        return []
-    first = submission.evaluation.grid_leader_id or submission.evaluation_id
-    cars = (
-        EvaluationJob.objects.filter(Q(pk=first) | Q(grid_leader=first))
-        .select_related("model__owner__profile")
-        .prefetch_related("trial_rows")
-        .order_by("grid_position", "pk")
-    )
-    if len(cars) < 2:
-        return []
-    listed = []
-    for car in cars:
-        trials = list(car.trial_rows.all())
-        done = [trial for trial in trials if trial.completed]
-        listed.append(RaceCar(
-            evaluation=car.pk, place=car.grid_position + 1, racer=racer_name(racer=car.model.owner),
-            model_name=car.model.name, status=car.get_status_display(), laps=len(done),
-            time_ms=sum(trial.time_ms for trial in done),
-            crashes=sum(trial.crashes for trial in trials),
-            off_tracks=sum(trial.off_tracks for trial in trials),
-        ))  # fmt: skip
-    return listed
 
 
 def ranking_of(*, event: Event, racer: AbstractBaseUser) -> Ranking | None:

@@ -174,7 +174,7 @@ def submission_detail(request: HttpRequest, pk: int) -> HttpResponse:
             "submission": submission,
             "event": submission.event,
             "laps": list(submission.laps.all()),
-            "cars": selectors.race_cars(submission=submission),
+            "cars": training_selectors.race_cars(evaluation=submission.evaluation),
             "ranking": ranking,
             "own": request.user.pk == submission.racer_id,
         },

@@ -18,6 +18,7 @@ from django.db.models import Count, F, FloatField, Prefetch, Q, QuerySet, Sum
 from django.db.models.functions import Least, Lower
 from django.utils import timezone
 
+from accounts.selectors import racer_name
 from common.redis_client import redis_client
 from rl.experience import JobChannel
 from rl.stopwatch import PHASES
@@ -539,3 +540,46 @@ def allowance_for(*, racer: AbstractBaseUser) -> Allowance:
 def reward_functions_for_racer(*, racer: AbstractBaseUser) -> QuerySet[RewardFunction]:
     """The racer's library of named reward functions, by name."""
     return RewardFunction.objects.filter(owner=racer).order_by(Lower("name"))
+
+
+@dataclass
+class RaceCar:
+    """A car of a race of several (model against model), as its evaluations' pages list it."""
+
+    evaluation: int
+    place: int  # on the grid, 1 in front
+    racer: str
+    model_name: str
+    status: str
+    laps: int  # completed
+    time_ms: int  # of the completed laps, penalties included
+    crashes: int
+    off_tracks: int
+
+
+def race_cars(*, evaluation: EvaluationJob | None) -> list[RaceCar]:
+    """The cars of the race ``evaluation`` drove in (model against model), in grid order, each
+    with its own laps and counts; [] when it drove alone (or None: gone with its model)."""
+    if evaluation is None:
+        return []
+    first = evaluation.grid_leader_id or evaluation.pk
+    cars = (
+        EvaluationJob.objects.filter(Q(pk=first) | Q(grid_leader=first))
+        .select_related("model__owner__profile")
+        .prefetch_related("trial_rows")
+        .order_by("grid_position", "pk")
+    )
+    if len(cars) < 2:
+        return []
+    listed = []
+    for car in cars:
+        trials = list(car.trial_rows.all())
+        done = [trial for trial in trials if trial.completed]
+        listed.append(RaceCar(
+            evaluation=car.pk, place=car.grid_position + 1, racer=racer_name(racer=car.model.owner),
+            model_name=car.model.name, status=car.get_status_display(), laps=len(done),
+            time_ms=sum(trial.time_ms for trial in done),
+            crashes=sum(trial.crashes for trial in trials),
+            off_tracks=sum(trial.off_tracks for trial in trials),
+        ))  # fmt: skip
+    return listed

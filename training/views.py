@@ -837,7 +837,8 @@ def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpRes
         request,
         "training/evaluation_detail.html",
         {"model": job.model, "evaluation": job, "trials": list(job.trial_rows.all()),
-         "files": files, "can_stop": stoppable and not hasattr(job, "submission")},
+         "files": files, "cars": selectors.race_cars(evaluation=job),
+         "can_stop": stoppable and not hasattr(job, "submission") and not job.rival},
     )  # fmt: skip
 
 

@@ -9,6 +9,7 @@ import io
 
 import pytest
 from django.core.files.storage import default_storage
+from django.urls import reverse
 
 from racing import live_races, services
 from racing.models import Division, LiveEntry, Racer, Submission
@@ -92,6 +93,11 @@ def test_a_submission_races_the_leaders_models_and_each_car_keeps_its_own_race(
     client.force_login(alice)
     page = client.get(submission.get_absolute_url()).text
     assert "The race" in page and "carols" in page and "Model against model: 2 cars" in page
+    client.force_login(carol)  # the rival's owner finds the race on their model's page
+    url = reverse("training:evaluation-detail", args=[carols.pk, rivals[0].pk])
+    page = client.get(url).text
+    assert "raced against another racer" in page and "Stop evaluation" not in page
+    assert "straight-ahead" in page  # alice's model, first on the grid
     # the rival's owner: the model as it was, not told, nothing submitted for them
     assert RLModel.objects.get(pk=carols.pk).status == RLModel.Status.TRAINING
     assert carol.notifications.count() == told
