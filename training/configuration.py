@@ -11,11 +11,11 @@ it depends on, so that no page or command can save one unchecked.
 from __future__ import annotations
 
 import dataclasses
-import math
 import re
 from collections.abc import Mapping
 from typing import TypedDict
 
+from common.numbers import finite
 from common.refusals import Refused
 from rl import hyperparameters as hp
 from simulator import config as sim
@@ -307,7 +307,7 @@ def check_evaluation(settings: dict, *, model: RLModel) -> dict:
     clean["trials"] = trials
     clean["continuous_laps"] = bool(settings.get("continuous_laps", False))
     for name, default in (("off_track_penalty", 2.0), ("crash_penalty", 5.0)):
-        value = _number(settings.get(name, default))
+        value = finite(settings.get(name, default))
         if value is None or not 0 <= value <= PENALTY_MAX:
             what = name.replace("_", " ").capitalize()
             errors[name] = f"{what} is 0 to {PENALTY_MAX:g} seconds."
@@ -447,14 +447,6 @@ def _switch(settings: dict, name: str, errors: dict) -> bool:
     return value is True
 
 
-def _number(value) -> float | None:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        return None
-    return number if math.isfinite(number) else None
-
-
 def _integer(value) -> int | None:
-    number = _number(value)
+    number = finite(value)
     return int(number) if number is not None and number == int(number) else None

@@ -1084,8 +1084,8 @@ class _TensorFlowFiles:
         if not checkpoints and not graphs:
             return None
         best = STEP.search(checkpoints[0]) if checkpoints else None
-        same = next((g for g in graphs if best and _number(GRAPH, g) == int(best[1])), None)
-        newest = max(graphs, key=lambda g: (g == CAR_GRAPH, _number(GRAPH, g)), default=None)
+        same = next((g for g in graphs if best and _numbered(GRAPH, g) == int(best[1])), None)
+        newest = max(graphs, key=lambda g: (g == CAR_GRAPH, _numbered(GRAPH, g)), default=None)
         return cls(checkpoints, same or newest)
 
     def load(
@@ -1147,10 +1147,11 @@ def _chosen_checkpoints(members: Members, prefixes: list[str]) -> list[str]:
             return list(dict.fromkeys([pointed[0], last if last in there else pointed[0]]))
     if not prefixes:
         return []
-    return [max(prefixes, key=lambda p: (_number(STEP, p), p))]
+    return [max(prefixes, key=lambda p: (_numbered(STEP, p), p))]
 
 
-def _number(pattern: re.Pattern, path: str) -> int:
+def _numbered(pattern: re.Pattern, path: str) -> int:
+    """The number ``pattern`` captures in ``path`` (a step, a graph's); -1 where none."""
     match = pattern.search(path)
     return int(match[1]) if match else -1
 

@@ -32,6 +32,7 @@ from asgiref.sync import async_to_sync
 from channels import DEFAULT_CHANNEL_LAYER
 from channels.layers import channel_layers, get_channel_layer
 
+from common.numbers import finite
 from simulator.config import VIEWS
 
 logger = logging.getLogger(__name__)
@@ -139,7 +140,9 @@ def frame_from_child(raw: dict[str, Any], worker: int) -> dict | None:
 
 
 def _number(value: Any, kind: type) -> int | float:
-    return kind(value) if isinstance(value, int | float) and not isinstance(value, bool) else 0
+    """A number a child sent, of ``kind``; 0 for anything else (text, a bool, NaN)."""
+    number = None if isinstance(value, bool | str) else finite(value)
+    return kind(number or 0)
 
 
 def send(group: str, message: dict) -> None:

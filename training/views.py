@@ -307,7 +307,8 @@ async def reward_validation(request: HttpRequest) -> JsonResponse:
     return _check_refused(JsonResponse({"message": message}), checked)
 
 
-def _number(text: str) -> int:
+def _pk(text: str) -> int:
+    """A row's id from a query string; 404 for anything else."""
     if not text.isdigit():
         raise Http404("No such model")
     return int(text)
@@ -343,7 +344,7 @@ class _ModelCreatePage:
         self.checked: rewards.Validation | Exception | None = None
         self.source = None
         if "clone" in request.GET:
-            self.source = _get_model_for_user(request, _number(request.GET["clone"]))
+            self.source = _get_model_for_user(request, _pk(request.GET["clone"]))
             if not self.source.trainable:
                 messages.error(
                     request,
@@ -364,9 +365,7 @@ class _ModelCreatePage:
             }  # fmt: skip
         self.chosen_reward = None
         if "reward" in request.GET:  # "Create a model" with a function of the racer's library
-            self.chosen_reward = _get_reward_function_for_user(
-                request, _number(request.GET["reward"])
-            )
+            self.chosen_reward = _get_reward_function_for_user(request, _pk(request.GET["reward"]))
             initial["reward_function"] = self.chosen_reward.source
         self.form = ModelCreateForm(
             request.POST or None, owner=request.user, initial=initial, source=self.source
