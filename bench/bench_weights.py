@@ -10,10 +10,11 @@ iteration it prints the bytes Redis sent (its ``total_net_output_bytes``), the f
 the end of the publish to the last worker holding the weights) and the publish's own time.
 
 Per environment step: the weights Redis sent in an iteration over ``--steps`` steps an iteration
-(4,379 by default: the README's iteration of a lapping car, DeepRacer's 20 episodes), beside the
-experience's bytes a step, measured on episodes driven in the real simulator (the camera's
-frames as the sandbox encodes them; each episode goes into Redis and out once, as the trainer
-pops it). Workers on other machines each fetch once for theirs: the cache's figure is per machine.
+(4,379 by default: docs/benchmarks.md's iteration of a lapping car, DeepRacer's 20 episodes),
+beside the experience's bytes a step, measured on episodes driven in the real simulator (the
+camera's frames as the sandbox encodes them; each episode goes into Redis and out once, as the
+trainer pops it). Workers on other machines each fetch once for theirs: the cache's figure is
+per machine.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from tests.services import RedisServer
 
 JOB = 1
 TRACK = "rookie-loop"
-README_STEPS = 4379  # an iteration of the README's throughput bench, the car lapping
+LAPPING_STEPS = 4379  # an iteration of docs/benchmarks.md's throughput bench, the car lapping
 EXPERIENCE_STEPS = 200  # [steps] driven to measure the experience's bytes a step
 
 
@@ -110,7 +111,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--workers", type=int, nargs="+", default=[1, 4, 8])
     parser.add_argument("--iterations", type=int, default=5)
-    parser.add_argument("--steps", type=int, default=README_STEPS, help="steps an iteration")
+    parser.add_argument("--steps", type=int, default=LAPPING_STEPS, help="steps an iteration")
     parser.add_argument("--architecture", default=SHALLOW)
     arguments = parser.parse_args()
     env = gymnasium.make(simulator.ENV_ID, track=TRACK)

@@ -5,7 +5,7 @@ every machine counts together, in fixed windows. An attempt over its rate is ref
 work, with a sentence that says how long to wait (``over`` gives the ``Limited``); the views
 answer 429 with it. An attempt whose outcome says which limit it counts against (an import) is
 held against each at once (``hold``), and given back to the others once that is known.
-The rates are settings (``PITLANE_RATES``, from environment variables; README, "Limits").
+The rates are settings (``PITLANE_RATES``, from environment variables; docs/operating.md, "Limits").
 Every refusal says when to try again in a ``Retry-After`` header too, set in one place
 (``RetryAfterMiddleware``) from the ``Limited`` the request was refused with.
 
@@ -196,5 +196,5 @@ def refuse(form: BaseForm, limited: Limited) -> None:
 
 
 def address(request: HttpRequest) -> str:
-    """The client's address, as the server saw it (behind a proxy: see the README)."""
+    """The client's address, as the server saw it (behind a proxy: see docs/operating.md)."""
     return "address:" + request.META.get("REMOTE_ADDR", "")

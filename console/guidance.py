@@ -23,7 +23,7 @@ GUIDANCE = {
         "More stable learning from the same experience, but slower training.",
         "Faster training; use fewer epochs with a small batch size. Without a GPU the update "
         "is most of the training time: with 3, a fast continuous model drove 3 clean laps "
-        "after about 5 minutes of training instead of 30 (the README's training figures).",
+        "after about 5 minutes of training instead of 30 (docs/benchmarks.md's training figures).",
     ),
     "lr": (
         "How big a step each update takes toward better behaviour.",
@@ -43,7 +43,7 @@ GUIDANCE = {
         "The car cares about the next few steps only: quicker to train, more short-sighted. "
         "Without a GPU a fast continuous model (1-4 m/s) with 0.97 drove 3 clean laps within "
         "2.5 minutes in each of 4 runs, and after 20 minutes lapped in 6.5-7.3 s (a braking "
-        "driver laps in 6.7 s; the README's training figures).",
+        "driver laps in 6.7 s; docs/benchmarks.md's training figures).",
     ),
     "loss_type": (
         "How the size of a prediction error is turned into an update. Huber and mean squared "

@@ -8,7 +8,7 @@ changes of 2° to 30° made while the car rolls at 1.5 m/s, the hinge's angle af
 
 Nothing of simapp is copied into Pitlane: its URDF and meshes are read from ``PATH`` and written,
 with their ``package://`` paths resolved and xacro's conditionals dropped, to a temporary folder.
-Not a test (it needs that checkout); the README quotes its figures.
+Not a test (it needs that checkout); docs/simulator.md quotes its figures.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """Settings shared by every environment.
 
-Everything that differs between machines is read through ``console.env.env``; the defaults serve one
-machine (SQLite, a local Redis started by ``make run``, files under ``var/``). See the README's
-"Running on several machines" for the variables that switch to PostgreSQL, S3 and a shared Redis.
+Everything that differs between machines is read through ``console.env.env``; the defaults serve
+one machine (SQLite, a local Redis started by ``make run``, files under ``var/``). See
+docs/operating.md, "Running on several machines", for the variables that switch to PostgreSQL,
+S3 and a shared Redis.
 """
 
 import os
@@ -170,7 +171,7 @@ CELERY_BROKER_TRANSPORT_OPTIONS = {
 }
 CELERY_TASK_SERIALIZER = "json"
 CELERY_ACCEPT_CONTENT = ["json"]
-# Rate limits (common.ratelimits; README, "Limits"): a count per period, per racer unless
+# Rate limits (common.ratelimits; docs/operating.md, "Limits"): a count per period, per racer unless
 # said: sign-in per racer name and per address, sign-up per address, password reset requests
 # per address and per email address asked for. "import" counts the imports that arrived,
 # "import-refused" the attempts that did not (a racer correcting an archive tries again).
