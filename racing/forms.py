@@ -119,6 +119,11 @@ class RaceObstaclesForm(RacerWords, forms.ModelForm):
         }.items():  # fmt: skip
             if value is not None:
                 self.initial[name] = value
+        if "cars" in self.fields:  # left out: each model alone, as before the field existed
+            self.fields["cars"].required = False
+
+    def clean_cars(self) -> int:
+        return self.cleaned_data.get("cars") or 1
 
     def clean(self) -> dict:
         data = super().clean()
@@ -180,16 +185,12 @@ class CommunityRaceForm(RaceObstaclesForm):
             self.data[name] = self.fields["form_token"].initial
             self.stale = True
         self.fields["ranking_method"].initial = RankingMethod.FIRST_CONSECUTIVE
-        self.fields["cars"].required = False  # left out: each model alone, as before it existed
         self.fields["track"].initial = Track.objects.values_list("name", flat=True).first()
         now = timezone.localtime().replace(second=0, microsecond=0)
         self.fields["opens_at"].initial = now
         self.fields["closes_at"].initial = now + RACE_LENGTH
         self.instance.organiser = organiser
         self.instance.public = False
-
-    def clean_cars(self) -> int:
-        return self.cleaned_data["cars"] or 1
 
     def clean(self) -> dict:
         data = super().clean()
