@@ -15,9 +15,9 @@ from django.contrib.auth.models import User
 from common.redis_client import redis_client
 from console.supervisor import worker_pools
 from console.workers import live_workers
+from tests.helpers.accounts import racer
 from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
 
-PASSWORD = "correct-horse-battery-staple"
 TRAINERS = 2  # the suite's training worker's processes (celery_worker_process)
 BROWSER_TESTS = Path(__file__).parent / "browser"
 
@@ -54,24 +54,20 @@ def _fresh_rate_limits() -> Iterator[None]:
         return
 
 
-def _racer(username: str, **extra) -> User:
-    return User.objects.create_user(username=username, password=PASSWORD, **extra)
-
-
 @pytest.fixture
 def alice(db) -> User:
-    return _racer("alice")
+    return racer("alice")
 
 
 @pytest.fixture
 def bob(db) -> User:
-    return _racer("bob")
+    return racer("bob")
 
 
 @pytest.fixture
 def stella(db) -> User:
     """League staff."""
-    return _racer("stella", is_staff=True)
+    return racer("stella", is_staff=True)
 
 
 @pytest.fixture

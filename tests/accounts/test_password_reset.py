@@ -7,7 +7,7 @@ from django.db import transaction
 from django.urls import reverse
 
 from accounts import tasks
-from tests.conftest import PASSWORD
+from tests.helpers.accounts import PASSWORD
 
 pytestmark = pytest.mark.django_db
 

@@ -4,7 +4,7 @@ from django.urls import reverse
 
 from accounts.models import Profile
 from accounts.services import profile_ensure
-from tests.racing.factories import event, scored
+from tests.helpers.league import event, scored
 
 pytestmark = pytest.mark.django_db
 

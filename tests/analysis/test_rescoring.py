@@ -14,18 +14,10 @@ from analysis import rescoring, services, summaries
 from analysis.models import Rescoring, TraceSummary
 from analysis.records import Source
 from analysis.tasks import RESCORE_HARD_LIMIT
-from tests.analysis.test_summaries import recorded_by_hand
+from tests.helpers.analysis import SPEED_AND_OFF_TRACK, recorded_by_hand
 from training.models import RewardFunction
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
-
-# Twice the speed, and 100 for a step off the track: read from the replayed params.
-SPEED_AND_OFF_TRACK = """
-def reward_function(params):
-    if params["steps"] == 2:
-        print("waypoints:", len(params["waypoints"]))
-    return 2.0 * params["speed"] + (100.0 if params["is_offtrack"] else 0.0)
-"""
 
 
 def rescored(owner, source_code: str) -> Rescoring:

@@ -5,7 +5,6 @@ racer their own model's driving and nobody else's."""
 from __future__ import annotations
 
 import json
-import shutil
 import tempfile
 from pathlib import Path
 
@@ -13,67 +12,22 @@ import gymnasium
 import numpy as np
 import pytest
 from deepracer.logs import AnalysisUtils, DeepRacerLog
-from django.conf import settings as django_settings
 from django.urls import reverse
 
 import simulator
 from analysis import records, selectors, summaries, traces
 from analysis.models import TraceSummary
-from rl import hyperparameters
 from simulator.controller import CentreLineDriver
 from simulator.params import replayed
-from simulator.trace import SimTraceRow, to_csv
-from tests.training.test_deepracer_utils import EPISODES, extracted, new_model, train_on_paper
-from training import artifacts, configuration, signals
-from training.models import EvaluationJob, RLModel, TrainingJob
-from training.rewards import EXAMPLES
+from simulator.trace import to_csv
+from tests.helpers.analysis import HAND_WRITTEN, recorded_by_hand, untrained
+from tests.helpers.training_logs import EPISODES, extracted, new_model, train_on_paper
+from training import artifacts
+from training.models import EvaluationJob, TrainingJob
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 
 STEP = 1 / 15  # [s]
-
-
-def row(episode, steps, x, y, steer, speed, action, reward, progress, waypoint, tstamp, status):
-    return SimTraceRow(
-        episode=episode, steps=float(steps), X=x, Y=y, yaw=90.0, steer=steer, throttle=speed,
-        action=action, reward=reward, done=status not in ("prepare", "in_progress"),
-        all_wheels_on_track=status != "off_track", progress=progress, closest_waypoint=waypoint,
-        track_len=16.5, tstamp=tstamp, episode_status=status, pause_duration=0.0,
-        obstacle_crash_counter=0, wall_clock=1_700_000_000.0,
-    )  # fmt: skip
-
-
-# Two episodes on the Pitlane Oval (111 waypoints: a tenth of the lap is 11 of them). The first
-# laps in three steps, the second leaves the track at its second step.
-HAND_WRITTEN = [
-    row(0, 1, 0.0, -1.49, 0.0, 0.0, -1, 0.0, 0.0, 0, 10.0, "prepare"),
-    row(0, 2, 0.2, -1.49, -30.0, 1.0, 0, 1.0, 30.0, 0, 10.0667, "in_progress"),
-    row(0, 3, 1.0, 1.49, 0.0, 2.0, 2, 2.0, 60.0, 55, 10.1333, "in_progress"),
-    row(0, 4, -0.2, -1.49, 0.0, 2.0, 2, 3.0, 100.0, 109, 10.2, "lap_complete"),
-    row(1, 1, 0.5, -1.49, 0.0, 0.0, -1, 0.0, 0.0, 5, 10.2, "prepare"),
-    row(1, 2, 0.6, -1.49, 15.0, 0.5, 1, 0.5, 2.0, 5, 10.2667, "in_progress"),
-    row(1, 3, 1.5, 2.5, 15.0, 0.5, 1, 0.001, 3.5, 6, 10.3333, "off_track"),
-]
-
-
-def untrained(owner, name: str) -> RLModel:
-    """A model with a job and no files (no weights either: the analysis never reads them)."""
-    settings = {"name": name, "track": "pitlane-oval", "reward_function": EXAMPLES[0].source,
-                "hyperparameters": hyperparameters.defaults("clipped_ppo")}  # fmt: skip
-    clean = configuration.check(settings, owner=owner, validate_reward=False)
-    model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean.row())
-    TrainingJob.objects.create(model=model, status=TrainingJob.Status.COMPLETED, iterations=1)
-    shutil.rmtree(django_settings.MEDIA_ROOT / "models" / str(model.pk), ignore_errors=True)
-    return model
-
-
-def recorded_by_hand(owner) -> TrainingJob:
-    model = untrained(owner, "by-hand")
-    job = model.jobs.get()
-    document = to_csv(HAND_WRITTEN)
-    artifacts.save(model, artifacts.training_trace(1), document)
-    signals.trace_recorded.send(TrainingJob, document=document, job=job, iteration=1)
-    return job
 
 
 def test_a_hand_written_trace_is_summarised_as_counted_by_hand(alice):

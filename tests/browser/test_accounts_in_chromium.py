@@ -7,30 +7,10 @@ from playwright.sync_api import Page, expect
 from accounts.models import Profile
 from racing.services import demo_season_load
 from tests.browser.checks import page_problems
-from tests.conftest import PASSWORD
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in, sign_up
 
 pytestmark = pytest.mark.django_db(transaction=True)
-
-
-def log_in(page: Page, username: str, password: str) -> None:
-    page.goto("/accounts/login/")
-    page.get_by_label("Login name").fill(username)
-    page.get_by_label("Password").fill(password)
-    page.get_by_role("button", name="Log in").click()
-
-
-def sign_up(page: Page, username: str) -> None:
-    """From the home page, as a visitor finds it."""
-    page.get_by_role("link", name="Create your racer account").click()
-    sign_up_here(page, username)
-
-
-def sign_up_here(page: Page, username: str) -> None:
-    """The sign-up form, on the page open now, filled in and sent."""
-    page.get_by_label("Login name").fill(username)
-    page.get_by_label("Password", exact=True).fill(PASSWORD)
-    page.get_by_label("Password confirmation").fill(PASSWORD)
-    page.get_by_role("button", name="Sign up").click()
 
 
 def test_a_new_racer_signs_up_logs_out_and_logs_back_in(page: Page):

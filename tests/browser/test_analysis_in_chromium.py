@@ -6,12 +6,11 @@ from __future__ import annotations
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.analysis.test_rescoring import SPEED_AND_OFF_TRACK
-from tests.analysis.test_summaries import untrained
 from tests.browser.conftest import ARTIFACTS
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.training.test_deepracer_utils import train_on_paper
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.analysis import SPEED_AND_OFF_TRACK, untrained
+from tests.helpers.browser import log_in
+from tests.helpers.training_logs import train_on_paper
 from training.models import RewardFunction
 
 pytestmark = pytest.mark.django_db(transaction=True)

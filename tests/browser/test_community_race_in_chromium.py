@@ -10,8 +10,8 @@ from playwright.sync_api import Page, expect
 
 from racing.models import Event
 from tests.browser.checks import page_problems
-from tests.browser.test_accounts_in_chromium import log_in, sign_up_here
-from tests.conftest import PASSWORD
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in, sign_up_here
 
 pytestmark = pytest.mark.django_db(transaction=True)
 

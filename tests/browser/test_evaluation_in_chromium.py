@@ -3,9 +3,9 @@ import threading
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.training.factories import ready_model
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in
+from tests.helpers.models import ready_model
 from training import evaluation, services
 
 pytestmark = pytest.mark.django_db(transaction=True)

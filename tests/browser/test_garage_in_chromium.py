@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in
 from training.models import Vehicle
 
 pytestmark = pytest.mark.django_db(transaction=True)

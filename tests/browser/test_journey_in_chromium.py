@@ -15,9 +15,8 @@ from playwright.sync_api import Page, expect
 from racing.models import Submission
 from tests.browser.checks import page_problems
 from tests.browser.conftest import ARTIFACTS
-from tests.browser.test_accounts_in_chromium import sign_up
-from tests.browser.test_live_training_in_chromium import FRAME_BYTES
-from tests.racing.factories import event
+from tests.helpers.browser import FRAME_BYTES, sign_up
+from tests.helpers.league import event
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db(transaction=True)

@@ -9,13 +9,13 @@ from playwright.sync_api import Page, expect
 
 from racing.models import Submission
 from simulator.trace import to_csv
-from tests.analysis.test_summaries import HAND_WRITTEN
 from tests.browser.checks import page_problems
 from tests.browser.conftest import off_the_loop
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.racing.factories import event, race_evaluation, scored
-from tests.training.factories import ready_model
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.analysis import HAND_WRITTEN
+from tests.helpers.browser import log_in
+from tests.helpers.league import event, race_evaluation, scored
+from tests.helpers.models import ready_model
 from training import artifacts
 from training.models import EvaluationJob, JobLogLine, TrainingJob
 

@@ -13,8 +13,8 @@ from playwright.sync_api import Page, expect
 from racing.models import Submission
 from tests.browser.checks import page_problems
 from tests.browser.conftest import off_the_loop
-from tests.browser.test_accounts_in_chromium import sign_up_here
-from tests.racing.factories import event, scored
+from tests.helpers.browser import sign_up_here
+from tests.helpers.league import event, scored
 
 pytestmark = pytest.mark.django_db(transaction=True)
 

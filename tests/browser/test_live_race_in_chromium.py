@@ -7,10 +7,10 @@ from playwright.sync_api import Page, expect
 
 from accounts.selectors import racer_name
 from racing.models import Submission
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.racing.factories import event
-from tests.training.factories import ready_model
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in
+from tests.helpers.league import event
+from tests.helpers.models import ready_model
 
 pytestmark = [
     pytest.mark.django_db(transaction=True),

@@ -1,17 +1,13 @@
 import pytest
 from playwright.sync_api import Page, expect
 
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.training.test_training import settings
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import FRAME_BYTES, log_in
+from tests.helpers.training import settings
 from training.models import RLModel, TrainingJob
 from training.services import model_create
 
 pytestmark = pytest.mark.django_db(transaction=True)
-
-FRAME_BYTES = (
-    "img => fetch(img.src).then(r => r.arrayBuffer()).then(b => Array.from(new Uint8Array(b)))"
-)
 
 
 def test_a_racer_watches_the_car_learn_and_stops_training(

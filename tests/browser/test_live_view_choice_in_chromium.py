@@ -2,9 +2,9 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from rl import hyperparameters
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.training.test_training import TINY_PPO, settings
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in
+from tests.helpers.training import TINY_PPO, settings
 from training.models import TrainingJob
 from training.services import model_create
 

@@ -13,11 +13,15 @@ from playwright.sync_api import Page, expect
 from notifications import services as notifications
 from tests.browser.checks import page_problems
 from tests.browser.conftest import off_the_loop
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.training.factories import ready_model
-from tests.training.test_import_preview import car_archive, deepracer_folder
-from tests.training.test_imports import trained_with_history, virtual_archive
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.archives import (
+    car_archive,
+    deepracer_folder,
+    trained_with_history,
+    virtual_archive,
+)
+from tests.helpers.browser import log_in
+from tests.helpers.models import ready_model
 from training import imports, services
 from training.models import RLModel
 

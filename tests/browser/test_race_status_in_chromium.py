@@ -10,10 +10,10 @@ from racing import live as racing_live
 from racing import services as racing_services
 from racing.models import Submission
 from tests.browser.conftest import off_the_loop
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.racing.factories import event, race_evaluation
-from tests.training.factories import ready_model
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in
+from tests.helpers.league import event, race_evaluation
+from tests.helpers.models import ready_model
 from training import live, selectors
 from training.models import EvaluationJob, EvaluationTrial
 

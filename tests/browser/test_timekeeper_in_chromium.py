@@ -9,9 +9,9 @@ from playwright.sync_api import Page, expect
 
 from accounts.selectors import racer_name
 from racing.models import RankingMethod, Submission
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.racing.factories import event
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in
+from tests.helpers.league import event
 
 pytestmark = pytest.mark.django_db(transaction=True)
 LAP = 1_100  # [ms] between crossings: laps shorter than a second are refused as a double press

@@ -2,9 +2,9 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from tests.browser.conftest import ARTIFACTS, off_the_loop
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.training.factories import ready_model
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in
+from tests.helpers.models import ready_model
 from training import live
 from training.models import Iteration
 

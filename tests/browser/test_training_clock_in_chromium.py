@@ -8,9 +8,9 @@ import pytest
 from django.utils import timezone
 from playwright.sync_api import Page, expect
 
-from tests.browser.test_accounts_in_chromium import log_in
-from tests.conftest import PASSWORD
-from tests.training.test_training import settings
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.browser import log_in
+from tests.helpers.training import settings
 from training import configuration
 from training.models import RLModel, TrainingJob
 

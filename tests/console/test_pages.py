@@ -8,7 +8,7 @@ from django.conf import settings
 from django.test import Client
 from django.urls import reverse
 
-from tests.training.factories import ready_model
+from tests.helpers.models import ready_model
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db

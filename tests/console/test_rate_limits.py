@@ -5,8 +5,8 @@ import pytest
 from django.contrib.auth.models import User
 from django.urls import reverse
 
-from tests.conftest import PASSWORD
-from tests.training.factories import trained_model
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.models import trained_model
 from training import services
 from training.models import EvaluationJob, RewardFunction, RLModel
 

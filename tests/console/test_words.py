@@ -15,9 +15,9 @@ from django.utils import timezone
 from analysis.models import Rescoring
 from common.forms import RacerWords
 from simulator.trace import to_csv
-from tests.analysis.test_summaries import HAND_WRITTEN
-from tests.racing.factories import event
-from tests.training.factories import ready_model
+from tests.helpers.analysis import HAND_WRITTEN
+from tests.helpers.league import event
+from tests.helpers.models import ready_model
 from training import artifacts, configuration
 
 pytestmark = pytest.mark.django_db

@@ -13,9 +13,10 @@ from django.urls import reverse
 from console.env import Env
 from notifications import services
 from notifications.models import Notification
-from tests.racing import factories as racing
-from tests.training.factories import ready_model
-from tests.training.test_training import queued_job
+from racing.models import Submission
+from tests.helpers import league
+from tests.helpers.models import ready_model
+from tests.helpers.training import queued_job
 from training import evaluation, jobs, lifecycle, trainer
 from training.models import EvaluationJob, EvaluationTrial, TrainingJob
 
@@ -78,9 +79,9 @@ def test_an_evaluations_end_is_told_but_a_races_evaluation_waits_for_the_score(a
     )
     assert told.url == reverse("training:evaluation-detail", args=[model.pk, done.pk])
 
-    event = racing.event()
-    race = racing.race_evaluation(model, event)
-    racing.Submission.objects.create(
+    event = league.event()
+    race = league.race_evaluation(model, event)
+    Submission.objects.create(
         event=event, racer=alice, model=model, model_name=model.name, evaluation=race
     )
     evaluation._finish(driven(race), EvaluationJob.Status.COMPLETED)
@@ -88,7 +89,7 @@ def test_an_evaluations_end_is_told_but_a_races_evaluation_waits_for_the_score(a
 
 
 def test_a_scored_race_tells_the_racer_its_score(alice, tracks):
-    submission = racing.scored(racing.event(), alice, 61_234, 62_000, 63_000, model_name="fast")
+    submission = league.scored(league.event(), alice, 61_234, 62_000, 63_000, model_name="fast")
     told = Notification.objects.get(recipient=alice)
     assert told.text.startswith("fast in Time trial is scored: ")
     assert "3 laps completed" in told.text

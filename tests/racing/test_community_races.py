@@ -11,9 +11,9 @@ from django.utils import timezone
 from racing import services
 from racing.forms import CommunityRaceForm
 from racing.models import Event, Ranking, Submission
+from tests.helpers.league import scored
+from tests.helpers.models import ready_model
 from tests.racing.conftest import race_form
-from tests.racing.factories import scored
-from tests.training.factories import ready_model
 
 pytestmark = pytest.mark.django_db
 

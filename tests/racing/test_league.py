@@ -14,10 +14,10 @@ from django.utils import timezone
 
 from racing import selectors, services
 from racing.models import Division, Event, Racer, RaceType, Ranking, Submission
-from tests.racing.factories import DAY, event, race_evaluation, scored
-from tests.training.factories import ready_model, with_a_later_checkpoint
-from tests.training.test_evaluation import trial_paths
-from tests.training.test_live import viewer
+from tests.helpers.evaluations import trial_paths
+from tests.helpers.league import DAY, event, race_evaluation, scored
+from tests.helpers.live import viewer
+from tests.helpers.models import ready_model, with_a_later_checkpoint
 from training import evaluation as evaluations
 from training.models import EvaluationJob, RLModel
 

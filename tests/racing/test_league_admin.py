@@ -8,8 +8,8 @@ from django.urls import reverse
 
 from notifications.models import Notification
 from racing.models import Event, Ranking, Submission
-from tests.conftest import PASSWORD
-from tests.racing.factories import DAY, event, scored
+from tests.helpers.accounts import PASSWORD
+from tests.helpers.league import DAY, event, scored
 
 pytestmark = pytest.mark.usefixtures("tracks")
 

@@ -12,8 +12,8 @@ from common.formatting import gap, laptime
 from racing.forms import SubmissionForm
 from racing.models import Event, Season
 from racing.services import demo_season_load
-from tests.racing.factories import event, scored
-from tests.training.factories import ready_model
+from tests.helpers.league import event, scored
+from tests.helpers.models import ready_model
 from training.models import RLModel
 from training.selectors import UNTRAINED
 

@@ -7,8 +7,8 @@ import pytest
 
 from racing import live_races
 from racing.models import LiveEntry, Submission
-from tests.racing.factories import event
-from tests.training.factories import ready_model
+from tests.helpers.league import event
+from tests.helpers.models import ready_model
 from training.models import scaled_speeds
 
 pytestmark = pytest.mark.django_db

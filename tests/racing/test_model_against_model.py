@@ -13,9 +13,9 @@ from django.urls import reverse
 
 from racing import live_races, services
 from racing.models import Division, LiveEntry, Racer, Submission
-from tests.conftest import _racer
-from tests.racing.factories import event, scored
-from tests.training.factories import ready_model
+from tests.helpers import accounts
+from tests.helpers.league import event, scored
+from tests.helpers.models import ready_model
 from training import artifacts, jobs
 from training import services as training_services
 from training.models import EvaluationJob, RLModel
@@ -28,7 +28,7 @@ ONE_LAP = {"laps_required": 1, "laps_to_drive": 1}  # a race of one lap: the car
 @pytest.fixture
 def pros(alice, bob):
     """Three racers of the Pro division, where model against model is raced."""
-    racers = [alice, bob, _racer("carol")]
+    racers = [alice, bob, accounts.racer("carol")]
     for racer in racers:
         Racer.objects.filter(pk=Racer.of(racer).pk).update(division=Division.PRO)
     return racers

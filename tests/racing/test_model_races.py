@@ -4,8 +4,8 @@ import pytest
 from django.urls import reverse
 
 from racing.models import Submission
-from tests.racing.factories import event, race_evaluation
-from tests.training.factories import ready_model
+from tests.helpers.league import event, race_evaluation
+from tests.helpers.models import ready_model
 from training import signals
 from training.models import EvaluationJob, Track
 

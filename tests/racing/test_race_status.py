@@ -6,8 +6,8 @@ from django.urls import reverse
 
 from racing import services
 from racing.models import Submission
-from tests.racing.factories import event, scored
-from tests.training.factories import ready_model
+from tests.helpers.league import event, scored
+from tests.helpers.models import ready_model
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 

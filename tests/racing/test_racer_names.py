@@ -7,7 +7,7 @@ from django.template import engines
 from django.urls import reverse
 
 from accounts.models import Profile
-from tests.racing.factories import event, scored
+from tests.helpers.league import event, scored
 
 pytestmark = pytest.mark.django_db
 

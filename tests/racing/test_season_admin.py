@@ -5,7 +5,7 @@ from django.contrib.auth.models import Group, User
 from django.urls import reverse
 
 from racing.models import Event, Season
-from tests.conftest import PASSWORD
+from tests.helpers.accounts import PASSWORD
 from training.models import Track
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]

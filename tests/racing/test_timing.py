@@ -10,7 +10,7 @@ from django.urls import reverse
 
 from racing import timing
 from racing.models import Ranking, RankingMethod, Submission
-from tests.racing.factories import DAY, event
+from tests.helpers.league import DAY, event
 
 pytestmark = pytest.mark.django_db
 

@@ -21,53 +21,10 @@ from rl.learner import Learner, SpacesOnly, code_version, update_precision, weig
 from rl.networks import lower_precision
 from rl.ppo import sb3_minibatches
 from rl.sac import DeepRacerSAC, Replay
-from tests.training.test_stop import synthetic_episode
+from tests.helpers.learning import driven, learner_for, steps_taken, synthetic_episode
 
 SMALL_OBSERVATIONS = gymnasium.spaces.Dict({"lidar": gymnasium.spaces.Box(0, 1, (4,))})
 SMALL_ACTIONS = gymnasium.spaces.Box(-1, 1, (2,))
-CONTINUOUS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}}
-
-
-@pytest.fixture(scope="module")
-def env():
-    environment = gymnasium.make(simulator.ENV_ID, track="pitlane-oval", action_space=CONTINUOUS)
-    yield environment
-    environment.close()
-
-
-def learner_for(env, **values) -> Learner:
-    return Learner(
-        algorithm="clipped_ppo",
-        hyperparameters={**hyperparameters.defaults("clipped_ppo"), **values},
-        architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-        observation_space=env.observation_space, action_space=env.action_space, seed=7,
-    )  # fmt: skip
-
-
-def driven(learner: Learner, env, steps: int = 48, scale: float = 1.0, offset: float = 0.0):
-    """An episode as the learner's own policy would have driven it (so the first ratio is 1),
-    with rewards ``scale`` times a fixed pattern; the values it was driven with are ``offset``
-    from what the value network says now."""
-    episode = synthetic_episode(env, steps=steps)
-    episode.rewards = (scale * np.linspace(-1.0, 2.0, steps)).astype(np.float32)
-    policy = learner.model.policy
-    with torch.no_grad():
-        observations = {
-            name: torch.as_tensor(frames[:-1]) for name, frames in episode.observations.items()
-        }
-        observations, _ = policy.obs_to_tensor({k: v.numpy() for k, v in observations.items()})
-        values, log_prob, _ = policy.evaluate_actions(
-            observations, torch.as_tensor(episode.actions, dtype=torch.float32)
-        )
-    episode.values = (scale * values.flatten().numpy() + offset).astype(np.float32)
-    episode.log_probs = log_prob.numpy().astype(np.float32)
-    return episode
-
-
-def steps_taken(learner: Learner) -> list:
-    taken = []
-    learner.model.policy.optimizer.register_step_post_hook(lambda *_: taken.append(1))
-    return taken
 
 
 def value_weights(learner: Learner) -> dict[str, torch.Tensor]:

@@ -8,7 +8,7 @@ import torch
 import simulator
 from rl.networks import SHALLOW
 from rl.policies import Policy
-from tests.training.factories import sensor_frames
+from tests.helpers.models import sensor_frames
 
 DISCRETE = [{"steering_angle": a, "speed": 1.0} for a in (-30, 0, 30)]
 CONTINUOUS = {"steering_angle": {"low": -30.0, "high": 30.0}, "speed": {"low": 0.5, "high": 2.0}}

@@ -5,11 +5,10 @@ import pytest
 from rl import hyperparameters
 from rl import learner as learner_module
 from rl.learner import Interrupted, Learner
-from tests.rl.test_learner import driven, env, learner_for, steps_taken  # noqa: F401 (a fixture)
-from tests.training.test_stop import synthetic_episode
+from tests.helpers.learning import driven, learner_for, steps_taken, synthetic_episode
 
 
-def test_a_ppo_update_tells_its_minibatches_done_of_all_its_epochs(env):  # noqa: F811
+def test_a_ppo_update_tells_its_minibatches_done_of_all_its_epochs(env):
     learner = learner_for(env, num_epochs=3, batch_size=16)
     told, taken = [], steps_taken(learner)
     learner.learn([driven(learner, env, steps=40)], progress=lambda *seen: told.append(seen))
@@ -18,7 +17,7 @@ def test_a_ppo_update_tells_its_minibatches_done_of_all_its_epochs(env):  # noqa
     assert len(taken) == 9
 
 
-def test_a_ppo_update_that_a_target_kl_ends_early_still_ends_at_its_total(env):  # noqa: F811
+def test_a_ppo_update_that_a_target_kl_ends_early_still_ends_at_its_total(env):
     learner = learner_for(env, num_epochs=3, batch_size=16, lr=0.003)
     learner.model.target_kl = 1e-6
     told = []
@@ -28,7 +27,7 @@ def test_a_ppo_update_that_a_target_kl_ends_early_still_ends_at_its_total(env): 
     assert 2 <= len(told) < 10 and told[-1] == (9, 9)
 
 
-def test_a_sac_update_tells_its_gradient_steps_done_chunk_by_chunk(env, monkeypatch):  # noqa: F811
+def test_a_sac_update_tells_its_gradient_steps_done_chunk_by_chunk(env, monkeypatch):
     monkeypatch.setattr(learner_module, "SAC_CHUNK", 2)  # few steps, cheap ones, several chunks
     learner = Learner(
         algorithm="sac", hyperparameters={**hyperparameters.defaults("sac"), "batch_size": 4},
@@ -40,7 +39,7 @@ def test_a_sac_update_tells_its_gradient_steps_done_chunk_by_chunk(env, monkeypa
     assert told == [(2, 5), (4, 5), (5, 5)]
 
 
-def test_an_update_abandoned_never_says_it_finished(env):  # noqa: F811
+def test_an_update_abandoned_never_says_it_finished(env):
     learner = learner_for(env, num_epochs=3, batch_size=16)
     told, asked = [], []
 

@@ -5,8 +5,7 @@ import pytest
 
 from rl.learner import weights_bytes
 from rl.policies import Policy
-from tests.sandbox.test_cars import ENV
-from tests.sandbox.test_sandbox import POLICY
+from tests.helpers.sandbox import ENV, POLICY
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ import functools
 from collections.abc import Iterator
 
 import gymnasium
-import msgpack
 import numpy as np
 import pytest
 
@@ -19,22 +18,20 @@ from rl.policies import Policy
 from sandbox import MiB, Sandbox, SandboxFailure
 from sandbox.reward import RewardProcess
 from simulator.trace import FIELDS
-from tests.sandbox.test_sandbox import POLICY, assert_stopped, outcome, reward
+from tests.helpers.sandbox import (
+    ENV,
+    POLICY,
+    REWARD,
+    SEED,
+    array,
+    assert_stopped,
+    episodes_by_car,
+    outcome,
+    reward,
+)
 
-ENV = {"track": "pitlane-oval"}
-SEED = 7
 CARS = 2
 EPISODES = 2  # per car
-# Reading where the car is and how it moves, so that any difference shows; and counting its
-# calls in a global, as DeepRacer reward functions that remember the step before do: each car's
-# calls must reach a copy of their own, or the cars' counts would mix.
-REWARD = """calls = 0
-
-def reward_function(params):
-    global calls
-    calls += 1
-    return params["progress"] + params["speed"] + abs(params["heading"]) / 100 + calls / 1000
-"""
 
 
 @contextlib.contextmanager
@@ -47,20 +44,6 @@ def child(weights: bytes, *, cars: int, seed: int, start: float = 0.0) -> Iterat
         sandbox.load(REWARD)
         sandbox.set_weights(1, weights)
         yield sandbox
-
-
-def episodes_by_car(sandbox: Sandbox, per_car: int) -> dict[int, list[dict]]:
-    """Each car's first ``per_car`` episodes, driven as a rollout worker asks for them: every
-    idle car starts one while more are wanted."""
-    driven: dict[int, list[dict]] = {car: [] for car in range(sandbox.cars)}
-    started = driving = 0
-    while started < per_car * sandbox.cars or driving:
-        start = min(sandbox.cars - driving, per_car * sandbox.cars - started)
-        reply = sandbox.episode("explore", start=start)
-        started += start
-        driving = reply["driving"]
-        driven[reply["car"]].append(msgpack.unpackb(reply["payload"]))
-    return driven
 
 
 def test_each_of_several_cars_drives_the_episodes_a_child_of_one_car_would(weights):
@@ -84,12 +67,6 @@ def test_each_of_several_cars_drives_the_episodes_a_child_of_one_car_would(weigh
                 assert np.allclose(array(got, name), array(want, name), rtol=1e-5, atol=1e-6)
     starts = [episodes[0]["trace"][0][2:4] for episodes in driven.values()]
     assert starts[0] != starts[1]  # the cars drove from places of their own
-
-
-def array(payload: dict, name: str) -> np.ndarray:
-    from rl.experience import decode_array
-
-    return decode_array(payload["arrays"][name], "float32", (None,))
 
 
 STATUS = FIELDS.index("episode_status")  # a trace row's

@@ -5,7 +5,6 @@ validation are feedback, not the boundary, so they are not in the way here."""
 
 import os
 import socket
-import textwrap
 from pathlib import Path
 
 import msgpack
@@ -14,38 +13,7 @@ import pytest
 import sandbox as sandbox_package
 from rl.experience import decode_array
 from sandbox import CHILD_ENVIRONMENT, MiB, Sandbox, SandboxFailure, self_test
-
-POLICY = {"algorithm": "clipped_ppo", "architecture": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"}
-
-
-def driving(env: dict) -> Sandbox:
-    """A sandbox that drives episodes in ``env`` as a rollout worker's does: with a policy."""
-    return Sandbox(env=env, policy=POLICY, memory_allowance=1024 * MiB)
-
-
-PARAMS = {"x": 1.0, "y": 2.0, "track_width": 0.76, "distance_from_center": 0.1}
-
-
-def reward(body: str) -> str:
-    """A reward function whose body is ``body``."""
-    return "def reward_function(params):\n" + textwrap.indent(textwrap.dedent(body), "    ")
-
-
-def outcome(source: str, params: dict = PARAMS, **settings) -> float | SandboxFailure:
-    """What a call of ``source``'s reward function comes to: its reward, or how it failed."""
-    with Sandbox(**settings) as sandbox:
-        try:
-            sandbox.load(source)
-            return sandbox.call(params)
-        except SandboxFailure as failure:
-            return failure
-
-
-def assert_stopped(result, kind: str, *fragments: str) -> None:
-    assert isinstance(result, SandboxFailure), f"the code ran and returned {result!r}"
-    assert result.kind == kind, (result.kind, str(result))
-    for fragment in fragments:
-        assert fragment in str(result)
+from tests.helpers.sandbox import PARAMS, POLICY, assert_stopped, driving, outcome, reward
 
 
 def test_the_sandbox_holds_on_this_machine():

@@ -21,8 +21,7 @@ from rl.policies import Policy, rollout_device
 from rl.wire import ProtocolError
 from sandbox import MiB, Sandbox, SandboxFailure, served
 from sandbox.served import PolicyServer
-from tests.sandbox.test_cars import ENV, REWARD, SEED, array, episodes_by_car
-from tests.sandbox.test_sandbox import POLICY
+from tests.helpers.sandbox import ENV, POLICY, REWARD, SEED, array, episodes_by_car
 
 CARS = 2
 EPISODES = 2  # per car
@@ -277,7 +276,7 @@ def test_a_job_on_a_machine_with_a_gpu_learns_on_it_and_its_cars_drive_on_the_cp
 ):
     """PITLANE_ROLLOUT_DEVICE's default, cpu, on a GPU machine too (console/settings/base.py says
     why); a child served from the GPU drives in the test above."""
-    from tests.training.test_training import settings, wait_for_job
+    from tests.helpers.training import settings, wait_for_job
     from training.models import TrainingJob
     from training.services import model_create, training_stop
 

@@ -11,6 +11,7 @@ import pytest
 from simulator import tracks
 from simulator.tracks import TrackError
 from tests import routes
+from tests.helpers.tracks import claiming
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -169,16 +170,6 @@ def test_a_registered_resolver_lets_a_name_load_and_travel_inline():
         tracks.unregister_resolver(resolver)
     with pytest.raises(TrackError, match="No track named 'my-loop'"):
         tracks.load("my-loop")
-
-
-def claiming(shape: tuple[int, ...]) -> bytes:
-    """A route file of 60 waypoints whose header claims ``shape``: read as it claims, it would
-    take ``prod(shape) * 8`` bytes."""
-    buffer = io.BytesIO()
-    np.lib.format.write_array_header_1_0(
-        buffer, {"descr": "<f8", "fortran_order": False, "shape": shape}
-    )
-    return buffer.getvalue() + routes.counterclockwise()[:60].tobytes()
 
 
 def test_a_header_claiming_more_than_the_file_holds_is_refused_before_any_memory_is_set_aside():

@@ -5,15 +5,14 @@ import io
 
 import numpy as np
 import pytest
-from django.contrib.auth.models import User
 from django.core.files.uploadedfile import SimpleUploadedFile
 from django.core.management import CommandError, call_command
 from django.urls import reverse
 
 from tests import routes
-from tests.sandbox.test_sandbox import driving
-from tests.simulator.test_route_files import claiming
-from tests.training.test_model_pages import form_data
+from tests.helpers.sandbox import driving
+from tests.helpers.tracks import claiming, upload
+from tests.helpers.training import form_data
 from training.models import RLModel, Track
 from training.services import TrackRefused, track_add, tracks_sync
 
@@ -90,22 +89,6 @@ def test_an_added_track_is_never_clobbered_by_the_built_in_sync(tracks):
     ):
         track_add(name="s-bend", display_name="", route=routes.route_bytes("clockwise"),
                   directions=["clockwise"])  # fmt: skip
-
-
-@pytest.fixture
-def admin_client(client, db):
-    staff = User.objects.create_superuser("marshal", password="x")
-    client.force_login(staff)
-    return client
-
-
-def upload(client, kind: str, name: str):
-    data = {
-        "route_file": SimpleUploadedFile(f"{kind}.npy", routes.route_bytes(kind)),
-        "name": name, "display_name": "Upload", "description": "From the admin",
-        "difficulty": "beginner", "directions": ["counterclockwise", "clockwise"],
-    }  # fmt: skip
-    return client.post(reverse("admin:training_track_add"), data)
 
 
 def test_staff_add_a_track_by_uploading_its_route_file_in_the_admin(admin_client, tracks):

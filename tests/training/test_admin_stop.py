@@ -4,7 +4,7 @@ import pytest
 from django.contrib.auth.models import User
 from django.urls import reverse
 
-from tests.training.factories import ready_model
+from tests.helpers.models import ready_model
 from training import admin
 from training.models import RLModel, TrainingJob
 from training.services import training_stop

@@ -14,8 +14,8 @@ from django.utils import timezone
 
 from rl.stopwatch import Stopwatch
 from sandbox import SandboxUnavailable
+from tests.helpers.training import queued_job, reload, wait_for_job
 from tests.services import wait_for
-from tests.training.test_training import queued_job, reload, wait_for_job
 from training import jobs, rollouts, selectors, tasks, trainer
 from training.models import TrainingJob
 from training.services import training_stop

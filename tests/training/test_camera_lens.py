@@ -12,9 +12,9 @@ from django.urls import reverse
 
 import simulator
 from simulator.camera import CAR_FOV, SIMAPP_FOV
-from tests.training.test_imports import deepracer_export, tar_gz
-from tests.training.test_model_form import post
-from tests.training.test_training import settings as training_settings
+from tests.helpers.archives import deepracer_export, tar_gz
+from tests.helpers.training import post
+from tests.helpers.training import settings as training_settings
 from training import configuration, exports, imports, jobs
 from training.forms import ModelCreateForm
 from training.models import CameraLens, RLModel, TrainingJob

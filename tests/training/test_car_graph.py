@@ -12,7 +12,7 @@ import simulator
 from rl import cargraph, tfgraph
 from rl.networks import DEEP, SHALLOW
 from rl.policies import Policy
-from tests.training.factories import sensor_frames
+from tests.helpers.models import sensor_frames
 
 DISCRETE = [
     {"steering_angle": -30, "speed": 0.6}, {"steering_angle": 0, "speed": 1.0},

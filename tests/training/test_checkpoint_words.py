@@ -6,7 +6,7 @@ import re
 import pytest
 from django.urls import reverse
 
-from tests.training.factories import ready_model
+from tests.helpers.models import ready_model
 from training import artifacts, evaluation, selectors, services
 from training.models import EvaluationJob, EvaluationTrial, Iteration, RLModel, Track
 

@@ -10,23 +10,12 @@ import pytest
 from django.urls import reverse
 from django.utils import timezone
 
-from tests.training.test_training import settings
-from training import configuration, jobs, selectors
-from training.models import RLModel, TrainingJob
+from tests.helpers.training import training_job
+from training import jobs, selectors
+from training.models import TrainingJob
 from training.services import training_stop
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
-
-
-def training_job(owner, *, seconds: float, ago: float, **fields) -> TrainingJob:
-    """A job in progress whose trainer last measured ``seconds`` used, ``ago`` seconds ago."""
-    clean = configuration.check(settings(name="clocked"), owner=owner, validate_reward=False)
-    model = RLModel.objects.create(owner=owner, status=RLModel.Status.TRAINING, **clean.row())
-    return TrainingJob.objects.create(
-        model=model, status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="trainer:1",
-        training_seconds=seconds, clock_at=timezone.now() - timedelta(seconds=ago),
-        iterations=3, **fields,
-    )  # fmt: skip
 
 
 def at(moment):

@@ -7,15 +7,14 @@ import pytest
 from django.urls import reverse
 
 from rl.learner import load_tensors
-from tests.training.factories import (
+from tests.helpers.models import (
     STRAIGHT_AHEAD,
     ready_model,
     trained_model,
     with_a_later_checkpoint,
 )
-from tests.training.test_model_pages import form_data
-from tests.training.test_training import settings as training_settings
-from tests.training.test_training import wait_for_job
+from tests.helpers.training import form_data, wait_for_job
+from tests.helpers.training import settings as training_settings
 from training import artifacts
 from training.configuration import ModelSettings
 from training.forms import ModelCreateForm

@@ -17,9 +17,9 @@ import simulator
 from rl import tfcheckpoint, tfweights
 from rl.networks import SHALLOW
 from rl.policies import Policy
+from tests.helpers.archives import DEEPRACER_METADATA, deepracer_export, drfc_layout, tar_gz
+from tests.helpers.models import ready_model, sensor_frames
 from tests.training.deepracer_tf import build, checkpoints_json
-from tests.training.factories import ready_model, sensor_frames
-from tests.training.test_imports import DEEPRACER_METADATA, deepracer_export, drfc_layout, tar_gz
 from training import artifacts, exports, imports, services
 from training.models import RLModel
 

@@ -15,10 +15,10 @@ from django.urls import reverse
 import simulator
 from simulator import randomisation_ranges
 from simulator.randomisation import LookView
-from tests.training.factories import ready_model, trained_model
-from tests.training.test_imports import DEEPRACER_PARAMS, deepracer_export, tar_gz
-from tests.training.test_model_form import post
-from tests.training.test_training import settings as training_settings
+from tests.helpers.archives import DEEPRACER_PARAMS, deepracer_export, tar_gz
+from tests.helpers.models import ready_model, trained_model
+from tests.helpers.training import post
+from tests.helpers.training import settings as training_settings
 from training import artifacts, configuration, exports, imports, services
 from training.forms import ModelCreateForm
 from training.models import EvaluationJob, RLModel

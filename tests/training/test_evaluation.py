@@ -17,11 +17,12 @@ from django.urls import reverse
 from django.utils import timezone
 
 from analysis.models import TraceSummary
+from tests.helpers.evaluations import stored, trial_paths
+from tests.helpers.live import frame_header, viewer
+from tests.helpers.models import ready_model, trained_model
+from tests.helpers.training_logs import assert_evaluation_logs_read_as_recorded
 from tests.services import wait_for
-from tests.training.factories import ready_model, trained_model
-from tests.training.test_deepracer_utils import assert_evaluation_logs_read_as_recorded
-from tests.training.test_live import frame_header, viewer
-from training import artifacts, configuration, jobs, services, signals
+from training import configuration, jobs, services, signals
 from training import evaluation as evaluations
 from training.artifacts import EVALUATION_METRICS as METRICS
 from training.artifacts import EVALUATION_TRACE as TRACE
@@ -32,12 +33,6 @@ from training.models import EvaluationJob, RLModel
 pytestmark = pytest.mark.usefixtures("tracks")
 
 STEP_MS = 1000 / 15
-
-
-def stored(evaluation: EvaluationJob, name: str) -> bytes:
-    return artifacts.read(
-        artifacts.path(evaluation.model, artifacts.evaluation_prefix(evaluation) + name)
-    )
 
 
 def decoded_frames(data: bytes) -> tuple[int, tuple[int, int]]:
@@ -355,15 +350,6 @@ def test_a_run_overtaken_while_it_saves_leaves_the_evaluation_and_its_model_to_t
     assert after.status == EvaluationJob.Status.IN_PROGRESS and after.lease_owner == taker
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.EVALUATING
     assert not alice.notifications.exists()
-
-
-def trial_paths(evaluation: EvaluationJob) -> list[list[tuple[str, str]]]:
-    """Each trial's positions, row after row, from its stored trace."""
-    rows = csv.DictReader(io.StringIO(stored(evaluation, TRACE).decode()))
-    paths: dict[str, list] = {}
-    for row in rows:
-        paths.setdefault(row["episode"], []).append((row["X"], row["Y"]))
-    return list(paths.values())
 
 
 @pytest.mark.django_db

@@ -7,10 +7,10 @@ from django.core.files.storage import default_storage
 from django.test import Client
 from django.urls import reverse
 
+from tests.helpers.evaluations import stored
+from tests.helpers.live import frame_header, viewer
+from tests.helpers.models import ready_model
 from tests.services import wait_for
-from tests.training.factories import ready_model
-from tests.training.test_evaluation import stored
-from tests.training.test_live import frame_header, viewer
 from training import artifacts, jobs, services
 from training import evaluation as runner
 from training.models import EvaluationJob, RLModel
@@ -88,7 +88,7 @@ def test_a_race_entry_cannot_be_stopped(alice):
 
 
 def _event():
-    from tests.racing.factories import event
+    from tests.helpers.league import event
 
     return event()
 

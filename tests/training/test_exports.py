@@ -18,7 +18,7 @@ from django.urls import reverse
 
 from rl import cargraph, hyperparameters
 from rl.policies import Policy
-from tests.training.factories import sensor_frames, trained_model
+from tests.helpers.models import sensor_frames, trained_model
 from training import artifacts, exports
 from training.models import RLModel
 

@@ -16,9 +16,9 @@ from django.utils import timezone
 from common import transactions
 from rl.learner import Update
 from rl.stopwatch import Stopwatch
-from tests.training.factories import STRAIGHT_AHEAD, ready_model
-from tests.training.test_imports import virtual_archive
-from tests.training.test_training import settings as training_settings
+from tests.helpers.archives import virtual_archive
+from tests.helpers.models import STRAIGHT_AHEAD, ready_model
+from tests.helpers.training import settings as training_settings
 from training import artifacts, configuration, imports, jobs, services, tasks, trainer
 from training.models import RLModel, TrainingJob
 

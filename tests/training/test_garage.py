@@ -119,7 +119,7 @@ def test_an_unknown_track_preview_is_a_404(client):
 
 
 def test_a_models_car_has_its_vehicles_colour_in_the_video(client, alice, bob, tracks):
-    from tests.training.test_model_pages import form_data
+    from tests.helpers.training import form_data
 
     red = Vehicle.objects.create(owner=alice, name="red-one", shell_colour="#d1242f")
     theirs = Vehicle.objects.create(owner=bob, name="not-yours")

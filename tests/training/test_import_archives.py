@@ -20,8 +20,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from common import documents
-from tests.training.factories import ready_model
-from tests.training.test_imports import CHECKED_IMPORT, deepracer_export, tar_gz, virtual_archive
+from tests.helpers.archives import CHECKED_IMPORT, deepracer_export, tar_gz, virtual_archive
+from tests.helpers.models import ready_model
 from training import artifacts, history, imports, views
 from training.models import RLModel
 

@@ -17,9 +17,9 @@ from django.urls import reverse
 
 from analysis.records import Source
 from simulator.trace import to_csv
-from tests.analysis.test_summaries import HAND_WRITTEN
-from tests.training.factories import ready_model
-from tests.training.test_imports import tar_gz, trainer_metrics, virtual_archive
+from tests.helpers.analysis import HAND_WRITTEN
+from tests.helpers.archives import tar_gz, trainer_metrics, virtual_archive
+from tests.helpers.models import ready_model
 from training import artifacts, exports, history, imports, selectors
 from training.models import EvaluationJob, Iteration, RLModel, TrainingJob
 

@@ -8,29 +8,19 @@ from __future__ import annotations
 import io
 
 import pytest
-import yaml
 from django.core.files.uploadedfile import SimpleUploadedFile
 from django.urls import reverse
 
-from tests.training.factories import ready_model
-from tests.training.test_imports import CHECKED_IMPORT, DEEPRACER_PARAMS, deepracer_export, tar_gz
-from training import artifacts, configuration, exports, imports, selectors, services
+from tests.helpers.archives import (
+    CHECKED_IMPORT,
+    car_archive,
+    deepracer_folder,
+)
+from tests.helpers.models import ready_model
+from training import artifacts, configuration, imports, selectors, services
 from training.models import Quota, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
-
-
-def deepracer_folder(**params) -> bytes:
-    """A DeepRacer model folder without weights: its reward function and settings."""
-    return tar_gz(deepracer_export(**{
-        "training_params.yaml": yaml.safe_dump({**DEEPRACER_PARAMS, **params}).encode(),
-    }))  # fmt: skip
-
-
-def car_archive(owner) -> bytes:
-    """A physical-car archive (model_metadata.json and agent/model.pb), as the car takes it."""
-    with artifacts.default_storage.open(exports.physical(ready_model(owner)).name, "rb") as file:
-        return file.read()
 
 
 def test_a_folder_without_weights_is_previewed_and_nothing_is_created_until_confirmed(

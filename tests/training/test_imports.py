@@ -17,65 +17,24 @@ from django.urls import reverse
 from safetensors.torch import save as save_tensors
 
 from rl.learner import load_tensors
-from tests.training.factories import ready_model
-from training import artifacts, exports, history, imports, selectors
+from tests.helpers.archives import (
+    CHECKED_IMPORT,
+    DEEPRACER_HYPERPARAMETERS,
+    DEEPRACER_METADATA,
+    DEEPRACER_PARAMS,
+    deepracer_export,
+    drfc_layout,
+    tar_gz,
+    trained_with_history,
+    virtual_archive,
+)
+from tests.helpers.models import ready_model
+from training import artifacts, history, imports, selectors
 from training.configuration import ModelSettings, check
 from training.models import RLModel, ShellColour, Track, TrainingJob
 from training.rewards import EXAMPLES
 
 pytestmark = pytest.mark.django_db
-
-DEEPRACER_METADATA = {
-    "action_space": [
-        {"steering_angle": -30.0, "speed": 0.6, "index": 0},
-        {"steering_angle": 0.0, "speed": 1.2, "index": 1},
-        {"steering_angle": 30.0, "speed": 0.6, "index": 2},
-    ],
-    "sensor": ["FRONT_FACING_CAMERA"],
-    "neural_network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-    "version": "4",
-    "training_algorithm": "clipped_ppo",
-    "action_space_type": "discrete",
-}
-DEEPRACER_HYPERPARAMETERS = {
-    "batch_size": 64, "beta_entropy": 0.01, "discount_factor": 0.999, "e_greedy_value": 0.05,
-    "epsilon_steps": 10000, "exploration_type": "categorical", "loss_type": "huber",
-    "lr": 0.0003, "num_episodes_between_training": 20, "num_epochs": 10, "stack_size": 1,
-    "term_cond_avg_score": 350.0, "term_cond_max_episodes": 1000,
-}  # fmt: skip
-# H_track: a DeepRacer world (deepracer-utils' track_meta names it) whose route simapp does not
-# ship, so it is not one of the built-in tracks: the archive's track is not loaded here.
-DEEPRACER_PARAMS = {
-    "WORLD_NAME": "H_track", "REVERSE_DIR": False, "RACE_TYPE": "TIME_TRIAL",
-    "CAR_NAME": "my-deepracer-car",
-}  # fmt: skip
-
-# The import page hands the archive to a checker thread (training.checks), which writes with a
-# database connection of its own: what the test made must be committed for it to see.
-CHECKED_IMPORT = pytest.mark.django_db(transaction=True)
-
-
-def tar_gz(members: dict[str, bytes], tweak=None) -> bytes:
-    """A .tar.gz of ``members``; ``tweak(tar)`` may add hostile entries."""
-    buffer = io.BytesIO()
-    with tarfile.open(fileobj=buffer, mode="w:gz", compresslevel=1) as tar:
-        for name, data in members.items():
-            info = tarfile.TarInfo(name)
-            info.size = len(data)
-            tar.addfile(info, io.BytesIO(data))
-        if tweak:
-            tweak(tar)
-    return buffer.getvalue()
-
-
-def deepracer_export(**changes) -> dict[str, bytes]:
-    members = {
-        "model_metadata.json": json.dumps(DEEPRACER_METADATA).encode(),
-        "reward_function.py": EXAMPLES[0].source.encode(),
-        "hyperparameters.json": json.dumps(DEEPRACER_HYPERPARAMETERS).encode(),
-        "training_params.yaml": yaml.safe_dump(DEEPRACER_PARAMS).encode(),
-    }
-    return {**members, **changes}
 
 
 # TensorFlow files of a car this console does not have: never read (test_deepracer_weights.py
@@ -86,11 +45,6 @@ UNFIT_WEIGHTS = {
     "model/8_Step-7040.ckpt.data-00000-of-00001": b"\x00" * 32,
     "model/checkpoint": b'model_checkpoint_path: "8_Step-7040.ckpt"\n',
 }
-
-
-def virtual_archive(model: RLModel) -> bytes:
-    with artifacts.default_storage.open(exports.virtual(model).name, "rb") as file:
-        return file.read()
 
 
 def stored_objects() -> set[str]:
@@ -281,40 +235,6 @@ def test_an_archive_over_the_upload_limit_is_refused_before_it_is_read(alice, cl
     assert "The archive is over" in response.text
 
 
-def trainer_metrics(iterations: int = 2, episodes: int = 3) -> dict:
-    """training_metrics.json as our trainer writes it: each iteration's training episodes
-    (trial 1, 2, ...), then the evaluation of the policy learnt from them."""
-    rows, episode, clock = [], 0, 1_700_000_000_000
-    for number in range(1, iterations + 1):
-        for trial in range(1, episodes + 1):
-            episode += 1
-            lap = number == iterations and trial == episodes
-            rows.append({
-                "reward_score": 10.0 * number + trial, "metric_time": clock + 4000,
-                "start_time": clock, "elapsed_time_in_milliseconds": 4000 if lap else 2000,
-                "episode": episode, "trial": trial, "phase": "training",
-                "completion_percentage": 100 if lap else 20 * number,
-                "episode_status": "lap_complete" if lap else "off_track",
-            })  # fmt: skip
-            clock += 5000
-        for trial in (1, 2):
-            rows.append({
-                "reward_score": 0, "metric_time": clock + 1000, "start_time": clock,
-                "elapsed_time_in_milliseconds": 1000, "episode": episode, "trial": trial,
-                "phase": "evaluation", "completion_percentage": 30 * number + 10 * trial,
-                "episode_status": "off_track",
-            })  # fmt: skip
-            clock += 1000
-    return {"metrics": rows, "best_model_metric": "progress"}
-
-
-def trained_with_history(owner) -> RLModel:
-    model = ready_model(owner)
-    artifacts.save(model, artifacts.TRAINING_METRICS, json.dumps(trainer_metrics()))
-    TrainingJob.objects.filter(model=model).update(training_seconds=150.4, iterations=2)
-    return model
-
-
 @CHECKED_IMPORT
 def test_an_imported_virtual_model_keeps_its_training_history(alice, bob, tracks, client):
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(trained_with_history(alice)))
@@ -463,15 +383,6 @@ def test_an_archive_at_fault_is_not_kept_for_the_next_attempt(alice, tracks, cli
     response = client.post(reverse("training:model-import"), {"archive": upload})
     assert response.status_code == 400 and "Reward function: syntax" in response.text
     assert response.context["form"].kept_upload is None and "you uploaded" not in response.text
-
-
-def drfc_layout(members: dict[str, bytes]) -> dict[str, bytes]:
-    """The files as DeepRacer for Cloud uploads a model: the metadata under model/ (and at the
-    root), the hyperparameters under ip/."""
-    moved = dict(members)
-    moved["model/model_metadata.json"] = moved["model_metadata.json"]
-    moved["ip/hyperparameters.json"] = moved.pop("hyperparameters.json")
-    return moved
 
 
 LAYOUTS = {

@@ -12,8 +12,8 @@ from django.utils import timezone
 from racing.live_races import LIVE_ENTRY
 from racing.models import Submission
 from racing.services import SUBMISSION
-from tests.training.factories import ready_model
-from tests.training.test_training import settings
+from tests.helpers.models import ready_model
+from tests.helpers.training import settings
 from training import jobs, lifecycle
 from training.jobs import LeaseLost
 from training.models import EvaluationJob, RLModel, TrainingJob
@@ -149,7 +149,7 @@ def test_an_evaluation_starts_over_only_while_it_is_unfinished(alice, tracks):
 
 
 def test_a_race_entry_is_scored_again_but_a_failed_one_stays_failed(alice, tracks):
-    from tests.racing.factories import event
+    from tests.helpers.league import event
 
     entry = Submission.objects.create(event=event(), racer=alice, model_name="m")
     assert not SUBMISSION.move(entry, Job.COMPLETED)  # not driven yet

@@ -1,8 +1,6 @@
 """Live streams over the real ASGI application (origin check, sessions, the Redis channel layer)."""
 
 import asyncio
-import json
-import struct
 import threading
 import time
 import tracemalloc
@@ -11,18 +9,16 @@ import pytest
 from asgiref.sync import sync_to_async
 from channels.layers import get_channel_layer
 from channels.testing import WebsocketCommunicator
-from django.conf import settings
-from django.test import Client
 
 from common.redis_client import redis_client
-from tests.training.factories import ready_model
+from tests.helpers.live import frame_header, viewer
+from tests.helpers.models import ready_model
 from training import live, selectors
 from training.consumers import WINDOW, TrainingConsumer
 from training.models import TrainingJob
 
 pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.usefixtures("tracks")]
 
-ORIGIN = (b"origin", b"http://127.0.0.1:8000")
 JPEG = b"\xff\xd8\xff\xe0" + bytes(2000)
 
 
@@ -34,24 +30,9 @@ def no_live_keys_of_earlier_tests():
         client.delete(name)
 
 
-def login_cookie(user) -> bytes:
-    client = Client()
-    client.force_login(user)
-    return f"{settings.SESSION_COOKIE_NAME}={client.cookies[settings.SESSION_COOKIE_NAME].value}"
-
-
 def queued_job(owner) -> TrainingJob:
     model = ready_model(owner, name=f"live-{owner.username}")
     return TrainingJob.objects.create(model=model)
-
-
-async def viewer(path: str, user=None, origin=ORIGIN) -> WebsocketCommunicator:
-    from console.asgi import application
-
-    headers = [origin]
-    if user is not None:
-        headers.append((b"cookie", (await sync_to_async(login_cookie)(user)).encode()))
-    return WebsocketCommunicator(application, path, headers=headers)
 
 
 async def watching(job: TrainingJob, user) -> WebsocketCommunicator:
@@ -61,11 +42,6 @@ async def watching(job: TrainingJob, user) -> WebsocketCommunicator:
     assert connected
     assert (await communicator.receive_json_from(timeout=5))["type"] == "state"
     return communicator
-
-
-def frame_header(message: bytes) -> tuple[dict, bytes]:
-    (length,) = struct.unpack("!I", message[:4])
-    return json.loads(message[4 : 4 + length]), message[4 + length :]
 
 
 async def send_frames(group: str, count: int, size: int = len(JPEG), first: int = 1) -> None:

@@ -12,9 +12,9 @@ from kombu.exceptions import OperationalError
 
 from racing import tasks as racing_tasks
 from racing.models import Submission
-from tests.racing.factories import event, race_evaluation
-from tests.training.factories import ready_model
-from tests.training.test_training import settings
+from tests.helpers.league import event, race_evaluation
+from tests.helpers.models import ready_model
+from tests.helpers.training import settings
 from training import jobs, tasks
 from training.models import EvaluationJob, TrainingJob
 from training.services import model_create

@@ -8,9 +8,9 @@ import pytest
 from django.urls import reverse
 
 from simulator import config as sim
-from tests.training.factories import STRAIGHT_AHEAD, ready_model
-from tests.training.test_model_pages import form_data
-from tests.training.test_training import settings as training_settings
+from tests.helpers.models import STRAIGHT_AHEAD, ready_model
+from tests.helpers.training import form_data, post
+from tests.helpers.training import settings as training_settings
 from training import configuration
 from training.models import RLModel
 
@@ -23,11 +23,6 @@ CONTINUOUS = {"action_space_type": "continuous", "algorithm": "sac", "steering_l
 def actions(*rows) -> str:
     return json.dumps([{"steering_angle": s, "speed": v, "index": i} for i, (s, v) in
                        enumerate(rows)])  # fmt: skip
-
-
-def post(client, racer, url=None, **changes):
-    client.force_login(racer)
-    return client.post(url or reverse("training:model-create"), form_data(**changes))
 
 
 def test_a_bad_continuous_speed_is_the_only_error_and_shows_under_the_highest_speed(

@@ -1,32 +1,14 @@
-import json
 import re
 
 import pytest
 from django.urls import reverse
 
-from rl import hyperparameters
+from tests.helpers.training import form_data
 from training.models import RLModel, TrainingJob
 from training.rewards import EXAMPLES
 from training.services import model_create
 
 pytestmark = pytest.mark.django_db
-
-
-def form_data(**changes) -> dict:
-    data = {
-        "name": "first-model", "description": "", "track": "rookie-loop",
-        "direction": "counterclockwise", "race_type": "TIME_TRIAL", "camera": "FRONT_FACING_CAMERA",
-        "lidar": "", "network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-        "action_space_type": "discrete",
-        "actions": json.dumps([{"steering_angle": a, "speed": 1} for a in (-20, 0, 20)]),
-        "steering_low": -30, "steering_high": 30, "speed_low": 1, "speed_high": 2,
-        "algorithm": "clipped_ppo", "max_minutes": 60, "workers": 1,
-        "reward_function": EXAMPLES[0].source,
-    }  # fmt: skip
-    for algorithm, values in (("clipped_ppo", hyperparameters.defaults("clipped_ppo")),
-                              ("sac", hyperparameters.defaults("sac"))):  # fmt: skip
-        data.update({f"{algorithm}__{name}": value for name, value in values.items()})
-    return {**data, **changes}
 
 
 def test_the_create_page_offers_every_setting_with_its_default(client, alice, tracks):

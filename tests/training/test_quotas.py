@@ -7,8 +7,8 @@ import pytest
 from django.urls import reverse
 from django.utils import timezone
 
-from tests.training.factories import ready_model
-from tests.training.test_model_pages import form_data
+from tests.helpers.models import ready_model
+from tests.helpers.training import form_data
 from training import configuration, jobs, selectors
 from training.models import Quota, QuotaDefaults, RLModel, TrainingJob
 from training.services import model_create, training_stop

@@ -8,7 +8,7 @@ import pytest
 from django.urls import reverse
 
 import simulator.samples
-from tests.sandbox.test_sandbox import driving
+from tests.helpers.sandbox import driving
 from tests.services import ROOT
 from training.rewards import EXAMPLES, MAX_SOURCE_SIZE, reward_validate, static_problems
 

@@ -9,7 +9,7 @@ from django.urls import reverse
 from common import transactions
 from common.transactions import SlowStepInTransaction
 from tests import routes
-from tests.training.test_added_tracks import admin_client, upload  # noqa: F401 (a fixture)
+from tests.helpers.tracks import upload
 from training import rewards, services
 from training.models import Track
 
@@ -29,7 +29,7 @@ def route_checks(monkeypatch) -> list[bool]:
     return seen
 
 
-def test_a_staff_upload_checks_its_route_file_outside_any_transaction(admin_client, route_checks):  # noqa: F811
+def test_a_staff_upload_checks_its_route_file_outside_any_transaction(admin_client, route_checks):
     response = upload(admin_client, "counterclockwise", "club_oval")
     assert response.status_code == 302
     assert route_checks and not any(route_checks)  # the form's check and track_add's

@@ -6,21 +6,21 @@ reaches the job's log, a bounded share of it."""
 import re
 
 import gymnasium
-import numpy as np
 import pytest
 
 import simulator
 from common.redis_client import redis_client
 from rl import hyperparameters
-from rl.experience import Episode, JobChannel
+from rl.experience import JobChannel
 from rl.learner import Interrupted, Learner
-from tests.services import wait_for
-from tests.training.test_training import (
+from tests.helpers.learning import synthetic_episode
+from tests.helpers.training import (
     TINY_PPO,
     sandbox_children,
     settings,
     wait_for_job,
 )
+from tests.services import wait_for
 from training import configuration, rollouts, tasks
 from training.models import Iteration, JobLogLine, RLModel, TrainingJob
 from training.services import training_stop
@@ -110,20 +110,6 @@ def test_a_job_deleted_in_the_middle_of_an_update_frees_its_rollout_worker(
     TrainingJob.objects.filter(pk=job.pk).delete()
     wait_for(lambda: not ours & set(sandbox_children()), "the rollout to end", timeout=60)
     assert redis_client().hget(JobChannel(redis_client(), job.pk).control, "stop") == b"1"
-
-
-def synthetic_episode(env, steps: int = 40) -> Episode:
-    """An episode of random observations and actions, shaped as a rollout worker sends one."""
-    observations = [env.observation_space.sample() for _ in range(steps + 1)]
-    return Episode(
-        worker=0, version=0,
-        observations={name: np.stack([o[name] for o in observations])
-                      for name in env.observation_space.spaces},
-        actions=np.array([env.action_space.sample() for _ in range(steps)]),
-        rewards=np.ones(steps, dtype=np.float32), values=np.zeros(steps, dtype=np.float32),
-        log_probs=np.zeros(steps, dtype=np.float32), terminated=True, final_value=0.0,
-        progress=10.0, status="off_track", lap_time=None, trace=[],
-    )  # fmt: skip
 
 
 @pytest.mark.parametrize("algorithm", ["clipped_ppo", "sac"])

@@ -14,8 +14,8 @@ from django.core.files.storage import default_storage
 from django.urls import reverse
 from moto.server import ThreadedMotoServer
 
+from tests.helpers.models import trained_model
 from tests.services import free_port
-from tests.training.factories import trained_model
 from training import artifacts, services
 from training.models import EvaluationJob, RLModel, TrainingJob
 

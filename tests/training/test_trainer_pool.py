@@ -7,9 +7,9 @@ import pytest
 from django.urls import reverse
 
 from tests.conftest import TRAINERS
+from tests.helpers.training import reload
+from tests.helpers.training import settings as model_settings
 from tests.services import wait_for
-from tests.training.test_training import reload
-from tests.training.test_training import settings as model_settings
 from training import selectors
 from training.models import TrainingJob
 from training.services import model_create, training_stop

@@ -5,7 +5,6 @@ import importlib
 import io
 import json
 from datetime import timedelta
-from pathlib import Path
 
 import gymnasium
 import msgpack
@@ -24,50 +23,13 @@ from rl.learner import Learner
 from rl.stopwatch import PHASES
 from sandbox import MiB, Sandbox
 from simulator.trace import SimTraceRow
-from tests.services import parent_of, wait_for
-from tests.training.test_deepracer_utils import assert_training_logs_read_as_recorded
+from tests.helpers.training import queued_job, reload, settings, wait_for_job
+from tests.helpers.training_logs import assert_training_logs_read_as_recorded
+from tests.services import wait_for
 from training import artifacts, configuration, jobs, rewards, tasks, trainer
 from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
 from training.services import model_create, training_stop
-
-TINY_PPO = {"batch_size": 32, "num_epochs": 3, "num_episodes_between_training": 5}
-
-
-def settings(**changes) -> dict:
-    base = {
-        "name": "tiny-oval",
-        "track": "pitlane-oval",
-        "sensors": ["FRONT_FACING_CAMERA"],
-        "algorithm": "clipped_ppo",
-        "hyperparameters": {**hyperparameters.defaults("clipped_ppo"), **TINY_PPO},
-        "max_minutes": 10,
-        "reward_function": EXAMPLES[0].source,
-    }
-    return {**base, **changes}
-
-
-def reload(job: TrainingJob) -> TrainingJob:
-    return TrainingJob.objects.select_related("model").get(pk=job.pk)
-
-
-def wait_for_job(job: TrainingJob, condition, what: str, timeout: float = 240) -> TrainingJob:
-    """Wait until ``condition(job)``; a job that fails meanwhile fails the test with its log."""
-
-    def log_of(current: TrainingJob) -> str:
-        return "\n".join(f"{line.at:%H:%M:%S} {line.text}" for line in current.log_lines.all())
-
-    def reached() -> bool:
-        current = reload(job)
-        if current.status == TrainingJob.Status.FAILED:
-            pytest.fail(f"the job failed: {current.failure_reason}\n{log_of(current)}")
-        return condition(current)
-
-    try:
-        wait_for(reached, what, timeout=timeout)
-    except TimeoutError as error:
-        pytest.fail(f"{error}; the job's log:\n{log_of(reload(job))}")
-    return reload(job)
 
 
 @pytest.mark.django_db(transaction=True)
@@ -152,12 +114,6 @@ def test_a_second_delivery_of_the_trainer_task_does_not_train_twice(alice, track
     assert taken.attempt == 2
     with pytest.raises(jobs.LeaseLost):
         jobs.write(held, message="a stale run writing")
-
-
-def queued_job(owner) -> TrainingJob:
-    """A job saved without enqueueing its trainer: one still waiting for a free worker."""
-    clean = configuration.check(settings(), owner=owner, validate_reward=False)
-    return TrainingJob.objects.create(model=RLModel.objects.create(owner=owner, **clean.row()))
 
 
 @pytest.mark.django_db(transaction=True)
@@ -469,19 +425,6 @@ def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
     training_stop(job=job)
     job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)
     assert job.model.status == RLModel.Status.READY
-
-
-def sandbox_children() -> dict[int, int]:
-    """The running sandbox children: {pid: parent pid}. Their reward processes, forks of theirs
-    with the same command line, are left out."""
-    found = {}
-    for entry in Path("/proc").glob("[0-9]*"):
-        try:
-            if b"sandbox.child" in (entry / "cmdline").read_bytes():
-                found[int(entry.name)] = parent_of(int(entry.name))
-        except OSError:
-            continue
-    return {pid: parent for pid, parent in found.items() if parent not in found}
 
 
 @pytest.mark.django_db(transaction=True)

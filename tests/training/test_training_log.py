@@ -9,8 +9,8 @@ from common.redis_client import redis_client
 from rl.experience import JobChannel, LogEntry
 from sandbox import LOG_KEEP, Sandbox
 from sandbox.reward import MAX_LOG
-from tests.sandbox.test_sandbox import PARAMS, reward
-from tests.training.factories import ready_model
+from tests.helpers.models import ready_model
+from tests.helpers.sandbox import PARAMS, reward
 from training import rollouts
 from training.models import JobLogLine, TrainingJob
 

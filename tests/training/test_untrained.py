@@ -5,8 +5,8 @@ import pytest
 from django.urls import reverse
 
 from racing import services as racing_services
-from tests.racing.factories import event
-from tests.training.factories import ready_model
+from tests.helpers.league import event
+from tests.helpers.models import ready_model
 from training import artifacts, configuration, exports, selectors, services
 from training.models import EvaluationJob, RLModel, TrainingJob
 

@@ -5,7 +5,7 @@ import pytest
 
 from common.redis_client import redis_client
 from rl.experience import JobChannel
-from tests.training.test_clock import training_job
+from tests.helpers.training import training_job
 from training import selectors
 from training.models import TrainingJob
 from training.trainer import update_message
