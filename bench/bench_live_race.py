@@ -2,7 +2,7 @@
 the simulated lap times: `python -m bench.bench_live_race [--watchers 50] [--laps 3]`.
 
 Starts the console as `make run` does, makes a public event on the Pitlane Oval, a racer with a
-ready model (tests.training.factories' straight-ahead policy, which leaves the track at each
+ready model (tests.helpers.models' straight-ahead policy, which leaves the track at each
 bend and is put back), opens the event's live race, queues the model and launches its turn: a
 simulation worker drives ``--laps`` laps in real time (racing.live_races).
 
@@ -66,7 +66,7 @@ def main() -> None:
         from bench.bench_training import bench_racer
         from racing import live_races
         from racing.models import Event, Season, Submission
-        from tests.training.factories import ready_model
+        from tests.helpers.models import ready_model
         from training.models import EvaluationTrial, Track
         from training.services import tracks_sync
 

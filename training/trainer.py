@@ -16,6 +16,7 @@ import contextlib
 import functools
 import json
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -113,7 +114,25 @@ def run(job_id: int, owner: str, start_rollouts, queued_rollouts=None) -> bool:
     return True
 
 
+class Every:
+    """Says when ``seconds`` have passed since it last said so (the first time at once)."""
+
+    def __init__(self, seconds: float) -> None:
+        self.seconds = seconds
+        self._last = -math.inf
+
+    def due(self) -> bool:
+        now = time.monotonic()
+        if now - self._last < self.seconds:
+            return False
+        self._last = now
+        return True
+
+
 class Trainer:
+    """A training job's run on a trainer: the learner, the loop that gathers its workers'
+    episodes and updates the policy from them, the clock, and the job's end."""
+
     def __init__(self, job: TrainingJob, start_rollouts, queued_rollouts=None) -> None:
         self.job = job
         self.model: RLModel = job.model
@@ -127,16 +146,29 @@ class Trainer:
         self.slots += [
             Slot(i, self.model.track.name) for i in range(len(self.slots), self.model.workers)
         ]
+        # What it learns with (``_build_learner``), and the weights the workers drive
+        self.learner: Learner | None = None
+        self.spaces: tuple = ()  # the environment's observation and action spaces
+        self.version = job.weights_version  # of the weights published to the workers
+        # What came in
+        self.collected: list[Episode] = []  # episodes of the iteration being gathered
         self.metrics: list[dict] = []
         self.evaluations: dict[int, list[dict]] = {}  # version: the results come so far
+        self.printed: int | None = None  # lines of the workers and the reward function filed
+        # The clock: billed from when a car drives (``_start_clock``), never while it waits
+        self.base_seconds = job.training_seconds  # the time used before this run
         self.session_started: float | None = None  # when this run's clock started [monotonic]
         self.waiting_since = time.monotonic()  # for its first simulation worker
         self.first_run = job.started_at is None
-        self.base_seconds = job.training_seconds  # the time used before this run
+        self.training_message = ""  # what the job's page says while it trains
+        self.stopwatch = Stopwatch()  # where the time goes, by phase
+        # How it ends
         self.ending: str | None = None  # why the loop ends: "stop" or "limit"
-        self.last_look = self.last_check = 0.0
         self.abandoned: int | None = None  # the iteration an ending cut short
-        self.printed: int | None = None  # lines of the workers and the reward function filed
+        # What it does every so often
+        self.stop_looks = Every(STOP_CHECK)  # for the racer's stop and the time limit
+        self.renewals = Every(CHECK_EVERY)  # of the lease, with the clock written
+        self.worker_checks = Every(CHECK_EVERY)  # the workers, their logs and evaluations
 
     # The loop
 
@@ -265,9 +297,6 @@ class Trainer:
         return ", ".join(sorted(shown.get(name, name) for name in names))
 
     def _loop(self) -> None:
-        self.collected: list[Episode] = []
-        self.last_watch = 0.0
-        self.stopwatch = Stopwatch()
         while True:
             try:
                 if self._turn():
@@ -282,9 +311,7 @@ class Trainer:
         if self._should_end():
             self._say_why_it_ended()
             return True
-        now = time.monotonic()
-        if now - self.last_watch >= CHECK_EVERY:
-            self.last_watch = now
+        if self.worker_checks.due():
             if not self.channel.is_set_up(job.attempt):
                 self._recover_redis("Redis restarted and lost the job's keys")
                 return False
@@ -334,14 +361,11 @@ class Trainer:
         """Whether training should end now: the racer asked to stop, or the time is up. Looks at
         most once a second (in the middle of an update too), and renews the lease and writes the
         clock every few seconds."""
-        now = time.monotonic()
-        if self.ending is not None or now - self.last_look < STOP_CHECK:
+        if self.ending is not None or not self.stop_looks.due():
             return self.ending is not None
-        self.last_look = now
         max_seconds = self.model.max_minutes * 60
         spent = min(self._spent(), max_seconds)
-        if now - self.last_check >= CHECK_EVERY:
-            self.last_check = now
+        if self.renewals.due():
             jobs.write(self.job, lease_expires=timezone.now() + jobs.lease())
             if not jobs.clock_write(self.job, spent):
                 self.ending = "stop"

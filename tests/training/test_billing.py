@@ -12,7 +12,6 @@ from django.db import connection
 from django.urls import reverse
 from django.utils import timezone
 
-from rl.stopwatch import Stopwatch
 from sandbox import SandboxUnavailable
 from tests.helpers.training import queued_job, reload, wait_for_job
 from tests.services import wait_for
@@ -153,7 +152,7 @@ def test_a_jobs_clock_stops_while_no_car_drives_and_starts_again_when_one_does(
     run = trainer.Trainer(job, start_rollouts=lambda job, slot: None)
     run.channel.start(job.attempt)
     run.training_message, run.first_run = "Training with 1 simulation worker", False
-    run.collected, run.stopwatch, run.last_watch = [], Stopwatch(), time.monotonic()
+    run.worker_checks.due()  # the workers were just checked
     jobs.move(job, TrainingJob.Status.INITIALIZING)
     run.channel.beat(0)
     run._start_clock()
