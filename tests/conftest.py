@@ -23,11 +23,23 @@ BROWSER_TESTS = Path(__file__).parent / "browser"
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Browser tests are marked, and run last: the slowest, and the ones that need everything."""
+    """Browser tests are marked, and run last: the slowest, and the ones that need everything.
+    Tests that take the ``tensorflow`` fixture are marked too (``make test-quick`` leaves them
+    out: TensorFlow takes seconds to load)."""
     for item in items:
         if item.path.is_relative_to(BROWSER_TESTS):
             item.add_marker(pytest.mark.browser)
+        if "tensorflow" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.tensorflow)
     items.sort(key=lambda item: item.path.is_relative_to(BROWSER_TESTS))
+
+
+@pytest.fixture(scope="session")
+def tensorflow():
+    """TensorFlow, loaded once: the car's graph is run in it, as the car runs it."""
+    import tensorflow
+
+    return tensorflow
 
 
 @pytest.fixture(autouse=True)

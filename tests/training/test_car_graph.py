@@ -36,13 +36,6 @@ def case_id(case) -> str:
     return f"{algorithm}-{kind}-{'+'.join(sensors)}-{'3' if network == SHALLOW else '5'}-layer"
 
 
-@pytest.fixture(scope="module")
-def tensorflow():
-    import tensorflow
-
-    return tensorflow
-
-
 def build(algorithm, space, sensors, network):
     environment = {"track": "rookie-loop", "sensors": sensors, "action_space": space}
     env = gymnasium.make(simulator.ENV_ID, **environment)

@@ -29,13 +29,6 @@ DISCRETE = DEEPRACER_METADATA["action_space"]
 CONTINUOUS = {"steering_angle": {"low": -30.0, "high": 30.0}, "speed": {"low": 0.5, "high": 2.0}}
 
 
-@pytest.fixture(scope="module")
-def tf():
-    import tensorflow
-
-    return tensorflow
-
-
 def metadata(algorithm: str, space, sensors: list[str], **more) -> dict:
     kind = "discrete" if isinstance(space, list) else "continuous"
     return {
@@ -48,11 +41,11 @@ def environment(space, sensors) -> dict:
     return {"track": "rookie-loop", "sensors": sensors, "action_space": space}
 
 
-def deepracer_model(tf, algorithm, space, sensors, **options):
+def deepracer_model(tensorflow, algorithm, space, sensors, **options):
     env = gymnasium.make(simulator.ENV_ID, **environment(space, sensors))
     discrete = isinstance(space, list)
     count = len(space) if discrete else 2
-    model = build(tf, algorithm, SHALLOW, env.observation_space, count, discrete, **options)
+    model = build(tensorflow, algorithm, SHALLOW, env.observation_space, count, discrete, **options)
     env.close()
     return model
 
@@ -110,9 +103,11 @@ def checkpoint_files(deepracer, tmp_path, name: str) -> dict[str, bytes]:
     }
 
 
-def test_a_ppo_model_comes_in_with_its_best_and_last_checkpoints(alice, tracks, tf, tmp_path):
+def test_a_ppo_model_comes_in_with_its_best_and_last_checkpoints(
+    alice, tracks, tensorflow, tmp_path
+):
     sensors = ["FRONT_FACING_CAMERA"]
-    deepracer = deepracer_model(tf, "clipped_ppo", DISCRETE, sensors, seed=1)
+    deepracer = deepracer_model(tensorflow, "clipped_ppo", DISCRETE, sensors, seed=1)
     frames = sensor_frames(environment(DISCRETE, sensors), count=4)
     files = checkpoint_files(deepracer, tmp_path, "3_Step-2200.ckpt")
     best = {part: [deepracer.run(part, f) for f in frames] for part in ("policy", "value")}
@@ -171,10 +166,10 @@ CASES = {
 
 @pytest.mark.parametrize("case", CASES)
 def test_every_kind_of_model_comes_in_with_the_weights_of_its_checkpoint(
-    case, alice, tracks, tf, tmp_path
+    case, alice, tracks, tensorflow, tmp_path
 ):
     algorithm, space, sensors, parts, options = CASES[case]
-    deepracer = deepracer_model(tf, algorithm, space, sensors, **options)
+    deepracer = deepracer_model(tensorflow, algorithm, space, sensors, **options)
     files = checkpoint_files(deepracer, tmp_path, "12_Step-9000.ckpt")
     files["model/checkpoint"] = b'model_checkpoint_path: "12_Step-9000.ckpt"\n'
     archive = drfc_archive(files, metadata(algorithm, space, sensors))
@@ -187,9 +182,9 @@ def test_every_kind_of_model_comes_in_with_the_weights_of_its_checkpoint(
         assert all(torch.equal(critic[key], target[key]) for key in critic)
 
 
-def test_a_frozen_graph_without_checkpoints_brings_the_policy(alice, tracks, tf):
+def test_a_frozen_graph_without_checkpoints_brings_the_policy(alice, tracks, tensorflow):
     sensors = ["FRONT_FACING_CAMERA"]
-    deepracer = deepracer_model(tf, "sac", CONTINUOUS, sensors, keras_names=True)
+    deepracer = deepracer_model(tensorflow, "sac", CONTINUOUS, sensors, keras_names=True)
     archive = drfc_archive({"model/model_4.pb": deepracer.frozen_graph()},
                            metadata("sac", CONTINUOUS, sensors))  # fmt: skip
     imported = imports.import_model(owner=alice, archive=io.BytesIO(archive))
@@ -199,11 +194,13 @@ def test_a_frozen_graph_without_checkpoints_brings_the_policy(alice, tracks, tf)
     assert_same(deepracer, imported_policy(imported.model), frames, ["policy"])
 
 
-def test_a_car_archive_comes_in_to_evaluate_and_race_but_not_to_train(alice, tracks, tf, client):
+def test_a_car_archive_comes_in_to_evaluate_and_race_but_not_to_train(
+    alice, tracks, tensorflow, client
+):
     # simapp before 2.0: no sensor in the metadata, the camera called "observation".
     legacy = {key: value for key, value in DEEPRACER_METADATA.items() if key != "sensor"}
     legacy["version"] = "1"
-    deepracer = deepracer_model(tf, "clipped_ppo", DISCRETE, ["FRONT_FACING_CAMERA"],
+    deepracer = deepracer_model(tensorflow, "clipped_ppo", DISCRETE, ["FRONT_FACING_CAMERA"],
                                 camera="observation")  # fmt: skip
     archive = tar_gz({"model_metadata.json": json.dumps(legacy).encode(),
                       "agent/model.pb": deepracer.frozen_graph()})  # fmt: skip
@@ -240,8 +237,10 @@ def test_our_car_download_comes_back_as_the_same_policy(alice, bob, tracks):
                                    ours(theirs, "policy", observation), atol=1e-5)  # fmt: skip
 
 
-def test_weights_that_do_not_fit_the_metadata_are_refused_by_name(alice, tracks, tf, tmp_path):
-    deepracer = deepracer_model(tf, "clipped_ppo", DISCRETE, ["FRONT_FACING_CAMERA"])
+def test_weights_that_do_not_fit_the_metadata_are_refused_by_name(
+    alice, tracks, tensorflow, tmp_path
+):
+    deepracer = deepracer_model(tensorflow, "clipped_ppo", DISCRETE, ["FRONT_FACING_CAMERA"])
     files = checkpoint_files(deepracer, tmp_path, "2_Step-100.ckpt")
     two_actions = metadata("clipped_ppo", DISCRETE[:2], ["FRONT_FACING_CAMERA"])
     with pytest.raises(

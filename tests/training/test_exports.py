@@ -70,10 +70,8 @@ def car_loader(archive: bytes, into: Path) -> tuple[bytes, dict]:
 
 
 def test_the_car_installs_the_archive_and_its_graph_chooses_the_pytorch_policys_action(
-    alice, tracks, tmp_path
+    alice, tracks, tmp_path, tensorflow
 ):
-    import tensorflow
-
     model = trained_model(alice, "discrete-camera", weights=decisive)
     output = tmp_path / "physicalmodel-discrete-camera.tar.gz"
     call_command("exportmodel", model.name, "--physical", "-o", str(output), stdout=io.StringIO())
