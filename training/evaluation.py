@@ -539,11 +539,11 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
     ):  # fmt: skip
         logger.warning("Evaluation %s was taken over by another run; it ends it", evaluation.pk)
         return
-    _announce(evaluation)
-    if evaluation.rival:  # another racer's model, raced against theirs: neither held nor told
-        return
-    _model_free(evaluation)
-    if status != EvaluationJob.Status.CANCELED:  # the racer stopped it: they know
+    # a rival car's model (another racer's, raced against theirs) was neither held nor is told
+    if not evaluation.rival:
+        _model_free(evaluation)
+    _announce(evaluation)  # once the model is free: the page that hears it may race it again
+    if not evaluation.rival and status != EvaluationJob.Status.CANCELED:  # stopped: they know
         notifications.evaluation_ended(evaluation=evaluation)
 
 
