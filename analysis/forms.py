@@ -20,9 +20,11 @@ class RescoreForm(RacerWords, forms.Form):
     saved = forms.ChoiceField(
         required=False,
         label="Start from",
-        error_messages={"invalid_choice": "Choose the model's own reward function or one of "
-                        "your saved ones; that one is not in your library."},
-    )  # fmt: skip
+        error_messages={
+            "invalid_choice": "Choose the model's own reward function or one of "
+            "your saved ones; that one is not in your library."
+        },
+    )
     reward_function = forms.CharField(
         strip=False,
         required=False,

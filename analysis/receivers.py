@@ -9,8 +9,9 @@ from analysis import records
 logger = logging.getLogger(__name__)
 
 
-def summarize_recorded(sender, *, document: str, job=None, iteration: int = 0, evaluation=None,
-                       **kwargs) -> None:  # fmt: skip
+def summarize_recorded(
+    sender, *, document: str, job=None, iteration: int = 0, evaluation=None, **kwargs
+) -> None:
     """Summarise a trace as it is recorded. A summary that cannot be made is logged and made
     again when a page asks for it: it never stops the training or the evaluation."""
     try:

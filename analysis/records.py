@@ -109,9 +109,13 @@ class Source:
 def save(source: Source, iteration: int, steps: traces.Steps) -> TraceSummary:
     summary = summaries.summarize(steps, waypoints=len(source.track.centre), actions=source.actions)
     fields = {
-        "version": summaries.VERSION, "episodes": summary.episodes, "marks": summary.marks,
-        "actions": summary.actions, "points": summary.points, "steps": summary.steps,
-    }  # fmt: skip
+        "version": summaries.VERSION,
+        "episodes": summary.episodes,
+        "marks": summary.marks,
+        "actions": summary.actions,
+        "points": summary.points,
+        "steps": summary.steps,
+    }
     if source.evaluation is not None:
         row, _ = TraceSummary.objects.update_or_create(
             evaluation=source.evaluation, defaults=fields

@@ -12,8 +12,16 @@ from analysis.models import Rescoring
 from analysis.records import Source
 from simulator import params as reward_params
 
-EPISODE_COLUMNS = ("iteration", "episode", "start", "steps", "progress", "seconds", "outcome",
-                   "reward")  # fmt: skip
+EPISODE_COLUMNS = (
+    "iteration",
+    "episode",
+    "start",
+    "steps",
+    "progress",
+    "seconds",
+    "outcome",
+    "reward",
+)
 MAP_POINTS = 60_000  # the most steps one map draws: evenly spread over what was picked
 ROUND = 3  # decimals of a metre sent to the browser: a millimetre
 
@@ -157,9 +165,22 @@ def episode(source: Source, iteration: int, number: int) -> dict | None:
     rows = slice(chosen.first, chosen.last + 1)
     track = source.track
     recorded = steps.recorded(rows)
-    shown = ("x", "y", "heading", "speed", "steering_angle", "progress", "steps",
-             "distance_from_center", "is_left_of_center", "track_width", "closest_waypoints",
-             "all_wheels_on_track", "is_offtrack", "is_crashed")  # fmt: skip
+    shown = (
+        "x",
+        "y",
+        "heading",
+        "speed",
+        "steering_angle",
+        "progress",
+        "steps",
+        "distance_from_center",
+        "is_left_of_center",
+        "track_width",
+        "closest_waypoints",
+        "all_wheels_on_track",
+        "is_offtrack",
+        "is_crashed",
+    )
     params = [{name: p[name] for name in shown} for p in reward_params.replayed(track, recorded)]
     return {
         "iteration": iteration,

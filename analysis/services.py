@@ -23,8 +23,9 @@ class RescoringRefused(Refused):
     """The re-scoring was not asked for; ``errors`` says why, per input."""
 
 
-def rescoring_create(*, source: Source, owner, reward_function: str, first: int | None,
-                     last: int | None) -> Rescoring:  # fmt: skip
+def rescoring_create(
+    *, source: Source, owner, reward_function: str, first: int | None, last: int | None
+) -> Rescoring:
     """Ask for ``reward_function`` to be run over ``source``'s recorded steps, iterations
     ``first``..``last`` (by default the latest that fit in MAX_RESCORE_STEPS)."""
     steps = dict(source.summaries().values_list("iteration", "steps"))
@@ -33,10 +34,12 @@ def rescoring_create(*, source: Source, owner, reward_function: str, first: int 
     first, last = _range(steps, first, last)
     total = sum(count for iteration, count in steps.items() if first <= iteration <= last)
     if total > MAX_RESCORE_STEPS:
-        raise RescoringRefused({
-            "first": f"Iterations {first} to {last} hold {total:,} steps; a re-scoring takes at "
-            f"most {MAX_RESCORE_STEPS:,}. Choose fewer iterations."
-        })  # fmt: skip
+        raise RescoringRefused(
+            {
+                "first": f"Iterations {first} to {last} hold {total:,} steps; a re-scoring "
+                f"takes at most {MAX_RESCORE_STEPS:,}. Choose fewer iterations."
+            }
+        )
     rescorings_lapsed(owner=owner)
     with transaction.atomic():
         # One request at a time per racer counts and adds (PostgreSQL locks the racer's row).
@@ -45,9 +48,14 @@ def rescoring_create(*, source: Source, owner, reward_function: str, first: int 
         if busy.count() >= MAX_RESCORINGS_AT_ONCE:
             raise RescoringRefused("Wait for your re-scorings running now to finish.")
         rescoring = Rescoring.objects.create(
-            owner=owner, job=source.job, evaluation=source.evaluation,
-            reward_function=reward_function, first=first, last=last, total_steps=total,
-        )  # fmt: skip
+            owner=owner,
+            job=source.job,
+            evaluation=source.evaluation,
+            reward_function=reward_function,
+            first=first,
+            last=last,
+            total_steps=total,
+        )
     transaction.on_commit(lambda: _enqueue(rescoring.pk))
     return rescoring
 
@@ -62,9 +70,12 @@ def rescorings_lapsed(*, owner) -> int:
     failed = 0
     for pk in lapsed.values_list("pk", flat=True):
         failed += lifecycle.RESCORING.move(
-            pk, _R.FAILED, only_from={_R.RUNNING}, finished_at=timezone.now(),
+            pk,
+            _R.FAILED,
+            only_from={_R.RUNNING},
+            finished_at=timezone.now(),
             failure="The worker scoring it stopped answering; ask for it again.",
-        )  # fmt: skip
+        )
     return failed
 
 
@@ -82,10 +93,12 @@ def _range(steps: dict[int, int], first: int | None, last: int | None) -> tuple[
                 break
             first = iteration
     if not any(first <= iteration <= last for iteration in known):
-        raise RescoringRefused({
-            "first": f"No iteration from {first} to {last} was recorded; iterations "
-            f"{known[0]} to {known[-1]} were."
-        })  # fmt: skip
+        raise RescoringRefused(
+            {
+                "first": f"No iteration from {first} to {last} was recorded; iterations "
+                f"{known[0]} to {known[-1]} were."
+            }
+        )
     return max(first, known[0]), min(last, known[-1])  # what was recorded of first..last
 
 

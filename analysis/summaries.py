@@ -76,9 +76,12 @@ def summarize(steps: Steps, *, waypoints: int, actions: int | None) -> Summary:
 
 
 def _action_counts(
-    steps: Steps, section: np.ndarray, driven: np.ndarray, row_outcome: np.ndarray,
+    steps: Steps,
+    section: np.ndarray,
+    driven: np.ndarray,
+    row_outcome: np.ndarray,
     actions: int | None,
-) -> bytes:  # fmt: skip
+) -> bytes:
     """How often each steering bin, speed bin and action was chosen, per outcome and section."""
     table = np.zeros((len(OUTCOMES), SECTIONS, STEER_BINS + SPEED_BINS + (actions or 0)), np.int32)
     rows = np.flatnonzero(driven)
@@ -104,8 +107,16 @@ def _points(steps: Steps, driven: np.ndarray, row_outcome: np.ndarray) -> bytes:
     rows = np.flatnonzero(driven)
     if len(rows) > POINTS_PER_TRACE:
         rows = rows[np.linspace(0, len(rows) - 1, POINTS_PER_TRACE).round().astype(np.int64)]
-    columns = (steps.x, steps.y, steps.reward, steps.speed, steps.steer, steps.action,
-               row_outcome, np.arange(len(steps)))  # fmt: skip
+    columns = (
+        steps.x,
+        steps.y,
+        steps.reward,
+        steps.speed,
+        steps.steer,
+        steps.action,
+        row_outcome,
+        np.arange(len(steps)),
+    )
     return np.stack([np.asarray(c)[rows] for c in columns]).astype(np.float32).tobytes()
 
 
@@ -125,8 +136,14 @@ def iteration_figures(episodes: list[list]) -> dict:
     """One iteration's figures from its summarised episodes: average reward and progress, the
     share of laps completed, and the best and median lap of those."""
     if not episodes:
-        return {"episodes": 0, "reward": None, "progress": None, "completion": None,
-                "best_lap": None, "median_lap": None}  # fmt: skip
+        return {
+            "episodes": 0,
+            "reward": None,
+            "progress": None,
+            "completion": None,
+            "best_lap": None,
+            "median_lap": None,
+        }
     laps = [e[4] for e in episodes if e[5] == 0]
     return {
         "episodes": len(episodes),

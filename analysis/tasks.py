@@ -8,8 +8,13 @@ RESCORE_LIMIT = 15 * 60  # [s] a re-scoring is stopped after this, and told so
 RESCORE_HARD_LIMIT = RESCORE_LIMIT + 60  # [s] its worker process is killed after this
 
 
-@shared_task(name="analysis.rescore", acks_late=True, ignore_result=True,
-             soft_time_limit=RESCORE_LIMIT, time_limit=RESCORE_HARD_LIMIT)  # fmt: skip
+@shared_task(
+    name="analysis.rescore",
+    acks_late=True,
+    ignore_result=True,
+    soft_time_limit=RESCORE_LIMIT,
+    time_limit=RESCORE_HARD_LIMIT,
+)
 def rescore(rescoring_id: int) -> None:
     from analysis import rescoring
 

@@ -22,14 +22,28 @@ from simulator.trace import FIELDS
 # (reversed, immobilized, time up, in progress).
 OUTCOMES = ("lap_complete", "off_track", "crashed", "other")
 OUTCOME_LABELS = {
-    "lap_complete": "Lap complete", "off_track": "Off track", "crashed": "Crashed",
+    "lap_complete": "Lap complete",
+    "off_track": "Off track",
+    "crashed": "Crashed",
     "other": "Other (reversed, immobilized, time up)",
-}  # fmt: skip
+}
 LEAVING = ("off_track", "crashed")  # the statuses marked on the track where they happen
 READ = (
-    "episode", "steps", "X", "Y", "yaw", "steer", "throttle", "action", "reward",
-    "all_wheels_on_track", "progress", "closest_waypoint", "tstamp", "episode_status",
-)  # fmt: skip
+    "episode",
+    "steps",
+    "X",
+    "Y",
+    "yaw",
+    "steer",
+    "throttle",
+    "action",
+    "reward",
+    "all_wheels_on_track",
+    "progress",
+    "closest_waypoint",
+    "tstamp",
+    "episode_status",
+)
 MAX_ROWS = 2_000_000  # a trace longer than this is not read (a 10-hour job writes ~10,000/file)
 
 
@@ -95,11 +109,17 @@ class Steps:
     def recorded(self, rows: slice | np.ndarray) -> Recorded:
         """What ``simulator.params.replayed`` reads of ``rows`` (a slice or row indices)."""
         return Recorded(
-            x=self.x[rows], y=self.y[rows], yaw=self.yaw[rows], steer=self.steer[rows],
-            speed=self.speed[rows], progress=self.progress[rows], steps=self.steps[rows],
-            all_wheels_on_track=self.all_wheels_on_track[rows], status=self.status[rows],
+            x=self.x[rows],
+            y=self.y[rows],
+            yaw=self.yaw[rows],
+            steer=self.steer[rows],
+            speed=self.speed[rows],
+            progress=self.progress[rows],
+            steps=self.steps[rows],
+            all_wheels_on_track=self.all_wheels_on_track[rows],
+            status=self.status[rows],
             tstamp=self.tstamp[rows],
-        )  # fmt: skip
+        )
 
     def leaving(self) -> np.ndarray:
         """The rows where the car left the track or crashed: the first row of each incident."""

@@ -88,9 +88,12 @@ def points(request: HttpRequest, pk: int, evaluation: int | None = None) -> Http
     asked = request.GET.get("rescoring", "")
     if asked.isascii() and asked.isdecimal() and len(asked) <= 18:  # a row's id, or nothing
         rescoring = Rescoring.objects.filter(
-            pk=int(asked), owner=request.user, status=Rescoring.Status.DONE,
-            job=source.job, evaluation=source.evaluation,
-        ).first()  # fmt: skip
+            pk=int(asked),
+            owner=request.user,
+            status=Rescoring.Status.DONE,
+            job=source.job,
+            evaluation=source.evaluation,
+        ).first()
     body = selectors.points(source, _choice(request, source), rescoring)
     response = HttpResponse(body, content_type="application/octet-stream")
     response["Cache-Control"] = "private, max-age=60"
@@ -146,8 +149,9 @@ def rescore(request: HttpRequest, pk: int, evaluation: int | None = None) -> Jso
 
 @login_required
 @require_GET
-def rescoring(request: HttpRequest, pk: int, rescoring: int,
-              evaluation: int | None = None) -> JsonResponse:  # fmt: skip
+def rescoring(
+    request: HttpRequest, pk: int, rescoring: int, evaluation: int | None = None
+) -> JsonResponse:
     source = _source(request, pk, evaluation)
     services.rescorings_lapsed(owner=request.user)
     found = get_object_or_404(

@@ -85,8 +85,12 @@ def measure(args) -> None:
     call_command("migrate", verbosity=0)
     call_command("loadtracks", verbosity=0, stdout=open(os.devnull, "w"))  # noqa: SIM115
     racer = User.objects.create_user("racer", password="!")  # noqa: S106
-    draft = {"name": "ten-hours", "track": "pitlane-oval", "reward_function": EXAMPLES[0].source,
-             "hyperparameters": hyperparameters.defaults("clipped_ppo")}  # fmt: skip
+    draft = {
+        "name": "ten-hours",
+        "track": "pitlane-oval",
+        "reward_function": EXAMPLES[0].source,
+        "hyperparameters": hyperparameters.defaults("clipped_ppo"),
+    }
     clean = configuration.check(draft, owner=racer, validate_reward=False)
     model = RLModel.objects.create(owner=racer, status=RLModel.Status.READY, **clean.row())
     job = TrainingJob.objects.create(
@@ -105,8 +109,10 @@ def measure(args) -> None:
         records.summarize_document(document, job=job, iteration=iteration)
         summarising.append(time.perf_counter() - begin)
     total = args.iterations * (document.count("\n") - 1)
-    print(f"{args.iterations} iterations, {total:,} recorded rows; summarising one as the trainer "
-          f"records it: {statistics.median(summarising) * 1000:.0f} ms (median)")  # fmt: skip
+    print(
+        f"{args.iterations} iterations, {total:,} recorded rows; summarising one as the trainer "
+        f"records it: {statistics.median(summarising) * 1000:.0f} ms (median)"
+    )
     print(f"{len(episodes)} episodes an iteration; the one shown: {middle.steps} steps\n")
 
     client = Client()
@@ -149,9 +155,13 @@ def rescore(job, racer, last: int) -> None:
 
     # As the page asks for one (analysis.services), without a broker: this process runs it.
     asked = Rescoring.objects.create(
-        owner=racer, job=job, reward_function=EXAMPLES[0].source, first=last, last=last,
+        owner=racer,
+        job=job,
+        reward_function=EXAMPLES[0].source,
+        first=last,
+        last=last,
         total_steps=job.summaries.get(iteration=last).steps,
-    )  # fmt: skip
+    )
     begin = time.perf_counter()
     rescoring.run(asked.pk)
     seconds = time.perf_counter() - begin

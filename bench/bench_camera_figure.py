@@ -26,15 +26,23 @@ from simulator.texture import Style
 
 # Pitlane's camera and track image before issue 44 (simulator/env.py and texture.py at d6827f9).
 BEFORE_CAMERA = {
-    "camera_fov": 120.0, "camera_mount": (0.12, 0.12, 25.0), "camera_texture_ppm": 64,
+    "camera_fov": 120.0,
+    "camera_mount": (0.12, 0.12, 25.0),
+    "camera_texture_ppm": 64,
     "room": Room(height=None, background=150),  # no walls: a light sky from the horizon up
-}  # fmt: skip
+}
 BEFORE_STYLE = Style(
-    surroundings=(196, (200, 212, 216)), surface=(58, (62, 60, 58)),
-    border=(250, (250, 250, 250)), centre_line=(214, (40, 200, 240)),
-    start_line=(250, (250, 250, 250)), border_width=0.05, centre_line_width=0.03, dash=0.15,
-    start_line_width=0.05, borders_inside=False,
-)  # fmt: skip
+    surroundings=(196, (200, 212, 216)),
+    surface=(58, (62, 60, 58)),
+    border=(250, (250, 250, 250)),
+    centre_line=(214, (40, 200, 240)),
+    start_line=(250, (250, 250, 250)),
+    border_width=0.05,
+    centre_line_width=0.03,
+    dash=0.15,
+    start_line_width=0.05,
+    borders_inside=False,
+)
 SCALE = 3
 
 
@@ -62,8 +70,7 @@ def labelled(image: np.ndarray, label: str) -> np.ndarray:
     big = cv2.resize(image, None, fx=SCALE, fy=SCALE, interpolation=cv2.INTER_NEAREST)
     big = cv2.cvtColor(big, cv2.COLOR_GRAY2BGR)
     cv2.rectangle(big, (0, 0), (big.shape[1], 22), (0, 0, 0), -1)
-    cv2.putText(big, label, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1,
-                cv2.LINE_AA)  # fmt: skip
+    cv2.putText(big, label, (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
     return big
 
 

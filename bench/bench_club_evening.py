@@ -138,9 +138,11 @@ class Browser:
     def post(self, path: str, data: dict) -> tuple[requests.Response, float]:
         started = time.perf_counter()
         response = self.session.post(
-            self.base + path, data=data, headers={"X-CSRFToken": self.token},
+            self.base + path,
+            data=data,
+            headers={"X-CSRFToken": self.token},
             timeout=REQUEST_TIMEOUT,
-        )  # fmt: skip
+        )
         return response, time.perf_counter() - started
 
     def validate(self, source: str) -> tuple[int, float]:
@@ -363,8 +365,10 @@ class Evening:
         from bench.bench_training import job_of
         from training.models import Iteration
 
-        print(f"\n{'job':<14}{'queue wait':>11}{'training':>10}{'iterations':>11}{'steps':>8}"
-              f"{'steps/s':>9}  status")  # fmt: skip
+        print(
+            f"\n{'job':<14}{'queue wait':>11}{'training':>10}{'iterations':>11}{'steps':>8}"
+            f"{'steps/s':>9}  status"
+        )
         healthy = unfinished is None
         for model in self.models:
             job = job_of(model)
@@ -374,8 +378,10 @@ class Evening:
             started = job.started_at
             wait = clock((started - job.created_at).total_seconds()) if started else "never"
             reason = f" ({job.failure_reason})" if job.failure_reason else ""
-            print(f"{model.owner.username:<14}{wait:>11}{clock(job.training_seconds):>10}"
-                  f"{job.iterations:>11}{job.steps:>8}{rate}  {job.status}{reason}")  # fmt: skip
+            print(
+                f"{model.owner.username:<14}{wait:>11}{clock(job.training_seconds):>10}"
+                f"{job.iterations:>11}{job.steps:>8}{rate}  {job.status}{reason}"
+            )
             healthy &= job.status == "COMPLETED" and job.iterations > 0
         if unfinished:
             print(f"{unfinished}: the jobs not completed above waited or trained on.")
@@ -430,8 +436,10 @@ class Evening:
             f"{status or 'no answer'}: {n}" for status, n in sorted(self.rescore_refusals.items())
         )
         rate = f"{scored / busy:,.0f} steps/s while running" if busy else "none ended"
-        print(f"Re-scorings, racer-1: {len(rows)} asked ({statuses}); {rate}; "
-              f"refused: {refused or '0'}")  # fmt: skip
+        print(
+            f"Re-scorings, racer-1: {len(rows)} asked ({statuses}); {rate}; "
+            f"refused: {refused or '0'}"
+        )
 
 
 def main() -> None:
@@ -446,18 +454,23 @@ def main() -> None:
         help="jobs training at once (make run's PITLANE_TRAINERS)",
     )
     parser.add_argument(
-        "--simulations", type=int, default=max(2, os.cpu_count() or 1),
+        "--simulations",
+        type=int,
+        default=max(2, os.cpu_count() or 1),
         help="simulation processes (make run's PITLANE_WORKER_CONCURRENCY)",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--console-rates", action="store_true",
+        "--console-rates",
+        action="store_true",
         help="keep make run's rate limit on Validate (30 checks in 10 minutes per racer)",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--patience", type=float, default=None,
+        "--patience",
+        type=float,
+        default=None,
         help="[min] after which the evening is given up (default: the queue's length in jobs "
         "times the training minutes plus 3, plus 10)",
-    )  # fmt: skip
+    )
     arguments = parser.parse_args()
     if min(arguments.racers, arguments.trainers, arguments.simulations) < 1:
         parser.error("--racers, --trainers and --simulations take 1 or more")

@@ -106,8 +106,11 @@ def _one_job(cluster: Cluster, owner, machines: int, minutes: float) -> None:
     if not wall:
         print(f"  {machines:12d}  no iteration finished in {minutes:g} min")
         return
-    print(f"  {machines:12d}  {len(rows):10d}  {steps / wall:7.1f}  {trainer / wall:12.0%}  "
-          f"{moved / max(steps, 1):16,.0f}", flush=True)  # fmt: skip
+    print(
+        f"  {machines:12d}  {len(rows):10d}  {steps / wall:7.1f}  {trainer / wall:12.0%}  "
+        f"{moved / max(steps, 1):16,.0f}",
+        flush=True,
+    )
 
 
 def _many_jobs(owner, jobs: int, minutes: float) -> None:
@@ -130,8 +133,10 @@ def _many_jobs(owner, jobs: int, minutes: float) -> None:
                 elif job.is_active and time.monotonic() - began[model.pk] > minutes * 60:
                     training_stop(job=job)
         time.sleep(1)
-    print(f"\n{jobs} jobs of one worker created at once, stopped after {minutes:g} min of "
-          "training each:")  # fmt: skip
+    print(
+        f"\n{jobs} jobs of one worker created at once, stopped after {minutes:g} min of "
+        "training each:"
+    )
     print("  job  queued for  iterations  steps/s")
     for n, model in enumerate(models):
         rows = list(Iteration.objects.filter(job=job_of(model)))

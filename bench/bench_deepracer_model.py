@@ -56,10 +56,21 @@ def utils_folder(given: Path | None) -> Path:
     if not (folder / MODEL / "model_48.pb").exists():
         Path("var").mkdir(exist_ok=True)
         subprocess.run(
-            [sys.executable, "-m", "pip", "download", f"deepracer-utils=={VERSION}", "--no-deps",
-             "--no-binary", ":all:", "-d", "var", "-q"],
+            [
+                sys.executable,
+                "-m",
+                "pip",
+                "download",
+                f"deepracer-utils=={VERSION}",
+                "--no-deps",
+                "--no-binary",
+                ":all:",
+                "-d",
+                "var",
+                "-q",
+            ],
             check=True,
-        )  # fmt: skip
+        )
         with tarfile.open(Path("var") / f"deepracer_utils-{VERSION}.tar.gz") as archive:
             wanted = [m for m in archive if "/sample-model/" in m.name]
             archive.extractall("var", members=wanted, filter="data")
@@ -97,14 +108,16 @@ def with_old_parts(env: DeepRacerEnv, parts: list[str]) -> DeepRacerEnv:
     return env
 
 
-def drive(track: str, settings: dict, starts: int, act_for, old: bool = False,
-          old_parts: list[str] = ()) -> float:  # fmt: skip
+def drive(
+    track: str, settings: dict, starts: int, act_for, old: bool = False, old_parts: list[str] = ()
+) -> float:
     """Mean progress from ``starts`` points round ``track``; ``act_for(start)`` gives the
     policy for each."""
     results = []
     for number in range(starts):
-        env = DeepRacerEnv(track=track, mode="evaluation", laps=1, max_resets=0,
-                           start=number / starts, **settings)  # fmt: skip
+        env = DeepRacerEnv(
+            track=track, mode="evaluation", laps=1, max_resets=0, start=number / starts, **settings
+        )
         if old:
             env = before(env)
         elif old_parts:
@@ -118,14 +131,19 @@ def main() -> None:
     parser.add_argument("--tracks", default=",".join(TRACKS))
     parser.add_argument("--starts", type=int, default=12, help="points round the lap")
     parser.add_argument("--utils", type=Path, help="deepracer-utils' unpacked source")
-    parser.add_argument("--old-parts", default="", help="drive 'after' with these parts of the "
-                        "old look, e.g. room,surroundings")  # fmt: skip
+    parser.add_argument(
+        "--old-parts",
+        default="",
+        help="drive 'after' with these parts of the old look, e.g. room,surroundings",
+    )
     args = parser.parse_args()
     old_parts = [part for part in args.old_parts.split(",") if part]
     known = {*BEFORE_CAMERA, *(field.name for field in dataclasses.fields(BEFORE_STYLE))}
     if unknown := sorted(set(old_parts) - known):
-        parser.error(f"--old-parts: no part named {', '.join(unknown)}; "
-                     f"the parts are {', '.join(sorted(known))}")  # fmt: skip
+        parser.error(
+            f"--old-parts: no part named {', '.join(unknown)}; "
+            f"the parts are {', '.join(sorted(known))}"
+        )
     policy, settings = deepracer_policy(utils_folder(args.utils))
     actions = len(settings["action_space"])
 
@@ -137,15 +155,19 @@ def main() -> None:
         return lambda _observation: int(rng.integers(actions))
 
     started = time.perf_counter()
-    print(f"deepracer-utils {VERSION} model_48.pb, {args.starts} starts a track, one lap, "
-          "ended at the first time off the track: mean progress [%]")  # fmt: skip
+    print(
+        f"deepracer-utils {VERSION} model_48.pb, {args.starts} starts a track, one lap, "
+        "ended at the first time off the track: mean progress [%]"
+    )
     if old_parts:
         print(f"after: simapp's camera and scene but the old {', '.join(old_parts)}")
     print(f"{'track':<22}{'random':>8}{'before':>8}{'after':>8}")
     for track in args.tracks.split(","):
-        row = [drive(track, settings, args.starts, random),
-               drive(track, settings, args.starts, model, old=True),
-               drive(track, settings, args.starts, model, old_parts=old_parts)]  # fmt: skip
+        row = [
+            drive(track, settings, args.starts, random),
+            drive(track, settings, args.starts, model, old=True),
+            drive(track, settings, args.starts, model, old_parts=old_parts),
+        ]
         print(f"{track:<22}" + "".join(f"{value:8.1f}" for value in row), flush=True)
     print(f"({time.perf_counter() - started:.0f} s)")
 

@@ -64,9 +64,11 @@ def attack(body: str) -> tuple[str, float, float]:
     """(how the episode ended, seconds it held the worker, MiB above the baseline at peak)."""
     policy = {"algorithm": hp.PPO, "architecture": SHALLOW, "seed": 0}
     with Sandbox(
-        env={"track": "rookie-loop"}, policy=policy, call_timeout=REWARD_CALL_LIMIT,
+        env={"track": "rookie-loop"},
+        policy=policy,
+        call_timeout=REWARD_CALL_LIMIT,
         memory_allowance=MEMORY_ALLOWANCE,
-    ) as sandbox:  # fmt: skip
+    ) as sandbox:
         sandbox.load(EVERYWHERE + body)
         baseline = peak = rss()
         done = threading.Event()

@@ -47,10 +47,18 @@ def run_child(url: str, requests: int, label: str) -> None:
     print(f"\n== {label}", flush=True)
     env = {**os.environ, "DATABASE_URL": url, "DJANGO_SETTINGS_MODULE": "console.settings.dev"}
     subprocess.run(
-        [sys.executable, "-m", "bench.bench_leaderboard", "--child", url,
-         "--requests", str(requests)],
-        env=env, check=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-m",
+            "bench.bench_leaderboard",
+            "--child",
+            url,
+            "--requests",
+            str(requests),
+        ],
+        env=env,
+        check=True,
+    )
 
 
 # PostgreSQL
@@ -132,10 +140,14 @@ def populate():
             name="Bench season", year=now.year, starts_on=now.date(), ends_on=now.date()
         )
         event = Event.objects.create(
-            season=season, name="Bench trial", slug="bench-trial",
-            track=Track.objects.get(name="pitlane-oval"), division=Division.OPEN,
-            opens_at=now - timedelta(days=10), closes_at=now + timedelta(days=10),
-        )  # fmt: skip
+            season=season,
+            name="Bench trial",
+            slug="bench-trial",
+            track=Track.objects.get(name="pitlane-oval"),
+            division=Division.OPEN,
+            opens_at=now - timedelta(days=10),
+            closes_at=now + timedelta(days=10),
+        )
         racers = User.objects.bulk_create(
             [User(username=f"racer{i:05d}", password="!") for i in range(RACERS)],  # noqa: S106
             batch_size=2000,
@@ -146,12 +158,19 @@ def populate():
             for _ in range(SUBMISSIONS_PER_RACER):
                 qualified = rng.random() < 0.9
                 score = round(skill * rng.uniform(0.95, 1.2))
-                submissions.append(Submission(
-                    event=event, racer=racer, model_name=f"model-{racer.pk}",
-                    status=Submission.Status.COMPLETED, finished_at=now, qualified=qualified,
-                    score_ms=score if qualified else None, laps_completed=3,
-                    off_tracks=rng.randint(0, 4),
-                ))  # fmt: skip
+                submissions.append(
+                    Submission(
+                        event=event,
+                        racer=racer,
+                        model_name=f"model-{racer.pk}",
+                        status=Submission.Status.COMPLETED,
+                        finished_at=now,
+                        qualified=qualified,
+                        score_ms=score if qualified else None,
+                        laps_completed=3,
+                        off_tracks=rng.randint(0, 4),
+                    )
+                )
         Submission.objects.bulk_create(submissions, batch_size=5000)
         best: dict[int, Submission] = {}
         for submission in Submission.objects.filter(event=event, qualified=True).order_by(
@@ -159,12 +178,21 @@ def populate():
         ):
             best.setdefault(submission.racer_id, submission)
         Ranking.objects.bulk_create(
-            [Ranking(event=event, racer_id=racer_id, submission=s, model_name=s.model_name,
-                     score_ms=s.score_ms, submitted_at=s.created_at,
-                     laps_completed=s.laps_completed, off_tracks=s.off_tracks)
-             for racer_id, s in best.items()],
+            [
+                Ranking(
+                    event=event,
+                    racer_id=racer_id,
+                    submission=s,
+                    model_name=s.model_name,
+                    score_ms=s.score_ms,
+                    submitted_at=s.created_at,
+                    laps_completed=s.laps_completed,
+                    off_tracks=s.off_tracks,
+                )
+                for racer_id, s in best.items()
+            ],
             batch_size=5000,
-        )  # fmt: skip
+        )
     ranked = {ranking.racer_id for ranking in event.rankings.all()}
     return event, [racer for racer in racers if racer.pk in ranked]
 

@@ -229,8 +229,11 @@ def main() -> None:
         rates: dict[bool, list[float]] = {False: [], True: []}
         cpu: dict[bool, dict[str, list[float]]] = {False: {}, True: {}}
         crowd: list[Viewer] = []
-        print(f"Training, PPO defaults, camera, one worker: {2 * WATCHED + 1} iterations, every "
-              f"other one watched by {VIEWERS} viewers", flush=True)  # fmt: skip
+        print(
+            f"Training, PPO defaults, camera, one worker: {2 * WATCHED + 1} iterations, every "
+            f"other one watched by {VIEWERS} viewers",
+            flush=True,
+        )
         for phase in range(2 * WATCHED + 1):
             watched, done = phase % 2 == 1, iterations()
             viewers = Audience(console["url"], job.pk, cookie, VIEWERS) if watched else None
@@ -248,8 +251,11 @@ def main() -> None:
             previous, row = rows[done - 1 : done + 1]
             rate = row.steps / (row.created_at - previous.created_at).total_seconds()
             rates[watched].append(rate)
-            print(f"iteration {row.number}: {rate:,.1f} steps/s, "
-                  f"{'watched' if watched else 'nobody watching'}", flush=True)  # fmt: skip
+            print(
+                f"iteration {row.number}: {rate:,.1f} steps/s, "
+                f"{'watched' if watched else 'nobody watching'}",
+                flush=True,
+            )
         training_stop(job=job_of(model))
 
         print(f"{VIEWERS} viewers: latency {latency_line(crowd)}")

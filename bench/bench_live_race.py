@@ -72,21 +72,28 @@ def main() -> None:
 
         tracks_sync()
         now = timezone.now()
-        season = Season.objects.create(name="Bench", year=now.year, starts_on=now.date(),
-                                       ends_on=now.date())  # fmt: skip
+        season = Season.objects.create(
+            name="Bench", year=now.year, starts_on=now.date(), ends_on=now.date()
+        )
         event = Event.objects.create(
-            season=season, name="Live bench", slug="live-bench", opens_at=now,
-            closes_at=now + timezone.timedelta(days=1), laps_required=1, laps_to_drive=args.laps,
+            season=season,
+            name="Live bench",
+            slug="live-bench",
+            opens_at=now,
+            closes_at=now + timezone.timedelta(days=1),
+            laps_required=1,
+            laps_to_drive=args.laps,
             track=Track.objects.get(name="pitlane-oval"),
-        )  # fmt: skip
+        )
         racer = bench_racer()
         staff = bench_racer("staff")
         session = live_races.live_session_open(event=event, facilitator=staff)
         live_races.live_entry_join(session=session, racer=racer, model=ready_model(racer))
 
         with sync_playwright() as playwright:
-            browser = playwright.chromium.launch(executable_path=shutil.which("chromium"),
-                                                 args=["--no-sandbox"])  # fmt: skip
+            browser = playwright.chromium.launch(
+                executable_path=shutil.which("chromium"), args=["--no-sandbox"]
+            )
             page = browser.new_page(viewport={"width": 1280, "height": 720})
             page.goto(f"{console['url']}/events/{event.slug}/broadcast/")
             page.wait_for_selector("body[data-listening=true]")
@@ -114,16 +121,20 @@ def main() -> None:
         latencies = sorted(1000 * x for viewer in viewers for x in viewer.latencies)
         frames = [viewer.frames for viewer in viewers]
         p95 = latencies[int(0.95 * (len(latencies) - 1))]
-        print(f"{args.watchers} watchers of a live turn ({args.laps} laps of the Pitlane Oval in "
-              f"real time): {len(latencies):,} frames, {min(frames)}-{max(frames)} a watcher; "
-              f"latency p50 {statistics.median(latencies):.0f} ms, p95 {p95:.0f} ms")  # fmt: skip
+        print(
+            f"{args.watchers} watchers of a live turn ({args.laps} laps of the Pitlane Oval in "
+            f"real time): {len(latencies):,} frames, {min(frames)}-{max(frames)} a watcher; "
+            f"latency p50 {statistics.median(latencies):.0f} ms, p95 {p95:.0f} ms"
+        )
         trials = EvaluationTrial.objects.filter(evaluation_id=evaluation).order_by("number")
         differences = []
         for trial, shown in zip(trials, seen, strict=False):
             difference = laptime_ms(shown["timer"]) - trial.time_ms
             differences.append(abs(difference))
-            print(f"lap {trial.number}: simulated {trial.time_ms / 1000:.3f} s, the broadcast's "
-                  f"timer {shown['timer']} ({difference:+d} ms)")  # fmt: skip
+            print(
+                f"lap {trial.number}: simulated {trial.time_ms / 1000:.3f} s, the broadcast's "
+                f"timer {shown['timer']} ({difference:+d} ms)"
+            )
         if differences:
             print(f"the broadcast's lap timer: within {max(differences)} ms of the simulated laps")
 

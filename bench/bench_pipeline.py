@@ -152,16 +152,20 @@ def report(jobs: list) -> None:
     for job in jobs:
         rows = list(Iteration.objects.filter(job=job))
         if not rows:
-            print(f"  {job.pk:3d}  {job.status:9s}  no iteration ended ({job.episodes} episodes "
-                  f"arrived): give it more --minutes")  # fmt: skip
+            print(
+                f"  {job.pk:3d}  {job.status:9s}  no iteration ended ({job.episodes} episodes "
+                f"arrived): give it more --minutes"
+            )
             continue
         steps, wall = sum(r.steps for r in rows), sum(r.wall_seconds for r in rows)
         rate = steps / wall
         total += rate
         split = {p: sum(r.time_split.get(p, 0.0) for r in rows) for p in PHASES}
         shares = "  ".join(f"{100 * split[p] / wall:8.1f}%" for p in PHASES)
-        print(f"  {job.pk:3d}  {job.status:9s}  {len(rows):5d}  {steps:5d}  {wall:6.1f}  "
-              f"{rate:7.1f}  {shares}")  # fmt: skip
+        print(
+            f"  {job.pk:3d}  {job.status:9s}  {len(rows):5d}  {steps:5d}  {wall:6.1f}  "
+            f"{rate:7.1f}  {shares}"
+        )
     print(f"  all {len(jobs)} job(s): {total:.1f} steps/s", flush=True)
 
 
@@ -169,8 +173,10 @@ def machine_words() -> str:
     import torch
 
     gpu = torch.cuda.get_device_name(0) if torch.cuda.is_available() else "no GPU"
-    return (f"{os.cpu_count()} cores, {gpu}, PyTorch {torch.__version__}, "
-            f"Python {sys.version.split()[0]}")  # fmt: skip
+    return (
+        f"{os.cpu_count()} cores, {gpu}, PyTorch {torch.__version__}, "
+        f"Python {sys.version.split()[0]}"
+    )
 
 
 def arguments() -> argparse.Namespace:
@@ -193,8 +199,12 @@ def arguments() -> argparse.Namespace:
 def rounds(chosen: argparse.Namespace, var_dir: str, redis_url: str) -> None:
     """Set the database up, then train each round of ``chosen.jobs`` and report it."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("DJANGO_")}
-    env.update(DJANGO_SETTINGS_MODULE="bench.pipeline_settings", PITLANE_VAR_DIR=var_dir,
-               REDIS_URL=redis_url, PYTHONUNBUFFERED="1")  # fmt: skip
+    env.update(
+        DJANGO_SETTINGS_MODULE="bench.pipeline_settings",
+        PITLANE_VAR_DIR=var_dir,
+        REDIS_URL=redis_url,
+        PYTHONUNBUFFERED="1",
+    )
     os.environ.update(env)
     import django
     from django.core.management import call_command
@@ -211,9 +221,12 @@ def rounds(chosen: argparse.Namespace, var_dir: str, redis_url: str) -> None:
         workers, cars = layout(cores, jobs, chosen.workers, chosen.cars)
         round_env = {**env, "PITLANE_CARS_PER_WORKER": str(cars), "PITLANE_TRAINERS": str(jobs)}
         os.environ.update(round_env)
-        print(f"{jobs} job(s), each {workers} rollout worker(s) of {cars} car(s), "
-              f"{chosen.minutes:g} min; cores: {jobs * workers} simulating, {jobs} feeding "
-              f"the trainers, of {cores}:", flush=True)  # fmt: skip
+        print(
+            f"{jobs} job(s), each {workers} rollout worker(s) of {cars} car(s), "
+            f"{chosen.minutes:g} min; cores: {jobs * workers} simulating, {jobs} feeding "
+            f"the trainers, of {cores}:",
+            flush=True,
+        )
         models = round_models(owner, jobs, workers)
         with started(worker_commands(jobs, workers), round_env, var_dir):
             report(train_round(models, chosen.minutes))

@@ -38,8 +38,7 @@ def train(owner, *, randomise: bool, minutes: float, seed: int, fast: bool):
     training_stop(job=job)
     while (job := job_of(model)).status in job.ACTIVE:
         time.sleep(1)
-    print(f"  {name}: {job.training_seconds / 60:.1f} min, {job.iterations} iterations",
-          flush=True)  # fmt: skip
+    print(f"  {name}: {job.training_seconds / 60:.1f} min, {job.iterations} iterations", flush=True)
     return model
 
 
@@ -53,13 +52,16 @@ def completion(model, *, randomise: bool, trials: int) -> tuple[int, float]:
     from training import artifacts
 
     settings = {**model.environment_settings(), "randomise": randomise}
-    env = gymnasium.make(simulator.ENV_ID, mode="evaluation", laps=1, max_resets=0, noise=True,
-                         **settings)  # fmt: skip
+    env = gymnasium.make(
+        simulator.ENV_ID, mode="evaluation", laps=1, max_resets=0, noise=True, **settings
+    )
     learner = Learner(
-        algorithm=model.algorithm, hyperparameters=model.hyperparameters,
-        architecture=model.architecture, observation_space=env.observation_space,
+        algorithm=model.algorithm,
+        hyperparameters=model.hyperparameters,
+        architecture=model.architecture,
+        observation_space=env.observation_space,
         action_space=env.action_space,
-    )  # fmt: skip
+    )
     learner.restore(artifacts.read(job_of(model).best_checkpoint))
     laps, progress = 0, []
     for seed in range(trials):
@@ -89,23 +91,35 @@ def main() -> None:
         django.setup()
         owner = bench_racer()
         # flushed: a reward function's check forks a child, which would print it again
-        print(f"Training two models, {arguments.minutes:g} min each (seed {arguments.seed}):",
-              flush=True)  # fmt: skip
+        print(
+            f"Training two models, {arguments.minutes:g} min each (seed {arguments.seed}):",
+            flush=True,
+        )
         models = {
-            trained: train(owner, randomise=trained == "randomised", minutes=arguments.minutes,
-                           seed=arguments.seed, fast=arguments.fast)
+            trained: train(
+                owner,
+                randomise=trained == "randomised",
+                minutes=arguments.minutes,
+                seed=arguments.seed,
+                fast=arguments.fast,
+            )
             for trained in SCENES
-        }  # fmt: skip
-        print(f"\nEach model's best checkpoint, {arguments.trials} one-lap trials a scene "
-              "(ended at the first reset):")  # fmt: skip
+        }
+        print(
+            f"\nEach model's best checkpoint, {arguments.trials} one-lap trials a scene "
+            "(ended at the first reset):"
+        )
         print(f"{'trained in':<22}{'evaluated in':<22}{'laps completed':>16}{'completion':>12}")
         for trained, model in models.items():
             for scene in SCENES:
-                laps, mean = completion(model, randomise=scene == "randomised",
-                                        trials=arguments.trials)  # fmt: skip
+                laps, mean = completion(
+                    model, randomise=scene == "randomised", trials=arguments.trials
+                )
                 shown = f"{laps} of {arguments.trials}"
-                print(f"{trained + ' scenes':<22}{scene + ' scenes':<22}{shown:>16}"
-                      f"{mean:>11.1f}%", flush=True)  # fmt: skip
+                print(
+                    f"{trained + ' scenes':<22}{scene + ' scenes':<22}{shown:>16}{mean:>11.1f}%",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

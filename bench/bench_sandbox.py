@@ -50,8 +50,9 @@ def in_process() -> float:
     exec(compile(reward_source(), "<reward_function>", "exec"), namespace)  # noqa: S102
     env = gymnasium.make(simulator.ENV_ID, track=TRACK, reward_fn=namespace["reward_function"])
     env.reset(seed=0)
-    policy = Policy.build(POLICY["algorithm"], POLICY["architecture"],
-                          env.observation_space, env.action_space)  # fmt: skip
+    policy = Policy.build(
+        POLICY["algorithm"], POLICY["architecture"], env.observation_space, env.action_space
+    )
     episode.drive(env, policy)  # warm-up
     steps, started = 0, time.perf_counter()
     while steps < STEPS:
@@ -70,8 +71,14 @@ def in_sandbox(cars: int = 1, steps_wanted: int = STEPS, device: str | None = No
     def progress(steps: int) -> None:
         seen.append((steps, time.perf_counter()))
 
-    with Sandbox(env={"track": TRACK}, cars=cars, policy=POLICY, policy_device=device,
-                 memory_allowance=1024 * MiB, car_memory=384 * MiB) as sandbox:  # fmt: skip
+    with Sandbox(
+        env={"track": TRACK},
+        cars=cars,
+        policy=POLICY,
+        policy_device=device,
+        memory_allowance=1024 * MiB,
+        car_memory=384 * MiB,
+    ) as sandbox:
         sandbox.load(reward_source())
         driving = sandbox.episode(start=cars)["driving"]  # warm-up
         seen.clear()
@@ -103,8 +110,13 @@ def main() -> None:
     parser.add_argument("--cars", type=int, nargs="+", help="rollouts alone, with these cars")
     parser.add_argument("--steps", type=int, default=STEPS, help="steps timed per figure")
     parser.add_argument("--rounds", type=int, default=ROUNDS, help="figures a median is of")
-    parser.add_argument("--served", nargs="?", const="cpu", choices=("cpu", "cuda"),
-                        help="and with the policy served from this device (cpu)")  # fmt: skip
+    parser.add_argument(
+        "--served",
+        nargs="?",
+        const="cpu",
+        choices=("cpu", "cuda"),
+        help="and with the policy served from this device (cpu)",
+    )
     options = parser.parse_args()
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # the child inherits it

@@ -79,8 +79,9 @@ def pybullet_vehicle():
     client.loadURDF("plane.urdf")
     body = client.loadURDF("racecar/racecar.urdf", [0, 0, 0.05])
     for wheel in (2, 3, 5, 7):
-        client.setJointMotorControl2(body, wheel, pybullet.VELOCITY_CONTROL,
-                                     targetVelocity=30, force=10)  # fmt: skip
+        client.setJointMotorControl2(
+            body, wheel, pybullet.VELOCITY_CONTROL, targetVelocity=30, force=10
+        )
     for hinge in (4, 6):
         client.setJointMotorControl2(body, hinge, pybullet.POSITION_CONTROL, targetPosition=0.2)
 
@@ -96,8 +97,9 @@ CONTINUOUS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.1, 
 
 def lap(track: str, driver) -> float | None:
     """[s] the lap time of ``driver(env)`` on ``track``, None unless the lap was clean."""
-    env = gymnasium.make(simulator.ENV_ID, track=track, mode="evaluation", laps=1,
-                         action_space=CONTINUOUS)  # fmt: skip
+    env = gymnasium.make(
+        simulator.ENV_ID, track=track, mode="evaluation", laps=1, action_space=CONTINUOUS
+    )
     env.reset(seed=0)
     chosen = driver(env.unwrapped)
     while True:
@@ -116,26 +118,34 @@ def braking_lap(track: str) -> tuple[float | None, float | None]:
     """([s] the braking driver's fastest clean lap of ``track``, the grip share that gave it),
     over ``GRIP_SHARES``; (None, None) when none lapped clean."""
     laps = [
-        (time, share) for share in GRIP_SHARES
+        (time, share)
+        for share in GRIP_SHARES
         if (time := lap(track, lambda env, g=share: BrakingDriver(env, grip=g)))
-    ]  # fmt: skip
+    ]
     return min(laps) if laps else (None, None)
 
 
 def grip_table() -> None:
-    print(f"\n{'track':<22}{'length':>8}{'best constant':>15}{'its lap':>9}"
-          f"{'braking lap':>13}{'grip share':>12}{'at 4 m/s':>10}")  # fmt: skip
+    print(
+        f"\n{'track':<22}{'length':>8}{'best constant':>15}{'its lap':>9}"
+        f"{'braking lap':>13}{'grip share':>12}{'at 4 m/s':>10}"
+    )
     for name in tracks.names(origin="pitlane"):
         best = next(
-            ((tenths / 10, time) for tenths in range(40, 4, -1)
-             if (time := lap(name, lambda env, v=tenths / 10: CentreLineDriver(env, speed=v)))),
+            (
+                (tenths / 10, time)
+                for tenths in range(40, 4, -1)
+                if (time := lap(name, lambda env, v=tenths / 10: CentreLineDriver(env, speed=v)))
+            ),
             (None, None),
-        )  # fmt: skip
+        )
         fastest, share = braking_lap(name)
         at_four = "clean" if best[0] == 4.0 else "fails"
-        print(f"{name:<22}{tracks.load(name).length:>7.1f}m"
-              f"{best[0] or 0:>13.1f}/s{best[1] or 0:>8.2f}s"
-              f"{fastest or 0:>12.2f}s{share or 0:>12.3f}{at_four:>10}")  # fmt: skip
+        print(
+            f"{name:<22}{tracks.load(name).length:>7.1f}m"
+            f"{best[0] or 0:>13.1f}/s{best[1] or 0:>8.2f}s"
+            f"{fastest or 0:>12.2f}s{share or 0:>12.3f}{at_four:>10}"
+        )
 
 
 def main() -> None:

@@ -27,8 +27,14 @@ CONTINUOUS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.1, 
 
 def lap(path: str, direction: str, speed: float) -> dict:
     """One evaluation lap of the route file at ``path``: its status, lap time and resets."""
-    env = gymnasium.make(simulator.ENV_ID, track=path, direction=direction, mode="evaluation",
-                         laps=1, action_space=CONTINUOUS)  # fmt: skip
+    env = gymnasium.make(
+        simulator.ENV_ID,
+        track=path,
+        direction=direction,
+        mode="evaluation",
+        laps=1,
+        action_space=CONTINUOUS,
+    )
     env.reset(seed=0)
     driver = CentreLineDriver(env.unwrapped, speed=speed)
     while True:
@@ -36,8 +42,11 @@ def lap(path: str, direction: str, speed: float) -> dict:
         if terminated or truncated:
             break
     env.close()
-    return {"status": info["status"], "time": (info["lap_times"] or [None])[0],
-            "resets": info["resets"]}  # fmt: skip
+    return {
+        "status": info["status"],
+        "time": (info["lap_times"] or [None])[0],
+        "resets": info["resets"],
+    }
 
 
 def main() -> None:
@@ -45,8 +54,10 @@ def main() -> None:
     parser.add_argument("--speed", type=float, default=1.5, help="[m/s] the driver's speed")
     speed = parser.parse_args().speed
     rows, started = [], time.perf_counter()
-    print(f"{'WORLD_NAME':<28}{'track':<38}{'direction':<18}{'points':>7}{'length':>9}"
-          f"{'width':>8}{'narrowest':>10}{'lap':>9}  result")  # fmt: skip
+    print(
+        f"{'WORLD_NAME':<28}{'track':<38}{'direction':<18}{'points':>7}{'length':>9}"
+        f"{'width':>8}{'narrowest':>10}{'lap':>9}  result"
+    )
     for name in tracks.names(origin="deepracer"):
         for world_name, direction in tracks.entry(name)["world_names"].items():
             path = DEEPRACER_DIR / "routes" / f"{world_name}.npy"
@@ -64,13 +75,17 @@ def main() -> None:
     lengths = sorted((t.length, w) for w, t, _, _ in rows)
     widths = sorted((t.width, w) for w, t, _, _ in rows)
     clean = [row for row in rows if row[2]]
-    print(f"\n{len(rows)} route files of {len(tracks.names(origin='deepracer'))} tracks; "
-          f"length {lengths[0][0]:.2f} m ({lengths[0][1]}) to {lengths[-1][0]:.2f} m "
-          f"({lengths[-1][1]}); median width {widths[0][0]:.3f} m ({widths[0][1]}) to "
-          f"{widths[-1][0]:.3f} m ({widths[-1][1]})")  # fmt: skip
-    print(f"{len(clean)} of {len(rows)} lapped clean at {speed} m/s, in "
-          f"{min(r[3] for r in clean):.2f} s to {max(r[3] for r in clean):.2f} s; "
-          f"the bench took {time.perf_counter() - started:.0f} s")  # fmt: skip
+    print(
+        f"\n{len(rows)} route files of {len(tracks.names(origin='deepracer'))} tracks; "
+        f"length {lengths[0][0]:.2f} m ({lengths[0][1]}) to {lengths[-1][0]:.2f} m "
+        f"({lengths[-1][1]}); median width {widths[0][0]:.3f} m ({widths[0][1]}) to "
+        f"{widths[-1][0]:.3f} m ({widths[-1][1]})"
+    )
+    print(
+        f"{len(clean)} of {len(rows)} lapped clean at {speed} m/s, in "
+        f"{min(r[3] for r in clean):.2f} s to {max(r[3] for r in clean):.2f} s; "
+        f"the bench took {time.perf_counter() - started:.0f} s"
+    )
 
 
 if __name__ == "__main__":

@@ -126,10 +126,19 @@ def bench_racer(name: str = "bench"):
 
 
 def default_model(
-    owner, name: str, *, workers: int = 1, seed: int = 0, fast: bool = False,
-    steering: float = 30, speed: tuple[float, float] = FAST_SPEED, algorithm: str = PPO,
-    hyperparameters: dict | None = None, reward: str = "road-ahead", randomise: bool = False,
-):  # fmt: skip
+    owner,
+    name: str,
+    *,
+    workers: int = 1,
+    seed: int = 0,
+    fast: bool = False,
+    steering: float = 30,
+    speed: tuple[float, float] = FAST_SPEED,
+    algorithm: str = PPO,
+    hyperparameters: dict | None = None,
+    reward: str = "road-ahead",
+    randomise: bool = False,
+):
     """A model with DeepRacer's defaults on the Rookie Loop; ``hyperparameters``: the racer's
     own values of some (DeepRacer's names), over the algorithm's defaults; with ``fast``,
     ``reward`` names the reward function (``REWARDS``); ``randomise``: trained with domain
@@ -182,22 +191,27 @@ def throughput(owner, workers: int, minutes: float) -> None:
     time.sleep(CHECK_LATE_EVALUATIONS)
     rows = list(Iteration.objects.filter(job=job).order_by("number"))
     print(f"{workers} rollout worker(s), {minutes:g} min, {len(rows)} iterations:")
-    print("  iter  steps  wall s  steps/s  lap  " + "  ".join(f"{p:>8}" for p in PHASES)
-          + "  eval s")  # fmt: skip
+    print(
+        "  iter  steps  wall s  steps/s  lap  " + "  ".join(f"{p:>8}" for p in PHASES) + "  eval s"
+    )
     for row in rows:
         split = "  ".join(f"{row.time_split.get(p, 0.0):8.1f}" for p in PHASES)
         evaluation = f"{row.evaluation_seconds:6.1f}" if row.evaluation_seconds else "     —"
-        print(f"  {row.number:4d}  {row.steps:5d}  {row.wall_seconds:6.1f}  "
-              f"{row.steps / row.wall_seconds:7.1f}  {'yes' if row.best_lap_time else ' no'}  "
-              f"{split}  {evaluation}")  # fmt: skip
+        print(
+            f"  {row.number:4d}  {row.steps:5d}  {row.wall_seconds:6.1f}  "
+            f"{row.steps / row.wall_seconds:7.1f}  {'yes' if row.best_lap_time else ' no'}  "
+            f"{split}  {evaluation}"
+        )
 
     def rate(chosen: list) -> str:
         wall = sum(row.wall_seconds for row in chosen)
         return f"{sum(row.steps for row in chosen) / wall:.1f} steps/s" if wall else "—"
 
     lapping = [row for row in rows if row.best_lap_time]
-    print(f"  mean: {rate(rows)}; over the {len(lapping)} iterations that lapped: "
-          f"{rate(lapping)}", flush=True)  # fmt: skip
+    print(
+        f"  mean: {rate(rows)}; over the {len(lapping)} iterations that lapped: {rate(lapping)}",
+        flush=True,
+    )
 
 
 def _update_spaces(algorithm: str):
@@ -236,12 +250,20 @@ def _update_episodes(spaces, steps: int, per_episode: int = 100) -> list:
 
     def episode() -> Episode:
         return Episode(
-            worker=0, version=0, observations=frames, actions=actions(),
+            worker=0,
+            version=0,
+            observations=frames,
+            actions=actions(),
             rewards=rng.random(per_episode, dtype=np.float32),
             values=rng.random(per_episode, dtype=np.float32),
-            log_probs=np.full(per_episode, -2.3, np.float32), terminated=True, final_value=0.0,
-            progress=10.0, status="off_track", lap_time=None, trace=[],
-        )  # fmt: skip
+            log_probs=np.full(per_episode, -2.3, np.float32),
+            terminated=True,
+            final_value=0.0,
+            progress=10.0,
+            status="off_track",
+            lap_time=None,
+            trace=[],
+        )
 
     return [episode() for _ in range(max(1, steps // per_episode))]
 
@@ -446,8 +468,10 @@ def update_speed(steps: int = 2000, *, algorithm: str = PPO, device: str = "cpu"
     episodes = _update_episodes(spaces, steps)
     warm_up = _update_episodes(spaces, 8 if algorithm == SAC else 200, per_episode=8)
     counts = sorted({1, os.cpu_count() or 1}) if device == "cpu" else [torch.get_num_threads()]
-    print(f"{algorithm} update on {device}, DeepRacer's defaults, {steps} steps "
-          f"[ms per step; warm-up s]:")  # fmt: skip
+    print(
+        f"{algorithm} update on {device}, DeepRacer's defaults, {steps} steps "
+        f"[ms per step; warm-up s]:"
+    )
     for threads in counts:
         torch.set_num_threads(threads)
         for name, (change, cuda_only) in UPDATE_VARIANTS[algorithm].items():
@@ -455,10 +479,13 @@ def update_speed(steps: int = 2000, *, algorithm: str = PPO, device: str = "cpu"
                 print(f"  {name}: needs --device cuda", flush=True)
                 continue
             built = Learner(
-                algorithm=algorithm, hyperparameters=hyperparameters.defaults(algorithm),
-                architecture=networks.SHALLOW, observation_space=spaces[0],
-                action_space=spaces[1], device=device,
-            )  # fmt: skip
+                algorithm=algorithm,
+                hyperparameters=hyperparameters.defaults(algorithm),
+                architecture=networks.SHALLOW,
+                observation_space=spaces[0],
+                action_space=spaces[1],
+                device=device,
+            )
             validating = torch.distributions.Distribution._validate_args  # _capturable's to undo
             change(built)
             started = time.perf_counter()
@@ -566,10 +593,18 @@ def time_to_qualify(
     model's rollout workers."""
     from training.services import training_stop
 
-    model = default_model(owner, f"qualify-{seed}{'-fast' if fast else ''}", seed=seed, fast=fast,
-                          steering=steering, speed=speed, algorithm=algorithm,
-                          hyperparameters=hyperparameters, reward=reward,
-                          workers=workers)  # fmt: skip
+    model = default_model(
+        owner,
+        f"qualify-{seed}{'-fast' if fast else ''}",
+        seed=seed,
+        fast=fast,
+        steering=steering,
+        speed=speed,
+        algorithm=algorithm,
+        hyperparameters=hyperparameters,
+        reward=reward,
+        workers=workers,
+    )
     tried = set()
     qualified = None
     while True:
@@ -598,9 +633,11 @@ def time_to_qualify(
             if fast and minutes >= lap_after:
                 training_stop(job=job)
                 model_ok, model_laps, iteration = racers_model(model)
-                print(f"  seed {seed}: the model, its best checkpoint (iteration {iteration}): "
-                      f"{'3' if model_ok else 'not 3'} clean laps: {laps_words(model_laps)}",
-                      flush=True)  # fmt: skip
+                print(
+                    f"  seed {seed}: the model, its best checkpoint (iteration {iteration}): "
+                    f"{'3' if model_ok else 'not 3'} clean laps: {laps_words(model_laps)}",
+                    flush=True,
+                )
                 best_lap, model_lap = (
                     min(laps) if ok else None,
                     min(model_laps) if model_ok else None,
@@ -638,9 +675,11 @@ def main() -> None:
         "--device", default="cpu", help="with --update, where to learn: cpu, cuda (or cuda:N)"
     )
     parser.add_argument(
-        "--precision", choices=PRECISIONS, default="fp32",
+        "--precision",
+        choices=PRECISIONS,
+        default="fp32",
         help="the trainer's PITLANE_TRAINER_PRECISION, for the throughput and --qualify",
-    )  # fmt: skip
+    )
     parser.add_argument(
         "--minutes",
         type=float,
@@ -648,10 +687,13 @@ def main() -> None:
         help="[min] of training for the throughput",
     )
     parser.add_argument(
-        "--workers", type=int, nargs="+", default=None,
+        "--workers",
+        type=int,
+        nargs="+",
+        default=None,
         help="rollout workers: for throughput, each count in turn (default 1 and 2); with "
         "--qualify, the model's (one count, default 1)",
-    )  # fmt: skip
+    )
     parser.add_argument(
         "--fast",
         action="store_true",
@@ -667,31 +709,48 @@ def main() -> None:
         "--steering", type=float, default=30, help="[deg] with --fast, the steering range's bound"
     )
     parser.add_argument(
-        "--speed", type=float, nargs=2, default=FAST_SPEED, metavar=("LOW", "HIGH"),
+        "--speed",
+        type=float,
+        nargs=2,
+        default=FAST_SPEED,
+        metavar=("LOW", "HIGH"),
         help="[m/s] with --fast, the speed range",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--reward", choices=tuple(REWARDS), default="road-ahead",
+        "--reward",
+        choices=tuple(REWARDS),
+        default="road-ahead",
         help="with --fast, the reward function: the road ahead's speed, that with steady hands, "
         "or that with a steady heading too",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--under", type=float, default=None,
+        "--under",
+        type=float,
+        default=None,
         help="[s] qualifying takes 3 clean laps each under this time",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--algorithm", choices=(PPO, SAC), default=PPO,
+        "--algorithm",
+        choices=(PPO, SAC),
+        default=PPO,
         help="with --fast or --update, PPO (DeepRacer's default) or SAC",
-    )  # fmt: skip
+    )
     parser.add_argument(
-        "--hyperparameter", type=_setting, action="extend", nargs="+", default=[],
-        metavar="NAME=VALUE", help="with --qualify, a racer's own value (DeepRacer's names)",
-    )  # fmt: skip
+        "--hyperparameter",
+        type=_setting,
+        action="extend",
+        nargs="+",
+        default=[],
+        metavar="NAME=VALUE",
+        help="with --qualify, a racer's own value (DeepRacer's names)",
+    )
     parser.add_argument(
-        "--cars", type=int, default=None,
+        "--cars",
+        type=int,
+        default=None,
         help="the console's PITLANE_CARS_PER_WORKER: cars a rollout worker drives together "
         "(default: the console's, 8; 1 is how a worker drove before issue 43)",
-    )  # fmt: skip
+    )
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument(
         "--limit",
@@ -730,17 +789,25 @@ def main() -> None:
             if arguments.fast:
                 from bench.bench_simulator import braking_lap
 
-                print(f"The braking driver's lap on the Rookie Loop: "
-                      f"{braking_lap('rookie-loop')[0]:.2f} s")  # fmt: skip
+                print(
+                    f"The braking driver's lap on the Rookie Loop: "
+                    f"{braking_lap('rookie-loop')[0]:.2f} s"
+                )
             for seed in arguments.seeds:
                 minutes, best, model_best = time_to_qualify(
-                    owner, seed, arguments.limit, fast=arguments.fast,
+                    owner,
+                    seed,
+                    arguments.limit,
+                    fast=arguments.fast,
                     workers=(arguments.workers or [1])[0],
-                    lap_after=arguments.lap_after, steering=arguments.steering,
-                    speed=tuple(arguments.speed), under=arguments.under,
+                    lap_after=arguments.lap_after,
+                    steering=arguments.steering,
+                    speed=tuple(arguments.speed),
+                    under=arguments.under,
                     algorithm=arguments.algorithm,
-                    hyperparameters=dict(arguments.hyperparameter), reward=arguments.reward,
-                )  # fmt: skip
+                    hyperparameters=dict(arguments.hyperparameter),
+                    reward=arguments.reward,
+                )
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
                 if arguments.fast and arguments.under:
                     shown += f"; its best lap: {best:.2f} s" if best else ""

@@ -58,16 +58,24 @@ def run_probe(probe: str, var_dir: str, tree: Path) -> dict:
         "PITLANE_VAR_DIR": var_dir,
     }
     output = subprocess.run(
-        [sys.executable, "-c", probe], env=env, cwd=tree, check=True, capture_output=True,
+        [sys.executable, "-c", probe],
+        env=env,
+        cwd=tree,
+        check=True,
+        capture_output=True,
         text=True,
-    ).stdout  # fmt: skip
+    ).stdout
     return json.loads(output.splitlines()[-1])
 
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--tree", type=Path, default=Path(__file__).resolve().parent.parent,
-                        help="the checkout to start (default: this one)")  # fmt: skip
+    parser.add_argument(
+        "--tree",
+        type=Path,
+        default=Path(__file__).resolve().parent.parent,
+        help="the checkout to start (default: this one)",
+    )
     tree = parser.parse_args().tree
     with tempfile.TemporaryDirectory(prefix="pitlane-bench-web-") as var_dir:
         run_probe(PROBE, var_dir, tree)  # the first start fills the file system's cache
@@ -75,8 +83,9 @@ def main() -> None:
         validation = run_probe(VALIDATE, var_dir, tree)["seconds"]
     seconds = statistics.median(start["seconds"] for start in starts)
     peak = statistics.median(start["peak_mib"] for start in starts)
-    print(f"Web process start-up of {tree} (console.asgi and every URL pattern), "
-          f"median of {ROUNDS}:")  # fmt: skip
+    print(
+        f"Web process start-up of {tree} (console.asgi and every URL pattern), median of {ROUNDS}:"
+    )
     print(f"  import time: {seconds:.2f} s")
     print(f"  peak memory: {peak:.0f} MiB")
     print(f"  heavy libraries loaded: {', '.join(starts[0]['heavy']) or 'none'}")

@@ -63,8 +63,9 @@ def fan_out(url: str, weights: bytes, workers: int, iterations: int, cache: str 
     context = multiprocessing.get_context("fork")
     orders = [context.Queue() for _ in range(workers)]
     done = context.Queue()
-    processes = [context.Process(target=_worker, args=(url, cache, order, done))
-                 for order in orders]  # fmt: skip
+    processes = [
+        context.Process(target=_worker, args=(url, cache, order, done)) for order in orders
+    ]
     for process in processes:
         process.start()
     sent, times, publishes = [], [], []
@@ -87,8 +88,11 @@ def fan_out(url: str, weights: bytes, workers: int, iterations: int, cache: str 
             order.put(None)
         for process in processes:
             process.join(30)
-    return {"bytes": statistics.median(sent), "seconds": statistics.median(times),
-            "publish": statistics.median(publishes)}  # fmt: skip
+    return {
+        "bytes": statistics.median(sent),
+        "seconds": statistics.median(times),
+        "publish": statistics.median(publishes),
+    }
 
 
 def experience_bytes_per_step() -> float:
@@ -100,8 +104,9 @@ def experience_bytes_per_step() -> float:
     while steps < EXPERIENCE_STEPS:
         driven = episode.drive(env, policy, "explore", seed=seed)
         arrays = episode.experience(driven, discrete=True, ppo=True)
-        payload = msgpack.packb({"arrays": encode_arrays(arrays), "trace": driven.trace},
-                                use_bin_type=True)  # fmt: skip
+        payload = msgpack.packb(
+            {"arrays": encode_arrays(arrays), "trace": driven.trace}, use_bin_type=True
+        )
         steps, size, seed = steps + len(driven.rewards), size + len(payload), seed + 1
     env.close()
     return size / steps
@@ -119,9 +124,11 @@ def main() -> None:
     env.close()
     weights = weights_bytes(policy.weights_module.state_dict())
     experience = experience_bytes_per_step()
-    print(f"Weights {len(weights) / 1e6:.1f} MB ({arguments.architecture}); experience "
-          f"{experience / 1e3:.1f} kB a step, into Redis and out again: {2 * experience / 1e3:.1f} "
-          f"kB a step; {arguments.steps:,} steps an iteration")  # fmt: skip
+    print(
+        f"Weights {len(weights) / 1e6:.1f} MB ({arguments.architecture}); experience "
+        f"{experience / 1e3:.1f} kB a step, into Redis and out again: {2 * experience / 1e3:.1f} "
+        f"kB a step; {arguments.steps:,} steps an iteration"
+    )
     print(
         "| rollout workers on the machine | fetch | Redis sent per iteration | per step "
         "(weights + experience) | fan-out per iteration | publish |"
@@ -138,10 +145,12 @@ def main() -> None:
                 for label, cache in caches.items():
                     got = fan_out(server.url, weights, workers, arguments.iterations, cache)
                     per_step = got["bytes"] / arguments.steps
-                    print(f"| {workers} | {label} | {got['bytes'] / 1e6:.1f} MB | "
-                          f"{per_step / 1e3:.1f} + {2 * experience / 1e3:.1f} kB | "
-                          f"{got['seconds'] * 1e3:.0f} ms | "
-                          f"{got['publish'] * 1e3:.0f} ms |")  # fmt: skip
+                    print(
+                        f"| {workers} | {label} | {got['bytes'] / 1e6:.1f} MB | "
+                        f"{per_step / 1e3:.1f} + {2 * experience / 1e3:.1f} kB | "
+                        f"{got['seconds'] * 1e3:.0f} ms | "
+                        f"{got['publish'] * 1e3:.0f} ms |"
+                    )
         finally:
             server.stop()
 

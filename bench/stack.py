@@ -96,10 +96,23 @@ def private_redis(var_dir: str | Path, executable: str | None = None) -> Iterato
         sys.exit("redis-server is not installed (scripts/device-bundle.sh carries Debian's).")
     port = free_port()
     server = subprocess.Popen(
-        [executable, "--bind", "127.0.0.1", "--port", str(port), "--dir", str(var_dir),
-         "--save", "", "--appendonly", "no", "--logfile", str(Path(var_dir) / "redis.log")],
+        [
+            executable,
+            "--bind",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--dir",
+            str(var_dir),
+            "--save",
+            "",
+            "--appendonly",
+            "no",
+            "--logfile",
+            str(Path(var_dir) / "redis.log"),
+        ],
         stdin=subprocess.DEVNULL,
-    )  # fmt: skip
+    )
     try:
         deadline = time.monotonic() + 30
         while True:
@@ -124,9 +137,14 @@ def started(commands: dict[str, list[str]], env: dict[str, str], log_dir: str | 
         for name, argv in commands.items():
             with open(Path(log_dir) / f"{name}.log", "wb") as log:
                 processes[name] = subprocess.Popen(
-                    argv, cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=log,
-                    stderr=subprocess.STDOUT, start_new_session=True,
-                )  # fmt: skip
+                    argv,
+                    cwd=ROOT,
+                    env=env,
+                    stdin=subprocess.DEVNULL,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    start_new_session=True,
+                )
         yield processes
     finally:
         for process in reversed(processes.values()):

@@ -59,8 +59,11 @@ def words(field: forms.Field, label: str) -> dict[str, str]:
                 f"{label} is {what} %(limit_value)d characters long; this one has %(show_value)d."
             )
     if isinstance(field, forms.IntegerField | forms.FloatField | forms.DecimalField):
-        for code, what in (("max_value", "at most"), ("min_value", "at least"),
-                           ("step_size", "in steps of")):  # fmt: skip
+        for code, what in (
+            ("max_value", "at most"),
+            ("min_value", "at least"),
+            ("step_size", "in steps of"),
+        ):
             said[code] = f"{label} is {what} {_limit(getattr(field, code))}."
     if isinstance(field, forms.DecimalField):
         said["max_digits"] = f"{label} has at most %(max)s digits."
@@ -70,11 +73,25 @@ def words(field: forms.Field, label: str) -> dict[str, str]:
 
 
 # The codes whose message Django formats with the error's params (a "%" of a label doubled).
-FORMATTED = {"invalid_choice", "max_length", "min_length", "max_value", "min_value", "step_size",
-             "max_digits", "max_decimal_places", "max_whole_digits"}  # fmt: skip
+FORMATTED = {
+    "invalid_choice",
+    "max_length",
+    "min_length",
+    "max_value",
+    "min_value",
+    "step_size",
+    "max_digits",
+    "max_decimal_places",
+    "max_whole_digits",
+}
 PLACEHOLDERS = (
-    "%(limit_value)d", "%(limit_value)s", "%(show_value)d", "%(max)s", "%(max)d", "%(length)d",
-)  # fmt: skip
+    "%(limit_value)d",
+    "%(limit_value)s",
+    "%(show_value)d",
+    "%(max)s",
+    "%(max)d",
+    "%(length)d",
+)
 
 
 def _escaped(text: str) -> str:

@@ -160,9 +160,12 @@ def _counted(request: HttpRequest, action: str, key: str | None) -> dict | None:
         key = f"racer:{request.user.pk}"
     try:
         return get_usage(
-            request, group=f"pitlane:{action}", key=lambda group, request: key,
-            rate=settings.PITLANE_RATES[action], increment=True,
-        )  # fmt: skip
+            request,
+            group=f"pitlane:{action}",
+            key=lambda group, request: key,
+            rate=settings.PITLANE_RATES[action],
+            increment=True,
+        )
     except RedisError as error:
         logger.warning("Rate limit %s not counted: %s", action, error)
         if action in FAIL_CLOSED:

@@ -65,8 +65,19 @@ class Pool:
 
     def arguments(self) -> list[str]:
         """``celery -A console worker`` and what follows it, for this pool."""
-        return ["-A", "console", "worker", "-Q", self.queue, "--hostname", self.hostname,
-                "--concurrency", str(self.concurrency), "--loglevel", "INFO"]  # fmt: skip
+        return [
+            "-A",
+            "console",
+            "worker",
+            "-Q",
+            self.queue,
+            "--hostname",
+            self.hostname,
+            "--concurrency",
+            str(self.concurrency),
+            "--loglevel",
+            "INFO",
+        ]
 
 
 def worker_pools(*, trainers: int, simulations: int, prefix: str = "") -> list[Pool]:
@@ -151,9 +162,17 @@ class Supervisor:
             self._spawn(pool.name, [sys.executable, "-m", "celery", *pool.arguments(), *beat])
         self._spawn(
             "web server",
-            [sys.executable, "-m", "daphne", "-b", self.host, "-p", str(self.port),
-             "console.asgi:application"],
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "daphne",
+                "-b",
+                self.host,
+                "-p",
+                str(self.port),
+                "console.asgi:application",
+            ],
+        )
         self._wait_until(self._workers_reported, "the Celery workers to report in")
         self._wait_until(self._web_answers, "the web server to answer")
         self._say(f"\nPitlane is running: {self.url}  (Ctrl-C stops it)\n")
@@ -176,10 +195,25 @@ class Supervisor:
         config.write_text(f"requirepass {settings.REDIS_PASSWORD}\n")
         self._spawn(
             "Redis",
-            [executable, str(config), "--bind", "127.0.0.1", "--port", str(port),
-             "--dir", str(data), "--appendonly", "yes", "--protected-mode", "yes",
-             "--daemonize", "no", "--logfile", str(data / "redis.log")],
-        )  # fmt: skip
+            [
+                executable,
+                str(config),
+                "--bind",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--dir",
+                str(data),
+                "--appendonly",
+                "yes",
+                "--protected-mode",
+                "yes",
+                "--daemonize",
+                "no",
+                "--logfile",
+                str(data / "redis.log"),
+            ],
+        )
 
     def _wait_for_redis(self) -> None:
         client = redis_client()

@@ -9,6 +9,6 @@ def bell(request: HttpRequest) -> dict:
     user = getattr(request, "user", None)
     if user is None or not user.is_authenticated:
         return {}
-    return {"unread_notifications": SimpleLazyObject(
-        lambda: selectors.unread_count(recipient=user)
-    )}  # fmt: skip
+    return {
+        "unread_notifications": SimpleLazyObject(lambda: selectors.unread_count(recipient=user))
+    }

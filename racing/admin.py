@@ -60,12 +60,28 @@ class EventAdminForm(RaceObstaclesForm, EventInlineForm):
     class Meta:
         model = Event
         fields = [
-            "season", "name", "slug", "division", "track", "direction", "race_type", "cars",
+            "season",
+            "name",
+            "slug",
+            "division",
+            "track",
+            "direction",
+            "race_type",
+            "cars",
             "opens_at",
-            "closes_at", "ranking_method", "laps_required", "laps_to_drive",
-            "off_track_penalty_s", "crash_penalty_s", "max_off_tracks_per_lap",
-            "submissions_per_racer", "public", "organiser", "participants", "removed",
-        ]  # fmt: skip
+            "closes_at",
+            "ranking_method",
+            "laps_required",
+            "laps_to_drive",
+            "off_track_penalty_s",
+            "crash_penalty_s",
+            "max_off_tracks_per_lap",
+            "submissions_per_racer",
+            "public",
+            "organiser",
+            "participants",
+            "removed",
+        ]
 
 
 class EventInline(admin.TabularInline):
@@ -107,9 +123,16 @@ class SeasonAdmin(admin.ModelAdmin):
 @admin.register(Event)
 class EventAdmin(admin.ModelAdmin):
     list_display = [
-        "name", "season", "track", "race_type", "division", "opens_at", "closes_at", "state",
+        "name",
+        "season",
+        "track",
+        "race_type",
+        "division",
+        "opens_at",
+        "closes_at",
+        "state",
         "public",
-    ]  # fmt: skip
+    ]
     list_filter = ["season", "division", "race_type", "track", "public", "ranking_method"]
     search_fields = ["name", "slug", "organiser__username"]
     form = EventAdminForm
@@ -159,10 +182,11 @@ class EventAdmin(admin.ModelAdmin):
 
 class DisqualifyForm(forms.Form):
     reason = forms.CharField(
-        max_length=255, widget=forms.Textarea(attrs={"rows": 3, "cols": 60}),
+        max_length=255,
+        widget=forms.Textarea(attrs={"rows": 3, "cols": 60}),
         help_text="The racer reads it on their run's page and in their notification.",
         error_messages={"required": "Say why: the racer reads it."},
-    )  # fmt: skip
+    )
 
 
 class SubmissionAdminForm(forms.ModelForm):
@@ -182,8 +206,15 @@ class SubmissionAdminForm(forms.ModelForm):
 class LapInline(admin.TabularInline):
     model = Lap
     fields = readonly_fields = [
-        "number", "time_ms", "status", "counted", "off_tracks", "crashes", "resets", "penalty_ms",
-    ]  # fmt: skip
+        "number",
+        "time_ms",
+        "status",
+        "counted",
+        "off_tracks",
+        "crashes",
+        "resets",
+        "penalty_ms",
+    ]
     extra = 0
     can_delete = False
 
@@ -194,18 +225,37 @@ class LapInline(admin.TabularInline):
 @admin.register(Submission)
 class SubmissionAdmin(admin.ModelAdmin):
     list_display = [
-        "pk", "event", "racer", "model_name", "status", "score", "qualified", "disqualified",
+        "pk",
+        "event",
+        "racer",
+        "model_name",
+        "status",
+        "score",
+        "qualified",
+        "disqualified",
         "created_at",
-    ]  # fmt: skip
+    ]
     list_filter = ["event__season", "event", "status", "qualified", "disqualified", "physical"]
     search_fields = ["racer__username", "model_name", "event__name"]
     date_hierarchy = "created_at"
     list_select_related = ["event", "racer"]
     readonly_fields = [
-        "event", "racer", "model", "model_name", "evaluation", "status", "failure_reason",
-        "created_at", "finished_at", "score_ms", "qualified", "laps_completed", "off_tracks",
-        "video", "physical",
-    ]  # fmt: skip
+        "event",
+        "racer",
+        "model",
+        "model_name",
+        "evaluation",
+        "status",
+        "failure_reason",
+        "created_at",
+        "finished_at",
+        "score_ms",
+        "qualified",
+        "laps_completed",
+        "off_tracks",
+        "video",
+        "physical",
+    ]
     fields = [*readonly_fields, "disqualified", "disqualification_reason"]
     form = SubmissionAdminForm
     inlines = [LapInline]
@@ -271,9 +321,15 @@ class RankingAdmin(admin.ModelAdmin):
     search_fields = ["racer__username", "model_name"]
     list_select_related = ["event", "racer"]
     readonly_fields = [
-        "event", "racer", "submission", "model_name", "score_ms", "submitted_at",
-        "laps_completed", "off_tracks",
-    ]  # fmt: skip
+        "event",
+        "racer",
+        "submission",
+        "model_name",
+        "score_ms",
+        "submitted_at",
+        "laps_completed",
+        "off_tracks",
+    ]
 
     @admin.display(description="time", ordering="score_ms")
     def time(self, ranking: Ranking) -> str:

@@ -27,20 +27,24 @@ class SubmissionForm(RacerWords, forms.Form):
     """A racer's ready model and an open event they may enter."""
 
     event = forms.ModelChoiceField(
-        queryset=Event.objects.none(), empty_label="Choose an event",
+        queryset=Event.objects.none(),
+        empty_label="Choose an event",
         error_messages={"invalid_choice": "Choose one of the open events listed."},
-    )  # fmt: skip
+    )
     model = forms.ModelChoiceField(
-        queryset=RLModel.objects.none(), empty_label="Choose a model",
+        queryset=RLModel.objects.none(),
+        empty_label="Choose a model",
         error_messages={"invalid_choice": "Choose one of your ready models."},
         help_text="Your ready models.",
-    )  # fmt: skip
+    )
     checkpoint = forms.ChoiceField(
-        choices=EvaluationJob.Checkpoint.choices, initial=EvaluationJob.Checkpoint.BEST,
-        widget=forms.RadioSelect, required=False,
+        choices=EvaluationJob.Checkpoint.choices,
+        initial=EvaluationJob.Checkpoint.BEST,
+        widget=forms.RadioSelect,
+        required=False,
         help_text="Which of the model's checkpoints races: the best its training measured "
         "(by its best-checkpoint setting) or the last it saved.",
-    )  # fmt: skip
+    )
 
     def __init__(self, *args, racer, **kwargs) -> None:
         super().__init__(*args, **kwargs)
@@ -82,21 +86,33 @@ class RaceObstaclesForm(RacerWords, forms.ModelForm):
     those of the chosen race type are required."""
 
     box_count = forms.IntegerField(
-        label="Boxes", min_value=1, max_value=MAX_OBJECTS, initial=3, required=False,
+        label="Boxes",
+        min_value=1,
+        max_value=MAX_OBJECTS,
+        initial=3,
+        required=False,
         help_text="Object avoidance: how many boxes stand on the track.",
-    )  # fmt: skip
+    )
     box_randomize = forms.BooleanField(
-        label="Move the boxes every trial", required=False,
+        label="Move the boxes every trial",
+        required=False,
         help_text="Off: the boxes stand in the same places for every trial.",
-    )  # fmt: skip
+    )
     bot_count = forms.IntegerField(
-        label="Bot cars", min_value=1, max_value=MAX_OBJECTS, initial=3, required=False,
+        label="Bot cars",
+        min_value=1,
+        max_value=MAX_OBJECTS,
+        initial=3,
+        required=False,
         help_text="Head-to-bot: how many bot cars drive the track.",
-    )  # fmt: skip
+    )
     bot_speed = forms.FloatField(
-        label="Bot car speed [m/s]", min_value=BOT_SPEED_RANGE[0], max_value=BOT_SPEED_RANGE[1],
-        initial=1.0, required=False,
-    )  # fmt: skip
+        label="Bot car speed [m/s]",
+        min_value=BOT_SPEED_RANGE[0],
+        max_value=BOT_SPEED_RANGE[1],
+        initial=1.0,
+        required=False,
+    )
     bot_lane_changes = forms.BooleanField(label="Bot cars change lanes", required=False)
 
     BOXES = ("box_count", "box_randomize")
@@ -113,10 +129,12 @@ class RaceObstaclesForm(RacerWords, forms.ModelForm):
         super().__init__(*args, **kwargs)
         boxes, bots = self.instance.boxes or {}, self.instance.bots or {}
         for name, value in {
-            "box_count": boxes.get("count"), "box_randomize": boxes.get("randomize"),
-            "bot_count": bots.get("count"), "bot_speed": bots.get("speed"),
+            "box_count": boxes.get("count"),
+            "box_randomize": boxes.get("randomize"),
+            "bot_count": bots.get("count"),
+            "bot_speed": bots.get("speed"),
             "bot_lane_changes": bots.get("lane_changes"),
-        }.items():  # fmt: skip
+        }.items():
             if value is not None:
                 self.initial[name] = value
         if "cars" in self.fields:  # left out: each model alone, as before the field existed
@@ -137,11 +155,14 @@ class RaceObstaclesForm(RacerWords, forms.ModelForm):
             else None
         )
         self.instance.bots = (
-            {"count": data.get("bot_count"), "speed": data.get("bot_speed"),
-             "lane_changes": bool(data.get("bot_lane_changes"))}
+            {
+                "count": data.get("bot_count"),
+                "speed": data.get("bot_speed"),
+                "lane_changes": bool(data.get("bot_lane_changes")),
+            }
             if race_type == RaceType.HEAD_TO_BOT
             else None
-        )  # fmt: skip
+        )
         return data
 
 
@@ -150,18 +171,32 @@ class CommunityRaceForm(RaceObstaclesForm):
     now and closes in a week unless the organiser says otherwise (in their own time zone)."""
 
     track = forms.ModelChoiceField(
-        queryset=Track.objects.all(), to_field_name="name",
-        error_messages={"required": "Choose a track.",
-                        "invalid_choice": "Choose one of the tracks shown."},
-    )  # fmt: skip
+        queryset=Track.objects.all(),
+        to_field_name="name",
+        error_messages={
+            "required": "Choose a track.",
+            "invalid_choice": "Choose one of the tracks shown.",
+        },
+    )
 
     class Meta:
         model = Event
         fields = [
-            "name", "track", "direction", "race_type", "cars", "opens_at", "closes_at",
-            "ranking_method", "laps_required", "laps_to_drive", "off_track_penalty_s",
-            "crash_penalty_s", "max_off_tracks_per_lap", "submissions_per_racer",
-        ]  # fmt: skip
+            "name",
+            "track",
+            "direction",
+            "race_type",
+            "cars",
+            "opens_at",
+            "closes_at",
+            "ranking_method",
+            "laps_required",
+            "laps_to_drive",
+            "off_track_penalty_s",
+            "crash_penalty_s",
+            "max_off_tracks_per_lap",
+            "submissions_per_racer",
+        ]
         widgets = {
             "opens_at": forms.DateTimeInput(attrs={"type": "datetime-local"}, format=LOCAL),
             "closes_at": forms.DateTimeInput(attrs={"type": "datetime-local"}, format=LOCAL),
@@ -230,13 +265,15 @@ class LiveJoinForm(RacerWords, forms.Form):
     """A racer's place in a live race's queue: a ready model and its speed multiplier."""
 
     model = forms.ModelChoiceField(
-        queryset=RLModel.objects.none(), empty_label="Choose a model",
+        queryset=RLModel.objects.none(),
+        empty_label="Choose a model",
         error_messages={"invalid_choice": "Choose one of your ready models."},
-    )  # fmt: skip
+    )
     speed = forms.FloatField(
-        label="Speed multiplier", initial=1.0,
+        label="Speed multiplier",
+        initial=1.0,
         help_text="Your model's speeds times this during your turn.",
-    )  # fmt: skip
+    )
 
     def __init__(self, *args, racer, session, **kwargs) -> None:
         super().__init__(*args, **kwargs)
@@ -251,10 +288,12 @@ class LiveJoinForm(RacerWords, forms.Form):
 class LiveSessionForm(RacerWords, forms.Form):
     """The facilitator's settings of a live race."""
 
-    min_speed = forms.FloatField(label="Slowest speed multiplier", initial=0.5, min_value=0.1,
-                                 max_value=2.0)  # fmt: skip
-    max_speed = forms.FloatField(label="Fastest speed multiplier", initial=1.5, min_value=0.1,
-                                 max_value=2.0)  # fmt: skip
+    min_speed = forms.FloatField(
+        label="Slowest speed multiplier", initial=0.5, min_value=0.1, max_value=2.0
+    )
+    max_speed = forms.FloatField(
+        label="Fastest speed multiplier", initial=1.5, min_value=0.1, max_value=2.0
+    )
     autolaunch = forms.BooleanField(
         label="Launch each turn as soon as the last one ends", required=False
     )

@@ -51,10 +51,16 @@ def timing_state(run: PhysicalRun | None) -> dict:
         return {"type": "timing", "on_track": False, "server_ms": _now_ms()}
     submission = run.submission
     laps = [
-        {"number": lap.number, "time_ms": lap.time_ms, "penalty_ms": lap.penalty_ms,
-         "off_tracks": lap.off_tracks, "resets": lap.resets, "counted": lap.counted}
+        {
+            "number": lap.number,
+            "time_ms": lap.time_ms,
+            "penalty_ms": lap.penalty_ms,
+            "off_tracks": lap.off_tracks,
+            "resets": lap.resets,
+            "counted": lap.counted,
+        }
         for lap in submission.laps.order_by("number")
-    ]  # fmt: skip
+    ]
     started = run.line_crossed_at
     return {
         "type": "timing",
@@ -99,12 +105,15 @@ def queue_state(session: LiveSession | None) -> dict:
     shown, cars = [], []
     for entry in entries:
         row = {
-            "id": entry.pk, "racer": racer_name(racer=entry.racer),
-            "model_name": entry.model_name, "speed": entry.speed, "status": entry.status,
+            "id": entry.pk,
+            "racer": racer_name(racer=entry.racer),
+            "model_name": entry.model_name,
+            "speed": entry.speed,
+            "status": entry.status,
             "submission": entry.submission_id,
             "evaluation": entry.submission.evaluation_id if entry.submission else None,
             "score_ms": entry.submission.score_ms if entry.submission else None,
-        }  # fmt: skip
+        }
         if entry.status == entry.Status.DRIVING:
             evaluation = entry.submission.evaluation if entry.submission else None
             cars.append((evaluation.grid_position if evaluation else 0, row))
@@ -112,11 +121,16 @@ def queue_state(session: LiveSession | None) -> dict:
             shown.append(row)
     cars = [row for _, row in sorted(cars, key=lambda car: car[0])]
     return {
-        "type": "queue", "open": True, "event": session.event_id,
-        "autolaunch": session.autolaunch, "min_speed": session.min_speed,
-        "max_speed": session.max_speed, "entries": shown, "driving": cars[0] if cars else None,
+        "type": "queue",
+        "open": True,
+        "event": session.event_id,
+        "autolaunch": session.autolaunch,
+        "min_speed": session.min_speed,
+        "max_speed": session.max_speed,
+        "entries": shown,
+        "driving": cars[0] if cars else None,
         "cars": cars,
-    }  # fmt: skip
+    }
 
 
 def announce_queue(session: LiveSession) -> None:

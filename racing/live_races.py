@@ -56,9 +56,13 @@ def may_facilitate(*, event: Event, user: AbstractBaseUser) -> bool:
 
 
 def live_session_open(
-    *, event: Event, facilitator: AbstractBaseUser, min_speed: float = 0.5,
-    max_speed: float = 1.5, autolaunch: bool = False,
-) -> LiveSession:  # fmt: skip
+    *,
+    event: Event,
+    facilitator: AbstractBaseUser,
+    min_speed: float = 0.5,
+    max_speed: float = 1.5,
+    autolaunch: bool = False,
+) -> LiveSession:
     """The event's live session, opened (or its settings changed)."""
     if event.physical:
         raise LiveRefused(f"{event.name} is raced by real cars: its timekeeper times them.")
@@ -68,9 +72,13 @@ def live_session_open(
         raise LiveRefused("The speed multipliers run from 0.1 to 2.0, the slowest first.")
     session, _ = LiveSession.objects.update_or_create(
         event=event,
-        defaults={"facilitator": facilitator, "min_speed": min_speed, "max_speed": max_speed,
-                  "autolaunch": autolaunch},
-    )  # fmt: skip
+        defaults={
+            "facilitator": facilitator,
+            "min_speed": min_speed,
+            "max_speed": max_speed,
+            "autolaunch": autolaunch,
+        },
+    )
     live.announce_queue(session)
     return session
 
@@ -87,8 +95,9 @@ def live_entry_join(
     if reason:
         raise LiveRefused(reason)
     if model.status != RLModel.Status.READY:
-        raise LiveRefused(f"{model.name} is {model.get_status_display().lower()}: join with it "
-                          "once it is ready.")  # fmt: skip
+        raise LiveRefused(
+            f"{model.name} is {model.get_status_display().lower()}: join with it once it is ready."
+        )
     with transaction.atomic():
         LiveSession.objects.select_for_update().filter(pk=session.pk).first()
         queued = session.entries.filter(racer=racer, status__in=(_E.WAITING, _E.DRIVING))
@@ -96,9 +105,13 @@ def live_entry_join(
             raise LiveRefused("You are in the queue already: one place a racer.")
         last = session.entries.aggregate(last=Max("position"))["last"] or 0
         entry = LiveEntry.objects.create(
-            session=session, racer=racer, model=model, model_name=model.name, speed=speed,
+            session=session,
+            racer=racer,
+            model=model,
+            model_name=model.name,
+            speed=speed,
             position=last + 1,
-        )  # fmt: skip
+        )
     live.announce_queue(session)
     return entry
 
@@ -153,10 +166,15 @@ def live_turn_launch(*, session: LiveSession) -> LiveEntry:
                 raise LiveRefused(f"{entry.model_name} was deleted: take it out of the queue.")
             try:
                 submission = services.submission_create(
-                    racer=entry.racer, event=session.event, model=entry.model,
-                    speed_multiplier=entry.speed, real_time=True, against_leaders=False,
-                    grid_leader=leader, grid_position=position,
-                )  # fmt: skip
+                    racer=entry.racer,
+                    event=session.event,
+                    model=entry.model,
+                    speed_multiplier=entry.speed,
+                    real_time=True,
+                    against_leaders=False,
+                    grid_leader=leader,
+                    grid_position=position,
+                )
             except services.SubmissionRefused as refused:
                 raise LiveRefused(f"{entry.model_name} cannot race now: {refused}") from None
             leader = leader or submission.evaluation

@@ -31,9 +31,11 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
         if request.method == "POST" and join.is_valid():
             try:
                 live_races.live_entry_join(
-                    session=session, racer=user, model=join.cleaned_data["model"],
+                    session=session,
+                    racer=user,
+                    model=join.cleaned_data["model"],
                     speed=join.cleaned_data["speed"],
-                )  # fmt: skip
+                )
             except live_races.LiveRefused as refused:
                 join.add_error(None, str(refused))
             else:
@@ -44,10 +46,15 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
         waiting = session.entries.filter(racer=user, status=LiveEntry.Status.WAITING)
         mine = set(waiting.values_list("pk", flat=True))
     context = {
-        "event": event, "session": session, "facilitator": facilitator, "join": join, "mine": mine,
-        "queue": live.queue_state(session), "speedup": settings.PITLANE_WATCHED_SPEEDUP,
+        "event": event,
+        "session": session,
+        "facilitator": facilitator,
+        "join": join,
+        "mine": mine,
+        "queue": live.queue_state(session),
+        "speedup": settings.PITLANE_WATCHED_SPEEDUP,
         "settings_form": LiveSessionForm(initial=_settings(session)) if facilitator else None,
-    }  # fmt: skip
+    }
     if request.GET.get("fragment") == "queue":
         return render(request, "racing/includes/live_queue.html", context)
     return render(request, "racing/live_race.html", context)
@@ -56,8 +63,11 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
 def _settings(session: LiveSession | None) -> dict:
     if session is None:
         return {}
-    return {"min_speed": session.min_speed, "max_speed": session.max_speed,
-            "autolaunch": session.autolaunch}  # fmt: skip
+    return {
+        "min_speed": session.min_speed,
+        "max_speed": session.max_speed,
+        "autolaunch": session.autolaunch,
+    }
 
 
 def _facilitated(request: HttpRequest, slug: str) -> Event:

@@ -83,9 +83,13 @@ class Event(RaceConditions):
         CLOSED = "closed", "Closed"
 
     season = models.ForeignKey(
-        Season, null=True, blank=True, on_delete=models.CASCADE, related_name="events",
+        Season,
+        null=True,
+        blank=True,
+        on_delete=models.CASCADE,
+        related_name="events",
         help_text="Empty for a community race.",
-    )  # fmt: skip
+    )
     name = models.CharField(max_length=100)
     slug = models.SlugField(max_length=100, unique=True)
     track = models.ForeignKey(Track, on_delete=models.PROTECT, related_name="events")
@@ -96,25 +100,32 @@ class Event(RaceConditions):
         max_length=24, choices=RankingMethod.choices, default=RankingMethod.FIRST_CONSECUTIVE
     )
     laps_required = models.PositiveSmallIntegerField(
-        "consecutive laps to qualify (N)", default=3,
+        "consecutive laps to qualify (N)",
+        default=3,
         validators=[MinValueValidator(1), MaxValueValidator(20)],
-    )  # fmt: skip
+    )
     laps_to_drive = models.PositiveSmallIntegerField(
-        "laps to drive", default=3, validators=[MinValueValidator(1), MaxValueValidator(20)],
+        "laps to drive",
+        default=3,
+        validators=[MinValueValidator(1), MaxValueValidator(20)],
         help_text="The car drives this many laps without stopping; at least N.",
-    )  # fmt: skip
+    )
     off_track_penalty_s = models.FloatField(
-        "off-track penalty [s]", default=2.0,
+        "off-track penalty [s]",
+        default=2.0,
         validators=[MinValueValidator(0), MaxValueValidator(PENALTY_MAX)],
-    )  # fmt: skip
+    )
     crash_penalty_s = models.FloatField(
-        "crash penalty [s]", default=5.0,
+        "crash penalty [s]",
+        default=5.0,
         validators=[MinValueValidator(0), MaxValueValidator(PENALTY_MAX)],
-    )  # fmt: skip
+    )
     max_off_tracks_per_lap = models.PositiveSmallIntegerField(
-        "off-tracks allowed per lap", null=True, blank=True,
+        "off-tracks allowed per lap",
+        null=True,
+        blank=True,
         help_text="A lap with more off-tracks does not count. Empty: any number.",
-    )  # fmt: skip
+    )
     submissions_per_racer = models.PositiveSmallIntegerField(
         default=10, validators=[MinValueValidator(1), MaxValueValidator(1000)]
     )
@@ -122,50 +133,66 @@ class Event(RaceConditions):
         default=True, help_text="A private event is a community race: entered by invitation."
     )
     organiser = models.ForeignKey(
-        settings.AUTH_USER_MODEL, null=True, blank=True, on_delete=models.CASCADE,
-        related_name="organised_events", help_text="The racer who runs a community race.",
-    )  # fmt: skip
+        settings.AUTH_USER_MODEL,
+        null=True,
+        blank=True,
+        on_delete=models.CASCADE,
+        related_name="organised_events",
+        help_text="The racer who runs a community race.",
+    )
     invite_token = models.CharField(max_length=43, blank=True, db_index=True)
     participants = models.ManyToManyField(
-        settings.AUTH_USER_MODEL, blank=True, related_name="joined_events",
+        settings.AUTH_USER_MODEL,
+        blank=True,
+        related_name="joined_events",
         help_text="Who may enter a private event (through its invitation).",
-    )  # fmt: skip
+    )
     removed = models.ManyToManyField(
-        settings.AUTH_USER_MODEL, blank=True, related_name="removed_from_events",
+        settings.AUTH_USER_MODEL,
+        blank=True,
+        related_name="removed_from_events",
         verbose_name="racers taken out",
         help_text="Racers the organiser took out: the invitation no longer lets them back in.",
-    )  # fmt: skip
+    )
     form_token = models.CharField(
-        max_length=43, blank=True, editable=False,
+        max_length=43,
+        blank=True,
+        editable=False,
         help_text="The one-time token of the form that created this community race: the same "
         "form sent twice (Back and submit again, a double click) gives back this race.",
-    )  # fmt: skip
+    )
     cars = models.PositiveSmallIntegerField(
-        "cars a race", default=1, validators=[MinValueValidator(1), MaxValueValidator(MAX_CARS)],
+        "cars a race",
+        default=1,
+        validators=[MinValueValidator(1), MaxValueValidator(MAX_CARS)],
         help_text="Model against model (DeepRacer for Cloud's HEAD_TO_MODEL): 2 to 4 racers' "
         "models on the track at once, each entry against the leaders' models (or, raced live, "
         "the next racers in the queue). 1: each model alone.",
-    )  # fmt: skip
+    )
     physical = models.BooleanField(
-        "raced by real cars", default=False,
+        "raced by real cars",
+        default=False,
         help_text="Real cars at a venue: a timekeeper records each lap (the event's timekeeper "
         "page, or a timing device), and the laps are scored by the same rules.",
-    )  # fmt: skip
+    )
     timing_token_hash = models.CharField(
-        max_length=64, blank=True, editable=False,
+        max_length=64,
+        blank=True,
+        editable=False,
         help_text="SHA-256 of the token a timing device sends (racing.timing); the token itself "
         "is shown once, when it is made.",
-    )  # fmt: skip
+    )
     created_at = models.DateTimeField(auto_now_add=True, null=True, editable=False)
 
     class Meta:
         ordering = ["opens_at", "name"]
         constraints = [
             models.UniqueConstraint(
-                fields=["organiser", "form_token"], condition=~models.Q(form_token=""),
+                fields=["organiser", "form_token"],
+                condition=~models.Q(form_token=""),
                 name="one_race_per_form",
             )
-        ]  # fmt: skip
+        ]
 
     def __str__(self) -> str:
         return self.name
@@ -275,9 +302,11 @@ class Submission(models.Model):
     )
     # Kept here as well as on its evaluation, which goes with the model: what drove the race.
     checkpoint = models.CharField(
-        max_length=8, choices=EvaluationJob.Checkpoint.choices,
-        default=EvaluationJob.Checkpoint.BEST, help_text="The model's best or last checkpoint.",
-    )  # fmt: skip
+        max_length=8,
+        choices=EvaluationJob.Checkpoint.choices,
+        default=EvaluationJob.Checkpoint.BEST,
+        help_text="The model's best or last checkpoint.",
+    )
     checkpoint_iteration = models.PositiveIntegerField(
         null=True, blank=True, help_text="The training iteration whose weights raced."
     )
@@ -344,13 +373,15 @@ class LiveSession(models.Model):
         default=False, help_text="Launch the next turn as soon as one ends."
     )
     min_speed = models.FloatField(
-        "slowest speed multiplier", default=0.5,
+        "slowest speed multiplier",
+        default=0.5,
         validators=[MinValueValidator(0.1), MaxValueValidator(2.0)],
-    )  # fmt: skip
+    )
     max_speed = models.FloatField(
-        "fastest speed multiplier", default=1.5,
+        "fastest speed multiplier",
+        default=1.5,
         validators=[MinValueValidator(0.1), MaxValueValidator(2.0)],
-    )  # fmt: skip
+    )
     created_at = models.DateTimeField(auto_now_add=True)
 
     def __str__(self) -> str:
@@ -401,9 +432,11 @@ class PhysicalRun(models.Model):
         settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="+"
     )
     line_crossed_ms = models.BigIntegerField(
-        null=True, blank=True, help_text="The clock's reading when the car last crossed the line: "
+        null=True,
+        blank=True,
+        help_text="The clock's reading when the car last crossed the line: "
         "the lap on track started then. Empty until the first crossing.",
-    )  # fmt: skip
+    )
     line_crossed_at = models.DateTimeField(
         null=True,
         blank=True,

@@ -91,12 +91,10 @@ def submission_create(
     queued, with a seed of its own that the submission keeps, and the model is SUBMITTING until
     it ends. The racer's row is locked meanwhile, so two submissions at once cannot overrun the
     limit. A live race's turn drives at ``speed_multiplier`` times the model's speeds, in
-    ``real_time`` (racing.live_races).
-
-    Where the event puts several cars on the track (``Event.cars``), the model races
-    ``against_leaders``' models (``selectors.rivals_for``), or, with ``grid_leader``, it is
-    car ``grid_position`` of that evaluation's race (a live turn's next racers), driven by
-    that race's run rather than a task of its own."""
+    ``real_time`` (racing.live_races). Where the event puts several cars on the track
+    (``Event.cars``), the model races ``against_leaders``' models (``selectors.rivals_for``),
+    or, with ``grid_leader``, it is car ``grid_position`` of that evaluation's race (a live
+    turn's next racers), driven by that race's run rather than a task of its own."""
     if checkpoint not in EvaluationJob.Checkpoint.values:
         raise SubmissionRefused("Race the model's best or its last checkpoint.")
     with transaction.atomic():
@@ -108,29 +106,44 @@ def submission_create(
             raise SubmissionRefused(reason)
         try:
             evaluation = training_services.evaluation_reserve(
-                model=model, purpose=RLModel.Status.SUBMITTING,
-                **race_rules(event, checkpoint=checkpoint), speed_multiplier=speed_multiplier,
-                real_time=real_time, grid_leader=grid_leader, grid_position=grid_position,
-            )  # fmt: skip
+                model=model,
+                purpose=RLModel.Status.SUBMITTING,
+                **race_rules(event, checkpoint=checkpoint),
+                speed_multiplier=speed_multiplier,
+                real_time=real_time,
+                grid_leader=grid_leader,
+                grid_position=grid_position,
+            )
         except training_services.EvaluationRefused as refused:
             raise SubmissionRefused(str(refused)) from None
         submission = Submission.objects.create(
-            event=event, racer=racer, model=model, model_name=model.name, evaluation=evaluation,
-            checkpoint=checkpoint, seed=evaluation.seed,
-        )  # fmt: skip
+            event=event,
+            racer=racer,
+            model=model,
+            model_name=model.name,
+            evaluation=evaluation,
+            checkpoint=checkpoint,
+            seed=evaluation.seed,
+        )
         if grid_leader is not None:
             return submission  # its race's first car's run drives it, and scores it
         if against_leaders:
-            rivals = selectors.rivals_for(event=event, racer=racer)
-            for position, rival in enumerate(rivals, start=1):
-                training_services.evaluation_rival_add(
-                    leader=evaluation, model=rival.model, position=position,
-                    **race_rules(event, checkpoint=rival.checkpoint),
-                )  # fmt: skip
+            _rivals_add(evaluation, event=event, racer=racer)
         # A send that fails (the broker unreachable) is logged, not the racer's error: the
         # workers send a queued task that is not in the broker again (tasks.resend_lost).
         transaction.on_commit(lambda: tasks.race.delay(submission.pk), robust=True)
     return submission
+
+
+def _rivals_add(evaluation: EvaluationJob, *, event: Event, racer: AbstractBaseUser) -> None:
+    """Behind ``evaluation`` on the grid, the leaders' models (``selectors.rivals_for``)."""
+    for position, rival in enumerate(selectors.rivals_for(event=event, racer=racer), start=1):
+        training_services.evaluation_rival_add(
+            leader=evaluation,
+            model=rival.model,
+            position=position,
+            **race_rules(event, checkpoint=rival.checkpoint),
+        )
 
 
 def race_rules(event: Event, *, checkpoint: str = "best") -> dict:
@@ -162,9 +175,11 @@ def submission_run(*, submission_id: int) -> Submission | None:
         return None
     race = [submission]  # with the submissions racing with it (a live turn's next racers)
     if submission.evaluation_id is not None:
-        race += Submission.objects.select_related("event").filter(
-            evaluation__grid_leader=submission.evaluation_id, status__in=Submission.ACTIVE
-        ).order_by("evaluation__grid_position")  # fmt: skip
+        race += (
+            Submission.objects.select_related("event")
+            .filter(evaluation__grid_leader=submission.evaluation_id, status__in=Submission.ACTIVE)
+            .order_by("evaluation__grid_position")
+        )
     for entry in race:
         SUBMISSION.move(entry, Submission.Status.IN_PROGRESS)
         live.announce_submission(entry)
@@ -244,11 +259,16 @@ def submission_score(
 def _lap(submission: Submission, trial: EvaluationTrial, limit: int | None) -> Lap:
     """A lap counts when the car finished it with at most ``limit`` off-tracks (None: any)."""
     return Lap(
-        submission=submission, number=trial.number, time_ms=trial.time_ms, status=trial.status,
-        off_tracks=trial.off_tracks, crashes=trial.crashes, resets=trial.resets,
+        submission=submission,
+        number=trial.number,
+        time_ms=trial.time_ms,
+        status=trial.status,
+        off_tracks=trial.off_tracks,
+        crashes=trial.crashes,
+        resets=trial.resets,
         penalty_ms=trial.penalty_ms,
         counted=trial.completed and (limit is None or trial.off_tracks <= limit),
-    )  # fmt: skip
+    )
 
 
 def _keep_video(submission: Submission, video: str) -> str:

@@ -156,11 +156,15 @@ def _crossing(run: PhysicalRun, at_ms: int | None) -> None:
         penalty_ms = round(run.off_tracks * event.off_track_penalty_s * 1000)
         limit = event.max_off_tracks_per_lap
         Lap.objects.create(
-            submission=run.submission, number=run.submission.laps.count() + 1,
-            time_ms=lap_ms + penalty_ms, penalty_ms=penalty_ms, status="lap_complete",
-            off_tracks=run.off_tracks, resets=run.resets,
+            submission=run.submission,
+            number=run.submission.laps.count() + 1,
+            time_ms=lap_ms + penalty_ms,
+            penalty_ms=penalty_ms,
+            status="lap_complete",
+            off_tracks=run.off_tracks,
+            resets=run.resets,
             counted=limit is None or run.off_tracks <= limit,
-        )  # fmt: skip
+        )
     run.line_crossed_ms, run.line_crossed_at = at_ms, timezone.now()
     run.off_tracks = run.resets = 0
     run.save(update_fields=["line_crossed_ms", "line_crossed_at", "off_tracks", "resets"])
@@ -196,10 +200,14 @@ def physical_run_finish(*, run: PhysicalRun) -> PhysicalRun:
             size=event.laps_required,
         )
         SUBMISSION.move(
-            submission, Submission.Status.COMPLETED, finished_at=timezone.now(), score_ms=score,
-            qualified=score is not None, laps_completed=len(laps),
+            submission,
+            Submission.Status.COMPLETED,
+            finished_at=timezone.now(),
+            score_ms=score,
+            qualified=score is not None,
+            laps_completed=len(laps),
             off_tracks=sum(lap.off_tracks for lap in laps),
-        )  # fmt: skip
+        )
         ranked = ranking_offer(submission=submission)
     live.announce_submission(submission, ranked=ranked)
     live.announce_timing(run)

@@ -44,9 +44,12 @@ def timekeeper(request: HttpRequest, slug: str) -> HttpResponse:
         data = form.cleaned_data
         try:
             timing.physical_run_start(
-                event=event, racer=data["racer"], model_name=data["model_name"], car=data["car"],
+                event=event,
+                racer=data["racer"],
+                model_name=data["model_name"],
+                car=data["car"],
                 timekeeper=request.user,
-            )  # fmt: skip
+            )
         except timing.TimingRefused as refused:
             form.add_error(None, str(refused))
         else:
@@ -106,18 +109,26 @@ def broadcast_state(request: HttpRequest, slug: str) -> JsonResponse:
     event = _get_event_for_user(request, slug)
     run = timing.running_run(event=event) if event.physical else None
     session = None if event.physical else LiveSession.objects.filter(event=event).first()
-    return JsonResponse({
-        "timing": live.timing_state(run), "queue": live.queue_state(session),
-        "top": _top(event, TOP),
-    })  # fmt: skip
+    return JsonResponse(
+        {
+            "timing": live.timing_state(run),
+            "queue": live.queue_state(session),
+            "top": _top(event, TOP),
+        }
+    )
 
 
 def _top(event: Event, count: int) -> list[dict]:
     return [
-        {"place": place, "racer": racer_name(racer=ranking.racer), "model_name": ranking.model_name,
-         "score_ms": ranking.score_ms, "physical": ranking.submission.physical}
+        {
+            "place": place,
+            "racer": racer_name(racer=ranking.racer),
+            "model_name": ranking.model_name,
+            "score_ms": ranking.score_ms,
+            "physical": ranking.submission.physical,
+        }
         for place, ranking in enumerate(selectors.leaders(event=event, count=count), start=1)
-    ]  # fmt: skip
+    ]
 
 
 @csrf_exempt
@@ -141,9 +152,12 @@ def _signal(event: Event, body: bytes) -> JsonResponse:
             raise TypeError
     except (ValueError, KeyError, TypeError, AttributeError):
         return JsonResponse(
-            {"error": 'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a '
-             "signal of off_track, reset, undo or finish."}, status=400,
-        )  # fmt: skip
+            {
+                "error": 'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a '
+                "signal of off_track, reset, undo or finish."
+            },
+            status=400,
+        )
     run = timing.running_run(event=event)
     if run is None:
         return JsonResponse({"error": "No car is on the track: start a run first."}, status=409)

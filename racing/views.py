@@ -128,10 +128,13 @@ def submission_create(request: HttpRequest) -> HttpResponse:
     return render(
         request,
         "racing/submission_create.html",
-        {"form": form, "has_events": form.fields["event"].queryset.exists(),
-         "has_models": form.fields["model"].queryset.exists()},
+        {
+            "form": form,
+            "has_events": form.fields["event"].queryset.exists(),
+            "has_models": form.fields["model"].queryset.exists(),
+        },
         status=429 if limited else 200,
-    )  # fmt: skip
+    )
 
 
 @login_required

@@ -76,9 +76,12 @@ class Fleet:
     index in the exception's ``car`` where it knows it."""
 
     def __init__(
-        self, envs: list, policy: Policy, seeds: list[int] | None = None,
+        self,
+        envs: list,
+        policy: Policy,
+        seeds: list[int] | None = None,
         score: Score | None = None,
-    ) -> None:  # fmt: skip
+    ) -> None:
         self.policy = policy
         self.score = score
         self.cars: list[Car] = []
@@ -149,8 +152,11 @@ class Fleet:
                 self.stepping = car
                 advanced.append(car.env.unwrapped.advance(self._command(car, action)))
             self.stepping = None
-            calls = [(car.index, params) for car, params in zip(driving, advanced, strict=True)
-                     if params is not None]  # fmt: skip
+            calls = [
+                (car.index, params)
+                for car, params in zip(driving, advanced, strict=True)
+                if params is not None
+            ]
             rewards = iter(self.score(calls) if calls else [])
         except BaseException as error:
             if self.stepping is None:  # the scorer's failure
@@ -232,10 +238,15 @@ class Fleet:
 
 
 def drive(
-    env, policy: Policy, mode: str = "explore", *, record: bool = True, seed: int | None = None,
+    env,
+    policy: Policy,
+    mode: str = "explore",
+    *,
+    record: bool = True,
+    seed: int | None = None,
     on_reset: Callable[[dict, dict], None] | None = None,
     on_step: Callable[[dict, dict, bool], None] | None = None,
-) -> Driven:  # fmt: skip
+) -> Driven:
     """One episode of ``env`` from a reset (with ``seed``), a fleet of one car: ``mode``
     "explore" (the policy, sampling), "random" (uniform actions) or "evaluate" (the policy,
     deterministic). ``on_reset(observation, info)`` runs after the reset,
@@ -258,9 +269,10 @@ def experience(driven: Driven, discrete: bool, ppo: bool) -> dict[str, np.ndarra
     arrays = {f"obs:{name}": np.stack(frames) for name, frames in driven.observations.items()}
     count = len(driven.actions)
     arrays["actions"] = (
-        np.array(driven.actions, dtype=np.int64) if discrete
+        np.array(driven.actions, dtype=np.int64)
+        if discrete
         else np.array(driven.actions, dtype=np.float32).reshape(count, -1)
-    )  # fmt: skip
+    )
     arrays["rewards"] = np.array(driven.rewards, dtype=np.float32)
     if ppo:
         arrays["values"] = np.array(driven.values, dtype=np.float32)

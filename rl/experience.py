@@ -9,6 +9,9 @@ rollout worker, "version:count" of the episodes it has started and not yet pushe
 stop, attempt, the run's token, and when each rollout worker took its task and last beat).
 Episodes travel as msgpack with their arrays as raw bytes: they come from a sandbox that ran a
 racer's code, so the trainer checks every field before it learns from one (``decode_episode``).
+
+Long because the keys are one protocol between the trainer and its workers: each side's reads
+and writes of them, and the checks of what a sandbox sent, are read together.
 """
 
 from __future__ import annotations
@@ -100,10 +103,15 @@ class JobChannel:
         size and hash go beside them: a machine's ``WeightsCache`` names and checks its copy so."""
         self.client.hset(
             self.policy,
-            mapping={"version": version, "weights": weights, "evaluate": evaluate,
-                     "episodes": episodes, "size": len(weights),
-                     "digest": weights_digest(weights)},
-        )  # fmt: skip
+            mapping={
+                "version": version,
+                "weights": weights,
+                "evaluate": evaluate,
+                "episodes": episodes,
+                "size": len(weights),
+                "digest": weights_digest(weights),
+            },
+        )
 
     def policy_version(self) -> int:
         value = self.client.hget(self.policy, "version")
@@ -149,8 +157,19 @@ class JobChannel:
         pushed; none once a newer version is published. The trainer keeps the first episodes of
         a version to come, so an episode started past its count would be dropped, and those
         dropped would be the longest (the laps completed): a bias the reservations prevent."""
-        return int(self.client.eval(RESERVE, 3, self.policy, self.counts, self.reserved,
-                                    worker, version, most, EXPIRE_AFTER))  # fmt: skip
+        return int(
+            self.client.eval(
+                RESERVE,
+                3,
+                self.policy,
+                self.counts,
+                self.reserved,
+                worker,
+                version,
+                most,
+                EXPIRE_AFTER,
+            )
+        )
 
     def reservations_drop(self, worker: int) -> None:
         """Give back what ``worker`` reserved and did not push: its episodes were abandoned
@@ -197,11 +216,17 @@ class JobChannel:
         (``join``), and one that outlived a restart sees the token change and stops, rather
         than drive on beside its replacement."""
         pipe = self.client.pipeline(transaction=True)
-        pipe.delete(self.experience, self.counts, self.reserved, self.evaluation, self.control,
-                    self.log)  # fmt: skip
-        pipe.hset(self.control, mapping={
-            "stop": 0, "attempt": attempt, "run": f"{attempt}:{secrets.token_hex(8)}",
-        })  # fmt: skip
+        pipe.delete(
+            self.experience, self.counts, self.reserved, self.evaluation, self.control, self.log
+        )
+        pipe.hset(
+            self.control,
+            mapping={
+                "stop": 0,
+                "attempt": attempt,
+                "run": f"{attempt}:{secrets.token_hex(8)}",
+            },
+        )
         pipe.execute()
 
     def is_set_up(self, attempt: int) -> bool:
@@ -260,10 +285,13 @@ class JobChannel:
         """Lines for the job's log; the list keeps the newest ``MAX_LOG_LINES`` until filed."""
         if entries:
             pipe = self.client.pipeline()
-            pipe.rpush(self.log, *[
-                json.dumps([entry.source, entry.level, entry.text[:MAX_LOG_TEXT]])
-                for entry in entries
-            ])  # fmt: skip
+            pipe.rpush(
+                self.log,
+                *[
+                    json.dumps([entry.source, entry.level, entry.text[:MAX_LOG_TEXT]])
+                    for entry in entries
+                ],
+            )
             pipe.ltrim(self.log, -MAX_LOG_LINES, -1)
             pipe.execute()
 
@@ -279,8 +307,15 @@ class JobChannel:
         return entries
 
     def expire(self) -> None:
-        for name in (self.experience, self.counts, self.reserved, self.evaluation, self.policy,
-                     self.control, self.log):  # fmt: skip
+        for name in (
+            self.experience,
+            self.counts,
+            self.reserved,
+            self.evaluation,
+            self.policy,
+            self.control,
+            self.log,
+        ):
             self.client.expire(name, EXPIRE_AFTER)
 
 
@@ -292,10 +327,13 @@ def encode_arrays(arrays: dict[str, np.ndarray], *, compress: bool = True) -> di
     level 1) for Redis unless ``compress`` is False (a pipe gains nothing: ``sandbox.served``)."""
     contiguous = {name: np.ascontiguousarray(array) for name, array in arrays.items()}
     return {
-        name: {"dtype": str(a.dtype), "shape": list(a.shape),
-               "data": zlib.compress(a.tobytes(), 1) if compress else a.tobytes()}
+        name: {
+            "dtype": str(a.dtype),
+            "shape": list(a.shape),
+            "data": zlib.compress(a.tobytes(), 1) if compress else a.tobytes(),
+        }
         for name, a in contiguous.items()
-    }  # fmt: skip
+    }
 
 
 def decode_array(
@@ -308,10 +346,11 @@ def decode_array(
         raise ProtocolError(f"expected {dtype} data")
     declared = encoded.get("shape")
     if (
-        not isinstance(declared, list) or len(declared) != len(shape)
+        not isinstance(declared, list)
+        or len(declared) != len(shape)
         or not all(type(size) is int and 0 <= size < 2**31 for size in declared)
         or any(want is not None and want != got for want, got in zip(shape, declared, strict=True))
-    ):  # fmt: skip
+    ):
         raise ProtocolError(f"expected shape {shape}, got {declared}")
     size, data = math.prod(declared) * np.dtype(dtype).itemsize, encoded.get("data")
     try:  # never inflated more than a byte past the shape's
@@ -359,8 +398,9 @@ def decode_episode(payload: bytes, observation_space, action_space, ppo: bool) -
         raise ValueError("rewards out of range")
     observations = {}
     for name, space in observation_space.spaces.items():
-        observation = decode_array(arrays.get(f"obs:{name}"), str(space.dtype),
-                                   (steps + 1, *space.shape))  # fmt: skip
+        observation = decode_array(
+            arrays.get(f"obs:{name}"), str(space.dtype), (steps + 1, *space.shape)
+        )
         if observation.dtype.kind == "f" and not np.isfinite(observation).all():
             raise ValueError(f"{name} observations out of range")
         observations[name] = observation

@@ -81,22 +81,44 @@ SETTINGS = {
         Setting("lr", "Learning rate", 3e-4, 1e-8, 1e-3),
         Setting("beta_entropy", "Entropy", 0.01, 0.0, 1.0),
         Setting("discount_factor", "Discount factor", 0.999, 0.0, 1.0),
-        Setting("loss_type", "Loss type", HUBER, choices=(HUBER, MEAN_SQUARED_ERROR),
-                aliases=LOSS_ALIASES),
-        Setting("num_episodes_between_training", "Episodes between policy updates", 20, 5, 100,
-                integer=True),
+        Setting(
+            "loss_type",
+            "Loss type",
+            HUBER,
+            choices=(HUBER, MEAN_SQUARED_ERROR),
+            aliases=LOSS_ALIASES,
+        ),
+        Setting(
+            "num_episodes_between_training",
+            "Episodes between policy updates",
+            20,
+            5,
+            100,
+            integer=True,
+        ),
     ),
     SAC: (
         Setting("batch_size", "Gradient descent batch size", 64, choices=BATCH_SIZES, integer=True),
         Setting("lr", "Learning rate", 3e-4, 1e-8, 1e-3),
         Setting("sac_alpha", "SAC alpha (entropy)", 0.2, 0.0, 1.0),
         Setting("discount_factor", "Discount factor", 0.999, 0.0, 1.0),
-        Setting("loss_type", "Loss type", MEAN_SQUARED_ERROR, choices=(MEAN_SQUARED_ERROR,),
-                aliases=LOSS_ALIASES),
-        Setting("num_episodes_between_training", "Episodes between policy updates", 1, 1, 1,
-                integer=True),
+        Setting(
+            "loss_type",
+            "Loss type",
+            MEAN_SQUARED_ERROR,
+            choices=(MEAN_SQUARED_ERROR,),
+            aliases=LOSS_ALIASES,
+        ),
+        Setting(
+            "num_episodes_between_training",
+            "Episodes between policy updates",
+            1,
+            1,
+            1,
+            integer=True,
+        ),
     ),
-}  # fmt: skip
+}
 
 # DeepRacer's other keys (simapp bundle/markov/constants.py:72-89, 01f5f01), which this console
 # does not use: kept with the model as given and written back on export. Their defaults are
@@ -161,8 +183,9 @@ def check(algorithm: str, values: dict) -> tuple[dict, dict[str, str]]:
     settings it uses and DeepRacer's others (``KEPT``), each given or at its default."""
     if algorithm not in SETTINGS:
         return {}, {"algorithm": "The algorithm must be PPO or SAC."}
-    errors = {str(name): unknown_message(name) for name in values
-              if setting(algorithm, name) is None}  # fmt: skip
+    errors = {
+        str(name): unknown_message(name) for name in values if setting(algorithm, name) is None
+    }
     result = {}
     for each in (*SETTINGS[algorithm], *KEPT):
         try:

@@ -68,10 +68,17 @@ class Learner:
     ``precision``: what its updates compute the features in (``update_precision``)."""
 
     def __init__(
-        self, *, algorithm: str, hyperparameters: dict, architecture: str,
-        observation_space, action_space, seed: int = 0, device: str = "auto",
+        self,
+        *,
+        algorithm: str,
+        hyperparameters: dict,
+        architecture: str,
+        observation_space,
+        action_space,
+        seed: int = 0,
+        device: str = "auto",
         precision: str = "fp32",
-    ) -> None:  # fmt: skip
+    ) -> None:
         self.algorithm = algorithm
         self.hyperparameters = hyperparameters
         self.seed = seed
@@ -80,17 +87,35 @@ class Learner:
         h = hyperparameters
         if algorithm == hp.PPO:
             self.model = DeepRacerPPO(
-                "MultiInputPolicy", env, n_steps=h["batch_size"], batch_size=h["batch_size"],
-                n_epochs=h["num_epochs"], learning_rate=h["lr"], ent_coef=h["beta_entropy"],
-                gamma=h["discount_factor"], gae_lambda=GAE_LAMBDA, clip_range=CLIP_RANGE,
-                value_loss=h["loss_type"], policy_kwargs=kwargs, seed=seed, device=device,
-            )  # fmt: skip
+                "MultiInputPolicy",
+                env,
+                n_steps=h["batch_size"],
+                batch_size=h["batch_size"],
+                n_epochs=h["num_epochs"],
+                learning_rate=h["lr"],
+                ent_coef=h["beta_entropy"],
+                gamma=h["discount_factor"],
+                gae_lambda=GAE_LAMBDA,
+                clip_range=CLIP_RANGE,
+                value_loss=h["loss_type"],
+                policy_kwargs=kwargs,
+                seed=seed,
+                device=device,
+            )
         else:
             self.model = DeepRacerSAC(
-                "MultiInputPolicy", env, learning_rate=h["lr"], replay_size=REPLAY_SIZE,
-                learning_starts=0, batch_size=h["batch_size"], ent_coef=h["sac_alpha"],
-                gamma=h["discount_factor"], policy_kwargs=kwargs, seed=seed, device=device,
-            )  # fmt: skip
+                "MultiInputPolicy",
+                env,
+                learning_rate=h["lr"],
+                replay_size=REPLAY_SIZE,
+                learning_starts=0,
+                batch_size=h["batch_size"],
+                ent_coef=h["sac_alpha"],
+                gamma=h["discount_factor"],
+                policy_kwargs=kwargs,
+                seed=seed,
+                device=device,
+            )
         # The job's metrics are ours: a logger that writes nothing (SB3's configure(None) would
         # leave an empty SB3-<time> folder in the temporary directory for every learner built).
         self.model.set_logger(Logger(folder=None, output_formats=[]))
@@ -130,9 +155,11 @@ class Learner:
     # Learning
 
     def learn(
-        self, episodes: list[Episode], interrupted: Callable[[], bool] = lambda: False,
+        self,
+        episodes: list[Episode],
+        interrupted: Callable[[], bool] = lambda: False,
         progress: Progress = lambda done, total: None,
-    ) -> Update:  # fmt: skip
+    ) -> Update:
         """One policy update from ``episodes``. ``interrupted`` is asked between minibatches (or
         every few gradient steps): when it says True, the update is abandoned (``Interrupted``).
         ``progress(done, total)`` is told the gradient steps done after each (``Progress``): PPO
@@ -258,8 +285,12 @@ def code_version() -> str:
     try:
         described = subprocess.run(
             ["git", "describe", "--always", "--dirty", "--abbrev=12"],
-            cwd=root, capture_output=True, text=True, timeout=10, check=True,
-        ).stdout.strip()  # fmt: skip
+            cwd=root,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return version
     return f"{version}+{described.replace('-', '.')}" if described else version

@@ -69,7 +69,12 @@ def onnx_graph(policy: Policy, discrete: bool) -> bytes:
         path = Path(directory) / "model.onnx"
         with torch.no_grad():
             torch.onnx.export(
-                network, network.sample_inputs(), str(path), dynamo=False, opset_version=OPSET,
-                input_names=network.input_names, output_names=[network.output_name],
-            )  # fmt: skip
+                network,
+                network.sample_inputs(),
+                str(path),
+                dynamo=False,
+                opset_version=OPSET,
+                input_names=network.input_names,
+                output_names=[network.output_name],
+            )
         return path.read_bytes()

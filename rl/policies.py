@@ -31,9 +31,13 @@ class Policy:
 
     @classmethod
     def build(
-        cls, algorithm: str, architecture: str, observation_space, action_space,
+        cls,
+        algorithm: str,
+        architecture: str,
+        observation_space,
+        action_space,
         device: str = "cpu",
-    ) -> Policy:  # fmt: skip
+    ) -> Policy:
         """``architecture``: the model's network as ``networks.architecture`` names it;
         ``device``: where it runs (torch's name: "cpu", "cuda")."""
         kwargs = policy_kwargs(algorithm, architecture)
@@ -147,13 +151,15 @@ def _sample(distribution, generators: list[torch.Generator | None]) -> torch.Ten
     inner = distribution.distribution
     if isinstance(inner, torch.distributions.Categorical):
         probs = inner.probs.cpu()
-        return torch.cat([
-            torch.multinomial(probs[row], 1, generator=generator)
-            for row, generator in enumerate(generators)
-        ]).to(inner.probs.device)  # fmt: skip
-    noise = torch.stack([
-        torch.randn(inner.loc.shape[1:], generator=generator) for generator in generators
-    ]).to(inner.loc.device)  # fmt: skip
+        return torch.cat(
+            [
+                torch.multinomial(probs[row], 1, generator=generator)
+                for row, generator in enumerate(generators)
+            ]
+        ).to(inner.probs.device)
+    noise = torch.stack(
+        [torch.randn(inner.loc.shape[1:], generator=generator) for generator in generators]
+    ).to(inner.loc.device)
     actions = inner.loc + inner.scale * noise
     if isinstance(distribution, SquashedDiagGaussianDistribution):
         distribution.gaussian_actions = actions

@@ -46,10 +46,12 @@ class Rollout:
     def minibatch(self, indices: torch.Tensor) -> DictRolloutBufferSamples:
         return DictRolloutBufferSamples(
             observations={name: frames[indices] for name, frames in self.observations.items()},
-            actions=self.actions[indices], old_values=self.values[indices],
-            old_log_prob=self.log_probs[indices], advantages=self.advantages[indices],
+            actions=self.actions[indices],
+            old_values=self.values[indices],
+            old_log_prob=self.log_probs[indices],
+            advantages=self.advantages[indices],
             returns=self.returns[indices],
-        )  # fmt: skip
+        )
 
 
 class DeepRacerPPO(PPO):

@@ -76,8 +76,10 @@ def entries(index: bytes) -> dict[str, Entry]:
             found[name] = Entry(
                 dtype=np.dtype(_DTYPES[proto.dtype]),
                 shape=tuple(int(dim.size) for dim in proto.shape.dim),
-                shard=proto.shard_id, offset=proto.offset, size=proto.size,
-            )  # fmt: skip
+                shard=proto.shard_id,
+                offset=proto.offset,
+                size=proto.size,
+            )
     return found
 
 

@@ -26,10 +26,14 @@ PRODUCER = 27
 
 _F = descriptor_pb2.FieldDescriptorProto
 _SCALARS = {
-    "string": _F.TYPE_STRING, "bytes": _F.TYPE_BYTES, "int32": _F.TYPE_INT32,
-    "int64": _F.TYPE_INT64, "float": _F.TYPE_FLOAT, "bool": _F.TYPE_BOOL,
+    "string": _F.TYPE_STRING,
+    "bytes": _F.TYPE_BYTES,
+    "int32": _F.TYPE_INT32,
+    "int64": _F.TYPE_INT64,
+    "float": _F.TYPE_FLOAT,
+    "bool": _F.TYPE_BOOL,
     "fixed32": _F.TYPE_FIXED32,
-}  # fmt: skip
+}
 
 
 def _message(file, name: str, fields, *, oneof: str | None = None, parent=None):
@@ -50,15 +54,20 @@ def _message(file, name: str, fields, *, oneof: str | None = None, parent=None):
     return message
 
 
+# Long because it declares TensorFlow's graph messages field by field, one table each.
 def _declare():
     file = descriptor_pb2.FileDescriptorProto(
         name="pitlane/tensorflow_graph.proto", package="tensorflow", syntax="proto3"
     )
-    shape = _message(file, "TensorShapeProto", [
-        ("dim", 2, ".tensorflow.TensorShapeProto.Dim", True), ("unknown_rank", 3, "bool", False),
-    ])  # fmt: skip
-    _message(file, "Dim", [("size", 1, "int64", False), ("name", 2, "string", False)],
-             parent=shape)  # fmt: skip
+    shape = _message(
+        file,
+        "TensorShapeProto",
+        [
+            ("dim", 2, ".tensorflow.TensorShapeProto.Dim", True),
+            ("unknown_rank", 3, "bool", False),
+        ],
+    )
+    _message(file, "Dim", [("size", 1, "int64", False), ("name", 2, "string", False)], parent=shape)
     _message(file, "TensorProto", [
         ("dtype", 1, "int32", False), ("tensor_shape", 2, ".tensorflow.TensorShapeProto", False),
         ("version_number", 3, "int32", False), ("tensor_content", 4, "bytes", False),
@@ -79,26 +88,42 @@ def _declare():
         ("name", 1, "string", False), ("op", 2, "string", False), ("input", 3, "string", True),
         ("device", 4, "string", False), ("attr", 5, ".tensorflow.NodeDef.AttrEntry", True),
     ])  # fmt: skip
-    entry = _message(file, "AttrEntry", [
-        ("key", 1, "string", False), ("value", 2, ".tensorflow.AttrValue", False),
-    ], parent=node)  # fmt: skip
+    entry = _message(
+        file,
+        "AttrEntry",
+        [
+            ("key", 1, "string", False),
+            ("value", 2, ".tensorflow.AttrValue", False),
+        ],
+        parent=node,
+    )
     entry.options.map_entry = True
     _message(file, "VersionDef", [
         ("producer", 1, "int32", False), ("min_consumer", 2, "int32", False),
         ("bad_consumers", 3, "int32", True),
     ])  # fmt: skip
-    _message(file, "GraphDef", [
-        ("node", 1, ".tensorflow.NodeDef", True), ("versions", 4, ".tensorflow.VersionDef", False),
-    ])  # fmt: skip
+    _message(
+        file,
+        "GraphDef",
+        [
+            ("node", 1, ".tensorflow.NodeDef", True),
+            ("versions", 4, ".tensorflow.VersionDef", False),
+        ],
+    )
     # tensor_bundle.proto: a checkpoint's index entries (read by rl.tfcheckpoint)
     _message(file, "BundleEntryProto", [
         ("dtype", 1, "int32", False), ("shape", 2, ".tensorflow.TensorShapeProto", False),
         ("shard_id", 3, "int32", False), ("offset", 4, "int64", False),
         ("size", 5, "int64", False), ("crc32c", 6, "fixed32", False), ("slices", 7, "bytes", True),
     ])  # fmt: skip
-    _message(file, "BundleHeaderProto", [
-        ("num_shards", 1, "int32", False), ("endianness", 2, "int32", False),
-    ])  # fmt: skip
+    _message(
+        file,
+        "BundleHeaderProto",
+        [
+            ("num_shards", 1, "int32", False),
+            ("endianness", 2, "int32", False),
+        ],
+    )
     pool = descriptor_pool.DescriptorPool()
     pool.Add(file)
     return [
@@ -139,46 +164,67 @@ class Graph:
     def conv2d(self, scope: str, x: str, kernel: np.ndarray, bias: np.ndarray, stride: int) -> str:
         """A convolution as TensorFlow's Conv2D: NHWC, unpadded, ``kernel`` as HWIO."""
         conv = self.add(
-            f"{scope}/Conv2D", "Conv2D", [x, self.const(f"{scope}/kernel", kernel)],
-            T=_Type(DT_FLOAT), strides=[1, stride, stride, 1], padding=b"VALID",
-            data_format=b"NHWC", dilations=[1, 1, 1, 1], use_cudnn_on_gpu=True,
+            f"{scope}/Conv2D",
+            "Conv2D",
+            [x, self.const(f"{scope}/kernel", kernel)],
+            T=_Type(DT_FLOAT),
+            strides=[1, stride, stride, 1],
+            padding=b"VALID",
+            data_format=b"NHWC",
+            dilations=[1, 1, 1, 1],
+            use_cudnn_on_gpu=True,
             explicit_paddings=[],
-        )  # fmt: skip
+        )
         return self.bias_add(scope, conv, bias)
 
     def dense(self, scope: str, x: str, kernel: np.ndarray, bias: np.ndarray) -> str:
         """x @ kernel + bias, ``kernel`` as TensorFlow keeps it: [in, out]."""
         product = self.add(
-            f"{scope}/MatMul", "MatMul", [x, self.const(f"{scope}/kernel", kernel)],
-            T=_Type(DT_FLOAT), transpose_a=False, transpose_b=False,
-        )  # fmt: skip
+            f"{scope}/MatMul",
+            "MatMul",
+            [x, self.const(f"{scope}/kernel", kernel)],
+            T=_Type(DT_FLOAT),
+            transpose_a=False,
+            transpose_b=False,
+        )
         return self.bias_add(scope, product, bias)
 
     def bias_add(self, scope: str, x: str, bias: np.ndarray) -> str:
         return self.add(
-            f"{scope}/BiasAdd", "BiasAdd", [x, self.const(f"{scope}/bias", bias)],
-            T=_Type(DT_FLOAT), data_format=b"NHWC",
-        )  # fmt: skip
+            f"{scope}/BiasAdd",
+            "BiasAdd",
+            [x, self.const(f"{scope}/bias", bias)],
+            T=_Type(DT_FLOAT),
+            data_format=b"NHWC",
+        )
 
     def unary(self, name: str, op: str, x: str) -> str:
         """Relu, Tanh, Softmax, Identity."""
         return self.add(name, op, [x], T=_Type(DT_FLOAT))
 
     def divide(self, name: str, x: str, by: float) -> str:
-        return self.add(name, "RealDiv", [x, self.const(f"{name}/y", np.float32(by))],
-                        T=_Type(DT_FLOAT))  # fmt: skip
+        return self.add(
+            name, "RealDiv", [x, self.const(f"{name}/y", np.float32(by))], T=_Type(DT_FLOAT)
+        )
 
     def reshape(self, name: str, x: str, shape: list[int]) -> str:
         return self.add(
-            name, "Reshape", [x, self.const(f"{name}/shape", np.array(shape, np.int32))],
-            T=_Type(DT_FLOAT), Tshape=_Type(DT_INT32),
-        )  # fmt: skip
+            name,
+            "Reshape",
+            [x, self.const(f"{name}/shape", np.array(shape, np.int32))],
+            T=_Type(DT_FLOAT),
+            Tshape=_Type(DT_INT32),
+        )
 
     def concat(self, name: str, xs: list[str], axis: int) -> str:
         return self.add(
-            name, "ConcatV2", [*xs, self.const(f"{name}/axis", np.int32(axis))],
-            N=len(xs), T=_Type(DT_FLOAT), Tidx=_Type(DT_INT32),
-        )  # fmt: skip
+            name,
+            "ConcatV2",
+            [*xs, self.const(f"{name}/axis", np.int32(axis))],
+            N=len(xs),
+            T=_Type(DT_FLOAT),
+            Tidx=_Type(DT_INT32),
+        )
 
 
 class _Type(int):

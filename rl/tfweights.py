@@ -62,10 +62,12 @@ def wanted(names: Iterable[str], ppo: bool) -> list[str]:
     value = PPO_VALUE_SCOPE if ppo else SAC_Q_SCOPE
     prefixes = (f"{cargraph.policy_scope(ppo)}/", f"{value}/")
     return [
-        name for name in names
-        if name.startswith(prefixes) and "Adam" not in name
+        name
+        for name in names
+        if name.startswith(prefixes)
+        and "Adam" not in name
         and name.endswith(("/kernel", "/bias", "/policy_log_std"))
-    ]  # fmt: skip
+    ]
 
 
 def load(policy: Policy, tensors: Mapping[str, np.ndarray], *, complete: bool) -> None:
@@ -88,8 +90,7 @@ def load(policy: Policy, tensors: Mapping[str, np.ndarray], *, complete: bool) -
             found += _layer(tensors, f"{head}/policy_fc", network.action_net)
         if complete:
             found += _extractor(tensors, PPO_VALUE_SCOPE, network.vf_features_extractor)
-            found += _layer(tensors, f"{PPO_VALUE_SCOPE}/v_values_head_0/output",
-                            network.value_net)  # fmt: skip
+            found += _layer(tensors, f"{PPO_VALUE_SCOPE}/v_values_head_0/output", network.value_net)
     else:
         actor, scope = network.actor, cargraph.policy_scope(ppo)
         found += _extractor(tensors, scope, actor.features_extractor)
@@ -133,14 +134,22 @@ def _layer(tensors, name: str, layer: nn.Module) -> list:
     """A layer's kernel and bias, each as PyTorch lays it out."""
     out, into, *window = layer.weight.shape
     if not window:  # dense: TensorFlow's [in, out]
-        return [_fit(tensors, f"{name}/kernel", layer.weight, (into, out), lambda k: k.T),
-                _fit(tensors, f"{name}/bias", layer.bias, (out,))]  # fmt: skip
+        return [
+            _fit(tensors, f"{name}/kernel", layer.weight, (into, out), lambda k: k.T),
+            _fit(tensors, f"{name}/bias", layer.bias, (out,)),
+        ]
     if window == [1, 1]:  # a camera's per-pixel dense layer: TensorFlow's [in, out]
-        kernel = _fit(tensors, f"{name}/kernel", layer.weight, (into, out),
-                      lambda k: k.T[:, :, None, None])  # fmt: skip
+        kernel = _fit(
+            tensors, f"{name}/kernel", layer.weight, (into, out), lambda k: k.T[:, :, None, None]
+        )
     else:  # TensorFlow's [height, width, in, out]
-        kernel = _fit(tensors, f"{name}/kernel", layer.weight, (*window, into, out),
-                      lambda k: k.transpose(3, 2, 0, 1))  # fmt: skip
+        kernel = _fit(
+            tensors,
+            f"{name}/kernel",
+            layer.weight,
+            (*window, into, out),
+            lambda k: k.transpose(3, 2, 0, 1),
+        )
     return [kernel, _fit(tensors, f"{name}/bias", layer.bias, (out,))]
 
 
@@ -151,8 +160,10 @@ def _fit(tensors, name: str, parameter: torch.Tensor, shape: tuple, layout=None)
         raise Unfit(f"it has no {name}")
     value = np.asarray(tensors[name], dtype=np.float32)
     if tuple(value.shape) != tuple(int(size) for size in shape):
-        raise Unfit(f"its {name} has the shape {list(value.shape)}, where the network of "
-                    f"model_metadata.json has {[int(size) for size in shape]}")  # fmt: skip
+        raise Unfit(
+            f"its {name} has the shape {list(value.shape)}, where the network of "
+            f"model_metadata.json has {[int(size) for size in shape]}"
+        )
     value = layout(value) if layout else value.reshape(parameter.shape)
     return name, parameter, np.ascontiguousarray(value)
 

@@ -121,8 +121,9 @@ class WeightsCache:
                 break
             except BlockingIOError:
                 if time.monotonic() > deadline:
-                    logger.warning("Waited %.0f s for the lock of %s; fetching",
-                                   self.patience, folder)  # fmt: skip
+                    logger.warning(
+                        "Waited %.0f s for the lock of %s; fetching", self.patience, folder
+                    )
                     yield False
                     return
                 time.sleep(LOCK_POLL)

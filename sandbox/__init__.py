@@ -170,11 +170,20 @@ class Sandbox:
         os.set_blocking(self._process.stdin.fileno(), False)
         threading.Thread(target=self._read_frames, daemon=True).start()
         threading.Thread(target=self._read_stderr, daemon=True).start()
-        self.report = self._request({
-            "call_timeout": self.call_timeout, "memory_allowance": self.memory_allowance,
-            "car_memory": self.car_memory, "env": env, "cars": self.cars, "policy": policy,
-            "samples": portable_env(self.samples), "op": "start",
-        }, {"ready"}, self.start_timeout)  # fmt: skip
+        self.report = self._request(
+            {
+                "call_timeout": self.call_timeout,
+                "memory_allowance": self.memory_allowance,
+                "car_memory": self.car_memory,
+                "env": env,
+                "cars": self.cars,
+                "policy": policy,
+                "samples": portable_env(self.samples),
+                "op": "start",
+            },
+            {"ready"},
+            self.start_timeout,
+        )
         return self.report
 
     def load(self, source: str) -> None:
@@ -222,13 +231,18 @@ class Sandbox:
         if self.server is not None:
             self.server.policy.load_published(data)
             data = b""
-        self._request({"op": "weights", "version": version, "data": data}, {"weights"},
-                      WEIGHTS_TIMEOUT)  # fmt: skip
+        self._request(
+            {"op": "weights", "version": version, "data": data}, {"weights"}, WEIGHTS_TIMEOUT
+        )
 
     def episode(
-        self, mode: str = "explore", worker: int = 0,
-        on_progress: Callable[[int], None] | None = None, *, start: int = 1,
-    ) -> dict:  # fmt: skip
+        self,
+        mode: str = "explore",
+        worker: int = 0,
+        on_progress: Callable[[int], None] | None = None,
+        *,
+        start: int = 1,
+    ) -> dict:
         """The next episode of the child's cars to end, ``start`` of its idle cars first
         beginning one in ``mode`` (with one car: drive one episode): ``summary`` (steps, reward,
         progress, status, lap_time), ``car`` (which), ``driving`` (how many cars have episodes
@@ -291,9 +305,12 @@ class Sandbox:
     # Talking to the child
 
     def _request(
-        self, message: dict, expected: set[str], timeout: float | None = None,
+        self,
+        message: dict,
+        expected: set[str],
+        timeout: float | None = None,
         on_progress: Callable[[int], None] | None = None,
-    ) -> dict:  # fmt: skip
+    ) -> dict:
         """Send ``message`` and wait for its answer: by ``timeout`` (the call's limit where
         None) and ``GRACE`` from now, or, with ``on_progress`` (an episode, a rollout), with a
         step at least that often."""
@@ -322,9 +339,13 @@ class Sandbox:
             raise self._died() from None
 
     def _wait(
-        self, expected: set[str], deadline: float, what: str,
-        on_progress: Callable[[int], None] | None = None, stall: float | None = None,
-    ) -> dict:  # fmt: skip
+        self,
+        expected: set[str],
+        deadline: float,
+        what: str,
+        on_progress: Callable[[int], None] | None = None,
+        stall: float | None = None,
+    ) -> dict:
         """The answer to ``what``, by ``deadline``; with ``stall``, a progress frame with more
         steps than the last moves the deadline to ``stall`` seconds after it."""
         steps = -1
@@ -427,12 +448,18 @@ class Sandbox:
         process = self._process
         code = process.wait(5) if process is not None else None
         if self.stderr_tail:
-            logger.warning("A sandbox child stopped (%s); its last words: %s", code,
-                           self.stderr_tail[-2000:].decode("utf-8", "replace"))  # fmt: skip
+            logger.warning(
+                "A sandbox child stopped (%s); its last words: %s",
+                code,
+                self.stderr_tail[-2000:].decode("utf-8", "replace"),
+            )
         # The child runs only our code (the racer's runs in its reward process, whose end the
         # child reports): its own end is the simulation's, not the reward function's.
-        how = f"was killed by {signal.Signals(-code).name}" if code and code < 0 else (
-            f"exited with status {code}")  # fmt: skip
+        how = (
+            f"was killed by {signal.Signals(-code).name}"
+            if code and code < 0
+            else (f"exited with status {code}")
+        )
         return SandboxFailure("crashed", f"The simulation's process stopped: it {how}.")
 
     def _kill(self) -> None:
@@ -479,11 +506,13 @@ class Sandbox:
 def _failure_of(frame: dict) -> SandboxFailure:
     """The failure an error frame of the child's tells, its parts bounded."""
     return SandboxFailure(
-        str(frame.get("kind", "error"))[:20], str(frame.get("message", ""))[:500],
-        _int_or_none(frame.get("line")), _int_or_none(frame.get("step")),
+        str(frame.get("kind", "error"))[:20],
+        str(frame.get("message", ""))[:500],
+        _int_or_none(frame.get("line")),
+        _int_or_none(frame.get("step")),
         str(frame["status"])[:20] if frame.get("status") else None,
         _int_or_none(frame.get("car")),
-    )  # fmt: skip
+    )
 
 
 def _policy_server(policy: dict, env: dict | None, cars: int, device: str) -> served.PolicyServer:
@@ -535,9 +564,10 @@ def self_test() -> SelfTest:
         detail = "sealed code could " + ", ".join(escaped)
     else:
         detail = "held: files, network, processes and writes are refused" + (
-            "; in its own user and network namespaces" if namespaces else
-            "; namespaces are not available here, seccomp alone holds"
-        )  # fmt: skip
+            "; in its own user and network namespaces"
+            if namespaces
+            else "; namespaces are not available here, seccomp alone holds"
+        )
     return SelfTest(not escaped, tuple(escaped), namespaces, detail)
 
 

@@ -9,6 +9,9 @@ call of the racer's code goes to the reward process and is timed from here; what
 becomes log messages, what it raises, returns or takes too long over becomes an error message
 naming the line. Since the racer's code cannot write to the worker, the frames the worker reads
 (progress above all) are this module's. This module never imports Django.
+
+Long because the child is one sealed process with one request loop: each request it answers
+(validate, drive, serve a policy, sample situations) shares the seal and the reward process.
 """
 
 from __future__ import annotations
@@ -99,9 +102,10 @@ class Child:
         namespaces = seal.enter_namespaces()
         seal.limit_resources(address_space)
         seal.install_seccomp(
-            read_fds=(0, self.reward.replies), write_fds=(self.reply_fd, 2, self.reward.requests),
+            read_fds=(0, self.reward.replies),
+            write_fds=(self.reply_fd, 2, self.reward.requests),
             children=(self.reward.pid,),
-        )  # fmt: skip
+        )
         self.send({"type": "ready", "namespaces": namespaces, "address_space": address_space})
         while (request := read_frame(self.requests)) is not None:
             handler = getattr(self, f"op_{request.get('op')}", None)
@@ -153,9 +157,11 @@ class Child:
 
             torch.set_num_threads(1)
             self.policy = Policy.build(
-                settings["algorithm"], settings["architecture"],
-                self.env.observation_space, self.env.action_space,
-            )  # fmt: skip
+                settings["algorithm"],
+                settings["architecture"],
+                self.env.observation_space,
+                self.env.action_space,
+            )
             self.policy.explore(observations, [None] * len(observations))
         self.ppo = self.policy.ppo
         # One round trip to the reward process a step for all the cars (RewardProcess.calls).
@@ -178,8 +184,13 @@ class Child:
                 self.op_watch(request)
                 continue
             break
-        self.send({"type": "error", "kind": "policy",
-                   "message": "The worker did not answer with the cars' actions."})  # fmt: skip
+        self.send(
+            {
+                "type": "error",
+                "kind": "policy",
+                "message": "The worker did not answer with the cars' actions.",
+            }
+        )
         os._exit(75)
 
     # Requests
@@ -255,19 +266,29 @@ class Child:
             final_value = self.policy.value(driven.last_observation)
         arrays = episode.experience(driven, hasattr(car.env.action_space, "n"), self.ppo)
         answer["payload"] = msgpack.packb(
-            {**summary, "final_value": final_value, "arrays": encode_arrays(arrays),
-             "trace": driven.trace}, use_bin_type=True,
-        )  # fmt: skip
+            {
+                **summary,
+                "final_value": final_value,
+                "arrays": encode_arrays(arrays),
+                "trace": driven.trace,
+            },
+            use_bin_type=True,
+        )
         self.send(answer, log=True)
 
     def _summary(self, car: episode.Car, rewards: list, info: dict, terminated: bool) -> dict:
         """What the trainer and the job's page read of an episode without its experience."""
         return {
-            "worker": self.worker, "car": car.index, "version": self.version,
-            "steps": len(rewards), "reward": float(sum(rewards)), "progress": info["progress"],
-            "status": info["status"], "terminated": bool(terminated),
+            "worker": self.worker,
+            "car": car.index,
+            "version": self.version,
+            "steps": len(rewards),
+            "reward": float(sum(rewards)),
+            "progress": info["progress"],
+            "status": info["status"],
+            "terminated": bool(terminated),
             "lap_time": car.env.unwrapped.sim_time if info["status"] == "lap_complete" else None,
-        }  # fmt: skip
+        }
 
     def op_watch(self, request: dict) -> None:
         """Which views to send while driving; no answer."""
@@ -303,12 +324,19 @@ class Child:
 
     def _send_view(self, view: str, observation: dict | None) -> None:
         env = self.env.unwrapped
-        self.send({
-            "type": "frame", "view": view, "rendered_at": time.time(),
-            "jpeg": jpeg(view_image(env, view, observation)),
-            "worker": self.worker, "episode": self.shown_episode,
-            "step": env.steps, "status": env.status, "progress": env.progress,
-        })  # fmt: skip
+        self.send(
+            {
+                "type": "frame",
+                "view": view,
+                "rendered_at": time.time(),
+                "jpeg": jpeg(view_image(env, view, observation)),
+                "worker": self.worker,
+                "episode": self.shown_episode,
+                "step": env.steps,
+                "status": env.status,
+                "progress": env.progress,
+            }
+        )
 
     def op_load(self, request: dict) -> None:
         try:
@@ -349,10 +377,12 @@ class Child:
             escaped = self.reward.probe(request)
         except RewardFailure as error:
             escaped = [f"stop the probe ({error})"]
-        escaped += seal.escapes({
-            "read a file (from the child)": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
-            "start a process (from the child)": lambda: os.fork() == 0 and os._exit(0),
-        })  # fmt: skip
+        escaped += seal.escapes(
+            {
+                "read a file (from the child)": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
+                "start a process (from the child)": lambda: os.fork() == 0 and os._exit(0),
+            }
+        )
         self.send({"type": "probe", "escaped": escaped})
 
     def op_exit(self, request: dict) -> None:
@@ -377,8 +407,13 @@ def _unavailable(error: WorldUnavailable) -> dict[str, Any]:
 def _failure(error: RewardFailure | RewardError, **where: Any) -> dict[str, Any]:
     """The error frame for a reward call that failed, with the step and status where it did."""
     if isinstance(error, RewardError):  # a value the reward process sent, refused here
-        return {"type": "error", "kind": "value", "message": str(error)[:500], "line": None,
-                **where}  # fmt: skip
+        return {
+            "type": "error",
+            "kind": "value",
+            "message": str(error)[:500],
+            "line": None,
+            **where,
+        }
     return {**error.error, **where}
 
 

@@ -41,11 +41,23 @@ from simulator.rewards import RewardError, checked_reward
 
 FILENAME = "<reward_function>"
 PRELOADED = (
-    "math", "random", "numpy", "scipy", "scipy.spatial", "scipy.interpolate", "scipy.signal",
-    "scipy.stats", "scipy.optimize", "scipy.linalg", "scipy.special", "shapely",
-    "shapely.geometry", "shapely.ops", "shapely.affinity",
+    "math",
+    "random",
+    "numpy",
+    "scipy",
+    "scipy.spatial",
+    "scipy.interpolate",
+    "scipy.signal",
+    "scipy.stats",
+    "scipy.optimize",
+    "scipy.linalg",
+    "scipy.special",
+    "shapely",
+    "shapely.geometry",
+    "shapely.ops",
+    "shapely.affinity",
     "encodings.idna",  # so that code reaching for the network meets the seal, not a missing codec
-)  # fmt: skip
+)
 MAX_LOG = 200  # characters per printed line kept, and lines kept between two messages
 MAX_REPLY = 1024 * 1024  # [bytes] the largest reply frame: a reward and 200 printed lines
 KINDS = {"syntax", "import", "exception", "definition", "value", "timeout", "memory"}
@@ -136,8 +148,12 @@ class RewardProcess:
         """The reward for ``params`` from car ``car``'s copy of the function, checked here
         (``RewardError`` if it is not one)."""
         params = self._sent([params])[0]
-        reply = self._ask({"op": "call", "params": params, "car": car}, "reward",
-                          self.call_timeout + KILL_GRACE, car)  # fmt: skip
+        reply = self._ask(
+            {"op": "call", "params": params, "car": car},
+            "reward",
+            self.call_timeout + KILL_GRACE,
+            car,
+        )
         return checked_reward(reply.get("value"))
 
     def calls(self, calls: list[tuple[int, dict]]) -> list[float]:
@@ -184,8 +200,9 @@ class RewardProcess:
         if waypoints is not None and waypoints != self._waypoints:
             self._ask({"op": "waypoints", "waypoints": waypoints}, "waypoints", 5.0)
             self._waypoints = waypoints
-        return [{name: value for name, value in each.items() if name != "waypoints"}
-                for each in params]  # fmt: skip
+        return [
+            {name: value for name, value in each.items() if name != "waypoints"} for each in params
+        ]
 
     def probe(self, request: dict) -> list[str]:
         reply = self._ask({**request, "op": "probe"}, "probe", 30.0)
@@ -228,9 +245,11 @@ class RewardProcess:
         except ProtocolError as error:
             self.stop()
             raise RewardFailure(
-                "protocol", f"The reward function's process broke the protocol ({error}).",
-                None, car,
-            ) from None  # fmt: skip
+                "protocol",
+                f"The reward function's process broke the protocol ({error}).",
+                None,
+                car,
+            ) from None
         except OSError:  # the process is gone
             reply = None
         if reply is None:
@@ -242,9 +261,11 @@ class RewardProcess:
         if kind == "error" and reply.get("kind") in KINDS:
             named = _int_or_none(reply.get("car"))
             raise RewardFailure(
-                reply["kind"], str(reply.get("message", ""))[:500],
-                _int_or_none(reply.get("line")), car if named is None else named,
-            )  # fmt: skip
+                reply["kind"],
+                str(reply.get("message", ""))[:500],
+                _int_or_none(reply.get("line")),
+                car if named is None else named,
+            )
         self.stop()
         raise RewardFailure(
             "protocol", f"The reward function's process answered {kind!r}.", None, car
@@ -393,16 +414,18 @@ class _Host:
 
     def op_probe(self, request: dict) -> None:
         """Try what sealed code must not be able to do; report what got through."""
-        escaped = seal.escapes({
-            "read a file": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
-            "connect to the network": lambda: (
-                __import__("socket").socket().connect(("127.0.0.1", int(request["port"])))
-            ),
-            "start a process": lambda: os.fork() == 0 and os._exit(0),
-            "run a program": lambda: os.execv("/bin/true", ["true"]),  # noqa: S606
-            "write a file": lambda: open("/tmp/pitlane-sandbox-probe", "w").write("x"),  # noqa: S108, SIM115
-            "write to the worker": lambda: os.write(1, b"\0\0\0\1\x80"),
-        })  # fmt: skip
+        escaped = seal.escapes(
+            {
+                "read a file": lambda: open(request["secret_path"]).read(),  # noqa: SIM115
+                "connect to the network": lambda: (
+                    __import__("socket").socket().connect(("127.0.0.1", int(request["port"])))
+                ),
+                "start a process": lambda: os.fork() == 0 and os._exit(0),
+                "run a program": lambda: os.execv("/bin/true", ["true"]),  # noqa: S606
+                "write a file": lambda: open("/tmp/pitlane-sandbox-probe", "w").write("x"),  # noqa: S108, SIM115
+                "write to the worker": lambda: os.write(1, b"\0\0\0\1\x80"),
+            }
+        )
         self.send({"type": "probe", "escaped": escaped})
 
     def _limited(self, function, *args):

@@ -68,10 +68,14 @@ class ServedPolicy:
 
     def _act(self, how: str, observations: list[dict], seeds: list[int] | None = None) -> dict:
         batch = {name: np.stack([seen[name] for seen in observations]) for name in observations[0]}
-        answer = self.ask({
-            "type": "act", "how": how, "seeds": seeds,
-            "observations": encode_arrays(batch, compress=False),  # 19 KB a car's camera
-        })  # fmt: skip
+        answer = self.ask(
+            {
+                "type": "act",
+                "how": how,
+                "seeds": seeds,
+                "observations": encode_arrays(batch, compress=False),  # 19 KB a car's camera
+            }
+        )
         # The worker is trusted: its arrays are taken as they say they are.
         return {
             name: decode_array(packed, packed["dtype"], tuple(packed["shape"]), compressed=False)
@@ -143,10 +147,11 @@ class PolicyServer:
             raise ProtocolError("observations for no car, or for more than it has")
         seeds = request.get("seeds")
         if how == "explore" and (
-            not isinstance(seeds, list) or len(seeds) != cars
+            not isinstance(seeds, list)
+            or len(seeds) != cars
             or not all(type(seed) is int and seed in self.generators for seed in seeds)
             or len(set(seeds)) != cars
-        ):  # fmt: skip
+        ):
             raise ProtocolError("seeds of no car it drives")
         return (
             how,

@@ -40,15 +40,40 @@ FOREIGN_PATHS = {"scripts/evaluation/prepare-config.py"}  # DeepRacer for Cloud'
 
 DJANGO_COMMANDS = {
     # django.core
-    "check", "compilemessages", "createcachetable", "dbshell", "diffsettings", "dumpdata",
-    "flush", "inspectdb", "loaddata", "makemessages", "makemigrations", "migrate",
-    "optimizemigration", "runserver", "sendtestemail", "shell", "showmigrations", "sqlflush",
-    "sqlmigrate", "sqlsequencereset", "squashmigrations", "startapp", "startproject", "test",
+    "check",
+    "compilemessages",
+    "createcachetable",
+    "dbshell",
+    "diffsettings",
+    "dumpdata",
+    "flush",
+    "inspectdb",
+    "loaddata",
+    "makemessages",
+    "makemigrations",
+    "migrate",
+    "optimizemigration",
+    "runserver",
+    "sendtestemail",
+    "shell",
+    "showmigrations",
+    "sqlflush",
+    "sqlmigrate",
+    "sqlsequencereset",
+    "squashmigrations",
+    "startapp",
+    "startproject",
+    "test",
     "testserver",
     # django.contrib: auth, staticfiles, sessions, contenttypes; channels
-    "changepassword", "createsuperuser", "collectstatic", "findstatic", "clearsessions",
-    "remove_stale_contenttypes", "runworker",
-}  # fmt: skip
+    "changepassword",
+    "createsuperuser",
+    "collectstatic",
+    "findstatic",
+    "clearsessions",
+    "remove_stale_contenttypes",
+    "runworker",
+}
 
 FENCE = re.compile(r"^```[^\n]*\n(.*?)^```", re.S | re.M)
 INLINE_CODE = re.compile(r"`([^`\n]+(?:\n[^`\n]+)*)`")

@@ -38,8 +38,9 @@ def car_urdf(simapp: Path, folder: Path) -> Path:
     """The single-camera car's URDF as PyBullet can read it, in ``folder``."""
     text = (simapp / URDF).read_text()
     text = re.sub(r"\s*</?xacro:(unless|if)\b[^>]*>", "", text)
-    text = text.replace("package://deepracer_simulation_environment/meshes/deepracer/",
-                        str(simapp / MESHES) + "/")  # fmt: skip
+    text = text.replace(
+        "package://deepracer_simulation_environment/meshes/deepracer/", str(simapp / MESHES) + "/"
+    )
     path = folder / "car.urdf"
     path.write_text(text)
     return path
@@ -64,13 +65,21 @@ class Rig:
         for j in range(p.getNumJoints(car)):
             p.setJointMotorControl2(car, j, p.VELOCITY_CONTROL, force=0)  # no built-in motors
             wheel = "wheel" in p.getJointInfo(car, j)[12].decode()
-            p.changeDynamics(car, j, lateralFriction=0.5 if wheel else 0.0, jointDamping=0.0,
-                             linearDamping=0.0, angularDamping=0.0)  # fmt: skip
+            p.changeDynamics(
+                car,
+                j,
+                lateralFriction=0.5 if wheel else 0.0,
+                jointDamping=0.0,
+                linearDamping=0.0,
+                angularDamping=0.0,
+            )
         p.changeDynamics(car, -1, linearDamping=0.0, angularDamping=0.0)
         self.spec = spec = CarSpec()
-        self.wheels = {f"{side}_{axle}_wheel_joint": gain for side in ("left", "right")
-                       for axle, gain in (("rear", spec.rear_wheel_gain),
-                                          ("front", spec.front_wheel_gain))}  # fmt: skip
+        self.wheels = {
+            f"{side}_{axle}_wheel_joint": gain
+            for side in ("left", "right")
+            for axle, gain in (("rear", spec.rear_wheel_gain), ("front", spec.front_wheel_gain))
+        }
         self.hinges = {f"{side}_steering_hinge_joint": [0.0, 0.0] for side in ("left", "right")}
 
     def angle(self) -> float:
@@ -84,8 +93,9 @@ class Rig:
         for name, gain in self.wheels.items():
             rate = p.getJointState(self.car, self.joints[name])[1]
             torque = gain * (speed / spec.command_radius - rate)
-            p.setJointMotorControl2(self.car, self.joints[name], p.TORQUE_CONTROL,
-                                    force=max(-10.0, min(10.0, torque)))  # fmt: skip
+            p.setJointMotorControl2(
+                self.car, self.joints[name], p.TORQUE_CONTROL, force=max(-10.0, min(10.0, torque))
+            )
         most = spec.steering_rate_limit * STEP
         for name, state in self.hinges.items():
             command, last = state
@@ -94,8 +104,12 @@ class Rig:
             torque = spec.steering_p * error + spec.steering_d * (error - last) / STEP
             state[:] = command, error
             effort = spec.steering_effort
-            p.setJointMotorControl2(self.car, self.joints[name], p.TORQUE_CONTROL,
-                                    force=max(-effort, min(effort, torque)))  # fmt: skip
+            p.setJointMotorControl2(
+                self.car,
+                self.joints[name],
+                p.TORQUE_CONTROL,
+                force=max(-effort, min(effort, torque)),
+            )
         p.stepSimulation()
 
 
@@ -130,8 +144,9 @@ def main() -> int:
                     rig.tick(SPEED, math.radians(change))
                 pybullet_angles.append(rig.angle())
                 done = sample
-            cells = "".join(f"{a:>7.2f} / {b:>6.2f}" for a, b in zip(pybullet_angles, ours(change),
-                                                                   strict=True))  # fmt: skip
+            cells = "".join(
+                f"{a:>7.2f} / {b:>6.2f}" for a, b in zip(pybullet_angles, ours(change), strict=True)
+            )
             print(f"{change:>7.0f}°{cells}   (PyBullet / ours, degrees)")
     return 0
 

@@ -70,12 +70,14 @@ def main(argv: list[str] | None = None) -> int:
     commands = parser.add_subparsers(dest="command", required=True)
     drive = commands.add_parser("demo", help="drive a lap along the centre line and film it")
     drive.add_argument(
-        "--track", required=True,
+        "--track",
+        required=True,
         help=f"one of: {', '.join(tracks.names(origin='pitlane'))}, or one of DeepRacer's by its "
         "WORLD_NAME (reInvent2019_track, 2022_april_open_cw, ...)",
-    )  # fmt: skip
-    drive.add_argument("--direction", default="counterclockwise",
-                       choices=["counterclockwise", "clockwise"])  # fmt: skip
+    )
+    drive.add_argument(
+        "--direction", default="counterclockwise", choices=["counterclockwise", "clockwise"]
+    )
     drive.add_argument(
         "--speed",
         type=float,
@@ -88,8 +90,9 @@ def main(argv: list[str] | None = None) -> int:
     if not 0.1 <= arguments.speed <= 4:
         parser.error("--speed is 0.1 to 4 m/s")
     try:
-        line = demo(arguments.track, arguments.direction, arguments.speed, arguments.out,
-                    arguments.braking)  # fmt: skip
+        line = demo(
+            arguments.track, arguments.direction, arguments.speed, arguments.out, arguments.braking
+        )
         print(line)  # noqa: T201
     except (TrackError, ConfigError, OSError) as error:
         print(f"python -m simulator: {error}", file=sys.stderr)  # noqa: T201

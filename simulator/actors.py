@@ -42,9 +42,13 @@ class Traffic:
     """The boxes (OBJECT_AVOIDANCE) or bot cars (HEAD_TO_BOT) of one episode."""
 
     def __init__(
-        self, track: Track, objects: Objects | None, bots: Bots | None, rivals: int = 0,
+        self,
+        track: Track,
+        objects: Objects | None,
+        bots: Bots | None,
+        rivals: int = 0,
         rival_shades: tuple = (),
-    ) -> None:  # fmt: skip
+    ) -> None:
         self.track = track
         self.objects = objects
         self.bots = bots

@@ -139,8 +139,9 @@ class PerspectiveView:
         beyond = room is not None and room.field is not None
         self._border_mode = cv2.BORDER_REPLICATE if beyond else cv2.BORDER_CONSTANT
         if room is not None and room.height is not None:  # each column's ray at the horizon
-            pixels = np.stack([np.arange(lens.width), np.full(lens.width, horizon),
-                               np.ones(lens.width)])  # fmt: skip
+            pixels = np.stack(
+                [np.arange(lens.width), np.full(lens.width, horizon), np.ones(lens.width)]
+            )
             self._column_rays = (np.linalg.inv(self._k) @ pixels).T
             self._rows = np.arange(lens.height)[:, None]
             self._levels = np.array([[room.height], [0.0]])  # the edge's top and foot [m]
@@ -289,10 +290,15 @@ class PerspectiveView:
         dx, dy = position[0] - x, position[1] - y
         along, across = dx * c[:, 0] + dy * s[:, 0], -dx * s[:, 0] + dy * c[:, 0]
         facing = np.stack(
-            [position[2] > height, across < -half_width, along > half_length,
-             across > half_width, along < -half_length],
+            [
+                position[2] > height,
+                across < -half_width,
+                along > half_length,
+                across > half_width,
+                along < -half_length,
+            ],
             axis=1,
-        ).tolist()  # fmt: skip
+        ).tolist()
         for solid, faces, visible in zip(solids, faces_pixels, facing, strict=True):
             for face, light, seen in zip(faces, _FACE_LIGHT, visible, strict=True):
                 if seen:

@@ -88,12 +88,16 @@ def deepracer_parts() -> tuple[Part, ...]:
     less and are left out. The stereo car's differ by 2 g (its second camera link)."""
     wheels = [
         Part(WHEEL_MASS, axle, side * half, z, WHEEL_IZZ)
-        for axle, half, z in ((REAR_AXLE_X, REAR_WHEEL_Y, REAR_AXLE_Z),
-                              (FRONT_AXLE_X, FRONT_WHEEL_Y, FRONT_AXLE_Z))
+        for axle, half, z in (
+            (REAR_AXLE_X, REAR_WHEEL_Y, REAR_AXLE_Z),
+            (FRONT_AXLE_X, FRONT_WHEEL_Y, FRONT_AXLE_Z),
+        )
         for side in (1, -1)
-    ]  # fmt: skip
-    hinges = [Part(HINGE_MASS, FRONT_AXLE_X, side * FRONT_WHEEL_Y, FRONT_AXLE_Z, HINGE_IZZ)
-              for side in (1, -1)]  # fmt: skip
+    ]
+    hinges = [
+        Part(HINGE_MASS, FRONT_AXLE_X, side * FRONT_WHEEL_Y, FRONT_AXLE_Z, HINGE_IZZ)
+        for side in (1, -1)
+    ]
     # The chassis: 5.0 kg, its centre at the chassis origin, izz 0.05865 kg m²: URDF:10-24.
     return (Part(5.0, 0.0, 0.0, 0.0, 0.05865), *wheels, *hinges)
 
@@ -346,8 +350,7 @@ class Car:
                 r -= change * b * inv_i
                 # Front, along the wheels.
                 along = u * cos_d + (v + r * a) * sin_d
-                new = _clip(p_fl + (target - along - soft_front * p_fl) / k_front_long,
-                            limit_front)  # fmt: skip
+                new = _clip(p_fl + (target - along - soft_front * p_fl) / k_front_long, limit_front)
                 change, p_fl = new - p_fl, new
                 u += change * cu
                 v += change * su

@@ -144,10 +144,15 @@ BOUNDS = {"low": "lowest", "high": "highest"}
 
 def _discrete(value: Sequence) -> DiscreteActions:
     if not 2 <= len(value) <= 30:
-        raise ActionSpaceError({"": (
-            f"A discrete action space has 2 to 30 actions, not {len(value)}." if value
-            else "There are no actions: a discrete action space has 2 to 30."
-        )})  # fmt: skip
+        raise ActionSpaceError(
+            {
+                "": (
+                    f"A discrete action space has 2 to 30 actions, not {len(value)}."
+                    if value
+                    else "There are no actions: a discrete action space has 2 to 30."
+                )
+            }
+        )
     problems: dict[str, str] = {}
     actions: list[tuple[float, float]] = []
     seen: dict[tuple[float, float], int] = {}
@@ -157,8 +162,9 @@ def _discrete(value: Sequence) -> DiscreteActions:
             continue
         numbers = []
         for name, (label, limits, unit) in VALUES.items():
-            number, problem = _reading(action.get(name), f"{label.capitalize()} in action {index}",
-                                       limits, unit)  # fmt: skip
+            number, problem = _reading(
+                action.get(name), f"{label.capitalize()} in action {index}", limits, unit
+            )
             if problem:
                 problems[f"{index}.{name}"] = problem
             numbers.append(number)
@@ -183,10 +189,14 @@ def _continuous(value: Mapping) -> ContinuousActions:
     for name, (label, limits, unit) in VALUES.items():
         bounds = value.get(name)
         if not isinstance(bounds, Mapping):
-            raise ActionSpaceError({"": (
-                'A continuous action space is {"steering_angle": {"low": -30, "high": 30}, '
-                '"speed": {"low": 1, "high": 2}}.'
-            )})  # fmt: skip
+            raise ActionSpaceError(
+                {
+                    "": (
+                        'A continuous action space is {"steering_angle": {"low": -30, "high": 30}, '
+                        '"speed": {"low": 1, "high": 2}}.'
+                    )
+                }
+            )
         for bound, word in BOUNDS.items():
             number, problem = _reading(bounds.get(bound), f"The {word} {label}", limits, unit)
             if problem:

@@ -54,8 +54,11 @@ class CentreLineDriver:
         ahead = here + speed * self.anticipation
         bend = float(self.curvature[int(ahead / self.SPACING) % len(self.curvature)])
         error = math.atan2(math.sin(float(heading) - car.yaw), math.cos(float(heading) - car.yaw))
-        wanted = (math.atan(spec.wheelbase * bend) + self.heading_gain * error
-                  + math.atan2(-self.gain * offset, speed))  # fmt: skip
+        wanted = (
+            math.atan(spec.wheelbase * bend)
+            + self.heading_gain * error
+            + math.atan2(-self.gain * offset, speed)
+        )
         # Beyond the angle whose turn the grip can hold, the front tyres only slide.
         grip = math.atan(spec.wheelbase * spec.friction * GRAVITY / speed**2)
         wanted = max(-grip, min(grip, wanted))
@@ -77,10 +80,12 @@ class CentreLineDriver:
         if isinstance(actions, ContinuousActions):
             (s_low, s_high), (v_low, v_high) = actions.steering, actions.speed
             return np.array(
-                [2 * (steering - s_low) / (s_high - s_low) - 1,
-                 2 * (speed - v_low) / (v_high - v_low) - 1],
+                [
+                    2 * (steering - s_low) / (s_high - s_low) - 1,
+                    2 * (speed - v_low) / (v_high - v_low) - 1,
+                ],
                 dtype=np.float32,
-            )  # fmt: skip
+            )
         table = np.array(actions.actions)
         cost = np.abs(table[:, 0] - steering) / 30.0 + np.abs(table[:, 1] - speed)
         return int(np.argmin(cost))

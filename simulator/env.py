@@ -194,8 +194,9 @@ class DeepRacerEnv(gym.Env):
     ) -> None:
         self.config = default_config(camera_lens)
         loaded = load(track) if route is None else load(track).on_route(route)
-        self.track: Track = loaded.with_direction(config.choice(
-            "The direction", direction, ("counterclockwise", "clockwise")))  # fmt: skip
+        self.track: Track = loaded.with_direction(
+            config.choice("The direction", direction, ("counterclockwise", "clockwise"))
+        )
         self.camera_name, self.lidar_name = config.sensors(sensors)
         self.actions = config.action_space(action_space)
         self.race_type = config.choice("The race type", race_type, config.RACE_TYPES)
@@ -204,10 +205,12 @@ class DeepRacerEnv(gym.Env):
         if race_type == "HEAD_TO_BOT" and bots is None:
             bots = {}
         self.traffic = Traffic(
-            self.track, config.objects(objects, race_type), config.bots(bots, race_type),
+            self.track,
+            config.objects(objects, race_type),
+            config.bots(bots, race_type),
             rivals=config.positive_int("The number of rivals", rivals, 0, config.MAX_CARS - 1),
             rival_shades=tuple(_shade(colour) for colour in rival_colours),
-        )  # fmt: skip
+        )
         # [m] along the track from the start, left of the centre line: the centre line's start
         # alone, or place ``grid`` (0 first) on simapp's grid of a race of several cars
         if grid is not None:
@@ -409,8 +412,9 @@ class DeepRacerEnv(gym.Env):
         centre line."""
         x, y, heading = self.track.point_at(distance % self.track.length, left)
         back = self.car.spec.report_offset
-        self.car.place(float(x) - back * math.cos(heading), float(y) - back * math.sin(heading),
-                       float(heading))  # fmt: skip
+        self.car.place(
+            float(x) - back * math.cos(heading), float(y) - back * math.sin(heading), float(heading)
+        )
         self._sync_car_body()
         self._distance = float(self.track.project_points([self.car.position]).distance[0])
 
@@ -459,8 +463,11 @@ class DeepRacerEnv(gym.Env):
             return False
         self._sync_car_body()
         touched = set(self._world.car_touches())
-        hit = [a for a, body in zip(self.traffic.actors, self._actor_bodies, strict=False)
-               if body in touched]  # fmt: skip
+        hit = [
+            a
+            for a, body in zip(self.traffic.actors, self._actor_bodies, strict=False)
+            if body in touched
+        ]
         rivals = [actor for actor in hit if actor.kind == "rival"]
         if self._ghost and self._pause_left == 0 and not rivals:
             self._ghost = False  # clear of the cars: it races again
@@ -546,8 +553,9 @@ class DeepRacerEnv(gym.Env):
         cfg = self.config
         style = cfg["track_style"] or style_for(self.track)
         room = cfg["room"] or room_for(self.track, style)
-        texture = render(self.track, pixels_per_metre=cfg["camera_texture_ppm"], style=style,
-                         field=room.field)  # fmt: skip
+        texture = render(
+            self.track, pixels_per_metre=cfg["camera_texture_ppm"], style=style, field=room.field
+        )
         lens = Lens(*cfg["camera_size"], cfg["camera_fov"])
         forward, height, pitch = cfg["camera_mount"]
         if self.camera_name == "STEREO_CAMERAS":
@@ -706,10 +714,13 @@ class DeepRacerEnv(gym.Env):
         cos_a, sin_a = math.cos(actor.yaw), math.sin(actor.yaw)
         half_l, half_w = actor.length / 2, actor.width / 2
         points = [(actor.x, actor.y)] + [
-            (actor.x + u * half_l * cos_a - v * half_w * sin_a,
-             actor.y + u * half_l * sin_a + v * half_w * cos_a)
-            for u in (-1, 1) for v in (-1, 1)
-        ]  # fmt: skip
+            (
+                actor.x + u * half_l * cos_a - v * half_w * sin_a,
+                actor.y + u * half_l * sin_a + v * half_w * cos_a,
+            )
+            for u in (-1, 1)
+            for v in (-1, 1)
+        ]
         half_fov = math.radians(SIMAPP_FOV) / 2
         cos_y, sin_y = math.cos(c.yaw), math.sin(c.yaw)
         for x, y in points:
@@ -752,14 +763,27 @@ class DeepRacerEnv(gym.Env):
             "lap": self.lap,
             "sim_time": self.sim_time,
             "trace": SimTraceRow(
-                episode=self._episode, steps=float(self.steps), X=x, Y=y,
-                yaw=math.degrees(c.yaw), steer=steering, throttle=speed, action=trace_action,
-                reward=reward, done=done, all_wheels_on_track=self._wheels_on_track(params),
-                progress=self.progress, closest_waypoint=nearest, track_len=self.track.length,
-                tstamp=self.clock, episode_status=status, pause_duration=self._pause_duration,
-                obstacle_crash_counter=self.counts["crashes"], wall_clock=None,
+                episode=self._episode,
+                steps=float(self.steps),
+                X=x,
+                Y=y,
+                yaw=math.degrees(c.yaw),
+                steer=steering,
+                throttle=speed,
+                action=trace_action,
+                reward=reward,
+                done=done,
+                all_wheels_on_track=self._wheels_on_track(params),
+                progress=self.progress,
+                closest_waypoint=nearest,
+                track_len=self.track.length,
+                tstamp=self.clock,
+                episode_status=status,
+                pause_duration=self._pause_duration,
+                obstacle_crash_counter=self.counts["crashes"],
+                wall_clock=None,
             ),
-        }  # fmt: skip
+        }
         if self.mode == "evaluation":
             info.update(
                 lap_times=list(self.lap_times),

@@ -134,8 +134,13 @@ def recoloured(texture: TrackTexture, levels: list[int], look: Look) -> TrackTex
         knots, targets = knots[1:], targets[1:]
     if knots[-2] == 255:
         knots, targets = knots[:-1], targets[:-1]
-    table = np.clip(np.interp(np.arange(256), knots, np.clip(targets, 0, 255)) * look.brightness,
-                    0, 255).round().astype(np.uint8)  # fmt: skip
+    table = (
+        np.clip(
+            np.interp(np.arange(256), knots, np.clip(targets, 0, 255)) * look.brightness, 0, 255
+        )
+        .round()
+        .astype(np.uint8)
+    )
     image = cv2.LUT(texture.image, table)
     if look.texture_strength > 0:
         height, width = image.shape[:2]
@@ -146,8 +151,9 @@ def recoloured(texture: TrackTexture, levels: list[int], look: Look) -> TrackTex
         coarse = 128 + 127 * look.texture_strength * rng.uniform(
             -1.0, 1.0, (height // cell + 2, width // cell + 2)
         )
-        gain = cv2.resize(coarse.round().astype(np.uint8), (width, height),
-                          interpolation=cv2.INTER_CUBIC)  # fmt: skip
+        gain = cv2.resize(
+            coarse.round().astype(np.uint8), (width, height), interpolation=cv2.INTER_CUBIC
+        )
         if image.ndim == 3:
             gain = cv2.merge([gain] * image.shape[2])
         image = cv2.multiply(image, gain, scale=1 / 128)
@@ -166,12 +172,23 @@ class LookView(PerspectiveView):
     """A camera dressed in an episode's look: its recoloured track image and sky (given), the
     objects in the look's shades, and each frame blurred and noisy as the look says."""
 
-    def __init__(self, plain: PerspectiveView, texture: TrackTexture, sky, look: Look,
-                 rng: np.random.Generator) -> None:  # fmt: skip
+    def __init__(
+        self,
+        plain: PerspectiveView,
+        texture: TrackTexture,
+        sky,
+        look: Look,
+        rng: np.random.Generator,
+    ) -> None:
         forward, height, pitch, left = look.mount
         m = plain.mount
-        mount = dataclasses.replace(m, forward=m.forward + forward, height=m.height + height,
-                                    pitch=m.pitch + pitch, left=m.left + left)  # fmt: skip
+        mount = dataclasses.replace(
+            m,
+            forward=m.forward + forward,
+            height=m.height + height,
+            pitch=m.pitch + pitch,
+            left=m.left + left,
+        )
         room = plain.room and dataclasses.replace(
             plain.room, background=_scaled(plain.room.background, look.brightness)
         )
@@ -226,11 +243,17 @@ class Scene:
         cameras dressed in it, the car with its jitter, and the look."""
         look = Look.draw(rng, len(self.levels))
         texture = recoloured(self.cameras[0].texture, self.levels, look)
-        shifted = (tuple(c + look.sky_shift for c in self.sky) if isinstance(self.sky, tuple)
-                   else self.sky + look.sky_shift)  # fmt: skip
+        shifted = (
+            tuple(c + look.sky_shift for c in self.sky)
+            if isinstance(self.sky, tuple)
+            else self.sky + look.sky_shift
+        )
         sky = _scaled(shifted, look.brightness)
         frames = np.random.default_rng(look.seed ^ 0x5EED)  # each frame's noise window
         cameras = [LookView(camera, texture, sky, look, frames) for camera in self.cameras]
-        car = dataclasses.replace(self.car, friction=self.car.friction * look.friction,
-                                  command_radius=self.car.command_radius / look.motor)  # fmt: skip
+        car = dataclasses.replace(
+            self.car,
+            friction=self.car.friction * look.friction,
+            command_radius=self.car.command_radius / look.motor,
+        )
         return cameras, car, look

@@ -25,14 +25,18 @@ class Situation:
 def situations(track: str, direction: str = "counterclockwise") -> list[Situation]:
     """Start line, mid-lap, off track, finish and near an object, on ``track``."""
     env: DeepRacerEnv = gymnasium.make(
-        simulator.ENV_ID, track=track, direction=direction, race_type="OBJECT_AVOIDANCE",
+        simulator.ENV_ID,
+        track=track,
+        direction=direction,
+        race_type="OBJECT_AVOIDANCE",
         objects={"count": 1},
-    ).unwrapped  # fmt: skip
+    ).unwrapped
     try:
         env.reset(seed=0)
         length = env.track.length
         half_width = env.track.width / 2
         (box,) = env.traffic.actors
+        # one situation a row (a table: the formatter leaves it as it is)
         found = [
             _at(env, "start", "On the start line, at rest", 0.0, 0.0, 0.0, 0.0, 0.0),
             _at(env, "mid-lap", "Mid-lap at speed, a little left of the centre line, turning",
@@ -53,9 +57,15 @@ def situations(track: str, direction: str = "counterclockwise") -> list[Situatio
 
 
 def _at(
-    env: DeepRacerEnv, name: str, description: str, distance: float, offset: float,
-    progress: float, steering: float, speed: float,
-) -> Situation:  # fmt: skip
+    env: DeepRacerEnv,
+    name: str,
+    description: str,
+    distance: float,
+    offset: float,
+    progress: float,
+    steering: float,
+    speed: float,
+) -> Situation:
     x, y, heading = env.track.point_at(distance % env.track.length, offset)
     back = env.car.spec.report_offset
     heading = float(heading)

@@ -120,8 +120,10 @@ class Spectator:
         )
         forward = (ahead - centre) / np.linalg.norm(ahead - centre)
         axes = MAP_CAR_SCALE * 16 * np.array([forward, (-forward[1], forward[0])])
-        wheels, body = (np.round(shape @ axes + centre * 16).astype(np.int32)
-                        for shape in (_MAP_CAR_WHEELS, _MAP_CAR_BODY))  # fmt: skip
+        wheels, body = (
+            np.round(shape @ axes + centre * 16).astype(np.int32)
+            for shape in (_MAP_CAR_WHEELS, _MAP_CAR_BODY)
+        )
         cv2.polylines(inset, list(wheels), False, TYRE_SHADE, 3, cv2.LINE_AA, 4)
         cv2.fillConvexPoly(inset, body, colour, cv2.LINE_AA, 4)
         cv2.polylines(inset, [body], True, (255, 255, 255), 1, cv2.LINE_AA, 4)
@@ -132,12 +134,28 @@ class Spectator:
         )
         text = f"{laps}   {env.progress:5.1f}%   {env.car.speed:4.2f} m/s   {env.sim_time:6.2f} s"
         cv2.rectangle(frame, (0, SIZE[1] - 30), (SIZE[0], SIZE[1]), (30, 30, 30), -1)
-        cv2.putText(frame, text, (10, SIZE[1] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.55,
-                    TEXT_COLOUR, 1, cv2.LINE_AA)  # fmt: skip
+        cv2.putText(
+            frame,
+            text,
+            (10, SIZE[1] - 10),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.55,
+            TEXT_COLOUR,
+            1,
+            cv2.LINE_AA,
+        )
         if env.car.sliding:  # the tyres at their grip: the car drifts, or spins
             slide = f"SLIDING {abs(math.degrees(env.car.slip_angle)):3.0f} deg"
-            cv2.putText(frame, slide, (SIZE[0] - 150, SIZE[1] - 10), cv2.FONT_HERSHEY_SIMPLEX,
-                        0.55, SLIDE_COLOUR, 2, cv2.LINE_AA)  # fmt: skip
+            cv2.putText(
+                frame,
+                slide,
+                (SIZE[0] - 150, SIZE[1] - 10),
+                cv2.FONT_HERSHEY_SIMPLEX,
+                0.55,
+                SLIDE_COLOUR,
+                2,
+                cv2.LINE_AA,
+            )
 
 
 def car_solids(car: Car, colour: tuple[int, int, int]) -> list[Solid]:
@@ -147,19 +165,35 @@ def car_solids(car: Car, colour: tuple[int, int, int]) -> list[Solid]:
     body_width = spec.width - 2 * tyre
     parts = [
         # (forward of the rear axle, left, yaw, length, width, height, shade)
-        *((along, side * spec.wheel_track / 2, steer, diameter, tyre, diameter, TYRE_SHADE)
-          for along, steer in ((0.0, 0.0), (spec.wheelbase, car.steering))
-          for side in (1, -1)),
+        *(
+            (along, side * spec.wheel_track / 2, steer, diameter, tyre, diameter, TYRE_SHADE)
+            for along, steer in ((0.0, 0.0), (spec.wheelbase, car.steering))
+            for side in (1, -1)
+        ),
         (spec.centre_offset, 0.0, 0.0, spec.length, body_width, DRAWN_HEIGHT / 2, colour),
-        (spec.centre_offset - 0.02, 0.0, 0.0, 0.45 * spec.length, 0.85 * body_width,
-         DRAWN_HEIGHT, colour),
-    ]  # fmt: skip
+        (
+            spec.centre_offset - 0.02,
+            0.0,
+            0.0,
+            0.45 * spec.length,
+            0.85 * body_width,
+            DRAWN_HEIGHT,
+            colour,
+        ),
+    ]
     c, s = math.cos(car.yaw), math.sin(car.yaw)
     return [
-        Solid(car.x + along * c - side * s, car.y + along * s + side * c, car.yaw + yaw,
-              length, width, height, shade)
+        Solid(
+            car.x + along * c - side * s,
+            car.y + along * s + side * c,
+            car.yaw + yaw,
+            length,
+            width,
+            height,
+            shade,
+        )
         for along, side, yaw, length, width, height, shade in parts
-    ]  # fmt: skip
+    ]
 
 
 def car_windows(car: Car) -> tuple[np.ndarray, np.ndarray]:
@@ -179,10 +213,12 @@ def car_windows(car: Car) -> tuple[np.ndarray, np.ndarray]:
         middle + 0.7 * half * forward + (top + lift) * up,
     )
     spans = (tall, tall, 0.3 * half * forward)
-    windows = np.array([
-        (centre - wide - span, centre + wide - span, centre + wide + span, centre - wide + span)
-        for centre, span in zip(centres, spans, strict=True)
-    ])  # fmt: skip
+    windows = np.array(
+        [
+            (centre - wide - span, centre + wide - span, centre + wide + span, centre - wide + span)
+            for centre, span in zip(centres, spans, strict=True)
+        ]
+    )
     return windows, np.array([-forward, forward, up])
 
 

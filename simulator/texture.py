@@ -180,8 +180,9 @@ def render(
         along = np.linspace(start, start + style.dash, 5)
         left = np.column_stack(track.point_at(along, half)[:2])
         right = np.column_stack(track.point_at(along[::-1], -half)[:2])
-        cv2.fillPoly(image, [fixed(np.vstack([left, right]))], style.centre_line[pick],
-                     cv2.LINE_AA, shift)  # fmt: skip
+        cv2.fillPoly(
+            image, [fixed(np.vstack([left, right]))], style.centre_line[pick], cv2.LINE_AA, shift
+        )
 
     if style.borders_inside:  # bands from each edge border_width toward the other edge
         across = track.outer - track.inner
@@ -215,13 +216,22 @@ def preview_png(track: Track, *, width: int = 480) -> bytes:
 def preview_texture(track: Track, *, width: int = 480) -> TrackTexture:
     """``preview``'s picture with its world-to-pixel transform, for drawing on it."""
     low, high = track.bounds
-    texture = render(track, pixels_per_metre=width / float(high[0] - low[0] + 2 * MARGIN),
-                     colour=True)  # fmt: skip
+    texture = render(
+        track, pixels_per_metre=width / float(high[0] - low[0] + 2 * MARGIN), colour=True
+    )
     image = texture.image[:, :width].copy()  # ceil() may have added a column
     x, y, heading = track.point_at(0.0)
     start = texture.to_pixels(np.array([[x, y]]))[0]
     tip = texture.to_pixels(np.array([[x + 0.9 * np.cos(heading), y + 0.9 * np.sin(heading)]]))[0]
-    cv2.arrowedLine(image, tuple(np.round(start).astype(int)), tuple(np.round(tip).astype(int)),
-                    (30, 110, 235), 3, cv2.LINE_AA, tipLength=0.35)  # fmt: skip
-    return TrackTexture(image=image, pixels_per_metre=texture.pixels_per_metre,
-                        origin=texture.origin)  # fmt: skip
+    cv2.arrowedLine(
+        image,
+        tuple(np.round(start).astype(int)),
+        tuple(np.round(tip).astype(int)),
+        (30, 110, 235),
+        3,
+        cv2.LINE_AA,
+        tipLength=0.35,
+    )
+    return TrackTexture(
+        image=image, pixels_per_metre=texture.pixels_per_metre, origin=texture.origin
+    )

@@ -49,10 +49,21 @@ class Postgres:
         if self.as_user:
             shutil.chown(folder, "nobody")
         subprocess.run(
-            [*self.as_user, pg_binary("initdb"), "-D", str(self.data), "-U", "postgres",
-             "--auth=trust", "--no-sync", "-E", "UTF8"],
-            check=True, stdout=subprocess.DEVNULL,
-        )  # fmt: skip
+            [
+                *self.as_user,
+                pg_binary("initdb"),
+                "-D",
+                str(self.data),
+                "-U",
+                "postgres",
+                "--auth=trust",
+                "--no-sync",
+                "-E",
+                "UTF8",
+            ],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
         self.url = f"postgres://postgres@127.0.0.1:{self.port}/postgres"
         self.start()
 
@@ -62,16 +73,29 @@ class Postgres:
             "-c max_connections=200"
         )
         subprocess.run(
-            [*self.as_user, pg_binary("pg_ctl"), "-D", str(self.data), "-o", options, "-l",
-             str(self.folder / "log"), "-w", "start"],
-            check=True, stdout=subprocess.DEVNULL,
-        )  # fmt: skip
+            [
+                *self.as_user,
+                pg_binary("pg_ctl"),
+                "-D",
+                str(self.data),
+                "-o",
+                options,
+                "-l",
+                str(self.folder / "log"),
+                "-w",
+                "start",
+            ],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
 
     def stop(self) -> None:
         subprocess.run(
             [*self.as_user, pg_binary("pg_ctl"), "-D", str(self.data), "-m", "fast", "stop"],
-            check=False, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        )  # fmt: skip
+            check=False,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
 
     def remove(self) -> None:
         self.stop()
@@ -107,9 +131,12 @@ class S3Server:
         import boto3
 
         return boto3.client(
-            "s3", endpoint_url=self.url, region_name="us-east-1",
-            aws_access_key_id="cluster", aws_secret_access_key="cluster",
-        )  # fmt: skip
+            "s3",
+            endpoint_url=self.url,
+            region_name="us-east-1",
+            aws_access_key_id="cluster",
+            aws_secret_access_key="cluster",
+        )
 
     def keys(self, prefix: str = "") -> list[str]:
         pages = (
@@ -133,10 +160,13 @@ class Machine:
         self.env = {**env, "PITLANE_VAR_DIR": str(self.var)}
         self.processes: list[subprocess.Popen] = []
         # the machine's settings, for an operator's commands: `. env` in its folder
-        (folder / "env").write_text("".join(
-            f"export {key}={shlex.quote(value)}\n" for key, value in sorted(self.env.items())
-            if key.startswith(OURS)
-        ))  # fmt: skip
+        (folder / "env").write_text(
+            "".join(
+                f"export {key}={shlex.quote(value)}\n"
+                for key, value in sorted(self.env.items())
+                if key.startswith(OURS)
+            )
+        )
 
     def run(self, *args: str) -> str:
         """``python ARGS`` on this machine, to its end; its output."""
@@ -151,9 +181,13 @@ class Machine:
         """A long-running command on this machine, in a process group of its own."""
         log = open(self.folder / "log", "ab")  # noqa: SIM115 (the process holds it)
         process = subprocess.Popen(
-            [str(command), *args], cwd=self.code, env=self.env, stdout=log,
-            stderr=subprocess.STDOUT, start_new_session=True,
-        )  # fmt: skip
+            [str(command), *args],
+            cwd=self.code,
+            env=self.env,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
         log.close()
         self.processes.append(process)
         return process
@@ -203,8 +237,10 @@ def _copy_code(destination: Path) -> None:
     ``var/``, no virtualenv, no build output."""
     listed = subprocess.run(
         ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
-        cwd=ROOT, check=True, capture_output=True,
-    ).stdout.split(b"\0")  # fmt: skip
+        cwd=ROOT,
+        check=True,
+        capture_output=True,
+    ).stdout.split(b"\0")
     for name in filter(None, (item.decode() for item in listed)):
         source = ROOT / name
         if source.is_file():
@@ -220,9 +256,16 @@ class Cluster:
     for every machine."""
 
     def __init__(
-        self, folder: Path, *, simulation: int = 2, training: int = 1, port: int | None = None,
-        proxied: bool = True, settings: dict[str, str] | None = None, processes: int = 2,
-    ) -> None:  # fmt: skip
+        self,
+        folder: Path,
+        *,
+        simulation: int = 2,
+        training: int = 1,
+        port: int | None = None,
+        proxied: bool = True,
+        settings: dict[str, str] | None = None,
+        processes: int = 2,
+    ) -> None:
         self.folder, self.processes = folder, processes
         self.postgres = Postgres()
         self.redis = RedisServer(folder / "redis")
@@ -260,30 +303,65 @@ class Cluster:
 
     def start_web(self) -> None:
         self.web.start(
-            BIN / "daphne", "-b", "127.0.0.1", "-p", str(self.port), "--proxy-headers",
+            BIN / "daphne",
+            "-b",
+            "127.0.0.1",
+            "-p",
+            str(self.port),
+            "--proxy-headers",
             "console.asgi:application",
-        )  # fmt: skip
+        )
         # exactly one scheduler, here on the web machine
         self.web.start(BIN / "celery", "-A", "console", "beat")
         # re-scorings, one at a time, beside the checkers that run the same sandbox here
         self.web.start(
-            BIN / "celery", "-A", "console", "worker", "-Q", "rescoring", "--hostname",
-            f"rescore@{self.web.name}", "--concurrency", "1", "--loglevel", "INFO",
-        )  # fmt: skip
+            BIN / "celery",
+            "-A",
+            "console",
+            "worker",
+            "-Q",
+            "rescoring",
+            "--hostname",
+            f"rescore@{self.web.name}",
+            "--concurrency",
+            "1",
+            "--loglevel",
+            "INFO",
+        )
 
     @staticmethod
     def start_training(machine: Machine) -> None:
         machine.start(
-            BIN / "celery", "-A", "console", "worker", "-Q", "training", "--hostname",
-            f"trainer@{machine.name}", "--concurrency", "1", "--loglevel", "INFO",
-        )  # fmt: skip
+            BIN / "celery",
+            "-A",
+            "console",
+            "worker",
+            "-Q",
+            "training",
+            "--hostname",
+            f"trainer@{machine.name}",
+            "--concurrency",
+            "1",
+            "--loglevel",
+            "INFO",
+        )
 
     @staticmethod
     def start_simulation(machine: Machine, processes: int = 2) -> None:
         machine.start(
-            BIN / "celery", "-A", "console", "worker", "-Q", "simulation", "--hostname",
-            f"sim@{machine.name}", "--concurrency", str(processes), "--loglevel", "INFO",
-        )  # fmt: skip
+            BIN / "celery",
+            "-A",
+            "console",
+            "worker",
+            "-Q",
+            "simulation",
+            "--hostname",
+            f"sim@{machine.name}",
+            "--concurrency",
+            str(processes),
+            "--loglevel",
+            "INFO",
+        )
 
     def listening(self) -> bool:
         for process in self.web.processes:
@@ -305,10 +383,7 @@ class Cluster:
 
 def cluster_env(database: str, redis: str, s3: str) -> dict[str, str]:
     """The environment every machine gets: the README's variables for several machines."""
-    env = {
-        key: value for key, value in os.environ.items()
-        if not key.startswith(OURS)
-    }  # fmt: skip
+    env = {key: value for key, value in os.environ.items() if not key.startswith(OURS)}
     env.update(
         DJANGO_SETTINGS_MODULE="console.settings.prod",
         DJANGO_SECRET_KEY=SECRET_KEY,

@@ -58,11 +58,13 @@ class TrackUploadForm(forms.ModelForm):
             return cleaned
         try:
             track_check(
-                name=cleaned["name"], route=self.route, directions=cleaned["directions"],
+                name=cleaned["name"],
+                route=self.route,
+                directions=cleaned["directions"],
                 difficulty=cleaned.get("difficulty") or Track.Difficulty.INTERMEDIATE,
                 display_name=cleaned.get("display_name", ""),
                 description=cleaned.get("description", ""),
-            )  # fmt: skip
+            )
         except TrackRefused as error:
             field = {"route": "route_file"}.get(error.field, error.field)
             self.add_error(field if field in self.fields else None, error.message)
@@ -126,8 +128,15 @@ class TrackAdmin(admin.ModelAdmin):
     def get_fields(self, request, obj=None) -> list[str]:
         if obj is None:
             return ["route_file", *TrackUploadForm.Meta.fields, "directions"]
-        return ["name", *AddedTrackForm.Meta.fields, "length_m", "width_m", "picture",
-                "added_by", "added_at"]  # fmt: skip
+        return [
+            "name",
+            *AddedTrackForm.Meta.fields,
+            "length_m",
+            "width_m",
+            "picture",
+            "added_by",
+            "added_at",
+        ]
 
     def get_readonly_fields(self, request, obj=None) -> list[str]:
         return [] if obj is None else self.readonly_fields
@@ -147,10 +156,15 @@ class TrackAdmin(admin.ModelAdmin):
             directions, route = form.cleaned_data["directions"], form.route
             name, replace = form.cleaned_data["name"], False
         row = track_add(
-            name=name, display_name=obj.display_name, route=route, directions=directions,
-            description=obj.description, difficulty=obj.difficulty, added_by=request.user,
+            name=name,
+            display_name=obj.display_name,
+            route=route,
+            directions=directions,
+            description=obj.description,
+            difficulty=obj.difficulty,
+            added_by=request.user,
             replace=replace,
-        )  # fmt: skip
+        )
         obj.pk, obj.length_m, obj.width_m = row.pk, row.length_m, row.width_m
 
 

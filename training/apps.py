@@ -20,8 +20,15 @@ def added_track(name: str) -> dict | None:
 
     from training.models import Direction, Track
 
-    fields = ("name", "display_name", "description", "difficulty", "counterclockwise", "clockwise",
-              "route")  # fmt: skip
+    fields = (
+        "name",
+        "display_name",
+        "description",
+        "difficulty",
+        "counterclockwise",
+        "clockwise",
+        "route",
+    )
     try:
         row = Track.objects.filter(name=name, added_at__isnull=False).values(*fields).first()
     except DatabaseError:  # no database here (a command run before `migrate`): built-ins only
@@ -29,7 +36,10 @@ def added_track(name: str) -> dict | None:
     if row is None:
         return None
     return {
-        "name": row["name"], "display_name": row["display_name"], "route": bytes(row["route"]),
+        "name": row["name"],
+        "display_name": row["display_name"],
+        "route": bytes(row["route"]),
         "directions": [d.value for d in Direction if row[d.value]],
-        "description": row["description"], "difficulty": row["difficulty"],
-    }  # fmt: skip
+        "description": row["description"],
+        "difficulty": row["difficulty"],
+    }

@@ -126,18 +126,32 @@ class ModelSettings:
     def draft(self) -> Draft:
         """The settings as a racer would give them: ``check`` of these gives them back."""
         return Draft(
-            name=self.name, description=self.description, track=self.track.name,
-            direction=self.direction, race_type=self.race_type, boxes=self.boxes,
-            bots=self.bots, vehicle=self.vehicle, shell_colour=self.shell_colour,
-            camera_lens=self.camera_lens, sensors=list(self.sensors), network=self.network,
+            name=self.name,
+            description=self.description,
+            track=self.track.name,
+            direction=self.direction,
+            race_type=self.race_type,
+            boxes=self.boxes,
+            bots=self.bots,
+            vehicle=self.vehicle,
+            shell_colour=self.shell_colour,
+            camera_lens=self.camera_lens,
+            sensors=list(self.sensors),
+            network=self.network,
             action_space=self.action_space,
-            algorithm=self.algorithm, hyperparameters=dict(self.hyperparameters),
-            max_minutes=self.max_minutes, workers=self.workers,
-            extra_tracks=list(self.extra_tracks), seed=self.seed,
-            domain_randomisation=self.domain_randomisation, world_name=self.world_name,
-            reward_function=self.reward_function, cloned_from=self.cloned_from,
-            best_checkpoint_by=self.best_checkpoint_by, cloned_checkpoint=self.cloned_checkpoint,
-        )  # fmt: skip
+            algorithm=self.algorithm,
+            hyperparameters=dict(self.hyperparameters),
+            max_minutes=self.max_minutes,
+            workers=self.workers,
+            extra_tracks=list(self.extra_tracks),
+            seed=self.seed,
+            domain_randomisation=self.domain_randomisation,
+            world_name=self.world_name,
+            reward_function=self.reward_function,
+            cloned_from=self.cloned_from,
+            best_checkpoint_by=self.best_checkpoint_by,
+            cloned_checkpoint=self.cloned_checkpoint,
+        )
 
     def replace(self, **changes) -> ModelSettings:
         return dataclasses.replace(self, **changes)
@@ -383,8 +397,9 @@ def _check_race(settings: dict, clean: dict, errors: dict) -> None:
     race_type = settings.get("race_type") or "TIME_TRIAL"
     try:
         sim.choice("The race type", race_type, sim.RACE_TYPES)
-        boxes = sim.objects(settings.get("boxes") if race_type == "OBJECT_AVOIDANCE" else None,
-                            race_type)  # fmt: skip
+        boxes = sim.objects(
+            settings.get("boxes") if race_type == "OBJECT_AVOIDANCE" else None, race_type
+        )
         bots = sim.bots(settings.get("bots") if race_type == "HEAD_TO_BOT" else None, race_type)
     except sim.ConfigError as error:
         errors["race_type"] = str(error)

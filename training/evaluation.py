@@ -206,9 +206,13 @@ def _claim(evaluation: EvaluationJob | None, owner: str) -> list[EvaluationJob]:
         if car.status != EvaluationJob.Status.QUEUED:
             car.trial_rows.all().delete()
         lifecycle.EVALUATION.move(
-            car, EvaluationJob.Status.INITIALIZING, started_at=now, message="Loading the model",
-            lease_owner=owner, lease_expires=now + jobs.lease(),
-        )  # fmt: skip
+            car,
+            EvaluationJob.Status.INITIALIZING,
+            started_at=now,
+            message="Loading the model",
+            lease_owner=owner,
+            lease_expires=now + jobs.lease(),
+        )
     return race
 
 
@@ -323,9 +327,11 @@ class Evaluator:
         its policy with the weights read."""
         self.env = gymnasium.make(simulator.ENV_ID, **self.evaluation.environment_settings(race))
         self.policy = Policy.build(
-            self.model.algorithm, self.model.architecture,
-            self.env.observation_space, self.env.action_space,
-        )  # fmt: skip
+            self.model.algorithm,
+            self.model.architecture,
+            self.env.observation_space,
+            self.env.action_space,
+        )
         try:
             self.policy.load_checkpoint(self._weights)
         except (ValueError, OSError) as error:
@@ -449,11 +455,18 @@ class Evaluator:
         viewers."""
         for view in views:
             image = frame if view == "spectator" else view_image(unwrapped, view, observation)
-            publisher.offer(live.frame_event(
-                0, view, jpeg(image), step=unwrapped.steps, status=unwrapped.status,
-                progress=unwrapped.progress, episode=len(self.results) + 1,
-                lap_ms=round((unwrapped.sim_time - self._counts.started) * 1000),
-            ))  # fmt: skip
+            publisher.offer(
+                live.frame_event(
+                    0,
+                    view,
+                    jpeg(image),
+                    step=unwrapped.steps,
+                    status=unwrapped.status,
+                    progress=unwrapped.progress,
+                    episode=len(self.results) + 1,
+                    lap_ms=round((unwrapped.sim_time - self._counts.started) * 1000),
+                )
+            )
 
     def _record(
         self, env, info: dict, before: LapCounts, seconds: float, *, status: str
@@ -498,9 +511,13 @@ class Evaluator:
         )
         live.announce(live.evaluation_group(evaluation.pk), selectors.trial_row(trial=trial))
         return LapCounts(
-            now["off_tracks"], now["crashes"], now["resets"], now["reversed"],
-            now["immobilized"], env.sim_time,
-        )  # fmt: skip
+            now["off_tracks"],
+            now["crashes"],
+            now["resets"],
+            now["reversed"],
+            now["immobilized"],
+            env.sim_time,
+        )
 
     # Files
 
@@ -534,9 +551,15 @@ def _finish(evaluation: EvaluationJob, status: str, reason: str = "") -> None:
     evaluation over meanwhile (its lease lapsed): that run ends it."""
     held = EvaluationJob.objects.filter(lease_owner=evaluation.lease_owner)  # not taken over
     if not lifecycle.EVALUATION.move(
-        evaluation, status, within=held, failure_reason=reason, message="",
-        finished_at=timezone.now(), lease_owner="", lease_expires=None,
-    ):  # fmt: skip
+        evaluation,
+        status,
+        within=held,
+        failure_reason=reason,
+        message="",
+        finished_at=timezone.now(),
+        lease_owner="",
+        lease_expires=None,
+    ):
         logger.warning("Evaluation %s was taken over by another run; it ends it", evaluation.pk)
         return
     # a rival car's model (another racer's, raced against theirs) was neither held nor is told
@@ -553,9 +576,14 @@ def _end_stopped(evaluation: EvaluationJob) -> None:
     it died); its model is freed and the racer told once that transaction commits."""
     reason = jobs.EVALUATION_STOPPED if evaluation.video else jobs.EVALUATION_STOPPED_UNSAVED
     lifecycle.EVALUATION.move(
-        evaluation, EvaluationJob.Status.CANCELED, finished_at=timezone.now(), message="",
-        failure_reason=reason, lease_owner="", lease_expires=None,
-    )  # fmt: skip
+        evaluation,
+        EvaluationJob.Status.CANCELED,
+        finished_at=timezone.now(),
+        message="",
+        failure_reason=reason,
+        lease_owner="",
+        lease_expires=None,
+    )
 
     def after_commit() -> None:
         _model_free(evaluation)

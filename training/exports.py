@@ -120,10 +120,15 @@ def virtual(model: RLModel) -> Export:
     # DeepRacer's hyperparameters.json, where a DeepRacer model has it (ip/) and where Pitlane's
     # exports have always had it (the root).
     members["hyperparameters.json"] = members[HYPERPARAMETERS] = deepracer_hyperparameters(model)
-    members.update({
-        PITLANE_SETTINGS: _json(pitlane_settings(model)),
-        **{name: _checkpoint(model, kept) for kept, name in artifacts.EXPORTED_CHECKPOINTS.items()},
-    })  # fmt: skip
+    members.update(
+        {
+            PITLANE_SETTINGS: _json(pitlane_settings(model)),
+            **{
+                name: _checkpoint(model, kept)
+                for kept, name in artifacts.EXPORTED_CHECKPOINTS.items()
+            },
+        }
+    )
     if metrics is not None:
         members[artifacts.TRAINING_METRICS] = metrics
     members.update(_exact_history(model))

@@ -36,14 +36,16 @@ class ModelImportForm(RacerWords, forms.Form):
     (``kept_upload``, named by the hidden ``kept`` token)."""
 
     name = forms.CharField(
-        max_length=64, required=False,
+        max_length=64,
+        required=False,
         help_text="Leave empty to keep the archive's name. Letters, digits and hyphens.",
-    )  # fmt: skip
+    )
     archive = forms.FileField(
-        label="Archive (.tar.gz)", required=False,
+        label="Archive (.tar.gz)",
+        required=False,
         help_text="A Pitlane virtual model, or a model downloaded from DeepRacer.",
         widget=forms.FileInput(attrs={"accept": ".tar.gz,.tgz,.tar,application/gzip"}),
-    )  # fmt: skip
+    )
     kept = forms.CharField(required=False, widget=forms.HiddenInput)
 
     def __init__(self, *args, owner, kept: imports.KeptUpload | None = None, **kwargs) -> None:
@@ -84,9 +86,11 @@ class ModelImportConfirmForm(RacerWords, forms.Form):
 
     name = forms.CharField(max_length=64, help_text="Letters, digits and hyphens.")
     track = forms.ModelChoiceField(
-        queryset=Track.objects.all(), to_field_name="name", empty_label=None,
+        queryset=Track.objects.all(),
+        to_field_name="name",
+        empty_label=None,
         error_messages={"required": "Choose a track.", "invalid_choice": "Choose a listed track."},
-    )  # fmt: skip
+    )
     direction = forms.ChoiceField(
         choices=[("counterclockwise", "Counter-clockwise"), ("clockwise", "Clockwise")]
     )
@@ -211,8 +215,11 @@ def _shown(value: float) -> str:
 def range_help(low: float, high: float, default: float, *, note: str = "") -> str:
     """“Range 3-10, default 10 (DeepRacer's default).”: what a number field allows."""
     low_text, high_text = _shown(low), _shown(high)
-    span = (f"{low_text} to {high_text}" if low < 0 or "e" in low_text + high_text
-            else f"{low_text}-{high_text}")  # fmt: skip
+    span = (
+        f"{low_text} to {high_text}"
+        if low < 0 or "e" in low_text + high_text
+        else f"{low_text}-{high_text}"
+    )
     return f"Range {span}, default {_shown(default)} (DeepRacer's default).{note}"
 
 
@@ -243,18 +250,31 @@ class TrackAndRaceFields(RacerWords, forms.Form):
         choices=RaceType.choices, widget=forms.RadioSelect, initial=RaceType.TIME_TRIAL
     )
     box_count = forms.IntegerField(
-        label="Boxes", min_value=1, max_value=6, initial=3, required=False,
+        label="Boxes",
+        min_value=1,
+        max_value=6,
+        initial=3,
+        required=False,
         help_text=range_help(1, 6, 3),
-    )  # fmt: skip
+    )
     box_randomize = forms.BooleanField(label="New box positions every episode", required=False)
     bot_count = forms.IntegerField(
-        label="Bot cars", min_value=1, max_value=6, initial=3, required=False,
+        label="Bot cars",
+        min_value=1,
+        max_value=6,
+        initial=3,
+        required=False,
         help_text=range_help(1, 6, 3),
-    )  # fmt: skip
+    )
     bot_speed = forms.FloatField(
-        label="Bot speed [m/s]", min_value=0.2, max_value=6, initial=0.5, required=False,
-        widget=forms.NumberInput(attrs={"step": "0.1"}), help_text=range_help(0.2, 6, 0.5),
-    )  # fmt: skip
+        label="Bot speed [m/s]",
+        min_value=0.2,
+        max_value=6,
+        initial=0.5,
+        required=False,
+        widget=forms.NumberInput(attrs={"step": "0.1"}),
+        help_text=range_help(0.2, 6, 0.5),
+    )
     bot_lane_changes = forms.BooleanField(label="Bots change lanes", required=False)
 
     PLACES = {"boxes": "box_count", "bots": "bot_count"}  # where a setting's error shows
@@ -289,14 +309,17 @@ class ModelCreateForm(TrackAndRaceFields):
 
     name = forms.CharField(max_length=64, help_text="1 to 64 letters, digits and hyphens.")
     description = forms.CharField(
-        max_length=255, required=False, widget=forms.Textarea(attrs={"rows": 2}),
+        max_length=255,
+        required=False,
+        widget=forms.Textarea(attrs={"rows": 2}),
         help_text="Optional, up to 255 characters.",
-    )  # fmt: skip
+    )
     field_order = ["name", "description", "track", "direction", "race_type"]
     domain_randomisation = forms.BooleanField(
-        label="Domain randomisation", required=False,
+        label="Domain randomisation",
+        required=False,
         help_text=RANDOMISATION_HELP + " Off by default, as in DeepRacer.",
-    )  # fmt: skip
+    )
     vehicle = forms.ModelChoiceField(
         queryset=Vehicle.objects.none(),
         required=False,
@@ -363,23 +386,30 @@ class ModelCreateForm(TrackAndRaceFields):
     )
     max_minutes = forms.IntegerField(label="Maximum training time [min]", initial=60)
     best_checkpoint_by = forms.ChoiceField(
-        label="Best checkpoint by", choices=BestCheckpointBy.choices, required=False,
+        label="Best checkpoint by",
+        choices=BestCheckpointBy.choices,
+        required=False,
         initial=BestCheckpointBy.PROGRESS,
         help_text="After each policy update a few evaluation episodes drive the new checkpoint; "
         "the best is the one whose episodes went furthest on average (DeepRacer's), earned the "
         "most reward, or lapped fastest (an unfinished lap counts 999.999 s). DeepRacer for "
         "Cloud's DR_TRAIN_BEST_MODEL_METRIC.",
-    )  # fmt: skip
+    )
     cloned_checkpoint = forms.ChoiceField(
-        label="Start from", choices=EvaluationJob.Checkpoint.choices, required=False,
-        initial=EvaluationJob.Checkpoint.BEST, widget=forms.RadioSelect,
+        label="Start from",
+        choices=EvaluationJob.Checkpoint.choices,
+        required=False,
+        initial=EvaluationJob.Checkpoint.BEST,
+        widget=forms.RadioSelect,
         help_text="Which of its source's checkpoints the clone's training starts from.",
-    )  # fmt: skip
+    )
     workers = forms.IntegerField(
-        label="Simulations at once", initial=1,
-        help_text=range_help(1, configuration.MAX_WORKERS, 1,
-                             note=" Each extra track needs one more."),
-    )  # fmt: skip
+        label="Simulations at once",
+        initial=1,
+        help_text=range_help(
+            1, configuration.MAX_WORKERS, 1, note=" Each extra track needs one more."
+        ),
+    )
     extra_tracks = forms.ModelMultipleChoiceField(
         queryset=Track.objects.all(),
         to_field_name="name",
@@ -391,9 +421,13 @@ class ModelCreateForm(TrackAndRaceFields):
     # What a clone keeps from its source, since its weights are made for them; the number of
     # discrete actions too (the page's table offers no adding or removing).
     KEPT_BY_A_CLONE = {
-        "vehicle": "sensors", "camera": "sensors", "lidar": "sensors", "network": "network",
-        "algorithm": "training algorithm", "action_space_type": "kind of action space",
-    }  # fmt: skip
+        "vehicle": "sensors",
+        "camera": "sensors",
+        "lidar": "sensors",
+        "network": "network",
+        "algorithm": "training algorithm",
+        "action_space_type": "kind of action space",
+    }
 
     def __init__(self, *args, owner, source=None, **kwargs) -> None:
         """``source``: the model this one is a clone of, if it is one."""
@@ -493,11 +527,15 @@ class ModelCreateForm(TrackAndRaceFields):
             "best_checkpoint_by": model.best_checkpoint_by,
         }
         if model.boxes:
-            initial.update(box_count=model.boxes.get("count"),
-                           box_randomize=model.boxes.get("randomize"))  # fmt: skip
+            initial.update(
+                box_count=model.boxes.get("count"), box_randomize=model.boxes.get("randomize")
+            )
         if model.bots:
-            initial.update(bot_count=model.bots.get("count"), bot_speed=model.bots.get("speed"),
-                           bot_lane_changes=model.bots.get("lane_changes"))  # fmt: skip
+            initial.update(
+                bot_count=model.bots.get("count"),
+                bot_speed=model.bots.get("speed"),
+                bot_lane_changes=model.bots.get("lane_changes"),
+            )
         if model.action_space_type == "discrete":
             initial["actions"] = json.dumps(model.action_space)
         else:
@@ -632,26 +670,46 @@ class Section:
     prefixed: bool = False
 
     def fields(self, form: forms.Form) -> list[str]:
-        return [name for name in form.fields
-                if name in self.names or (self.prefixed and "__" in name)]  # fmt: skip
+        return [
+            name for name in form.fields if name in self.names or (self.prefixed and "__" in name)
+        ]
 
 
 SECTIONS = (
     Section("section-name", "Name", ("name", "description", "cloned_checkpoint")),
     Section("section-track", "Track", ("track", "direction", "domain_randomisation")),
-    Section("section-race-type", "Race type", ("race_type", "box_count", "box_randomize",
-                                               "bot_count", "bot_speed", "bot_lane_changes")),
-    Section("section-car", "Car: sensors and network", ("vehicle", "camera", "lidar",
-                                                        "camera_lens", "network")),
-    Section("section-action-space", "Action space", ("action_space_type", "actions",
-                                                     "steering_low", "steering_high",
-                                                     "speed_low", "speed_high")),
-    Section("section-algorithm", "Training algorithm and hyperparameters", ("algorithm",),
-            prefixed=True),
-    Section("section-stop", "Stop condition and workers", ("max_minutes", "workers",
-                                                           "extra_tracks", "best_checkpoint_by")),
+    Section(
+        "section-race-type",
+        "Race type",
+        ("race_type", "box_count", "box_randomize", "bot_count", "bot_speed", "bot_lane_changes"),
+    ),
+    Section(
+        "section-car",
+        "Car: sensors and network",
+        ("vehicle", "camera", "lidar", "camera_lens", "network"),
+    ),
+    Section(
+        "section-action-space",
+        "Action space",
+        (
+            "action_space_type",
+            "actions",
+            "steering_low",
+            "steering_high",
+            "speed_low",
+            "speed_high",
+        ),
+    ),
+    Section(
+        "section-algorithm", "Training algorithm and hyperparameters", ("algorithm",), prefixed=True
+    ),
+    Section(
+        "section-stop",
+        "Stop condition and workers",
+        ("max_minutes", "workers", "extra_tracks", "best_checkpoint_by"),
+    ),
     Section("section-reward-function", "Reward function", ("reward_function",)),
-)  # fmt: skip
+)
 
 
 @dataclass(frozen=True)
@@ -692,41 +750,55 @@ class EvaluationForm(TrackAndRaceFields):
     ``configuration.check_evaluation``."""
 
     trials = forms.TypedChoiceField(
-        choices=[(n, f"{n} trials") for n in (3, 4, 5)], coerce=int, initial=3,
+        choices=[(n, f"{n} trials") for n in (3, 4, 5)],
+        coerce=int,
+        initial=3,
         help_text="Each trial is one lap.",
-    )  # fmt: skip
+    )
     continuous_laps = forms.BooleanField(
-        label="Continuous laps", required=False,
+        label="Continuous laps",
+        required=False,
         help_text="The car drives its trials lap after lap without stopping, as in a race.",
-    )  # fmt: skip
+    )
     off_track_penalty = forms.FloatField(
-        label="Off-track penalty [s]", min_value=0, max_value=10, initial=2.0,
+        label="Off-track penalty [s]",
+        min_value=0,
+        max_value=10,
+        initial=2.0,
         widget=forms.NumberInput(attrs={"step": "0.1"}),
         help_text="The car waits this long after leaving the track, then goes back on it. "
         + range_help(0, 10, 2),
-    )  # fmt: skip
+    )
     crash_penalty = forms.FloatField(
-        label="Crash penalty [s]", min_value=0, max_value=10, initial=5.0,
+        label="Crash penalty [s]",
+        min_value=0,
+        max_value=10,
+        initial=5.0,
         widget=forms.NumberInput(attrs={"step": "0.1"}),
         help_text="The same, after hitting a box or a bot car. " + range_help(0, 10, 5),
-    )  # fmt: skip
+    )
     max_resets = forms.IntegerField(
-        label="Resets allowed", min_value=0, max_value=sim.MAX_RESETS,
-        initial=sim.DEFAULT_MAX_RESETS, required=False,
+        label="Resets allowed",
+        min_value=0,
+        max_value=sim.MAX_RESETS,
+        initial=sim.DEFAULT_MAX_RESETS,
+        required=False,
         help_text="Each time the car leaves the track, crashes, turns back or gets stuck, it is "
         "put back on the track; after this many, its trial ends where it is. 0 ends it at the "
         f"first; empty, never. Range 0-{sim.MAX_RESETS:,}, default {sim.DEFAULT_MAX_RESETS} "
         "(DeepRacer for Cloud's DR_EVAL_MAX_RESETS).",
-    )  # fmt: skip
+    )
     domain_randomisation = forms.BooleanField(
-        label="Randomised scenes", required=False,
+        label="Randomised scenes",
+        required=False,
         help_text=RANDOMISATION_HELP.replace("Each episode", "Each trial")
         + " Off: the plain scene, whatever the model trained in.",
-    )  # fmt: skip
+    )
     checkpoint = forms.ChoiceField(
-        choices=EvaluationJob.Checkpoint.choices, initial=EvaluationJob.Checkpoint.BEST,
+        choices=EvaluationJob.Checkpoint.choices,
+        initial=EvaluationJob.Checkpoint.BEST,
         widget=forms.RadioSelect,
-    )  # fmt: skip
+    )
 
     def __init__(
         self, *args, checkpoints: list[selectors.CheckpointChoice] | None = None, **kwargs
@@ -740,7 +812,16 @@ class EvaluationForm(TrackAndRaceFields):
         data = self.cleaned_data
         return {
             **self.race_settings(),
-            **{name: data[name] for name in ("trials", "continuous_laps", "off_track_penalty",
-                                             "crash_penalty", "max_resets", "checkpoint",
-                                             "domain_randomisation")},
-        }  # fmt: skip
+            **{
+                name: data[name]
+                for name in (
+                    "trials",
+                    "continuous_laps",
+                    "off_track_penalty",
+                    "crash_penalty",
+                    "max_resets",
+                    "checkpoint",
+                    "domain_randomisation",
+                )
+            },
+        }

@@ -133,10 +133,15 @@ def _episode(row: dict, position: int) -> Episode:
         raise Unreadable(f"episode row {position} has no finite reward")
     status = str(row.get("episode_status", "")).strip().lower().replace(" ", "_")
     return Episode(
-        reward=reward, progress=progress, milliseconds=milliseconds, status=status,
-        episode=_whole(row.get("episode")), trial=_whole(row.get("trial")),
-        started=_whole(row.get("start_time")), ended=_whole(row.get("metric_time")),
-    )  # fmt: skip
+        reward=reward,
+        progress=progress,
+        milliseconds=milliseconds,
+        status=status,
+        episode=_whole(row.get("episode")),
+        trial=_whole(row.get("trial")),
+        started=_whole(row.get("start_time")),
+        ended=_whole(row.get("metric_time")),
+    )
 
 
 def _whole(value: object) -> int | None:
@@ -165,13 +170,24 @@ def history_save(*, job: TrainingJob, history: History, seconds: float | None = 
         row.job = job
     Iteration.objects.bulk_create(history.iterations)
     job.iterations, job.episodes, job.steps = (
-        len(history.iterations), history.episodes, history.steps,
-    )  # fmt: skip
+        len(history.iterations),
+        history.episodes,
+        history.steps,
+    )
     job.training_seconds = history.seconds if seconds is None else seconds
     job.finished_at = job.clock_at = timezone.now()
     job.message = "Imported with its weights and its training history."
-    job.save(update_fields=["iterations", "episodes", "steps", "training_seconds",
-                            "finished_at", "clock_at", "message"])  # fmt: skip
+    job.save(
+        update_fields=[
+            "iterations",
+            "episodes",
+            "steps",
+            "training_seconds",
+            "finished_at",
+            "clock_at",
+            "message",
+        ]
+    )
     JobLogLine.objects.create(
         job=job,
         text=f"Imported with its training history: {job.iterations} iteration"
@@ -203,12 +219,16 @@ def exact_document(*, job: TrainingJob, checkpoints: dict[str, int | None]) -> d
     """``EXACT``'s document for ``job``: its iterations and ``checkpoints`` ({"best": n, ...})."""
     rows = []
     for row in job.iteration_rows.order_by("number"):
-        rows.append({
-            "number": row.number, **{name: getattr(row, name) for name in _NUMBERS + _OPTIONAL},
-            **{name: getattr(row, name) for name in _COUNTS},
-            "time_split": row.time_split, "training_points": row.training_points,
-            "evaluation_points": row.evaluation_points,
-        })  # fmt: skip
+        rows.append(
+            {
+                "number": row.number,
+                **{name: getattr(row, name) for name in _NUMBERS + _OPTIONAL},
+                **{name: getattr(row, name) for name in _COUNTS},
+                "time_split": row.time_split,
+                "training_points": row.training_points,
+                "evaluation_points": row.evaluation_points,
+            }
+        )
     return {"format": EXACT_FORMAT, "iterations": rows, "checkpoints": checkpoints}
 
 
@@ -250,17 +270,21 @@ def _exact_row(row: object, number: int) -> Iteration:
     evaluation = row.get("evaluation_points", [])
     split = row.get("time_split", {})
     if not (
-        isinstance(points, list) and isinstance(evaluation, list) and isinstance(split, dict)
+        isinstance(points, list)
+        and isinstance(evaluation, list)
+        and isinstance(split, dict)
         and all(isinstance(p, list) and len(p) == 2 for p in points)
-    ):  # fmt: skip
+    ):
         raise Unreadable(f"its iteration {number} has points that are not lists of numbers")
     return Iteration(
-        number=number, **values,
+        number=number,
+        **values,
         time_split={str(k): _finite(v, number, "time_split") for k, v in split.items()},
-        training_points=[[_finite(r, number, "points"), _finite(p, number, "points")]
-                         for r, p in points],
+        training_points=[
+            [_finite(r, number, "points"), _finite(p, number, "points")] for r, p in points
+        ],
         evaluation_points=[_finite(p, number, "points") for p in evaluation],
-    )  # fmt: skip
+    )
 
 
 def _finite(value: object, number: int, name: str) -> float:

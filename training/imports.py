@@ -82,8 +82,13 @@ MAX_MEMBERS = 2048  # a virtual model's archive carries up to exports.MAX_TRACES
 MAX_NAME = 4096  # [characters] a member's path
 MAX_HEADER = 64 * 1024  # [bytes] one pax or GNU long-name header: a long name, a few attributes
 MAX_HEADERS = 1 * MiB  # [bytes] all of an archive's pax and long-name headers together
-EXTENDED = (tarfile.XHDTYPE, tarfile.XGLTYPE, tarfile.SOLARIS_XHDTYPE, tarfile.GNUTYPE_LONGNAME,
-            tarfile.GNUTYPE_LONGLINK)  # fmt: skip
+EXTENDED = (
+    tarfile.XHDTYPE,
+    tarfile.XGLTYPE,
+    tarfile.SOLARIS_XHDTYPE,
+    tarfile.GNUTYPE_LONGNAME,
+    tarfile.GNUTYPE_LONGLINK,
+)
 # [bytes] the most each file an import reads may hold (``_limit``), checked from the member's
 # header before a byte of it is read; a 500 MiB reward function packs into 511 KB of gzip.
 TEXT_LIMIT = 1 * MiB  # the reward function
@@ -109,8 +114,11 @@ PLACES = {
 }
 WANTED = {
     *(path for paths in PLACES.values() for path in paths),
-    exports.PITLANE_SETTINGS, artifacts.TRAINING_METRICS, *CHECKPOINTS, history.EXACT,
-}  # fmt: skip
+    exports.PITLANE_SETTINGS,
+    artifacts.TRAINING_METRICS,
+    *CHECKPOINTS,
+    history.EXACT,
+}
 # Simulation traces as DeepRacer lays them out (logs_archive), at the root or in a single folder:
 # a training iteration's are read, up to exports.TRACES_LIMIT together; an evaluation's are not.
 TRAINING_TRACE = re.compile(r"(?:[^/]+/)?training-simtrace/(\d{1,6})-iteration\.csv")
@@ -128,8 +136,11 @@ KEPT_FOR = timedelta(hours=6)
 KEPT_SESSION_KEY = "training:kept-import"
 DEFAULT_TRACK = "rookie-loop"
 SENSOR_ALIASES = {sim.LEGACY_CAMERA: "FRONT_FACING_CAMERA"}
-DEEPRACER_ALGORITHMS = {hyperparameters.PPO: Algorithm.PPO, "ppo": Algorithm.PPO,
-                        hyperparameters.SAC: Algorithm.SAC}  # fmt: skip
+DEEPRACER_ALGORITHMS = {
+    hyperparameters.PPO: Algorithm.PPO,
+    "ppo": Algorithm.PPO,
+    hyperparameters.SAC: Algorithm.SAC,
+}
 
 
 class Members(dict[str, bytes | None]):
@@ -192,12 +203,18 @@ class ImportPreview:
         settings = self.settings
         space = settings["action_space"]
         return RLModel(
-            name=settings["name"], race_type=settings["race_type"], boxes=settings.get("boxes"),
-            bots=settings.get("bots"), sensors=settings["sensors"], network=settings["network"],
+            name=settings["name"],
+            race_type=settings["race_type"],
+            boxes=settings.get("boxes"),
+            bots=settings.get("bots"),
+            sensors=settings["sensors"],
+            network=settings["network"],
             action_space_type="discrete" if isinstance(space, list) else "continuous",
-            action_space=space, algorithm=settings["algorithm"], workers=settings["workers"],
+            action_space=space,
+            algorithm=settings["algorithm"],
+            workers=settings["workers"],
             camera_lens=settings.get("camera_lens") or CameraLens.SIMULATOR,
-        )  # fmt: skip
+        )
 
 
 @dataclass
@@ -253,14 +270,19 @@ def import_start(
     plan = _plan(archive, name)
     if not plan.trains:
         return _import_ready(owner, archive, plan)
-    settings = {**plan.settings, **{key: value for key, value in (changes or {}).items()
-                                    if key in PREVIEW_CHANGES}}  # fmt: skip
+    settings = {
+        **plan.settings,
+        **{key: value for key, value in (changes or {}).items() if key in PREVIEW_CHANGES},
+    }
     notes = _track_notes(plan, settings)
     if notes != plan.notes:  # the racer chose the track: the route the console drives it
         settings["world_name"] = ""
     where = configuration.reward_sample_track(settings)
-    validation = rewards.reward_validate(source=plan.reward, track=where[0], direction=where[1]) \
-        if where else None  # fmt: skip
+    validation = (
+        rewards.reward_validate(source=plan.reward, track=where[0], direction=where[1])
+        if where
+        else None
+    )
     problems = _preview_problems(owner, settings, validation, track_changed=notes != plan.notes)
     if problems or not confirmed:
         settings["hyperparameters"] = hyperparameters.check(
@@ -309,18 +331,31 @@ def _import_ready(owner: AbstractBaseUser, archive: IO[bytes], plan: _Plan) -> I
                 f"{exports.PITLANE_SETTINGS} names a network layout this console does not know "
                 f"({_shown(layout)}): it was exported by a newer Pitlane."
             )
-        imported = _import_trained(owner, plan.settings, plan.members, plan.ours, layout=layout,
-                                   checkpoints=lambda _: plan.weights)  # fmt: skip
+        imported = _import_trained(
+            owner,
+            plan.settings,
+            plan.members,
+            plan.ours,
+            layout=layout,
+            checkpoints=lambda _: plan.weights,
+        )
     else:
         tensorflow = plan.tensorflow
         imported = _import_trained(
-            owner, plan.settings, plan.members, plan.ours, layout=hyperparameters.NETWORK_LAYOUT,
+            owner,
+            plan.settings,
+            plan.members,
+            plan.ours,
+            layout=hyperparameters.NETWORK_LAYOUT,
             checkpoints=lambda policy: tensorflow.load(archive, plan.members, policy, notes),
-        )  # fmt: skip
+        )
     imported.notes = notes + imported.notes
     if not plan.reward.strip():
-        untold = "" if _place(plan.members, "hyperparameters.json") in plan.members else (
-            ", no hyperparameters")  # fmt: skip
+        untold = (
+            ""
+            if _place(plan.members, "hyperparameters.json") in plan.members
+            else (", no hyperparameters")
+        )
         imported.notes.append(
             "A car archive: a driving model without training history. It can be evaluated, raced "
             "and downloaded, but not trained on or cloned: the archive brings the policy alone "
@@ -344,16 +379,22 @@ def _track_notes(plan: _Plan, settings: configuration.Draft) -> list[str]:
     """The plan's notes, where the racer chose another track or direction on the preview: the
     archive's track notes say only what was not carried over, and a note says what they chose."""
     if (settings["track"], settings["direction"]) == (
-        plan.settings["track"], plan.settings["direction"]
-    ):  # fmt: skip
+        plan.settings["track"],
+        plan.settings["direction"],
+    ):
         return list(plan.notes)
     notes = [note for note in plan.notes if note not in plan.track_notes]
-    notes += [note.split(". ", 1)[0] + "." for note in plan.track_notes
-              if note.startswith("Not carried over")]  # fmt: skip
+    notes += [
+        note.split(". ", 1)[0] + "."
+        for note in plan.track_notes
+        if note.startswith("Not carried over")
+    ]
     track = Track.objects.filter(name=settings["track"]).first()
     shown = track.display_name if track else settings["track"]
-    notes.append(f"You chose the track on the import's preview: {shown}, "
-                 f"{configuration.direction_words(settings['direction'])}.")  # fmt: skip
+    notes.append(
+        f"You chose the track on the import's preview: {shown}, "
+        f"{configuration.direction_words(settings['direction'])}."
+    )
     return notes
 
 
@@ -754,8 +795,10 @@ def _hyperparameters(algorithm: str, given: dict, notes: list[str]) -> dict:
                 f"The model uses {_shown(default)}."
             )
     if unknown:
-        notes.append(f"Not carried over from hyperparameters.json: {', '.join(unknown)}: not "
-                     "one of DeepRacer's hyperparameters.")  # fmt: skip
+        notes.append(
+            f"Not carried over from hyperparameters.json: {', '.join(unknown)}: not "
+            "one of DeepRacer's hyperparameters."
+        )
     return values
 
 
@@ -795,8 +838,14 @@ def _network(metadata: dict, notes: list[str]) -> str:
 
 # model_metadata.json's keys (simapp bundle/markov/boto/s3/constants.py:90-106, 01f5f01) that the
 # settings above take, or that describe the file rather than the model.
-METADATA_TAKEN = {"sensor", "neural_network", "action_space", "action_space_type",
-                  "training_algorithm", "version"}  # fmt: skip
+METADATA_TAKEN = {
+    "sensor",
+    "neural_network",
+    "action_space",
+    "action_space_type",
+    "training_algorithm",
+    "version",
+}
 
 
 def _metadata_left_out(metadata: dict, notes: list[str]) -> None:
@@ -837,9 +886,11 @@ def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str, str]:
         track = Track.objects.filter(name=DEFAULT_TRACK).first()
         if world:
             shown = track.display_name if track else DEFAULT_TRACK
-            notes.append(f"Not carried over from training_params.yaml: the track {world}, which "
-                         f"is not loaded here. The model trains on {shown}; choose "
-                         "another by cloning it.")  # fmt: skip
+            notes.append(
+                f"Not carried over from training_params.yaml: the track {world}, which "
+                f"is not loaded here. The model trains on {shown}; choose "
+                "another by cloning it."
+            )
     if direction is None and "TRACK_DIRECTION_CLOCKWISE" in params:
         clockwise = _truthy(params["TRACK_DIRECTION_CLOCKWISE"])
         direction = "clockwise" if clockwise else "counterclockwise"
@@ -850,8 +901,9 @@ def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str, str]:
     if track is not None and not getattr(track, direction):
         other = "clockwise" if direction == "counterclockwise" else "counterclockwise"
         said, instead = map(configuration.direction_words, (direction, other))
-        notes.append(f"{track.display_name} is not driven {said} here: the model drives it "
-                     f"{instead}.")  # fmt: skip
+        notes.append(
+            f"{track.display_name} is not driven {said} here: the model drives it {instead}."
+        )
         direction = other
     if track is None:
         return DEFAULT_TRACK, direction, ""
@@ -861,11 +913,13 @@ def _deepracer_track(params: dict, notes: list[str]) -> tuple[str, str, str]:
     route = _own_route(driven, track.name, direction)
     if route:
         drove = sim_tracks.load(track.name).on_route(route).with_direction(direction)
-        notes.append(f"Trains on {route}.npy ({len(drove.waypoints)} waypoints), the route file "
-                     f"DeepRacer drove for WORLD_NAME {world}, not the one DeepRacer's console "
-                     f"drives {track.display_name} {configuration.direction_words(direction)}: "
-                     "a reward function that reads waypoints by index sees the route it was "
-                     "written for.")  # fmt: skip
+        notes.append(
+            f"Trains on {route}.npy ({len(drove.waypoints)} waypoints), the route file "
+            f"DeepRacer drove for WORLD_NAME {world}, not the one DeepRacer's console "
+            f"drives {track.display_name} {configuration.direction_words(direction)}: "
+            "a reward function that reads waypoints by index sees the route it was "
+            "written for."
+        )
     return track.name, direction, route
 
 
@@ -904,19 +958,26 @@ def _route_direction(name: str) -> str:
 # training_params.yaml's race settings (simapp YamlKey, boto/s3/constants.py:144-170, and
 # D's prepare-config), as our race types take them.
 RACE_KEYS = {
-    "OBJECT_AVOIDANCE": {"NUMBER_OF_OBSTACLES": "count",
-                         "RANDOMIZE_OBSTACLE_LOCATIONS": "randomize"},
-    "HEAD_TO_BOT": {"NUMBER_OF_BOT_CARS": "count", "BOT_CAR_SPEED": "speed",
-                    "IS_LANE_CHANGE": "lane_changes"},
-}  # fmt: skip
+    "OBJECT_AVOIDANCE": {
+        "NUMBER_OF_OBSTACLES": "count",
+        "RANDOMIZE_OBSTACLE_LOCATIONS": "randomize",
+    },
+    "HEAD_TO_BOT": {
+        "NUMBER_OF_BOT_CARS": "count",
+        "BOT_CAR_SPEED": "speed",
+        "IS_LANE_CHANGE": "lane_changes",
+    },
+}
 
 
 def _deepracer_race(params: dict, notes: list[str]) -> dict:
     """The race type and its boxes or bot cars; what does not fit is noted and defaulted."""
     race_type = str(params.get("RACE_TYPE") or "TIME_TRIAL").strip().upper()
     if race_type not in sim.RACE_TYPES:
-        notes.append(f"Not carried over from training_params.yaml: the race type {race_type}. "
-                     "The model trains for a TIME_TRIAL.")  # fmt: skip
+        notes.append(
+            f"Not carried over from training_params.yaml: the race type {race_type}. "
+            "The model trains for a TIME_TRIAL."
+        )
         return {"race_type": "TIME_TRIAL", "boxes": None, "bots": None}
     race = {"race_type": race_type, "boxes": None, "bots": None}
     if race_type == "TIME_TRIAL":
@@ -925,16 +986,18 @@ def _deepracer_race(params: dict, notes: list[str]) -> dict:
     for key, field_name in RACE_KEYS[race_type].items():
         if key in params:
             value = params[key]
-            given[field_name] = _truthy(value) if field_name in ("randomize", "lane_changes") \
-                else value  # fmt: skip
-    which, check = (("boxes", sim.objects) if race_type == "OBJECT_AVOIDANCE"
-                    else ("bots", sim.bots))  # fmt: skip
+            given[field_name] = (
+                _truthy(value) if field_name in ("randomize", "lane_changes") else value
+            )
+    which, check = ("boxes", sim.objects) if race_type == "OBJECT_AVOIDANCE" else ("bots", sim.bots)
     try:
         race[which] = vars(check(given, race_type))
     except (sim.ConfigError, TypeError, ValueError) as error:
         race[which] = vars(check({}, race_type))
-        notes.append(f"Not carried over from training_params.yaml: {_race_given(params, race_type)}"
-                     f" ({error}). The model has {_race_shown(race[which])}.")  # fmt: skip
+        notes.append(
+            f"Not carried over from training_params.yaml: {_race_given(params, race_type)}"
+            f" ({error}). The model has {_race_shown(race[which])}."
+        )
     return race
 
 
@@ -975,8 +1038,10 @@ def _deepracer_colour(params: dict, notes: list[str]) -> str:
     by_name = {label.lower(): value for value, label in ShellColour.choices}
     found = by_name.get(str(given).strip().lower())
     if found is None:
-        notes.append(f"Not carried over from training_params.yaml: CAR_COLOR {_shown(given)}, "
-                     "not one of the garage's colours. The car is black.")  # fmt: skip
+        notes.append(
+            f"Not carried over from training_params.yaml: CAR_COLOR {_shown(given)}, "
+            "not one of the garage's colours. The car is black."
+        )
         return ShellColour.BLACK
     return found
 
@@ -1018,10 +1083,19 @@ def _deepracer_best_metric(params: dict, notes: list[str]) -> str:
 
 
 # training_params.yaml's keys the settings above take.
-PARAMS_TAKEN = {"WORLD_NAME", "TRACK_DIRECTION_CLOCKWISE", "REVERSE_DIR", "RACE_TYPE",
-                "CAR_NAME", "NUM_WORKERS", "CAR_COLOR", "ENABLE_DOMAIN_RANDOMIZATION",
-                "BEST_MODEL_METRIC",
-                *RACE_KEYS["OBJECT_AVOIDANCE"], *RACE_KEYS["HEAD_TO_BOT"]}  # fmt: skip
+PARAMS_TAKEN = {
+    "WORLD_NAME",
+    "TRACK_DIRECTION_CLOCKWISE",
+    "REVERSE_DIR",
+    "RACE_TYPE",
+    "CAR_NAME",
+    "NUM_WORKERS",
+    "CAR_COLOR",
+    "ENABLE_DOMAIN_RANDOMIZATION",
+    "BEST_MODEL_METRIC",
+    *RACE_KEYS["OBJECT_AVOIDANCE"],
+    *RACE_KEYS["HEAD_TO_BOT"],
+}
 # Where DeepRacer kept its files and streams, and who ran it: nothing a model here could use.
 PARAMS_PLACES = re.compile(
     r"(S3|BUCKET|PREFIX|REGION|ENDPOINT|ARN|KINESIS|SQS|_KEY$|JOB_TYPE|ROBOMAKER|SAGEMAKER)"
@@ -1075,10 +1149,11 @@ class _TensorFlowFiles:
     @classmethod
     def find(cls, members: Members) -> _TensorFlowFiles | None:
         prefixes = sorted(
-            path.removesuffix(tfcheckpoint.SUFFIX_INDEX) for path in members
+            path.removesuffix(tfcheckpoint.SUFFIX_INDEX)
+            for path in members
             if path.endswith(tfcheckpoint.SUFFIX_INDEX)
             and path.removesuffix(tfcheckpoint.SUFFIX_INDEX) + tfcheckpoint.SUFFIX_DATA in members
-        )  # fmt: skip
+        )
         checkpoints = _chosen_checkpoints(members, prefixes)
         graphs = sorted(path for path in members if path.endswith(".pb"))
         if not checkpoints and not graphs:
@@ -1138,8 +1213,9 @@ def _chosen_checkpoints(members: Members, prefixes: list[str]) -> list[str]:
             for key in ("best_checkpoint", "last_checkpoint")
         ]
         names += [(_text(members, at + coach) or "").strip() for coach in COACH_CHECKPOINTS]
-        latest = re.search(r'model_checkpoint_path:\s*"([^"]+)"',
-                           _text(members, at + TF_CHECKPOINT) or "")  # fmt: skip
+        latest = re.search(
+            r'model_checkpoint_path:\s*"([^"]+)"', _text(members, at + TF_CHECKPOINT) or ""
+        )
         names.append(latest and PurePosixPath(latest[1]).name)
         pointed = [at + name for name in names if isinstance(name, str) and at + name in there]
         if pointed:
@@ -1200,8 +1276,9 @@ def _import_trained(
     model = RLModel(**checked.row())
     from rl.policies import Policy  # torch: loaded by a process's first import of weights
 
-    policy = Policy.for_environment(checked.algorithm, model.architecture,
-                                    model.environment_settings())  # fmt: skip
+    policy = Policy.for_environment(
+        checked.algorithm, model.architecture, model.environment_settings()
+    )
     weights = checkpoints(policy)
     for path, data in weights.items():
         try:
@@ -1219,18 +1296,21 @@ def _import_trained(
             owner=owner, settings=checked, status=RLModel.Status.IMPORTING
         )
     # Its files are written outside any transaction (the weights may be hundreds of MiB), the
-    # model IMPORTING meanwhile, its row holding the racer's quota; it is READY, with its job,
-    # only once they are all stored, and gone with them where they cannot be.
+    # model IMPORTING meanwhile; READY once they are all stored, and gone where they cannot be.
     try:
         artifacts.write_model_files(model)
         exact, notes = _exact_history(members)
         best_name, last_name = _checkpoints_save(model, best, last, exact)
         with transaction.atomic():
             job = TrainingJob.objects.create(
-                model=model, status=TrainingJob.Status.COMPLETED, weights_version=1,
-                best_checkpoint=best_name, last_checkpoint=last_name, lease_owner=jobs.IMPORTED,
+                model=model,
+                status=TrainingJob.Status.COMPLETED,
+                weights_version=1,
+                best_checkpoint=best_name,
+                last_checkpoint=last_name,
+                lease_owner=jobs.IMPORTED,
                 message="Imported with its weights.",
-            )  # fmt: skip
+            )
             history_notes, metrics = _import_history(model, job, members, ours, exact)
             lifecycle.MODEL.move(model, RLModel.Status.READY)
     except BaseException:
@@ -1258,8 +1338,9 @@ def _import_undo(model: RLModel) -> None:
     except Exception:  # the database locked, say: the racer reads why the import failed
         logger.exception(
             "Import of model %s failed and its row could not be deleted; the workers' "
-            "heartbeat removes it (abandoned_imports_remove)", model.pk,
-        )  # fmt: skip
+            "heartbeat removes it (abandoned_imports_remove)",
+            model.pk,
+        )
 
 
 ABANDONED_AFTER = 10 * 60  # [s] an import still IMPORTING this long has died
@@ -1341,10 +1422,14 @@ def _import_history(
     except history.Unreadable as unreadable:
         if exact is None:
             missing = data is None and artifacts.TRAINING_METRICS not in members.over
-            said = ("The archive has no training metrics" if missing else
-                    f"The archive's training metrics could not be read ({unreadable})")  # fmt: skip
-            notes.append(f"{said}: the model arrives without its training history (no graph or "
-                         "iterations).")  # fmt: skip
+            said = (
+                "The archive has no training metrics"
+                if missing
+                else f"The archive's training metrics could not be read ({unreadable})"
+            )
+            notes.append(
+                f"{said}: the model arrives without its training history (no graph or iterations)."
+            )
     if exact is not None:
         history.history_save(job=job, history=exact.history, seconds=seconds)
     elif found is not None:
@@ -1365,8 +1450,11 @@ def _history_files_save(
     traces (those of its iterations, when the history says how many), kept where the Analysis
     tab and the downloads read them; notes for what stays behind, or could not be stored."""
     found = {int(match[1]): path for path in members if (match := TRAINING_TRACE.fullmatch(path))}
-    kept = [number for number, path in sorted(found.items())
-            if members[path] is not None and (not iterations or number < iterations)]  # fmt: skip
+    kept = [
+        number
+        for number, path in sorted(found.items())
+        if members[path] is not None and (not iterations or number < iterations)
+    ]
     notes, stored = [], 0
     try:
         if metrics is not None:
@@ -1384,8 +1472,10 @@ def _history_files_save(
             "download of this model carries what was kept."
         )
     if not found:
-        notes.append("The archive has no simulation traces (training-simtrace): the Analysis tab "
-                     "has nothing to show.")  # fmt: skip
+        notes.append(
+            "The archive has no simulation traces (training-simtrace): the Analysis tab "
+            "has nothing to show."
+        )
     elif stored == len(kept) < len(found):
         notes.append(
             f"Simulation traces came for {len(kept)} of the archive's {len(found)} iterations "

@@ -142,8 +142,9 @@ def lapsed_evaluations() -> list[EvaluationJob]:
     statuses = EvaluationJob.Status
     lapsed = EvaluationJob.objects.filter(
         status__in=(statuses.INITIALIZING, statuses.IN_PROGRESS, statuses.STOPPING),
-        lease_expires__lt=now, grid_leader__isnull=True,  # a race's first car's run drives all
-    ).exclude(lease_owner="")  # fmt: skip
+        lease_expires__lt=now,
+        grid_leader__isnull=True,  # a race's first car's run drives all
+    ).exclude(lease_owner="")
     claimed = []
     for evaluation in lapsed:
         rows = EvaluationJob.objects.filter(

@@ -130,10 +130,14 @@ def frame_from_child(raw: dict[str, Any], worker: int) -> dict | None:
         return None
     now, rendered = time.time(), raw.get("rendered_at")
     event = frame_event(
-        worker, view, data,
-        episode=_number(raw.get("episode"), int), step=_number(raw.get("step"), int),
-        progress=_number(raw.get("progress"), float), status=str(raw.get("status", ""))[:20],
-    )  # fmt: skip
+        worker,
+        view,
+        data,
+        episode=_number(raw.get("episode"), int),
+        step=_number(raw.get("step"), int),
+        progress=_number(raw.get("progress"), float),
+        status=str(raw.get("status", ""))[:20],
+    )
     if isinstance(rendered, float) and now - 5.0 <= rendered <= now:
         event["rendered_at"] = rendered
     return event

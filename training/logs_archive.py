@@ -98,10 +98,12 @@ def _training_traces(model: RLModel) -> list[tuple[str, str]]:
         _, names = default_storage.listdir(prefix + "training-simtrace")
     except FileNotFoundError:
         names = []
-    found = sorted((int(match[1]), name) for name in names
-                   if (match := re.fullmatch(r"(\d+)-iteration\.csv", name)))  # fmt: skip
-    return [(f"training-simtrace/{name}", f"{prefix}training-simtrace/{name}")
-            for _, name in found]  # fmt: skip
+    found = sorted(
+        (int(match[1]), name)
+        for name in names
+        if (match := re.fullmatch(r"(\d+)-iteration\.csv", name))
+    )
+    return [(f"training-simtrace/{name}", f"{prefix}training-simtrace/{name}") for _, name in found]
 
 
 def _evaluation_files(model: RLModel):
@@ -122,8 +124,9 @@ def _evaluation_files(model: RLModel):
         yield (
             (f"evaluation-{stamp}/evaluation-simtrace/0-iteration.csv", trace),
             (f"metrics/EvaluationMetrics-{stamp}.json", metrics)
-            if default_storage.exists(metrics) else None,
-        )  # fmt: skip
+            if default_storage.exists(metrics)
+            else None,
+        )
 
 
 def _stamp(evaluation: EvaluationJob, taken: set[str]) -> str:

@@ -124,28 +124,36 @@ class Track(models.Model):
     counterclockwise = models.BooleanField(default=True)
     clockwise = models.BooleanField(default=True)
     default_direction = models.CharField(
-        max_length=16, choices=Direction.choices, default=Direction.COUNTERCLOCKWISE,
+        max_length=16,
+        choices=Direction.choices,
+        default=Direction.COUNTERCLOCKWISE,
         help_text="The direction offered first (DeepRacer's console: defaultDirection).",
-    )  # fmt: skip
+    )
     season = models.PositiveSmallIntegerField(
-        null=True, blank=True,
+        null=True,
+        blank=True,
         help_text="The year DeepRacer raced it, as deepracer-utils' track_meta groups the tracks "
         "(2019: 2019 and earlier); empty for Pitlane's own and added tracks.",
-    )  # fmt: skip
+    )
     position = models.PositiveSmallIntegerField(
         default=0, help_text="Where the track comes in the simulator's catalogue."
     )
     route = models.BinaryField(
-        blank=True, default=b"", editable=False,
+        blank=True,
+        default=b"",
+        editable=False,
         help_text="The DeepRacer route file (.npy) of a track added by staff; empty when built in.",
-    )  # fmt: skip
+    )
     preview = models.BinaryField(
         blank=True, default=b"", editable=False, help_text="Its top-down picture (PNG)."
     )
     added_by = models.ForeignKey(
-        settings.AUTH_USER_MODEL, null=True, blank=True, on_delete=models.SET_NULL,
+        settings.AUTH_USER_MODEL,
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
         related_name="+",
-    )  # fmt: skip
+    )
     added_at = models.DateTimeField(null=True, blank=True)
 
     objects = TrackManager()
@@ -194,9 +202,10 @@ class RaceConditions(models.Model):
         null=True, blank=True, help_text='Object avoidance: {"count": 1-6, "randomize": false}.'
     )
     bots = models.JSONField(
-        null=True, blank=True,
+        null=True,
+        blank=True,
         help_text='Head-to-bot: {"count": 1-6, "speed": 0.2-6, "lane_changes": false}.',
-    )  # fmt: skip
+    )
 
     class Meta:
         abstract = True
@@ -244,9 +253,10 @@ class RLModel(RaceConditions):
         "are for those).",
     )
     action_space_type = models.CharField(
-        max_length=10, choices=[("discrete", "Discrete"), ("continuous", "Continuous")],
+        max_length=10,
+        choices=[("discrete", "Discrete"), ("continuous", "Continuous")],
         default="discrete",
-    )  # fmt: skip
+    )
     action_space = models.JSONField(default=list)
     algorithm = models.CharField(max_length=16, choices=Algorithm.choices, default=Algorithm.PPO)
     hyperparameters = models.JSONField(default=dict)
@@ -258,56 +268,68 @@ class RLModel(RaceConditions):
     )
     seed = models.IntegerField(default=0)
     best_checkpoint_by = models.CharField(
-        max_length=8, choices=BestCheckpointBy.choices, default=BestCheckpointBy.PROGRESS,
+        max_length=8,
+        choices=BestCheckpointBy.choices,
+        default=BestCheckpointBy.PROGRESS,
         help_text="How training picks the best checkpoint (DR_TRAIN_BEST_MODEL_METRIC).",
-    )  # fmt: skip
+    )
     world_name = models.CharField(
-        max_length=64, blank=True,
+        max_length=64,
+        blank=True,
         help_text="The track's DeepRacer route file it drives, by WORLD_NAME, where that is not "
         "the one the console drives its direction: a DeepRacer for Cloud model's bare "
         "WORLD_NAME (simulator.tracks.Track.on_route). Blank: the console's.",
-    )  # fmt: skip
+    )
     cloned_from = models.ForeignKey(
         "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="clones"
     )
     cloned_checkpoint = models.CharField(
-        max_length=8, choices=Checkpoint.choices, blank=True,
+        max_length=8,
+        choices=Checkpoint.choices,
+        blank=True,
         help_text="A clone's start: its source's best or last checkpoint.",
-    )  # fmt: skip
+    )
     vehicle = models.ForeignKey(
         "Vehicle", null=True, blank=True, on_delete=models.SET_NULL, related_name="rl_models"
     )
     shell_colour = models.CharField(
-        max_length=7, choices=ShellColour.choices, default=ShellColour.BLACK,
+        max_length=7,
+        choices=ShellColour.choices,
+        default=ShellColour.BLACK,
         help_text="The car's colour in the video: its vehicle's when it was created.",
-    )  # fmt: skip
+    )
     camera_lens = models.CharField(
-        max_length=10, choices=CameraLens.choices, default=CameraLens.SIMULATOR,
+        max_length=10,
+        choices=CameraLens.choices,
+        default=CameraLens.SIMULATOR,
         help_text="DeepRacer's simulated camera, as its console trained with, or the physical "
         "car's wide lens, for a model meant for a car.",
-    )  # fmt: skip
+    )
     camera_before_deepracer = models.BooleanField(
-        default=False, editable=False,
+        default=False,
+        editable=False,
         help_text="Trained on this console before issue 44 gave the car DeepRacer's camera "
         "(migration 0018): it learnt Pitlane's 120°, 25° down view, and now drives with the "
         "64.7° one.",
-    )  # fmt: skip
+    )
     lidar_before_deepracer = models.BooleanField(
-        default=False, editable=False,
+        default=False,
+        editable=False,
         help_text="Trained with a lidar on this console before issue 44 put it on simapp's "
         "mount (migration 0022): it learnt a lidar facing forwards 0.1 m up, and now reads one "
         "facing backwards 0.182 m up.",
-    )  # fmt: skip
+    )
     domain_randomisation = models.BooleanField(
         default=False,
         help_text=f"Each episode in a scene of its own: {randomisation_ranges.SUMMARY} "
         "(simulator.randomisation); DeepRacer for Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION.",
-    )  # fmt: skip
+    )
     import_notes = models.JSONField(
-        default=list, blank=True,
+        default=list,
+        blank=True,
         help_text="What an import rebuilt or left out, in a racer's words: shown on the model's "
         "page for as long as the model lives.",
-    )  # fmt: skip
+    )
 
     class Meta:
         verbose_name = "model"
@@ -510,9 +532,10 @@ class Iteration(models.Model):
         help_text="[s] of the wall time by phase (rl.stopwatch.PHASES); they add up to it.",
     )
     evaluation_seconds = models.FloatField(
-        null=True, blank=True,
+        null=True,
+        blank=True,
         help_text="[s] the evaluation of this iteration's checkpoint took, beside the next one.",
-    )  # fmt: skip
+    )
     training_points = models.JSONField(
         default=list, help_text="[reward, progress %] of each training episode, for the graph."
     )
@@ -523,10 +546,11 @@ class Iteration(models.Model):
         null=True, blank=True, help_text="Mean total reward of the evaluation episodes."
     )
     evaluation_lap_ms = models.FloatField(
-        null=True, blank=True,
+        null=True,
+        blank=True,
         help_text="[ms] mean lap time of the evaluation episodes, 999999 for each unfinished "
         "one (DeepRacer's best-model lap time).",
-    )  # fmt: skip
+    )
     created_at = models.DateTimeField(auto_now_add=True)
 
     class Meta:
@@ -583,10 +607,12 @@ class EvaluationJob(RaceConditions):
     off_track_penalty = models.FloatField("off-track penalty [s]", default=2.0)
     crash_penalty = models.FloatField("crash penalty [s]", default=5.0)
     max_resets = models.PositiveSmallIntegerField(
-        "resets allowed", null=True, blank=True,
+        "resets allowed",
+        null=True,
+        blank=True,
         help_text="Times the car may be put back on the track before its trial ends there "
         "(DeepRacer for Cloud's DR_EVAL_MAX_RESETS); empty: no limit, as in a race.",
-    )  # fmt: skip
+    )
     checkpoint = models.CharField(max_length=8, choices=Checkpoint.choices, default=Checkpoint.BEST)
     checkpoint_name = models.CharField(max_length=255, blank=True, help_text="The weights used.")
     checkpoint_iteration = models.PositiveIntegerField(
@@ -596,33 +622,42 @@ class EvaluationJob(RaceConditions):
         default=False, help_text="Each trial in a randomised scene, whatever the model trained in."
     )
     seed = models.PositiveIntegerField(
-        null=True, blank=True, default=new_seed,
+        null=True,
+        blank=True,
+        default=new_seed,
         help_text="Seeds its trials' noise; the same seed drives them again exactly. Empty: "
         "driven without noise (before seeds).",
-    )  # fmt: skip
+    )
     speed_multiplier = models.FloatField(
-        default=1.0, help_text="Each action's speed times this: a live race's racer's choice, "
+        default=1.0,
+        help_text="Each action's speed times this: a live race's racer's choice, "
         "as DeepRacer's LIVE races let racers drive at 0.5-1.5 times their model's speeds.",
-    )  # fmt: skip
+    )
     real_time = models.BooleanField(
-        default=False, help_text="Driven at the speed of real time even when nobody watches: "
+        default=False,
+        help_text="Driven at the speed of real time even when nobody watches: "
         "a live race's turn, which its audience sees as it happens.",
-    )  # fmt: skip
+    )
     # Model against model: the cars of one race are evaluations driven together by the run of
     # the first (its ``grid_leader``, None), each of its own model with its own trials, trace and
     # video, as DeepRacer for Cloud's head-to-model evaluation writes each model's files under
     # its own prefix (scripts/evaluation/prepare-config.py:119-143, deepracer-for-cloud).
     grid_leader = models.ForeignKey(
-        "self", null=True, blank=True, on_delete=models.SET_NULL, related_name="grid",
+        "self",
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
+        related_name="grid",
         help_text="The first car of the race this car drove in; empty for the first or alone.",
-    )  # fmt: skip
+    )
     grid_position = models.PositiveSmallIntegerField(
         default=0, help_text="Its place on the grid: 0 in front, each next car 0.75 m behind."
     )
     rival = models.BooleanField(
-        default=False, help_text="Another racer's model raced against this one's: its model was "
+        default=False,
+        help_text="Another racer's model raced against this one's: its model was "
         "not reserved, and its owner is not told.",
-    )  # fmt: skip
+    )
     status = models.CharField(max_length=16, choices=Status.choices, default=Status.QUEUED)
     message = models.CharField(max_length=255, blank=True)
     failure_reason = models.TextField(blank=True)
@@ -770,9 +805,11 @@ class Quota(models.Model):
         defaults = QuotaDefaults.current()
         return cls.objects.get_or_create(
             racer=racer,
-            defaults={"max_models": defaults.max_models,
-                      "max_minutes_per_month": defaults.max_minutes_per_month},
-        )[0]  # fmt: skip
+            defaults={
+                "max_models": defaults.max_models,
+                "max_minutes_per_month": defaults.max_minutes_per_month,
+            },
+        )[0]
 
 
 def scaled_speeds(action_space, multiplier: float):

@@ -355,12 +355,14 @@ def _params_key_problems(tree: ast.Module) -> tuple[list[Problem], list[Problem]
             and node.args[0].value not in PARAM_NAMES
         ):
             key = node.args[0].value
-            warnings.append(Problem(
-                "style",
-                f"{node.func.value.id}.get('{key}') always gives its default, since "
-                + unknown_key_message(key),
-                node.lineno,
-            ))  # fmt: skip
+            warnings.append(
+                Problem(
+                    "style",
+                    f"{node.func.value.id}.get('{key}') always gives its default, since "
+                    + unknown_key_message(key),
+                    node.lineno,
+                )
+            )
     return errors, warnings
 
 

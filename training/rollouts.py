@@ -8,6 +8,9 @@ newest published version, and relays what the child drives. Where the policy run
 training episodes to the experience buffer as each car ends one, evaluation results after each
 update, and what the reward function printed. It never writes the job's rows; a failure of the
 racer's code is reported to the trainer, which fails the job.
+
+Long because a rollout worker's loop and its ways out (new weights, a stop, a sandbox that
+died, a lost Redis, a policy served from the GPU) are one state machine, read together.
 """
 
 from __future__ import annotations
@@ -96,8 +99,9 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             evaluator = None
             if worker == 0:  # DeepRacer's first worker evaluates (simapp
                 # bundle/markov/rollout_worker.py:327-329, 01f5f01)
-                evaluator = Evaluator(stack.enter_context(sandbox(1)), channel, token,
-                                      Printed(label))  # fmt: skip
+                evaluator = Evaluator(
+                    stack.enter_context(sandbox(1)), channel, token, Printed(label)
+                )
                 evaluator.sandbox.load(model.reward_function)
                 stack.callback(evaluator.close)
             shown = Track.objects.filter(name=track).values_list("display_name", flat=True)
@@ -107,8 +111,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             with live.FramePublisher(channel.client, live.training_group(job_id)) as publisher:
                 viewing = Viewing(driver, publisher, worker)
                 try:
-                    why = _drive(driver, channel, token, job, worker, viewing, printed,
-                                 evaluator)  # fmt: skip
+                    why = _drive(driver, channel, token, job, worker, viewing, printed, evaluator)
                 except JobEnded:
                     why = "the training ended; the episode it was driving was abandoned"
                 channel.push_log([*printed.close(), LogEntry("worker", f"{name} stopped: {why}.")])
@@ -136,10 +139,14 @@ def _sandboxes(model, worker: int, track: str, device: str) -> Callable[[int], S
 
     def sandbox(cars: int) -> Sandbox:
         return Sandbox(
-            env=model.environment_settings(track), cars=cars, policy=policy,
-            policy_device=None if device == "cpu" else device, call_timeout=REWARD_CALL_LIMIT,
-            memory_allowance=MEMORY_ALLOWANCE, car_memory=CAR_MEMORY,
-        )  # fmt: skip
+            env=model.environment_settings(track),
+            cars=cars,
+            policy=policy,
+            policy_device=None if device == "cpu" else device,
+            call_timeout=REWARD_CALL_LIMIT,
+            memory_allowance=MEMORY_ALLOWANCE,
+            car_memory=CAR_MEMORY,
+        )
 
     return sandbox
 
@@ -185,8 +192,9 @@ class Viewing:
         self.held = time.monotonic()
         for view in self.views:
             if view in self.last:
-                self.publisher.offer({**self.last[view], "paused": True,
-                                      "rendered_at": time.time()})  # fmt: skip
+                self.publisher.offer(
+                    {**self.last[view], "paused": True, "rendered_at": time.time()}
+                )
 
     def resume(self) -> None:
         """The pause is over: frames flow from the sandbox again."""
@@ -219,9 +227,11 @@ class Evaluator:
         self.evaluated = version
         episodes = self.channel.evaluations_wanted()
         self.thread = threading.Thread(
-            target=self._evaluate, args=(version, weights, episodes),
-            name=f"evaluation of {version}", daemon=True,
-        )  # fmt: skip
+            target=self._evaluate,
+            args=(version, weights, episodes),
+            name=f"evaluation of {version}",
+            daemon=True,
+        )
         self.thread.start()
 
     def check(self) -> None:
@@ -292,14 +302,25 @@ class Printed:
         if not dropped:
             return []
         who = f" by {self.label.lower()}" if self.label else ""
-        return [LogEntry("reward", f"… {dropped:,} more line{'s' if dropped != 1 else ''} "
-                         f"printed{who} in iteration {self.iteration} not kept")]  # fmt: skip
+        return [
+            LogEntry(
+                "reward",
+                f"… {dropped:,} more line{'s' if dropped != 1 else ''} "
+                f"printed{who} in iteration {self.iteration} not kept",
+            )
+        ]
 
 
 def _drive(
-    sandbox: Sandbox, channel: JobChannel, run: str, job: TrainingJob, worker: int,
-    viewing: Viewing, printed: Printed, evaluator: Evaluator | None = None,
-) -> str:  # fmt: skip
+    sandbox: Sandbox,
+    channel: JobChannel,
+    run: str,
+    job: TrainingJob,
+    worker: int,
+    viewing: Viewing,
+    printed: Printed,
+    evaluator: Evaluator | None = None,
+) -> str:
     """Drive episodes until the job's run ends; why it ended, in the racer's words.
 
     The sandbox's cars drive together, and each episode goes to the buffer as it ends. A car
@@ -359,9 +380,14 @@ def _still_wanted(job: TrainingJob) -> bool:
 
 
 def _await_next_version(
-    channel: JobChannel, run: str, job: TrainingJob, version: int, worker: int,
-    viewing: Viewing, evaluator: Evaluator | None = None,
-) -> bool:  # fmt: skip
+    channel: JobChannel,
+    run: str,
+    job: TrainingJob,
+    version: int,
+    worker: int,
+    viewing: Viewing,
+    evaluator: Evaluator | None = None,
+) -> bool:
     """The trainer has the episodes it wants of this version: wait while it learns, rather than
     drive episodes it would drop (and take the CPU it learns with). False when the job's row says
     it is over: a trainer that died, or a job deleted, without a word to Redis would otherwise
@@ -393,6 +419,7 @@ def failure_words(failure: SandboxFailure, worker: int) -> str:
 def _where(failure: SandboxFailure, worker: int) -> str:
     car = f", car {failure.car + 1}" if failure.car is not None and failure.step is not None else ""
     return (
-        f"in simulation worker {worker + 1}" if failure.step is None
+        f"in simulation worker {worker + 1}"
+        if failure.step is None
         else f"(worker {worker + 1}{car})"
-    )  # fmt: skip
+    )

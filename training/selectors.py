@@ -575,11 +575,17 @@ def race_cars(*, evaluation: EvaluationJob | None) -> list[RaceCar]:
     for car in cars:
         trials = list(car.trial_rows.all())
         done = [trial for trial in trials if trial.completed]
-        listed.append(RaceCar(
-            evaluation=car.pk, place=car.grid_position + 1, racer=racer_name(racer=car.model.owner),
-            model_name=car.model.name, status=car.get_status_display(), laps=len(done),
-            time_ms=sum(trial.time_ms for trial in done),
-            crashes=sum(trial.crashes for trial in trials),
-            off_tracks=sum(trial.off_tracks for trial in trials),
-        ))  # fmt: skip
+        listed.append(
+            RaceCar(
+                evaluation=car.pk,
+                place=car.grid_position + 1,
+                racer=racer_name(racer=car.model.owner),
+                model_name=car.model.name,
+                status=car.get_status_display(),
+                laps=len(done),
+                time_ms=sum(trial.time_ms for trial in done),
+                crashes=sum(trial.crashes for trial in trials),
+                off_tracks=sum(trial.off_tracks for trial in trials),
+            )
+        )
     return listed

@@ -65,9 +65,17 @@ def tracks_sync() -> list[Track]:
 
 
 CATALOGUE_FIELDS = (
-    "display_name", "description", "difficulty", "length_m", "width_m", "counterclockwise",
-    "clockwise", "default_direction", "season", "position",
-)  # fmt: skip
+    "display_name",
+    "description",
+    "difficulty",
+    "length_m",
+    "width_m",
+    "counterclockwise",
+    "clockwise",
+    "default_direction",
+    "season",
+    "position",
+)
 
 
 @functools.cache
@@ -83,14 +91,23 @@ def _catalogue_rows() -> list[tuple[str, dict]]:
             track = simulator_tracks.load(name)
             length, width = round(track.length, 2), round(track.width, 3)
         directions = entry["directions"]
-        found.append((name, {
-            "display_name": entry["display_name"], "description": entry["description"],
-            "difficulty": entry["difficulty"], "length_m": length, "width_m": width,
-            "counterclockwise": Direction.COUNTERCLOCKWISE in directions,
-            "clockwise": Direction.CLOCKWISE in directions,
-            "default_direction": directions[0], "season": entry.get("season"),
-            "position": position,
-        }))  # fmt: skip
+        found.append(
+            (
+                name,
+                {
+                    "display_name": entry["display_name"],
+                    "description": entry["description"],
+                    "difficulty": entry["difficulty"],
+                    "length_m": length,
+                    "width_m": width,
+                    "counterclockwise": Direction.COUNTERCLOCKWISE in directions,
+                    "clockwise": Direction.CLOCKWISE in directions,
+                    "default_direction": directions[0],
+                    "season": entry.get("season"),
+                    "position": position,
+                },
+            )
+        )
     return found
 
 
@@ -119,52 +136,77 @@ def track_check(
     """The simulator's track for what ``track_add`` would store, or ``TrackRefused`` saying what is
     wrong. Writes nothing; called outside any transaction, as the route's check is slow work."""
     outside_transaction("A track's route check")
-    if not TRACK_NAME.fullmatch(name or ""):
-        raise TrackRefused("name", (
-            "A track name is 1 to 64 letters, digits, '_' or '-', starting with a letter or "
-            "digit, like my_track_2."
-        ))  # fmt: skip
-    if name in simulator_tracks.names():
-        raise TrackRefused("name", f"{name} is a built-in track; choose another name.")
-    if (builtin := simulator_tracks.world(name)) is not None:  # load(name) would find it first
-        shown = simulator_tracks.entry(builtin[0])["display_name"]
-        raise TrackRefused("name", (
-            f"{name} is DeepRacer's name for the built-in {shown} ({builtin[1]}); choose "
-            "another name."
-        ))  # fmt: skip
-    existing = Track.objects.filter(name=name).first()
-    if existing is not None and (existing.builtin or not replace):
-        raise TrackRefused("name", (
-            f"There is already a track named {name} ({existing.display_name})"
-            + ("." if existing.builtin else "; replace it, or choose another name.")
-        ))  # fmt: skip
+    _track_name_check(name, replace=replace)
     if len(display_name) > Track._meta.get_field("display_name").max_length:
         raise TrackRefused("display_name", "A display name is at most 100 characters.")
     if len(description) > (most := Track._meta.get_field("description").max_length):
         raise TrackRefused("description", f"A description is at most {most} characters.")
     if difficulty not in Track.Difficulty.values:
-        raise TrackRefused("difficulty", (
-            f"The difficulty is one of {', '.join(Track.Difficulty.values)}, not {difficulty!r}."
-        ))  # fmt: skip
+        raise TrackRefused(
+            "difficulty",
+            (f"The difficulty is one of {', '.join(Track.Difficulty.values)}, not {difficulty!r}."),
+        )
     known = [direction.value for direction in Direction]
     if not directions or any(direction not in known for direction in directions):
-        raise TrackRefused("directions", (
-            f"Choose the directions the track is driven: {' and/or '.join(known)}."
-        ))  # fmt: skip
+        raise TrackRefused(
+            "directions", (f"Choose the directions the track is driven: {' and/or '.join(known)}.")
+        )
     if not route:
         raise TrackRefused("route", "Choose the track's route file (.npy).")
     if len(route) > ROUTE_MAX_BYTES:
-        raise TrackRefused("route", (
-            f"That file is {len(route) / 1024 / 1024:.1f} MB; a route file is at most "
-            f"{ROUTE_MAX_BYTES // 1024 // 1024} MB."
-        ))  # fmt: skip
+        raise TrackRefused(
+            "route",
+            (
+                f"That file is {len(route) / 1024 / 1024:.1f} MB; a route file is at most "
+                f"{ROUTE_MAX_BYTES // 1024 // 1024} MB."
+            ),
+        )
     try:
-        return simulator_tracks.load({
-            "name": name, "display_name": display_name or name, "route": route,
-            "directions": list(directions), "description": description, "difficulty": difficulty,
-        })  # fmt: skip
+        return simulator_tracks.load(
+            {
+                "name": name,
+                "display_name": display_name or name,
+                "route": route,
+                "directions": list(directions),
+                "description": description,
+                "difficulty": difficulty,
+            }
+        )
     except simulator_tracks.TrackError as error:
         raise TrackRefused("route", str(error)) from None
+
+
+def _track_name_check(name: str, *, replace: bool) -> None:
+    """``TrackRefused`` unless ``name`` may name a new track (or, with ``replace``, an added
+    track it replaces)."""
+    if not TRACK_NAME.fullmatch(name or ""):
+        raise TrackRefused(
+            "name",
+            (
+                "A track name is 1 to 64 letters, digits, '_' or '-', starting with a letter or "
+                "digit, like my_track_2."
+            ),
+        )
+    if name in simulator_tracks.names():
+        raise TrackRefused("name", f"{name} is a built-in track; choose another name.")
+    if (builtin := simulator_tracks.world(name)) is not None:  # load(name) would find it first
+        shown = simulator_tracks.entry(builtin[0])["display_name"]
+        raise TrackRefused(
+            "name",
+            (
+                f"{name} is DeepRacer's name for the built-in {shown} ({builtin[1]}); choose "
+                "another name."
+            ),
+        )
+    existing = Track.objects.filter(name=name).first()
+    if existing is not None and (existing.builtin or not replace):
+        raise TrackRefused(
+            "name",
+            (
+                f"There is already a track named {name} ({existing.display_name})"
+                + ("." if existing.builtin else "; replace it, or choose another name.")
+            ),
+        )
 
 
 def track_add(
@@ -187,9 +229,14 @@ def track_add(
     """
     display_name = display_name or name
     track = track_check(
-        name=name, route=route, directions=directions, difficulty=difficulty,
-        display_name=display_name, description=description, replace=replace,
-    )  # fmt: skip
+        name=name,
+        route=route,
+        directions=directions,
+        difficulty=difficulty,
+        display_name=display_name,
+        description=description,
+        replace=replace,
+    )
     # The preview shows the track as first offered, with its arrow in that direction.
     shown = track.with_direction(next(iter(directions)))
     # Drawn with OpenCV, which only adding a track needs: imported here, not when the web starts.
@@ -201,14 +248,22 @@ def track_add(
         raise TrackRefused("route", "The track's preview could not be drawn.") from error
     with transaction.atomic():
         return _track_row_save(
-            name=name, display_name=display_name, route=route, directions=directions,
-            description=description, difficulty=difficulty, added_by=added_by, track=track,
-            png=png, replace=replace,
-        )  # fmt: skip
+            name=name,
+            display_name=display_name,
+            route=route,
+            directions=directions,
+            description=description,
+            difficulty=difficulty,
+            added_by=added_by,
+            track=track,
+            png=png,
+            replace=replace,
+        )
 
 
-def _track_row_save(*, name, display_name, route, directions, description, difficulty, added_by,
-                    track, png, replace) -> Track:  # fmt: skip
+def _track_row_save(
+    *, name, display_name, route, directions, description, difficulty, added_by, track, png, replace
+) -> Track:
     existing = Track.objects.select_for_update().filter(name=name).first()
     if existing is not None and (existing.builtin or not replace):  # added since it was checked
         raise TrackRefused("name", f"There is already a track named {name}; choose another name.")
@@ -272,14 +327,18 @@ def check_quota(*, owner: AbstractBaseUser, minutes: int) -> None:
     Quota.objects.select_for_update().filter(pk=Quota.of(owner).pk).first()
     allowance = selectors.allowance_for(racer=owner)
     if allowance.models_left < 1:
-        raise configuration.Invalid({"quota": (
-            f"You have {allowance.models} models, your limit; delete one to make room."
-        )})  # fmt: skip
+        raise configuration.Invalid(
+            {"quota": (f"You have {allowance.models} models, your limit; delete one to make room.")}
+        )
     if minutes > allowance.minutes_left:
-        raise configuration.Invalid({"max_minutes": (
-            f"You have {allowance.minutes_left} training minutes left this month (of "
-            f"{allowance.max_minutes}); choose at most that, or wait for the 1st."
-        )})  # fmt: skip
+        raise configuration.Invalid(
+            {
+                "max_minutes": (
+                    f"You have {allowance.minutes_left} training minutes left this month (of "
+                    f"{allowance.max_minutes}); choose at most that, or wait for the 1st."
+                )
+            }
+        )
 
 
 def model_create(
@@ -368,9 +427,12 @@ def _clone_weights_start(job: TrainingJob, weights: str) -> bool:
             return False  # stopped by the racer meanwhile, or taken by a trainer, which copies
         lifecycle.TRAINING_JOB.move(locked, TrainingJob.Status.STOPPING)
         lifecycle.TRAINING_JOB.move(
-            locked, TrainingJob.Status.FAILED, finished_at=timezone.now(), lease_expires=None,
+            locked,
+            TrainingJob.Status.FAILED,
+            finished_at=timezone.now(),
+            lease_expires=None,
             failure_reason=CLONE_COPY_FAILED.format(why=why),
-        )  # fmt: skip
+        )
         lifecycle.MODEL.move(job.model_id, RLModel.Status.ERROR)
     live.announce_training(job.pk)
     live.announce_queue()
@@ -405,9 +467,11 @@ def _reward_validation(settings: configuration.Draft) -> rewards.Validation | No
 
 
 def _model_save(
-    owner: AbstractBaseUser, draft: configuration.Draft, validate_reward: bool,
+    owner: AbstractBaseUser,
+    draft: configuration.Draft,
+    validate_reward: bool,
     validation: rewards.Validation | None,
-) -> tuple[RLModel, TrainingJob, str | None]:  # fmt: skip
+) -> tuple[RLModel, TrainingJob, str | None]:
     """The model's and its job's rows, and a clone's source's checkpoint, to be copied."""
     settings = configuration.check(
         draft, owner=owner, validate_reward=validate_reward, validation=validation
@@ -418,12 +482,17 @@ def _model_save(
         raise configuration.Invalid({"cloned_from": "You can clone only your own models."})
     weights = (
         selectors.model_trained_checkpoint(model=source, which=settings.cloned_checkpoint)
-        if source is not None else None
-    )  # fmt: skip
+        if source is not None
+        else None
+    )
     if source is not None and weights is None:
-        raise configuration.Invalid({"cloned_from": (
-            f"{source.name} is {selectors.UNTRAINED}: it has no trained weights to clone."
-        )})  # fmt: skip
+        raise configuration.Invalid(
+            {
+                "cloned_from": (
+                    f"{source.name} is {selectors.UNTRAINED}: it has no trained weights to clone."
+                )
+            }
+        )
     if source is not None:  # its weights are for its source's network
         settings = settings.replace(network_layout=source.network_layout)
     model = model_insert(owner=owner, settings=settings, status=RLModel.Status.QUEUED)
@@ -444,17 +513,22 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
         job = TrainingJob.objects.select_for_update().get(pk=job.pk)
         if job.status == TrainingJob.Status.QUEUED and job.attempt == 0:
             lifecycle.TRAINING_JOB.move(
-                job, TrainingJob.Status.CANCELED, finished_at=timezone.now(),
+                job,
+                TrainingJob.Status.CANCELED,
+                finished_at=timezone.now(),
                 failure_reason="Stopped before training began.",
-            )  # fmt: skip
+            )
             lifecycle.MODEL.move(job.model_id, RLModel.Status.ERROR)
         elif job.is_active and not job.stop_requested:
             clock = selectors.training_clock(job=job)  # frozen here: the time billed
             lifecycle.TRAINING_JOB.move(
-                job, TrainingJob.Status.STOPPING, stop_requested=True,
-                message=jobs.saving_message(job.iterations), training_seconds=clock.seconds,
+                job,
+                TrainingJob.Status.STOPPING,
+                stop_requested=True,
+                message=jobs.saving_message(job.iterations),
+                training_seconds=clock.seconds,
                 clock_at=clock.at,
-            )  # fmt: skip
+            )
             lifecycle.MODEL.move(job.model_id, RLModel.Status.STOPPING)
     live.announce_training(job.pk)
     if job.status == TrainingJob.Status.CANCELED:
@@ -506,9 +580,10 @@ def _clone_waiting(source: RLModel) -> str | None:
     longer says it is one (``cloned_from`` is cleared), and its trainer could neither find its
     copy of them nor make one."""
     waiting = TrainingJob.objects.filter(
-        model__cloned_from=source, last_checkpoint="",
+        model__cloned_from=source,
+        last_checkpoint="",
         status__in=(TrainingJob.Status.QUEUED, TrainingJob.Status.INITIALIZING),
-    )  # fmt: skip
+    )
     return waiting.values_list("model__name", flat=True).first()
 
 
@@ -595,18 +670,23 @@ def evaluation_stop(*, evaluation: EvaluationJob) -> EvaluationJob:
         evaluation = EvaluationJob.objects.select_for_update().get(pk=evaluation.pk)
         if evaluation.status == statuses.QUEUED:
             lifecycle.EVALUATION.move(
-                evaluation, statuses.CANCELED, finished_at=timezone.now(), message="",
+                evaluation,
+                statuses.CANCELED,
+                finished_at=timezone.now(),
+                message="",
                 failure_reason="Stopped by you before it began.",
-            )  # fmt: skip
+            )
             lifecycle.MODEL.move(
-                evaluation.model_id, RLModel.Status.READY,
+                evaluation.model_id,
+                RLModel.Status.READY,
                 only_from=frozenset({RLModel.Status.EVALUATING}),
-            )  # fmt: skip
+            )
         elif evaluation.status in (statuses.INITIALIZING, statuses.IN_PROGRESS):
             lifecycle.EVALUATION.move(
-                evaluation, statuses.STOPPING,
+                evaluation,
+                statuses.STOPPING,
                 message="Stopping: the trials it finished are kept",
-            )  # fmt: skip
+            )
     live.announce(
         live.evaluation_group(evaluation.pk), selectors.evaluation_status(evaluation=evaluation)
     )

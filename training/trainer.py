@@ -175,9 +175,11 @@ class Trainer:
     def train(self) -> None:
         job, model = self.job, self.model
         preparing = not job.stop_requested and jobs.move(
-            job, TrainingJob.Status.INITIALIZING, started_at=job.started_at or timezone.now(),
+            job,
+            TrainingJob.Status.INITIALIZING,
+            started_at=job.started_at or timezone.now(),
             message="Preparing the trainer",
-        )  # fmt: skip
+        )
         if not preparing:  # the racer stopped it before this run took it up, or as it did
             jobs.log(job, "Stopped by the racer.")
             self.finish(TrainingJob.Status.COMPLETED)
@@ -217,9 +219,11 @@ class Trainer:
         job = self.job
         self.session_started = time.monotonic()
         started = jobs.clock_write(
-            job, self.base_seconds, to=TrainingJob.Status.IN_PROGRESS,
+            job,
+            self.base_seconds,
+            to=TrainingJob.Status.IN_PROGRESS,
             message=self.training_message,
-        )  # fmt: skip
+        )
         live.announce_training(job.pk)
         if not started:  # the racer stopped it while it waited
             self.ending = "stop"
@@ -246,9 +250,11 @@ class Trainer:
         self.waiting_since = time.monotonic()
         jobs.log(self.job, f"{why}: the clock stops until a car drives again.")
         waiting = jobs.clock_write(
-            self.job, self.base_seconds, to=TrainingJob.Status.INITIALIZING,
+            self.job,
+            self.base_seconds,
+            to=TrainingJob.Status.INITIALIZING,
             message=WAITING_FOR_WORKER,
-        )  # fmt: skip
+        )
         live.announce_training(self.job.pk)
         if not waiting:  # the racer stopped it
             self.ending = "stop"
@@ -493,9 +499,11 @@ class Trainer:
 
     def _publish(self, evaluate: int = 0) -> None:
         self.channel.publish(
-            self.version, self.learner.policy_weights(), evaluate=evaluate,
+            self.version,
+            self.learner.policy_weights(),
+            evaluate=evaluate,
             episodes=self.model.hyperparameters["num_episodes_between_training"],
-        )  # fmt: skip
+        )
 
     def _recall_progress(self) -> None:
         """On resuming: the metrics written so far."""
@@ -749,9 +757,16 @@ def evaluation_metrics(results: list[dict], *, now: float) -> list[dict]:
 
 
 def _metric(
-    phase: str, *, steps: int, reward: int, progress: float, status: str, now: float,
-    episode: int, trial: int,
-) -> dict:  # fmt: skip
+    phase: str,
+    *,
+    steps: int,
+    reward: int,
+    progress: float,
+    status: str,
+    now: float,
+    episode: int,
+    trial: int,
+) -> dict:
     """One entry of DeepRacer's metrics JSON: the episode's time is its steps at the control
     rate, ending ``now``; the completion is truncated to a whole percentage."""
     elapsed = round(steps * 1000 / CONTROL_HZ)

@@ -357,12 +357,16 @@ class _ModelCreatePage:
         else:
             initial = {
                 "reward_function": rewards.EXAMPLES[0].source,
-                "actions": json.dumps(sim_config.DiscreteActions(
-                    tuple((a["steering_angle"], a["speed"])
-                          for a in sim_config.DEFAULT_ACTION_SPACE)
-                ).metadata()),
+                "actions": json.dumps(
+                    sim_config.DiscreteActions(
+                        tuple(
+                            (a["steering_angle"], a["speed"])
+                            for a in sim_config.DEFAULT_ACTION_SPACE
+                        )
+                    ).metadata()
+                ),
                 "track": "rookie-loop",
-            }  # fmt: skip
+            }
         self.chosen_reward = None
         if "reward" in request.GET:  # "Create a model" with a function of the racer's library
             self.chosen_reward = _get_reward_function_for_user(request, _pk(request.GET["reward"]))
@@ -484,9 +488,10 @@ def model_stop(request: HttpRequest, pk: int) -> HttpResponse:
             messages.success(request, f"Stopping: {job.message[0].lower()}{job.message[1:]}.")
         return redirect("training:model-detail", pk=model.pk)
     return render(
-        request, "training/model_stop.html",
+        request,
+        "training/model_stop.html",
         {"model": model, "job": job, "clock": selectors.training_clock(job=job)},
-    )  # fmt: skip
+    )
 
 
 def _log_source(request: HttpRequest) -> str:
@@ -611,8 +616,11 @@ class _ModelImportAttempt:
         self.outcome: imports.Imported | imports.ImportPreview | Exception | None = None
         self.kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
         self.confirm = ModelImportConfirmForm(request.POST) if "confirm" in request.POST else None
-        posted = (request.POST, request.FILES) if self.confirm is None else (
-            {"kept": request.POST.get("kept", "")},)  # fmt: skip
+        posted = (
+            (request.POST, request.FILES)
+            if self.confirm is None
+            else ({"kept": request.POST.get("kept", "")},)
+        )
         self.form = ModelImportForm(*posted, owner=request.user, kept=self.kept)
         if self.confirm is not None:
             self.form.is_valid()  # for the page to go back to: the kept archive, or a choice
@@ -649,9 +657,15 @@ class _ModelImportAttempt:
         refused = False
         if isinstance(outcome, imports.Imported):
             imports.upload_discard(session=request.session)
-            messages.success(request, _imported_message(outcome.model) + (
-                " “From its import” below says what the import rebuilt or left out."
-                if outcome.model.import_notes else ""))  # fmt: skip
+            messages.success(
+                request,
+                _imported_message(outcome.model)
+                + (
+                    " “From its import” below says what the import rebuilt or left out."
+                    if outcome.model.import_notes
+                    else ""
+                ),
+            )
             return redirect("training:model-detail", pk=outcome.model.pk)
         upload = request.FILES.get("archive") if self.confirm is None else None
         if isinstance(outcome, imports.ImportPreview):
@@ -690,11 +704,14 @@ class _ModelImportAttempt:
             algorithm=settings["algorithm"], stored=settings["hyperparameters"], max_minutes=0
         )
         context = {
-            "form": self.form, "preview": preview, "confirm": confirm, "kept": kept,
+            "form": self.form,
+            "preview": preview,
+            "confirm": confirm,
+            "kept": kept,
             "hyperparameters": [row for row in shown if row.key],
             "tracks": selectors.tracks_available(),
             "allowance": selectors.allowance_for(racer=request.user),
-        }  # fmt: skip
+        }
         status = 400 if confirm.errors else 200
         return render(request, "training/model_import.html", context, status=status)
 
@@ -772,12 +789,16 @@ def model_delete(request: HttpRequest, pk: int) -> HttpResponse:
 @login_required
 def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
     model = _get_model_for_user(request, pk)
-    initial = {"track": model.track.name, "direction": model.direction,
-               "race_type": model.race_type}  # fmt: skip
+    initial = {
+        "track": model.track.name,
+        "direction": model.direction,
+        "race_type": model.race_type,
+    }
     form = EvaluationForm(
-        request.POST or None, initial=initial,
+        request.POST or None,
+        initial=initial,
         checkpoints=selectors.model_checkpoint_choices(model=model),
-    )  # fmt: skip
+    )
     refusal = limited = None
     if model.status != RLModel.Status.READY:
         refusal = (
@@ -798,13 +819,20 @@ def evaluation_create(request: HttpRequest, pk: int) -> HttpResponse:
     return render(
         request,
         "training/evaluation_create.html",
-        {"model": model, "form": form, "refusal": refusal,
-         "tracks": selectors.tracks_available(),
-         "untrained": selectors.model_untrained(model=model),
-         "untrained_words": selectors.UNTRAINED},
-        status=429 if limited else
-        400 if form.errors or (refusal and request.method == "POST") else 200,
-    )  # fmt: skip
+        {
+            "model": model,
+            "form": form,
+            "refusal": refusal,
+            "tracks": selectors.tracks_available(),
+            "untrained": selectors.model_untrained(model=model),
+            "untrained_words": selectors.UNTRAINED,
+        },
+        status=429
+        if limited
+        else 400
+        if form.errors or (refusal and request.method == "POST")
+        else 200,
+    )
 
 
 def _get_evaluation_for_user(request: HttpRequest, pk: int, evaluation: int) -> EvaluationJob:
@@ -827,18 +855,27 @@ def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpRes
     prefix = artifacts.path(job.model, artifacts.evaluation_prefix(job))
     ended = (EvaluationJob.Status.COMPLETED, EvaluationJob.Status.CANCELED)
     files = [
-        (name, label) for name, label in EVALUATION_FILES.items()
+        (name, label)
+        for name, label in EVALUATION_FILES.items()
         if job.status in ended and default_storage.exists(prefix + name)
-    ]  # fmt: skip
-    stoppable = job.status in (EvaluationJob.Status.QUEUED, EvaluationJob.Status.INITIALIZING,
-                               EvaluationJob.Status.IN_PROGRESS)  # fmt: skip
+    ]
+    stoppable = job.status in (
+        EvaluationJob.Status.QUEUED,
+        EvaluationJob.Status.INITIALIZING,
+        EvaluationJob.Status.IN_PROGRESS,
+    )
     return render(
         request,
         "training/evaluation_detail.html",
-        {"model": job.model, "evaluation": job, "trials": list(job.trial_rows.all()),
-         "files": files, "cars": selectors.race_cars(evaluation=job),
-         "can_stop": stoppable and not hasattr(job, "submission") and not job.rival},
-    )  # fmt: skip
+        {
+            "model": job.model,
+            "evaluation": job,
+            "trials": list(job.trial_rows.all()),
+            "files": files,
+            "cars": selectors.race_cars(evaluation=job),
+            "can_stop": stoppable and not hasattr(job, "submission") and not job.rival,
+        },
+    )
 
 
 @login_required

@@ -178,12 +178,19 @@ CELERY_ACCEPT_CONTENT = ["json"]
 PITLANE_RATES = {
     action: env.rate(f"PITLANE_RATE_{action.upper().replace('-', '_')}", default)
     for action, default in {
-        "sign-in-account": "10/15m", "sign-in-address": "30/15m", "sign-up": "5/h",
-        "validate": "30/10m", "import": "10/h", "import-refused": "30/h", "create": "20/h",
-        "evaluate": "30/h", "rescore": "20/h", "password-reset": "5/h",
+        "sign-in-account": "10/15m",
+        "sign-in-address": "30/15m",
+        "sign-up": "5/h",
+        "validate": "30/10m",
+        "import": "10/h",
+        "import-refused": "30/h",
+        "create": "20/h",
+        "evaluate": "30/h",
+        "rescore": "20/h",
+        "password-reset": "5/h",
         "password-reset-email": "3/h",
     }.items()
-}  # fmt: skip
+}
 RATELIMIT_USE_CACHE = "default"
 # django_ratelimit is not an installed app: it would only add a system check whose list of
 # caches (django-redis, not Django's own RedisCache) predates Django's; RedisCache's incr is

@@ -19,8 +19,10 @@ def when(moment: datetime | None, style: str = "datetime") -> str:
         return "—"
     return format_html(
         '<time datetime="{}" data-when="{}">{}</time>',
-        moment.isoformat(), style, local_text(moment, style),
-    )  # fmt: skip
+        moment.isoformat(),
+        style,
+        local_text(moment, style),
+    )
 
 
 register.filter(laptime)

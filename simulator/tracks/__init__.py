@@ -35,8 +35,10 @@ GRID_BATCH = 100_000  # grid entries whose pairs are compared at once (bounds th
 OPEN_GAP = 3.0  # a route whose end is this many of its longest steps from its start is open
 DIRECTIONS = ("counterclockwise", "clockwise")
 # The .npy format versions numpy.save writes for a plain array, and their header readers.
-NPY_HEADERS = {(1, 0): np.lib.format.read_array_header_1_0,
-               (2, 0): np.lib.format.read_array_header_2_0}  # fmt: skip
+NPY_HEADERS = {
+    (1, 0): np.lib.format.read_array_header_1_0,
+    (2, 0): np.lib.format.read_array_header_2_0,
+}
 
 
 class TrackError(ValueError):
@@ -337,8 +339,12 @@ def load(source: str | Path | Mapping[str, Any]) -> Track:
             f"No track named {str(source)!r}. Built-in tracks: {known}, and DeepRacer's "
             f"{len(names(origin='deepracer'))} by their WORLD_NAME, like reInvent2019_track."
         )
-    return _from_array(read_route(path.read_bytes(), path.name), name=path.stem,
-                       display_name=path.stem, source=path)  # fmt: skip
+    return _from_array(
+        read_route(path.read_bytes(), path.name),
+        name=path.stem,
+        display_name=path.stem,
+        source=path,
+    )
 
 
 def read_route(data: bytes, filename: str = "The route file") -> np.ndarray:
@@ -386,8 +392,14 @@ def signed_area(ring: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
-COLUMNS = ("centre x", "centre y", "inner border x", "inner border y", "outer border x",
-           "outer border y")  # fmt: skip
+COLUMNS = (
+    "centre x",
+    "centre y",
+    "inner border x",
+    "inner border y",
+    "outer border x",
+    "outer border y",
+)
 
 
 def _sanitized(array: np.ndarray) -> np.ndarray:
@@ -469,8 +481,9 @@ def _from_array(array: np.ndarray, **metadata: Any) -> Track:
     # Which way the file's points run: the sign of the centre line's area, as DeepRacer reads
     # shapely's LinearRing.is_ccw of it (track_data.py:222).
     direction = "counterclockwise" if signed_area(centre[:-1]) > 0 else "clockwise"
-    return Track(centre=centre, inner=route[:, 2:4], outer=route[:, 4:6], direction=direction,
-                 **metadata)  # fmt: skip
+    return Track(
+        centre=centre, inner=route[:, 2:4], outer=route[:, 4:6], direction=direction, **metadata
+    )
 
 
 def _from_inline(spec: Mapping[str, Any]) -> Track:

@@ -75,11 +75,16 @@ def console_entry(track: dict, routes: dict, meta: dict) -> dict:
         if routes[world].direction != direction:
             raise SystemExit(f"{world} runs {routes[world].direction}, not {direction}.")
     return {
-        "name": name, "display_name": track["name"], "description": track["description"],
-        "difficulty": difficulty(track["difficulty"]), "directions": directions,
-        "routes": driven, "world_names": worlds, "season": _season(meta, worlds, name),
+        "name": name,
+        "display_name": track["name"],
+        "description": track["description"],
+        "difficulty": difficulty(track["difficulty"]),
+        "directions": directions,
+        "routes": driven,
+        "world_names": worlds,
+        "season": _season(meta, worlds, name),
         "console": True,
-    }  # fmt: skip
+    }
 
 
 def other_entry(world: str, route, meta: dict) -> dict:
@@ -113,8 +118,9 @@ def catalogue(routes_dir: Path, console: list[dict], meta: dict) -> tuple[list[d
             refused.append(f"{path.stem}: {error}")
     entries = [console_entry(track, routes, meta) for track in console]
     taken = {world for entry in entries for world in entry["world_names"]}
-    entries += [other_entry(w, routes[w], meta) for w in sorted(routes, key=str.lower)
-                if w not in taken]  # fmt: skip
+    entries += [
+        other_entry(w, routes[w], meta) for w in sorted(routes, key=str.lower) if w not in taken
+    ]
     for entry in entries:
         track = routes[entry["routes"][entry["directions"][0]]]
         entry["length_m"], entry["width_m"] = round(track.length, 2), round(track.width, 3)
@@ -128,20 +134,24 @@ def main(routes_dir: str, tracks_json: str, track_utils: str) -> None:
     (DEEPRACER_DIR / "routes").mkdir(parents=True, exist_ok=True)
     for entry in entries:
         for world in entry["world_names"]:
-            shutil.copyfile(Path(routes_dir) / f"{world}.npy",
-                            DEEPRACER_DIR / "routes" / f"{world}.npy")  # fmt: skip
+            shutil.copyfile(
+                Path(routes_dir) / f"{world}.npy", DEEPRACER_DIR / "routes" / f"{world}.npy"
+            )
     with open(DEEPRACER_DIR / "catalog.json", "w") as file:
         json.dump(entries, file, indent=1)
         file.write("\n")
     _catalog.cache_clear()
     for entry in entries:
         shown = load(entry["name"]).with_direction(entry["directions"][0])
-        cv2.imwrite(str(DEEPRACER_DIR / f"{entry['name']}.png"),
-                    preview(shown, width=PREVIEW_WIDTH),
-                    [cv2.IMWRITE_PNG_COMPRESSION, 9])  # fmt: skip
+        cv2.imwrite(
+            str(DEEPRACER_DIR / f"{entry['name']}.png"),
+            preview(shown, width=PREVIEW_WIDTH),
+            [cv2.IMWRITE_PNG_COMPRESSION, 9],
+        )
     routes = sum(len(entry["world_names"]) for entry in entries)
-    sys.stdout.write(f"{len(entries)} tracks from {routes} route files; left out: "
-                     f"{'; '.join(refused)}\n")  # fmt: skip
+    sys.stdout.write(
+        f"{len(entries)} tracks from {routes} route files; left out: {'; '.join(refused)}\n"
+    )
 
 
 if __name__ == "__main__":

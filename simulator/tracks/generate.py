@@ -312,8 +312,7 @@ def closest_approach(centre: np.ndarray, width: float) -> float:
 
 
 def build(spec: TrackSpec) -> np.ndarray:
-    centre = smooth(resample(catmull_rom(spec.outline()), spec.length), spec.length,
-                    spec.smoothing)  # fmt: skip
+    centre = smooth(resample(catmull_rom(spec.outline()), spec.length), spec.length, spec.smoothing)
     ring = np.roll(centre[:-1], -round(spec.start_at * (len(centre) - 1)), axis=0)
     centre = np.vstack([ring, ring[:1]])
     tightest = float(bend_radii(centre).min())
@@ -352,8 +351,11 @@ def main() -> None:
         file.write("\n")
     _catalog.cache_clear()
     for spec in SPECS:
-        cv2.imwrite(str(DATA_DIR / f"{spec.name}.png"), preview(load(spec.name)),
-                    [cv2.IMWRITE_PNG_COMPRESSION, 9])  # fmt: skip
+        cv2.imwrite(
+            str(DATA_DIR / f"{spec.name}.png"),
+            preview(load(spec.name)),
+            [cv2.IMWRITE_PNG_COMPRESSION, 9],
+        )
 
 
 if __name__ == "__main__":

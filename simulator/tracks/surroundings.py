@@ -133,10 +133,12 @@ def surroundings(bundle: Path, world_name: str, road: Rect) -> dict | None:
             walls.append((footprint(ring), float(ring[:, 2].max()), path.stem == "background"))
     fields = [rect for rect in fields if encloses(rect, road)]
     rings = [
-        (rect, height) for rect, height, backdrop in walls
-        if encloses(rect, road) and height > 0.05
+        (rect, height)
+        for rect, height, backdrop in walls
+        if encloses(rect, road)
+        and height > 0.05
         and (not backdrop or any(near(rect, field) for field in fields))
-    ]  # fmt: skip
+    ]
     entry = {"sky": sky, "meshes": sorted(path.name for path in paths)}
     if rings:
         rect, height = min(rings, key=lambda ring: area(ring[0]))

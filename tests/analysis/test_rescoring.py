@@ -145,7 +145,7 @@ def test_a_rescoring_whose_worker_died_fails_and_frees_its_place(alice, client):
     )
     Rescoring.objects.filter(pk=alive.pk).update(
         status=Rescoring.Status.RUNNING, started_at=timezone.now()
-    )  # fmt: skip
+    )
     client.force_login(alice)
     base = reverse("analysis:model", args=[source.model.pk])
     page = client.get(base).text  # its list says the dead one failed, before any poll

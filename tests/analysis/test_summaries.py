@@ -56,9 +56,13 @@ def test_a_hand_written_trace_is_summarised_as_counted_by_hand(alice):
     assert column["outcome"].tolist() == [0, 0, 0, 1, 1]
     assert column["row"].tolist() == [1, 2, 3, 5, 6]
     assert summaries.iteration_figures(summary.episodes) == {
-        "episodes": 2, "reward": pytest.approx(3.2505), "progress": pytest.approx(51.75),
-        "completion": 50.0, "best_lap": 0.2, "median_lap": 0.2,
-    }  # fmt: skip
+        "episodes": 2,
+        "reward": pytest.approx(3.2505),
+        "progress": pytest.approx(51.75),
+        "completion": 50.0,
+        "best_lap": 0.2,
+        "median_lap": 0.2,
+    }
 
 
 def _split(table: np.ndarray) -> dict[str, np.ndarray]:
@@ -113,11 +117,28 @@ def test_the_params_replayed_from_a_trace_are_those_the_car_was_given(tracks):
     track = records.track_of("pitlane-oval", "counterclockwise")
     for theirs, ours in zip(given, replayed(track, recorded), strict=True):
         assert set(ours) == set(theirs) - {"waypoints"}
-        for name in ("x", "y", "heading", "distance_from_center", "track_width", "progress",
-                     "speed", "steering_angle", "projection_distance", "sim_time"):  # fmt: skip
+        for name in (
+            "x",
+            "y",
+            "heading",
+            "distance_from_center",
+            "track_width",
+            "progress",
+            "speed",
+            "steering_angle",
+            "projection_distance",
+            "sim_time",
+        ):
             assert ours[name] == pytest.approx(theirs[name], abs=2e-3), name
-        for name in ("steps", "closest_waypoints", "all_wheels_on_track", "is_offtrack",
-                     "is_crashed", "is_reversed", "track_length"):  # fmt: skip
+        for name in (
+            "steps",
+            "closest_waypoints",
+            "all_wheels_on_track",
+            "is_offtrack",
+            "is_crashed",
+            "is_reversed",
+            "track_length",
+        ):
             assert ours[name] == theirs[name], name
         if theirs["distance_from_center"] > 1e-3:  # on the line, the stored digits pick a side
             assert ours["is_left_of_center"] == theirs["is_left_of_center"]
@@ -232,8 +253,9 @@ def test_an_evaluations_trials_have_their_analysis_tab(alice, client):
         model=model, track=model.track, trials=2, status=EvaluationJob.Status.COMPLETED
     )
     document = to_csv(HAND_WRITTEN)  # its two episodes stand for two trials
-    artifacts.save(model, artifacts.evaluation_prefix(evaluation) + artifacts.EVALUATION_TRACE,
-                   document)  # fmt: skip
+    artifacts.save(
+        model, artifacts.evaluation_prefix(evaluation) + artifacts.EVALUATION_TRACE, document
+    )
     client.force_login(alice)
     detail = client.get(reverse("training:evaluation-detail", args=[model.pk, evaluation.pk]))
     base = reverse("analysis:evaluation", args=[model.pk, evaluation.pk])

@@ -27,9 +27,14 @@ pytestmark = pytest.mark.django_db(transaction=True)
 
 SCREENS = {"laptop": {"width": 1280, "height": 800}, "phone": {"width": 390, "height": 844}}
 PUBLIC = [
-    "/", "/accounts/login/", "/accounts/signup/", "/races/", "/leaderboards/", "/help/",
+    "/",
+    "/accounts/login/",
+    "/accounts/signup/",
+    "/races/",
+    "/leaderboards/",
+    "/help/",
     "/nothing/",
-]  # fmt: skip
+]
 
 
 def racer_pages(alice) -> list[str]:
@@ -40,15 +45,31 @@ def racer_pages(alice) -> list[str]:
     vehicle = Vehicle.objects.create(owner=alice, name="page-car", shell_colour="#f5f5f5")
     artifacts.save(model, artifacts.training_trace(1), to_csv(HAND_WRITTEN))  # for its Analysis
     return [
-        "/models/", f"/models/{model.pk}/", f"/models/{model.pk}/evaluate/",
-        f"/models/{model.pk}/delete/", "/models/create/", f"/models/create/?clone={model.pk}",
-        "/models/import/", "/models/reward-function/", "/garage/", f"/garage/{vehicle.pk}/edit/",
-        f"/garage/{vehicle.pk}/delete/", "/races/", "/races/submit/",
-        "/races/submissions/", submission.get_absolute_url(), "/leaderboards/",
-        trial.get_absolute_url(), f"/seasons/{season.pk}/", "/races/community/new/",
-        "/notifications/", "/accounts/password/", f"/models/{model.pk}/analysis/",
-        f"/events/{trial.slug}/live/", f"/events/{trial.slug}/broadcast/",
-    ]  # fmt: skip
+        "/models/",
+        f"/models/{model.pk}/",
+        f"/models/{model.pk}/evaluate/",
+        f"/models/{model.pk}/delete/",
+        "/models/create/",
+        f"/models/create/?clone={model.pk}",
+        "/models/import/",
+        "/models/reward-function/",
+        "/garage/",
+        f"/garage/{vehicle.pk}/edit/",
+        f"/garage/{vehicle.pk}/delete/",
+        "/races/",
+        "/races/submit/",
+        "/races/submissions/",
+        submission.get_absolute_url(),
+        "/leaderboards/",
+        trial.get_absolute_url(),
+        f"/seasons/{season.pk}/",
+        "/races/community/new/",
+        "/notifications/",
+        "/accounts/password/",
+        f"/models/{model.pk}/analysis/",
+        f"/events/{trial.slug}/live/",
+        f"/events/{trial.slug}/broadcast/",
+    ]
 
 
 def test_every_page_reads_well_on_a_laptop_and_a_phone(page: Page, alice, tracks):

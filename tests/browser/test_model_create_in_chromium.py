@@ -268,10 +268,16 @@ def test_the_action_space_is_drawn_as_a_fan_that_follows_the_table(page: Page, a
 
 
 def test_the_model_page_draws_its_action_space(page: Page, alice, tracks):
-    discrete = model_create(owner=alice, settings={
-        "name": "three-rays", "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
-        "action_space": [{"steering_angle": a, "speed": 1} for a in (-20, 0, 20)],
-    }, validate_reward=False)  # fmt: skip
+    discrete = model_create(
+        owner=alice,
+        settings={
+            "name": "three-rays",
+            "track": "rookie-loop",
+            "reward_function": EXAMPLES[0].source,
+            "action_space": [{"steering_angle": a, "speed": 1} for a in (-20, 0, 20)],
+        },
+        validate_reward=False,
+    )
     log_in(page, "alice", PASSWORD)
     page.goto(f"/models/{discrete.pk}/")
     expect(rays(page)).to_have_count(3)
@@ -280,10 +286,19 @@ def test_the_model_page_draws_its_action_space(page: Page, alice, tracks):
     )
     assert left_of_the_car(page, page.locator('[data-action-fan] [data-action-ray="2"]'))
 
-    continuous = model_create(owner=alice, settings={
-        "name": "a-sector", "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
-        "action_space": {"steering_angle": {"low": 5, "high": 30}, "speed": {"low": 1, "high": 3}},
-    }, validate_reward=False)  # fmt: skip
+    continuous = model_create(
+        owner=alice,
+        settings={
+            "name": "a-sector",
+            "track": "rookie-loop",
+            "reward_function": EXAMPLES[0].source,
+            "action_space": {
+                "steering_angle": {"low": 5, "high": 30},
+                "speed": {"low": 1, "high": 3},
+            },
+        },
+        validate_reward=False,
+    )
     page.goto(f"/models/{continuous.pk}/")
     expect(rays(page)).to_have_count(0)
     expect(page.locator("[data-action-fan] [data-action-sector]")).to_have_count(1)

@@ -79,8 +79,9 @@ def test_an_import_says_what_it_creates_and_asks_before_it_trains(
     page: Page, alice, tracks, tmp_path
 ):
     # A car archive: a driving model without training history, said so on its page.
-    car = imports.import_model(owner=alice, archive=io.BytesIO(car_archive(alice)),
-                               name="from-the-car").model  # fmt: skip
+    car = imports.import_model(
+        owner=alice, archive=io.BytesIO(car_archive(alice)), name="from-the-car"
+    ).model
     errors = []
     page.on("pageerror", lambda error: errors.append(str(error)))
     log_in(page, "alice", PASSWORD)
@@ -137,9 +138,10 @@ def test_the_bell_shows_unread_notifications_and_marks_them_read(page: Page, ali
     bell = page.locator("[data-bell]")
     expect(bell).to_have_attribute("aria-label", "Notifications")
     notifications.notification_send(
-        recipient=alice, text="straight-ahead finished training: 3 iterations in 1:35.",
+        recipient=alice,
+        text="straight-ahead finished training: 3 iterations in 1:35.",
         url=f"/models/{model.pk}/",
-    )  # fmt: skip
+    )
     notifications.notification_send(recipient=alice, text="Another one.", url="/models/")
     page.reload()
     expect(page.locator("[data-bell-count]")).to_have_text("2")

@@ -58,9 +58,12 @@ def queued_submission(racer) -> Submission:
     model = ready_model(racer)
     trial = event(laps_required=1, laps_to_drive=1)
     return Submission.objects.create(
-        event=trial, racer=racer, model=model, model_name=model.name,
+        event=trial,
+        racer=racer,
+        model=model,
+        model_name=model.name,
         evaluation=race_evaluation(model, trial),
-    )  # fmt: skip
+    )
 
 
 def test_the_submission_page_follows_its_race_and_then_shows_the_score(page: Page, alice, tracks):

@@ -20,8 +20,14 @@ LAP = 1_100  # [ms] between crossings: laps shorter than a second are refused as
 def test_the_timekeeper_times_a_real_car_by_keyboard_and_the_broadcast_follows(
     page: Page, alice, stella, tracks
 ):
-    race = event("Summit live", physical=True, laps_required=2, laps_to_drive=3,
-                 ranking_method=RankingMethod.BEST_LAP, off_track_penalty_s=2.0)  # fmt: skip
+    race = event(
+        "Summit live",
+        physical=True,
+        laps_required=2,
+        laps_to_drive=3,
+        ranking_method=RankingMethod.BEST_LAP,
+        off_track_penalty_s=2.0,
+    )
     screen = page.context.new_page()
     screen.goto(f"/events/{race.slug}/broadcast/")
     expect(screen.locator("body")).to_have_attribute("data-listening", "true")

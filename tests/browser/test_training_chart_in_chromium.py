@@ -45,12 +45,19 @@ def a_model_that_reached_the_finish(owner):
     job = model.jobs.get()
     for number in range(1, 5):
         Iteration.objects.create(
-            job=job, number=number, reward=20.0 * number, completion=25.0 * number,
-            evaluation_completion=25.0 * number, episodes=5, steps=500, wall_seconds=1.0,
-            training_points=[[20.0 * number + k, min(100.0, 25.0 * number + 10 * k)]
-                             for k in (-4, -2, 0, 2, 4)],
+            job=job,
+            number=number,
+            reward=20.0 * number,
+            completion=25.0 * number,
+            evaluation_completion=25.0 * number,
+            episodes=5,
+            steps=500,
+            wall_seconds=1.0,
+            training_points=[
+                [20.0 * number + k, min(100.0, 25.0 * number + 10 * k)] for k in (-4, -2, 0, 2, 4)
+            ],
             evaluation_points=[min(100.0, 25.0 * number + k) for k in (-15, 15)],
-        )  # fmt: skip
+        )
     job.iterations = 4
     job.save()
     return model
@@ -109,9 +116,15 @@ def test_where_the_newest_iterations_time_went_is_shown_beside_the_graph_and_fol
     expect(shown).to_contain_text("Its evaluation drove 3.2 s beside the next iteration.")
 
     Iteration.objects.create(
-        job=job, number=5, reward=100.0, completion=100.0, episodes=5, steps=500,
-        wall_seconds=8.0, time_split={**dict.fromkeys(split, 0.0), "driving": 2.0, "update": 6.0},
-    )  # fmt: skip
+        job=job,
+        number=5,
+        reward=100.0,
+        completion=100.0,
+        episodes=5,
+        steps=500,
+        wall_seconds=8.0,
+        time_split={**dict.fromkeys(split, 0.0), "driving": 2.0, "update": 6.0},
+    )
     off_the_loop(live.announce_iteration, job.pk, 5)
     expect(shown).to_contain_text("in iteration 5: 8.0 s")
     expect(shown.locator('[data-phase="update"]')).to_have_text("Policy update 6.0 s · 75%")

@@ -24,10 +24,15 @@ def training_job(owner, *, seconds: float, ago: float) -> TrainingJob:
     clean = configuration.check(settings(name="clocked"), owner=owner, validate_reward=False)
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.TRAINING, **clean.row())
     return TrainingJob.objects.create(
-        model=model, status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="trainer:1",
-        lease_expires=timezone.now() + timedelta(minutes=5), iterations=3,
-        training_seconds=seconds, clock_at=timezone.now() - timedelta(seconds=ago),
-    )  # fmt: skip
+        model=model,
+        status=TrainingJob.Status.IN_PROGRESS,
+        attempt=1,
+        lease_owner="trainer:1",
+        lease_expires=timezone.now() + timedelta(minutes=5),
+        iterations=3,
+        training_seconds=seconds,
+        clock_at=timezone.now() - timedelta(seconds=ago),
+    )
 
 
 def samples(page: Page, count: int = 8) -> list[float]:

@@ -22,13 +22,21 @@ def test_a_refusal_reads_as_one_sentence_or_one_line_per_input():
 
 def test_every_service_refusal_is_one():
     refusals = (
-        configuration.Invalid, exports.ExportRefused, imports.ImportRefused,
-        logs_archive.LogsRefused, services.TrackRefused, services.VehicleSensorsLocked,
-        services.ModelBusy, services.EvaluationRefused, services.RewardFunctionInvalid,
+        configuration.Invalid,
+        exports.ExportRefused,
+        imports.ImportRefused,
+        logs_archive.LogsRefused,
+        services.TrackRefused,
+        services.VehicleSensorsLocked,
+        services.ModelBusy,
+        services.EvaluationRefused,
+        services.RewardFunctionInvalid,
         SubmissionRefused,
-    )  # fmt: skip
+    )
     assert all(issubclass(refusal, Refused) for refusal in refusals)
     track = services.TrackRefused("route", "The route file is empty.")
     assert (track.field, track.message, track.errors) == (
-        "route", "The route file is empty.", {"route": "The route file is empty."}
-    )  # fmt: skip
+        "route",
+        "The route file is empty.",
+        {"route": "The route file is empty."},
+    )

@@ -113,9 +113,13 @@ class Browser:
         """The page at the end of the redirects, as a browser follows them."""
         for _ in range(10):
             response = self.session.request(
-                method, self.base + path, allow_redirects=False, timeout=300,
-                headers={"Cookie": self.cookies(), "Referer": self.origin + path}, **kwargs,
-            )  # fmt: skip
+                method,
+                self.base + path,
+                allow_redirects=False,
+                timeout=300,
+                headers={"Cookie": self.cookies(), "Referer": self.origin + path},
+                **kwargs,
+            )
             if response.status_code not in (301, 302, 303):
                 assert response.status_code < 400, (
                     f"{method} {path}: {response.status_code}\n{_errors(response.text)}"
@@ -142,9 +146,16 @@ class Browser:
 
     def websocket(self, path: str):
         url = "ws://" + self.base.split("://", 1)[1] + path
-        return connect(url, additional_headers={
-            "Cookie": self.cookies(), "Origin": self.origin, "X-Forwarded-Proto": "https",
-        }, open_timeout=30, max_size=2**24)  # fmt: skip
+        return connect(
+            url,
+            additional_headers={
+                "Cookie": self.cookies(),
+                "Origin": self.origin,
+                "X-Forwarded-Proto": "https",
+            },
+            open_timeout=30,
+            max_size=2**24,
+        )
 
     def cookies(self) -> str:
         return "; ".join(f"{cookie.name}={cookie.value}" for cookie in self.session.cookies)
@@ -194,13 +205,24 @@ def _racer_training(cluster: Cluster, racer: str, model: str) -> tuple[Browser, 
     """A new racer's browser, and their new model (id, and its job's) training on two
     simulation workers."""
     browser = Browser(cluster)
-    browser.submit("/accounts/signup/", {"username": racer, "password1": "a-long-passphrase",
-                                         "password2": "a-long-passphrase"})  # fmt: skip
-    created = browser.submit("/models/create/", {
-        "name": model, "track": "pitlane-oval", "workers": "2", "max_minutes": "15",
-        "reward_function": REWARD, "clipped_ppo__num_episodes_between_training": "5",
-        "clipped_ppo__batch_size": "32", "clipped_ppo__num_epochs": "3", "actions": FAST,
-    })  # fmt: skip
+    browser.submit(
+        "/accounts/signup/",
+        {"username": racer, "password1": "a-long-passphrase", "password2": "a-long-passphrase"},
+    )
+    created = browser.submit(
+        "/models/create/",
+        {
+            "name": model,
+            "track": "pitlane-oval",
+            "workers": "2",
+            "max_minutes": "15",
+            "reward_function": REWARD,
+            "clipped_ppo__num_episodes_between_training": "5",
+            "clipped_ppo__batch_size": "32",
+            "clipped_ppo__num_epochs": "3",
+            "actions": FAST,
+        },
+    )
     model_id = int(re.search(r"/models/(\d+)/", created.url)[1])
     return browser, model_id, int(re.search(r'data-live-url="/ws/jobs/(\d+)/"', created.text)[1])
 
@@ -239,31 +261,41 @@ def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk_through_
 
     # A simulation machine dies: its worker is replaced on the other, and the log says so.
     cluster.simulation[1].kill()
-    wait_for(lambda: "stopped answering; starting a replacement" in _log(browser, model),
-             "the dead machine's worker to be replaced", timeout=120)  # fmt: skip
+    wait_for(
+        lambda: "stopped answering; starting a replacement" in _log(browser, model),
+        "the dead machine's worker to be replaced",
+        timeout=120,
+    )
     cluster.start_simulation(cluster.simulation[1])
 
     # Redis restarts with nothing kept: the trainer sets the job up again, workers reconnect,
     # and the job goes on by itself. (An update under way when Redis went finishes first and
     # counts as an iteration, so the next one is awaited only once the trainer says so.)
     cluster.redis.restart()
-    wait_for(lambda: "Redis is back" in _log(browser, model),
-             "the trainer to set the job up again on the new Redis", timeout=120)  # fmt: skip
+    wait_for(
+        lambda: "Redis is back" in _log(browser, model),
+        "the trainer to set the job up again on the new Redis",
+        timeout=120,
+    )
     _wait_iterations(browser, model, len(_iterations(browser, model)) + 1)
 
     # The training machine dies: the other takes the job up from its last checkpoint.
     trainer = next(m for m in cluster.training if "training.train[" in m.log())
     trainer.kill()
-    wait_for(lambda: "Resumed from the checkpoint of iteration" in _log(browser, model),
-             "another training machine to resume the job", timeout=180)  # fmt: skip
+    wait_for(
+        lambda: "Resumed from the checkpoint of iteration" in _log(browser, model),
+        "another training machine to resume the job",
+        timeout=180,
+    )
     assert "The trainer stopped answering" in _log(browser, model)
 
     # The database stops for 20 s: pages say so, the job waits, then goes on (the resumed job's
     # next iteration, after both faults).
     cluster.postgres.stop()
     try:
-        down = browser.session.get(cluster.url + f"/models/{model}/", timeout=60,
-                                   headers={"Cookie": browser.cookies()})  # fmt: skip
+        down = browser.session.get(
+            cluster.url + f"/models/{model}/", timeout=60, headers={"Cookie": browser.cookies()}
+        )
         assert down.status_code == 503, down.status_code
         assert "The console cannot reach its database" in down.text
         time.sleep(20)
@@ -280,8 +312,13 @@ def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk_through_
 
     # Evaluate on a simulation machine; its video and trace come from S3.
     evaluated = browser.submit(f"/models/{model}/evaluate/", {"trials": "3"})
-    page = _wait_page(browser, evaluated.url.split(cluster.url, 1)[1], "data-job-status",
-                      {"COMPLETED", "FAILED"}, timeout=300)  # fmt: skip
+    page = _wait_page(
+        browser,
+        evaluated.url.split(cluster.url, 1)[1],
+        "data-job-status",
+        {"COMPLETED", "FAILED"},
+        timeout=300,
+    )
     assert _status(page, "data-job-status") == "COMPLETED", _errors(page)
 
     # Race in the demo season's open time trial; the run is on its leaderboard.
@@ -307,8 +344,11 @@ def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk_through_
     virtual = browser.get(f"/models/{model}/download/virtual/").content
 
     # Import the virtual archive back, then delete both models and all their files.
-    imported = browser.submit("/models/import/", {"name": "spread-out-again"},
-                              files={"archive": ("virtualmodel.tar.gz", virtual)})  # fmt: skip
+    imported = browser.submit(
+        "/models/import/",
+        {"name": "spread-out-again"},
+        files={"archive": ("virtualmodel.tar.gz", virtual)},
+    )
     again = int(re.search(r"/models/(\d+)/", imported.url)[1])
     assert "Ready" in imported.text
     assert cluster.s3.keys(f"models/{again}/")
@@ -321,8 +361,9 @@ def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk_through_
     # rl.weights_cache, removed an hour after its job's last use.)
     for machine in cluster.machines:
         kept = [
-            name for name in machine.files()  # collected static files, beat's schedule
+            name
+            for name in machine.files()  # collected static files, beat's schedule
             if not name.startswith(("static/", "celerybeat-schedule", "weights/"))
-        ]  # fmt: skip
+        ]
         assert kept == [], f"{machine.name} keeps {kept}"
     assert all(Path(machine.var, "media").exists() is False for machine in cluster.machines)

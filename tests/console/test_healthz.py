@@ -86,9 +86,12 @@ def test_healthz_is_503_when_no_workers_sandbox_holds(client, settings, tmp_path
     redis_server = RedisServer(tmp_path / "redis")
     settings.REDIS_URL = redis_server.url
     record = {
-        "hostname": "unsafe@box", "pid": 1, "queues": ["rescoring", "simulation", "training"],
-        "started_at": 0, "sandbox": {"ok": False, "detail": "sealed code could read a file"},
-    }  # fmt: skip
+        "hostname": "unsafe@box",
+        "pid": 1,
+        "queues": ["rescoring", "simulation", "training"],
+        "started_at": 0,
+        "sandbox": {"ok": False, "detail": "sealed code could read a file"},
+    }
     try:
         redis_client().set(KEY_PREFIX + "unsafe@box", json.dumps(record), ex=60)
         response = client.get(reverse("healthz"))

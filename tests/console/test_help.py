@@ -9,9 +9,17 @@ from training.rewards import PARAMS
 pytestmark = pytest.mark.django_db
 
 SECTIONS = (
-    "race-types", "sensors", "networks", "action-space", "hyperparameters", "stop-condition",
-    "reward-function", "evaluation", "league", "physical-car",
-)  # fmt: skip
+    "race-types",
+    "sensors",
+    "networks",
+    "action-space",
+    "hyperparameters",
+    "stop-condition",
+    "reward-function",
+    "evaluation",
+    "league",
+    "physical-car",
+)
 
 
 def test_the_help_page_is_public_and_has_every_section(client):
@@ -69,9 +77,15 @@ def test_the_help_page_says_how_to_get_a_model_onto_the_car(client):
     section = re.search(
         r'id="physical-car">(.*?)</section>', client.get(reverse("help")).text, re.S
     ).group(1)
-    for words in ("physicalmodel-", "<strong>Models</strong>", "<strong>Upload</strong>",
-                  "<strong>Start vehicle</strong>", "<code>model_metadata.json</code>",
-                  "<code>agent/model.pb</code>", "<code>model.onnx</code>"):  # fmt: skip
+    for words in (
+        "physicalmodel-",
+        "<strong>Models</strong>",
+        "<strong>Upload</strong>",
+        "<strong>Start vehicle</strong>",
+        "<code>model_metadata.json</code>",
+        "<code>agent/model.pb</code>",
+        "<code>model.onnx</code>",
+    ):
         assert words in section, words
 
 

@@ -30,9 +30,13 @@ def test_starting_a_web_process_imports_no_torch_physics_or_opencv():
     environment = {**os.environ, "DJANGO_SETTINGS_MODULE": "console.settings.test"}
     started = subprocess.run(
         [sys.executable, "-c", START_WEB_PROCESS % (HEAVY,)],
-        cwd=settings.BASE_DIR, env=environment, capture_output=True, text=True, timeout=120,
+        cwd=settings.BASE_DIR,
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=120,
         check=False,
-    )  # fmt: skip
+    )
     assert started.returncode == 0, started.stderr
     loaded = json.loads(started.stdout.strip().splitlines()[-1])
     assert loaded == [], f"a web process imported {sorted({m.split('.')[0] for m in loaded})}"
@@ -41,9 +45,17 @@ def test_starting_a_web_process_imports_no_torch_physics_or_opencv():
 def test_a_sandbox_child_that_only_validates_loads_no_torch():
     # Every validation starts a child: PyTorch (about a second) comes only with a policy.
     started = subprocess.run(
-        [sys.executable, "-c", "import sys, sandbox.child; "
-         "print(sorted({'torch', 'stable_baselines3'} & set(sys.modules)))"],
-        cwd=settings.BASE_DIR, capture_output=True, text=True, timeout=120, check=False,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-c",
+            "import sys, sandbox.child; "
+            "print(sorted({'torch', 'stable_baselines3'} & set(sys.modules)))",
+        ],
+        cwd=settings.BASE_DIR,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
     assert started.returncode == 0, started.stderr
     assert started.stdout.strip() == "[]"

@@ -36,8 +36,14 @@ def test_a_racer_sees_their_sections_and_next_steps(client, alice):
 def test_staff_also_see_system_and_admin(client, stella):
     client.force_login(stella)
     assert nav_labels(client.get(reverse("home"))) == [
-        "Models", "Garage", "Races", "Leaderboards", "Help", "System", "Admin",
-    ]  # fmt: skip
+        "Models",
+        "Garage",
+        "Races",
+        "Leaderboards",
+        "Help",
+        "System",
+        "Admin",
+    ]
 
 
 def test_the_current_section_is_marked(client, alice):

@@ -63,11 +63,17 @@ def test_one_address_trying_many_racers_ends_in_a_wait(alice, bob, stella, clien
 
 def test_sign_ups_from_one_address_are_limited(client, rates):
     for n in range(2):
-        client.post(reverse("signup"), {"username": f"racer{n}", "password1": "x",
-                                        "password2": "y"})  # fmt: skip
-    response = client.post(reverse("signup"), {
-        "username": "racer9", "password1": PASSWORD, "password2": PASSWORD,
-    })  # fmt: skip
+        client.post(
+            reverse("signup"), {"username": f"racer{n}", "password1": "x", "password2": "y"}
+        )
+    response = client.post(
+        reverse("signup"),
+        {
+            "username": "racer9",
+            "password1": PASSWORD,
+            "password2": PASSWORD,
+        },
+    )
     assert response.status_code == 429
     assert_waits(response)
     assert "Too many new accounts from your address" in response.text
@@ -154,9 +160,14 @@ def test_sign_in_and_sign_up_are_refused_while_attempts_cannot_be_counted(
     assert "try again in a moment" in response.text
     assert_waits(response, at_most=60)
     assert "_auth_user_id" not in client.session
-    response = client.post(reverse("signup"), {
-        "username": "racer9", "password1": PASSWORD, "password2": PASSWORD,
-    })  # fmt: skip
+    response = client.post(
+        reverse("signup"),
+        {
+            "username": "racer9",
+            "password1": PASSWORD,
+            "password2": PASSWORD,
+        },
+    )
     assert response.status_code == 503
     assert "Signing up is paused for a moment" in response.text
     assert_waits(response, at_most=60)

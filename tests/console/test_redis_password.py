@@ -24,10 +24,19 @@ def settings_in(var_dir: Path, **env: str) -> str:
         DJANGO_SETTINGS_MODULE="console.settings.dev", PITLANE_VAR_DIR=str(var_dir), **env
     )
     result = subprocess.run(
-        [sys.executable, "-c", "import django; django.setup(); "
-         "from django.conf import settings; print(settings.REDIS_URL)"],
-        cwd=ROOT, env=environment, capture_output=True, text=True, timeout=60, check=True,
-    )  # fmt: skip
+        [
+            sys.executable,
+            "-c",
+            "import django; django.setup(); "
+            "from django.conf import settings; print(settings.REDIS_URL)",
+        ],
+        cwd=ROOT,
+        env=environment,
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=True,
+    )
     return result.stdout.strip()
 
 

@@ -23,9 +23,13 @@ from training import artifacts, configuration
 pytestmark = pytest.mark.django_db
 
 DJANGOS_WORDS = [
-    "This field is required.", "Ensure this value", "Select a valid choice", "Enter a whole number",
-    "Enter a number.", "Enter a valid",
-]  # fmt: skip
+    "This field is required.",
+    "Ensure this value",
+    "Select a valid choice",
+    "Enter a whole number",
+    "Enter a number.",
+    "Enter a valid",
+]
 LONG = "x" * 300
 
 
@@ -137,8 +141,12 @@ def test_a_moment_is_written_one_way_whatever_writes_it():
     )
     with timezone.override("UTC"):
         written = template.render({"m": MOMENT}).split("|")
-    assert written[:4] == ["26 Nov 2026, 19:46", "26 Nov 2026", "26 Nov 2026, 19:46",
-                           "26 Nov 2026, 19:46"]  # fmt: skip
+    assert written[:4] == [
+        "26 Nov 2026, 19:46",
+        "26 Nov 2026",
+        "26 Nov 2026, 19:46",
+        "26 Nov 2026, 19:46",
+    ]
     assert written[4].endswith(">26 Nov 2026, 19:46</time>")
 
 

@@ -17,12 +17,26 @@ from training.rewards import EXAMPLES
 def row(episode, steps, x, y, steer, speed, action, reward, progress, waypoint, tstamp, status):
     """A trace row on the Pitlane Oval, with what follows from the rest filled in."""
     return SimTraceRow(
-        episode=episode, steps=float(steps), X=x, Y=y, yaw=90.0, steer=steer, throttle=speed,
-        action=action, reward=reward, done=status not in ("prepare", "in_progress"),
-        all_wheels_on_track=status != "off_track", progress=progress, closest_waypoint=waypoint,
-        track_len=16.5, tstamp=tstamp, episode_status=status, pause_duration=0.0,
-        obstacle_crash_counter=0, wall_clock=1_700_000_000.0,
-    )  # fmt: skip
+        episode=episode,
+        steps=float(steps),
+        X=x,
+        Y=y,
+        yaw=90.0,
+        steer=steer,
+        throttle=speed,
+        action=action,
+        reward=reward,
+        done=status not in ("prepare", "in_progress"),
+        all_wheels_on_track=status != "off_track",
+        progress=progress,
+        closest_waypoint=waypoint,
+        track_len=16.5,
+        tstamp=tstamp,
+        episode_status=status,
+        pause_duration=0.0,
+        obstacle_crash_counter=0,
+        wall_clock=1_700_000_000.0,
+    )
 
 
 # Two episodes on the Pitlane Oval (111 waypoints: a tenth of the lap is 11 of them). The first
@@ -40,8 +54,12 @@ HAND_WRITTEN = [
 
 def untrained(owner, name: str) -> RLModel:
     """A model with a job and no files (no weights either: the analysis never reads them)."""
-    settings = {"name": name, "track": "pitlane-oval", "reward_function": EXAMPLES[0].source,
-                "hyperparameters": hyperparameters.defaults("clipped_ppo")}  # fmt: skip
+    settings = {
+        "name": name,
+        "track": "pitlane-oval",
+        "reward_function": EXAMPLES[0].source,
+        "hyperparameters": hyperparameters.defaults("clipped_ppo"),
+    }
     clean = configuration.check(settings, owner=owner, validate_reward=False)
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.READY, **clean.row())
     TrainingJob.objects.create(model=model, status=TrainingJob.Status.COMPLETED, iterations=1)

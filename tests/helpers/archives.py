@@ -28,18 +28,29 @@ DEEPRACER_METADATA = {
     "action_space_type": "discrete",
 }
 DEEPRACER_HYPERPARAMETERS = {
-    "batch_size": 64, "beta_entropy": 0.01, "discount_factor": 0.999, "e_greedy_value": 0.05,
-    "epsilon_steps": 10000, "exploration_type": "categorical", "loss_type": "huber",
-    "lr": 0.0003, "num_episodes_between_training": 20, "num_epochs": 10, "stack_size": 1,
-    "term_cond_avg_score": 350.0, "term_cond_max_episodes": 1000,
-}  # fmt: skip
+    "batch_size": 64,
+    "beta_entropy": 0.01,
+    "discount_factor": 0.999,
+    "e_greedy_value": 0.05,
+    "epsilon_steps": 10000,
+    "exploration_type": "categorical",
+    "loss_type": "huber",
+    "lr": 0.0003,
+    "num_episodes_between_training": 20,
+    "num_epochs": 10,
+    "stack_size": 1,
+    "term_cond_avg_score": 350.0,
+    "term_cond_max_episodes": 1000,
+}
 
 # H_track: a DeepRacer world (deepracer-utils' track_meta names it) whose route simapp does not
 # ship, so it is not one of the built-in tracks: the archive's track is not loaded here.
 DEEPRACER_PARAMS = {
-    "WORLD_NAME": "H_track", "REVERSE_DIR": False, "RACE_TYPE": "TIME_TRIAL",
+    "WORLD_NAME": "H_track",
+    "REVERSE_DIR": False,
+    "RACE_TYPE": "TIME_TRIAL",
     "CAR_NAME": "my-deepracer-car",
-}  # fmt: skip
+}
 
 # The import page hands the archive to a checker thread (training.checks), which writes with a
 # database connection of its own: what the test made must be committed for it to see.
@@ -81,9 +92,13 @@ def drfc_layout(members: dict[str, bytes]) -> dict[str, bytes]:
 
 def deepracer_folder(**params) -> bytes:
     """A DeepRacer model folder without weights: its reward function and settings."""
-    return tar_gz(deepracer_export(**{
-        "training_params.yaml": yaml.safe_dump({**DEEPRACER_PARAMS, **params}).encode(),
-    }))  # fmt: skip
+    return tar_gz(
+        deepracer_export(
+            **{
+                "training_params.yaml": yaml.safe_dump({**DEEPRACER_PARAMS, **params}).encode(),
+            }
+        )
+    )
 
 
 def virtual_archive(model: RLModel) -> bytes:
@@ -100,21 +115,34 @@ def trainer_metrics(iterations: int = 2, episodes: int = 3) -> dict:
         for trial in range(1, episodes + 1):
             episode += 1
             lap = number == iterations and trial == episodes
-            rows.append({
-                "reward_score": 10.0 * number + trial, "metric_time": clock + 4000,
-                "start_time": clock, "elapsed_time_in_milliseconds": 4000 if lap else 2000,
-                "episode": episode, "trial": trial, "phase": "training",
-                "completion_percentage": 100 if lap else 20 * number,
-                "episode_status": "lap_complete" if lap else "off_track",
-            })  # fmt: skip
+            rows.append(
+                {
+                    "reward_score": 10.0 * number + trial,
+                    "metric_time": clock + 4000,
+                    "start_time": clock,
+                    "elapsed_time_in_milliseconds": 4000 if lap else 2000,
+                    "episode": episode,
+                    "trial": trial,
+                    "phase": "training",
+                    "completion_percentage": 100 if lap else 20 * number,
+                    "episode_status": "lap_complete" if lap else "off_track",
+                }
+            )
             clock += 5000
         for trial in (1, 2):
-            rows.append({
-                "reward_score": 0, "metric_time": clock + 1000, "start_time": clock,
-                "elapsed_time_in_milliseconds": 1000, "episode": episode, "trial": trial,
-                "phase": "evaluation", "completion_percentage": 30 * number + 10 * trial,
-                "episode_status": "off_track",
-            })  # fmt: skip
+            rows.append(
+                {
+                    "reward_score": 0,
+                    "metric_time": clock + 1000,
+                    "start_time": clock,
+                    "elapsed_time_in_milliseconds": 1000,
+                    "episode": episode,
+                    "trial": trial,
+                    "phase": "evaluation",
+                    "completion_percentage": 30 * number + 10 * trial,
+                    "episode_status": "off_track",
+                }
+            )
             clock += 1000
     return {"metrics": rows, "best_model_metric": "progress"}
 

@@ -27,11 +27,16 @@ def event(name: str = "Time trial", *, opens=-DAY, closes=DAY, **fields) -> Even
     offsets from now."""
     now = timezone.now()
     fields = {
-        "season": season(), "name": name, "slug": name.lower().replace(" ", "-"),
-        "track": Track.objects.get(name="pitlane-oval"), "race_type": RaceType.TIME_TRIAL,
-        "division": Division.OPEN, "opens_at": now + opens, "closes_at": now + closes,
+        "season": season(),
+        "name": name,
+        "slug": name.lower().replace(" ", "-"),
+        "track": Track.objects.get(name="pitlane-oval"),
+        "race_type": RaceType.TIME_TRIAL,
+        "division": Division.OPEN,
+        "opens_at": now + opens,
+        "closes_at": now + closes,
         **fields,
-    }  # fmt: skip
+    }
     event = Event(**fields)
     event.full_clean()
     event.save()
@@ -49,12 +54,17 @@ def scored(
         Submission.objects.filter(pk=submission.pk).update(created_at=at)
         submission.refresh_from_db()
     trials = [
-        EvaluationTrial(number=number, time_ms=time or 5_000, progress=100 if time else 40,
-                        status="lap_complete" if time else "time_up", off_tracks=off)
+        EvaluationTrial(
+            number=number,
+            time_ms=time or 5_000,
+            progress=100 if time else 40,
+            status="lap_complete" if time else "time_up",
+            off_tracks=off,
+        )
         for number, (time, off) in enumerate(
             itertools.zip_longest(times, off_tracks[: len(times)], fillvalue=0), start=1
         )
-    ]  # fmt: skip
+    ]
     return services.submission_score(submission=submission, trials=trials)
 
 

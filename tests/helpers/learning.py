@@ -13,14 +13,22 @@ def synthetic_episode(env, steps: int = 40) -> Episode:
     """An episode of random observations and actions, shaped as a rollout worker sends one."""
     observations = [env.observation_space.sample() for _ in range(steps + 1)]
     return Episode(
-        worker=0, version=0,
-        observations={name: np.stack([o[name] for o in observations])
-                      for name in env.observation_space.spaces},
+        worker=0,
+        version=0,
+        observations={
+            name: np.stack([o[name] for o in observations]) for name in env.observation_space.spaces
+        },
         actions=np.array([env.action_space.sample() for _ in range(steps)]),
-        rewards=np.ones(steps, dtype=np.float32), values=np.zeros(steps, dtype=np.float32),
-        log_probs=np.zeros(steps, dtype=np.float32), terminated=True, final_value=0.0,
-        progress=10.0, status="off_track", lap_time=None, trace=[],
-    )  # fmt: skip
+        rewards=np.ones(steps, dtype=np.float32),
+        values=np.zeros(steps, dtype=np.float32),
+        log_probs=np.zeros(steps, dtype=np.float32),
+        terminated=True,
+        final_value=0.0,
+        progress=10.0,
+        status="off_track",
+        lap_time=None,
+        trace=[],
+    )
 
 
 def learner_for(env, **values) -> Learner:
@@ -29,8 +37,10 @@ def learner_for(env, **values) -> Learner:
         algorithm="clipped_ppo",
         hyperparameters={**hyperparameters.defaults("clipped_ppo"), **values},
         architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-        observation_space=env.observation_space, action_space=env.action_space, seed=7,
-    )  # fmt: skip
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        seed=7,
+    )
 
 
 def driven(learner: Learner, env, steps: int = 48, scale: float = 1.0, offset: float = 0.0):

@@ -25,8 +25,9 @@ def ready_model(owner, name: str = "straight-ahead", track: str = "pitlane-oval"
     """A READY model with one checkpoint whose policy always chooses to drive straight at 4 m/s:
     on a loop it leaves the track at each bend and is put back, so it finishes its laps, with
     penalties, in a predictable number of steps."""
-    return trained_model(owner, name, weights=_straight_ahead, track=track,
-                         action_space=STRAIGHT_AHEAD)  # fmt: skip
+    return trained_model(
+        owner, name, weights=_straight_ahead, track=track, action_space=STRAIGHT_AHEAD
+    )
 
 
 def _straight_ahead(learner: Learner) -> None:
@@ -54,9 +55,13 @@ def trained_model(owner, name: str, *, weights=None, **settings) -> RLModel:
     checkpoint = _first_checkpoint(model, weights)
     name = artifacts.save(model, "checkpoints/iteration-1.safetensors", checkpoint)
     TrainingJob.objects.create(
-        model=model, status=TrainingJob.Status.COMPLETED, iterations=1, weights_version=1,
-        last_checkpoint=name, best_checkpoint=name,
-    )  # fmt: skip
+        model=model,
+        status=TrainingJob.Status.COMPLETED,
+        iterations=1,
+        weights_version=1,
+        last_checkpoint=name,
+        best_checkpoint=name,
+    )
     artifacts.write_model_files(model)
     return model
 
@@ -74,10 +79,13 @@ def _first_checkpoint(model: RLModel, weights) -> bytes:
     if key not in _CHECKPOINTS:
         env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
         learner = Learner(
-            algorithm=model.algorithm, hyperparameters=model.hyperparameters,
-            architecture=model.architecture, observation_space=env.observation_space,
-            action_space=env.action_space, seed=model.seed,
-        )  # fmt: skip
+            algorithm=model.algorithm,
+            hyperparameters=model.hyperparameters,
+            architecture=model.architecture,
+            observation_space=env.observation_space,
+            action_space=env.action_space,
+            seed=model.seed,
+        )
         env.close()
         if weights is not None:
             weights(learner)

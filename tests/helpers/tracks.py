@@ -25,7 +25,10 @@ def upload(client, kind: str, name: str):
     ``name``."""
     data = {
         "route_file": SimpleUploadedFile(f"{kind}.npy", routes.route_bytes(kind)),
-        "name": name, "display_name": "Upload", "description": "From the admin",
-        "difficulty": "beginner", "directions": ["counterclockwise", "clockwise"],
-    }  # fmt: skip
+        "name": name,
+        "display_name": "Upload",
+        "description": "From the admin",
+        "difficulty": "beginner",
+        "directions": ["counterclockwise", "clockwise"],
+    }
     return client.post(reverse("admin:training_track_add"), data)

@@ -34,17 +34,29 @@ def settings(**changes) -> dict:
 def form_data(**changes) -> dict:
     """The create-model form as the page posts it, with ``changes``."""
     data = {
-        "name": "first-model", "description": "", "track": "rookie-loop",
-        "direction": "counterclockwise", "race_type": "TIME_TRIAL", "camera": "FRONT_FACING_CAMERA",
-        "lidar": "", "network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+        "name": "first-model",
+        "description": "",
+        "track": "rookie-loop",
+        "direction": "counterclockwise",
+        "race_type": "TIME_TRIAL",
+        "camera": "FRONT_FACING_CAMERA",
+        "lidar": "",
+        "network": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
         "action_space_type": "discrete",
         "actions": json.dumps([{"steering_angle": a, "speed": 1} for a in (-20, 0, 20)]),
-        "steering_low": -30, "steering_high": 30, "speed_low": 1, "speed_high": 2,
-        "algorithm": "clipped_ppo", "max_minutes": 60, "workers": 1,
+        "steering_low": -30,
+        "steering_high": 30,
+        "speed_low": 1,
+        "speed_high": 2,
+        "algorithm": "clipped_ppo",
+        "max_minutes": 60,
+        "workers": 1,
         "reward_function": EXAMPLES[0].source,
-    }  # fmt: skip
-    for algorithm, values in (("clipped_ppo", hyperparameters.defaults("clipped_ppo")),
-                              ("sac", hyperparameters.defaults("sac"))):  # fmt: skip
+    }
+    for algorithm, values in (
+        ("clipped_ppo", hyperparameters.defaults("clipped_ppo")),
+        ("sac", hyperparameters.defaults("sac")),
+    ):
         data.update({f"{algorithm}__{name}": value for name, value in values.items()})
     return {**data, **changes}
 
@@ -102,7 +114,12 @@ def training_job(owner, *, seconds: float, ago: float, **fields) -> TrainingJob:
     clean = configuration.check(settings(name="clocked"), owner=owner, validate_reward=False)
     model = RLModel.objects.create(owner=owner, status=RLModel.Status.TRAINING, **clean.row())
     return TrainingJob.objects.create(
-        model=model, status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="trainer:1",
-        training_seconds=seconds, clock_at=timezone.now() - timedelta(seconds=ago),
-        iterations=3, **fields,
-    )  # fmt: skip
+        model=model,
+        status=TrainingJob.Status.IN_PROGRESS,
+        attempt=1,
+        lease_owner="trainer:1",
+        training_seconds=seconds,
+        clock_at=timezone.now() - timedelta(seconds=ago),
+        iterations=3,
+        **fields,
+    )

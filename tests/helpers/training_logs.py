@@ -27,10 +27,18 @@ from training.models import EvaluationJob, Iteration, RLModel
 
 STEP = 1 / 15  # [s]
 EVALUATION_KEYS = {
-    "completion_percentage", "metric_time", "start_time", "elapsed_time_in_milliseconds",
-    "episode_status", "crash_count", "immobilized_count", "off_track_count", "reversed_count",
-    "reset_count", "trial",
-}  # fmt: skip
+    "completion_percentage",
+    "metric_time",
+    "start_time",
+    "elapsed_time_in_milliseconds",
+    "episode_status",
+    "crash_count",
+    "immobilized_count",
+    "off_track_count",
+    "reversed_count",
+    "reset_count",
+    "trial",
+}
 
 
 def extracted(model: RLModel, into: Path) -> Path:
@@ -148,11 +156,20 @@ def drive(env, seed: int) -> Episode:
         if terminated or truncated:
             break
     return Episode(
-        worker=seed % 2, version=0, observations={}, actions=np.zeros(len(rewards)),
-        rewards=np.array(rewards, dtype=np.float32), values=None, log_probs=None,
-        terminated=terminated, final_value=0.0, progress=info["progress"],
-        status=info["status"], lap_time=None, trace=trace,
-    )  # fmt: skip
+        worker=seed % 2,
+        version=0,
+        observations={},
+        actions=np.zeros(len(rewards)),
+        rewards=np.array(rewards, dtype=np.float32),
+        values=None,
+        log_probs=None,
+        terminated=terminated,
+        final_value=0.0,
+        progress=info["progress"],
+        status=info["status"],
+        lap_time=None,
+        trace=trace,
+    )
 
 
 def train_on_paper(model: RLModel) -> None:
@@ -170,15 +187,22 @@ def train_on_paper(model: RLModel) -> None:
         )
         evaluation = [{"progress": 100.0, "status": "lap_complete", "steps": 150}] * 2
         metrics = trainer.with_evaluation(
-            metrics, trainer.evaluation_metrics(evaluation, now=1_700_000_100.0),
+            metrics,
+            trainer.evaluation_metrics(evaluation, now=1_700_000_100.0),
             episodes=number * EPISODES,
-        )  # fmt: skip
+        )
         Iteration.objects.create(
-            job=job, number=number, reward=0.0, completion=0.0, episodes=EPISODES,
-            steps=sum(e.steps for e in episodes), wall_seconds=1.0,
-            training_points=[[round(float(e.rewards.sum()), 3), round(e.progress, 2)]
-                             for e in episodes],
+            job=job,
+            number=number,
+            reward=0.0,
+            completion=0.0,
+            episodes=EPISODES,
+            steps=sum(e.steps for e in episodes),
+            wall_seconds=1.0,
+            training_points=[
+                [round(float(e.rewards.sum()), 3), round(e.progress, 2)] for e in episodes
+            ],
             evaluation_points=[100.0, 100.0],
-        )  # fmt: skip
+        )
     env.close()
     artifacts.save(model, artifacts.TRAINING_METRICS, trainer.metrics_document(metrics))

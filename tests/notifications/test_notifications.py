@@ -124,8 +124,11 @@ def test_the_email_server_is_read_from_one_url():
     url = "smtp+tls://racer%40club:s%3Dcret@mail.example.org:587"
     smtp = Env({"PITLANE_EMAIL_URL": url}).email("PITLANE_EMAIL_URL")
     assert (smtp.host, smtp.port, smtp.user, smtp.password) == (
-        "mail.example.org", 587, "racer@club", "s=cret",
-    )  # fmt: skip
+        "mail.example.org",
+        587,
+        "racer@club",
+        "s=cret",
+    )
     assert smtp.use_tls and not smtp.use_ssl
     assert Env({"E": "smtps://mail.example.org"}).email("E").port == 465
     assert "console" in Env({"E": "console://"}).email("E").backend

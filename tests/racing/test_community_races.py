@@ -167,8 +167,10 @@ def test_the_same_race_sent_again_from_a_fresh_form_gives_back_the_race_just_mad
 
     client.post(reverse("racing:community-race-create"), race_form(name="Saturday"))
     client.post(reverse("racing:community-race-create"), race_form(laps_to_drive=5))
-    client.post(reverse("racing:community-race-create"), race_form(race_type="HEAD_TO_BOT",
-                bot_count=2, bot_speed="1.5"))  # fmt: skip
+    client.post(
+        reverse("racing:community-race-create"),
+        race_form(race_type="HEAD_TO_BOT", bot_count=2, bot_speed="1.5"),
+    )
     assert Event.objects.count() == 4
 
 

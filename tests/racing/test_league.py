@@ -154,8 +154,9 @@ def test_ties_go_to_the_earlier_submission_even_when_it_is_scored_later(alice, b
     assert Ranking.objects.get(racer=alice).submission_id == earlier.pk != later.pk
     page = selectors.leaderboard_page(event=trial)
     assert [(r.racer.username, r.position, r.gap_ms) for r in page] == [
-        ("alice", 1, 0), ("bob", 2, 0),
-    ]  # fmt: skip
+        ("alice", 1, 0),
+        ("bob", 2, 0),
+    ]
 
 
 @pytest.mark.django_db
@@ -217,8 +218,9 @@ def test_event_rankings_recompute_from_the_submissions(alice, bob):
     Ranking.objects.all().delete()
     assert services.event_rankings_recompute(event=trial) == 2
     assert list(trial.rankings.values_list("racer__username", "score_ms")) == [
-        ("alice", 10_000), ("bob", 11_000),
-    ]  # fmt: skip
+        ("alice", 10_000),
+        ("bob", 11_000),
+    ]
 
 
 @pytest.mark.django_db
@@ -273,9 +275,11 @@ def test_a_pro_racer_enters_pro_events_and_not_open_ones(alice):
     Racer.objects.create(user=alice, division=Division.PRO)
     model = ready_model(alice)
     avoidance = event(
-        "Pro boxes", division=Division.PRO, race_type=RaceType.OBJECT_AVOIDANCE,
+        "Pro boxes",
+        division=Division.PRO,
+        race_type=RaceType.OBJECT_AVOIDANCE,
         boxes={"count": 2, "randomize": False},
-    )  # fmt: skip
+    )
     assert selectors.submission_refusal(racer=alice, event=avoidance, model=model) is None
     assert "Pro racers enter Pro events" in selectors.submission_refusal(
         racer=alice, event=event(), model=model
@@ -307,10 +311,15 @@ async def test_a_leaderboard_hears_when_a_submission_is_scored(alice):
     submission = await sync_to_async(scored)(trial, alice, 10_000, 10_000, 10_000)
     message = await communicator.receive_json_from(timeout=5)
     assert message == {
-        "type": "submission", "event": trial.pk, "submission": submission.pk,
-        "status": "COMPLETED", "status_display": "Completed", "score_ms": 10_000,
-        "qualified": True, "ranked": True,
-    }  # fmt: skip
+        "type": "submission",
+        "event": trial.pk,
+        "submission": submission.pk,
+        "status": "COMPLETED",
+        "status_display": "Completed",
+        "score_ms": 10_000,
+        "qualified": True,
+        "ranked": True,
+    }
     await communicator.disconnect()
 
 
@@ -347,8 +356,10 @@ def _assert_raced_under_the_rules(pk: int, trial: Event, model: RLModel) -> None
     assert submission.score_ms == round((laps[0].time_ms + laps[1].time_ms) / 2)  # 2 required
     ranking = Ranking.objects.get(event=trial, racer=submission.racer)
     assert (ranking.submission_id, ranking.score_ms, ranking.laps_completed) == (
-        submission.pk, submission.score_ms, 3,
-    )  # fmt: skip
+        submission.pk,
+        submission.score_ms,
+        3,
+    )
     assert ranking.off_tracks == sum(lap.off_tracks for lap in laps)
     assert default_storage.exists(submission.video) and submission.video.startswith("league/")
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY

@@ -103,12 +103,22 @@ def test_a_staff_division_change_is_kept_from_the_monthly_promotion(client, race
 @pytest.mark.django_db
 def test_the_race_form_keeps_what_was_typed_and_says_what_to_change(client, alice):
     client.force_login(alice)
-    response = client.post(reverse("racing:community-race-create"), {
-        "name": "Backwards", "track": "", "race_type": "TIME_TRIAL", "ranking_method": "BEST_LAP",
-        "opens_at": "2026-02-01T00:00", "closes_at": "2026-01-01T00:00", "laps_required": 3,
-        "laps_to_drive": 2, "off_track_penalty_s": 1, "crash_penalty_s": 2,
-        "submissions_per_racer": 5,
-    })  # fmt: skip
+    response = client.post(
+        reverse("racing:community-race-create"),
+        {
+            "name": "Backwards",
+            "track": "",
+            "race_type": "TIME_TRIAL",
+            "ranking_method": "BEST_LAP",
+            "opens_at": "2026-02-01T00:00",
+            "closes_at": "2026-01-01T00:00",
+            "laps_required": 3,
+            "laps_to_drive": 2,
+            "off_track_penalty_s": 1,
+            "crash_penalty_s": 2,
+            "submissions_per_racer": 5,
+        },
+    )
     assert response.status_code == 200
     assert 'value="Backwards"' in response.text
     errors = response.context["form"].errors
@@ -140,8 +150,10 @@ def test_the_organiser_removes_a_racer_and_closes_the_race_early(
     community_race.participants.add(bob)
     scored(community_race, bob, 10_000)
     client.force_login(bob)
-    assert client.get(reverse("racing:community-race-manage", args=[community_race.slug])
-                      ).status_code == 404  # fmt: skip
+    assert (
+        client.get(reverse("racing:community-race-manage", args=[community_race.slug])).status_code
+        == 404
+    )
     client.force_login(alice)
     manage = client.get(reverse("racing:community-race-manage", args=[community_race.slug]))
     assert community_race.invite_token in manage.text
@@ -194,10 +206,15 @@ def test_a_disqualified_racer_is_told_why_and_reads_it_on_their_runs_page(
     trial = event()
     run = scored(trial, alice, 9_000, 9_000, 9_000)
     client.force_login(race_staff)
-    client.post(reverse("admin:racing_submission_changelist"), {
-        "action": "disqualify", "_selected_action": [run.pk], "apply": "yes",
-        "reason": "Cut the chicane on lap 2",
-    })  # fmt: skip
+    client.post(
+        reverse("admin:racing_submission_changelist"),
+        {
+            "action": "disqualify",
+            "_selected_action": [run.pk],
+            "apply": "yes",
+            "reason": "Cut the chicane on lap 2",
+        },
+    )
     told = Notification.objects.get(recipient=alice, text__contains="disqualified")
     assert told.text == (
         "m in Time trial was disqualified by the league staff: Cut the chicane on lap 2. "

@@ -24,8 +24,10 @@ def test_the_demo_season_has_an_open_event_per_division_and_one_upcoming(tracks)
     season = demo_season_load(today=date(2026, 11, 21))
     events = {event.slug: event for event in season.events.all()}
     assert set(events) == {
-        "open-time-trial-2026-11", "pro-object-avoidance-2026-11", "open-time-trial-2026-12",
-    }  # fmt: skip
+        "open-time-trial-2026-11",
+        "pro-object-avoidance-2026-11",
+        "open-time-trial-2026-12",
+    }
     november = events["open-time-trial-2026-11"]
     assert (november.division, november.race_type) == ("OPEN", "TIME_TRIAL")
     assert events["pro-object-avoidance-2026-11"].division == "PRO"
@@ -65,8 +67,9 @@ def test_a_leaderboard_ranks_by_time_with_the_gap_to_first(client, ranked_event)
     response = client.get(ranked_event.get_absolute_url())
     rows = response.context["rankings"]
     assert [(r.position, r.racer.username, r.gap_ms) for r in rows] == [
-        (1, "bob", 0), (2, "alice", 1552),
-    ]  # fmt: skip
+        (1, "bob", 0),
+        (2, "alice", 1552),
+    ]
     assert "0:29.450" in response.text
     assert "+1.552" in response.text
 

@@ -120,9 +120,11 @@ def test_a_live_turn_puts_the_next_racers_on_the_grid_and_scores_each(tracks, pr
     assert carol.notifications.filter(text__startswith="You are next in Live heads").exists()
     # what lapses or is lost is the race's first car, whose run drives both
     EvaluationJob.objects.filter(pk__in=(lead.pk, second.pk)).update(
-        real_time=False, status=EvaluationJob.Status.IN_PROGRESS, lease_owner="gone:1:dead",
+        real_time=False,
+        status=EvaluationJob.Status.IN_PROGRESS,
+        lease_owner="gone:1:dead",
         lease_expires=lead.created_at,
-    )  # fmt: skip
+    )
     assert [e.pk for e in jobs.lapsed_evaluations()] == [lead.pk]
     EvaluationJob.objects.filter(pk__in=(lead.pk, second.pk)).update(
         status=EvaluationJob.Status.QUEUED, lease_owner="", lease_expires=None

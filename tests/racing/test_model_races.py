@@ -19,10 +19,16 @@ def test_race_submissions_are_listed_as_races_not_as_evaluations(client, alice):
     )
     cup = event("July cup")
     raced = Submission.objects.create(
-        event=cup, racer=alice, model=model, model_name=model.name,
-        evaluation=race_evaluation(model, cup), status=Submission.Status.COMPLETED,
-        laps_completed=3, score_ms=31_234, qualified=True,
-    )  # fmt: skip
+        event=cup,
+        racer=alice,
+        model=model,
+        model_name=model.name,
+        evaluation=race_evaluation(model, cup),
+        status=Submission.Status.COMPLETED,
+        laps_completed=3,
+        score_ms=31_234,
+        qualified=True,
+    )
 
     client.force_login(alice)
     page = client.get(reverse("training:model-detail", args=[model.pk]))
@@ -52,9 +58,13 @@ def test_a_race_whose_simulation_worker_died_is_raced_again_and_an_evaluation_ev
     model = ready_model(alice)
     cup = event("August cup")
     raced = Submission.objects.create(
-        event=cup, racer=alice, model=model, model_name=model.name,
-        evaluation=race_evaluation(model, cup), status=Submission.Status.IN_PROGRESS,
-    )  # fmt: skip
+        event=cup,
+        racer=alice,
+        model=model,
+        model_name=model.name,
+        evaluation=race_evaluation(model, cup),
+        status=Submission.Status.IN_PROGRESS,
+    )
     plain = EvaluationJob.objects.create(model=model, track=Track.objects.get(name="kidney-bean"))
     with django_capture_on_commit_callbacks() as sent:
         answers = signals.evaluation_lapsed.send(EvaluationJob, evaluation=raced.evaluation)

@@ -51,9 +51,16 @@ def test_a_new_evaluation_page_carries_no_queued_message_beside_its_live_status(
     client.force_login(alice)
     response = client.post(
         reverse("training:evaluation-create", args=[model.pk]),
-        {"track": "pitlane-oval", "direction": "counterclockwise", "race_type": "TIME_TRIAL",
-         "trials": "3", "off_track_penalty": "2", "crash_penalty": "5", "checkpoint": "best"},
+        {
+            "track": "pitlane-oval",
+            "direction": "counterclockwise",
+            "race_type": "TIME_TRIAL",
+            "trials": "3",
+            "off_track_penalty": "2",
+            "crash_penalty": "5",
+            "checkpoint": "best",
+        },
         follow=True,
-    )  # fmt: skip
+    )
     assert "The evaluation is queued." not in response.text
     assert "data-live-status>Queued" in response.text

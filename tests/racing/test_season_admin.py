@@ -22,17 +22,26 @@ def season_form(**event) -> dict:
     """The add-season form with one inline event, as the admin page posts it."""
     prefix = "events-0-"
     fields = {
-        "name": "Summer Cup", "slug": "summer-cup-july",
-        "track": Track.objects.get(name="pitlane-oval").pk, "race_type": "TIME_TRIAL",
-        "division": "OPEN", "opens_at": "2026-07-01T00:00", "closes_at": "2026-07-31T00:00",
+        "name": "Summer Cup",
+        "slug": "summer-cup-july",
+        "track": Track.objects.get(name="pitlane-oval").pk,
+        "race_type": "TIME_TRIAL",
+        "division": "OPEN",
+        "opens_at": "2026-07-01T00:00",
+        "closes_at": "2026-07-31T00:00",
         **event,
-    }  # fmt: skip
+    }
     return {
-        "name": "Summer 2026", "year": 2026, "starts_on": "2026-06-01", "ends_on": "2026-08-31",
-        "events-TOTAL_FORMS": 1, "events-INITIAL_FORMS": 0, "events-MIN_NUM_FORMS": 0,
+        "name": "Summer 2026",
+        "year": 2026,
+        "starts_on": "2026-06-01",
+        "ends_on": "2026-08-31",
+        "events-TOTAL_FORMS": 1,
+        "events-INITIAL_FORMS": 0,
+        "events-MIN_NUM_FORMS": 0,
         "events-MAX_NUM_FORMS": 1000,
         **{prefix + name: value for name, value in fields.items()},
-    }  # fmt: skip
+    }
 
 
 def test_staff_add_a_season_with_an_event_in_one_form(client, race_staff):
@@ -68,15 +77,28 @@ def event_form(**fields) -> dict:
         "season": Season.objects.create(
             name="Summer 2026", year=2026, starts_on="2026-06-01", ends_on="2026-08-31"
         ).pk,
-        "name": "Boxes in July", "slug": "boxes-in-july", "division": "PRO",
-        "track": Track.objects.get(name="pitlane-oval").pk, "direction": "counterclockwise",
-        "race_type": "OBJECT_AVOIDANCE", "box_count": 4, "bot_speed": 1.0, "bot_count": 3,
-        "opens_at_0": "2026-07-01", "opens_at_1": "00:00:00",
-        "closes_at_0": "2026-07-31", "closes_at_1": "00:00:00",
-        "ranking_method": "FIRST_CONSECUTIVE", "laps_required": 3, "laps_to_drive": 3,
-        "off_track_penalty_s": 2, "crash_penalty_s": 5, "submissions_per_racer": 10,
-        "public": "on", **fields,
-    }  # fmt: skip
+        "name": "Boxes in July",
+        "slug": "boxes-in-july",
+        "division": "PRO",
+        "track": Track.objects.get(name="pitlane-oval").pk,
+        "direction": "counterclockwise",
+        "race_type": "OBJECT_AVOIDANCE",
+        "box_count": 4,
+        "bot_speed": 1.0,
+        "bot_count": 3,
+        "opens_at_0": "2026-07-01",
+        "opens_at_1": "00:00:00",
+        "closes_at_0": "2026-07-31",
+        "closes_at_1": "00:00:00",
+        "ranking_method": "FIRST_CONSECUTIVE",
+        "laps_required": 3,
+        "laps_to_drive": 3,
+        "off_track_penalty_s": 2,
+        "crash_penalty_s": 5,
+        "submissions_per_racer": 10,
+        "public": "on",
+        **fields,
+    }
 
 
 def test_staff_set_boxes_and_bots_as_fields_not_json(client, race_staff):

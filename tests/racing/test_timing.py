@@ -47,16 +47,26 @@ def drive(run, *signals):
 def test_a_physical_run_is_scored_by_each_ranking_method_into_the_leaderboard(
     tracks, alice, stella, method, score_ms
 ):
-    race = event(physical=True, ranking_method=method, laps_required=2, laps_to_drive=5,
-                 max_off_tracks_per_lap=1, off_track_penalty_s=2.0)  # fmt: skip
+    race = event(
+        physical=True,
+        ranking_method=method,
+        laps_required=2,
+        laps_to_drive=5,
+        max_off_tracks_per_lap=1,
+        off_track_penalty_s=2.0,
+    )
     run = a_run(race, alice, stella)
-    run = drive(run, 5_000, 15_000, "off_track", 24_000, "reset", "off_track", 33_500,
-                41_500, 48_500)  # fmt: skip
+    run = drive(
+        run, 5_000, 15_000, "off_track", 24_000, "reset", "off_track", 33_500, 41_500, 48_500
+    )
     laps = list(run.submission.laps.order_by("number"))
     assert [(lap.time_ms, lap.penalty_ms, lap.counted) for lap in laps] == [
-        (10_000, 0, True), (11_000, 2_000, True), (13_500, 4_000, False), (8_000, 0, True),
+        (10_000, 0, True),
+        (11_000, 2_000, True),
+        (13_500, 4_000, False),
+        (8_000, 0, True),
         (7_000, 0, True),
-    ]  # fmt: skip
+    ]
     assert (laps[2].off_tracks, laps[2].resets) == (2, 1)
 
     timing.run_signal(run=run, signal=timing.Signal("finish"))
@@ -100,9 +110,11 @@ def test_one_car_at_a_time_on_a_physical_event_that_is_open(tracks, alice, bob, 
 
 def device_post(client, race, body, token="") -> tuple[int, dict]:
     response = client.post(
-        reverse("racing:timing-device", args=[race.slug]), data=body,
-        content_type="application/json", headers={"Authorization": f"Bearer {token}"},
-    )  # fmt: skip
+        reverse("racing:timing-device", args=[race.slug]),
+        data=body,
+        content_type="application/json",
+        headers={"Authorization": f"Bearer {token}"},
+    )
     return response.status_code, response.json()
 
 
@@ -120,12 +132,15 @@ def test_a_timing_device_needs_the_events_token(client, tracks, alice, stella):
     a_run(race, alice, stella)
     status, state = device_post(client, race, crossing, token)
     assert status == 200 and state["lap_started_ms"] is not None and state["laps"] == []
-    status, state = device_post(client, race, json.dumps({"signal": "crossing", "at_ms": 61_250}),
-                                token)  # fmt: skip
+    status, state = device_post(
+        client, race, json.dumps({"signal": "crossing", "at_ms": 61_250}), token
+    )
     assert status == 200 and [lap["time_ms"] for lap in state["laps"]] == [11_250]
     assert device_post(client, race, "not json", token)[0] == 400
-    assert device_post(client, race, json.dumps({"signal": "crossing", "at_ms": "soon"}),
-                       token)[0] == 400  # fmt: skip
+    assert (
+        device_post(client, race, json.dumps({"signal": "crossing", "at_ms": "soon"}), token)[0]
+        == 400
+    )
     assert device_post(client, race, json.dumps({"signal": "lap"}), token)[0] == 409
     # a new token: the old one stops working
     assert device_post(client, race, crossing, timing.timing_token_renew(event=race))[0] == 409

@@ -145,10 +145,13 @@ def test_minibatches_cut_on_the_device_make_the_same_update_as_sb3s_buffer(monke
 
 def sac_learner_for(env, **values) -> Learner:
     return Learner(
-        algorithm="sac", hyperparameters={**hyperparameters.defaults("sac"), **values},
+        algorithm="sac",
+        hyperparameters={**hyperparameters.defaults("sac"), **values},
         architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-        observation_space=env.observation_space, action_space=env.action_space, seed=7,
-    )  # fmt: skip
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        seed=7,
+    )
 
 
 @pytest.mark.parametrize(
@@ -170,9 +173,12 @@ def test_sacs_gradient_steps_learn_as_sb3s_from_the_same_batches(env, monkeypatc
     model = learner.model
     model.replay.add(synthetic_episode(env, steps=12))
     start = copy.deepcopy(
-        (model.policy.state_dict(), model.actor.optimizer.state_dict(),
-         model.critic.optimizer.state_dict())
-    )  # fmt: skip
+        (
+            model.policy.state_dict(),
+            model.actor.optimizer.state_dict(),
+            model.critic.optimizer.state_dict(),
+        )
+    )
     batches, sample = [], model.replay.sample
     monkeypatch.setattr(
         model.replay, "sample", lambda size: batches.append(sample(size)) or batches[-1]
@@ -257,9 +263,11 @@ def test_a_learner_computes_its_updates_features_in_the_precision_it_is_given(en
     learner = Learner(
         algorithm="clipped_ppo",
         hyperparameters={**hyperparameters.defaults("clipped_ppo"), "num_epochs": 1},
-        architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW", observation_space=env.observation_space,
-        action_space=env.action_space, precision="bf16",
-    )  # fmt: skip
+        architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        precision="bf16",
+    )
     extractor = learner.model.policy.pi_features_extractor
     extractor.register_forward_hook(lambda module, *_: seen.append(module.precision))
     learner.learn([driven(learner, env, steps=8)])
@@ -304,12 +312,17 @@ def test_on_a_gpu_a_ppo_update_learns_there_what_it_learns_on_the_cpu(env, monke
     for device in ("cpu", "cuda"):
         learner = Learner(
             algorithm="clipped_ppo",
-            hyperparameters={**hyperparameters.defaults("clipped_ppo"), "num_epochs": 2,
-                             "batch_size": 16},
+            hyperparameters={
+                **hyperparameters.defaults("clipped_ppo"),
+                "num_epochs": 2,
+                "batch_size": 16,
+            },
             architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-            observation_space=env.observation_space, action_space=env.action_space, seed=7,
+            observation_space=env.observation_space,
+            action_space=env.action_space,
+            seed=7,
             device=device,
-        )  # fmt: skip
+        )
         assert learner.device.startswith(device)
         episode = episode or driven(learner, env, steps=40)
         np.random.seed(3)
@@ -322,10 +335,13 @@ def test_on_a_gpu_a_ppo_update_learns_there_what_it_learns_on_the_cpu(env, monke
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a GPU")
 def test_on_a_gpu_sac_keeps_its_replay_buffer_and_learns_there(env):
     learner = Learner(
-        algorithm="sac", hyperparameters={**hyperparameters.defaults("sac"), "batch_size": 8},
+        algorithm="sac",
+        hyperparameters={**hyperparameters.defaults("sac"), "batch_size": 8},
         architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-        observation_space=env.observation_space, action_space=env.action_space, device="cuda",
-    )  # fmt: skip
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+        device="cuda",
+    )
     before = learner.model.actor.mu.weight.clone()
     learner.learn([synthetic_episode(env, steps=6)])
     assert learner.model.replay.rewards.device.type == "cuda"

@@ -30,10 +30,12 @@ def test_a_ppo_update_that_a_target_kl_ends_early_still_ends_at_its_total(env):
 def test_a_sac_update_tells_its_gradient_steps_done_chunk_by_chunk(env, monkeypatch):
     monkeypatch.setattr(learner_module, "SAC_CHUNK", 2)  # few steps, cheap ones, several chunks
     learner = Learner(
-        algorithm="sac", hyperparameters={**hyperparameters.defaults("sac"), "batch_size": 4},
+        algorithm="sac",
+        hyperparameters={**hyperparameters.defaults("sac"), "batch_size": 4},
         architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-        observation_space=env.observation_space, action_space=env.action_space,
-    )  # fmt: skip
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+    )
     told = []
     learner.learn([synthetic_episode(env, steps=5)], progress=lambda *seen: told.append(seen))
     assert told == [(2, 5), (4, 5), (5, 5)]
@@ -49,7 +51,8 @@ def test_an_update_abandoned_never_says_it_finished(env):
 
     with pytest.raises(Interrupted):
         learner.learn(
-            [driven(learner, env, steps=40)], interrupted=interrupted,
+            [driven(learner, env, steps=40)],
+            interrupted=interrupted,
             progress=lambda *seen: told.append(seen),
-        )  # fmt: skip
+        )
     assert told == [(1, 9)]

@@ -89,10 +89,11 @@ def test_worker_processes_wait_for_the_one_fetch_of_another(tmp_path):
     results = context.Queue()
     log = tmp_path / "fetches.log"
     processes = [
-        context.Process(target=_fetch_in_a_process,
-                        args=(str(tmp_path / "cache"), weights, str(log), results))
+        context.Process(
+            target=_fetch_in_a_process, args=(str(tmp_path / "cache"), weights, str(log), results)
+        )
         for _ in range(4)
-    ]  # fmt: skip
+    ]
     for process in processes:
         process.start()
     answers = [results.get(timeout=30) for _ in processes]
@@ -157,8 +158,9 @@ def test_a_worker_that_waits_too_long_for_the_lock_fetches_for_itself(tmp_path):
     with open(folder / ".lock", "a+b") as held:  # a worker stopped while it held the lock
         fcntl.flock(held, fcntl.LOCK_EX)
         assert WeightsCache(tmp_path, patience=0.05).weights(JOB, fetch.published, fetch) == (
-            2, b"version 2",
-        )  # fmt: skip
+            2,
+            b"version 2",
+        )
     assert fetch.calls == 1
     assert not list(folder.glob("*.weights"))  # not stored without the lock
 
@@ -168,8 +170,9 @@ def test_a_cache_it_cannot_write_costs_only_the_cache(tmp_path):
     blocked.write_text("")
     fetch = Fetches(1, b"version 1")
     assert WeightsCache(blocked / "weights").weights(JOB, fetch.published, fetch) == (
-        1, b"version 1",
-    )  # fmt: skip
+        1,
+        b"version 1",
+    )
     assert fetch.calls == 1
 
 
@@ -181,9 +184,13 @@ def test_rollout_workers_of_one_machine_drive_with_weights_fetched_once(channel,
 
     fetched = []  # the weights' trips from Redis
     hmget = channel.client.hmget
-    monkeypatch.setattr(channel.client, "hmget",
-                        lambda name, *keys: (fetched.append(1) if "weights" in keys else None)
-                        or hmget(name, *keys))  # fmt: skip
+    monkeypatch.setattr(
+        channel.client,
+        "hmget",
+        lambda name, *keys: (
+            (fetched.append(1) if "weights" in keys else None) or hmget(name, *keys)
+        ),
+    )
     channel.start(attempt=1)
     channel.publish(0, b"weights 0", episodes=100)
     job = SimpleNamespace(model=SimpleNamespace(algorithm="clipped_ppo"))

@@ -39,8 +39,9 @@ def child(weights: bytes, *, cars: int, seed: int, start: float = 0.0) -> Iterat
     """A rollout's child of ``cars`` cars, ready to drive: its reward function loaded, and
     acting with ``weights``."""
     env = {**ENV, "start": start} if start else ENV
-    with Sandbox(env=env, cars=cars, policy={**POLICY, "seed": seed},
-                 memory_allowance=1024 * MiB) as sandbox:  # fmt: skip
+    with Sandbox(
+        env=env, cars=cars, policy={**POLICY, "seed": seed}, memory_allowance=1024 * MiB
+    ) as sandbox:
         sandbox.load(REWARD)
         sandbox.set_weights(1, weights)
         yield sandbox
@@ -57,7 +58,10 @@ def test_each_of_several_cars_drives_the_episodes_a_child_of_one_car_would(weigh
         for got, want in zip(driven[car], expected, strict=True):
             assert got["trace"] == want["trace"]  # every row: place, action, reward, status
             assert (got["steps"], got["status"], got["progress"]) == (
-                want["steps"], want["status"], want["progress"])  # fmt: skip
+                want["steps"],
+                want["status"],
+                want["progress"],
+            )
             for name in ("actions", "rewards", "obs:FRONT_FACING_CAMERA"):
                 assert got["arrays"][name] == want["arrays"][name], name
             # The critic's value and the action's log-probability come from a batch of two
@@ -84,10 +88,16 @@ def fleet_driven(policy: Policy, *, together: bool) -> tuple[list, int, int]:
         # Penalties leave the car still, its steps paused without a reward call; the third
         # time off the track ends the episode.
         envs = [
-            gymnasium.make(simulator.ENV_ID, **ENV, mode="evaluation", max_resets=2,
-                           start=car / cars, reward_fn=functools.partial(process.call, car=car))
+            gymnasium.make(
+                simulator.ENV_ID,
+                **ENV,
+                mode="evaluation",
+                max_resets=2,
+                start=car / cars,
+                reward_fn=functools.partial(process.call, car=car),
+            )
             for car in range(cars)
-        ]  # fmt: skip
+        ]
         score = process.calls if together else None
         fleet = Fleet(envs, policy, [SEED + car for car in range(cars)], score=score)
         for car in fleet.cars:
@@ -113,10 +123,12 @@ def test_a_fleet_asks_the_reward_process_once_a_step_for_all_its_cars_and_drives
     # A round trip a step (but for those where every car driving is paused), and the waypoints
     # once. Each car's trace has a row per step of the fleet's, the reset's first.
     scored = sum(
-        any(len(driven.trace) > step and driven.trace[step][STATUS] != "pause"
-            for driven in together)
+        any(
+            len(driven.trace) > step and driven.trace[step][STATUS] != "pause"
+            for driven in together
+        )
         for step in range(1, steps + 1)
-    )  # fmt: skip
+    )
     assert asked_together == scored + 1
     for alone, beside in zip(one_by_one, together, strict=True):
         assert beside.trace == alone.trace  # every row: place, action, reward, status
@@ -170,8 +182,9 @@ def test_a_step_of_four_cars_each_call_near_its_limit_is_not_late(weights, monke
     # worker waits for a whole step (at the first and the second), not for one call.
     monkeypatch.setattr(sandbox_package, "GRACE", 0.5)  # 1 s a step would once have been late
     slow = "import time\n" + reward("if params['steps'] <= 2:\n    time.sleep(0.4)\nreturn 1.0")
-    with Sandbox(env=ENV, cars=4, policy=POLICY, call_timeout=0.5,
-                 memory_allowance=1024 * MiB) as sandbox:  # fmt: skip
+    with Sandbox(
+        env=ENV, cars=4, policy=POLICY, call_timeout=0.5, memory_allowance=1024 * MiB
+    ) as sandbox:
         sandbox.load(slow)
         sandbox.set_weights(1, weights)
         assert sandbox.episode("random", start=4)["summary"]["steps"] > 2

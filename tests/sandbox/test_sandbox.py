@@ -79,9 +79,10 @@ def test_connecting_to_a_listening_socket_is_refused():
         listener.listen()
         listener.settimeout(0.5)
         port = listener.getsockname()[1]
-        result = outcome("import socket\n" + reward(
-            f"socket.create_connection(('127.0.0.1', {port}), timeout=1)\nreturn 1.0"
-        ))  # fmt: skip
+        result = outcome(
+            "import socket\n"
+            + reward(f"socket.create_connection(('127.0.0.1', {port}), timeout=1)\nreturn 1.0")
+        )
         assert_stopped(result, "exception", "PermissionError")
         with pytest.raises(TimeoutError):
             listener.accept()  # nothing came in
@@ -126,8 +127,9 @@ def test_walking_object_subclasses_to_popen_is_refused(tmp_path):
 
 
 def test_allocating_10_gb_is_stopped_by_the_memory_limit():
-    assert_stopped(outcome(reward("x = bytearray(10 * 1024 ** 3)\nreturn 1.0")), "memory",
-                   "ran out of memory")  # fmt: skip
+    assert_stopped(
+        outcome(reward("x = bytearray(10 * 1024 ** 3)\nreturn 1.0")), "memory", "ran out of memory"
+    )
     numpy_attack = "import numpy as np\n" + reward("return float(np.ones(1_250_000_000).sum())")
     assert_stopped(outcome(numpy_attack), "memory")
 
@@ -189,8 +191,11 @@ def test_a_module_that_fails_on_import_is_reported_as_an_import_error():
 
 
 def test_code_without_a_reward_function_is_reported():
-    assert_stopped(outcome("def reward(params):\n    return 1.0\n"), "definition",
-                   "must define reward_function(params)")  # fmt: skip
+    assert_stopped(
+        outcome("def reward(params):\n    return 1.0\n"),
+        "definition",
+        "must define reward_function(params)",
+    )
 
 
 def test_an_episode_runs_the_simulator_and_the_reward_inside_the_sandbox():
@@ -224,16 +229,21 @@ def test_an_episode_names_the_step_and_status_where_the_reward_function_failed(f
     source = "import ctypes, signal\n" + reward(
         f"if params['steps'] == 3:\n    {failing}\nreturn 1.0"
     )
-    with Sandbox(env={"track": "pitlane-oval"}, policy=POLICY, call_timeout=0.5,
-                 memory_allowance=1024 * MiB) as sandbox:  # fmt: skip
+    with Sandbox(
+        env={"track": "pitlane-oval"}, policy=POLICY, call_timeout=0.5, memory_allowance=1024 * MiB
+    ) as sandbox:
         sandbox.load(source)
         with pytest.raises(SandboxFailure) as failed:
             sandbox.episode("random")
     assert str(failed.value) == expected
 
 
-BOXES = {"track": "pitlane-oval", "race_type": "OBJECT_AVOIDANCE", "objects": {"count": 6},
-         "sensors": ["FRONT_FACING_CAMERA", "LIDAR"]}  # fmt: skip
+BOXES = {
+    "track": "pitlane-oval",
+    "race_type": "OBJECT_AVOIDANCE",
+    "objects": {"count": 6},
+    "sensors": ["FRONT_FACING_CAMERA", "LIDAR"],
+}
 
 
 def test_a_rollouts_car_sees_boxes_through_pybullet_in_the_sealed_child():

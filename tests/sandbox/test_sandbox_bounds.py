@@ -118,8 +118,9 @@ def reward_process(source: str, cars: int) -> Iterator[RewardProcess]:
 def test_a_step_of_four_cars_each_near_its_limit_passes_and_each_cars_prints_arrive():
     # The time limit is per call: four calls of 0.3 s (1.2 s in all) in one step, under a
     # limit of 0.5 s each, are not late.
-    source = reward("time.sleep(0.3)\nprint('car', params['x'])\nreturn params['x']",
-                    head="import time\n")  # fmt: skip
+    source = reward(
+        "time.sleep(0.3)\nprint('car', params['x'])\nreturn params['x']", head="import time\n"
+    )
     with reward_process(source, cars=4) as process:
         asked = process.round_trips
         rewards = process.calls([(car, {**PARAMS, "x": float(car)}) for car in range(4)])
@@ -133,8 +134,9 @@ def test_a_call_that_outlives_its_alarm_in_one_of_four_cars_is_stopped_by_its_ow
     # Car 2 catches its alarm and returns 1 s late: within the deadline of a step of four
     # calls, past its own call's. Each car's reply is due by its own call's deadline.
     late = "try:\n    time.sleep(5)\nexcept BaseException:\n    time.sleep(1.0)\nreturn 1.0"
-    source = reward(f"if params['x'] == 2:\n{textwrap.indent(late, '    ')}\nreturn 1.0",
-                    head="import time\n")  # fmt: skip
+    source = reward(
+        f"if params['x'] == 2:\n{textwrap.indent(late, '    ')}\nreturn 1.0", head="import time\n"
+    )
     with reward_process(source, cars=4) as process:
         with pytest.raises(RewardFailure) as failed:
             process.calls([(car, {**PARAMS, "x": float(car)}) for car in range(4)])

@@ -32,8 +32,13 @@ needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA o
 def started(weights: bytes, *, cars: int = 1, device: str | None) -> Iterator[Sandbox]:
     """A rollout's child of ``cars`` cars seeded ``SEED``, its policy served from ``device``
     (None: held in the child), its reward function loaded and acting with ``weights``."""
-    with Sandbox(env=ENV, cars=cars, policy={**POLICY, "seed": SEED}, policy_device=device,
-                 memory_allowance=1024 * MiB) as sandbox:  # fmt: skip
+    with Sandbox(
+        env=ENV,
+        cars=cars,
+        policy={**POLICY, "seed": SEED},
+        policy_device=device,
+        memory_allowance=1024 * MiB,
+    ) as sandbox:
         sandbox.load(REWARD)
         sandbox.set_weights(1, weights)
         yield sandbox
@@ -228,8 +233,9 @@ def test_a_sensor_reading_that_is_not_a_finite_number_is_refused_before_the_netw
     readings[0, 3] = np.nan
     try:
         with pytest.raises(ProtocolError, match="not finite"):
-            server.answer({"how": "explore", "seeds": [SEED],
-                           "observations": {"LIDAR": pack_array(readings)}})  # fmt: skip
+            server.answer(
+                {"how": "explore", "seeds": [SEED], "observations": {"LIDAR": pack_array(readings)}}
+            )
     finally:
         server.close()
     assert ran == []
@@ -250,8 +256,12 @@ def test_the_rollout_device_is_the_gpu_where_torch_finds_one_and_a_gpu_asked_for
 def test_a_rollout_worker_serves_its_sandboxes_the_policy_where_it_runs_off_the_cpu():
     from training.rollouts import _sandboxes, cars_for
 
-    model = SimpleNamespace(algorithm="clipped_ppo", architecture=POLICY["architecture"], seed=3,
-                            environment_settings=lambda track: {"track": track})  # fmt: skip
+    model = SimpleNamespace(
+        algorithm="clipped_ppo",
+        architecture=POLICY["architecture"],
+        seed=3,
+        environment_settings=lambda track: {"track": track},
+    )
     for device, served_from in (("cuda", "cuda"), ("cpu", None)):
         sandbox = _sandboxes(model, 1, "pitlane-oval", device)(2)  # made, not started
         assert (sandbox.policy_device, sandbox.cars) == (served_from, 2)
@@ -283,8 +293,9 @@ def test_a_job_on_a_machine_with_a_gpu_learns_on_it_and_its_cars_drive_on_the_cp
     job = model_create(owner=alice, settings=settings()).jobs.get()
     job = wait_for_job(job, lambda j: j.iterations >= 1, "a policy update")
     lines = list(job.log_lines.values_list("text", flat=True))
-    assert any(line.startswith("Training started") and "learning on the GPU" in line
-               for line in lines), lines  # fmt: skip
+    assert any(
+        line.startswith("Training started") and "learning on the GPU" in line for line in lines
+    ), lines
     driving = [line for line in lines if "is driving" in line]
     assert driving and not any("policy on the GPU" in line for line in driving), lines
     training_stop(job=job)

@@ -156,9 +156,14 @@ def test_less_friction_slides_earlier():
 def test_the_same_seed_drives_the_same_trajectory():
     runs = []
     for _ in range(2):
-        env = gymnasium.make(simulator.ENV_ID, track="hairpin-alley",
-                             action_space={"steering_angle": {"low": -30, "high": 30},
-                                           "speed": {"low": 0.5, "high": 4}})  # fmt: skip
+        env = gymnasium.make(
+            simulator.ENV_ID,
+            track="hairpin-alley",
+            action_space={
+                "steering_angle": {"low": -30, "high": 30},
+                "speed": {"low": 0.5, "high": 4},
+            },
+        )
         env.reset(seed=7)
         env.action_space.seed(7)
         rows = []

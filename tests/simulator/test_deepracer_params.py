@@ -25,12 +25,14 @@ SPEC = CarSpec()
 def stadium(repeat: int | None = None) -> np.ndarray:
     straight = np.arange(0.0, 6.0, 0.5)
     arc = np.linspace(-math.pi / 2, math.pi / 2, 16, endpoint=False)
-    centre = np.vstack([
-        np.column_stack([straight, np.full_like(straight, -RADIUS)]),
-        np.column_stack([6.0 + RADIUS * np.cos(arc), RADIUS * np.sin(arc)]),
-        np.column_stack([6.0 - straight, np.full_like(straight, RADIUS)]),
-        np.column_stack([-RADIUS * np.cos(arc), -RADIUS * np.sin(arc)]),
-    ])  # fmt: skip
+    centre = np.vstack(
+        [
+            np.column_stack([straight, np.full_like(straight, -RADIUS)]),
+            np.column_stack([6.0 + RADIUS * np.cos(arc), RADIUS * np.sin(arc)]),
+            np.column_stack([6.0 - straight, np.full_like(straight, RADIUS)]),
+            np.column_stack([-RADIUS * np.cos(arc), -RADIUS * np.sin(arc)]),
+        ]
+    )
     closed = np.vstack([centre[-1:], centre, centre[:1]])
     tangent = (closed[2:] - closed[:-2]) / np.linalg.norm(closed[2:] - closed[:-2], axis=1)[:, None]
     left = np.column_stack([-tangent[:, 1], tangent[:, 0]])  # towards the inside
@@ -140,8 +142,14 @@ def test_a_time_trial_has_every_object_key_at_deepracers_defaults(env, monkeypat
     params = held_at(env(), monkeypatch, 2.0, -2.0)["params"]
     assert params["closest_objects"] == [0, 0]
     assert params["object_in_camera"] is False
-    for key in ("objects_location", "objects_distance", "objects_distance_from_center",
-                "objects_heading", "objects_left_of_center", "objects_speed"):  # fmt: skip
+    for key in (
+        "objects_location",
+        "objects_distance",
+        "objects_distance_from_center",
+        "objects_heading",
+        "objects_left_of_center",
+        "objects_speed",
+    ):
         assert params[key] == [], key
 
 
@@ -199,8 +207,11 @@ def test_sector_lidar_marks_a_sector_whose_nearest_return_is_under_half_a_metre(
     # sector's minimum is under 0.5 m (environments/constants.py:27,29;
     # observation_sector_discretize_filter.py:53-71). The laser faces backwards
     # (deepracer_single_cam_lidar.urdf:537): the middle sectors look behind the car.
-    racer = env(race_type="OBJECT_AVOIDANCE", objects={"count": 1},
-                sensors=["FRONT_FACING_CAMERA", "SECTOR_LIDAR"])  # fmt: skip
+    racer = env(
+        race_type="OBJECT_AVOIDANCE",
+        objects={"count": 1},
+        sensors=["FRONT_FACING_CAMERA", "SECTOR_LIDAR"],
+    )
     (box,) = racer.unwrapped.traffic.actors
     box.distance, box.offset = 4.0, 0.0  # its far face at x = 4 + 0.25
     racer.unwrapped.traffic._update_poses()

@@ -20,8 +20,9 @@ def route(world_name: str) -> np.ndarray:
 
 def test_the_catalogue_holds_every_looped_route_file_of_simapp_as_70_tracks():
     shipped = sorted(path.stem for path in (DEEPRACER_DIR / "routes").glob("*.npy"))
-    worlds = sorted(w for name in tracks.names(origin="deepracer")
-                    for w in tracks.entry(name)["world_names"])  # fmt: skip
+    worlds = sorted(
+        w for name in tracks.names(origin="deepracer") for w in tracks.entry(name)["world_names"]
+    )
     assert len(shipped) == 126 and worlds == shipped  # simapp's 127 less Straight_track (open)
     assert len(tracks.names(origin="deepracer")) == 70  # the console's 62 and 8 it never listed
     assert tracks.names()[:2] == ["rookie-loop", "pitlane-oval"]  # ours first, as before
@@ -71,17 +72,25 @@ def test_a_track_held_to_one_route_file_drives_that_file_backwards_the_other_way
     drives it: the file named, reversed by REVERSE_DIR, never the console's file that way."""
     held = tracks.load("reInvent2019_track").on_route("reInvent2019_track")
     assert (held.world_name, held.direction, len(held.waypoints)) == (
-        "reInvent2019_track", "counterclockwise", 154
-    )  # fmt: skip
+        "reInvent2019_track",
+        "counterclockwise",
+        154,
+    )
     backwards = held.with_direction("clockwise")
     assert (backwards.world_name, backwards.reversed, len(backwards.waypoints)) == (
-        "reInvent2019_track", True, 154
-    )  # fmt: skip
+        "reInvent2019_track",
+        True,
+        154,
+    )
     from_file = tracks.load(DEEPRACER_DIR / "routes" / "reInvent2019_track.npy")
     np.testing.assert_array_equal(held.centre, from_file.centre)
     np.testing.assert_array_equal(backwards.centre, held.centre[::-1])
-    env = gymnasium.make(simulator.ENV_ID, track="reInvent2019_track", direction="clockwise",
-                         route="reInvent2019_track")  # fmt: skip
+    env = gymnasium.make(
+        simulator.ENV_ID,
+        track="reInvent2019_track",
+        direction="clockwise",
+        route="reInvent2019_track",
+    )
     driven = env.unwrapped.track
     assert (driven.world_name, driven.direction) == ("reInvent2019_track", "clockwise")
     np.testing.assert_array_equal(driven.centre, backwards.centre)
@@ -127,9 +136,11 @@ def test_every_deepracer_track_has_a_small_preview_and_the_licences_lie_beside_t
     for name in tracks.names(origin="deepracer"):
         assert cv2.imread(str(tracks.preview_path(name))).shape[1] == 240, name
     notice = (DEEPRACER_DIR / "NOTICE").read_text()
-    for commit in ("01f5f015fd852f952b351643898d4beb4f36494b",  # simapp
-                   "61af778f9b1d904a6318b746fc3e5a8ddac525ce",  # deepracer-on-aws
-                   "262e3fe37abe8706dc2fa1901e7d046e46b39709"):  # deepracer-utils  # fmt: skip
+    for commit in (
+        "01f5f015fd852f952b351643898d4beb4f36494b",  # simapp
+        "61af778f9b1d904a6318b746fc3e5a8ddac525ce",  # deepracer-on-aws
+        "262e3fe37abe8706dc2fa1901e7d046e46b39709",
+    ):  # deepracer-utils
         assert commit in notice
     assert "Apache License" in (DEEPRACER_DIR / "LICENSE-Apache-2.0.txt").read_text()
     assert (
@@ -146,11 +157,15 @@ track_meta["2022_april_open"] = "Ace Speedway"
 track_meta["reinvent_base"] = "re:Invent 2018"
 """
     assert track_meta(source) == {
-        "2022_april_open": ("Ace Speedway", 2022), "reinvent_base": ("re:Invent 2018", 2019),
-    }  # fmt: skip
+        "2022_april_open": ("Ace Speedway", 2022),
+        "reinvent_base": ("re:Invent 2018", 2019),
+    }
     assert [difficulty(s) for s in (10, 25, 50, 94)] == [
-        "beginner", "intermediate", "advanced", "expert",
-    ]  # fmt: skip
+        "beginner",
+        "intermediate",
+        "advanced",
+        "expert",
+    ]
 
 
 def test_the_catalogue_file_names_a_route_file_for_every_direction_or_reverses_its_own():

@@ -10,8 +10,11 @@ from tests.services import ROOT
 def demo(*arguments: str) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", "simulator", "demo", *arguments],
-        cwd=ROOT, capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_the_demo_drives_a_lap_and_writes_the_spectator_video(tmp_path):
@@ -38,8 +41,9 @@ def test_the_demo_shows_a_hairpin_taken_too_fast_and_the_braking_that_takes_it(t
     too_fast = demo("--track", "hairpin-alley", "--speed", "3", "--out", str(tmp_path / "a.mp4"))
     assert too_fast.returncode == 0, too_fast.stderr
     assert re.search(r"at 3.0 m/s; slid for \d+\.\d s, left the track \d+ times", too_fast.stdout)
-    braking = demo("--track", "hairpin-alley", "--speed", "3", "--braking",
-                   "--out", str(tmp_path / "b.mp4"))  # fmt: skip
+    braking = demo(
+        "--track", "hairpin-alley", "--speed", "3", "--braking", "--out", str(tmp_path / "b.mp4")
+    )
     assert braking.returncode == 0, braking.stderr
     assert "braking for corners, up to 3.0 m/s" in braking.stdout
     assert "left the track" not in braking.stdout
@@ -48,8 +52,11 @@ def test_the_demo_shows_a_hairpin_taken_too_fast_and_the_braking_that_takes_it(t
 def test_the_demo_names_an_unknown_track():
     result = subprocess.run(
         [sys.executable, "-m", "simulator", "demo", "--track", "monza"],
-        cwd=ROOT, capture_output=True, text=True, timeout=60,
-    )  # fmt: skip
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 2
     assert "No track named 'monza'" in result.stderr
     assert "Traceback" not in result.stderr

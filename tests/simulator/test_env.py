@@ -14,15 +14,36 @@ from simulator.tracks import TrackError
 from tests.simulator.conftest import CONTINUOUS, drive
 
 REWARD_KEYS = {
-    "all_wheels_on_track", "x", "y", "heading", "distance_from_center", "is_left_of_center",
-    "is_offtrack", "is_crashed", "is_reversed", "progress", "steps", "speed", "steering_angle",
-    "track_width", "track_length", "waypoints", "closest_waypoints", "projection_distance",
+    "all_wheels_on_track",
+    "x",
+    "y",
+    "heading",
+    "distance_from_center",
+    "is_left_of_center",
+    "is_offtrack",
+    "is_crashed",
+    "is_reversed",
+    "progress",
+    "steps",
+    "speed",
+    "steering_angle",
+    "track_width",
+    "track_length",
+    "waypoints",
+    "closest_waypoints",
+    "projection_distance",
     "sim_time",
-}  # fmt: skip
+}
 OBJECT_KEYS = {
-    "closest_objects", "objects_location", "objects_distance", "objects_distance_from_center",
-    "objects_heading", "objects_left_of_center", "objects_speed", "object_in_camera",
-}  # fmt: skip
+    "closest_objects",
+    "objects_location",
+    "objects_distance",
+    "objects_distance_from_center",
+    "objects_heading",
+    "objects_left_of_center",
+    "objects_speed",
+    "object_in_camera",
+}
 
 
 @pytest.mark.parametrize(
@@ -56,8 +77,9 @@ def test_the_same_seed_gives_the_same_episode(environments):
         for _ in range(120):
             observation, reward, terminated, truncated, info = env.step(rng.integers(10))
             frames.append(observation["FRONT_FACING_CAMERA"])
-            rows.append((reward, info["status"], info["params"]["objects_location"],
-                         info["trace"][:14]))  # fmt: skip
+            rows.append(
+                (reward, info["status"], info["params"]["objects_location"], info["trace"][:14])
+            )
             if terminated or truncated:
                 break
         runs.append((np.stack(frames), rows))
@@ -91,8 +113,9 @@ LAPS = [
 def test_the_scripted_driver_laps_every_track_in_the_time_its_speed_predicts(
     environments, name, direction
 ):
-    env = environments(track=name, direction=direction, mode="evaluation", laps=1,
-                       action_space=CONTINUOUS)  # fmt: skip
+    env = environments(
+        track=name, direction=direction, mode="evaluation", laps=1, action_space=CONTINUOUS
+    )
     env.reset(seed=0)
     speed = 1.5
     infos = drive(env, CentreLineDriver(env.unwrapped, speed=speed))
@@ -198,12 +221,27 @@ def test_the_reward_params_have_every_key_with_the_right_types_and_ranges(enviro
         params = info["params"]
         seen.append(params)
         assert set(params) == REWARD_KEYS | OBJECT_KEYS
-        for key in ("all_wheels_on_track", "is_left_of_center", "is_offtrack", "is_crashed",
-                    "is_reversed"):  # fmt: skip
+        for key in (
+            "all_wheels_on_track",
+            "is_left_of_center",
+            "is_offtrack",
+            "is_crashed",
+            "is_reversed",
+        ):
             assert type(params[key]) is bool, key
-        for key in ("x", "y", "heading", "distance_from_center", "progress", "speed",
-                    "steering_angle", "track_width", "track_length", "projection_distance",
-                    "sim_time"):  # fmt: skip
+        for key in (
+            "x",
+            "y",
+            "heading",
+            "distance_from_center",
+            "progress",
+            "speed",
+            "steering_angle",
+            "track_width",
+            "track_length",
+            "projection_distance",
+            "sim_time",
+        ):
             assert type(params[key]) is float, key
         assert type(params["steps"]) is float
         assert -180 < params["heading"] <= 180
@@ -272,8 +310,9 @@ def test_integer_boolean_and_numpy_rewards_are_accepted(environments):
 
 
 def test_an_evaluation_penalty_freezes_the_car_then_puts_it_back(environments):
-    env = environments(track="pitlane-oval", mode="evaluation", laps=1,
-                       penalties={"off_track": 2.0, "crash": 5.0})  # fmt: skip
+    env = environments(
+        track="pitlane-oval", mode="evaluation", laps=1, penalties={"off_track": 2.0, "crash": 5.0}
+    )
     env.reset(seed=0)
     drive(env, steps=20)
     infos = drive(env, head_for_the_border(env), until="off_track")
@@ -292,8 +331,13 @@ def test_an_evaluation_penalty_freezes_the_car_then_puts_it_back(environments):
 
 
 def test_an_evaluation_episode_ends_where_the_car_would_be_put_back_once_too_often(environments):
-    env = environments(track="pitlane-oval", mode="evaluation", laps=1, max_resets=1,
-                       penalties={"off_track": 0.0, "crash": 0.0})  # fmt: skip
+    env = environments(
+        track="pitlane-oval",
+        mode="evaluation",
+        laps=1,
+        max_resets=1,
+        penalties={"off_track": 0.0, "crash": 0.0},
+    )
     env.reset(seed=0)
     drive(env, steps=20)
     put_back = drive(env, head_for_the_border(env), until="off_track")

@@ -16,11 +16,21 @@ RED, BLUE = (40, 40, 220), (220, 90, 40)
 
 def cars(track: str = "rookie-loop", **settings) -> list[DeepRacerEnv]:
     return [
-        DeepRacerEnv(track=track, mode="evaluation", laps=1, action_space=CONTINUOUS,
-                     sensors=["FRONT_FACING_CAMERA", "LIDAR"], rivals=1, grid=place,
-                     car_colour=own, rival_colours=[other], penalties={"crash": 2.0}, **settings)
+        DeepRacerEnv(
+            track=track,
+            mode="evaluation",
+            laps=1,
+            action_space=CONTINUOUS,
+            sensors=["FRONT_FACING_CAMERA", "LIDAR"],
+            rivals=1,
+            grid=place,
+            car_colour=own,
+            rival_colours=[other],
+            penalties={"crash": 2.0},
+            **settings,
+        )
         for place, own, other in zip((0, 1), (RED, BLUE), (BLUE, RED), strict=True)
-    ]  # fmt: skip
+    ]
 
 
 def test_the_grid_is_simapps_each_car_behind_the_last_in_the_other_lane():

@@ -51,8 +51,9 @@ def test_a_randomised_episodes_frames_repeat_with_its_seed_noise_and_all():
     frame(still, seed=3)
     assert still.look.noise > 1  # seed 3's look has noise to see
     camera, car = still._cameras[0], still.car
-    assert not np.array_equal(camera.render(car.x, car.y, car.yaw),
-                              camera.render(car.x, car.y, car.yaw))  # fmt: skip
+    assert not np.array_equal(
+        camera.render(car.x, car.y, car.yaw), camera.render(car.x, car.y, car.yaw)
+    )
 
 
 def test_off_the_frames_are_the_plain_cameras_frames():
@@ -61,8 +62,11 @@ def test_off_the_frames_are_the_plain_cameras_frames():
     # a camera built here from the track's image, without the randomisation module
     plain = PerspectiveView(
         render(env.track, pixels_per_metre=env.config["camera_texture_ppm"]),
-        camera.lens, camera.mount, camera.room.sky, camera.room,
-    )  # fmt: skip
+        camera.lens,
+        camera.mount,
+        camera.room.sky,
+        camera.room,
+    )
     for seed in (1, 2, None):
         seen = frame(env, seed)
         car = env.car

@@ -64,8 +64,13 @@ def test_a_route_deepracer_or_a_racer_could_not_drive_is_refused_in_plain_words(
 
 
 def test_the_route_script_writes_its_files_from_the_command_line(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "tests.routes", str(tmp_path)],
-                            capture_output=True, text=True, check=True, cwd=ROOT)  # fmt: skip
+    result = subprocess.run(
+        [sys.executable, "-m", "tests.routes", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
     assert sorted(result.stdout.split()) == sorted(
         str(tmp_path / f"{n}.npy") for n in routes.ROUTES
     )
@@ -135,13 +140,20 @@ def test_every_built_in_track_runs_counterclockwise_as_generated():
 def test_an_inline_track_loads_from_the_files_bytes_with_its_metadata():
     buffer = io.BytesIO()
     np.save(buffer, routes.clockwise())
-    track = tracks.load({
-        "name": "reInvent2019_track", "display_name": "re:Invent 2019",
-        "directions": ["clockwise"], "route": buffer.getvalue(), "difficulty": "advanced",
-    })  # fmt: skip
+    track = tracks.load(
+        {
+            "name": "reInvent2019_track",
+            "display_name": "re:Invent 2019",
+            "directions": ["clockwise"],
+            "route": buffer.getvalue(),
+            "difficulty": "advanced",
+        }
+    )
     assert (track.name, track.display_name, track.directions) == (
-        "reInvent2019_track", "re:Invent 2019", ("clockwise",),
-    )  # fmt: skip
+        "reInvent2019_track",
+        "re:Invent 2019",
+        ("clockwise",),
+    )
     assert track.difficulty == "advanced"
     with pytest.raises(TrackError, match="cannot be driven counterclockwise"):
         track.with_direction("counterclockwise")

@@ -46,12 +46,20 @@ def test_each_border_is_a_76_mm_band_inside_the_tracks_edge(ring):
     # reInvent2019_track.dae and 2022_reinvent_champ_ccw.dae: ol/il quads 0.0762 m across, whose
     # outer vertices are the road's. Across the ring at 90° round (clear of the start line):
     _, texture = ring
-    across = {round(r * 1000): level_at(texture, 0.0, r) for r in
-              (1.995, 2.005, 2.070, 2.083, 2.917, 2.930, 2.995, 3.005)}  # fmt: skip
+    across = {
+        round(r * 1000): level_at(texture, 0.0, r)
+        for r in (1.995, 2.005, 2.070, 2.083, 2.917, 2.930, 2.995, 3.005)
+    }
     assert across == {
-        1995: SURROUNDINGS[0], 2005: BORDER[0], 2070: BORDER[0], 2083: SURFACE[0],
-        2917: SURFACE[0], 2930: BORDER[0], 2995: BORDER[0], 3005: SURROUNDINGS[0],
-    }  # fmt: skip
+        1995: SURROUNDINGS[0],
+        2005: BORDER[0],
+        2070: BORDER[0],
+        2083: SURFACE[0],
+        2917: SURFACE[0],
+        2930: BORDER[0],
+        2995: BORDER[0],
+        3005: SURROUNDINGS[0],
+    }
 
 
 def test_the_centre_line_is_dashed_51_mm_on_and_51_mm_off_and_25_mm_wide(ring):
@@ -70,8 +78,10 @@ def test_the_centre_line_is_dashed_51_mm_on_and_51_mm_off_and_25_mm_wide(ring):
     middle = track.point_at(float(distances[starts[3]] + 0.025))
     x, y, heading = middle
     side = (-math.sin(heading), math.cos(heading))
-    width = [level_at(texture, x + side[0] * o, y + side[1] * o) == CENTRE_LINE[0]
-             for o in np.arange(-0.03, 0.03, 0.001)]  # fmt: skip
+    width = [
+        level_at(texture, x + side[0] * o, y + side[1] * o) == CENTRE_LINE[0]
+        for o in np.arange(-0.03, 0.03, 0.001)
+    ]
     assert sum(width) * 0.001 == pytest.approx(0.0254, abs=0.004)
 
 

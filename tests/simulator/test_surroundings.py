@@ -39,8 +39,9 @@ def collada(meshes: dict[str, np.ndarray], matrix: np.ndarray) -> str:
 
 
 def box(low: tuple[float, float, float], high: tuple[float, float, float]) -> np.ndarray:
-    return np.array([(x, y, z) for x in (low[0], high[0]) for y in (low[1], high[1])
-                     for z in (low[2], high[2])])  # fmt: skip
+    return np.array(
+        [(x, y, z) for x in (low[0], high[0]) for y in (low[1], high[1]) for z in (low[2], high[2])]
+    )
 
 
 def inches_y_up(points: np.ndarray) -> np.ndarray:
@@ -69,18 +70,28 @@ def a_world(bundle, name: str, meshes: dict[str, np.ndarray], matrix=None, sky=T
 
 def test_the_builder_reads_walls_a_grass_bank_or_nothing_round_the_field(tmp_path):
     road = (1.0, 1.0, 7.0, 5.0)
-    a_world(tmp_path, "walled", {
-        "roadmesh0": box((1, 1, 0), (7, 5, 0)),
-        "fieldmesh0": box((0.24, 0.24, 0), (7.76, 5.76, 0)),
-        "wallmesh0": box((0.24, 0.24, 0), (7.76, 5.76, 1)),
-    }, sky=False)  # fmt: skip
+    a_world(
+        tmp_path,
+        "walled",
+        {
+            "roadmesh0": box((1, 1, 0), (7, 5, 0)),
+            "fieldmesh0": box((0.24, 0.24, 0), (7.76, 5.76, 0)),
+            "wallmesh0": box((0.24, 0.24, 0), (7.76, 5.76, 1)),
+        },
+        sky=False,
+    )
     # a bank, in inches with y up: at the field's edge, rising to 0.2 m in its outer 0.3 m
     bank = [(x, y, 0.0) for x in (-1.016, 7.62) for y in (-1.016, 5.842)]
     bank += [(-1.0 + 0.1 * i, 2.0, 0.2) for i in range(3)] + [(3.0, 2.0, 0.0)]
-    a_world(tmp_path, "banked", {
-        "fieldShape-mesh": inches_y_up(box((0, 0, 0), (7.4, 5.2, 0))),
-        "bg_terrainShape-mesh": inches_y_up(np.array(bank)),
-    }, matrix=INCHES_Y_UP)  # fmt: skip
+    a_world(
+        tmp_path,
+        "banked",
+        {
+            "fieldShape-mesh": inches_y_up(box((0, 0, 0), (7.4, 5.2, 0))),
+            "bg_terrainShape-mesh": inches_y_up(np.array(bank)),
+        },
+        matrix=INCHES_Y_UP,
+    )
     a_world(tmp_path, "open", {"fieldShape": box((-9, -9, 0), (17, 15, 0))})
 
     walled = surroundings(tmp_path, "walled", road)

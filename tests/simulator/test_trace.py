@@ -51,8 +51,11 @@ def test_the_csv_reads_back_with_its_header():
 def test_an_episode_begins_with_deepracers_prepare_row():
     prepare, first = rows_from()[:2]
     assert (prepare.steps, prepare.episode_status, prepare.reward, prepare.done) == (
-        1.0, "prepare", 0.0, False,
-    )  # fmt: skip
+        1.0,
+        "prepare",
+        0.0,
+        False,
+    )
     assert prepare.all_wheels_on_track is True and prepare.progress == 0.0
     assert (first.steps, first.episode_status) == (2.0, "in_progress")
 

@@ -7,9 +7,15 @@ from simulator.tracks import TrackError
 from simulator.tracks.generate import SPECS, build
 
 BUILT_IN = [
-    "rookie-loop", "pitlane-oval", "kidney-bean", "s-bend", "speedway", "clover-loop",
-    "hairpin-alley", "championship-circuit",
-]  # fmt: skip
+    "rookie-loop",
+    "pitlane-oval",
+    "kidney-bean",
+    "s-bend",
+    "speedway",
+    "clover-loop",
+    "hairpin-alley",
+    "championship-circuit",
+]
 
 
 def test_the_built_in_tracks_are_listed_in_order_of_difficulty():

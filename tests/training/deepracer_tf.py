@@ -67,9 +67,17 @@ def nhwc(value: np.ndarray) -> np.ndarray:
 
 
 def build(
-    tf, algorithm: str, network: str, observation_space, action_count: int, discrete: bool,
-    *, seed: int = 0, keras_names: bool = False, camera: str = "FRONT_FACING_CAMERA",
-) -> DeepRacerModel:  # fmt: skip
+    tf,
+    algorithm: str,
+    network: str,
+    observation_space,
+    action_count: int,
+    discrete: bool,
+    *,
+    seed: int = 0,
+    keras_names: bool = False,
+    camera: str = "FRONT_FACING_CAMERA",
+) -> DeepRacerModel:
     """A model with random weights, steep enough in the heads to tell frames apart; ``camera``
     names the front camera's scope (simapp before 2.0 called it ``observation``)."""
     tf1 = tf.compat.v1
@@ -100,8 +108,9 @@ def build(
     def conv(x, filters: int, size: int, stride: int, name: str):
         fan_in = int(x.shape[-1]) * size * size
         with tf1.variable_scope(name):
-            kernel = variable("kernel", (size, size, int(x.shape[-1]), filters),
-                              1.0 / np.sqrt(fan_in))  # fmt: skip
+            kernel = variable(
+                "kernel", (size, size, int(x.shape[-1]), filters), 1.0 / np.sqrt(fan_in)
+            )
             bias = variable("bias", (filters,), 0.1)
         return tf.nn.bias_add(tf.nn.conv2d(x, kernel, [1, stride, stride, 1], "VALID"), bias)
 
@@ -185,10 +194,14 @@ def build(
         # only, to keep the archives small), and the step counter.
         for weight in list(tf1.global_variables()):
             for slot in ("Adam", "Adam_1") if "_head_0/" in weight.op.name else ():
-                tf1.get_variable(f"{weight.op.name}/{slot}", trainable=False,
-                                 initializer=np.zeros(weight.shape, np.float32))  # fmt: skip
-        tf1.get_variable(f"{ROOT}/main/online/global_step", initializer=np.int64(1234),
-                         trainable=False)  # fmt: skip
+                tf1.get_variable(
+                    f"{weight.op.name}/{slot}",
+                    trainable=False,
+                    initializer=np.zeros(weight.shape, np.float32),
+                )
+        tf1.get_variable(
+            f"{ROOT}/main/online/global_step", initializer=np.int64(1234), trainable=False
+        )
         session = tf1.Session(graph=graph)
         session.run(tf1.global_variables_initializer())
     ppo = algorithm == "clipped_ppo"
@@ -198,7 +211,9 @@ def build(
 
 def checkpoints_json(best: str, last: str) -> bytes:
     """simapp's deepracer_checkpoints.json (deepracer_checkpoint_json.py:83-131)."""
-    return json.dumps({
-        "best_checkpoint": {"name": best, "time_stamp": 1700000000.0, "avg_eval_metric": 0.5},
-        "last_checkpoint": {"name": last, "time_stamp": 1700000100.0, "avg_eval_metric": 0.4},
-    }).encode()  # fmt: skip
+    return json.dumps(
+        {
+            "best_checkpoint": {"name": best, "time_stamp": 1700000000.0, "avg_eval_metric": 0.5},
+            "last_checkpoint": {"name": last, "time_stamp": 1700000100.0, "avg_eval_metric": 0.4},
+        }
+    ).encode()

@@ -34,8 +34,17 @@ def loadtracks(*args) -> str:
 
 def test_loadtracks_adds_a_route_file_with_its_length_width_and_preview(tmp_path, tracks, client):
     path = route_file(tmp_path)
-    said = loadtracks(path, "--name", "H_track", "--display-name", "H track",
-                      "--directions", "clockwise", "--difficulty", "advanced")  # fmt: skip
+    said = loadtracks(
+        path,
+        "--name",
+        "H_track",
+        "--display-name",
+        "H track",
+        "--directions",
+        "clockwise",
+        "--difficulty",
+        "advanced",
+    )
     assert said == ("Added H track (H_track): 20.68 m long, 1.07 m wide, driven clockwise.\n")
     track = Track.objects.get(name="H_track")
     assert not track.builtin and track.added_at is not None
@@ -53,8 +62,11 @@ def test_loadtracks_adds_a_route_file_with_its_length_width_and_preview(tmp_path
 
 
 def test_loadtracks_refuses_what_it_cannot_add_in_the_loaders_words(tmp_path, tracks):
-    with pytest.raises(CommandError, match=r"^border_crosses_itself\.npy: The inner border of "
-                       r"this track crosses itself \(between waypoints"):  # fmt: skip
+    with pytest.raises(
+        CommandError,
+        match=r"^border_crosses_itself\.npy: The inner border of "
+        r"this track crosses itself \(between waypoints",
+    ):
         loadtracks(route_file(tmp_path, "border_crosses_itself"), "--name", "kinked")
     with pytest.raises(CommandError, match=r"not_a_number\.npy: Waypoint 7 of the route file"):
         loadtracks(route_file(tmp_path, "not_a_number"), "--name", "nan")
@@ -78,8 +90,12 @@ def test_loadtracks_refuses_what_it_cannot_add_in_the_loaders_words(tmp_path, tr
 
 def test_an_added_track_is_never_clobbered_by_the_built_in_sync(tracks):
     Track.objects.filter(name="s-bend").delete()
-    row = track_add(name="s-bend-2", display_name="Mine", route=routes.route_bytes("clockwise"),
-                    directions=["clockwise"])  # fmt: skip
+    row = track_add(
+        name="s-bend-2",
+        display_name="Mine",
+        route=routes.route_bytes("clockwise"),
+        directions=["clockwise"],
+    )
     Track.objects.filter(pk=row.pk).update(name="s-bend")  # as if the catalogue later took it
     tracks_sync()
     kept = Track.objects.get(name="s-bend")
@@ -87,8 +103,12 @@ def test_an_added_track_is_never_clobbered_by_the_built_in_sync(tracks):
     with pytest.raises(
         TrackRefused, match=r"^name: s-bend is a built-in track; choose another name"
     ):
-        track_add(name="s-bend", display_name="", route=routes.route_bytes("clockwise"),
-                  directions=["clockwise"])  # fmt: skip
+        track_add(
+            name="s-bend",
+            display_name="",
+            route=routes.route_bytes("clockwise"),
+            directions=["clockwise"],
+        )
 
 
 def test_staff_add_a_track_by_uploading_its_route_file_in_the_admin(admin_client, tracks):
@@ -99,8 +119,10 @@ def test_staff_add_a_track_by_uploading_its_route_file_in_the_admin(admin_client
     assert response.status_code == 302
     track = Track.objects.get(name="my_arctic_open")
     assert (track.display_name, track.description, track.directions) == (
-        "Upload", "From the admin", ["Counter-clockwise", "Clockwise"],
-    )  # fmt: skip
+        "Upload",
+        "From the admin",
+        ["Counter-clockwise", "Clockwise"],
+    )
     assert track.added_by.username == "marshal"
     assert bytes(track.preview).startswith(PNG)
     page = admin_client.get(reverse("admin:training_track_change", args=[track.pk]))
@@ -114,8 +136,10 @@ def test_staff_add_a_track_by_uploading_its_route_file_in_the_admin(admin_client
     assert admin_client.post(change, {**fields, "clockwise": "on"}).status_code == 302
     track = Track.objects.get(name="my_arctic_open")
     assert (track.display_name, track.directions, track.difficulty) == (
-        "Arctic Open", ["Clockwise"], "expert",
-    )  # fmt: skip
+        "Arctic Open",
+        ["Clockwise"],
+        "expert",
+    )
     assert track.added_by.username == "marshal" and bytes(track.preview).startswith(PNG)
 
 
@@ -132,9 +156,11 @@ def test_a_route_file_whose_header_claims_terabytes_is_refused_in_the_admin_not_
     admin_client, tracks
 ):
     data = {
-        "route_file": SimpleUploadedFile("huge.npy", claiming((10**12, 6))), "name": "huge",
-        "difficulty": "beginner", "directions": ["counterclockwise"],
-    }  # fmt: skip
+        "route_file": SimpleUploadedFile("huge.npy", claiming((10**12, 6))),
+        "name": "huge",
+        "difficulty": "beginner",
+        "directions": ["counterclockwise"],
+    }
     response = admin_client.post(reverse("admin:training_track_add"), data)
     assert response.status_code == 200
     assert "is cut short or damaged: its header says it holds 6,000,000,000,000 values" in (
@@ -156,8 +182,12 @@ def test_built_in_tracks_are_read_only_in_the_admin(admin_client, tracks):
 def test_a_model_on_an_added_track_validates_its_reward_and_drives_it_in_the_sandbox(
     client, alice, tracks
 ):
-    track_add(name="H_track", display_name="H track",
-              route=routes.route_bytes("clockwise"), directions=["clockwise"])  # fmt: skip
+    track_add(
+        name="H_track",
+        display_name="H track",
+        route=routes.route_bytes("clockwise"),
+        directions=["clockwise"],
+    )
     client.force_login(alice)
     page = client.get(reverse("training:model-create")).text
     assert 'value="H_track"' in page
@@ -168,9 +198,11 @@ def test_a_model_on_an_added_track_validates_its_reward_and_drives_it_in_the_san
     assert model.track.name == "H_track"
     # The sandbox child has no database: the parent sends the track inline.
     with driving({"track": model.track.name, "direction": model.direction}) as sandbox:
-        sandbox.load("def reward_function(params):\n"
-                     "    print(round(params['track_length'], 2))\n"
-                     "    return 1.0\n")  # fmt: skip
+        sandbox.load(
+            "def reward_function(params):\n"
+            "    print(round(params['track_length'], 2))\n"
+            "    return 1.0\n"
+        )
         result = sandbox.episode("random")
     assert result["summary"]["steps"] >= 1
     assert set(sandbox.logs) == {"20.68"}, sandbox.logs
@@ -181,6 +213,10 @@ def test_a_deepracer_route_name_is_refused_as_it_would_load_the_catalogue_track(
     stored as an added track would never be the one driven."""
     refused = r"^name: 2022_april_open_cw is DeepRacer's name for the built-in Ace Speedway"
     with pytest.raises(TrackRefused, match=refused + r" \(clockwise\); choose another name"):
-        track_add(name="2022_april_open_cw", display_name="", directions=["clockwise"],
-                  route=routes.route_bytes("clockwise"))  # fmt: skip
+        track_add(
+            name="2022_april_open_cw",
+            display_name="",
+            directions=["clockwise"],
+            route=routes.route_bytes("clockwise"),
+        )
     assert not Track.objects.filter(name="2022_april_open_cw").exists()

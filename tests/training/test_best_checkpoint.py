@@ -17,10 +17,14 @@ def rows() -> list[Iteration]:
         4: (100.0, 60.0, 9_000.0),
     }
     return [
-        Iteration(number=number, evaluation_completion=progress, evaluation_reward=reward,
-                  evaluation_lap_ms=lap)
+        Iteration(
+            number=number,
+            evaluation_completion=progress,
+            evaluation_reward=reward,
+            evaluation_lap_ms=lap,
+        )
         for number, (progress, reward, lap) in figures.items()
-    ]  # fmt: skip
+    ]
 
 
 @pytest.mark.parametrize(("metric", "best"), [("progress", 4), ("reward", 3), ("laptime", 4)])

@@ -82,9 +82,10 @@ def test_a_rollout_is_replaced_only_when_taken_for_dead_not_while_it_waits_in_th
     job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     sent, in_queue = [], {0}
     run = trainer.Trainer(
-        job, start_rollouts=lambda job, slot: sent.append(slot.index),
+        job,
+        start_rollouts=lambda job, slot: sent.append(slot.index),
         queued_rollouts=lambda job: in_queue,
-    )  # fmt: skip
+    )
     run.channel.start(job.attempt)
     (slot,) = run.slots
 

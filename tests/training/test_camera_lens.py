@@ -48,14 +48,16 @@ def test_a_lens_that_is_not_offered_is_refused_at_its_field_in_words(client, ali
     assert not RLModel.objects.filter(owner=alice).exists()
     assert words in response.text
     with pytest.raises(configuration.Invalid) as refused:
-        configuration.check(training_settings(camera_lens="fisheye"), owner=alice,
-                            validate_reward=False)  # fmt: skip
+        configuration.check(
+            training_settings(camera_lens="fisheye"), owner=alice, validate_reward=False
+        )
     assert refused.value.errors == {"camera_lens": words.replace("&#x27;", "'")}
 
 
 def test_a_clone_and_our_own_export_keep_the_lens(alice, bob, tracks):
-    checked = configuration.check(training_settings(camera_lens="wide"), owner=alice,
-                                  validate_reward=False)  # fmt: skip
+    checked = configuration.check(
+        training_settings(camera_lens="wide"), owner=alice, validate_reward=False
+    )
     original = RLModel.objects.create(owner=alice, **checked.row())
     clone_page = ModelCreateForm.initial_from(configuration.ModelSettings.of(original))
     assert clone_page["camera_lens"] == CameraLens.WIDE
@@ -71,8 +73,9 @@ def test_a_model_trained_before_deepracers_camera_says_so_on_its_page(client, al
     from django.apps import apps
 
     def trained(name: str, **job) -> RLModel:
-        checked = configuration.check(training_settings(name=name), owner=alice,
-                                      validate_reward=False)  # fmt: skip
+        checked = configuration.check(
+            training_settings(name=name), owner=alice, validate_reward=False
+        )
         model = RLModel.objects.create(owner=alice, **checked.row())
         TrainingJob.objects.create(model=model, iterations=3, **job)
         return model
@@ -86,8 +89,10 @@ def test_a_model_trained_before_deepracers_camera_says_so_on_its_page(client, al
 
     said = "it now drives with DeepRacer's 64.7° camera: clone it and train the clone to adapt."
     client.force_login(alice)
-    pages = {m.name: client.get(reverse("training:model-detail", args=[m.pk])).text
-             for m in (before, imported, since)}  # fmt: skip
+    pages = {
+        m.name: client.get(reverse("training:model-detail", args=[m.pk])).text
+        for m in (before, imported, since)
+    }
     assert said in pages["before"]
     assert said not in pages["imported"] and said not in pages["since"]
 
@@ -98,8 +103,9 @@ def test_a_model_trained_with_a_lidar_before_simapps_mount_says_so_on_its_page(
     from django.apps import apps
 
     def trained(name: str, sensors: list[str], **job) -> RLModel:
-        checked = configuration.check(training_settings(name=name, sensors=sensors),
-                                      owner=alice, validate_reward=False)  # fmt: skip
+        checked = configuration.check(
+            training_settings(name=name, sensors=sensors), owner=alice, validate_reward=False
+        )
         model = RLModel.objects.create(owner=alice, **checked.row())
         TrainingJob.objects.create(model=model, iterations=3, **job)
         return model
@@ -107,8 +113,9 @@ def test_a_model_trained_with_a_lidar_before_simapps_mount_says_so_on_its_page(
     lidar = ["FRONT_FACING_CAMERA", "LIDAR"]
     before = trained("before", lidar)
     camera_only = trained("camera-only", ["FRONT_FACING_CAMERA"])
-    imported = trained("imported", ["FRONT_FACING_CAMERA", "SECTOR_LIDAR"],
-                       lease_owner=jobs.IMPORTED)  # fmt: skip
+    imported = trained(
+        "imported", ["FRONT_FACING_CAMERA", "SECTOR_LIDAR"], lease_owner=jobs.IMPORTED
+    )
     migration = importlib.import_module("training.migrations.0022_lidar_mount")
 
     migration.mark_lidar_before_deepracer(apps, None)
@@ -116,7 +123,9 @@ def test_a_model_trained_with_a_lidar_before_simapps_mount_says_so_on_its_page(
 
     said = "it now reads DeepRacer's, facing backwards 0.182 m up"
     client.force_login(alice)
-    pages = {m.name: client.get(reverse("training:model-detail", args=[m.pk])).text
-             for m in (before, camera_only, imported, since)}  # fmt: skip
+    pages = {
+        m.name: client.get(reverse("training:model-detail", args=[m.pk])).text
+        for m in (before, camera_only, imported, since)
+    }
     assert said in pages["before"]
     assert not any(said in pages[name] for name in ("camera-only", "imported", "since"))

@@ -26,8 +26,10 @@ SENSORS = [
 ]  # fmt: skip
 CASES = [(algorithm, space, sensors, SHALLOW) for algorithm, space in KINDS for sensors in SENSORS]
 # The 5-layer networks are large (stereo: 57 million weights); one sensor set each way.
-CASES += [("clipped_ppo", DISCRETE, ["FRONT_FACING_CAMERA", "LIDAR"], DEEP),
-          ("sac", CONTINUOUS, ["STEREO_CAMERAS"], DEEP)]  # fmt: skip
+CASES += [
+    ("clipped_ppo", DISCRETE, ["FRONT_FACING_CAMERA", "LIDAR"], DEEP),
+    ("sac", CONTINUOUS, ["STEREO_CAMERAS"], DEEP),
+]
 
 
 def case_id(case) -> str:
@@ -71,8 +73,9 @@ def car_inputs(policy, observation) -> dict[str, np.ndarray]:
     return inputs
 
 
-@pytest.mark.parametrize(("algorithm", "space", "sensors", "network"), CASES,
-                         ids=[case_id(case) for case in CASES])  # fmt: skip
+@pytest.mark.parametrize(
+    ("algorithm", "space", "sensors", "network"), CASES, ids=[case_id(case) for case in CASES]
+)
 def test_tensorflow_and_openvino_run_the_car_graph_as_pytorch_does(
     algorithm, space, sensors, network, tensorflow, tmp_path
 ):

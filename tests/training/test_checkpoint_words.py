@@ -24,12 +24,17 @@ def trained_for_five_iterations(owner) -> RLModel:
     job.save()
     for number in range(1, 6):
         Iteration.objects.create(
-            job=job, number=number, reward=10.0 * number, completion=12.0 * number,
+            job=job,
+            number=number,
+            reward=10.0 * number,
+            completion=12.0 * number,
             evaluation_completion={3: 85.0, 5: 60.0}.get(number, 20.0),
             evaluation_reward={3: 120.5, 5: 80.0}.get(number, 10.0),
             evaluation_lap_ms={3: 12_345.0, 5: 999_999.0}.get(number, 999_999.0),
-            episodes=5, steps=500, wall_seconds=1.0,
-        )  # fmt: skip
+            episodes=5,
+            steps=500,
+            wall_seconds=1.0,
+        )
     return model
 
 
@@ -100,14 +105,20 @@ def test_a_models_pages_show_no_internal_status_names_or_track_slugs(client, ali
     model = trained_for_five_iterations(alice)
     RLModel.objects.filter(pk=model.pk).update(workers=3, extra_tracks=["rookie-loop", "s-bend"])
     raced = EvaluationJob.objects.create(
-        model=model, track=Track.objects.get(name="rookie-loop"), trials=3,
-        status=EvaluationJob.Status.COMPLETED, checkpoint_iteration=3,
-    )  # fmt: skip
+        model=model,
+        track=Track.objects.get(name="rookie-loop"),
+        trials=3,
+        status=EvaluationJob.Status.COMPLETED,
+        checkpoint_iteration=3,
+    )
     for number, status in enumerate(["lap_complete", "lap_complete", "time_up"], start=1):
         EvaluationTrial.objects.create(
-            evaluation=raced, number=number, time_ms=20_000, status=status,
+            evaluation=raced,
+            number=number,
+            time_ms=20_000,
+            status=status,
             progress=100.0 if status == "lap_complete" else 40.0,
-        )  # fmt: skip
+        )
     client.force_login(alice)
 
     pages = {
@@ -164,9 +175,13 @@ def test_a_best_by_reward_is_named_with_its_mean_evaluation_reward(alice):
 def test_every_page_names_the_starting_weights_alike_never_as_iteration_0(client, alice):
     model = trained_for_five_iterations(alice)
     started = EvaluationJob.objects.create(
-        model=model, track=Track.objects.get(name="rookie-loop"), trials=3,
-        status=EvaluationJob.Status.COMPLETED, checkpoint="last", checkpoint_iteration=0,
-    )  # fmt: skip
+        model=model,
+        track=Track.objects.get(name="rookie-loop"),
+        trials=3,
+        status=EvaluationJob.Status.COMPLETED,
+        checkpoint="last",
+        checkpoint_iteration=0,
+    )
     client.force_login(alice)
 
     for url in (

@@ -101,8 +101,16 @@ def test_a_racer_who_waits_is_served_before_any_flooders_next_check(one_checker)
     slow.release.set()
     assert [future.result(timeout=10) for future in flood] and bystander.result(timeout=10)
     assert slow.started == [
-        "f1 0", "f2 0", "f3 0", "f4 0", "bystander", "f1 1", "f2 1", "f3 1", "f4 1"
-    ]  # fmt: skip
+        "f1 0",
+        "f2 0",
+        "f3 0",
+        "f4 0",
+        "bystander",
+        "f1 1",
+        "f2 1",
+        "f3 1",
+        "f4 1",
+    ]
 
 
 def test_a_check_cancelled_while_it_waits_gives_its_place_back(small_pool):
@@ -144,10 +152,12 @@ class Browser:
     async def request(self, method: str, path: str, form: dict | None = None) -> asgi.Response:
         body = urlencode(form or {}).encode()
         headers = {
-            "host": "127.0.0.1", "cookie": self.cookie, "x-csrftoken": CSRF,
+            "host": "127.0.0.1",
+            "cookie": self.cookie,
+            "x-csrftoken": CSRF,
             "content-type": "application/x-www-form-urlencoded",
             "content-length": str(len(body)),
-        }  # fmt: skip
+        }
         return await asgi.request(method, path, headers, [body], timeout=60)
 
 

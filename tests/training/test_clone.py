@@ -29,8 +29,11 @@ def clone_url(model: RLModel) -> str:
 
 
 def cloned_form(**changes) -> dict:
-    clone = {"name": "straight-ahead-clone", "track": "pitlane-oval",
-             "actions": json.dumps(STRAIGHT_AHEAD)}  # fmt: skip
+    clone = {
+        "name": "straight-ahead-clone",
+        "track": "pitlane-oval",
+        "actions": json.dumps(STRAIGHT_AHEAD),
+    }
     return form_data(**{**clone, **changes})
 
 
@@ -144,8 +147,12 @@ def test_only_a_ready_model_of_ones_own_can_be_cloned(alice, bob, tracks, client
 @pytest.mark.django_db(transaction=True)
 def test_the_clones_training_starts_from_those_weights(alice, tracks, celery_worker_process):
     source = ready_model(alice)
-    clone = model_create(owner=alice, settings=training_settings(
-        name="clone-trains", action_space=STRAIGHT_AHEAD, cloned_from=source))  # fmt: skip
+    clone = model_create(
+        owner=alice,
+        settings=training_settings(
+            name="clone-trains", action_space=STRAIGHT_AHEAD, cloned_from=source
+        ),
+    )
     job = wait_for_job(clone.jobs.get(), lambda j: j.last_checkpoint, "the first checkpoint")
     training_stop(job=job)
     assert job.log_lines.filter(text__startswith="Starting from the weights").exists()

@@ -32,9 +32,16 @@ from training import artifacts, history, trainer
 from training.models import Iteration
 
 EPISODE_KEYS = {
-    "reward_score", "metric_time", "start_time", "elapsed_time_in_milliseconds", "episode",
-    "trial", "phase", "completion_percentage", "episode_status",
-}  # fmt: skip
+    "reward_score",
+    "metric_time",
+    "start_time",
+    "elapsed_time_in_milliseconds",
+    "episode",
+    "trial",
+    "phase",
+    "completion_percentage",
+    "episode_status",
+}
 
 
 @pytest.mark.django_db
@@ -57,11 +64,19 @@ def test_the_training_metrics_are_deepracers_and_read_back_as_a_history(alice, t
     assert all(set(entry) == EPISODE_KEYS for entry in entries)
     assert all(isinstance(entry["reward_score"], int) for entry in entries)
     assert [(e["phase"], e["episode"], e["trial"]) for e in entries] == [
-        ("training", 1, 1), ("training", 2, 2), ("training", 3, 3), ("training", 4, 4),
-        ("evaluation", 4, 4), ("evaluation", 4, 4),
-        ("training", 5, 1), ("training", 6, 2), ("training", 7, 3), ("training", 8, 4),
-        ("evaluation", 8, 4), ("evaluation", 8, 4),
-    ]  # fmt: skip
+        ("training", 1, 1),
+        ("training", 2, 2),
+        ("training", 3, 3),
+        ("training", 4, 4),
+        ("evaluation", 4, 4),
+        ("evaluation", 4, 4),
+        ("training", 5, 1),
+        ("training", 6, 2),
+        ("training", 7, 3),
+        ("training", 8, 4),
+        ("evaluation", 8, 4),
+        ("evaluation", 8, 4),
+    ]
     labels = {entry["episode_status"] for entry in entries}
     assert "Lap complete" in labels and labels <= set(artifacts.STATUS_LABELS.values())
     # An imported model's page reads it back: the same iterations, episodes and laps.
@@ -77,9 +92,12 @@ def test_evaluation_entries_follow_the_iteration_they_evaluate_even_when_they_co
     metrics = [entry("training", n, (n - 1) % 2 + 1) for n in range(1, 5)]
     late = trainer.with_evaluation(metrics, [entry("evaluation", 0, 0)], episodes=2)
     assert [(e["phase"], e["episode"], e["trial"]) for e in late] == [
-        ("training", 1, 1), ("training", 2, 2), ("evaluation", 2, 2),
-        ("training", 3, 1), ("training", 4, 2),
-    ]  # fmt: skip
+        ("training", 1, 1),
+        ("training", 2, 2),
+        ("evaluation", 2, 2),
+        ("training", 3, 1),
+        ("training", 4, 2),
+    ]
 
 
 def test_training_traces_are_named_from_iteration_zero_as_deepracers():
@@ -103,12 +121,16 @@ def test_the_logs_archive_is_a_deepracer_model_folder(alice, tracks, client):
     assert names == {
         f"paper-trained/{name}"
         for name in (
-            "model/model_metadata.json", "ip/hyperparameters.json", "reward_function.py",
-            "training_params.yaml", "training-simtrace/0-iteration.csv",
-            "training-simtrace/1-iteration.csv", "metrics/TrainingMetrics.json",
+            "model/model_metadata.json",
+            "ip/hyperparameters.json",
+            "reward_function.py",
+            "training_params.yaml",
+            "training-simtrace/0-iteration.csv",
+            "training-simtrace/1-iteration.csv",
+            "metrics/TrainingMetrics.json",
             "logs/training-log.txt",
         )
-    }  # fmt: skip
+    }
     with tempfile.TemporaryDirectory() as directory:
         folder = extracted(model, Path(directory))
         log = DeepRacerLog(str(folder))

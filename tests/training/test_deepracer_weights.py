@@ -32,9 +32,14 @@ CONTINUOUS = {"steering_angle": {"low": -30.0, "high": 30.0}, "speed": {"low": 0
 def metadata(algorithm: str, space, sensors: list[str], **more) -> dict:
     kind = "discrete" if isinstance(space, list) else "continuous"
     return {
-        "action_space": space, "sensor": sensors, "neural_network": SHALLOW, "version": "5",
-        "training_algorithm": algorithm, "action_space_type": kind, **more,
-    }  # fmt: skip
+        "action_space": space,
+        "sensor": sensors,
+        "neural_network": SHALLOW,
+        "version": "5",
+        "training_algorithm": algorithm,
+        "action_space_type": kind,
+        **more,
+    }
 
 
 def environment(space, sensors) -> dict:
@@ -51,8 +56,9 @@ def deepracer_model(tensorflow, algorithm, space, sensors, **options):
 
 
 def imported_policy(model: RLModel, which: str = "best_checkpoint") -> Policy:
-    policy = Policy.for_environment(model.algorithm, model.architecture,
-                                    model.environment_settings())  # fmt: skip
+    policy = Policy.for_environment(
+        model.algorithm, model.architecture, model.environment_settings()
+    )
     policy.load_checkpoint(artifacts.read(getattr(model.jobs.get(), which)))
     return policy
 
@@ -71,8 +77,11 @@ def ours(policy: Policy, what: str, observation: dict, action=None) -> np.ndarra
             distribution = network.get_distribution(tensor).distribution
             if what == "log_std":
                 return network.log_std.numpy()[None]
-            return distribution.probs.numpy() if hasattr(distribution, "probs") else (
-                distribution.mean.numpy())  # fmt: skip
+            return (
+                distribution.probs.numpy()
+                if hasattr(distribution, "probs")
+                else (distribution.mean.numpy())
+            )
         mean, log_std, _ = network.actor.get_action_dist_params(tensor)
         return (mean if what == "policy" else log_std).numpy()
 
@@ -134,8 +143,9 @@ def test_a_ppo_model_comes_in_with_its_best_and_last_checkpoints(
     policy = imported_policy(model, "best_checkpoint")
     for index, observation in enumerate(frames):
         for part in ("policy", "value"):
-            np.testing.assert_allclose(ours(policy, part, observation), best[part][index],
-                                       atol=1e-4)  # fmt: skip
+            np.testing.assert_allclose(
+                ours(policy, part, observation), best[part][index], atol=1e-4
+            )
     assert_same(deepracer, imported_policy(model, "last_checkpoint"), frames, ["policy", "value"])
 
 
@@ -185,8 +195,9 @@ def test_every_kind_of_model_comes_in_with_the_weights_of_its_checkpoint(
 def test_a_frozen_graph_without_checkpoints_brings_the_policy(alice, tracks, tensorflow):
     sensors = ["FRONT_FACING_CAMERA"]
     deepracer = deepracer_model(tensorflow, "sac", CONTINUOUS, sensors, keras_names=True)
-    archive = drfc_archive({"model/model_4.pb": deepracer.frozen_graph()},
-                           metadata("sac", CONTINUOUS, sensors))  # fmt: skip
+    archive = drfc_archive(
+        {"model/model_4.pb": deepracer.frozen_graph()}, metadata("sac", CONTINUOUS, sensors)
+    )
     imported = imports.import_model(owner=alice, archive=io.BytesIO(archive))
     assert imported.model.trainable
     assert any("spread and the Q networks start from new weights" in n for n in imported.notes)
@@ -200,10 +211,15 @@ def test_a_car_archive_comes_in_to_evaluate_and_race_but_not_to_train(
     # simapp before 2.0: no sensor in the metadata, the camera called "observation".
     legacy = {key: value for key, value in DEEPRACER_METADATA.items() if key != "sensor"}
     legacy["version"] = "1"
-    deepracer = deepracer_model(tensorflow, "clipped_ppo", DISCRETE, ["FRONT_FACING_CAMERA"],
-                                camera="observation")  # fmt: skip
-    archive = tar_gz({"model_metadata.json": json.dumps(legacy).encode(),
-                      "agent/model.pb": deepracer.frozen_graph()})  # fmt: skip
+    deepracer = deepracer_model(
+        tensorflow, "clipped_ppo", DISCRETE, ["FRONT_FACING_CAMERA"], camera="observation"
+    )
+    archive = tar_gz(
+        {
+            "model_metadata.json": json.dumps(legacy).encode(),
+            "agent/model.pb": deepracer.frozen_graph(),
+        }
+    )
     imported = imports.import_model(owner=alice, archive=io.BytesIO(archive), name="from-the-car")
     model = imported.model
     assert model.status == RLModel.Status.READY and not model.trainable
@@ -233,8 +249,9 @@ def test_our_car_download_comes_back_as_the_same_policy(alice, bob, tracks):
     assert not imported.model.trainable
     theirs, mine = imported_policy(original), imported_policy(imported.model)
     for observation in sensor_frames(original.environment_settings(), count=3):
-        np.testing.assert_allclose(ours(mine, "policy", observation),
-                                   ours(theirs, "policy", observation), atol=1e-5)  # fmt: skip
+        np.testing.assert_allclose(
+            ours(mine, "policy", observation), ours(theirs, "policy", observation), atol=1e-5
+        )
 
 
 def test_weights_that_do_not_fit_the_metadata_are_refused_by_name(

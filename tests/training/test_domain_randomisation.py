@@ -62,8 +62,9 @@ def test_the_create_page_offers_it_with_a_line_that_says_what_it_does(client, al
 
 def test_anything_but_on_or_off_is_refused_in_words(alice, tracks):
     with pytest.raises(configuration.Invalid) as refused:
-        configuration.check(training_settings(domain_randomisation="yes"), owner=alice,
-                            validate_reward=False)  # fmt: skip
+        configuration.check(
+            training_settings(domain_randomisation="yes"), owner=alice, validate_reward=False
+        )
     assert refused.value.errors == {
         "domain_randomisation": "Domain randomisation is on or off: true or false."
     }
@@ -87,10 +88,14 @@ def test_a_deepracer_archive_brings_its_enable_domain_randomization(given, expec
     imported = imports.import_model(owner=alice, archive=io.BytesIO(tar_gz(archive)))
     assert imported.model.domain_randomisation is expected
     notes = [note for note in imported.notes if "ENABLE_DOMAIN_RANDOMIZATION" in note]
-    assert notes == ([
-        "Not carried over from training_params.yaml: ENABLE_DOMAIN_RANDOMIZATION sometimes, "
-        "neither true nor false. Domain randomisation is off."
-    ] if given == "sometimes" else [])  # fmt: skip
+    assert notes == (
+        [
+            "Not carried over from training_params.yaml: ENABLE_DOMAIN_RANDOMIZATION sometimes, "
+            "neither true nor false. Domain randomisation is off."
+        ]
+        if given == "sometimes"
+        else []
+    )
 
 
 def test_training_params_carry_it_and_the_best_metric_through_a_deepracer_archive(
@@ -98,14 +103,17 @@ def test_training_params_carry_it_and_the_best_metric_through_a_deepracer_archiv
 ):
     """Without our pitlane.json, training_params.yaml alone brings both back, spelt as DeepRacer
     for Cloud writes them (ENABLE_DOMAIN_RANDOMIZATION, BEST_MODEL_METRIC)."""
-    original = trained_model(alice, "shifty", domain_randomisation=True,
-                             best_checkpoint_by="laptime")  # fmt: skip
+    original = trained_model(
+        alice, "shifty", domain_randomisation=True, best_checkpoint_by="laptime"
+    )
     params = artifacts.training_params(original)
     assert (params["ENABLE_DOMAIN_RANDOMIZATION"], params["BEST_MODEL_METRIC"]) == (True, "laptime")
     archive = deepracer_export(**{"training_params.yaml": yaml.safe_dump(params).encode()})
     imported = imports.import_model(owner=bob, archive=io.BytesIO(tar_gz(archive)))
     assert (imported.model.domain_randomisation, imported.model.best_checkpoint_by) == (
-        True, "laptime")  # fmt: skip
+        True,
+        "laptime",
+    )
     assert not [note for note in imported.notes if "BEST_MODEL_METRIC" in note]
 
 
@@ -140,10 +148,17 @@ def test_the_evaluate_page_offers_randomised_scenes(client, alice, tracks):
     assert 'name="domain_randomisation"' in client.get(url).text
     response = client.post(
         url,
-        {"track": "pitlane-oval", "direction": "counterclockwise", "race_type": "TIME_TRIAL",
-         "trials": "3", "off_track_penalty": "2", "crash_penalty": "5", "checkpoint": "best",
-         "domain_randomisation": "on"},
-    )  # fmt: skip
+        {
+            "track": "pitlane-oval",
+            "direction": "counterclockwise",
+            "race_type": "TIME_TRIAL",
+            "trials": "3",
+            "off_track_penalty": "2",
+            "crash_penalty": "5",
+            "checkpoint": "best",
+            "domain_randomisation": "on",
+        },
+    )
     assert response.status_code == 302
     evaluation = EvaluationJob.objects.get()
     assert evaluation.domain_randomisation and not model.domain_randomisation
@@ -153,8 +168,17 @@ def test_the_evaluate_page_offers_randomised_scenes(client, alice, tracks):
 
 def test_manage_py_evaluate_randomise_drives_the_trials_in_randomised_scenes(alice, tracks, capsys):
     model = ready_model(alice)
-    call_command("evaluate", model.name, "--track", "pitlane-oval", "--trials", "3",
-                 "--max-resets", "0", "--randomise")  # fmt: skip
+    call_command(
+        "evaluate",
+        model.name,
+        "--track",
+        "pitlane-oval",
+        "--trials",
+        "3",
+        "--max-resets",
+        "0",
+        "--randomise",
+    )
     evaluation = EvaluationJob.objects.get(model=model)
     assert evaluation.status == EvaluationJob.Status.COMPLETED
     assert evaluation.domain_randomisation

@@ -83,10 +83,18 @@ def test_the_evaluate_command_prints_the_results_and_records_every_step(alice, c
     metrics = json.loads(stored(evaluation, METRICS))["metrics"]
     assert [m["trial"] for m in metrics] == [1, 2, 3]
     assert set(metrics[0]) == {
-        "completion_percentage", "metric_time", "start_time", "elapsed_time_in_milliseconds",
-        "episode_status", "crash_count", "immobilized_count", "off_track_count",
-        "reversed_count", "reset_count", "trial",
-    }  # fmt: skip
+        "completion_percentage",
+        "metric_time",
+        "start_time",
+        "elapsed_time_in_milliseconds",
+        "episode_status",
+        "crash_count",
+        "immobilized_count",
+        "off_track_count",
+        "reversed_count",
+        "reset_count",
+        "trial",
+    }
     assert metrics[0]["off_track_count"] == trials[0].off_tracks
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
     assert_evaluation_logs_read_as_recorded(evaluation)  # in the model's logs archive
@@ -131,15 +139,24 @@ def test_evaluation_settings_are_checked_as_a_whole(alice):
         services.evaluation_start(
             model=model,
             settings={
-                "track": "nowhere", "trials": 2, "off_track_penalty": -1,
-                "crash_penalty": "a lot", "checkpoint": "first", "race_type": "DRAG_RACE",
+                "track": "nowhere",
+                "trials": 2,
+                "off_track_penalty": -1,
+                "crash_penalty": "a lot",
+                "checkpoint": "first",
+                "race_type": "DRAG_RACE",
                 "max_resets": -1,
             },
-        )  # fmt: skip
+        )
     assert set(invalid.value.errors) == {
-        "track", "trials", "off_track_penalty", "crash_penalty", "checkpoint", "race_type",
+        "track",
+        "trials",
+        "off_track_penalty",
+        "crash_penalty",
+        "checkpoint",
+        "race_type",
         "max_resets",
-    }  # fmt: skip
+    }
     assert "0 to 10,000" in invalid.value.errors["max_resets"]
     assert not EvaluationJob.objects.exists()
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
@@ -222,9 +239,16 @@ def test_the_evaluate_page_keeps_what_was_typed_and_says_what_to_change(client, 
     assert client.get(url).status_code == 200
     response = client.post(
         url,
-        {"track": "pitlane-oval", "direction": "counterclockwise", "race_type": "TIME_TRIAL",
-         "trials": "4", "off_track_penalty": "12", "crash_penalty": "5", "checkpoint": "last"},
-    )  # fmt: skip
+        {
+            "track": "pitlane-oval",
+            "direction": "counterclockwise",
+            "race_type": "TIME_TRIAL",
+            "trials": "4",
+            "off_track_penalty": "12",
+            "crash_penalty": "5",
+            "checkpoint": "last",
+        },
+    )
     assert response.status_code == 400
     content = response.content.decode()
     assert "Off-track penalty [s] is at most 10." in content
@@ -233,17 +257,26 @@ def test_the_evaluate_page_keeps_what_was_typed_and_says_what_to_change(client, 
 
     response = client.post(
         url,
-        {"track": "pitlane-oval", "direction": "counterclockwise", "race_type": "TIME_TRIAL",
-         "trials": "4", "off_track_penalty": "1.5", "crash_penalty": "3", "checkpoint": "last"},
-    )  # fmt: skip
+        {
+            "track": "pitlane-oval",
+            "direction": "counterclockwise",
+            "race_type": "TIME_TRIAL",
+            "trials": "4",
+            "off_track_penalty": "1.5",
+            "crash_penalty": "3",
+            "checkpoint": "last",
+        },
+    )
     evaluation = EvaluationJob.objects.get()
     assert response.status_code == 302
     assert response["Location"] == reverse(
         "training:evaluation-detail", args=[model.pk, evaluation.pk]
     )
     assert (evaluation.trials, evaluation.off_track_penalty, evaluation.checkpoint) == (
-        4, 1.5, "last",
-    )  # fmt: skip
+        4,
+        1.5,
+        "last",
+    )
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.EVALUATING
     again = client.post(url, {"track": "pitlane-oval", "trials": "3"})
     assert again.status_code == 400
@@ -304,9 +337,10 @@ def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_a
     started = services.evaluation_start(model=model, settings={"trials": 3}, enqueue=False)
     dead = "simulation-1:4242:cafe"
     EvaluationJob.objects.filter(pk=started.pk).update(
-        status=EvaluationJob.Status.IN_PROGRESS, lease_owner=dead,
+        status=EvaluationJob.Status.IN_PROGRESS,
+        lease_owner=dead,
         lease_expires=timezone.now() + timedelta(seconds=30),
-    )  # fmt: skip
+    )
     assert evaluations.run(started.pk) is None  # a second delivery leaves a live run alone
     assert jobs.lapsed_evaluations() == []
     assert EvaluationJob.objects.get(pk=started.pk).lease_owner == dead

@@ -81,8 +81,9 @@ def test_a_race_entry_cannot_be_stopped(alice):
     evaluation = services.evaluation_start(model=model, settings={}, enqueue=False)
     from racing.models import Submission
 
-    Submission.objects.create(racer=alice, model=model, model_name=model.name,
-                              evaluation=evaluation, event=_event())  # fmt: skip
+    Submission.objects.create(
+        racer=alice, model=model, model_name=model.name, evaluation=evaluation, event=_event()
+    )
     with pytest.raises(services.EvaluationRefused, match="cannot be stopped"):
         services.evaluation_stop(evaluation=evaluation)
 
@@ -133,9 +134,11 @@ def test_a_run_that_died_while_stopping_is_ended_by_the_next_and_said_without_it
     model = ready_model(alice)
     RLModel.objects.filter(pk=model.pk).update(status=RLModel.Status.EVALUATING)
     evaluation = EvaluationJob.objects.create(
-        model=model, track=model.track, status=EvaluationJob.Status.STOPPING,
+        model=model,
+        track=model.track,
+        status=EvaluationJob.Status.STOPPING,
         lease_owner=jobs.RESUMING,  # claimed by jobs.lapsed_evaluations for this run
-    )  # fmt: skip
+    )
     announced = []
     monkeypatch.setattr(runner.live, "announce", lambda group, status: announced.append(group))
     with django_capture_on_commit_callbacks() as after_commit:

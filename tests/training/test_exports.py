@@ -114,17 +114,22 @@ def test_a_continuous_stereo_lidar_policy_runs_as_onnx_on_onnx_runtime_and_openv
     alice, tracks, tmp_path
 ):
     model = trained_model(
-        alice, "sac-stereo-lidar", weights=decisive, algorithm="sac", action_space=CONTINUOUS,
+        alice,
+        "sac-stereo-lidar",
+        weights=decisive,
+        algorithm="sac",
+        action_space=CONTINUOUS,
         sensors=["STEREO_CAMERAS", "LIDAR"],
-    )  # fmt: skip
+    )
     members = export(tmp_path, model, "--onnx", "--checkpoint", "last")
     assert sorted(members) == ["model.onnx", "model_metadata.json"]
     onnx = onnxruntime.InferenceSession(members["model.onnx"])
     core = openvino.Core()
     (tmp_path / "model.onnx").write_bytes(members["model.onnx"])
     # fp32 throughout: the CPU plugin may otherwise compute in bf16 where the CPU has it.
-    ir = core.compile_model(core.read_model(str(tmp_path / "model.onnx")), "CPU",
-                            {"INFERENCE_PRECISION_HINT": "f32"})  # fmt: skip
+    ir = core.compile_model(
+        core.read_model(str(tmp_path / "model.onnx")), "CPU", {"INFERENCE_PRECISION_HINT": "f32"}
+    )
     policy = torch_policy(model)
     for observation in sensor_frames(model.environment_settings(), count=6):
         expected = policy.drive(observation)
@@ -160,10 +165,14 @@ def test_the_virtual_model_holds_what_training_elsewhere_needs(alice, tracks, tm
     model = trained_model(alice, "to-move")
     members = export(tmp_path, model, "--virtual")
     assert {
-        "model_metadata.json", "reward_function.py", "training_params.yaml",
-        "hyperparameters.json", "pitlane.json", "checkpoints/best.safetensors",
+        "model_metadata.json",
+        "reward_function.py",
+        "training_params.yaml",
+        "hyperparameters.json",
+        "pitlane.json",
+        "checkpoints/best.safetensors",
         "checkpoints/last.safetensors",
-    } <= set(members)  # fmt: skip
+    } <= set(members)
     assert members["reward_function.py"].decode() == model.reward_function
     assert json.loads(members["hyperparameters.json"]) == hyperparameters.defaults("clipped_ppo")
     assert members["ip/hyperparameters.json"] == members["hyperparameters.json"]  # DeepRacer's

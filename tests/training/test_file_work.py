@@ -52,9 +52,10 @@ def stored_objects() -> set[str]:
 
 def clone_of(source: RLModel) -> RLModel:
     return services.model_create(
-        owner=source.owner, validate_reward=False,
+        owner=source.owner,
+        validate_reward=False,
         settings=training_settings(name="clone", action_space=STRAIGHT_AHEAD, cloned_from=source),
-    )  # fmt: skip
+    )
 
 
 def test_a_clone_copies_its_sources_weights_after_its_rows_are_committed(

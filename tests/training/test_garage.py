@@ -29,10 +29,14 @@ def test_a_racer_builds_a_vehicle(client, alice):
     client.force_login(alice)
     response = client.post(
         reverse("training:garage"),
-        {"name": "Blue Thunder", "shell_colour": "#0969da", "camera": "STEREO_CAMERAS",
-         "lidar": "SECTOR_LIDAR"},
+        {
+            "name": "Blue Thunder",
+            "shell_colour": "#0969da",
+            "camera": "STEREO_CAMERAS",
+            "lidar": "SECTOR_LIDAR",
+        },
         follow=True,
-    )  # fmt: skip
+    )
     assert "Blue Thunder is in your garage." in response.text
     vehicle = Vehicle.objects.get(owner=alice)
     assert vehicle.sensors == ["STEREO_CAMERAS", "SECTOR_LIDAR"]
@@ -80,8 +84,9 @@ def test_the_tracks_list_searches_and_sorts_without_javascript(client, alice, tr
     found = cards(client.get(url, {"q": "speedway 2022"}).text)
     assert found[:2] == ["2022_april_open", "2022_april_pro"]
     assert "reInvent2019_track" not in found  # Smile Speedway, of 2020: every word must match
-    assert len(found) == Track.objects.filter(display_name__icontains="speedway",
-                                              season=2022).count()  # fmt: skip
+    assert (
+        len(found) == Track.objects.filter(display_name__icontains="speedway", season=2022).count()
+    )
     assert cards(client.get(url, {"q": "pitlane"}).text) == simulator_tracks.names(origin="pitlane")
     by_length = cards(client.get(url, {"sort": "length"}).text)
     lengths = dict(Track.objects.values_list("name", "length_m"))
@@ -148,10 +153,17 @@ def _model_on(vehicle, name: str = "on-the-car") -> RLModel:
     from training.rewards import EXAMPLES
     from training.services import model_create
 
-    return model_create(owner=vehicle.owner, validate_reward=False, settings={
-        "name": name, "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
-        "vehicle": vehicle, "sensors": vehicle.sensors,
-    })  # fmt: skip
+    return model_create(
+        owner=vehicle.owner,
+        validate_reward=False,
+        settings={
+            "name": name,
+            "track": "rookie-loop",
+            "reward_function": EXAMPLES[0].source,
+            "vehicle": vehicle,
+            "sensors": vehicle.sensors,
+        },
+    )
 
 
 def test_the_garage_offers_shell_colours_as_named_swatches(client, alice):
@@ -169,9 +181,11 @@ def test_a_racer_renames_and_repaints_a_vehicle(client, alice):
     url = reverse("training:vehicle-edit", args=[vehicle.pk])
     page = client.get(url)
     assert 'value="Rocket"' in page.text and 'value="#1f2328" id="id_shell_colour_0"' in page.text
-    response = client.post(url, {"name": "Comet", "shell_colour": "#2da44e",
-                                 "camera": "STEREO_CAMERAS", "lidar": "LIDAR"},
-                           follow=True)  # fmt: skip
+    response = client.post(
+        url,
+        {"name": "Comet", "shell_colour": "#2da44e", "camera": "STEREO_CAMERAS", "lidar": "LIDAR"},
+        follow=True,
+    )
     assert "Comet is saved." in response.text
     vehicle.refresh_from_db()
     assert (vehicle.name, vehicle.shell_colour) == ("Comet", "#2da44e")
@@ -183,8 +197,10 @@ def test_an_edit_with_a_taken_name_says_so_and_keeps_what_was_typed(client, alic
     vehicle = Vehicle.objects.create(owner=alice, name="Rocket")
     client.force_login(alice)
     url = reverse("training:vehicle-edit", args=[vehicle.pk])
-    response = client.post(url, {"name": "taken", "shell_colour": "#0969da",
-                                 "camera": "FRONT_FACING_CAMERA", "lidar": ""})  # fmt: skip
+    response = client.post(
+        url,
+        {"name": "taken", "shell_colour": "#0969da", "camera": "FRONT_FACING_CAMERA", "lidar": ""},
+    )
     assert response.status_code == 400
     assert "You already have a vehicle named “taken”" in response.text
     assert 'value="taken"' in response.text
@@ -192,8 +208,10 @@ def test_an_edit_with_a_taken_name_says_so_and_keeps_what_was_typed(client, alic
         'value="#0969da" id="id_shell_colour_6" style="--shell: #0969da" checked' in response.text
     )
     assert "<h1>Edit Rocket</h1>" in response.text
-    kept = client.post(url, {"name": "rocket", "shell_colour": "#0969da",
-                             "camera": "FRONT_FACING_CAMERA", "lidar": ""})  # fmt: skip
+    kept = client.post(
+        url,
+        {"name": "rocket", "shell_colour": "#0969da", "camera": "FRONT_FACING_CAMERA", "lidar": ""},
+    )
     assert kept.status_code == 302  # its own name, in another case, is not taken
     no_name = client.post(url, {"name": " ", "camera": "FRONT_FACING_CAMERA", "lidar": ""})
     assert "Give your vehicle a name." in no_name.text
@@ -211,8 +229,15 @@ def test_a_vehicle_with_models_keeps_its_sensors_and_says_why(client, alice, tra
     page = client.get(url)
     assert "Locked: models were trained on these sensors" in page.text
     assert page.text.count("disabled") >= 3  # two camera radios and the lidar list
-    response = client.post(url, {"name": "Rocket-2", "shell_colour": "#f28c28",
-                                 "camera": "STEREO_CAMERAS", "lidar": "LIDAR"})  # fmt: skip
+    response = client.post(
+        url,
+        {
+            "name": "Rocket-2",
+            "shell_colour": "#f28c28",
+            "camera": "STEREO_CAMERAS",
+            "lidar": "LIDAR",
+        },
+    )
     assert response.status_code == 302
     vehicle.refresh_from_db()
     assert vehicle.name == "Rocket-2" and vehicle.shell_colour == "#f28c28"
@@ -225,15 +250,25 @@ def test_the_update_service_refuses_new_sensors_once_a_model_was_trained(alice, 
     vehicle = Vehicle.objects.create(owner=alice, name="Rocket")
     _model_on(vehicle)
     with pytest.raises(VehicleSensorsLocked, match="build a new vehicle"):
-        vehicle_update(vehicle=vehicle, name="Rocket", shell_colour=vehicle.shell_colour,
-                       camera="STEREO_CAMERAS", lidar="")  # fmt: skip
+        vehicle_update(
+            vehicle=vehicle,
+            name="Rocket",
+            shell_colour=vehicle.shell_colour,
+            camera="STEREO_CAMERAS",
+            lidar="",
+        )
 
 
 def test_a_racer_deletes_a_vehicle_after_confirming_and_its_models_keep_their_settings(
     client, alice, tracks
 ):
-    vehicle = Vehicle.objects.create(owner=alice, name="Rocket", shell_colour="#d1242f",
-                                     camera="STEREO_CAMERAS", lidar="SECTOR_LIDAR")  # fmt: skip
+    vehicle = Vehicle.objects.create(
+        owner=alice,
+        name="Rocket",
+        shell_colour="#d1242f",
+        camera="STEREO_CAMERAS",
+        lidar="SECTOR_LIDAR",
+    )
     model = _model_on(vehicle)
     client.force_login(alice)
     detail = client.get(reverse("training:model-detail", args=[model.pk]))
@@ -259,8 +294,12 @@ def test_a_racer_cannot_edit_or_delete_another_racers_vehicle(client, alice, bob
     for name in ("training:vehicle-edit", "training:vehicle-delete"):
         url = reverse(name, args=[theirs.pk])
         assert client.get(url).status_code == 404
-        assert client.post(url, {"name": "mine", "shell_colour": "#d1242f",
-                                 "camera": "FRONT_FACING_CAMERA"}).status_code == 404  # fmt: skip
+        assert (
+            client.post(
+                url, {"name": "mine", "shell_colour": "#d1242f", "camera": "FRONT_FACING_CAMERA"}
+            ).status_code
+            == 404
+        )
     theirs.refresh_from_db()
     assert theirs.name == "Bobs-car"
 

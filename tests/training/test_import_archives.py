@@ -153,8 +153,9 @@ KINDS = st.sampled_from([tarfile.REGTYPE, tarfile.DIRTYPE, tarfile.SYMTYPE, tarf
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(names=st.lists(st.lists(PIECES, max_size=8).map("".join), min_size=1, max_size=3),
-       kind=KINDS)  # fmt: skip
+@given(
+    names=st.lists(st.lists(PIECES, max_size=8).map("".join), min_size=1, max_size=3), kind=KINDS
+)
 def test_whatever_the_member_names_reading_an_archive_only_ever_refuses(names, kind):
     def tweak(tar: tarfile.TarFile) -> None:
         tar.format = tarfile.PAX_FORMAT
@@ -166,8 +167,9 @@ def test_whatever_the_member_names_reading_an_archive_only_ever_refuses(names, k
         members = imports.read_archive(archive)
     except imports.ImportRefused:
         return
-    assert all(path and not path.startswith("/") and ".." not in path.split("/")
-               for path in members)  # fmt: skip
+    assert all(
+        path and not path.startswith("/") and ".." not in path.split("/") for path in members
+    )
 
 
 @CHECKED_IMPORT
@@ -291,8 +293,9 @@ def test_a_huge_member_is_refused_from_its_header_before_a_byte_is_read(path, li
 def test_no_file_is_read_past_its_limit_whatever_its_header_says(monkeypatch):
     archive = io.BytesIO(tar_gz({}, sparse("reward_function.py", 500 * imports.MiB)))
     reads, read = [], tarfile.ExFileObject.read
-    monkeypatch.setattr(tarfile.ExFileObject, "read",
-                        lambda self, size=-1: reads.append(size) or read(self, size))  # fmt: skip
+    monkeypatch.setattr(
+        tarfile.ExFileObject, "read", lambda self, size=-1: reads.append(size) or read(self, size)
+    )
     over = pytest.raises(imports.ImportRefused, match=r"^reward_function\.py is over 100 bytes")
     with tarfile.open(fileobj=archive) as tar, over:
         imports._read(tar, tar.next(), 100)  # as if its header had passed

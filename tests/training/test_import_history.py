@@ -25,9 +25,20 @@ from training.models import EvaluationJob, Iteration, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
 
-FIGURES = ("number", "reward", "completion", "evaluation_completion", "best_lap_time", "episodes",
-           "steps", "wall_seconds", "time_split", "evaluation_seconds", "training_points",
-           "evaluation_points")  # fmt: skip
+FIGURES = (
+    "number",
+    "reward",
+    "completion",
+    "evaluation_completion",
+    "best_lap_time",
+    "episodes",
+    "steps",
+    "wall_seconds",
+    "time_split",
+    "evaluation_seconds",
+    "training_points",
+    "evaluation_points",
+)
 
 
 def trained_three_iterations(owner) -> RLModel:
@@ -41,13 +52,20 @@ def trained_three_iterations(owner) -> RLModel:
     last = artifacts.save(model, artifacts.checkpoint(3), weights)
     for number in (1, 2, 3):
         Iteration.objects.create(
-            job=job, number=number, reward=11.9 + number / 3, completion=8.0 / number,
+            job=job,
+            number=number,
+            reward=11.9 + number / 3,
+            completion=8.0 / number,
             evaluation_completion=[None, 41.66666666666667, 12.5][number - 1],
-            best_lap_time=None if number < 3 else 9.933333333333334, episodes=3, steps=101,
-            wall_seconds=0.1 + 0.2 * number, time_split={"rollout": 0.30000000000000004},
-            evaluation_seconds=1 / 7, training_points=[[11.9049, 7.51], [0.1 + 0.2, 8.0]],
+            best_lap_time=None if number < 3 else 9.933333333333334,
+            episodes=3,
+            steps=101,
+            wall_seconds=0.1 + 0.2 * number,
+            time_split={"rollout": 0.30000000000000004},
+            evaluation_seconds=1 / 7,
+            training_points=[[11.9049, 7.51], [0.1 + 0.2, 8.0]],
             evaluation_points=[41.66666666666667, 33.3],
-        )  # fmt: skip
+        )
         artifacts.save(model, artifacts.training_trace(number), to_csv(HAND_WRITTEN))
     artifacts.save(model, artifacts.TRAINING_METRICS, json.dumps(trainer_metrics(3)))
     TrainingJob.objects.filter(pk=job.pk).update(
@@ -124,8 +142,11 @@ def test_an_archive_from_elsewhere_says_on_the_models_page_what_was_rebuilt_and_
     alice, bob, tracks, client
 ):
     members = members_of(virtual_archive(trained_three_iterations(alice)))
-    bare = {name: data for name, data in members.items()
-            if name != history.EXACT and not name.startswith("training-simtrace/")}  # fmt: skip
+    bare = {
+        name: data
+        for name, data in members.items()
+        if name != history.EXACT and not name.startswith("training-simtrace/")
+    }
     model = imported(bob, tar_gz(bare))
     rebuilt = figures(model)
     assert len(rebuilt) == 3 and rebuilt != figures(RLModel.objects.get(owner=alice))

@@ -33,27 +33,41 @@ def test_a_folder_without_weights_is_previewed_and_nothing_is_created_until_conf
     assert selectors.allowance_for(racer=alice).minutes_left == minutes_left  # no quota used
     settings = preview.settings
     assert (settings["name"], settings["track"], settings["max_minutes"]) == (
-        "my-deepracer-car", "rookie-loop", 60,
-    )  # fmt: skip
+        "my-deepracer-car",
+        "rookie-loop",
+        60,
+    )
     assert preview.model.get_race_type_display() == "Time trial"
     assert [(a["steering_angle"], a["speed"]) for a in preview.model.action_space] == [
-        (-30.0, 0.6), (0.0, 1.2), (30.0, 0.6)
-    ]  # fmt: skip
+        (-30.0, 0.6),
+        (0.0, 1.2),
+        (30.0, 0.6),
+    ]
     assert any("the track H_track, which is not loaded here" in n for n in preview.notes)
 
     # Confirmed with another name, track and time: the model is created as the racer chose.
-    changes = {"name": "my-car", "track": "pitlane-oval", "direction": "clockwise",
-               "max_minutes": 30}  # fmt: skip
-    imported = imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()),
-                                    changes=changes, confirmed=True)  # fmt: skip
+    changes = {
+        "name": "my-car",
+        "track": "pitlane-oval",
+        "direction": "clockwise",
+        "max_minutes": 30,
+    }
+    imported = imports.import_start(
+        owner=alice, archive=io.BytesIO(deepracer_folder()), changes=changes, confirmed=True
+    )
     model = RLModel.objects.get(owner=alice)
     assert imported.model == model and model.status == RLModel.Status.QUEUED
     assert (model.name, model.track.name, model.direction, model.max_minutes) == (
-        "my-car", "pitlane-oval", "clockwise", 30,
-    )  # fmt: skip
+        "my-car",
+        "pitlane-oval",
+        "clockwise",
+        30,
+    )
     # The model's notes say what was not carried over, and what the racer chose instead.
-    assert "Not carried over from training_params.yaml: the track H_track, which is " \
-        "not loaded here." in model.import_notes  # fmt: skip
+    assert (
+        "Not carried over from training_params.yaml: the track H_track, which is "
+        "not loaded here." in model.import_notes
+    )
     assert "You chose the track on the import's preview: Pitlane Oval, clockwise." in (
         model.import_notes
     )
@@ -75,8 +89,9 @@ def test_a_changed_value_is_checked_as_the_create_form_checks_it(
     changes, setting, said, alice, tracks
 ):
     ready_model(alice)
-    preview = imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()),
-                                   changes=changes, confirmed=True)  # fmt: skip
+    preview = imports.import_start(
+        owner=alice, archive=io.BytesIO(deepracer_folder()), changes=changes, confirmed=True
+    )
     assert isinstance(preview, imports.ImportPreview)
     assert setting in preview.problems and said in preview.problems[setting]
     assert RLModel.objects.filter(owner=alice).count() == 1  # the ready one alone
@@ -96,8 +111,12 @@ def test_two_confirms_of_one_import_at_once_make_one_model_and_the_second_is_tol
 
     monkeypatch.setattr(services, "check_quota", the_twin_commits_first)
     with pytest.raises(configuration.Invalid) as invalid:
-        imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()),
-                             changes={"name": "my-car"}, confirmed=True)  # fmt: skip
+        imports.import_start(
+            owner=alice,
+            archive=io.BytesIO(deepracer_folder()),
+            changes={"name": "my-car"},
+            confirmed=True,
+        )
     assert invalid.value.errors == {
         "name": "You already have a model named “my-car”; choose another name."
     }
@@ -105,8 +124,9 @@ def test_two_confirms_of_one_import_at_once_make_one_model_and_the_second_is_tol
 
 def test_a_training_time_over_the_racers_minutes_is_theirs_to_change(alice, tracks):
     Quota.objects.filter(pk=Quota.of(alice).pk).update(max_minutes_per_month=45)
-    preview = imports.import_start(owner=alice, archive=io.BytesIO(deepracer_folder()),
-                                   confirmed=True)  # fmt: skip
+    preview = imports.import_start(
+        owner=alice, archive=io.BytesIO(deepracer_folder()), confirmed=True
+    )
     assert "You have 45 training minutes left this month" in preview.problems["max_minutes"]
     assert not RLModel.objects.exists()
 
@@ -138,8 +158,14 @@ def test_a_car_archive_is_shown_as_a_driving_model_without_training_history(
     assert "a driving model without training history, ready to evaluate, race and download" in page
     assert "ready to evaluate, clone or download" not in page
     # No training clock, no episodes to a first update, no invented settings, no Clone.
-    for invented in ("used of 60 min", "first policy update comes after", "Batch size",
-                     f"?clone={model.pk}", "rookie-loop (", "Pitlane Oval ("):  # fmt: skip
+    for invented in (
+        "used of 60 min",
+        "first policy update comes after",
+        "Batch size",
+        f"?clone={model.pk}",
+        "rookie-loop (",
+        "Pitlane Oval (",
+    ):
         assert invented not in page, invented
     assert "cannot train and cannot be cloned" in page
     assert "not in the car archive" in page

@@ -102,9 +102,16 @@ def test_a_deepracer_export_for_a_car_we_lack_brings_its_settings_and_trains_ane
 ):
     metadata = {**DEEPRACER_METADATA, "sensor": ["FRONT_FACING_CAMERA", "DISCRETIZED_SECTOR_LIDAR"]}
     archive = tmp_path / "deepracer.tar.gz"
-    archive.write_bytes(tar_gz(deepracer_export(**UNFIT_WEIGHTS, **{
-        "model_metadata.json": json.dumps(metadata).encode(),
-    })))  # fmt: skip
+    archive.write_bytes(
+        tar_gz(
+            deepracer_export(
+                **UNFIT_WEIGHTS,
+                **{
+                    "model_metadata.json": json.dumps(metadata).encode(),
+                },
+            )
+        )
+    )
     out = io.StringIO()
     call_command("importmodel", str(archive), "--owner", "alice", stdout=out)
     said = out.getvalue()
@@ -204,8 +211,9 @@ def test_a_bad_archive_is_refused_with_its_reason_and_leaves_nothing(case, alice
     data, reason = HOSTILE[case]
     before = stored_objects()
     client.force_login(alice)
-    response = client.post(reverse("training:model-import"),
-                           {"archive": SimpleUploadedFile("model.tar.gz", data)})  # fmt: skip
+    response = client.post(
+        reverse("training:model-import"), {"archive": SimpleUploadedFile("model.tar.gz", data)}
+    )
     assert response.status_code == 400
     assert reason in response.text.replace("&#x27;", "'")
     assert "Traceback" not in response.text
@@ -266,21 +274,53 @@ DEEPRACER_METRICS = {
     "version": "2",
     "best_model_metric": "progress",
     "metrics": [
-        {"reward_score": 5, "metric_time": 1000, "start_time": 0,
-         "elapsed_time_in_milliseconds": 1000, "episode": 1, "trial": 1, "phase": "training",
-         "completion_percentage": 10, "episode_status": "Off track"},
-        {"reward_score": 7, "metric_time": 9000, "start_time": 1000,
-         "elapsed_time_in_milliseconds": 8000, "episode": 2, "trial": 2, "phase": "training",
-         "completion_percentage": 100, "episode_status": "Lap complete"},
+        {
+            "reward_score": 5,
+            "metric_time": 1000,
+            "start_time": 0,
+            "elapsed_time_in_milliseconds": 1000,
+            "episode": 1,
+            "trial": 1,
+            "phase": "training",
+            "completion_percentage": 10,
+            "episode_status": "Off track",
+        },
+        {
+            "reward_score": 7,
+            "metric_time": 9000,
+            "start_time": 1000,
+            "elapsed_time_in_milliseconds": 8000,
+            "episode": 2,
+            "trial": 2,
+            "phase": "training",
+            "completion_percentage": 100,
+            "episode_status": "Lap complete",
+        },
         # DeepRacer's evaluation rows repeat the last training episode's numbers.
-        {"reward_score": 0, "metric_time": 12000, "start_time": 9000,
-         "elapsed_time_in_milliseconds": 3000, "episode": 2, "trial": 2, "phase": "evaluation",
-         "completion_percentage": 60, "episode_status": "Crashed"},
-        {"reward_score": 9, "metric_time": 14000, "start_time": 12000,
-         "elapsed_time_in_milliseconds": 2000, "episode": 3, "trial": 1, "phase": "training",
-         "completion_percentage": 30, "episode_status": "Off track"},
+        {
+            "reward_score": 0,
+            "metric_time": 12000,
+            "start_time": 9000,
+            "elapsed_time_in_milliseconds": 3000,
+            "episode": 2,
+            "trial": 2,
+            "phase": "evaluation",
+            "completion_percentage": 60,
+            "episode_status": "Crashed",
+        },
+        {
+            "reward_score": 9,
+            "metric_time": 14000,
+            "start_time": 12000,
+            "elapsed_time_in_milliseconds": 2000,
+            "episode": 3,
+            "trial": 1,
+            "phase": "training",
+            "completion_percentage": 30,
+            "episode_status": "Off track",
+        },
     ],
-}  # fmt: skip
+}
 
 
 def test_deepracers_own_metrics_read_as_iterations():
@@ -340,16 +380,18 @@ def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
 
     # A taken name with a file that is no archive: the name is what the page talks about.
     upload = SimpleUploadedFile("model.tar.gz", b"not read yet")
-    response = client.post(reverse("training:model-import"),
-                           {"name": "straight-ahead", "archive": upload})  # fmt: skip
+    response = client.post(
+        reverse("training:model-import"), {"name": "straight-ahead", "archive": upload}
+    )
     assert response.status_code == 400
     assert "You already have a model named" in response.text
     assert "not a .tar.gz model archive" not in response.text
 
     # The archive chosen is kept: correcting the name is enough.
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(original))
-    response = client.post(reverse("training:model-import"),
-                           {"name": "straight-ahead", "archive": upload})  # fmt: skip
+    response = client.post(
+        reverse("training:model-import"), {"name": "straight-ahead", "archive": upload}
+    )
     assert "Using <strong>virtualmodel.tar.gz</strong> you uploaded" in response.text
     assert 'value="straight-ahead"' in response.text
     kept = response.context["form"].kept_upload
@@ -367,8 +409,9 @@ def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
 def test_a_kept_archive_is_another_racers_to_use_never(alice, bob, tracks, client):
     client.force_login(alice)
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(ready_model(alice)))
-    response = client.post(reverse("training:model-import"),
-                           {"name": "straight-ahead", "archive": upload})  # fmt: skip
+    response = client.post(
+        reverse("training:model-import"), {"name": "straight-ahead", "archive": upload}
+    )
     token = response.context["form"].kept_upload.token
     client.force_login(bob)
     response = client.post(reverse("training:model-import"), {"name": "mine", "kept": token})
@@ -404,10 +447,12 @@ def test_a_deepracer_model_imports_from_each_layout_with_every_hyperparameter(
 ):
     hyper = {**DEEPRACER_HYPERPARAMETERS, "loss_type": "mean squared error", "sac_alpha": 0.2}
     params = {**DEEPRACER_PARAMS, "WORLD_NAME": "pitlane-oval_cw"}
-    members = deepracer_export(**{
-        "hyperparameters.json": json.dumps(hyper).encode(),
-        "training_params.yaml": yaml.safe_dump(params).encode(),
-    })  # fmt: skip
+    members = deepracer_export(
+        **{
+            "hyperparameters.json": json.dumps(hyper).encode(),
+            "training_params.yaml": yaml.safe_dump(params).encode(),
+        }
+    )
     imported = imports.import_model(
         owner=alice, archive=io.BytesIO(tar_gz(LAYOUTS[layout](members)))
     )
@@ -421,8 +466,15 @@ def test_a_deepracer_model_imports_from_each_layout_with_every_hyperparameter(
 
 
 def track_row(name: str, **changes) -> Track:
-    fields = {"display_name": name, "difficulty": "beginner", "length_m": 20.0, "width_m": 1.0,
-              "counterclockwise": True, "clockwise": True, **changes}  # fmt: skip
+    fields = {
+        "display_name": name,
+        "difficulty": "beginner",
+        "length_m": 20.0,
+        "width_m": 1.0,
+        "counterclockwise": True,
+        "clockwise": True,
+        **changes,
+    }
     return Track.objects.create(name=name, **fields)
 
 
@@ -507,24 +559,38 @@ def test_a_bare_world_name_trains_on_simapps_own_file_and_a_clone_on_that_track_
 ):
     archive = tmp_path / "deepracer.tar.gz"
     params = {**DEEPRACER_PARAMS, "WORLD_NAME": "reInvent2019_track"}  # DeepRacer for Cloud's
-    archive.write_bytes(tar_gz(deepracer_export(**{
-        "training_params.yaml": yaml.safe_dump(params).encode(),
-    })))  # fmt: skip
+    archive.write_bytes(
+        tar_gz(
+            deepracer_export(
+                **{
+                    "training_params.yaml": yaml.safe_dump(params).encode(),
+                }
+            )
+        )
+    )
     call_command("importmodel", str(archive), "--owner", "alice", stdout=io.StringIO())
     model = RLModel.objects.get(owner=alice)
     assert (model.track.name, model.direction, model.world_name) == (
-        "reInvent2019_track", "counterclockwise", "reInvent2019_track"
-    )  # fmt: skip
-    assert any(note.startswith("Trains on reInvent2019_track.npy (154 waypoints)")
-               for note in model.import_notes)  # fmt: skip
+        "reInvent2019_track",
+        "counterclockwise",
+        "reInvent2019_track",
+    )
+    assert any(
+        note.startswith("Trains on reInvent2019_track.npy (154 waypoints)")
+        for note in model.import_notes
+    )
     assert model.environment_settings()["route"] == "reInvent2019_track"
     client.force_login(alice)
     page = client.get(reverse("training:model-detail", args=[model.pk])).text
     assert "(counter-clockwise, on DeepRacer's route file reInvent2019_track.npy)" in page
     assert model.environment_settings("pitlane-oval")["route"] is None  # another track's route
     model.status = RLModel.Status.READY  # as once its training ends: a clone's source
-    clone = {**ModelSettings.of(model).draft(), "name": "clone", "world_name": "",
-             "cloned_from": model}  # fmt: skip
+    clone = {
+        **ModelSettings.of(model).draft(),
+        "name": "clone",
+        "world_name": "",
+        "cloned_from": model,
+    }
     assert check(clone, owner=alice, validate_reward=False).world_name == "reInvent2019_track"
     elsewhere = {**clone, "track": "2022_april_open"}
     assert check(elsewhere, owner=alice, validate_reward=False).world_name == ""
@@ -533,9 +599,15 @@ def test_a_bare_world_name_trains_on_simapps_own_file_and_a_clone_on_that_track_
 def test_a_deepracer_export_imports_onto_its_own_track(alice, tracks, tmp_path):
     archive = tmp_path / "deepracer.tar.gz"
     params = {**DEEPRACER_PARAMS, "WORLD_NAME": "reInvent2019_track_cw"}
-    archive.write_bytes(tar_gz(deepracer_export(**{
-        "training_params.yaml": yaml.safe_dump(params).encode(),
-    })))  # fmt: skip
+    archive.write_bytes(
+        tar_gz(
+            deepracer_export(
+                **{
+                    "training_params.yaml": yaml.safe_dump(params).encode(),
+                }
+            )
+        )
+    )
     call_command("importmodel", str(archive), "--owner", "alice", stdout=io.StringIO())
     model = RLModel.objects.get(owner=alice)
     assert (model.track.display_name, model.direction) == ("Smile Speedway", "clockwise")
@@ -544,23 +616,36 @@ def test_a_deepracer_export_imports_onto_its_own_track(alice, tracks, tmp_path):
 
 @CHECKED_IMPORT
 def test_every_setting_that_is_not_carried_over_is_listed_on_the_result_page(alice, tracks, client):
-    metadata = {**DEEPRACER_METADATA, "sensor": ["FRONT_FACING_CAMERA", "DISCRETIZED_SECTOR_LIDAR"],
-                "neural_network": "DEEP_CONVOLUTIONAL_NETWORK_DEEP",
-                "lidar_config": {"num_sectors": 8, "clipping_dist": 2.0}}  # fmt: skip
+    metadata = {
+        **DEEPRACER_METADATA,
+        "sensor": ["FRONT_FACING_CAMERA", "DISCRETIZED_SECTOR_LIDAR"],
+        "neural_network": "DEEP_CONVOLUTIONAL_NETWORK_DEEP",
+        "lidar_config": {"num_sectors": 8, "clipping_dist": 2.0},
+    }
     hyper = {**DEEPRACER_HYPERPARAMETERS, "num_epochs": 20, "clip_range": 0.3}
     params = {
-        **DEEPRACER_PARAMS, "WORLD_NAME": "pitlane-oval", "RACE_TYPE": "OBJECT_AVOIDANCE",
-        "NUMBER_OF_OBSTACLES": 9, "RANDOMIZE_OBSTACLE_LOCATIONS": "True",
-        "OBJECT_POSITIONS": ["0.2,-1", "0.5,1"], "CHANGE_START_POSITION": True,
-        "NUM_WORKERS": 6, "CAR_COLOR": "Purple", "BODY_SHELL_TYPE": "f1_2021",
-        "SAGEMAKER_SHARED_S3_BUCKET": "bucket", "SAGEMAKER_SHARED_S3_PREFIX": "rl-deepracer",
+        **DEEPRACER_PARAMS,
+        "WORLD_NAME": "pitlane-oval",
+        "RACE_TYPE": "OBJECT_AVOIDANCE",
+        "NUMBER_OF_OBSTACLES": 9,
+        "RANDOMIZE_OBSTACLE_LOCATIONS": "True",
+        "OBJECT_POSITIONS": ["0.2,-1", "0.5,1"],
+        "CHANGE_START_POSITION": True,
+        "NUM_WORKERS": 6,
+        "CAR_COLOR": "Purple",
+        "BODY_SHELL_TYPE": "f1_2021",
+        "SAGEMAKER_SHARED_S3_BUCKET": "bucket",
+        "SAGEMAKER_SHARED_S3_PREFIX": "rl-deepracer",
         "AWS_REGION": "us-east-1",
-    }  # fmt: skip
-    members = deepracer_export(**UNFIT_WEIGHTS, **{
-        "model_metadata.json": json.dumps(metadata).encode(),
-        "hyperparameters.json": json.dumps(hyper).encode(),
-        "training_params.yaml": yaml.safe_dump(params).encode(),
-    })  # fmt: skip
+    }
+    members = deepracer_export(
+        **UNFIT_WEIGHTS,
+        **{
+            "model_metadata.json": json.dumps(metadata).encode(),
+            "hyperparameters.json": json.dumps(hyper).encode(),
+            "training_params.yaml": yaml.safe_dump(params).encode(),
+        },
+    )
     client.force_login(alice)
     upload = SimpleUploadedFile("model.tar.gz", tar_gz(drfc_layout(members)))
     preview = client.post(reverse("training:model-import"), {"archive": upload})
@@ -602,9 +687,14 @@ def test_every_setting_that_is_not_carried_over_is_listed_on_the_result_page(ali
 
 def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(alice, bob, tracks):
     original = ready_model(alice)
-    stored = {**original.hyperparameters, "loss_type": "mse", "term_cond_avg_score": 350.0,
-              "exploration_type": "e-greedy", "sac_alpha": 0.3,
-              "discount_factor": 0.99}  # fmt: skip
+    stored = {
+        **original.hyperparameters,
+        "loss_type": "mse",
+        "term_cond_avg_score": 350.0,
+        "exploration_type": "e-greedy",
+        "sac_alpha": 0.3,
+        "discount_factor": 0.99,
+    }
     stored.pop("stack_size")  # a model from before the kept keys: the export fills them in
     RLModel.objects.filter(pk=original.pk).update(
         hyperparameters=stored, best_checkpoint_by="reward"
@@ -635,8 +725,13 @@ def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(
 def test_an_exported_track_names_deepracers_world_and_imports_back_onto_itself(
     alice, tracks, track, direction, world_name
 ):
-    model = RLModel(owner=alice, name="round-trip", track=Track.objects.get(name=track),
-                    direction=direction, world_name=world_name)  # fmt: skip
+    model = RLModel(
+        owner=alice,
+        name="round-trip",
+        track=Track.objects.get(name=track),
+        direction=direction,
+        world_name=world_name,
+    )
     params = artifacts.training_params(model)
     if track == "2022_april_open":  # the file DeepRacer drives clockwise, not the base reversed
         assert (params["WORLD_NAME"], params["REVERSE_DIR"]) == ("2022_april_open_cw", False)

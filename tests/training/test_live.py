@@ -143,8 +143,9 @@ async def test_a_slow_viewer_gets_the_newest_frame_and_never_a_backlog(alice):
     group = live.training_group(job.pk)
 
     await send_frames(group, 10)  # the viewer acknowledges nothing
-    first = [frame_header(await communicator.receive_from(timeout=5))[0]["seq"]
-             for _ in range(WINDOW)]  # fmt: skip
+    first = [
+        frame_header(await communicator.receive_from(timeout=5))[0]["seq"] for _ in range(WINDOW)
+    ]
     assert first == [1, 2]
     assert await communicator.receive_nothing(timeout=0.3)  # no more until an ack
 
@@ -240,9 +241,15 @@ async def test_status_and_iterations_from_the_trainer_reach_the_page(alice):
     def trainer_side() -> None:
         TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.IN_PROGRESS)
         job.iteration_rows.create(
-            number=1, reward=12.5, completion=40.0, episodes=2, steps=90, wall_seconds=1.0,
-            training_points=[[10.0, 30.0], [15.0, 50.0]], evaluation_points=[45.0],
-        )  # fmt: skip
+            number=1,
+            reward=12.5,
+            completion=40.0,
+            episodes=2,
+            steps=90,
+            wall_seconds=1.0,
+            training_points=[[10.0, 30.0], [15.0, 50.0]],
+            evaluation_points=[45.0],
+        )
         live.announce_training(job.pk)
         live.announce_iteration(job.pk, 1)
 

@@ -70,10 +70,15 @@ def test_a_queued_evaluation_or_race_entry_whose_task_is_gone_is_sent_again(
     cup = event("Lost cup")
     plain = EvaluationJob.objects.create(model=model, track=model.track)
     entry, waits = (
-        Submission.objects.create(event=cup, racer=alice, model=model, model_name=model.name,
-                                  evaluation=race_evaluation(model, cup))
+        Submission.objects.create(
+            event=cup,
+            racer=alice,
+            model=model,
+            model_name=model.name,
+            evaluation=race_evaluation(model, cup),
+        )
         for _ in range(2)
-    )  # fmt: skip
+    )
     old = timezone.now() - timedelta(seconds=60)
     EvaluationJob.objects.update(created_at=old)
     monkeypatch.setattr(tasks, "waiting", lambda: {racing_tasks.race.name: {waits.pk}})

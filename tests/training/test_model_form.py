@@ -16,13 +16,20 @@ from training.models import RLModel
 
 pytestmark = pytest.mark.django_db
 
-CONTINUOUS = {"action_space_type": "continuous", "algorithm": "sac", "steering_low": -30,
-              "steering_high": 30, "speed_low": 1, "speed_high": 2}  # fmt: skip
+CONTINUOUS = {
+    "action_space_type": "continuous",
+    "algorithm": "sac",
+    "steering_low": -30,
+    "steering_high": 30,
+    "speed_low": 1,
+    "speed_high": 2,
+}
 
 
 def actions(*rows) -> str:
-    return json.dumps([{"steering_angle": s, "speed": v, "index": i} for i, (s, v) in
-                       enumerate(rows)])  # fmt: skip
+    return json.dumps(
+        [{"steering_angle": s, "speed": v, "index": i} for i, (s, v) in enumerate(rows)]
+    )
 
 
 def test_a_bad_continuous_speed_is_the_only_error_and_shows_under_the_highest_speed(
@@ -91,8 +98,9 @@ def test_a_bad_action_is_named_by_its_number_from_0_and_only_its_cells_are_marke
 def test_every_bad_cell_is_reported_at_once(alice, tracks):
     space = [{"steering_angle": 45, "speed": 1}, {"steering_angle": 0, "speed": ""}]
     with pytest.raises(configuration.Invalid) as invalid:
-        configuration.check(training_settings(action_space=space), owner=alice,
-                            validate_reward=False)  # fmt: skip
+        configuration.check(
+            training_settings(action_space=space), owner=alice, validate_reward=False
+        )
     assert invalid.value.errors == {
         "action_space.0.steering_angle": "Steering angle in action 0 is -30 to 30 degrees, not 45.",
         "action_space.1.speed": "Speed in action 1 is blank: enter 0.1 to 4 m/s.",
@@ -108,16 +116,26 @@ def test_a_saved_models_settings_check_back_to_themselves(alice, tracks):
     # What a model keeps is what its settings were: its draft (as a racer, an export or the clone
     # page gives them) checks back to the same settings.
     space = {"steering_angle": {"low": -20, "high": 30}, "speed": {"low": 0.8, "high": 2.5}}
-    checked = configuration.check(training_settings(
-        algorithm="sac", hyperparameters={"sac_alpha": 0.3}, action_space=space,
-        race_type="HEAD_TO_BOT", bots={"count": 2, "speed": 1.5, "lane_changes": True},
-        workers=2, extra_tracks=["rookie-loop"], seed=7,
-    ), owner=alice, validate_reward=False)  # fmt: skip
+    checked = configuration.check(
+        training_settings(
+            algorithm="sac",
+            hyperparameters={"sac_alpha": 0.3},
+            action_space=space,
+            race_type="HEAD_TO_BOT",
+            bots={"count": 2, "speed": 1.5, "lane_changes": True},
+            workers=2,
+            extra_tracks=["rookie-loop"],
+            seed=7,
+        ),
+        owner=alice,
+        validate_reward=False,
+    )
     model = RLModel.objects.create(owner=alice, **checked.row())
     saved = configuration.ModelSettings.of(model)
     assert saved.row()["track"] == model.track and saved.hyperparameters["sac_alpha"] == 0.3
-    again = configuration.check({**saved.draft(), "name": "again"}, owner=alice,
-                                validate_reward=False)  # fmt: skip
+    again = configuration.check(
+        {**saved.draft(), "name": "again"}, owner=alice, validate_reward=False
+    )
     assert again == saved.replace(name="again")
 
 
@@ -212,8 +230,12 @@ def test_the_loss_type_reads_as_deepracers_and_a_clone_keeps_the_keys_pitlane_do
     assert '<option value="huber">Huber</option>' in loss
     assert '<option value="mean squared error" selected>Mean squared error</option>' in loss
     assert "One of Huber, Mean squared error; default Huber" in page
-    data = form_data(name="clone", track="pitlane-oval", actions=json.dumps(STRAIGHT_AHEAD),
-                     clipped_ppo__loss_type="mean squared error")  # fmt: skip
+    data = form_data(
+        name="clone",
+        track="pitlane-oval",
+        actions=json.dumps(STRAIGHT_AHEAD),
+        clipped_ppo__loss_type="mean squared error",
+    )
     for name in CLONE_KEEPS:
         data.pop(name, None)
     response = client.post(reverse("training:model-create") + f"?clone={source.pk}", data)
@@ -225,9 +247,15 @@ def test_the_loss_type_reads_as_deepracers_and_a_clone_keeps_the_keys_pitlane_do
 
 def test_a_clone_cannot_change_what_it_keeps_even_if_sent(client, alice, tracks):
     source = ready_model(alice)
-    response = post(client, alice, reverse("training:model-create") + f"?clone={source.pk}",
-                    name="clone", track="pitlane-oval", actions=json.dumps(STRAIGHT_AHEAD),
-                    network="DEEP_CONVOLUTIONAL_NETWORK")  # fmt: skip
+    response = post(
+        client,
+        alice,
+        reverse("training:model-create") + f"?clone={source.pk}",
+        name="clone",
+        track="pitlane-oval",
+        actions=json.dumps(STRAIGHT_AHEAD),
+        network="DEEP_CONVOLUTIONAL_NETWORK",
+    )
     assert response.status_code == 400
     assert response.context["form"].errors["network"] == [
         "A clone keeps its source's network: its weights are for that one."
@@ -242,8 +270,12 @@ def test_the_evaluate_page_shows_only_the_chosen_race_types_settings(
     RLModel.objects.filter(pk=model.pk).update(race_type=race_type)
     client.force_login(alice)
     page = client.get(reverse("training:evaluation-create", args=[model.pk])).text
-    shown = {kind: 'hidden' not in re.search(rf'<div[^>]*data-when-race="{kind}"[^>]*>', page)[0]
-             for kind in ("OBJECT_AVOIDANCE", "HEAD_TO_BOT")}  # fmt: skip
-    assert shown == {"OBJECT_AVOIDANCE": race_type == "OBJECT_AVOIDANCE",
-                     "HEAD_TO_BOT": race_type == "HEAD_TO_BOT"}  # fmt: skip
+    shown = {
+        kind: "hidden" not in re.search(rf'<div[^>]*data-when-race="{kind}"[^>]*>', page)[0]
+        for kind in ("OBJECT_AVOIDANCE", "HEAD_TO_BOT")
+    }
+    assert shown == {
+        "OBJECT_AVOIDANCE": race_type == "OBJECT_AVOIDANCE",
+        "HEAD_TO_BOT": race_type == "HEAD_TO_BOT",
+    }
     assert "training/evaluation_create.js" in page

@@ -15,9 +15,18 @@ def test_the_create_page_offers_every_setting_with_its_default(client, alice, tr
     client.force_login(alice)
     response = client.get(reverse("training:model-create"))
     assert response.status_code == 200
-    for text in ("Rookie Loop", "Object avoidance", "Stereo cameras", "5-layer CNN",
-                 "Generate the table", "Entropy", "SAC alpha (entropy)", "Maximum training time",
-                 "Simulations at once", "Use this example"):  # fmt: skip
+    for text in (
+        "Rookie Loop",
+        "Object avoidance",
+        "Stereo cameras",
+        "5-layer CNN",
+        "Generate the table",
+        "Entropy",
+        "SAC alpha (entropy)",
+        "Maximum training time",
+        "Simulations at once",
+        "Use this example",
+    ):
         assert text in response.text, text
     assert 'value="rookie-loop" checked' in response.text
 
@@ -37,12 +46,14 @@ def test_the_track_picker_offers_every_catalogue_track_with_its_directions(clien
 
 def test_a_clockwise_only_track_refuses_counterclockwise_in_the_form(client, alice, tracks):
     client.force_login(alice)
-    response = client.post(reverse("training:model-create"),
-                           form_data(track="Albert", direction="counterclockwise"))  # fmt: skip
+    response = client.post(
+        reverse("training:model-create"), form_data(track="Albert", direction="counterclockwise")
+    )
     assert response.status_code == 400 and not RLModel.objects.exists()
     assert "Yun Speedway cannot be driven counter-clockwise." in response.text
-    response = client.post(reverse("training:model-create"),
-                           form_data(track="Albert", direction="clockwise"))  # fmt: skip
+    response = client.post(
+        reverse("training:model-create"), form_data(track="Albert", direction="clockwise")
+    )
     assert response.status_code == 302
     model = RLModel.objects.get()
     assert (model.track.display_name, model.direction) == ("Yun Speedway", "clockwise")
@@ -78,8 +89,10 @@ def test_the_model_list_shows_each_models_training_progress(
     client.force_login(alice)
     with django_assert_max_num_queries(8):  # session, racer, models, jobs, one waiting job
         page = client.get(reverse("training:model-list")).text
-    rows = {name: re.search(rf'>{name}</a>.*?</tr>', page, re.S).group(0)
-            for name in ("waiting", "running", "done")}  # fmt: skip
+    rows = {
+        name: re.search(rf">{name}</a>.*?</tr>", page, re.S).group(0)
+        for name in ("waiting", "running", "done")
+    }
     assert "Number 2 in the queue" in rows["waiting"]  # behind bob's
     assert "1:15 used of 60 min, 2 iterations" in rows["running"]
     assert "Completed after 10:00 of 10 min, 12 iterations" in rows["done"]
@@ -111,9 +124,15 @@ def test_a_bad_hyperparameter_is_reported_on_its_field(client, alice, tracks):
 
 
 def test_another_racers_model_is_not_found(client, alice, bob, tracks):
-    model = model_create(owner=bob, settings={
-        "name": "bobs", "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
-    }, validate_reward=False)  # fmt: skip
+    model = model_create(
+        owner=bob,
+        settings={
+            "name": "bobs",
+            "track": "rookie-loop",
+            "reward_function": EXAMPLES[0].source,
+        },
+        validate_reward=False,
+    )
     client.force_login(alice)
     assert client.get(reverse("training:model-detail", args=[model.pk])).status_code == 404
     assert client.post(reverse("training:model-stop", args=[model.pk])).status_code == 404
@@ -122,9 +141,15 @@ def test_another_racers_model_is_not_found(client, alice, bob, tracks):
 
 
 def test_stop_on_a_queued_model_cancels_it(client, alice, tracks):
-    model = model_create(owner=alice, settings={
-        "name": "mine", "track": "rookie-loop", "reward_function": EXAMPLES[0].source,
-    }, validate_reward=False)  # fmt: skip
+    model = model_create(
+        owner=alice,
+        settings={
+            "name": "mine",
+            "track": "rookie-loop",
+            "reward_function": EXAMPLES[0].source,
+        },
+        validate_reward=False,
+    )
     client.force_login(alice)
     response = client.post(reverse("training:model-stop", args=[model.pk]), follow=True)
     assert "Canceled: the model had not started training." in response.text
@@ -142,10 +167,14 @@ def test_the_model_page_shows_its_hyperparameters_as_the_create_form_labels_them
     table = re.search(r"<table [^>]*data-hyperparameters>.*?</table>", page, re.S)[0]
     rows = re.findall(r"<tr><td>([^<]*?) <code.*?<td class=\"num\">(.*?)</td>", table)
     assert rows == [
-        ("Gradient descent batch size", "64"), ("Number of epochs", "10"),
-        ("Learning rate", "1e-5"), ("Entropy", "0.01"), ("Discount factor", "0.999"),
-        ("Loss type", "Mean squared error"), ("Episodes between policy updates", "20"),
-    ]  # fmt: skip
+        ("Gradient descent batch size", "64"),
+        ("Number of epochs", "10"),
+        ("Learning rate", "1e-5"),
+        ("Entropy", "0.01"),
+        ("Discount factor", "0.999"),
+        ("Loss type", "Mean squared error"),
+        ("Episodes between policy updates", "20"),
+    ]
     assert '<tr><td>Maximum training time [min]</td><td class="num">60</td></tr>' in table
     others = re.search(r"<details [^>]*data-other-hyperparameters>.*?</details>", page, re.S)[0]
     assert "<summary>Other DeepRacer settings</summary>" in others

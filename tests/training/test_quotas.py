@@ -53,9 +53,15 @@ def test_a_racer_at_the_model_limit_is_told_to_delete_one(client, alice, tracks)
     assert response.status_code == 400
     assert "You have 1 models, your limit; delete one to make room." in response.text
     with pytest.raises(configuration.Invalid, match="your limit"):
-        model_create(owner=alice, settings={"name": "other", "track": "rookie-loop",
-                     "reward_function": "def reward_function(params):\n    return 1.0\n"},
-                     validate_reward=False)  # fmt: skip
+        model_create(
+            owner=alice,
+            settings={
+                "name": "other",
+                "track": "rookie-loop",
+                "reward_function": "def reward_function(params):\n    return 1.0\n",
+            },
+            validate_reward=False,
+        )
     assert RLModel.objects.filter(owner=alice).count() == 1
 
 
@@ -65,9 +71,12 @@ def test_a_stopped_training_is_billed_the_time_up_to_the_stop_not_its_budget(ali
     RLModel.objects.filter(pk=model.pk).update(max_minutes=60, status=RLModel.Status.TRAINING)
     job = TrainingJob.objects.get(model=model)
     TrainingJob.objects.filter(pk=job.pk).update(
-        status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="trainer:1",
-        training_seconds=5 * 60, clock_at=timezone.now() - timedelta(seconds=4),
-    )  # fmt: skip
+        status=TrainingJob.Status.IN_PROGRESS,
+        attempt=1,
+        lease_owner="trainer:1",
+        training_seconds=5 * 60,
+        clock_at=timezone.now() - timedelta(seconds=4),
+    )
     assert selectors.allowance_for(racer=alice).minutes_left == 40  # it holds its 60 min
 
     stopped = training_stop(job=job)

@@ -142,8 +142,11 @@ def test_a_nan_reward_is_a_test_failure():
 def run_command(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "manage.py", "validate_reward", *args],
-        cwd=ROOT, capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_the_command_prints_json_and_exits_0_when_valid(tmp_path):
@@ -163,9 +166,12 @@ def test_the_command_exits_1_with_the_errors_when_invalid(tmp_path):
     assert result.returncode == 1
     report = json.loads(result.stdout)
     assert report["errors"] == [
-        {"type": "import", "line": 1,
-         "message": "Only math, random, numpy, scipy and shapely may be imported, not os."},
-    ]  # fmt: skip
+        {
+            "type": "import",
+            "line": 1,
+            "message": "Only math, random, numpy, scipy and shapely may be imported, not os.",
+        },
+    ]
 
 
 def test_the_command_names_an_unknown_track(tmp_path):
@@ -199,9 +205,11 @@ class TestTheEditorPage:
 
     @pytest.mark.parametrize(
         ("data", "message"),
-        [({"source": "", "track": "pitlane-oval"}, "Write a reward function first."),
-         ({"source": "x", "track": "monza"}, "Choose a listed track.")],
-    )  # fmt: skip
+        [
+            ({"source": "", "track": "pitlane-oval"}, "Write a reward function first."),
+            ({"source": "x", "track": "monza"}, "Choose a listed track."),
+        ],
+    )
     def test_bad_input_gets_a_clear_message(self, client, alice, tracks, data, message):
         client.force_login(alice)
         response = client.post(reverse("training:reward-validation"), data)
@@ -266,6 +274,9 @@ def test_a_misspelt_get_is_a_warning_naming_the_closest_real_key():
     result = reward_validate(source=source, track="rookie-loop")
     assert result.valid
     assert [(w.line, w.message) for w in result.warnings] == [
-        (2, "params.get('sped') always gives its default, since params has no key 'sped'; "
-            "did you mean 'speed'?"),
-    ]  # fmt: skip
+        (
+            2,
+            "params.get('sped') always gives its default, since params has no key 'sped'; "
+            "did you mean 'speed'?",
+        ),
+    ]

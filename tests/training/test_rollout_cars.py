@@ -23,8 +23,15 @@ def channel():
     channel = JobChannel(redis_client(), job_id=987_701)
     channel.start(attempt=1)
     yield channel
-    channel.client.delete(channel.experience, channel.counts, channel.control, channel.policy,
-                          channel.log, channel.evaluation, channel.reserved)  # fmt: skip
+    channel.client.delete(
+        channel.experience,
+        channel.counts,
+        channel.control,
+        channel.policy,
+        channel.log,
+        channel.evaluation,
+        channel.reserved,
+    )
 
 
 def test_a_worker_of_several_cars_drives_each_version_its_share_and_no_episode_mixes_two(
@@ -37,11 +44,13 @@ def test_a_worker_of_several_cars_drives_each_version_its_share_and_no_episode_m
             channel.push_episode(msgpack.packb({"version": 1, "car": "another's"}), version=1)
         channel.publish(2, b"weights 2", episodes=3)
 
-    sandbox = ScriptedCars({
-        5: lambda: channel.publish(1, b"weights 1", episodes=4),  # the trainer has its 5
-        6: another_worker_completes_version_1,
-        11: channel.request_stop,  # the racer stops the job as version 2's third ends
-    })  # fmt: skip
+    sandbox = ScriptedCars(
+        {
+            5: lambda: channel.publish(1, b"weights 1", episodes=4),  # the trainer has its 5
+            6: another_worker_completes_version_1,
+            11: channel.request_stop,  # the racer stops the job as version 2's third ends
+        }
+    )
     job = SimpleNamespace(model=SimpleNamespace(algorithm="clipped_ppo"))
     why = _drive(sandbox, channel, channel.join(1), job, 0, Unwatched(), Printed())
     assert why == "the training ended"
@@ -53,8 +62,10 @@ def test_a_worker_of_several_cars_drives_each_version_its_share_and_no_episode_m
     pushed = [msgpack.unpackb(payload) for payload in channel.pop_episodes(limit=100)]
     ours = [episode["version"] for episode in pushed if episode["car"] != "another's"]
     assert ours == sandbox.ended == [0] * 5 + [1] * 3 + [2] * 3  # each as it ended
-    counts = {int(version): int(count) for version, count in
-              channel.client.hgetall(channel.counts).items()}  # fmt: skip
+    counts = {
+        int(version): int(count)
+        for version, count in channel.client.hgetall(channel.counts).items()
+    }
     assert counts == {0: 5, 1: 6, 2: 3}
 
 
@@ -86,8 +97,10 @@ def test_two_workers_of_several_cars_start_no_more_episodes_of_a_version_than_wa
         workers = [pool.submit(drive, worker) for worker in range(2)]
         trainer.result(timeout=120)
         assert [worker.result(timeout=30) for worker in workers] == ["the training ended"] * 2
-    started = {version: sum(fleet.started.get(version, 0) for fleet in fleets)
-               for version in range(versions)}  # fmt: skip
+    started = {
+        version: sum(fleet.started.get(version, 0) for fleet in fleets)
+        for version in range(versions)
+    }
     # Both workers drove each version (eight cars each, twenty wanted), and between them
     # started exactly the episodes wanted: none the trainer would drop.
     assert all(sum(fleet.started.values()) > 0 for fleet in fleets)

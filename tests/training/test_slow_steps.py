@@ -36,8 +36,12 @@ def test_a_staff_upload_checks_its_route_file_outside_any_transaction(admin_clie
     track = Track.objects.get(name="club_oval")
     route_checks.clear()
     change = reverse("admin:training_track_change", args=[track.pk])
-    fields = {"display_name": "Club oval", "description": "", "difficulty": "beginner",
-              "counterclockwise": "on"}  # fmt: skip
+    fields = {
+        "display_name": "Club oval",
+        "description": "",
+        "difficulty": "beginner",
+        "counterclockwise": "on",
+    }
     assert admin_client.post(change, fields).status_code == 302
     assert route_checks == [False]
     assert not Track.objects.get(pk=track.pk).clockwise
@@ -49,6 +53,7 @@ def test_slow_steps_refuse_to_run_inside_a_transaction():
         with pytest.raises(SlowStepInTransaction, match="route check"):
             services.track_check(name="inside", route=route, directions=["counterclockwise"])
         with pytest.raises(SlowStepInTransaction, match="validation in the sandbox"):
-            rewards.reward_validate(source="def reward_function(params):\n    return 1.0\n",
-                                    track="rookie-loop")  # fmt: skip
+            rewards.reward_validate(
+                source="def reward_function(params):\n    return 1.0\n", track="rookie-loop"
+            )
     services.track_check(name="outside", route=route, directions=["counterclockwise"])

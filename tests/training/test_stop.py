@@ -40,22 +40,28 @@ def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_
         settings(name="long-update", reward_function=PRINTING), owner=alice, validate_reward=False
     )
     # An update that would take hours: far more epochs than a racer may choose.
-    clean = clean.replace(hyperparameters={
-        **hyperparameters.defaults("clipped_ppo"), **TINY_PPO, "num_epochs": 100_000,
-    })  # fmt: skip
+    clean = clean.replace(
+        hyperparameters={
+            **hyperparameters.defaults("clipped_ppo"),
+            **TINY_PPO,
+            "num_epochs": 100_000,
+        }
+    )
     model = RLModel.objects.create(owner=alice, **clean.row())
     job = TrainingJob.objects.create(model=model)
     tasks.train.delay(job.pk)
     job = wait_for_job(
-        job, lambda j: j.message.endswith("(iteration 1, from 5 episodes)"),
+        job,
+        lambda j: j.message.endswith("(iteration 1, from 5 episodes)"),
         "the first update to begin",
-    )  # fmt: skip
+    )
     # The page tells how far the update has gone, and its time left at the pace so far.
     job = wait_for_job(job, lambda j: "left" in j.message, "the update's first estimate")
     assert re.fullmatch(
         r"Updating the policy: epoch \d+ of 100000, about \d+:\d\d left "
-        r"\(iteration 1, from 5 episodes\)", job.message,
-    )  # fmt: skip
+        r"\(iteration 1, from 5 episodes\)",
+        job.message,
+    )
 
     stopping = training_stop(job=job)
     assert stopping.status == TrainingJob.Status.STOPPING
@@ -94,16 +100,21 @@ def test_a_job_deleted_in_the_middle_of_an_update_frees_its_rollout_worker(
     # its rollout worker, waiting for the next policy, must still end and give back its place.
     before = set(sandbox_children())
     clean = configuration.check(settings(name="vanishing"), owner=alice, validate_reward=False)
-    clean = clean.replace(hyperparameters={
-        **hyperparameters.defaults("clipped_ppo"), **TINY_PPO, "num_epochs": 100_000,
-    })  # fmt: skip
+    clean = clean.replace(
+        hyperparameters={
+            **hyperparameters.defaults("clipped_ppo"),
+            **TINY_PPO,
+            "num_epochs": 100_000,
+        }
+    )
     model = RLModel.objects.create(owner=alice, **clean.row())
     job = TrainingJob.objects.create(model=model)
     tasks.train.delay(job.pk)
     wait_for_job(
-        job, lambda j: j.message.endswith("(iteration 1, from 5 episodes)"),
+        job,
+        lambda j: j.message.endswith("(iteration 1, from 5 episodes)"),
         "the first update to begin",
-    )  # fmt: skip
+    )
     ours = set(sandbox_children()) - before
     assert ours  # this job's rollout, waiting while the trainer learns
 
@@ -119,10 +130,12 @@ def test_an_update_is_abandoned_as_soon_as_it_is_told_to(algorithm):
     env = gymnasium.make(simulator.ENV_ID, track="pitlane-oval", **settings)
     values = {**hyperparameters.defaults(algorithm), "batch_size": 32}
     learner = Learner(
-        algorithm=algorithm, hyperparameters=values,
+        algorithm=algorithm,
+        hyperparameters=values,
         architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-        observation_space=env.observation_space, action_space=env.action_space,
-    )  # fmt: skip
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+    )
     asked = []
 
     def interrupted() -> bool:  # the trainer's look at the stop request

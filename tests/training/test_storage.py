@@ -40,8 +40,11 @@ def s3_server() -> Iterator[str]:
 def bucket(s3_server, settings, monkeypatch):
     """Artifacts in an S3 bucket, configured as production configures one; a boto3 client for
     looking at the bucket directly."""
-    for name, value in (("AWS_ACCESS_KEY_ID", "testing"), ("AWS_SECRET_ACCESS_KEY", "testing"),
-                        ("AWS_DEFAULT_REGION", "us-east-1")):  # fmt: skip
+    for name, value in (
+        ("AWS_ACCESS_KEY_ID", "testing"),
+        ("AWS_SECRET_ACCESS_KEY", "testing"),
+        ("AWS_DEFAULT_REGION", "us-east-1"),
+    ):
         monkeypatch.setenv(name, value)
     client = boto3.client("s3", endpoint_url=s3_server, region_name="us-east-1")
     client.create_bucket(Bucket=BUCKET)
@@ -50,12 +53,17 @@ def bucket(s3_server, settings, monkeypatch):
         "default": {
             "BACKEND": "storages.backends.s3.S3Storage",
             "OPTIONS": {
-                "bucket_name": BUCKET, "region_name": "us-east-1", "endpoint_url": s3_server,
-                "default_acl": None, "querystring_auth": True, "querystring_expire": 300,
-                "signature_version": "s3v4", "file_overwrite": True,
+                "bucket_name": BUCKET,
+                "region_name": "us-east-1",
+                "endpoint_url": s3_server,
+                "default_acl": None,
+                "querystring_auth": True,
+                "querystring_expire": 300,
+                "signature_version": "s3v4",
+                "file_overwrite": True,
             },
         },
-    }  # fmt: skip
+    }
     yield client
     for item in client.list_objects_v2(Bucket=BUCKET).get("Contents", []):
         client.delete_object(Bucket=BUCKET, Key=item["Key"])
@@ -72,9 +80,14 @@ def test_a_models_files_live_under_its_prefix_in_the_bucket(alice, tracks, bucke
     assert type(default_storage._wrapped).__name__ == "S3Storage"
     assert keys(bucket, f"models/{model.pk}/") == [
         f"models/{model.pk}/{name}"
-        for name in ("checkpoints/iteration-1.safetensors", "hyperparameters.json",
-                     "model_metadata.json", "reward_function.py", "training_params.yaml")
-    ]  # fmt: skip
+        for name in (
+            "checkpoints/iteration-1.safetensors",
+            "hyperparameters.json",
+            "model_metadata.json",
+            "reward_function.py",
+            "training_params.yaml",
+        )
+    ]
     artifacts.save(model, "metrics/training_metrics.json", '{"metrics": []}')
     artifacts.save(model, "metrics/training_metrics.json", '{"metrics": [1]}')  # replaced
     assert artifacts.read(artifacts.path(model, "metrics/training_metrics.json")) == (

@@ -47,8 +47,11 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     rows = list(Iteration.objects.filter(job=job).order_by("number"))
     assert [row.number for row in rows[:2]] == [1, 2]
     assert all(row.episodes >= 5 and row.steps > 0 for row in rows)
-    wait_for(lambda: Iteration.objects.filter(job=job, evaluation_completion__isnull=False)
-             .exists(), "an evaluation after an update", timeout=120)  # fmt: skip
+    wait_for(
+        lambda: Iteration.objects.filter(job=job, evaluation_completion__isnull=False).exists(),
+        "an evaluation after an update",
+        timeout=120,
+    )
     evaluated = Iteration.objects.filter(job=job, evaluation_completion__isnull=False).first()
     assert evaluated.evaluation_seconds > 0 and len(evaluated.evaluation_points) == 5
 
@@ -124,15 +127,30 @@ def test_evaluations_that_come_after_the_next_update_mark_their_own_checkpoint_b
     job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     run = trainer.Trainer(job, start_rollouts=lambda *args: None)
     for number in (1, 2):
-        Iteration.objects.create(job=job, number=number, reward=1.0, completion=10.0,
-                                 episodes=5, steps=50, wall_seconds=1.0)  # fmt: skip
+        Iteration.objects.create(
+            job=job,
+            number=number,
+            reward=1.0,
+            completion=10.0,
+            episodes=5,
+            steps=50,
+            wall_seconds=1.0,
+        )
 
     def results(version: int, progress: float, count: int) -> None:
         for _ in range(count):
-            run.channel.push_evaluation(msgpack.packb(
-                {"version": version, "progress": progress, "lap_time": None,
-                 "status": "off_track", "steps": 30, "seconds": 0.5}
-            ))  # fmt: skip
+            run.channel.push_evaluation(
+                msgpack.packb(
+                    {
+                        "version": version,
+                        "progress": progress,
+                        "lap_time": None,
+                        "status": "off_track",
+                        "steps": 30,
+                        "seconds": 0.5,
+                    }
+                )
+            )
 
     results(1, 80.0, 3)
     results(2, 40.0, 5)
@@ -155,16 +173,30 @@ def test_of_checkpoints_that_evaluate_alike_the_newer_is_best_as_in_deepracer(al
     job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     run = trainer.Trainer(job, start_rollouts=lambda *args: None)
     for number in (1, 2, 3):
-        Iteration.objects.create(job=job, number=number, reward=1.0, completion=10.0,
-                                 episodes=5, steps=50, wall_seconds=1.0)  # fmt: skip
+        Iteration.objects.create(
+            job=job,
+            number=number,
+            reward=1.0,
+            completion=10.0,
+            episodes=5,
+            steps=50,
+            wall_seconds=1.0,
+        )
 
     def results(version: int, progress: float, lap_time: float | None) -> None:
         for _ in range(5):
-            run.channel.push_evaluation(msgpack.packb(
-                {"version": version, "progress": progress, "lap_time": lap_time,
-                 "status": "lap_complete" if lap_time else "off_track", "steps": 30,
-                 "seconds": 0.5}
-            ))  # fmt: skip
+            run.channel.push_evaluation(
+                msgpack.packb(
+                    {
+                        "version": version,
+                        "progress": progress,
+                        "lap_time": lap_time,
+                        "status": "lap_complete" if lap_time else "off_track",
+                        "steps": 30,
+                        "seconds": 0.5,
+                    }
+                )
+            )
 
     results(2, 100.0, 7.5)
     results(1, 100.0, 7.0)  # faster, but older and recorded later
@@ -177,8 +209,9 @@ def test_of_checkpoints_that_evaluate_alike_the_newer_is_best_as_in_deepracer(al
     # A resumed trainer picks among all the job's evaluated iterations, not only its own.
     resumed = trainer.Trainer(reload(job), start_rollouts=lambda *args: None)
     resumed._recall_progress()
-    Iteration.objects.create(job=job, number=4, reward=1.0, completion=10.0,
-                             episodes=5, steps=50, wall_seconds=1.0)  # fmt: skip
+    Iteration.objects.create(
+        job=job, number=4, reward=1.0, completion=10.0, episodes=5, steps=50, wall_seconds=1.0
+    )
     results(4, 90.0, None)
     resumed._take_evaluations()
     assert reload(job).best_checkpoint.endswith(artifacts.checkpoint(3))
@@ -192,18 +225,34 @@ def test_the_models_best_checkpoint_metric_picks_the_best_as_dr_train_best_model
     progress (all 100%) the newer would be."""
     job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     for number in (1, 2):
-        Iteration.objects.create(job=job, number=number, reward=1.0, completion=10.0,
-                                 episodes=5, steps=50, wall_seconds=1.0)  # fmt: skip
+        Iteration.objects.create(
+            job=job,
+            number=number,
+            reward=1.0,
+            completion=10.0,
+            episodes=5,
+            steps=50,
+            wall_seconds=1.0,
+        )
     picked = {}
     for metric in ("laptime", "reward", "progress"):
         RLModel.objects.filter(pk=job.model_id).update(best_checkpoint_by=metric)
         run = trainer.Trainer(reload(job), start_rollouts=lambda *args: None)
         for version, lap_time, reward in ((1, 7.0, 50.0), (2, 7.5, 80.0)):
             for _ in range(5):
-                run.channel.push_evaluation(msgpack.packb(
-                    {"version": version, "progress": 100.0, "lap_time": lap_time,
-                     "reward": reward, "status": "lap_complete", "steps": 105, "seconds": 0.5}
-                ))  # fmt: skip
+                run.channel.push_evaluation(
+                    msgpack.packb(
+                        {
+                            "version": version,
+                            "progress": 100.0,
+                            "lap_time": lap_time,
+                            "reward": reward,
+                            "status": "lap_complete",
+                            "steps": 105,
+                            "seconds": 0.5,
+                        }
+                    )
+                )
         run._take_evaluations()
         picked[metric] = artifacts.checkpoint_iteration(reload(job).best_checkpoint)
         metrics = json.loads(artifacts.read(artifacts.path(job.model, artifacts.TRAINING_METRICS)))
@@ -287,9 +336,15 @@ class TestSettings:
         assert clean.hyperparameters["loss_type"] == stored
 
     def test_deepracers_keys_pitlane_does_not_use_are_kept_with_the_model(self, alice, tracks):
-        kept = {"stack_size": 2, "exploration_type": "E-Greedy", "e_greedy_value": 0.1,
-                "epsilon_steps": 5000, "term_cond_max_episodes": 1000,
-                "term_cond_avg_score": 350.0, "sac_alpha": 0.3}  # fmt: skip
+        kept = {
+            "stack_size": 2,
+            "exploration_type": "E-Greedy",
+            "e_greedy_value": 0.1,
+            "epsilon_steps": 5000,
+            "term_cond_max_episodes": 1000,
+            "term_cond_avg_score": 350.0,
+            "sac_alpha": 0.3,
+        }
         model = model_create(
             owner=alice, settings=settings(hyperparameters=kept), validate_reward=False
         )
@@ -300,8 +355,9 @@ class TestSettings:
             "exploration_type": "e-greedy",
         }
         # A new model has DeepRacer's defaults (discount 0.999 as simapp falls back to) for all.
-        defaults = configuration.check(settings(name="new", hyperparameters={}), owner=alice,
-                                       validate_reward=False).hyperparameters  # fmt: skip
+        defaults = configuration.check(
+            settings(name="new", hyperparameters={}), owner=alice, validate_reward=False
+        ).hyperparameters
         assert defaults["discount_factor"] == 0.999 and defaults["stack_size"] == 1
         assert defaults["term_cond_avg_score"] == 100000 and "sac_alpha" not in defaults
 
@@ -326,8 +382,9 @@ class TestSettings:
         continuous = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 1, "high": 2}}
         clean = configuration.check(
             settings(algorithm="sac", action_space=continuous, hyperparameters={}),
-            owner=alice, validate_reward=False,
-        )  # fmt: skip
+            owner=alice,
+            validate_reward=False,
+        )
         assert clean.hyperparameters["sac_alpha"] == 0.2
         assert clean.action_space_type == "continuous"
 
@@ -343,8 +400,7 @@ class TestSettings:
         source = model_create(owner=alice, settings=settings(), validate_reward=False)
         RLModel.objects.filter(pk=source.pk).update(status=RLModel.Status.READY)
         source.refresh_from_db()
-        errors = self.errors(alice, name="clone", cloned_from=source,
-                             sensors=["STEREO_CAMERAS"])  # fmt: skip
+        errors = self.errors(alice, name="clone", cloned_from=source, sensors=["STEREO_CAMERAS"])
         assert "A clone keeps its source's sensors (FRONT_FACING_CAMERA)" in errors["sensors"]
 
     def test_a_reward_function_that_fails_validation_is_refused_with_its_line(self, alice, tracks):
@@ -361,8 +417,9 @@ class TestSettings:
 def test_the_createmodel_command_creates_a_queued_model(alice, tracks, tmp_path, capsys):
     (tmp_path / "model.yaml").write_text("name: from-yaml\ntrack: rookie-loop\nmax_minutes: 30\n")
     (tmp_path / "reward.py").write_text(EXAMPLES[1].source)
-    call_command("createmodel", config=tmp_path / "model.yaml", reward=tmp_path / "reward.py",
-                 owner="alice")  # fmt: skip
+    call_command(
+        "createmodel", config=tmp_path / "model.yaml", reward=tmp_path / "reward.py", owner="alice"
+    )
     model = RLModel.objects.get(name="from-yaml")
     assert (model.max_minutes, model.jobs.get().status) == (30, "QUEUED")
     assert "its training is queued" in capsys.readouterr().out
@@ -385,9 +442,12 @@ def test_creating_a_model_validates_its_reward_function_before_any_transaction(
     assert model.jobs.get().status == TrainingJob.Status.QUEUED
 
     with pytest.raises(configuration.Invalid) as invalid:
-        model_create(owner=alice, settings=settings(
-            name="refused", reward_function="def reward_function(params):\n    return 'fast'\n"
-        ))  # fmt: skip
+        model_create(
+            owner=alice,
+            settings=settings(
+                name="refused", reward_function="def reward_function(params):\n    return 'fast'\n"
+            ),
+        )
     assert in_transaction == [False, False]
     assert "reward_function" in invalid.value.errors
     assert not RLModel.objects.filter(name="refused").exists()
@@ -401,19 +461,33 @@ def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
     clean = configuration.check(settings(name="resumed"), owner=alice, validate_reward=False)
     model = RLModel.objects.create(owner=alice, status=RLModel.Status.TRAINING, **clean.row())
     env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-    learner = Learner(algorithm=model.algorithm, hyperparameters=model.hyperparameters,
-                      architecture=model.architecture, observation_space=env.observation_space,
-                      action_space=env.action_space)  # fmt: skip
+    learner = Learner(
+        algorithm=model.algorithm,
+        hyperparameters=model.hyperparameters,
+        architecture=model.architecture,
+        observation_space=env.observation_space,
+        action_space=env.action_space,
+    )
     checkpoint = artifacts.save(model, "checkpoints/iteration-1.safetensors", learner.checkpoint())
     now = timezone.now()
     job = TrainingJob.objects.create(
-        model=model, status=TrainingJob.Status.IN_PROGRESS, attempt=1, lease_owner="dead:1",
-        lease_expires=now - timedelta(seconds=1), started_at=now - timedelta(minutes=1),
-        training_seconds=30, weights_version=1, iterations=1, episodes=5, steps=100,
-        last_checkpoint=checkpoint, best_checkpoint=checkpoint,
-    )  # fmt: skip
-    Iteration.objects.create(job=job, number=1, reward=1, completion=5, episodes=5, steps=100,
-                             wall_seconds=1)  # fmt: skip
+        model=model,
+        status=TrainingJob.Status.IN_PROGRESS,
+        attempt=1,
+        lease_owner="dead:1",
+        lease_expires=now - timedelta(seconds=1),
+        started_at=now - timedelta(minutes=1),
+        training_seconds=30,
+        weights_version=1,
+        iterations=1,
+        episodes=5,
+        steps=100,
+        last_checkpoint=checkpoint,
+        best_checkpoint=checkpoint,
+    )
+    Iteration.objects.create(
+        job=job, number=1, reward=1, completion=5, episodes=5, steps=100, wall_seconds=1
+    )
 
     tasks.train.delay(job.pk)  # the redelivered task
     job = wait_for_job(job, lambda j: j.iterations >= 2, "an update after resuming")

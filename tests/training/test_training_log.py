@@ -133,8 +133,15 @@ def test_the_log_panel_alone_is_its_owners_lines_in_time_order(client, alice, bo
     client.force_login(alice)
     panel = client.get(url).text
     assert "<html" not in panel and "data-log" in panel
-    said = [panel.index(text) for text in ("Training started", "driving Pitlane", "progress 12.5",
-                                           "Iteration 1: 5 episodes")]  # fmt: skip
+    said = [
+        panel.index(text)
+        for text in (
+            "Training started",
+            "driving Pitlane",
+            "progress 12.5",
+            "Iteration 1: 5 episodes",
+        )
+    ]
     assert said == sorted(said)
     only_prints = client.get(url, {"log": "reward"}).text
     assert only_prints.count('data-source="') == 1 and 'data-source="reward"' in only_prints

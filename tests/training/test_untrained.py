@@ -92,11 +92,16 @@ def test_it_cannot_be_cloned(alice):
     model = stopped_before_its_first_update(alice)
     with pytest.raises(configuration.Invalid) as refused:
         services.model_create(
-            owner=alice, validate_reward=False,
-            settings={"name": "its-clone", "track": "pitlane-oval", "cloned_from": model,
-                      "reward_function": model.reward_function,
-                      "action_space": model.action_space},
-        )  # fmt: skip
+            owner=alice,
+            validate_reward=False,
+            settings={
+                "name": "its-clone",
+                "track": "pitlane-oval",
+                "cloned_from": model,
+                "reward_function": model.reward_function,
+                "action_space": model.action_space,
+            },
+        )
     assert "no trained weights to clone" in str(refused.value.errors)
 
 

@@ -21,9 +21,10 @@ class Command(BaseCommand):
         parser.add_argument("--track", help="a built-in track (default: the model's own)")
         parser.add_argument("--direction", choices=["counterclockwise", "clockwise"])
         parser.add_argument(
-            "--race-type", choices=["TIME_TRIAL", "OBJECT_AVOIDANCE", "HEAD_TO_BOT"],
+            "--race-type",
+            choices=["TIME_TRIAL", "OBJECT_AVOIDANCE", "HEAD_TO_BOT"],
             default="TIME_TRIAL",
-        )  # fmt: skip
+        )
         parser.add_argument("--boxes", type=int, help="boxes, for OBJECT_AVOIDANCE")
         parser.add_argument("--bots", type=int, help="bot cars, for HEAD_TO_BOT")
         parser.add_argument("--trials", type=int, default=3, help="3 to 5 (default 3)")
@@ -31,21 +32,25 @@ class Command(BaseCommand):
         parser.add_argument("--off-track-penalty", type=float, default=2.0, help="[s]")
         parser.add_argument("--crash-penalty", type=float, default=5.0, help="[s]")
         parser.add_argument(
-            "--max-resets", type=int, default=sim.DEFAULT_MAX_RESETS,
+            "--max-resets",
+            type=int,
+            default=sim.DEFAULT_MAX_RESETS,
             help="resets a trial may use before it ends (default 100; -1: no limit)",
-        )  # fmt: skip
+        )
         parser.add_argument("--checkpoint", choices=["best", "last"], default="best")
         parser.add_argument(
-            "--randomise", action="store_true",
+            "--randomise",
+            action="store_true",
             help="each trial in a randomised scene (domain randomisation), whatever the model "
             "trained in",
-        )  # fmt: skip
+        )
         parser.add_argument(
-            "--seed", type=int,
+            "--seed",
+            type=int,
             help="drive the trials of the evaluation or race entry that had this seed again, "
             "given the same options: the evaluation's, or the event's race rules, track and the "
             "entry's --checkpoint (their pages show the seed); default: a new one",
-        )  # fmt: skip
+        )
 
     def handle(self, *args, **options) -> None:
         model = find_model(options["model"], options["owner"])
@@ -84,18 +89,34 @@ class Command(BaseCommand):
         self.stdout.write(self._table(job))
 
     def _table(self, job: EvaluationJob) -> str:
-        header = ("Trial", "Time", "Completed", "Status", "Off-tracks", "Crashes", "Penalty",
-                  "Resets")  # fmt: skip
+        header = (
+            "Trial",
+            "Time",
+            "Completed",
+            "Status",
+            "Off-tracks",
+            "Crashes",
+            "Penalty",
+            "Resets",
+        )
         rows = [_row(trial) for trial in job.trial_rows.all()]
         widths = [max(len(row[i]) for row in [header, *rows]) for i in range(len(header))]
-        lines = ["  ".join(cell.rjust(width) for cell, width in zip(row, widths, strict=True))
-                 for row in [header, *rows]]  # fmt: skip
+        lines = [
+            "  ".join(cell.rjust(width) for cell, width in zip(row, widths, strict=True))
+            for row in [header, *rows]
+        ]
         lines.append(f"Video, trace and metrics: {job.video.rsplit('/', 1)[0]}/")
         return "\n".join(lines)
 
 
 def _row(trial) -> tuple[str, ...]:
     return (
-        str(trial.number), laptime(trial.time_ms), f"{trial.progress:.1f}%", trial.status,
-        str(trial.off_tracks), str(trial.crashes), laptime(trial.penalty_ms), str(trial.resets),
-    )  # fmt: skip
+        str(trial.number),
+        laptime(trial.time_ms),
+        f"{trial.progress:.1f}%",
+        trial.status,
+        str(trial.off_tracks),
+        str(trial.crashes),
+        laptime(trial.penalty_ms),
+        str(trial.resets),
+    )

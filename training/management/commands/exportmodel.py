@@ -25,9 +25,11 @@ class Command(BaseCommand):
         kind.add_argument("--virtual", action="store_true", help="the archive to train on")
         kind.add_argument("--logs", action="store_true", help="the logs, for log analysis")
         parser.add_argument(
-            "--checkpoint", choices=["best", "last"], default="best",
+            "--checkpoint",
+            choices=["best", "last"],
+            default="best",
             help="which checkpoint goes on the car or into ONNX (default: best)",
-        )  # fmt: skip
+        )
         parser.add_argument("-o", "--output", help="where to write it (default: its own name)")
 
     def handle(self, *args, **options) -> None:

@@ -17,8 +17,9 @@ class Command(BaseCommand):
     def add_arguments(self, parser) -> None:
         parser.add_argument("file", type=Path, help="the reward function's Python file")
         parser.add_argument("--track", default="rookie-loop", help="a built-in track's name")
-        parser.add_argument("--direction", default="counterclockwise",
-                            choices=["counterclockwise", "clockwise"])  # fmt: skip
+        parser.add_argument(
+            "--direction", default="counterclockwise", choices=["counterclockwise", "clockwise"]
+        )
 
     def handle(self, *args, file: Path, track: str, direction: str, **options) -> None:
         try:
