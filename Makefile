@@ -1,7 +1,7 @@
 # Pitlane: two commands set up everything.
 #   make run   serve the console on http://127.0.0.1:8000 (Redis, a Celery worker and Daphne included)
 #   make test  lint and run the whole test suite against real Redis, Celery, Channels and Chromium
-#   make test-quick  the suite without its browser, cluster and TensorFlow tests: the edit loop
+#   make test-quick  the suite without its browser, cluster, TensorFlow and slow tests: the edit loop
 #   make cluster  serve the console as several machines would (PostgreSQL, Redis, S3, one web, one
 #              training and two simulation machines, each with its own code and var/) on :8000
 #   make device-bundle  fetch into var/device/ what the device machine's bench carries (wheels,
@@ -25,12 +25,14 @@ test: lint
 	@scripts/ensure-system-package.sh postgresql sh -c 'command -v initdb || ls /usr/lib/postgresql/*/bin/initdb'
 	$(BIN)/python -m pytest $(PYTEST_ARGS)
 
-# Not the browser (Chromium), cluster (several machines) nor TensorFlow tests: run `make test`
-# before a commit; this is for the loop between edits.
+# Not the browser (Chromium), cluster (several machines), TensorFlow nor slow tests (marked: each
+# takes seconds, a real worker or a training run): run `make test` before a commit; this is for
+# the loop between edits.
 test-quick: $(VENV)/.test-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	@scripts/ensure-system-package.sh postgresql sh -c 'command -v initdb || ls /usr/lib/postgresql/*/bin/initdb'
-	$(BIN)/python -m pytest -m "not browser and not cluster and not tensorflow" $(PYTEST_ARGS)
+	$(BIN)/python -m pytest -m "not browser and not cluster and not tensorflow and not slow" \
+		$(PYTEST_ARGS)
 
 cluster: $(VENV)/.test-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server

@@ -24,13 +24,17 @@ BROWSER_TESTS = Path(__file__).parent / "browser"
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Browser tests are marked, and run last: the slowest, and the ones that need everything.
-    Tests that take the ``tensorflow`` fixture are marked too (``make test-quick`` leaves them
-    out: TensorFlow takes seconds to load)."""
+    Tests that take the ``tensorflow`` fixture are marked too, and those that need the suite's
+    Celery worker are slow (``make test-quick`` leaves them out: TensorFlow takes seconds to
+    load, the worker to start, and its tasks drive the simulator)."""
     for item in items:
         if item.path.is_relative_to(BROWSER_TESTS):
             item.add_marker(pytest.mark.browser)
-        if "tensorflow" in getattr(item, "fixturenames", ()):
+        fixtures = getattr(item, "fixturenames", ())
+        if "tensorflow" in fixtures:
             item.add_marker(pytest.mark.tensorflow)
+        if "celery_worker_process" in fixtures:
+            item.add_marker(pytest.mark.slow)
     items.sort(key=lambda item: item.path.is_relative_to(BROWSER_TESTS))
 
 

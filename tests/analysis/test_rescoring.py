@@ -42,6 +42,7 @@ def test_a_reward_function_scores_every_recorded_step_with_its_params(alice):
     assert done.log == ["waypoints: 111", "waypoints: 111"]  # printed at each episode's step 2
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("code", "said"),
     [

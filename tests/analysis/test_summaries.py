@@ -74,6 +74,7 @@ def _cells(table) -> dict[tuple[int, int], int]:
     return {(i, j): count for i, line in enumerate(table) for j, count in enumerate(line) if count}
 
 
+@pytest.mark.slow
 def test_a_driven_job_is_summarised_as_deepracer_utils_reads_it(alice, tracks):
     model = new_model(alice, "driven")
     train_on_paper(model)  # two iterations of 4 episodes: laps and straight off the track

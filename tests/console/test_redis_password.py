@@ -40,6 +40,7 @@ def settings_in(var_dir: Path, **env: str) -> str:
     return result.stdout.strip()
 
 
+@pytest.mark.slow
 def test_the_private_redis_url_holds_a_password_generated_once_and_kept(tmp_path):
     url = settings_in(tmp_path)
     kept = tmp_path / "redis_password"
@@ -73,6 +74,7 @@ def supervisor(tmp_path, settings):
         started._stop_children()
 
 
+@pytest.mark.slow
 def test_make_runs_redis_answers_only_with_the_password_which_no_command_line_shows(
     supervisor, settings
 ):

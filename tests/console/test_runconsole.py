@@ -19,6 +19,8 @@ import redis
 from console.workers import live_workers
 from tests.services import ROOT, free_port, parent_of, wait_for
 
+pytestmark = pytest.mark.slow  # each test starts the console: Redis, workers and Daphne
+
 
 def environment(var_dir: Path, port: int, redis_port: int) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("DJANGO_", "PITLANE_"))}

@@ -299,6 +299,7 @@ def test_an_open_event_is_a_time_trial(tracks):
 # Live
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 async def test_a_leaderboard_hears_when_a_submission_is_scored(alice):
     trial = await sync_to_async(event)()
@@ -323,6 +324,7 @@ async def test_a_leaderboard_hears_when_a_submission_is_scored(alice):
     await communicator.disconnect()
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 async def test_a_submission_races_under_the_events_rules_on_a_real_worker(
     alice, celery_worker_process
@@ -369,6 +371,7 @@ def _assert_raced_under_the_rules(pk: int, trial: Event, model: RLModel) -> None
 # The checkpoint that races, and the seed that replays it
 
 
+@pytest.mark.slow
 @pytest.mark.django_db
 def test_a_race_drives_the_checkpoint_chosen_and_keeps_it_and_its_seed(client, alice):
     trial = event(laps_required=1, laps_to_drive=1)

@@ -49,6 +49,7 @@ def leader(race, racer, model: RLModel, score_ms: int) -> Submission:
     return submission
 
 
+@pytest.mark.slow
 def test_a_submission_races_the_leaders_models_and_each_car_keeps_its_own_race(
     client, tracks, pros, django_capture_on_commit_callbacks
 ):
@@ -104,6 +105,7 @@ def test_a_submission_races_the_leaders_models_and_each_car_keeps_its_own_race(
     assert race.submissions.filter(racer=carol).count() == 1
 
 
+@pytest.mark.slow
 def test_a_live_turn_puts_the_next_racers_on_the_grid_and_scores_each(tracks, pros, stella):
     alice, bob, carol = pros
     race = event("Live heads", division=Division.PRO, cars=2, **ONE_LAP)

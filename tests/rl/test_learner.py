@@ -35,6 +35,7 @@ def value_weights(learner: Learner) -> dict[str, torch.Tensor]:
     }
 
 
+@pytest.mark.slow
 def test_the_advantages_are_standardised_over_the_whole_batch_unless_told_not_to(env):
     first_losses = {}
     for normalise in (True, False):
@@ -50,6 +51,7 @@ def test_the_advantages_are_standardised_over_the_whole_batch_unless_told_not_to
     assert abs(first_losses[False, 10.0]) > 5 * abs(first_losses[False, 1.0]) > 0
 
 
+@pytest.mark.slow
 def test_a_value_clip_range_holds_the_values_the_loss_sees_near_the_rollouts(env):
     # The rollout's values are 100 above the network's: clipped to 0.2 of them, the loss sees
     # constants and the value network gets no gradient; unclipped, it learns.
@@ -70,6 +72,7 @@ def test_a_value_clip_range_holds_the_values_the_loss_sees_near_the_rollouts(env
     )
 
 
+@pytest.mark.slow
 def test_a_target_kl_stops_the_update_before_the_step_that_passes_it(env):
     learner = learner_for(env, num_epochs=3, batch_size=16)
     taken = steps_taken(learner)
@@ -109,6 +112,7 @@ def test_a_checkpoint_says_what_made_it(env):
     learner.restore(learner.checkpoint())  # the metadata is no obstacle to loading
 
 
+@pytest.mark.slow
 def test_building_and_training_a_learner_writes_nothing_outside_the_job(env, tmp_path, monkeypatch):
     # SB3 writes its log to a new SB3-<time> folder in the temporary directory unless told where;
     # a trainer builds a learner per job (and per resume), so they would pile up on the machine.

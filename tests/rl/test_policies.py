@@ -14,6 +14,7 @@ DISCRETE = [{"steering_angle": a, "speed": 1.0} for a in (-30, 0, 30)]
 CONTINUOUS = {"steering_angle": {"low": -30.0, "high": 30.0}, "speed": {"low": 0.5, "high": 2.0}}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("algorithm", "space"),
     [("clipped_ppo", DISCRETE), ("clipped_ppo", CONTINUOUS), ("sac", CONTINUOUS)],

@@ -47,6 +47,7 @@ def child(weights: bytes, *, cars: int, seed: int, start: float = 0.0) -> Iterat
         yield sandbox
 
 
+@pytest.mark.slow
 def test_each_of_several_cars_drives_the_episodes_a_child_of_one_car_would(weights):
     with child(weights, cars=CARS, seed=SEED) as together:
         driven = episodes_by_car(together, EPISODES)
@@ -111,6 +112,7 @@ def fleet_driven(policy: Policy, *, together: bool) -> tuple[list, int, int]:
         process.stop()
 
 
+@pytest.mark.slow
 def test_a_fleet_asks_the_reward_process_once_a_step_for_all_its_cars_and_drives_the_same_episodes(
     policy,
 ):
@@ -147,6 +149,7 @@ return 1.0
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("cars", "car", "failing", "kind", "message", "named"),
     [
@@ -177,6 +180,7 @@ def test_a_reward_function_that_fails_in_one_of_several_cars_fails_with_its_reas
     assert (failure.step, failure.status) == (3, "in_progress")
 
 
+@pytest.mark.slow
 def test_a_step_of_four_cars_each_call_near_its_limit_is_not_late(weights, monkeypatch):
     # One request a step for the four cars' calls, each 0.4 s under a limit of 0.5 s: the
     # worker waits for a whole step (at the first and the second), not for one call.
@@ -199,6 +203,7 @@ def test_the_racers_code_gets_the_same_memory_however_many_cars_its_worker_drive
         assert_stopped(result, "memory", "ran out of memory")
 
 
+@pytest.mark.slow
 def test_a_module_whose_top_level_takes_most_of_the_call_limit_loads_for_three_cars(monkeypatch):
     # Each car's copy of the module runs within the call's limit (1 s); the worker waits for
     # the three, not for one (a grace shortened here to keep the test short).
@@ -226,6 +231,7 @@ def test_an_episode_the_child_sends_out_of_protocol_is_a_protocol_failure(reply,
     assert message in str(failed.value)
 
 
+@pytest.mark.slow
 def test_the_live_view_shows_the_lowest_numbered_car_that_drives_with_the_workers_episode():
     frames: list[dict] = []
     policy = {**POLICY, "seed": SEED}

@@ -88,6 +88,7 @@ def test_connecting_to_a_listening_socket_is_refused():
             listener.accept()  # nothing came in
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "attack",
     [
@@ -147,6 +148,7 @@ def test_a_loop_that_blocks_the_alarm_is_killed_from_outside():
     assert_stopped(result, "timeout", "took longer than 0.5 s", "stopped")
 
 
+@pytest.mark.slow
 def test_numpy_file_loading_and_ctypes_libraries_are_refused(tmp_path):
     (tmp_path / "libevil.so").write_bytes(b"\x7fELF not really")
     for body in (
@@ -176,6 +178,7 @@ def test_an_exception_is_reported_with_its_line():
     assert_stopped(result, "exception", "line 3", "ZeroDivisionError: division by zero")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("value", "message"),
     [("float('nan')", "finite number"), ("'fast'", "str 'fast', not a number"),
@@ -198,6 +201,7 @@ def test_code_without_a_reward_function_is_reported():
     )
 
 
+@pytest.mark.slow
 def test_an_episode_runs_the_simulator_and_the_reward_inside_the_sandbox():
     with driving({"track": "pitlane-oval"}) as sandbox:
         sandbox.load(reward("return 1.0 if params['all_wheels_on_track'] else 0.0"))
@@ -213,6 +217,7 @@ def test_an_episode_runs_the_simulator_and_the_reward_inside_the_sandbox():
 CRASH = "ctypes.cast(ctypes.c_void_p(8), ctypes.POINTER(ctypes.c_long)).contents.value"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("failing", "expected"),
     [
@@ -246,6 +251,7 @@ BOXES = {
 }
 
 
+@pytest.mark.slow
 def test_a_rollouts_car_sees_boxes_through_pybullet_in_the_sealed_child():
     # PyBullet is connected before the child seals: it can open no file after.
     with Sandbox(env=BOXES, policy=POLICY, memory_allowance=1024 * MiB) as sandbox:
@@ -259,6 +265,7 @@ def test_a_rollouts_car_sees_boxes_through_pybullet_in_the_sealed_child():
             pytest.fail("no box seen in 20 episodes")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "sensors",
     [["FRONT_FACING_CAMERA"], ["FRONT_FACING_CAMERA", "LIDAR"]],

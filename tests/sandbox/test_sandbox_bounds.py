@@ -67,6 +67,7 @@ def forged(message: dict) -> str:
     return repr(pack(message))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("before", "during", "kind"),
     [
@@ -115,6 +116,7 @@ def reward_process(source: str, cars: int) -> Iterator[RewardProcess]:
         process.stop()
 
 
+@pytest.mark.slow
 def test_a_step_of_four_cars_each_near_its_limit_passes_and_each_cars_prints_arrive():
     # The time limit is per call: four calls of 0.3 s (1.2 s in all) in one step, under a
     # limit of 0.5 s each, are not late.
@@ -130,6 +132,7 @@ def test_a_step_of_four_cars_each_near_its_limit_passes_and_each_cars_prints_arr
     assert (lines, dropped) == (["car 0.0", "car 1.0", "car 2.0", "car 3.0"], 0)
 
 
+@pytest.mark.slow
 def test_a_call_that_outlives_its_alarm_in_one_of_four_cars_is_stopped_by_its_own_deadline():
     # Car 2 catches its alarm and returns 1 s late: within the deadline of a step of four
     # calls, past its own call's. Each car's reply is due by its own call's deadline.
@@ -182,6 +185,7 @@ def test_a_frame_over_the_size_limit_gets_the_process_killed():
     assert took < DEADLINE + SLACK
 
 
+@pytest.mark.slow
 def test_an_endless_line_on_standard_error_costs_the_worker_nothing():
     # About 1 GB written without a newline; read by lines, the worker once kept all of it.
     source = reward("os.write(2, b'x' * 50_000_000)\nreturn 1.0", head="import os\n")

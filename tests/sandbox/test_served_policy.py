@@ -50,6 +50,7 @@ def torch_loaded(sandbox: Sandbox) -> bool:
         return "libtorch" in maps.read()
 
 
+@pytest.mark.slow
 def test_a_child_whose_policy_is_served_drives_the_episodes_one_holding_it_would_without_torch(
     weights,
 ):
@@ -71,6 +72,7 @@ def test_a_child_whose_policy_is_served_drives_the_episodes_one_holding_it_would
                 assert np.allclose(array(got, name), array(want, name), rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_the_time_the_worker_takes_over_the_policy_is_not_counted_against_the_reward_function(
     weights, monkeypatch
 ):
@@ -90,6 +92,7 @@ def test_the_time_the_worker_takes_over_the_policy_is_not_counted_against_the_re
     assert msgpack.unpackb(reply["payload"])["steps"] > 1
 
 
+@pytest.mark.slow
 def test_a_policy_that_gives_no_answer_fails_the_worker_in_words_rather_than_hang(
     weights, monkeypatch
 ):
@@ -107,6 +110,7 @@ def test_a_policy_that_gives_no_answer_fails_the_worker_in_words_rather_than_han
     )
 
 
+@pytest.mark.slow
 def test_a_child_left_without_an_answer_gives_up_and_says_so_rather_than_wait_for_ever(
     weights, monkeypatch
 ):

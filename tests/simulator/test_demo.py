@@ -3,6 +3,7 @@ import subprocess
 import sys
 
 import cv2
+import pytest
 
 from tests.services import ROOT
 
@@ -37,6 +38,7 @@ def test_the_demo_drives_a_lap_and_writes_the_spectator_video(tmp_path):
     video.release()
 
 
+@pytest.mark.slow
 def test_the_demo_shows_a_hairpin_taken_too_fast_and_the_braking_that_takes_it(tmp_path):
     too_fast = demo("--track", "hairpin-alley", "--speed", "3", "--out", str(tmp_path / "a.mp4"))
     assert too_fast.returncode == 0, too_fast.stderr

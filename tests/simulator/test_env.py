@@ -109,6 +109,7 @@ LAPS = [
 ] + DEEPRACER_LAPS
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "direction"), LAPS, ids=[f"{n}-{d}" for n, d in LAPS])
 def test_the_scripted_driver_laps_every_track_in_the_time_its_speed_predicts(
     environments, name, direction

@@ -179,6 +179,7 @@ def test_built_in_tracks_are_read_only_in_the_admin(admin_client, tracks):
     assert admin_client.post(delete, {"post": "yes"}).status_code == 403
 
 
+@pytest.mark.slow
 def test_a_model_on_an_added_track_validates_its_reward_and_drives_it_in_the_sandbox(
     client, alice, tracks
 ):

@@ -35,6 +35,7 @@ def train_in_a_thread(job: TrainingJob, start_rollouts) -> threading.Thread:
     return thread
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 def test_a_job_waiting_for_a_simulation_worker_is_billed_from_when_its_car_drives(
     client, alice, tracks, celery_worker_process
@@ -145,6 +146,7 @@ def test_a_job_no_simulation_worker_takes_fails_unbilled_rather_than_hold_its_tr
     assert (job.training_seconds, job.iterations) == (0, 0)
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 def test_a_jobs_clock_stops_while_no_car_drives_and_starts_again_when_one_does(
     alice, tracks, settings, monkeypatch

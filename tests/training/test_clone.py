@@ -86,6 +86,7 @@ def test_a_clone_of_a_checkpoint_that_is_neither_best_nor_last_is_refused(alice,
     assert not RLModel.objects.filter(name="straight-ahead-clone").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("settings", [
     {},
     {"algorithm": "sac", "hyperparameters": {}, "race_type": "OBJECT_AVOIDANCE",
@@ -112,6 +113,7 @@ def test_a_clone_posted_as_the_page_shows_it_has_every_setting_of_its_source(
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
@@ -144,6 +146,7 @@ def test_only_a_ready_model_of_ones_own_can_be_cloned(alice, bob, tracks, client
     assert "Only a ready model can be cloned." in response.text
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 def test_the_clones_training_starts_from_those_weights(alice, tracks, celery_worker_process):
     source = ready_model(alice)

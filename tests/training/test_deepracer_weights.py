@@ -241,6 +241,7 @@ def test_a_car_archive_comes_in_to_evaluate_and_race_but_not_to_train(
     assert evaluation.model == model  # (evaluations need no reward function: test_evaluation)
 
 
+@pytest.mark.slow
 def test_our_car_download_comes_back_as_the_same_policy(alice, bob, tracks):
     original = ready_model(alice)
     with artifacts.default_storage.open(exports.physical(original).name, "rb") as file:

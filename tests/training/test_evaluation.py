@@ -50,6 +50,7 @@ def decoded_frames(data: bytes) -> tuple[int, tuple[int, int]]:
     return count, size
 
 
+@pytest.mark.slow
 @pytest.mark.django_db
 def test_the_evaluate_command_prints_the_results_and_records_every_step(alice, capsys):
     model = ready_model(alice)
@@ -162,6 +163,7 @@ def test_evaluation_settings_are_checked_as_a_whole(alice):
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 async def test_an_evaluation_runs_on_a_worker_with_live_video_and_its_page_shows_it(
     alice, bob, celery_worker_process
@@ -283,6 +285,7 @@ def test_the_evaluate_page_keeps_what_was_typed_and_says_what_to_change(client, 
     assert "once it is ready" in again.content.decode()
 
 
+@pytest.mark.slow
 @pytest.mark.django_db
 def test_an_evaluation_interrupted_by_a_dead_worker_starts_over_and_an_ended_one_never_reruns(
     alice,
@@ -386,6 +389,7 @@ def test_a_run_overtaken_while_it_saves_leaves_the_evaluation_and_its_model_to_t
     assert not alice.notifications.exists()
 
 
+@pytest.mark.slow
 @pytest.mark.django_db
 def test_three_trials_differ_and_the_evaluate_command_replays_them_by_their_seed(alice, capsys):
     model = ready_model(alice)  # straight ahead, off at the first bend: short trials

@@ -33,6 +33,7 @@ def check_stopped_after_its_first_trial(pk: int) -> None:
     assert b"lap_complete" in stored(evaluation, artifacts.EVALUATION_TRACE)
 
 
+@pytest.mark.slow
 @pytest.mark.django_db
 def test_a_stop_asked_during_a_trial_keeps_the_trials_finished(alice, monkeypatch):
     monkeypatch.setattr(jobs, "EVALUATION_STOP_LOOK", 0.0)  # the run looks at every step
@@ -94,6 +95,7 @@ def _event():
     return event()
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 async def test_the_racer_stops_a_running_evaluation_on_a_worker(alice, celery_worker_process):
     model = await sync_to_async(ready_model)(alice)

@@ -110,6 +110,7 @@ def test_the_car_installs_the_archive_and_its_graph_chooses_the_pytorch_policys_
     assert len(set(chosen)) > 1  # the frames are told apart: the comparison means something
 
 
+@pytest.mark.slow
 def test_a_continuous_stereo_lidar_policy_runs_as_onnx_on_onnx_runtime_and_openvino(
     alice, tracks, tmp_path
 ):
@@ -141,6 +142,7 @@ def test_a_continuous_stereo_lidar_policy_runs_as_onnx_on_onnx_runtime_and_openv
             np.testing.assert_allclose(action[0], expected, atol=1e-4)
 
 
+@pytest.mark.slow
 def test_a_model_with_pitlanes_first_networks_goes_to_onnx_but_not_to_the_car(
     alice, tracks, tmp_path
 ):
@@ -161,6 +163,7 @@ def test_a_model_with_pitlanes_first_networks_goes_to_onnx_but_not_to_the_car(
     np.testing.assert_allclose(got, expected, atol=1e-4)
 
 
+@pytest.mark.slow
 def test_the_virtual_model_holds_what_training_elsewhere_needs(alice, tracks, tmp_path):
     model = trained_model(alice, "to-move")
     members = export(tmp_path, model, "--virtual")
@@ -195,6 +198,7 @@ def test_a_model_without_weights_has_nothing_to_download(alice, tracks, tmp_path
     assert '<p class="muted" data-untrained>No downloads: untrained is ' in response.text
 
 
+@pytest.mark.slow
 def test_the_model_page_offers_the_archives_to_its_owner_only(alice, bob, tracks, client):
     model = trained_model(alice, "downloadable")
     client.force_login(alice)
@@ -215,6 +219,7 @@ def test_the_model_page_offers_the_archives_to_its_owner_only(alice, bob, tracks
     assert client.get(reverse("training:model-export-virtual", args=[model.pk])).status_code == 404
 
 
+@pytest.mark.slow
 def test_a_download_holds_the_checkpoint_chosen_best_or_last(alice, tracks):
     model = trained_model(alice, "two-checkpoints")
     later = artifacts.read(

@@ -96,6 +96,7 @@ def test_a_clone_whose_weights_cannot_be_copied_fails_in_words_and_its_source_st
     assert artifacts.read(best)
 
 
+@pytest.mark.slow
 def test_a_trainer_that_finds_no_copy_of_its_clones_weights_makes_it(alice, tracks, monkeypatch):
     # The request that created the clone died before it copied them: the job, sent again by
     # tasks.resend_lost, starts from the source's weights all the same.
@@ -110,6 +111,7 @@ def test_a_trainer_that_finds_no_copy_of_its_clones_weights_makes_it(alice, trac
     assert run.job.log_lines.filter(text__startswith="Starting from the weights").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 def test_a_clones_trainer_stays_unsent_however_long_its_weights_take_and_never_sees_part_of_them(
     alice, tracks, settings, monkeypatch
@@ -189,6 +191,7 @@ def archive_of_a_ready_model(owner) -> bytes:
     return _ARCHIVES[0]
 
 
+@pytest.mark.slow
 def test_an_import_stores_its_files_outside_any_transaction(alice, bob, tracks, storage_writes):
     archive = archive_of_a_ready_model(alice)
     storage_writes.clear()
@@ -199,6 +202,7 @@ def test_an_import_stores_its_files_outside_any_transaction(alice, bob, tracks, 
     assert artifacts.read(model.jobs.get().best_checkpoint)
 
 
+@pytest.mark.slow
 def test_an_import_whose_files_cannot_be_stored_leaves_no_model_and_no_files(
     alice, bob, tracks, monkeypatch
 ):
@@ -235,6 +239,7 @@ def test_a_trainer_saves_each_iterations_checkpoint_outside_its_transaction(
     assert TrainingJob.objects.get(pk=run.job.pk).last_checkpoint == checkpoint
 
 
+@pytest.mark.slow
 def test_an_import_whose_undo_cannot_delete_its_row_still_says_why_it_failed(
     alice, bob, tracks, monkeypatch
 ):

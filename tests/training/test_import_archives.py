@@ -38,6 +38,7 @@ def packed_from_a_folder(archive: bytes, folder) -> bytes:
     return packed.read_bytes()
 
 
+@pytest.mark.slow
 def test_a_model_folder_packed_with_tar_c_folder_dot_imports(alice, bob, tracks, tmp_path):
     data = packed_from_a_folder(virtual_archive(ready_model(alice)), tmp_path / "folder")
     with tarfile.open(fileobj=io.BytesIO(data)) as tar:
@@ -47,6 +48,7 @@ def test_a_model_folder_packed_with_tar_c_folder_dot_imports(alice, bob, tracks,
     assert imported.model.name == "straight-ahead"
 
 
+@pytest.mark.slow
 @CHECKED_IMPORT
 def test_the_import_page_takes_a_folder_packed_with_tar_c_folder_dot(
     alice, tracks, client, tmp_path
@@ -198,6 +200,7 @@ def post_import(client, data: bytes, name: str = ""):
 NOT_AN_ARCHIVE = b"just some notes, not a model"
 
 
+@pytest.mark.slow
 @CHECKED_IMPORT
 def test_refused_imports_do_not_use_up_the_hours_imports(alice, tracks, client, settings):
     settings.PITLANE_RATES = {**settings.PITLANE_RATES, "import": "2/h", "import-refused": "5/h"}

@@ -95,6 +95,7 @@ def labels(model: RLModel) -> list[str]:
     return [choice.label for choice in selectors.model_checkpoint_choices(model=model)]
 
 
+@pytest.mark.slow
 def test_a_virtual_model_comes_back_with_the_same_figures_checkpoints_and_traces(
     alice, bob, tracks, client
 ):
@@ -129,6 +130,7 @@ def members_of(archive: bytes) -> dict[str, bytes]:
         return {member.name: tar.extractfile(member).read() for member in tar}
 
 
+@pytest.mark.slow
 def test_the_archive_keeps_deepracers_files_as_they_are_and_its_traces_where_deepracer_does(
     alice, tracks
 ):
@@ -138,6 +140,7 @@ def test_the_archive_keeps_deepracers_files_as_they_are_and_its_traces_where_dee
     assert json.loads(members[history.EXACT])["checkpoints"] == {"best": 2, "last": 3}
 
 
+@pytest.mark.slow
 def test_an_archive_from_elsewhere_says_on_the_models_page_what_was_rebuilt_and_is_missing(
     alice, bob, tracks, client
 ):
@@ -162,6 +165,7 @@ def test_an_archive_from_elsewhere_says_on_the_models_page_what_was_rebuilt_and_
     )
 
 
+@pytest.mark.slow
 def test_a_damaged_record_falls_back_to_the_metrics_and_traces_past_the_limit_stay_behind(
     alice, bob, tracks, monkeypatch
 ):
@@ -192,6 +196,7 @@ def test_the_archive_fills_its_trace_budget_with_the_newest_training_traces_firs
     assert exports.chosen_traces(model)[-1].relative.endswith("evaluation-simtrace/0-iteration.csv")
 
 
+@pytest.mark.slow
 def test_an_archive_already_built_is_found_without_reading_its_traces(alice, tracks, monkeypatch):
     model = trained_three_iterations(alice)
     built = exports.virtual(model)
@@ -202,6 +207,7 @@ def test_an_archive_already_built_is_found_without_reading_its_traces(alice, tra
     assert read and not [name for name in read if "simtrace" in name]
 
 
+@pytest.mark.slow
 def test_traces_over_the_limit_are_the_newest_iterations_whatever_the_archives_order(
     alice, bob, tracks, monkeypatch
 ):

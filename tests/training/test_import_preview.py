@@ -74,6 +74,7 @@ def test_a_folder_without_weights_is_previewed_and_nothing_is_created_until_conf
     assert not any("trains on rookie-loop" in note for note in model.import_notes)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("changes", "setting", "said"),
     [
@@ -146,6 +147,7 @@ def test_a_car_archive_says_what_it_is_and_keeps_it_with_the_model(alice, bob, t
     assert selectors.job_imported_only(job=imported.model.latest_job)
 
 
+@pytest.mark.slow
 @CHECKED_IMPORT
 def test_a_car_archive_is_shown_as_a_driving_model_without_training_history(
     alice, bob, tracks, client
@@ -178,6 +180,7 @@ def test_a_car_archive_is_shown_as_a_driving_model_without_training_history(
     assert "cannot be cloned" in response.content.decode()
 
 
+@pytest.mark.slow
 @CHECKED_IMPORT
 def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, tracks, client):
     client.force_login(alice)

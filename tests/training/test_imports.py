@@ -52,6 +52,7 @@ def stored_objects() -> set[str]:
     return {str(path.relative_to(root)) for path in root.rglob("*") if path.is_file()}
 
 
+@pytest.mark.slow
 def test_a_virtual_model_imports_ready_with_the_same_weights(alice, bob, tracks, tmp_path):
     original = ready_model(alice)
     archive = tmp_path / "virtualmodel-straight-ahead.tar.gz"
@@ -78,6 +79,7 @@ def test_a_virtual_model_imports_ready_with_the_same_weights(alice, bob, tracks,
     assert out.getvalue().count("lap_complete") == 3
 
 
+@pytest.mark.slow
 @CHECKED_IMPORT
 def test_the_import_page_takes_an_archive_and_a_new_name(alice, tracks, client):
     original = ready_model(alice)
@@ -205,6 +207,7 @@ HOSTILE = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", HOSTILE)
 @CHECKED_IMPORT
 def test_a_bad_archive_is_refused_with_its_reason_and_leaves_nothing(case, alice, tracks, client):
@@ -243,6 +246,7 @@ def test_an_archive_over_the_upload_limit_is_refused_before_it_is_read(alice, cl
     assert "The archive is over" in response.text
 
 
+@pytest.mark.slow
 @CHECKED_IMPORT
 def test_an_imported_virtual_model_keeps_its_training_history(alice, bob, tracks, client):
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(trained_with_history(alice)))
@@ -332,6 +336,7 @@ def test_deepracers_own_metrics_read_as_iterations():
     assert found.seconds == 14.0 and found.episodes == 3
 
 
+@pytest.mark.slow
 def test_a_virtual_model_without_readable_metrics_imports_without_history_and_says_so(
     alice, bob, tracks
 ):
@@ -366,6 +371,7 @@ def test_a_file_that_is_not_an_archive_is_refused_in_a_racers_words(alice, clien
     assert "you uploaded" not in response.text  # a refused file is not kept
 
 
+@pytest.mark.slow
 @CHECKED_IMPORT
 def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
     alice, tracks, client
@@ -406,6 +412,7 @@ def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
     assert response.status_code == 400 and "Choose the model&#x27;s archive" in response.text
 
 
+@pytest.mark.slow
 def test_a_kept_archive_is_another_racers_to_use_never(alice, bob, tracks, client):
     client.force_login(alice)
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(ready_model(alice)))
@@ -441,6 +448,7 @@ LAYOUTS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout", LAYOUTS)
 def test_a_deepracer_model_imports_from_each_layout_with_every_hyperparameter(
     layout, alice, tracks
@@ -685,6 +693,7 @@ def test_every_setting_that_is_not_carried_over_is_listed_on_the_result_page(ali
     assert model.hyperparameters["term_cond_avg_score"] == 350.0
 
 
+@pytest.mark.slow
 def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(alice, bob, tracks):
     original = ready_model(alice)
     stored = {

@@ -137,6 +137,7 @@ async def test_frames_are_binary_with_a_header_and_each_is_released_by_an_ack(al
     await communicator.disconnect()
 
 
+@pytest.mark.slow
 async def test_a_slow_viewer_gets_the_newest_frame_and_never_a_backlog(alice):
     job = await sync_to_async(queued_job)(alice)
     communicator = await watching(job, alice)

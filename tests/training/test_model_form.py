@@ -67,6 +67,7 @@ def test_an_empty_action_table_is_refused_rather_than_replaced_by_the_default(
     assert not RLModel.objects.exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("rows", "index", "columns", "message"),
     [

@@ -72,6 +72,7 @@ def test_a_racer_creates_a_model_and_its_training_is_queued(client, alice, track
     assert "Stop training" in page.text
 
 
+@pytest.mark.slow
 def test_the_model_list_shows_each_models_training_progress(
     client, alice, bob, tracks, django_assert_max_num_queries
 ):

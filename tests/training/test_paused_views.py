@@ -35,6 +35,7 @@ def sandbox():
         yield sandbox
 
 
+@pytest.mark.slow
 def test_a_view_chosen_while_the_car_waits_is_drawn_at_once_as_the_car_stands(sandbox):
     publisher = Publisher()
     viewing = Viewing(sandbox, publisher, worker=0)

@@ -33,6 +33,7 @@ class TestTheServices:
     def test_code_from_a_form_is_kept_with_the_editors_line_endings(self, alice, tracks):
         assert save(alice, source=SPEEDY.replace("\n", "\r\n")).source == SPEEDY
 
+    @pytest.mark.slow
     def test_a_name_is_unique_per_racer_whatever_its_case(self, alice, bob, tracks):
         save(alice, name="Speedy")
         with pytest.raises(RewardFunctionInvalid) as refused:

@@ -20,6 +20,7 @@ def test_the_corpus_has_fifteen_deepracer_style_functions():
     assert len(CORPUS) == 15
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", CORPUS, ids=lambda path: path.stem)
 def test_a_corpus_function_validates(path):
     result = reward_validate(source=path.read_text(), track="rookie-loop")
@@ -28,6 +29,7 @@ def test_a_corpus_function_validates(path):
     assert all(isinstance(sample.reward, float) for sample in result.samples)
 
 
+@pytest.mark.slow
 def test_the_corpus_runs_in_the_simulator_inside_the_sandbox():
     with driving({"track": "s-bend", "race_type": "OBJECT_AVOIDANCE"}) as sandbox:
         for path in CORPUS:
@@ -48,6 +50,7 @@ def test_the_samples_are_made_in_the_sandbox_and_no_simulator_is_built_here(monk
     assert all(sample.reward > 0 for sample in result.samples if sample.situation != "off-track")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("example", EXAMPLES, ids=lambda example: example.slug)
 def test_our_examples_validate(example):
     assert reward_validate(source=example.source, track="clover-loop").valid
@@ -149,6 +152,7 @@ def run_command(*args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
 def test_the_command_prints_json_and_exits_0_when_valid(tmp_path):
     path = tmp_path / "reward.py"
     path.write_text(EXAMPLES[2].source)
@@ -159,6 +163,7 @@ def test_the_command_prints_json_and_exits_0_when_valid(tmp_path):
     assert [sample["situation"] for sample in report["samples"]] == SITUATIONS
 
 
+@pytest.mark.slow
 def test_the_command_exits_1_with_the_errors_when_invalid(tmp_path):
     path = tmp_path / "reward.py"
     path.write_text("import os\ndef reward_function(params):\n    return 1.0\n")
@@ -174,6 +179,7 @@ def test_the_command_exits_1_with_the_errors_when_invalid(tmp_path):
     ]
 
 
+@pytest.mark.slow
 def test_the_command_names_an_unknown_track(tmp_path):
     path = tmp_path / "reward.py"
     path.write_text(EXAMPLES[0].source)

@@ -32,6 +32,7 @@ def reward_function(params):
 """
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_the_stop(
     alice, tracks, celery_worker_process
@@ -92,6 +93,7 @@ def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_
     assert job.log_lines.filter(text__contains="1 simulation worker,").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 def test_a_job_deleted_in_the_middle_of_an_update_frees_its_rollout_worker(
     alice, tracks, celery_worker_process
@@ -123,6 +125,7 @@ def test_a_job_deleted_in_the_middle_of_an_update_frees_its_rollout_worker(
     assert redis_client().hget(JobChannel(redis_client(), job.pk).control, "stop") == b"1"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algorithm", ["clipped_ppo", "sac"])
 def test_an_update_is_abandoned_as_soon_as_it_is_told_to(algorithm):
     continuous = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}}

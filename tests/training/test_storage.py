@@ -97,6 +97,7 @@ def test_a_models_files_live_under_its_prefix_in_the_bucket(alice, tracks, bucke
     assert body.read().decode() == model.reward_function
 
 
+@pytest.mark.slow
 def test_downloads_from_a_bucket_are_short_lived_presigned_urls_for_the_owner(
     alice, bob, tracks, bucket, client
 ):
@@ -125,6 +126,7 @@ def test_downloads_from_a_bucket_are_short_lived_presigned_urls_for_the_owner(
     assert f"/models/{model.pk}/exports/" in export["Location"]
 
 
+@pytest.mark.slow
 def test_deleting_a_model_leaves_nothing_in_the_bucket(alice, tracks, bucket, client):
     model = trained_model(alice, "to-delete")
     other = trained_model(alice, "to-keep")

@@ -15,6 +15,7 @@ from training.models import TrainingJob
 from training.services import model_create, training_stop
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 @pytest.mark.django_db(transaction=True)
 def test_more_jobs_than_trainers_all_train_and_the_one_waiting_is_shown_its_place(

@@ -32,6 +32,7 @@ from training.rewards import EXAMPLES
 from training.services import model_create, training_stop
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     alice, tracks, celery_worker_process
@@ -453,6 +454,7 @@ def test_creating_a_model_validates_its_reward_function_before_any_transaction(
     assert not RLModel.objects.filter(name="refused").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
 def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
     alice, tracks, celery_worker_process
@@ -522,6 +524,7 @@ def test_a_worker_that_outlived_a_redis_restart_neither_miscounts_nor_drives_on(
     assert channel.pop_episodes(limit=10) == [f"new {i}".encode() for i in range(5)]
 
 
+@pytest.mark.slow
 def test_sac_learns_from_random_episodes_driven_in_the_sandbox():
     continuous = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.5, "high": 2}}
     env = gymnasium.make(simulator.ENV_ID, track="pitlane-oval", action_space=continuous)

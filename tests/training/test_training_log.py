@@ -68,6 +68,7 @@ def test_with_several_workers_each_line_says_which_printed_it():
     )
 
 
+@pytest.mark.slow
 def test_the_job_channel_carries_only_worker_and_reward_lines():
     channel = JobChannel(redis_client(), job_id=987_654)
     channel.client.delete(channel.log)
