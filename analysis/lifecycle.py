@@ -4,7 +4,7 @@ write of a status is a move, one conditional UPDATE)."""
 from __future__ import annotations
 
 from analysis.models import Rescoring
-from training.lifecycle import Lifecycle
+from common.lifecycle import Lifecycle
 
 _R = Rescoring.Status
 RESCORING = Lifecycle(

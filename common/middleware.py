@@ -1,5 +1,5 @@
 """A middleware base that is sync and async alike, as every middleware of the site must be: an
-async view (``training.checks``) is then awaited on the server's event loop rather than run in
+async view (``training.checkers``) is then awaited on the server's event loop rather than run in
 one of its threads, and Django never has to adapt a middleware (a test fails if it does)."""
 
 from __future__ import annotations

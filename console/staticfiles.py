@@ -1,7 +1,7 @@
 """WhiteNoise, able to sit in an async middleware chain.
 
 WhiteNoise's middleware is sync-only, and a single sync-only middleware makes Django run every
-view in a thread, ``async`` ones included; the views that await a check (``training.checks``)
+view in a thread, ``async`` ones included; the views that await a check (``training.checkers``)
 would hold a server thread after all. Serving a static file is a lookup and an open, the same in
 either mode; only passing the request on differs.
 """

@@ -20,11 +20,11 @@ from django.contrib.auth.models import AbstractBaseUser
 from django.db import transaction
 from django.db.models import Max
 
+from common.lifecycle import Lifecycle
 from common.refusals import Refused
 from notifications import services as notifications
 from racing import live, selectors, services
 from racing.models import Event, LiveEntry, LiveSession, Submission
-from training.lifecycle import Lifecycle
 from training.models import RLModel
 
 _E = LiveEntry.Status

@@ -22,6 +22,7 @@ from django.utils import timezone
 from django.utils.crypto import get_random_string
 from django.utils.text import slugify
 
+from common.lifecycle import Lifecycle
 from common.refusals import Refused
 from common.transactions import outside_transaction
 from notifications import services as notifications
@@ -38,7 +39,6 @@ from racing.models import (
     Submission,
 )
 from training import services as training_services
-from training.lifecycle import Lifecycle
 from training.models import EvaluationJob, EvaluationTrial, RLModel, Track
 
 logger = logging.getLogger(__name__)

@@ -177,7 +177,7 @@ def check(
     """The settings, complete and typed; ``Invalid`` otherwise, with every problem found.
     Only a model imported without a reward function (to evaluate and race, not to train) is
     checked without ``reward_required``. The reward function is validated here unless
-    ``validation`` is given: its result, found by a checker (``training.checks``) on
+    ``validation`` is given: its result, found by a checker (``training.checkers``) on
     ``reward_sample_track(settings)``, for the same code."""
     errors: dict[str, str] = {}
     clean: dict = {}

@@ -48,7 +48,7 @@ from simulator import head_to_head
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, jobs, lifecycle, live, selectors, signals
+from training import artifacts, leases, lifecycle, live, selectors, signals
 from training.models import EvaluationJob, EvaluationTrial, RLModel
 
 logger = logging.getLogger(__name__)
@@ -138,7 +138,7 @@ def run(evaluation_id: int) -> EvaluationJob | None:
 
     The run holds a lease on the evaluations while it drives (renewed every few seconds), as a
     trainer holds its job's. One that is under way with a lapsed lease lost its worker (the
-    heartbeat's ``jobs.lapsed_evaluations`` sent for this run, or Celery redelivered the task,
+    heartbeat's ``leases.lapsed_evaluations`` sent for this run, or Celery redelivered the task,
     which it acknowledges late): it starts over, so the racer gets a whole evaluation, not half
     of one. One whose lease is alive is a duplicate delivery, and is left to its run.
 
@@ -162,7 +162,7 @@ def run(evaluation_id: int) -> EvaluationJob | None:
     try:
         with _one_torch_thread():
             _race(cars)
-    except jobs.LeaseLost:
+    except leases.LeaseLost:
         logger.warning("Evaluation %s was taken over by another run; this one stops", evaluation_id)
         return None
     except EvaluationFailed as failure:
@@ -177,7 +177,7 @@ def run(evaluation_id: int) -> EvaluationJob | None:
             if car.failure:
                 _finish(car.evaluation, EvaluationJob.Status.FAILED, car.failure)
             elif car.stopped:
-                _finish(car.evaluation, EvaluationJob.Status.CANCELED, jobs.EVALUATION_STOPPED)
+                _finish(car.evaluation, EvaluationJob.Status.CANCELED, leases.EVALUATION_STOPPED)
             else:
                 _finish(car.evaluation, EvaluationJob.Status.COMPLETED)
     return race[0]
@@ -192,7 +192,7 @@ def _claim(evaluation: EvaluationJob | None, owner: str) -> list[EvaluationJob]:
         return []
     now = timezone.now()
     if evaluation.status != EvaluationJob.Status.QUEUED:
-        held = evaluation.lease_owner not in ("", jobs.RESUMING)
+        held = evaluation.lease_owner not in ("", leases.RESUMING)
         if held and evaluation.lease_expires and evaluation.lease_expires > now:
             logger.info("Evaluation %s is being driven by another run", evaluation.pk)
             return []
@@ -211,7 +211,7 @@ def _claim(evaluation: EvaluationJob | None, owner: str) -> list[EvaluationJob]:
             started_at=now,
             message="Loading the model",
             lease_owner=owner,
-            lease_expires=now + jobs.lease(),
+            lease_expires=now + leases.lease(),
         )
     return race
 
@@ -421,7 +421,7 @@ class Evaluator:
     def _look_for_stop(self) -> None:
         """``_StopAsked`` once the racer has asked to stop (looked for twice a second)."""
         now = time.monotonic()
-        if now - self._looked < jobs.EVALUATION_STOP_LOOK:
+        if now - self._looked < leases.EVALUATION_STOP_LOOK:
             return
         self._looked = now
         stopping = EvaluationJob.Status.STOPPING
@@ -433,7 +433,7 @@ class Evaluator:
             raise _StopAsked
 
     def _renew(self) -> None:
-        """Hold the lease while driving; ``jobs.LeaseLost`` once another run has it. A database
+        """Hold the lease while driving; ``leases.LeaseLost`` once another run has it. A database
         that does not answer is tried again at the next renewal, within the lease."""
         now = time.monotonic()
         if now - self._renewed < LEASE_RENEWAL:
@@ -443,12 +443,12 @@ class Evaluator:
         try:
             held = EvaluationJob.objects.filter(
                 pk=evaluation.pk, lease_owner=evaluation.lease_owner
-            ).update(lease_expires=timezone.now() + jobs.lease())
+            ).update(lease_expires=timezone.now() + leases.lease())
         except DatabaseError as error:
             logger.warning("Evaluation %s could not renew its lease: %s", evaluation.pk, error)
             return
         if not held:
-            raise jobs.LeaseLost(f"evaluation {evaluation.pk}")
+            raise leases.LeaseLost(f"evaluation {evaluation.pk}")
 
     def _show(self, publisher: live.FramePublisher, views, unwrapped, frame, observation) -> None:
         """Offer this step's ``views`` (the spectator's is the video's ``frame``) to the live
@@ -574,7 +574,7 @@ def _end_stopped(evaluation: EvaluationJob) -> None:
     """Within the transaction that locks it: end an evaluation whose run died as the racer
     stopped it, with the trials it recorded (and its video and trace where it saved them before
     it died); its model is freed and the racer told once that transaction commits."""
-    reason = jobs.EVALUATION_STOPPED if evaluation.video else jobs.EVALUATION_STOPPED_UNSAVED
+    reason = leases.EVALUATION_STOPPED if evaluation.video else leases.EVALUATION_STOPPED_UNSAVED
     lifecycle.EVALUATION.move(
         evaluation,
         EvaluationJob.Status.CANCELED,

@@ -54,7 +54,7 @@ from training import (
     configuration,
     exports,
     history,
-    jobs,
+    leases,
     lifecycle,
     rewards,
     services,
@@ -1308,7 +1308,7 @@ def _import_trained(
                 weights_version=1,
                 best_checkpoint=best_name,
                 last_checkpoint=last_name,
-                lease_owner=jobs.IMPORTED,
+                lease_owner=leases.IMPORTED,
                 message="Imported with its weights.",
             )
             history_notes, metrics = _import_history(model, job, members, ours, exact)

@@ -665,7 +665,7 @@ class EvaluationJob(RaceConditions):
     created_at = models.DateTimeField(auto_now_add=True)
     started_at = models.DateTimeField(null=True, blank=True)
     finished_at = models.DateTimeField(null=True, blank=True)
-    # The run driving it renews this while it drives (``training.jobs.lapsed_evaluations``).
+    # The run driving it renews this while it drives (``training.leases.lapsed_evaluations``).
     lease_owner = models.CharField(max_length=255, blank=True)
     lease_expires = models.DateTimeField(null=True, blank=True)
 

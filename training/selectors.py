@@ -22,8 +22,8 @@ from accounts.selectors import racer_name
 from common.redis_client import redis_client
 from rl.experience import JobChannel
 from rl.stopwatch import PHASES
-from training import artifacts, jobs
-from training.jobs import IMPORTED
+from training import artifacts, leases
+from training.leases import IMPORTED
 from training.models import (
     BestCheckpointBy,
     EvaluationJob,
@@ -64,7 +64,7 @@ def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
         )
         if model.training is not None:
             model.training.imported_only = job_imported_only(job=model.training)
-            model.training.queue_position = jobs.queue_position(model.training)
+            model.training.queue_position = leases.queue_position(model.training)
             model.training.clock = training_clock(job=model.training, now=now)
     return models
 
@@ -228,7 +228,7 @@ def training_status(*, job: TrainingJob) -> dict:
         "active": job.is_active,
         "message": job.message,
         "failure_reason": job.failure_reason,
-        "queue_position": jobs.queue_position(job),
+        "queue_position": leases.queue_position(job),
         "iterations": job.iterations,
         "episodes": job.episodes + episodes_arrived(job=job),
         "steps": job.steps,
@@ -520,12 +520,13 @@ class Allowance:
 def allowance_for(*, racer: AbstractBaseUser) -> Allowance:
     quota = Quota.of(racer)
     month = timezone.localtime().replace(day=1, hour=0, minute=0, second=0, microsecond=0)
-    jobs = TrainingJob.objects.filter(model__owner=racer, created_at__gte=month)
+    this_month = TrainingJob.objects.filter(model__owner=racer, created_at__gte=month)
     active = TrainingJob.ACTIVE
     # A job the racer stopped is billed the time up to the stop (its clock froze there), even
     # while it still saves; one that trains holds its whole budget.
-    training = jobs.filter(status__in=active, stop_requested=False)
-    ran_here = jobs.exclude(pk__in=training).exclude(lease_owner=IMPORTED)  # not imports' time
+    training = this_month.filter(status__in=active, stop_requested=False)
+    # not imports' time
+    ran_here = this_month.exclude(pk__in=training).exclude(lease_owner=IMPORTED)
     billed = Least("training_seconds", F("model__max_minutes") * 60.0, output_field=FloatField())
     used = ran_here.aggregate(seconds=Sum(billed))["seconds"]
     reserved = training.aggregate(minutes=Sum("model__max_minutes"))

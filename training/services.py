@@ -21,7 +21,7 @@ from django.utils import timezone
 from common.refusals import Refused
 from common.transactions import SlowStepInTransaction, outside_transaction
 from simulator import tracks as simulator_tracks
-from training import artifacts, configuration, jobs, lifecycle, live, rewards, selectors, tasks
+from training import artifacts, configuration, leases, lifecycle, live, rewards, selectors, tasks
 from training.models import (
     SEEDS,
     Direction,
@@ -412,12 +412,12 @@ def _save_whole(model: RLModel, relative: str, data: bytes) -> None:
 
 def _clone_weights_start(job: TrainingJob, weights: str) -> bool:
     """Copy a new clone's starting weights (its source's checkpoint ``weights``); whether its
-    trainer may be sent. Its send stays held meanwhile (``jobs.lease_renewed``), so
+    trainer may be sent. Its send stays held meanwhile (``leases.lease_renewed``), so
     ``tasks.resend_lost`` does not send its trainer before they are all there, however long
     the copy takes; a request that dies copying lets the hold lapse, and a trainer sent then
     copies them. Where they cannot be copied, its job fails in words and the model is ERROR,
     for the racer to delete."""
-    with jobs.lease_renewed(job):
+    with leases.lease_renewed(job):
         why = clone_weights_copy(model=job.model, weights=weights)
     if why is None:
         return True
@@ -500,7 +500,7 @@ def _model_save(
         return model, TrainingJob.objects.create(model=model), None
     # Its weights are copied once this commits: its send is held meanwhile, so
     # tasks.resend_lost does not send its trainer before they are there (_clone_weights_start).
-    held = {"lease_owner": jobs.RESUMING, "lease_expires": timezone.now() + jobs.lease()}
+    held = {"lease_owner": leases.RESUMING, "lease_expires": timezone.now() + leases.lease()}
     return model, TrainingJob.objects.create(model=model, **held), weights
 
 
@@ -525,7 +525,7 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
                 job,
                 TrainingJob.Status.STOPPING,
                 stop_requested=True,
-                message=jobs.saving_message(job.iterations),
+                message=leases.saving_message(job.iterations),
                 training_seconds=clock.seconds,
                 clock_at=clock.at,
             )
@@ -713,7 +713,7 @@ def reward_function_save(
 ) -> RewardFunction:
     """Save the racer's code under ``name`` in their library: a new function, or their
     ``reward_function`` changed (renamed too). The code is validated first, on ``track``'s
-    samples, unless ``validation`` is that of a checker (``training.checks``) for the same code;
+    samples, unless ``validation`` is that of a checker (``training.checkers``) for the same code;
     names are unique per racer, whatever their case (``RewardFunctionInvalid``)."""
     if reward_function is not None and reward_function.owner_id != owner.pk:
         raise RewardFunctionInvalid({"name": "You can change only your own reward functions."})

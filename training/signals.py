@@ -6,7 +6,7 @@ from django.dispatch import Signal
 # ...) for a training iteration, or with ``evaluation`` for an evaluation or a race entry.
 trace_recorded = Signal()
 
-# An evaluation whose run died was claimed to be driven again (``jobs.lapsed_evaluations``): a
+# An evaluation whose run died was claimed to be driven again (``leases.lapsed_evaluations``): a
 # receiver that sends the task that drives it (a race entry's) returns True; when none does, the
 # evaluation's own task is sent.
 evaluation_lapsed = Signal()

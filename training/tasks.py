@@ -66,19 +66,19 @@ def evaluate(evaluation_id: int) -> None:
 
 
 def resume_lapsed() -> list[str]:
-    """Send a trainer for each job whose run died (``jobs.lapsed_claim``), and a simulation
-    worker for each evaluation or race whose run died (``jobs.lapsed_evaluations``); what was
+    """Send a trainer for each job whose run died (``leases.lapsed_claim``), and a simulation
+    worker for each evaluation or race whose run died (``leases.lapsed_evaluations``); what was
     sent for, in words for the log; then what lost its task while queued (``resend_lost``),
     and the imports that died storing their files (``imports.abandoned_imports_remove``).
     Every worker calls it every few seconds (``console.workers``), so the work goes on
     whichever machines are left."""
-    from training import imports, jobs
+    from training import imports, leases
 
     sent = []
-    for job in jobs.lapsed_claim():
+    for job in leases.lapsed_claim():
         train.delay(job.pk)
         sent.append(f"training job {job.pk} lost its trainer; another is sent for")
-    for evaluation in jobs.lapsed_evaluations():
+    for evaluation in leases.lapsed_evaluations():
         _evaluation_send(evaluation)
         sent.append(f"evaluation {evaluation.pk} lost its simulation worker; it is driven again")
     return sent + resend_lost() + imports.abandoned_imports_remove()
@@ -86,23 +86,23 @@ def resume_lapsed() -> list[str]:
 
 def resend_lost() -> list[str]:
     """Send again the task of each queued job and evaluation whose task is gone: not in the
-    broker (``waiting``) for ``jobs.LOST_AFTER`` (``jobs.lost_queued_claim``); what was sent,
+    broker (``waiting``) for ``leases.LOST_AFTER`` (``leases.lost_queued_claim``); what was sent,
     in words for the log. A trainer delivered twice never trains twice (the lease), nor is an
     evaluation driven twice, so a task sent again that turns up after all does nothing."""
-    from training import jobs, signals
+    from training import leases, signals
     from training.models import EvaluationJob
 
     found = waiting()
     if found is None:
         return []
     sent = []
-    for job in jobs.lost_queued_claim(waiting=found.get(train.name, set())):
+    for job in leases.lost_queued_claim(waiting=found.get(train.name, set())):
         train.delay(job.pk)
         sent.append(f"queued training job {job.pk} had lost its task; it is sent again")
     evaluations = set(found.get(evaluate.name, set()))
     for _, theirs in signals.evaluations_waiting.send(EvaluationJob, waiting=found):
         evaluations |= set(theirs)
-    for evaluation in jobs.lost_queued_evaluations(waiting=evaluations):
+    for evaluation in leases.lost_queued_evaluations(waiting=evaluations):
         _evaluation_send(evaluation)
         sent.append(f"queued evaluation {evaluation.pk} had lost its task; it is sent again")
     return sent

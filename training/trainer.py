@@ -39,8 +39,8 @@ from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stop
 from sandbox.protocol import unpack
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, checkpoints, jobs, lifecycle, live, services, signals
-from training.jobs import LeaseLost
+from training import artifacts, checkpoints, leases, lifecycle, live, services, signals
+from training.leases import LeaseLost
 from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 
 logger = logging.getLogger(__name__)
@@ -83,7 +83,7 @@ def run(job_id: int, owner: str, start_rollouts, queued_rollouts=None) -> bool:
     broker's queue (None: it cannot tell); the task module passes both, so this module stays
     free of Celery. False when another run holds a live lease: the caller tries again later, and
     takes the job over if that run has died (its lease expired)."""
-    job = jobs.lease_acquire(job_id=job_id, owner=owner)
+    job = leases.lease_acquire(job_id=job_id, owner=owner)
     if job is None:
         held = TrainingJob.objects.filter(pk=job_id, status__in=TrainingJob.ACTIVE).exists()
         logger.info("Training job %s is %s", job_id, "held by another run" if held else "over")
@@ -174,14 +174,14 @@ class Trainer:
 
     def train(self) -> None:
         job, model = self.job, self.model
-        preparing = not job.stop_requested and jobs.move(
+        preparing = not job.stop_requested and leases.move(
             job,
             TrainingJob.Status.INITIALIZING,
             started_at=job.started_at or timezone.now(),
             message="Preparing the trainer",
         )
         if not preparing:  # the racer stopped it before this run took it up, or as it did
-            jobs.log(job, "Stopped by the racer.")
+            leases.log(job, "Stopped by the racer.")
             self.finish(TrainingJob.Status.COMPLETED)
             return
         # never back from STOPPING: a stop that lands now wins
@@ -197,10 +197,10 @@ class Trainer:
         self.waiting_since = time.monotonic()
         self.training_message = f"Training with {_workers(len(self.slots))} on {self._tracks()}"
         self.base_seconds = job.training_seconds
-        waiting = jobs.clock_write(job, self.base_seconds, message=WAITING_FOR_WORKER)
+        waiting = leases.clock_write(job, self.base_seconds, message=WAITING_FOR_WORKER)
         live.announce_training(job.pk)
         if not waiting:  # the racer stopped it while it was being prepared
-            jobs.log(job, "Stopped by the racer.")
+            leases.log(job, "Stopped by the racer.")
             self.finish(TrainingJob.Status.COMPLETED)
             return
         self._loop()
@@ -218,7 +218,7 @@ class Trainer:
         (``_stop_clock``)."""
         job = self.job
         self.session_started = time.monotonic()
-        started = jobs.clock_write(
+        started = leases.clock_write(
             job,
             self.base_seconds,
             to=TrainingJob.Status.IN_PROGRESS,
@@ -231,7 +231,7 @@ class Trainer:
         if self.first_run:
             self.first_run = False  # said once, not each time the clock starts again
             device = "the GPU" if self.learner.device.startswith("cuda") else "the CPU"
-            jobs.log(
+            leases.log(
                 job,
                 f"Training started: {self.model.get_algorithm_display()}, "
                 f"{_workers(len(self.slots))}, learning on {device}.",
@@ -248,8 +248,8 @@ class Trainer:
         self.base_seconds = self._spent()
         self.session_started = None
         self.waiting_since = time.monotonic()
-        jobs.log(self.job, f"{why}: the clock stops until a car drives again.")
-        waiting = jobs.clock_write(
+        leases.log(self.job, f"{why}: the clock stops until a car drives again.")
+        waiting = leases.clock_write(
             self.job,
             self.base_seconds,
             to=TrainingJob.Status.INITIALIZING,
@@ -278,7 +278,7 @@ class Trainer:
         if job.last_checkpoint:
             self.learner.restore(artifacts.read(job.last_checkpoint))
             self._recall_progress()
-            jobs.log(
+            leases.log(
                 job,
                 f"Resumed from the checkpoint of iteration {job.iterations} "
                 f"(attempt {job.attempt}).",
@@ -287,13 +287,13 @@ class Trainer:
         artifacts.write_model_files(model)
         cloned = artifacts.path(model, artifacts.CLONED_WEIGHTS)
         if model.cloned_from_id is not None and not default_storage.exists(cloned):
-            with jobs.lease_renewed(job):  # its request died before it copied them
+            with leases.lease_renewed(job):  # its request died before it copied them
                 why = services.clone_weights_copy(model=model)
             if why is not None:
                 raise JobFailed(services.CLONE_COPY_FAILED.format(why=why))
         if model.cloned_from_id is not None and default_storage.exists(cloned):
             self.learner.restore(artifacts.read(cloned))
-            jobs.log(job, "Starting from the weights of the model this one was cloned from.")
+            leases.log(job, "Starting from the weights of the model this one was cloned from.")
         self._checkpoint(0)
 
     def _tracks(self) -> str:
@@ -372,8 +372,8 @@ class Trainer:
         max_seconds = self.model.max_minutes * 60
         spent = min(self._spent(), max_seconds)
         if self.renewals.due():
-            jobs.write(self.job, lease_expires=timezone.now() + jobs.lease())
-            if not jobs.clock_write(self.job, spent):
+            leases.write(self.job, lease_expires=timezone.now() + leases.lease())
+            if not leases.clock_write(self.job, spent):
                 self.ending = "stop"
             live.announce_training(self.job.pk)
         elif self._stop_requested():
@@ -385,11 +385,11 @@ class Trainer:
     def _say_why_it_ended(self) -> None:
         job, model = self.job, self.model
         if self.ending == "stop":
-            jobs.log(job, "Stopped by the racer.")
+            leases.log(job, "Stopped by the racer.")
         else:
-            jobs.log(job, f"Reached the maximum training time of {model.max_minutes} min.")
+            leases.log(job, f"Reached the maximum training time of {model.max_minutes} min.")
         if self.abandoned is not None:
-            jobs.log(
+            leases.log(
                 job,
                 f"Iteration {self.abandoned} was being learnt and was abandoned; the model is "
                 f"saved from iteration {self.abandoned - 1}.",
@@ -398,7 +398,7 @@ class Trainer:
     def _recover_redis(self, what: str) -> None:
         """Wait for Redis to come back, then set the job's keys up again and restart the rollout
         workers (who stop when Redis goes); ``JobFailed`` if it stays away."""
-        jobs.log(self.job, f"{what}; waiting for it.", "warning")
+        leases.log(self.job, f"{what}; waiting for it.", "warning")
         self._stop_clock("Redis was lost")
         deadline = time.monotonic() + REDIS_PATIENCE
         while True:
@@ -418,7 +418,7 @@ class Trainer:
             if not slot.gone:
                 slot.started, slot.started_wall = time.monotonic(), time.time()
                 self.start_rollouts(self.job, slot)
-        jobs.log(
+        leases.log(
             self.job, "Redis is back: the experience buffer starts again from the newest weights."
         )
 
@@ -453,7 +453,7 @@ class Trainer:
                     for e in episodes
                 ],
             )
-            jobs.write(
+            leases.write(
                 self.job,
                 weights_version=self.version,
                 iterations=number,
@@ -463,14 +463,14 @@ class Trainer:
             )
         self._record_training(number, episodes)
         self.stopwatch.charge(SAVING)
-        jobs.clock_write(self.job, self._spent(), message=self.training_message)
+        leases.clock_write(self.job, self._spent(), message=self.training_message)
         self.stopwatch.charge(CHECKS)
         split = self.stopwatch.take()
         wall = sum(split.values())
         Iteration.objects.filter(pk=row.pk).update(wall_seconds=wall, time_split=split)
         live.announce_iteration(self.job.pk, number)
         live.announce_training(self.job.pk)
-        jobs.log(
+        leases.log(
             self.job,
             f"Iteration {number}: {update.episodes} episodes, {update.steps} steps, "
             f"average progress {update.completion:.1f}%, {wall:.1f} s: "
@@ -491,7 +491,7 @@ class Trainer:
             if done == 0 or (done < total and now - said[0] >= UPDATE_SAID_EVERY):
                 said[0] = now
                 message = update_message(done, total, epochs, now - started, about)
-                jobs.clock_write(self.job, self._spent(), message=message)
+                leases.clock_write(self.job, self._spent(), message=message)
                 live.announce_training(self.job.pk)
 
         progress(0, sum(e.steps for e in episodes))
@@ -516,7 +516,7 @@ class Trainer:
     def _checkpoint(self, number: int) -> str:
         name = artifacts.save(self.model, artifacts.checkpoint(number), self.learner.checkpoint())
         if number == 0:
-            jobs.write(
+            leases.write(
                 self.job, last_checkpoint=name, best_checkpoint=self.job.best_checkpoint or name
             )
         return name
@@ -585,7 +585,7 @@ class Trainer:
         best = checkpoints.best_iteration(rows=evaluated, metric=self.model.best_checkpoint_by)
         name = artifacts.path(self.model, artifacts.checkpoint(best.number)) if best else ""
         if name and name != self.job.best_checkpoint:
-            jobs.write(self.job, best_checkpoint=name)
+            leases.write(self.job, best_checkpoint=name)
 
     # Workers and the racer
 
@@ -626,7 +626,7 @@ class Trainer:
                 slot.replacements += 1
                 slot.started, slot.started_wall = now, wall
                 what = why.format(worker=f"Simulation worker {slot.index + 1}")
-                jobs.log(self.job, f"{what}; starting a replacement.", "warning")
+                leases.log(self.job, f"{what}; starting a replacement.", "warning")
                 self.start_rollouts(self.job, slot)
             else:
                 slot.gone = True
@@ -637,8 +637,8 @@ class Trainer:
                         "worker serves the simulation queue."
                     )
                 message = f"Carrying on with {left} of {len(self.slots)} simulation workers"
-                jobs.log(self.job, message + ".", "warning")
-                jobs.write(self.job, message=message)
+                leases.log(self.job, message + ".", "warning")
+                leases.write(self.job, message=message)
 
     def _stop_requested(self) -> bool:
         return TrainingJob.objects.filter(pk=self.job.pk, stop_requested=True).exists()
@@ -661,7 +661,7 @@ class Trainer:
         self.printed += len(kept)
         if len(kept) < len(entries) and room >= 0:
             self.printed += 1  # said once
-            jobs.log(
+            leases.log(
                 self.job,
                 f"The log holds {MAX_PRINTED_LINES:,} lines from the simulation workers and the "
                 "reward function; later ones are not kept.",
@@ -672,7 +672,7 @@ class Trainer:
         try:
             return decode_episode(payload, *self.spaces, ppo=self.ppo)
         except ValueError as error:
-            jobs.log(self.job, f"An episode was malformed and was dropped: {error}", "warning")
+            leases.log(self.job, f"An episode was malformed and was dropped: {error}", "warning")
             return None
 
     # The end
@@ -690,12 +690,12 @@ class Trainer:
             pass
         try:
             if self.session_started is not None:
-                jobs.clock_write(job, min(self._spent(), self.model.max_minutes * 60))
-            message = jobs.saving_message(job.iterations)
-            jobs.move(job, TrainingJob.Status.STOPPING, message=message)
+                leases.clock_write(job, min(self._spent(), self.model.max_minutes * 60))
+            message = leases.saving_message(job.iterations)
+            leases.move(job, TrainingJob.Status.STOPPING, message=message)
             if status == TrainingJob.Status.COMPLETED:
                 artifacts.write_model_files(self.model)
-            jobs.move(
+            leases.move(
                 job,
                 status,
                 finished_at=timezone.now(),
@@ -706,7 +706,7 @@ class Trainer:
         except LeaseLost:
             return
         if reason:
-            jobs.log(job, reason, "error")
+            leases.log(job, reason, "error")
         has_checkpoint = bool(job.last_checkpoint)
         ready = status == TrainingJob.Status.COMPLETED or has_checkpoint
         lifecycle.MODEL.move(self.model.pk, RLModel.Status.READY if ready else RLModel.Status.ERROR)

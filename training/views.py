@@ -36,11 +36,11 @@ from simulator import randomisation_ranges
 from simulator import tracks as simulator_tracks
 from training import (
     artifacts,
-    checks,
+    checkers,
     configuration,
     exports,
     imports,
-    jobs,
+    leases,
     logs_archive,
     rewards,
     selectors,
@@ -156,7 +156,7 @@ def _get_reward_function_for_user(request: HttpRequest, pk: int) -> RewardFuncti
 async def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResponse:
     """Write, validate and save a reward function in the racer's library (``pk``: open a saved
     one to change it); "Save and create a model" goes on to the create form with it. The code is
-    validated by a checker (``training.checks``) before the page saves it."""
+    validated by a checker (``training.checkers``) before the page saves it."""
     function, form, limited = await sync_to_async(_reward_editor_form)(request, pk)
     checked = None
     if limited:
@@ -244,10 +244,11 @@ async def _checked_reward(
     request: HttpRequest, source: str, track: str, direction: str = "counterclockwise"
 ) -> rewards.Validation | Exception:
     """``source`` validated on ``track`` by a checker, in the racer's turn; or why it could
-    not be: ``checks.Busy``, ``SandboxUnavailable`` or ``SandboxFailure``, for the page to show."""
+    not be: ``checkers.Busy``, ``SandboxUnavailable`` or ``SandboxFailure``, for the page to
+    show."""
     where = await sync_to_async(simulator_tracks.inline)(track)  # an added track: its route
     try:
-        return await checks.run(
+        return await checkers.run(
             partial(rewards.reward_validate, source=source, track=where, direction=direction),
             racer=(await request.auser()).pk,
         )
@@ -255,12 +256,12 @@ async def _checked_reward(
         return error
 
 
-CHECK_FAILURES = (checks.Busy, SandboxUnavailable, SandboxFailure)
+CHECK_FAILURES = (checkers.Busy, SandboxUnavailable, SandboxFailure)
 
 
 def _check_failed(error: Exception) -> str:
     """What a racer reads when a check could not run (one of ``CHECK_FAILURES``)."""
-    if isinstance(error, checks.Busy):
+    if isinstance(error, checkers.Busy):
         return str(error)
     return f"The reward function could not be checked: {error}"
 
@@ -269,8 +270,8 @@ def _check_refused(response: HttpResponse, error: Exception) -> HttpResponse:
     """``response`` for a check that could not run: 503, for the racer's input is not at fault,
     and when every checker was busy, when to try again."""
     response.status_code = 503
-    if isinstance(error, checks.Busy):
-        response["Retry-After"] = str(checks.RETRY_AFTER)
+    if isinstance(error, checkers.Busy):
+        response["Retry-After"] = str(checkers.RETRY_AFTER)
     return response
 
 
@@ -323,7 +324,7 @@ def _get_model_for_user(request: HttpRequest, pk: int) -> RLModel:
 async def model_create(request: HttpRequest) -> HttpResponse:
     """The create-model wizard; with ``?clone=<id>``, filled in from that model of the racer's,
     whose best weights the new model starts from. The reward function is validated by a checker
-    (``training.checks``), then the model is saved."""
+    (``training.checkers``), then the model is saved."""
     page = await sync_to_async(_ModelCreatePage)(request)
     if page.reward_where is not None:
         page.checked = await _checked_reward(
@@ -441,7 +442,7 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
         {
             "model": model,
             "job": job,
-            "queue_position": jobs.queue_position(job) if job else None,
+            "queue_position": leases.queue_position(job) if job else None,
             "iterations": iterations,
             "time_split": selectors.time_split(row=iterations[-1]) if iterations else [],
             "evaluations": selectors.evaluations_for_model(model=model)[:20],
@@ -584,7 +585,7 @@ def model_logs(request: HttpRequest, pk: int) -> HttpResponse:
 @login_required
 async def model_import(request: HttpRequest) -> HttpResponse:
     """The import form. The archive is read, its weights loaded and its reward function
-    validated by a checker (``training.checks``). A model that arrives with its weights is
+    validated by a checker (``training.checkers``). A model that arrives with its weights is
     imported at once; one that would train is previewed first (``imports.import_start``), and
     created, its training queued, once the racer confirms (the archive kept meanwhile, not sent
     again). An attempt that has to be corrected keeps the racer's archive (unless the archive
@@ -594,7 +595,7 @@ async def model_import(request: HttpRequest) -> HttpResponse:
     attempt = await sync_to_async(_ModelImportAttempt)(request)  # the upload is read to disk here
     if attempt.work is not None:
         try:
-            attempt.outcome = await checks.run(attempt.work, racer=(await request.auser()).pk)
+            attempt.outcome = await checkers.run(attempt.work, racer=(await request.auser()).pk)
         except (Refused, *CHECK_FAILURES) as error:
             attempt.outcome = error
     return await sync_to_async(attempt.respond)()

@@ -161,7 +161,7 @@ CELERY_TASK_REJECT_ON_WORKER_LOST = True
 CELERY_WORKER_PREFETCH_MULTIPLIER = 1
 CELERY_WORKER_HIJACK_ROOT_LOGGER = False
 CELERY_BROKER_CONNECTION_RETRY_ON_STARTUP = True
-CELERY_WORKER_CONSUMER = "console.consumer:Consumer"  # lives through a Redis restart
+CELERY_WORKER_CONSUMER = "console.celery_consumer:Consumer"  # lives through a Redis restart
 CELERY_BROKER_TRANSPORT_OPTIONS = {
     "global_keyprefix": "pitlane:celery:",
     # With late acknowledgement, Redis hands an unacknowledged task to another worker after this
@@ -198,7 +198,7 @@ RATELIMIT_USE_CACHE = "default"
 RATELIMIT_FAIL_OPEN = True  # a cache that cannot count lets attempts through (and logs it)
 # Evaluations and race entries a racer may have waiting or driving at once.
 PITLANE_MAX_QUEUED_EVALUATIONS = env.int("PITLANE_MAX_QUEUED_EVALUATIONS", 3, minimum=1)
-# Reward validations and imports run in each web process's pool of checkers (training.checks):
+# Reward validations and imports run in each web process's pool of checkers (training.checkers):
 # this many at once, and at most this many more waiting; past that a racer is asked to retry.
 PITLANE_CHECKERS = env.int("PITLANE_CHECKERS", 2, minimum=1)
 PITLANE_CHECKS_WAITING = env.int("PITLANE_CHECKS_WAITING", 8, minimum=0)

@@ -52,7 +52,7 @@ DEEPRACER_PARAMS = {
     "CAR_NAME": "my-deepracer-car",
 }
 
-# The import page hands the archive to a checker thread (training.checks), which writes with a
+# The import page hands the archive to a checker thread (training.checkers), which writes with a
 # database connection of its own: what the test made must be committed for it to see.
 CHECKED_IMPORT = pytest.mark.django_db(transaction=True)
 

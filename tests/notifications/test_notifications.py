@@ -17,7 +17,7 @@ from racing.models import Submission
 from tests.helpers import league
 from tests.helpers.models import ready_model
 from tests.helpers.training import queued_job
-from training import evaluation, jobs, lifecycle, trainer
+from training import evaluation, leases, lifecycle, trainer
 from training.models import EvaluationJob, EvaluationTrial, TrainingJob
 
 pytestmark = pytest.mark.django_db
@@ -25,7 +25,7 @@ pytestmark = pytest.mark.django_db
 
 def finished_by_the_trainer(job: TrainingJob, status: str, reason: str = "") -> TrainingJob:
     """The job as its trainer leaves it: leased, then ended through the trainer's own path."""
-    leased = jobs.lease_acquire(job_id=job.pk, owner="test-run")
+    leased = leases.lease_acquire(job_id=job.pk, owner="test-run")
     TrainingJob.objects.filter(pk=job.pk).update(iterations=3, training_seconds=95)
     leased.iterations, leased.training_seconds = 3, 95
     trainer.Trainer(leased, start_rollouts=lambda *args: None).finish(status, reason=reason)

@@ -16,7 +16,7 @@ from racing.models import Division, LiveEntry, Racer, Submission
 from tests.helpers import accounts
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
-from training import artifacts, jobs
+from training import artifacts, leases
 from training import services as training_services
 from training.models import EvaluationJob, RLModel
 
@@ -127,7 +127,7 @@ def test_a_live_turn_puts_the_next_racers_on_the_grid_and_scores_each(tracks, pr
         lease_owner="gone:1:dead",
         lease_expires=lead.created_at,
     )
-    assert [e.pk for e in jobs.lapsed_evaluations()] == [lead.pk]
+    assert [e.pk for e in leases.lapsed_evaluations()] == [lead.pk]
     EvaluationJob.objects.filter(pk__in=(lead.pk, second.pk)).update(
         status=EvaluationJob.Status.QUEUED, lease_owner="", lease_expires=None
     )

@@ -15,7 +15,7 @@ from django.utils import timezone
 from sandbox import SandboxUnavailable
 from tests.helpers.training import queued_job, reload, wait_for_job
 from tests.services import wait_for
-from training import jobs, rollouts, selectors, tasks, trainer
+from training import leases, rollouts, selectors, tasks, trainer
 from training.models import TrainingJob
 from training.services import training_stop
 
@@ -80,7 +80,7 @@ def test_a_job_waiting_for_a_simulation_worker_is_billed_from_when_its_car_drive
 def test_a_rollout_is_replaced_only_when_taken_for_dead_not_while_it_waits_in_the_queue(
     alice, tracks, settings
 ):
-    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     sent, in_queue = [], {0}
     run = trainer.Trainer(
         job,
@@ -151,12 +151,12 @@ def test_a_job_no_simulation_worker_takes_fails_unbilled_rather_than_hold_its_tr
 def test_a_jobs_clock_stops_while_no_car_drives_and_starts_again_when_one_does(
     alice, tracks, settings, monkeypatch
 ):
-    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     run = trainer.Trainer(job, start_rollouts=lambda job, slot: None)
     run.channel.start(job.attempt)
     run.training_message, run.first_run = "Training with 1 simulation worker", False
     run.worker_checks.due()  # the workers were just checked
-    jobs.move(job, TrainingJob.Status.INITIALIZING)
+    leases.move(job, TrainingJob.Status.INITIALIZING)
     run.channel.beat(0)
     run._start_clock()
     run.session_started -= 5  # it drove 5 s
@@ -192,7 +192,7 @@ def test_a_jobs_clock_stops_while_no_car_drives_and_starts_again_when_one_does(
 def test_a_rollout_says_it_took_its_task_before_it_reads_or_checks_anything(
     alice, tracks, monkeypatch
 ):
-    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     channel = trainer.Trainer(job, start_rollouts=None).channel
     channel.start(job.attempt)
     taken_when_checking = []

@@ -15,7 +15,7 @@ from simulator.camera import CAR_FOV, SIMAPP_FOV
 from tests.helpers.archives import deepracer_export, tar_gz
 from tests.helpers.training import post
 from tests.helpers.training import settings as training_settings
-from training import configuration, exports, imports, jobs
+from training import configuration, exports, imports, leases
 from training.forms import ModelCreateForm
 from training.models import CameraLens, RLModel, TrainingJob
 
@@ -81,7 +81,7 @@ def test_a_model_trained_before_deepracers_camera_says_so_on_its_page(client, al
         return model
 
     before = trained("before")  # trained here, as every model before migration 0018
-    imported = trained("imported", lease_owner=jobs.IMPORTED)  # an import never trained here
+    imported = trained("imported", lease_owner=leases.IMPORTED)  # an import never trained here
     migration = importlib.import_module("training.migrations.0018_camera_lens")
 
     migration.mark_camera_before_deepracer(apps, None)
@@ -114,7 +114,7 @@ def test_a_model_trained_with_a_lidar_before_simapps_mount_says_so_on_its_page(
     before = trained("before", lidar)
     camera_only = trained("camera-only", ["FRONT_FACING_CAMERA"])
     imported = trained(
-        "imported", ["FRONT_FACING_CAMERA", "SECTOR_LIDAR"], lease_owner=jobs.IMPORTED
+        "imported", ["FRONT_FACING_CAMERA", "SECTOR_LIDAR"], lease_owner=leases.IMPORTED
     )
     migration = importlib.import_module("training.migrations.0022_lidar_mount")
 

@@ -10,7 +10,7 @@ from django.test import Client
 from django.urls import reverse
 
 from tests import asgi
-from training import checks
+from training import checkers
 
 # The ASGI application serves from its own threads, with connections of their own.
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -35,15 +35,15 @@ def small_pool(settings):
 
 def test_past_the_checkers_and_the_waiting_line_a_check_is_refused_at_once(small_pool):
     release = threading.Event()
-    running = checks.pool().submit(release.wait, racer="alice")
-    waiting = checks.pool().submit(lambda: "waited", racer="bob")
-    with pytest.raises(checks.Busy, match="try again in a few seconds"):
-        checks.pool().submit(lambda: "refused", racer="carol")
+    running = checkers.pool().submit(release.wait, racer="alice")
+    waiting = checkers.pool().submit(lambda: "waited", racer="bob")
+    with pytest.raises(checkers.Busy, match="try again in a few seconds"):
+        checkers.pool().submit(lambda: "refused", racer="carol")
     release.set()
     assert running.result(timeout=10) is True
     assert waiting.result(timeout=10) == "waited"
     # The places are given back once the work is done: the next check is taken.
-    assert checks.pool().submit(lambda: "taken", racer="carol").result(timeout=10) == "taken"
+    assert checkers.pool().submit(lambda: "taken", racer="carol").result(timeout=10) == "taken"
 
 
 def test_a_check_that_fails_gives_its_place_back(small_pool):
@@ -52,7 +52,7 @@ def test_a_check_that_fails_gives_its_place_back(small_pool):
 
     for _ in range(3):  # more than the pool's places
         with pytest.raises(ValueError, match="broken"):
-            checks.pool().submit(broken, racer="alice").result(timeout=10)
+            checkers.pool().submit(broken, racer="alice").result(timeout=10)
 
 
 @pytest.fixture
@@ -74,16 +74,16 @@ class SlowChecks:
             self.release.wait(10)
             return name
 
-        return checks.pool().submit(work, racer=racer)
+        return checkers.pool().submit(work, racer=racer)
 
 
 def test_a_flooders_waiting_checks_do_not_keep_a_bystander_out(one_checker):
     slow = SlowChecks()
     flood = []
-    with pytest.raises(checks.Busy, match="Your earlier checks are still running"):
+    with pytest.raises(checkers.Busy, match="Your earlier checks are still running"):
         for n in range(20):
             flood.append(slow.submit(f"flood {n}", "flooder"))
-    assert len(flood) == checks.RACER_PLACES  # the waiting line keeps places for others
+    assert len(flood) == checkers.RACER_PLACES  # the waiting line keeps places for others
     bystander = slow.submit("bystander", "bystander")
     slow.release.set()
     assert bystander.result(timeout=10) == "bystander"
@@ -96,7 +96,7 @@ def test_a_racer_who_waits_is_served_before_any_flooders_next_check(one_checker)
     before the second check of any of them: the racers take turns."""
     slow = SlowChecks()
     flooders = ("f1", "f2", "f3", "f4")
-    flood = [slow.submit(f"{f} {n}", f) for n in range(checks.RACER_PLACES) for f in flooders]
+    flood = [slow.submit(f"{f} {n}", f) for n in range(checkers.RACER_PLACES) for f in flooders]
     bystander = slow.submit("bystander", "bystander")
     slow.release.set()
     assert [future.result(timeout=10) for future in flood] and bystander.result(timeout=10)
@@ -115,13 +115,13 @@ def test_a_racer_who_waits_is_served_before_any_flooders_next_check(one_checker)
 
 def test_a_check_cancelled_while_it_waits_gives_its_place_back(small_pool):
     release = threading.Event()
-    running = checks.pool().submit(release.wait, racer="alice")
-    waiting = checks.pool().submit(lambda: "never", racer="bob")
+    running = checkers.pool().submit(release.wait, racer="alice")
+    waiting = checkers.pool().submit(lambda: "never", racer="bob")
     assert waiting.cancel()
-    assert checks.pool().submit(lambda: "taken", racer="bob").cancel()  # its place was free
+    assert checkers.pool().submit(lambda: "taken", racer="bob").cancel()  # its place was free
     release.set()
     assert running.result(timeout=10) is True
-    assert checks.pool().submit(lambda: "taken", racer="bob").result(timeout=10) == "taken"
+    assert checkers.pool().submit(lambda: "taken", racer="bob").result(timeout=10) == "taken"
 
 
 def test_every_middleware_runs_on_the_event_loop(caplog, settings):
@@ -189,7 +189,7 @@ async def test_slow_validations_past_the_bound_are_refused_and_other_pages_still
     for response in results:
         if response.status == 503:
             assert "Every checker is busy" in response.text
-            assert response.headers["retry-after"] == str(checks.RETRY_AFTER)
+            assert response.headers["retry-after"] == str(checkers.RETRY_AFTER)
         else:
             assert '"valid": true' in response.text
     # The page was served while the checkers still worked on the two slow functions.

@@ -11,7 +11,7 @@ from django.urls import reverse
 from django.utils import timezone
 
 from tests.helpers.training import training_job
-from training import jobs, selectors
+from training import leases, selectors
 from training.models import TrainingJob
 from training.services import training_stop
 
@@ -73,7 +73,7 @@ def test_a_stop_freezes_the_clock_and_the_trainer_cannot_move_it(alice):
     assert (clock.seconds, clock.running) == (stopped.training_seconds, False)
 
     trainer_side = TrainingJob.objects.get(pk=job.pk)
-    assert jobs.clock_write(trainer_side, 487.0) is False  # its own measure, after the update
+    assert leases.clock_write(trainer_side, 487.0) is False  # its own measure, after the update
     assert TrainingJob.objects.get(pk=job.pk).training_seconds == stopped.training_seconds
     assert trainer_side.training_seconds == stopped.training_seconds
 

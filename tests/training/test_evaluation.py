@@ -22,7 +22,7 @@ from tests.helpers.live import frame_header, viewer
 from tests.helpers.models import ready_model, trained_model
 from tests.helpers.training_logs import assert_evaluation_logs_read_as_recorded
 from tests.services import wait_for
-from training import configuration, jobs, services, signals
+from training import configuration, leases, services, signals
 from training import evaluation as evaluations
 from training.artifacts import EVALUATION_METRICS as METRICS
 from training.artifacts import EVALUATION_TRACE as TRACE
@@ -345,15 +345,15 @@ def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_a
         lease_expires=timezone.now() + timedelta(seconds=30),
     )
     assert evaluations.run(started.pk) is None  # a second delivery leaves a live run alone
-    assert jobs.lapsed_evaluations() == []
+    assert leases.lapsed_evaluations() == []
     assert EvaluationJob.objects.get(pk=started.pk).lease_owner == dead
 
     past = timezone.now() - timedelta(seconds=1)
     EvaluationJob.objects.filter(pk=started.pk).update(lease_expires=past)  # its machine died
-    assert [e.pk for e in jobs.lapsed_evaluations()] == [started.pk]
-    assert jobs.lapsed_evaluations() == []  # claimed once: one new run is sent for
+    assert [e.pk for e in leases.lapsed_evaluations()] == [started.pk]
+    assert leases.lapsed_evaluations() == []  # claimed once: one new run is sent for
     claimed = EvaluationJob.objects.get(pk=started.pk)
-    assert claimed.message == jobs.EVALUATION_LAPSED and claimed.lease_owner == jobs.RESUMING
+    assert claimed.message == leases.EVALUATION_LAPSED and claimed.lease_owner == leases.RESUMING
     answers = signals.evaluation_lapsed.send(EvaluationJob, evaluation=claimed)
     assert not any(sent for _, sent in answers)  # no race's: its own task is sent
 
@@ -363,7 +363,7 @@ def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_a
     # The dead run, were it alive, stops at its next renewal rather than write.
     stale = evaluations.Evaluator(EvaluationJob.objects.get(pk=started.pk))
     stale.evaluation.lease_owner, stale._renewed = dead, float("-inf")
-    with pytest.raises(jobs.LeaseLost):
+    with pytest.raises(leases.LeaseLost):
         stale._renew()
 
 

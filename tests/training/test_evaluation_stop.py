@@ -11,7 +11,7 @@ from tests.helpers.evaluations import stored
 from tests.helpers.live import frame_header, viewer
 from tests.helpers.models import ready_model
 from tests.services import wait_for
-from training import artifacts, jobs, services
+from training import artifacts, leases, services
 from training import evaluation as runner
 from training.models import EvaluationJob, RLModel
 
@@ -25,7 +25,7 @@ def stop_url(evaluation: EvaluationJob) -> str:
 def check_stopped_after_its_first_trial(pk: int) -> None:
     evaluation = EvaluationJob.objects.select_related("model").get(pk=pk)
     assert evaluation.status == EvaluationJob.Status.CANCELED, evaluation.failure_reason
-    assert evaluation.failure_reason == jobs.EVALUATION_STOPPED
+    assert evaluation.failure_reason == leases.EVALUATION_STOPPED
     assert evaluation.model.status == RLModel.Status.READY
     trials = list(evaluation.trial_rows.all())
     assert 1 <= len(trials) < evaluation.trials and all(t.completed for t in trials)
@@ -36,7 +36,7 @@ def check_stopped_after_its_first_trial(pk: int) -> None:
 @pytest.mark.slow
 @pytest.mark.django_db
 def test_a_stop_asked_during_a_trial_keeps_the_trials_finished(alice, monkeypatch):
-    monkeypatch.setattr(jobs, "EVALUATION_STOP_LOOK", 0.0)  # the run looks at every step
+    monkeypatch.setattr(leases, "EVALUATION_STOP_LOOK", 0.0)  # the run looks at every step
     model = ready_model(alice)
     evaluation = services.evaluation_start(
         model=model, settings={"trials": 3, "off_track_penalty": 0}, enqueue=False
@@ -139,7 +139,7 @@ def test_a_run_that_died_while_stopping_is_ended_by_the_next_and_said_without_it
         model=model,
         track=model.track,
         status=EvaluationJob.Status.STOPPING,
-        lease_owner=jobs.RESUMING,  # claimed by jobs.lapsed_evaluations for this run
+        lease_owner=leases.RESUMING,  # claimed by leases.lapsed_evaluations for this run
     )
     announced = []
     monkeypatch.setattr(runner.live, "announce", lambda group, status: announced.append(group))
@@ -151,7 +151,7 @@ def test_a_run_that_died_while_stopping_is_ended_by_the_next_and_said_without_it
         callback()
     evaluation.refresh_from_db()
     assert evaluation.status == EvaluationJob.Status.CANCELED
-    assert evaluation.failure_reason == jobs.EVALUATION_STOPPED_UNSAVED
+    assert evaluation.failure_reason == leases.EVALUATION_STOPPED_UNSAVED
     assert "without them" in evaluation.failure_reason and not evaluation.video
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
     assert announced == [runner.live.evaluation_group(evaluation.pk)]

@@ -19,7 +19,7 @@ from rl.stopwatch import Stopwatch
 from tests.helpers.archives import virtual_archive
 from tests.helpers.models import STRAIGHT_AHEAD, ready_model
 from tests.helpers.training import settings as training_settings
-from training import artifacts, configuration, imports, jobs, services, tasks, trainer
+from training import artifacts, configuration, imports, leases, services, tasks, trainer
 from training.models import RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
@@ -105,7 +105,7 @@ def test_a_trainer_that_finds_no_copy_of_its_clones_weights_makes_it(alice, trac
     clone = clone_of(source)
     copy = artifacts.path(clone, artifacts.CLONED_WEIGHTS)
     artifacts.default_storage.delete(copy)  # an earlier test's model of that id may have left one
-    run = trainer.Trainer(jobs.lease_acquire(job_id=clone.jobs.get().pk, owner="run"), None)
+    run = trainer.Trainer(leases.lease_acquire(job_id=clone.jobs.get().pk, owner="run"), None)
     run._build_learner()
     assert artifacts.read(copy) == artifacts.read(source.jobs.get().best_checkpoint)
     assert run.job.log_lines.filter(text__startswith="Starting from the weights").exists()
@@ -117,7 +117,7 @@ def test_a_clones_trainer_stays_unsent_however_long_its_weights_take_and_never_s
     alice, tracks, settings, monkeypatch
 ):
     settings.PITLANE_TRAINER_LEASE = 1  # [s] so that the copy below outlasts two leases
-    monkeypatch.setattr(jobs, "LOST_AFTER", 0)
+    monkeypatch.setattr(leases, "LOST_AFTER", 0)
     source = ready_model(alice)
     during, save = [], FileSystemStorage._save
 
@@ -129,7 +129,7 @@ def test_a_clones_trainer_stays_unsent_however_long_its_weights_take_and_never_s
             storage.delete(copy)  # an earlier test's model of that id left one
         stored = save(storage, name, content)
         time.sleep(2.5)
-        during.append((storage.exists(copy), jobs.lost_queued_claim(waiting=set())))
+        during.append((storage.exists(copy), leases.lost_queued_claim(waiting=set())))
         return stored
 
     monkeypatch.setattr(FileSystemStorage, "_save", slow_to_a_bucket)
@@ -226,7 +226,7 @@ def test_a_trainer_saves_each_iterations_checkpoint_outside_its_transaction(
     alice, tracks, storage_writes, monkeypatch
 ):
     model = services.model_create(owner=alice, settings=training_settings(), validate_reward=False)
-    run = trainer.Trainer(jobs.lease_acquire(job_id=model.jobs.get().pk, owner="run"), None)
+    run = trainer.Trainer(leases.lease_acquire(job_id=model.jobs.get().pk, owner="run"), None)
     run._build_learner()
     run.version, run.stopwatch, run.training_message = 0, Stopwatch(), "Training"
     learnt = Update(episodes=1, steps=10, reward=1.0, completion=5.0, best_lap_time=None)

@@ -14,8 +14,8 @@ from racing.models import Submission
 from racing.services import SUBMISSION
 from tests.helpers.models import ready_model
 from tests.helpers.training import settings
-from training import jobs, lifecycle
-from training.jobs import LeaseLost
+from training import leases, lifecycle
+from training.leases import LeaseLost
 from training.models import EvaluationJob, RLModel, TrainingJob
 from training.services import model_create, training_stop
 
@@ -105,13 +105,13 @@ def test_a_stop_that_lands_as_a_trainer_takes_the_job_up_leaves_it_stopping(alic
     # The racer presses Stop after a trainer run took the job's lease, before it prepared: the
     # run finds the job STOPPING, not INITIALIZING over the racer's stop.
     model = model_create(owner=alice, settings=settings(), validate_reward=False)
-    run = jobs.lease_acquire(job_id=model.jobs.get().pk, owner="trainer:test")
+    run = leases.lease_acquire(job_id=model.jobs.get().pk, owner="trainer:test")
     training_stop(job=run)
-    assert not jobs.move(run, Job.INITIALIZING, message="Preparing the trainer")
+    assert not leases.move(run, Job.INITIALIZING, message="Preparing the trainer")
     assert run.status == Job.STOPPING and run.stop_requested
     assert TrainingJob.objects.get(pk=run.pk).message.startswith("Saving the model")
-    assert jobs.move(run, Job.COMPLETED)  # what the run does next: it ends the job
-    assert not jobs.move(run, Job.STOPPING)  # and nothing moves an ended job again
+    assert leases.move(run, Job.COMPLETED)  # what the run does next: it ends the job
+    assert not leases.move(run, Job.STOPPING)  # and nothing moves an ended job again
 
 
 def test_a_job_stopped_before_any_run_is_canceled_for_good(alice, tracks):
@@ -120,20 +120,20 @@ def test_a_job_stopped_before_any_run_is_canceled_for_good(alice, tracks):
     assert job.status == Job.CANCELED and job.failure_reason == "Stopped before training began."
     model.refresh_from_db()
     assert model.status == Status.ERROR
-    assert jobs.lease_acquire(job_id=job.pk, owner="trainer:late") is None  # no run takes it up
+    assert leases.lease_acquire(job_id=job.pk, owner="trainer:late") is None  # no run takes it up
     assert not lifecycle.TRAINING_JOB.move(job, Job.INITIALIZING)
 
 
 def test_only_the_run_holding_the_lease_moves_a_job_and_never_by_a_plain_write(alice, tracks):
     model = model_create(owner=alice, settings=settings(), validate_reward=False)
-    first = jobs.lease_acquire(job_id=model.jobs.get().pk, owner="trainer:first")
+    first = leases.lease_acquire(job_id=model.jobs.get().pk, owner="trainer:first")
     TrainingJob.objects.filter(pk=first.pk).update(lease_expires=None)  # its worker died
-    second = jobs.lease_acquire(job_id=first.pk, owner="trainer:second")
+    second = leases.lease_acquire(job_id=first.pk, owner="trainer:second")
     with pytest.raises(LeaseLost):
-        jobs.move(first, Job.INITIALIZING)
-    assert jobs.move(second, Job.INITIALIZING)
-    with pytest.raises(ValueError, match=r"jobs\.move"):
-        jobs.write(second, status=Job.IN_PROGRESS)
+        leases.move(first, Job.INITIALIZING)
+    assert leases.move(second, Job.INITIALIZING)
+    with pytest.raises(ValueError, match=r"leases\.move"):
+        leases.write(second, status=Job.IN_PROGRESS)
 
 
 def test_an_evaluation_starts_over_only_while_it_is_unfinished(alice, tracks):
@@ -167,19 +167,19 @@ def test_a_job_whose_trainer_died_is_claimed_once_for_a_new_run(alice, tracks):
     # What every worker's heartbeat does: a lapsed lease is claimed by one look, and the job is
     # sent for again only if no run took it up within another lease.
     model = model_create(owner=alice, settings=settings(), validate_reward=False)
-    run = jobs.lease_acquire(job_id=model.jobs.get().pk, owner="trainer:dead")
-    assert jobs.move(run, Job.INITIALIZING)
-    assert jobs.lapsed_claim() == []  # its lease is alive
+    run = leases.lease_acquire(job_id=model.jobs.get().pk, owner="trainer:dead")
+    assert leases.move(run, Job.INITIALIZING)
+    assert leases.lapsed_claim() == []  # its lease is alive
     past = timezone.now() - timedelta(seconds=1)
     TrainingJob.objects.filter(pk=run.pk).update(lease_expires=past)
-    assert [job.pk for job in jobs.lapsed_claim()] == [run.pk]
-    assert jobs.lapsed_claim() == []  # claimed once: one new run is sent for
-    assert TrainingJob.objects.get(pk=run.pk).log_lines.filter(text=jobs.LAPSED).count() == 1
+    assert [job.pk for job in leases.lapsed_claim()] == [run.pk]
+    assert leases.lapsed_claim() == []  # claimed once: one new run is sent for
+    assert TrainingJob.objects.get(pk=run.pk).log_lines.filter(text=leases.LAPSED).count() == 1
     with pytest.raises(LeaseLost):  # the old run, were it alive, no longer writes
-        jobs.write(run, message="still here")
+        leases.write(run, message="still here")
     TrainingJob.objects.filter(pk=run.pk).update(lease_expires=past)  # that run never came
-    assert [job.pk for job in jobs.lapsed_claim()] == [run.pk]
-    resumed = jobs.lease_acquire(job_id=run.pk, owner="trainer:new")
+    assert [job.pk for job in leases.lapsed_claim()] == [run.pk]
+    resumed = leases.lease_acquire(job_id=run.pk, owner="trainer:new")
     assert resumed.attempt == 2 and resumed.lease_owner == "trainer:new"
-    assert jobs.lapsed_claim() == []
-    assert TrainingJob.objects.get(pk=run.pk).log_lines.filter(text=jobs.LAPSED).count() == 1
+    assert leases.lapsed_claim() == []
+    assert TrainingJob.objects.get(pk=run.pk).log_lines.filter(text=leases.LAPSED).count() == 1

@@ -15,7 +15,7 @@ from racing.models import Submission
 from tests.helpers.league import event, race_evaluation
 from tests.helpers.models import ready_model
 from tests.helpers.training import settings
-from training import jobs, tasks
+from training import leases, tasks
 from training.models import EvaluationJob, TrainingJob
 from training.services import model_create
 
@@ -44,22 +44,22 @@ def test_a_queued_job_whose_task_is_gone_is_sent_again_once_keeping_its_place(
     alice, sent, monkeypatch
 ):
     first, lost, fresh = queued(alice, "first"), queued(alice, "lost"), queued(alice, "new", age=0)
-    place = jobs.queue_position(lost)
+    place = leases.queue_position(lost)
     monkeypatch.setattr(tasks, "waiting", lambda: {tasks.train.name: {first.pk}})
     tasks.resume_lapsed()
     assert sent == [(tasks.train.name, lost.pk)]  # not the one waiting, nor the one just sent
     tasks.resume_lapsed()
     assert len(sent) == 1  # claimed once: sent again a lease later if no trainer took it
-    assert jobs.queue_position(TrainingJob.objects.get(pk=lost.pk)) == place == 2
-    assert [line.text for line in lost.log_lines.all()] == [jobs.QUEUED_LOST]
+    assert leases.queue_position(TrainingJob.objects.get(pk=lost.pk)) == place == 2
+    assert [line.text for line in lost.log_lines.all()] == [leases.QUEUED_LOST]
 
     TrainingJob.objects.filter(pk=lost.pk).update(lease_expires=timezone.now())  # none took it
     tasks.resume_lapsed()
     assert sent == [(tasks.train.name, lost.pk)] * 2 and lost.log_lines.count() == 1
-    run = jobs.lease_acquire(job_id=lost.pk, owner="trainer:1")  # a trainer takes it at last
+    run = leases.lease_acquire(job_id=lost.pk, owner="trainer:1")  # a trainer takes it at last
     assert run.attempt == 1 and run.lease_owner == "trainer:1"
     TrainingJob.objects.filter(pk=lost.pk).update(lease_expires=timezone.now())
-    assert jobs.lost_queued_claim(waiting=set()) == [first]  # the trainer's own: lapsed_claim's
+    assert leases.lost_queued_claim(waiting=set()) == [first]  # the trainer's own: lapsed_claim's
     assert fresh.pk not in {pk for _, pk in sent}
 
 
@@ -85,7 +85,7 @@ def test_a_queued_evaluation_or_race_entry_whose_task_is_gone_is_sent_again(
     with django_capture_on_commit_callbacks(execute=True):
         tasks.resume_lapsed()
     assert sorted(sent) == [(racing_tasks.race.name, entry.pk), (tasks.evaluate.name, plain.pk)]
-    assert EvaluationJob.objects.get(pk=plain.pk).lease_owner == jobs.RESUMING
+    assert EvaluationJob.objects.get(pk=plain.pk).lease_owner == leases.RESUMING
 
 
 def test_the_broker_says_which_tasks_wait_in_its_queues(monkeypatch):

@@ -9,7 +9,7 @@ from django.utils import timezone
 
 from tests.helpers.models import ready_model
 from tests.helpers.training import form_data
-from training import configuration, jobs, selectors
+from training import configuration, leases, selectors
 from training.models import Quota, QuotaDefaults, RLModel, TrainingJob
 from training.services import model_create, training_stop
 
@@ -83,7 +83,7 @@ def test_a_stopped_training_is_billed_the_time_up_to_the_stop_not_its_budget(ali
     assert selectors.allowance_for(racer=alice).minutes_left == 94  # 5:04 used, while it saves
 
     # The iteration it was learning ends minutes later; the trainer's time does not count.
-    assert jobs.clock_write(stopped, 8 * 60 + 7) is False
+    assert leases.clock_write(stopped, 8 * 60 + 7) is False
     TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.COMPLETED)
     assert selectors.allowance_for(racer=alice).minutes == pytest.approx(
         stopped.training_seconds / 60

@@ -26,7 +26,7 @@ from simulator.trace import SimTraceRow
 from tests.helpers.training import queued_job, reload, settings, wait_for_job
 from tests.helpers.training_logs import assert_training_logs_read_as_recorded
 from tests.services import wait_for
-from training import artifacts, configuration, jobs, rewards, tasks, trainer
+from training import artifacts, configuration, leases, rewards, tasks, trainer
 from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
 from training.services import model_create, training_stop
@@ -100,7 +100,7 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
 @pytest.mark.django_db(transaction=True)
 def test_a_second_delivery_of_the_trainer_task_does_not_train_twice(alice, tracks):
     job = queued_job(alice)
-    held = jobs.lease_acquire(job_id=job.pk, owner="first-run")
+    held = leases.lease_acquire(job_id=job.pk, owner="first-run")
     assert held is not None and held.attempt == 1
 
     started = []
@@ -114,10 +114,10 @@ def test_a_second_delivery_of_the_trainer_task_does_not_train_twice(alice, track
     # The first run's lease lapses (its worker died): the next delivery takes over, and the old
     # run can no longer write.
     TrainingJob.objects.filter(pk=job.pk).update(lease_expires=None, lease_owner="")
-    taken = jobs.lease_acquire(job_id=job.pk, owner="second-run")
+    taken = leases.lease_acquire(job_id=job.pk, owner="second-run")
     assert taken.attempt == 2
-    with pytest.raises(jobs.LeaseLost):
-        jobs.write(held, message="a stale run writing")
+    with pytest.raises(leases.LeaseLost):
+        leases.write(held, message="a stale run writing")
 
 
 @pytest.mark.django_db(transaction=True)
@@ -125,7 +125,7 @@ def test_evaluations_that_come_after_the_next_update_mark_their_own_checkpoint_b
     """Evaluations drive beside the next iteration: checkpoint 1's results may come in pieces,
     after iteration 2 was learnt; each is recorded on its own iteration once whole, and the best
     checkpoint is the one that drove them."""
-    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     run = trainer.Trainer(job, start_rollouts=lambda *args: None)
     for number in (1, 2):
         Iteration.objects.create(
@@ -171,7 +171,7 @@ def test_evaluations_that_come_after_the_next_update_mark_their_own_checkpoint_b
 def test_of_checkpoints_that_evaluate_alike_the_newer_is_best_as_in_deepracer(alice, tracks):
     """DeepRacer's best model is the highest mean evaluation progress, a tie going to the newer
     checkpoint whatever its laps (simapp's s3_metrics.py); so it stays when the trainer resumes."""
-    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     run = trainer.Trainer(job, start_rollouts=lambda *args: None)
     for number in (1, 2, 3):
         Iteration.objects.create(
@@ -224,7 +224,7 @@ def test_the_models_best_checkpoint_metric_picks_the_best_as_dr_train_best_model
 ):
     """By lap time the faster checkpoint is best, by reward the better rewarded, where by
     progress (all 100%) the newer would be."""
-    job = jobs.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     for number in (1, 2):
         Iteration.objects.create(
             job=job,

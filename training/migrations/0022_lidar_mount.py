@@ -1,6 +1,6 @@
 from django.db import migrations, models
 
-IMPORTED = "import"  # training.jobs.IMPORTED: an import's record of a job that never ran here
+IMPORTED = "import"  # training.leases.IMPORTED: an import's record of a job that never ran here
 LIDARS = ("LIDAR", "SECTOR_LIDAR")
 
 

@@ -15,7 +15,7 @@ Either stops the worker with "Unrecoverable error". This consumer gives the tran
 broker's address back once collect is done, so those channels fail as kombu expects, with a
 connection error while Redis is down (ignored) or by reaching the new Redis, and the consumer
 reconnects: tasks in progress carry on, and those a restarted Redis lost are sent again by their
-jobs (training.jobs).
+jobs (training.leases).
 """
 
 from __future__ import annotations

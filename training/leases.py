@@ -216,7 +216,7 @@ def write(job: TrainingJob, **fields) -> None:
     """Update the job's row, only while ``job``'s attempt holds the lease; mirror on ``job``.
     Its status changes by ``move`` alone."""
     if "status" in fields:
-        raise ValueError("A job's status changes by jobs.move, as training.lifecycle allows.")
+        raise ValueError("A job's status changes by leases.move, as training.lifecycle allows.")
     if _held(job).update(**fields) != 1:
         raise LeaseLost(f"training job {job.pk} is held by another run")
     _mirror(job, fields)
