@@ -55,13 +55,7 @@ def completion(model, *, randomise: bool, trials: int) -> tuple[int, float]:
     env = gymnasium.make(
         simulator.ENV_ID, mode="evaluation", laps=1, max_resets=0, noise=True, **settings
     )
-    learner = Learner(
-        algorithm=model.algorithm,
-        hyperparameters=model.hyperparameters,
-        architecture=model.architecture,
-        observation_space=env.observation_space,
-        action_space=env.action_space,
-    )
+    learner = Learner.for_model(model, env)
     learner.restore(artifacts.read(job_of(model).best_checkpoint))
     laps, progress = 0, []
     for seed in range(trials):

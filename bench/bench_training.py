@@ -519,13 +519,7 @@ def qualifies(model, checkpoint: str) -> tuple[bool, list[float], str]:
     env = gymnasium.make(
         simulator.ENV_ID, mode="evaluation", laps=3, **model.environment_settings()
     )
-    learner = Learner(
-        algorithm=model.algorithm,
-        hyperparameters=model.hyperparameters,
-        architecture=model.architecture,
-        observation_space=env.observation_space,
-        action_space=env.action_space,
-    )
+    learner = Learner.for_model(model, env)
     learner.restore(artifacts.read(checkpoint))
     observation, _ = env.reset(seed=0)
     while True:

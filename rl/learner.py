@@ -67,6 +67,19 @@ class Learner:
     """One job's model: built from its settings, trained on episodes, saved as safetensors.
     ``precision``: what its updates compute the features in (``update_precision``)."""
 
+    @classmethod
+    def for_model(cls, model, env, **options) -> Learner:
+        """A learner for ``model``'s settings (its ``algorithm``, ``hyperparameters`` and
+        ``architecture``: a racer's model) on ``env``'s spaces; ``options``: the rest."""
+        return cls(
+            algorithm=model.algorithm,
+            hyperparameters=model.hyperparameters,
+            architecture=model.architecture,
+            observation_space=env.observation_space,
+            action_space=env.action_space,
+            **options,
+        )
+
     def __init__(
         self,
         *,

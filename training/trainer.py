@@ -266,14 +266,8 @@ class Trainer:
         env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
         self.spaces = env.observation_space, env.action_space
         env.close()
-        self.learner = Learner(
-            algorithm=model.algorithm,
-            hyperparameters=model.hyperparameters,
-            architecture=model.architecture,
-            observation_space=self.spaces[0],
-            action_space=self.spaces[1],
-            seed=model.seed,
-            precision=settings.PITLANE_TRAINER_PRECISION,
+        self.learner = Learner.for_model(
+            model, env, seed=model.seed, precision=settings.PITLANE_TRAINER_PRECISION
         )
         if job.last_checkpoint:
             self.learner.restore(artifacts.read(job.last_checkpoint))

@@ -8,11 +8,10 @@ import pytest
 from django.utils import timezone
 from playwright.sync_api import Page, expect
 
+from tests.helpers import training as training_helpers
 from tests.helpers.accounts import PASSWORD
 from tests.helpers.browser import log_in
-from tests.helpers.training import settings
-from training import configuration
-from training.models import RLModel, TrainingJob
+from training.models import TrainingJob
 
 pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.usefixtures("tracks")]
 
@@ -21,17 +20,8 @@ SHOWN = "() => Number(document.querySelector('[data-live-time]').dataset.shownSe
 
 def training_job(owner, *, seconds: float, ago: float) -> TrainingJob:
     """A job in progress whose trainer, busy learning, last measured ``seconds`` ``ago``."""
-    clean = configuration.check(settings(name="clocked"), owner=owner, validate_reward=False)
-    model = RLModel.objects.create(owner=owner, status=RLModel.Status.TRAINING, **clean.row())
-    return TrainingJob.objects.create(
-        model=model,
-        status=TrainingJob.Status.IN_PROGRESS,
-        attempt=1,
-        lease_owner="trainer:1",
-        lease_expires=timezone.now() + timedelta(minutes=5),
-        iterations=3,
-        training_seconds=seconds,
-        clock_at=timezone.now() - timedelta(seconds=ago),
+    return training_helpers.training_job(
+        owner, seconds=seconds, ago=ago, lease_expires=timezone.now() + timedelta(minutes=5)
     )
 
 

@@ -31,11 +31,12 @@ def synthetic_episode(env, steps: int = 40) -> Episode:
     )
 
 
-def learner_for(env, **values) -> Learner:
-    """A seeded PPO learner for ``env``'s spaces, ``values`` over the default hyperparameters."""
+def learner_for(env, algorithm: str = "clipped_ppo", **values) -> Learner:
+    """A seeded learner (PPO unless ``algorithm`` says) for ``env``'s spaces, ``values`` over
+    the default hyperparameters."""
     return Learner(
-        algorithm="clipped_ppo",
-        hyperparameters={**hyperparameters.defaults("clipped_ppo"), **values},
+        algorithm=algorithm,
+        hyperparameters={**hyperparameters.defaults(algorithm), **values},
         architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
         observation_space=env.observation_space,
         action_space=env.action_space,

@@ -78,14 +78,7 @@ def _first_checkpoint(model: RLModel, weights) -> bytes:
     key = (repr(settings), repr(model.environment_settings()), weights)
     if key not in _CHECKPOINTS:
         env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-        learner = Learner(
-            algorithm=model.algorithm,
-            hyperparameters=model.hyperparameters,
-            architecture=model.architecture,
-            observation_space=env.observation_space,
-            action_space=env.action_space,
-            seed=model.seed,
-        )
+        learner = Learner.for_model(model, env, seed=model.seed)
         env.close()
         if weights is not None:
             weights(learner)

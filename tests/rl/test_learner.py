@@ -147,17 +147,6 @@ def test_minibatches_cut_on_the_device_make_the_same_update_as_sb3s_buffer(monke
         torch.testing.assert_close(tensor, weights[1][name], rtol=1e-5, atol=1e-6)
 
 
-def sac_learner_for(env, **values) -> Learner:
-    return Learner(
-        algorithm="sac",
-        hyperparameters={**hyperparameters.defaults("sac"), **values},
-        architecture="DEEP_CONVOLUTIONAL_NETWORK_SHALLOW",
-        observation_space=env.observation_space,
-        action_space=env.action_space,
-        seed=7,
-    )
-
-
 @pytest.mark.parametrize(
     "option, refusal",
     [
@@ -173,7 +162,7 @@ def test_sac_refuses_the_sb3_options_its_gradient_step_does_not_follow(option, r
 
 
 def test_sacs_gradient_steps_learn_as_sb3s_from_the_same_batches(env, monkeypatch):
-    learner = sac_learner_for(env, batch_size=8)
+    learner = learner_for(env, "sac", batch_size=8)
     model = learner.model
     model.replay.add(synthetic_episode(env, steps=12))
     start = copy.deepcopy(

@@ -20,7 +20,7 @@ from analysis.models import TraceSummary
 from tests.helpers.evaluations import stored, trial_paths
 from tests.helpers.live import frame_header, viewer
 from tests.helpers.models import ready_model, trained_model
-from tests.helpers.training_logs import assert_evaluation_logs_read_as_recorded
+from tests.helpers.training_logs import EVALUATION_KEYS, assert_evaluation_logs_read_as_recorded
 from tests.services import wait_for
 from training import configuration, leases, services, signals
 from training import evaluation as evaluations
@@ -83,19 +83,7 @@ def test_the_evaluate_command_prints_the_results_and_records_every_step(alice, c
 
     metrics = json.loads(stored(evaluation, METRICS))["metrics"]
     assert [m["trial"] for m in metrics] == [1, 2, 3]
-    assert set(metrics[0]) == {
-        "completion_percentage",
-        "metric_time",
-        "start_time",
-        "elapsed_time_in_milliseconds",
-        "episode_status",
-        "crash_count",
-        "immobilized_count",
-        "off_track_count",
-        "reversed_count",
-        "reset_count",
-        "trial",
-    }
+    assert set(metrics[0]) == EVALUATION_KEYS
     assert metrics[0]["off_track_count"] == trials[0].off_tracks
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
     assert_evaluation_logs_read_as_recorded(evaluation)  # in the model's logs archive

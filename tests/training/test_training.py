@@ -463,13 +463,7 @@ def test_a_trainer_that_died_is_resumed_from_its_last_checkpoint(
     clean = configuration.check(settings(name="resumed"), owner=alice, validate_reward=False)
     model = RLModel.objects.create(owner=alice, status=RLModel.Status.TRAINING, **clean.row())
     env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-    learner = Learner(
-        algorithm=model.algorithm,
-        hyperparameters=model.hyperparameters,
-        architecture=model.architecture,
-        observation_space=env.observation_space,
-        action_space=env.action_space,
-    )
+    learner = Learner.for_model(model, env)
     checkpoint = artifacts.save(model, "checkpoints/iteration-1.safetensors", learner.checkpoint())
     now = timezone.now()
     job = TrainingJob.objects.create(
