@@ -16,7 +16,7 @@ from django.template.response import TemplateResponse
 
 from common.formatting import laptime
 from racing import services
-from racing.forms import LOCAL, RaceObstaclesForm
+from racing.forms import LOCAL, RACE_FIELDS, RaceObstaclesForm
 from racing.models import (
     Event,
     Lap,
@@ -64,19 +64,7 @@ class EventAdminForm(RaceObstaclesForm, EventInlineForm):
             "name",
             "slug",
             "division",
-            "track",
-            "direction",
-            "race_type",
-            "cars",
-            "opens_at",
-            "closes_at",
-            "ranking_method",
-            "laps_required",
-            "laps_to_drive",
-            "off_track_penalty_s",
-            "crash_penalty_s",
-            "max_off_tracks_per_lap",
-            "submissions_per_racer",
+            *RACE_FIELDS,
             "public",
             "organiser",
             "participants",

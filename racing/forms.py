@@ -81,6 +81,24 @@ def _event_label(event: Event) -> str:
     return f"{event.name} ({rule}, closes {local_text(event.closes_at)})"
 
 
+# An event's race and rules, as the admin and a community race's organiser set them.
+RACE_FIELDS = [
+    "track",
+    "direction",
+    "race_type",
+    "cars",
+    "opens_at",
+    "closes_at",
+    "ranking_method",
+    "laps_required",
+    "laps_to_drive",
+    "off_track_penalty_s",
+    "crash_penalty_s",
+    "max_off_tracks_per_lap",
+    "submissions_per_racer",
+]
+
+
 class RaceObstaclesForm(RacerWords, forms.ModelForm):
     """An event's boxes and bot cars as fields of their own (the model keeps them as JSON);
     those of the chosen race type are required."""
@@ -181,22 +199,7 @@ class CommunityRaceForm(RaceObstaclesForm):
 
     class Meta:
         model = Event
-        fields = [
-            "name",
-            "track",
-            "direction",
-            "race_type",
-            "cars",
-            "opens_at",
-            "closes_at",
-            "ranking_method",
-            "laps_required",
-            "laps_to_drive",
-            "off_track_penalty_s",
-            "crash_penalty_s",
-            "max_off_tracks_per_lap",
-            "submissions_per_racer",
-        ]
+        fields = ["name", *RACE_FIELDS]
         widgets = {
             "opens_at": forms.DateTimeInput(attrs={"type": "datetime-local"}, format=LOCAL),
             "closes_at": forms.DateTimeInput(attrs={"type": "datetime-local"}, format=LOCAL),

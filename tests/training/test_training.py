@@ -34,6 +34,20 @@ from training.services import model_create, training_stop
 
 @pytest.mark.slow
 @pytest.mark.django_db(transaction=True)
+def iterations(job, count: int) -> None:
+    """``count`` iterations of ``job`` recorded, as its trainer records them."""
+    for number in range(1, count + 1):
+        Iteration.objects.create(
+            job=job,
+            number=number,
+            reward=1.0,
+            completion=10.0,
+            episodes=5,
+            steps=50,
+            wall_seconds=1.0,
+        )
+
+
 def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     alice, tracks, celery_worker_process
 ):
@@ -127,16 +141,7 @@ def test_evaluations_that_come_after_the_next_update_mark_their_own_checkpoint_b
     checkpoint is the one that drove them."""
     job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     run = trainer.Trainer(job, start_rollouts=lambda *args: None)
-    for number in (1, 2):
-        Iteration.objects.create(
-            job=job,
-            number=number,
-            reward=1.0,
-            completion=10.0,
-            episodes=5,
-            steps=50,
-            wall_seconds=1.0,
-        )
+    iterations(job, 2)
 
     def results(version: int, progress: float, count: int) -> None:
         for _ in range(count):
@@ -173,16 +178,7 @@ def test_of_checkpoints_that_evaluate_alike_the_newer_is_best_as_in_deepracer(al
     checkpoint whatever its laps (simapp's s3_metrics.py); so it stays when the trainer resumes."""
     job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
     run = trainer.Trainer(job, start_rollouts=lambda *args: None)
-    for number in (1, 2, 3):
-        Iteration.objects.create(
-            job=job,
-            number=number,
-            reward=1.0,
-            completion=10.0,
-            episodes=5,
-            steps=50,
-            wall_seconds=1.0,
-        )
+    iterations(job, 3)
 
     def results(version: int, progress: float, lap_time: float | None) -> None:
         for _ in range(5):
@@ -225,16 +221,7 @@ def test_the_models_best_checkpoint_metric_picks_the_best_as_dr_train_best_model
     """By lap time the faster checkpoint is best, by reward the better rewarded, where by
     progress (all 100%) the newer would be."""
     job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
-    for number in (1, 2):
-        Iteration.objects.create(
-            job=job,
-            number=number,
-            reward=1.0,
-            completion=10.0,
-            episodes=5,
-            steps=50,
-            wall_seconds=1.0,
-        )
+    iterations(job, 2)
     picked = {}
     for metric in ("laptime", "reward", "progress"):
         RLModel.objects.filter(pk=job.model_id).update(best_checkpoint_by=metric)
