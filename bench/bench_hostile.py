@@ -24,7 +24,7 @@ from sandbox.protocol import pack
 os.environ.setdefault("DJANGO_SETTINGS_MODULE", "console.settings.dev")
 django.setup()  # the rollout worker's limits are read from where it keeps them
 
-from training.rollouts import MEMORY_ALLOWANCE, REWARD_CALL_LIMIT  # noqa: E402
+from jobs.rollouts import MEMORY_ALLOWANCE, REWARD_CALL_LIMIT  # noqa: E402
 
 EVERYWHERE = """
 import os, signal

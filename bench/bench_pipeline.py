@@ -3,7 +3,7 @@
 Starts a Redis of its own, a scratch SQLite database (migrated, the built-in tracks loaded) and
 the console's Celery workers as `make run` starts them (``console.supervisor.worker_pools``: a
 training worker and a simulation worker), but no web server: the real trainer
-(``training.trainer``) and rollout workers (``training.rollouts``, their sandboxes included) over
+(``jobs.trainer``) and rollout workers (``jobs.rollouts``, their sandboxes included) over
 a real Redis, the Django app Daphne left out (``bench.pipeline_settings``). For each count in
 ``--jobs``, that many models with DeepRacer's defaults (``bench_training.default_model``: PPO, the
 camera, the 3-layer CNN, 20 episodes between updates, the Rookie Loop) train at once for

@@ -4,7 +4,7 @@ workers shared one copy of them (``rl.weights_cache``): `python -m bench.bench_w
 A private Redis; the trainer's side publishes each iteration's weights (a real policy's, the
 3-layer PPO of DeepRacer's defaults unless ``--architecture`` says otherwise) as
 ``JobChannel.publish`` does, and ``--workers`` W rollout workers, each a process of its own on
-this machine, fetch them as ``training.rollouts._drive`` does: "before", each from Redis
+this machine, fetch them as ``jobs.rollouts._drive`` does: "before", each from Redis
 (``fetch_policy()``), "after", through the machine's cache (``fetch_policy(cache)``). Per
 iteration it prints the bytes Redis sent (its ``total_net_output_bytes``), the fan-out time (from
 the end of the publish to the last worker holding the weights) and the publish's own time.

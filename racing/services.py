@@ -167,7 +167,7 @@ def submission_run(*, submission_id: int) -> Submission | None:
     """The ``racing.race`` task's work: drive the submission's evaluation, then score it. A
     redelivered task drives an interrupted evaluation again and scores a finished one; a
     submission that has ended or vanished is left alone (None)."""
-    from training import evaluation as evaluations
+    from jobs import evaluation as evaluations
 
     submission = Submission.objects.select_related("event").filter(pk=submission_id).first()
     if submission is None or not submission.is_active:

@@ -1,7 +1,7 @@
 """The episode loop: a policy drives the environment from a reset to the episode's end.
 
 One loop for every episode Pitlane drives: the sandbox child's training and evaluation episodes
-(``sandbox.child``), an evaluation job's trials (``training.evaluation``) and what the sandbox's
+(``sandbox.child``), an evaluation job's trials (``jobs.evaluation``) and what the sandbox's
 benchmark times in process (``bench.bench_sandbox``). What differs between them is the mode and
 what runs after the reset and after each step (``on_reset``, ``on_step``: trace rows, video and
 live frames, lap records, progress), never the loop.
@@ -69,7 +69,7 @@ Score = Callable[[list[tuple[int, dict]]], list[float]]
 
 class Fleet:
     """Cars driven together by one policy (a car that evaluates may have its own,
-    ``Car.policy``: racers' models against each other, ``training.evaluation``). ``seeds[i]``
+    ``Car.policy``: racers' models against each other, ``jobs.evaluation``). ``seeds[i]``
     seeds car ``i``'s sampling and its action space (their environments are seeded by their
     resets). ``score``, where given, takes each car's (index, params) of a step and gives their
     rewards, in one call for all the cars; a call that fails raises, naming the failing car's

@@ -1,5 +1,5 @@
 """A policy as an ONNX graph: what ``onnxmodel-<name>.tar.gz`` carries for custom cars and other
-runtimes (``training.exports``). Inputs are named after the sensors (camera bytes 0-255 as float32,
+runtimes (``archives.exports``). Inputs are named after the sensors (camera bytes 0-255 as float32,
 NCHW; the lidar in metres or sector bits); the output is ``probabilities`` over the discrete
 actions, or ``action``: steering and speed each in [-1, 1] of its range."""
 

@@ -16,8 +16,10 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = (
     "accounts",
     "analysis",
+    "archives",
     "common",
     "console",
+    "jobs",
     "notifications",
     "racing",
     "rl",

@@ -18,8 +18,8 @@ from training.models import EvaluationJob, RLModel
 
 TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE section 5
 CLONED_WEIGHTS = "checkpoints/cloned.safetensors"  # a clone's start: its source's best weights
-# Where a virtual model's archive keeps its best and last checkpoints (training.exports), and an
-# import finds them (training.imports).
+# Where a virtual model's archive keeps its best and last checkpoints (archives.exports), and an
+# import finds them (archives.imports).
 EXPORTED_CHECKPOINTS = {
     "best": "checkpoints/best.safetensors",
     "last": "checkpoints/last.safetensors",

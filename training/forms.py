@@ -12,11 +12,12 @@ from dataclasses import dataclass
 
 from django import forms
 
+from archives import imports
 from common.forms import RacerWords
 from rl import hyperparameters
 from simulator import config as sim
 from simulator import randomisation_ranges
-from training import configuration, imports, selectors
+from training import configuration, selectors
 from training.models import (
     Algorithm,
     BestCheckpointBy,

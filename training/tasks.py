@@ -25,7 +25,7 @@ EVALUATION_LIMIT = 3600  # [s] five trials of at most 10,000 steps each, in real
     time_limit=LONGEST_JOB + 1200,
 )
 def train(self, job_id: int) -> None:
-    from training import trainer
+    from jobs import trainer
 
     torch_threads()
     owner = f"{self.request.hostname}:{os.getpid()}"
@@ -47,7 +47,7 @@ def train(self, job_id: int) -> None:
     time_limit=LONGEST_JOB + 1200,
 )
 def rollout(job_id: int, worker: int, attempt: int, track: str) -> None:
-    from training import rollouts
+    from jobs import rollouts
 
     rollouts.run(job_id, worker, attempt, track)
 
@@ -60,7 +60,7 @@ def rollout(job_id: int, worker: int, attempt: int, track: str) -> None:
     time_limit=EVALUATION_LIMIT + 60,
 )
 def evaluate(evaluation_id: int) -> None:
-    from training import evaluation
+    from jobs import evaluation
 
     evaluation.run(evaluation_id)
 
@@ -72,7 +72,8 @@ def resume_lapsed() -> list[str]:
     and the imports that died storing their files (``imports.abandoned_imports_remove``).
     Every worker calls it every few seconds (``console.workers``), so the work goes on
     whichever machines are left."""
-    from training import imports, leases
+    from archives import imports
+    from training import leases
 
     sent = []
     for job in leases.lapsed_claim():

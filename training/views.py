@@ -28,24 +28,14 @@ from django.urls import reverse
 from django.utils.cache import patch_cache_control
 from django.views.decorators.http import require_POST, require_safe
 
+from archives import exports, imports, logs_archive
 from common import ratelimits
 from common.refusals import Refused
 from sandbox import SandboxFailure, SandboxUnavailable
 from simulator import config as sim_config
 from simulator import randomisation_ranges
 from simulator import tracks as simulator_tracks
-from training import (
-    artifacts,
-    checkers,
-    configuration,
-    exports,
-    imports,
-    leases,
-    logs_archive,
-    rewards,
-    selectors,
-    services,
-)
+from training import artifacts, checkers, configuration, leases, rewards, selectors, services
 from training.forms import (
     EvaluationForm,
     ModelCreateForm,
@@ -566,7 +556,7 @@ def model_export(request: HttpRequest, pk: int, kind: str) -> HttpResponse:
 @login_required
 @require_safe
 def model_logs(request: HttpRequest, pk: int) -> HttpResponse:
-    """The model's logs, laid out as a DeepRacer model folder (``training.logs_archive``), built
+    """The model's logs, laid out as a DeepRacer model folder (``archives.logs_archive``), built
     for this request: its traces grow while it trains."""
     model = _get_model_for_user(request, pk)
     archive = tempfile.TemporaryFile()  # noqa: SIM115 (the response closes it once sent)

@@ -41,6 +41,8 @@ INSTALLED_APPS = [
     "channels",
     "console",
     "training",
+    "jobs",
+    "archives",
     "racing",
     "analysis",
     "notifications",
@@ -203,7 +205,7 @@ PITLANE_MAX_QUEUED_EVALUATIONS = env.int("PITLANE_MAX_QUEUED_EVALUATIONS", 3, mi
 PITLANE_CHECKERS = env.int("PITLANE_CHECKERS", 2, minimum=1)
 PITLANE_CHECKS_WAITING = env.int("PITLANE_CHECKS_WAITING", 8, minimum=0)
 # The largest request body (console.bodylimit): any page, and the model import's archive upload
-# (training.imports.MAX_ARCHIVE, 256 MiB, with room for the form around it).
+# (archives.imports.MAX_ARCHIVE, 256 MiB, with room for the form around it).
 PITLANE_MAX_BODY = env.int("PITLANE_MAX_BODY", 10 * 2**20, minimum=2**20)  # [bytes]
 PITLANE_MAX_IMPORT_BODY = env.int("PITLANE_MAX_IMPORT_BODY", 257 * 2**20, minimum=2**20)  # [bytes]
 # The queues a complete deployment serves; /healthz reports any that no worker consumes. Each has
@@ -214,7 +216,7 @@ PITLANE_MAX_IMPORT_BODY = env.int("PITLANE_MAX_IMPORT_BODY", 257 * 2**20, minimu
 PITLANE_QUEUES = ("training", "simulation", "rescoring")
 # Jobs that train at once on a machine `make run` serves (console.supervisor): processes of its
 # training worker. A trainer learns while its rollout workers wait for the new weights
-# (training.rollouts' _await_next_version), so the trainers share the cores then: two trainers
+# (jobs.rollouts' _await_next_version), so the trainers share the cores then: two trainers
 # with every core each made each update several times slower than with half of them each.
 PITLANE_TRAINERS = env.int("PITLANE_TRAINERS", 1, minimum=1)
 PITLANE_TRAINER_THREADS = env.int(
@@ -238,14 +240,14 @@ PITLANE_ROLLOUT_SILENCE = env.int("PITLANE_ROLLOUT_SILENCE", 30, minimum=5)  # [
 # last checkpoint, and an evaluation or race is driven again by another simulation worker.
 PITLANE_TRAINER_LEASE = env.int("PITLANE_TRAINER_LEASE", 45, minimum=10)  # [s]
 PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # [s]
-# Cars a rollout worker drives together (training.rollouts): each step runs the policy once for
+# Cars a rollout worker drives together (jobs.rollouts): each step runs the policy once for
 # all of them, and a batched forward pass costs far less per car than one per car (on one core of
 # the 2-core dev box: 12.6 ms a car at 1, 6.8 at 4, 4.6 at 8; 1.27 at 64 on the GPU box's CPU),
 # so a core drives 2.3 to 3 times the steps/s with 8 cars as with 1 (bench.bench_sandbox --cars).
 # The same on any machine: the gain is per core, not from more of them. Not more: each car adds
 # an environment (about 28 MiB) and an episode in memory, and an iteration is 20 episodes by
 # default, which more cars would finish with fewer and fewer of them driving. A SAC worker drives
-# one (it wants an episode per update: training.rollouts.cars_for).
+# one (it wants an episode per update: jobs.rollouts.cars_for).
 PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", 8, minimum=1, maximum=64)
 # Where a rollout worker runs its cars' policy: "cuda" serves it from the worker's own process on
 # the GPU (the sandbox child, which runs racers' code, is never given the GPU's driver: it sends

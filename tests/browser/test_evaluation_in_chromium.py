@@ -3,10 +3,11 @@ import threading
 import pytest
 from playwright.sync_api import Page, expect
 
+from jobs import evaluation
 from tests.helpers.accounts import PASSWORD
 from tests.helpers.browser import log_in
 from tests.helpers.models import ready_model
-from training import evaluation, services
+from training import services
 
 pytestmark = pytest.mark.django_db(transaction=True)
 

@@ -10,6 +10,7 @@ import io
 import pytest
 from playwright.sync_api import Page, expect
 
+from archives import imports
 from notifications import services as notifications
 from tests.browser.checks import page_problems
 from tests.browser.conftest import off_the_loop
@@ -22,7 +23,7 @@ from tests.helpers.archives import (
 )
 from tests.helpers.browser import log_in
 from tests.helpers.models import ready_model
-from training import imports, services
+from training import services
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db(transaction=True)

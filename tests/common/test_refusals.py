@@ -1,8 +1,9 @@
 """One refusal type: views and commands catch ``Refused`` and show what it says."""
 
+from archives import exports, imports, logs_archive
 from common.refusals import WHOLE, Refused
 from racing.services import SubmissionRefused
-from training import configuration, exports, imports, logs_archive, services
+from training import configuration, services
 
 
 def test_a_refusal_reads_as_one_sentence_or_one_line_per_input():

@@ -10,8 +10,9 @@ import tarfile
 import pytest
 import yaml
 
+from archives import exports
 from tests.helpers.models import ready_model
-from training import artifacts, exports
+from training import artifacts
 from training.models import RLModel, TrainingJob
 from training.rewards import EXAMPLES
 

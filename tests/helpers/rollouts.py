@@ -1,4 +1,4 @@
-"""Stand-ins for what ``training.rollouts._drive`` is given: a sandbox of several cars that ends
+"""Stand-ins for what ``jobs.rollouts._drive`` is given: a sandbox of several cars that ends
 their episodes in a scripted order, and a ``Viewing`` with nobody watching."""
 
 import time

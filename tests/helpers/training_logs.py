@@ -19,10 +19,12 @@ from deepracer.logs.misc import LogFolderType
 from django.conf import settings
 
 import simulator
+from archives import logs_archive
+from jobs import trainer
 from rl.experience import Episode
 from simulator.controller import CentreLineDriver
 from tests.helpers.models import trained_model
-from training import artifacts, logs_archive, trainer
+from training import artifacts
 from training.models import EvaluationJob, Iteration, RLModel
 
 STEP = 1 / 15  # [s]

@@ -11,13 +11,14 @@ from django.test.utils import CaptureQueriesContext
 from django.urls import reverse
 
 from console.env import Env
+from jobs import evaluation, trainer
 from notifications import services
 from notifications.models import Notification
 from racing.models import Submission
 from tests.helpers import league
 from tests.helpers.models import ready_model
 from tests.helpers.training import queued_job
-from training import evaluation, leases, lifecycle, trainer
+from training import leases, lifecycle
 from training.models import EvaluationJob, EvaluationTrial, TrainingJob
 
 pytestmark = pytest.mark.django_db

@@ -12,13 +12,13 @@ from django.db import connection
 from django.urls import reverse
 from django.utils import timezone
 
+from jobs import evaluation as evaluations
 from racing import selectors, services
 from racing.models import Division, Event, Racer, RaceType, Ranking, Submission
 from tests.helpers.evaluations import trial_paths
 from tests.helpers.league import DAY, event, race_evaluation, scored
 from tests.helpers.live import viewer
 from tests.helpers.models import ready_model, with_a_later_checkpoint
-from training import evaluation as evaluations
 from training.models import EvaluationJob, RLModel
 
 pytestmark = pytest.mark.usefixtures("tracks")

@@ -179,8 +179,8 @@ def test_a_cache_it_cannot_write_costs_only_the_cache(tmp_path):
 def test_rollout_workers_of_one_machine_drive_with_weights_fetched_once(channel, monkeypatch):
     from types import SimpleNamespace
 
+    from jobs.rollouts import Printed, _drive
     from tests.helpers.rollouts import ScriptedCars, Unwatched
-    from training.rollouts import Printed, _drive
 
     fetched = []  # the weights' trips from Redis
     hmget = channel.client.hmget

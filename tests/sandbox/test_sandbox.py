@@ -274,7 +274,7 @@ def test_a_rollouts_car_sees_boxes_through_pybullet_in_the_sealed_child():
 def test_a_rollout_without_pybullet_says_so_when_its_car_nears_a_box(
     tmp_path, monkeypatch, sensors
 ):
-    from training.rollouts import failure_words
+    from jobs.rollouts import failure_words
 
     (tmp_path / "pybullet.py").write_text("raise ImportError('not installed')\n")
     monkeypatch.setattr(

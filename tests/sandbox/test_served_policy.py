@@ -96,7 +96,7 @@ def test_the_time_the_worker_takes_over_the_policy_is_not_counted_against_the_re
 def test_a_policy_that_gives_no_answer_fails_the_worker_in_words_rather_than_hang(
     weights, monkeypatch
 ):
-    from training.rollouts import failure_words
+    from jobs.rollouts import failure_words
 
     monkeypatch.setattr(served, "ANSWER_TIMEOUT", 0.5)
     monkeypatch.setattr(PolicyServer, "_run", lambda self, *args: time.sleep(3.0))
@@ -258,7 +258,7 @@ def test_the_rollout_device_is_the_gpu_where_torch_finds_one_and_a_gpu_asked_for
 
 
 def test_a_rollout_worker_serves_its_sandboxes_the_policy_where_it_runs_off_the_cpu():
-    from training.rollouts import _sandboxes, cars_for
+    from jobs.rollouts import _sandboxes, cars_for
 
     model = SimpleNamespace(
         algorithm="clipped_ppo",

@@ -1,9 +1,9 @@
 """DeepRacer's best checkpoint by the racer's metric (DR_TRAIN_BEST_MODEL_METRIC), over a job's
-iterations: ``training.checkpoints``."""
+iterations: ``jobs.checkpoints``."""
 
 import pytest
 
-from training.checkpoints import UNFINISHED_LAP_MS, best_iteration, evaluation_means
+from jobs.checkpoints import UNFINISHED_LAP_MS, best_iteration, evaluation_means
 from training.models import Iteration
 
 

@@ -11,11 +11,12 @@ import pytest
 from django.urls import reverse
 
 import simulator
+from archives import exports, imports
 from simulator.camera import CAR_FOV, SIMAPP_FOV
 from tests.helpers.archives import deepracer_export, tar_gz
 from tests.helpers.training import post
 from tests.helpers.training import settings as training_settings
-from training import configuration, exports, imports, leases
+from training import configuration, leases
 from training.forms import ModelCreateForm
 from training.models import CameraLens, RLModel, TrainingJob
 

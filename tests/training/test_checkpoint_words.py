@@ -6,8 +6,9 @@ import re
 import pytest
 from django.urls import reverse
 
+from jobs import evaluation
 from tests.helpers.models import ready_model
-from training import artifacts, evaluation, selectors, services
+from training import artifacts, selectors, services
 from training.models import EvaluationJob, EvaluationTrial, Iteration, RLModel, Track
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]

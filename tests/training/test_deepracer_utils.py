@@ -21,6 +21,8 @@ from deepracer.logs import DeepRacerLog
 from django.core.management import CommandError, call_command
 from django.urls import reverse
 
+from archives import history
+from jobs import trainer
 from tests.helpers.training_logs import (
     EPISODES,
     assert_training_logs_read_as_recorded,
@@ -28,7 +30,7 @@ from tests.helpers.training_logs import (
     new_model,
     train_on_paper,
 )
-from training import artifacts, history, trainer
+from training import artifacts
 from training.models import Iteration
 
 EPISODE_KEYS = {

@@ -13,13 +13,14 @@ from django.core.management import call_command
 from django.urls import reverse
 
 import simulator
+from archives import exports, imports
 from simulator import randomisation_ranges
 from simulator.randomisation import LookView
 from tests.helpers.archives import DEEPRACER_PARAMS, deepracer_export, tar_gz
 from tests.helpers.models import ready_model, trained_model
 from tests.helpers.training import post
 from tests.helpers.training import settings as training_settings
-from training import artifacts, configuration, exports, imports, services
+from training import artifacts, configuration, services
 from training.forms import ModelCreateForm
 from training.models import EvaluationJob, RLModel
 

@@ -17,17 +17,17 @@ from django.urls import reverse
 from django.utils import timezone
 
 from analysis.models import TraceSummary
+from jobs import evaluation as evaluations
+from jobs.evaluation import EvaluationFailed, _VideoWriter
 from tests.helpers.evaluations import stored, trial_paths
 from tests.helpers.live import frame_header, viewer
 from tests.helpers.models import ready_model, trained_model
 from tests.helpers.training_logs import EVALUATION_KEYS, assert_evaluation_logs_read_as_recorded
 from tests.services import wait_for
 from training import configuration, leases, services, signals
-from training import evaluation as evaluations
 from training.artifacts import EVALUATION_METRICS as METRICS
 from training.artifacts import EVALUATION_TRACE as TRACE
 from training.artifacts import EVALUATION_VIDEO as VIDEO
-from training.evaluation import EvaluationFailed, _VideoWriter
 from training.models import EvaluationJob, RLModel
 
 pytestmark = pytest.mark.usefixtures("tracks")
@@ -278,7 +278,7 @@ def test_the_evaluate_page_keeps_what_was_typed_and_says_what_to_change(client, 
 def test_an_evaluation_interrupted_by_a_dead_worker_starts_over_and_an_ended_one_never_reruns(
     alice,
 ):
-    from training import evaluation as runner
+    from jobs import evaluation as runner
 
     model = ready_model(alice)
     evaluation = services.evaluation_start(

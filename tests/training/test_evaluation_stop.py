@@ -7,12 +7,12 @@ from django.core.files.storage import default_storage
 from django.test import Client
 from django.urls import reverse
 
+from jobs import evaluation as runner
 from tests.helpers.evaluations import stored
 from tests.helpers.live import frame_header, viewer
 from tests.helpers.models import ready_model
 from tests.services import wait_for
 from training import artifacts, leases, services
-from training import evaluation as runner
 from training.models import EvaluationJob, RLModel
 
 pytestmark = pytest.mark.usefixtures("tracks")

@@ -16,10 +16,11 @@ import torch
 from django.core.management import CommandError, call_command
 from django.urls import reverse
 
+from archives import exports
 from rl import cargraph, hyperparameters
 from rl.policies import Policy
 from tests.helpers.models import sensor_frames, trained_model
-from training import artifacts, exports
+from training import artifacts
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db

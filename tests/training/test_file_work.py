@@ -13,13 +13,15 @@ from django.core.files.storage import FileSystemStorage, default_storage
 from django.db import OperationalError
 from django.utils import timezone
 
+from archives import imports
 from common import transactions
+from jobs import trainer
 from rl.learner import Update
 from rl.stopwatch import Stopwatch
 from tests.helpers.archives import virtual_archive
 from tests.helpers.models import STRAIGHT_AHEAD, ready_model
 from tests.helpers.training import settings as training_settings
-from training import artifacts, configuration, imports, leases, services, tasks, trainer
+from training import artifacts, configuration, leases, services, tasks
 from training.models import RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db

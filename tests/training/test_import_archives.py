@@ -19,10 +19,11 @@ from django.urls import reverse
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from archives import history, imports
 from common import documents
 from tests.helpers.archives import CHECKED_IMPORT, deepracer_export, tar_gz, virtual_archive
 from tests.helpers.models import ready_model
-from training import artifacts, history, imports, views
+from training import artifacts, views
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db

@@ -16,11 +16,12 @@ from django.db.models import Max
 from django.urls import reverse
 
 from analysis.records import Source
+from archives import exports, history, imports
 from simulator.trace import to_csv
 from tests.helpers.analysis import HAND_WRITTEN
 from tests.helpers.archives import tar_gz, trainer_metrics, virtual_archive
 from tests.helpers.models import ready_model
-from training import artifacts, exports, history, imports, selectors
+from training import artifacts, selectors
 from training.models import EvaluationJob, Iteration, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db

@@ -11,13 +11,14 @@ import pytest
 from django.core.files.uploadedfile import SimpleUploadedFile
 from django.urls import reverse
 
+from archives import imports
 from tests.helpers.archives import (
     CHECKED_IMPORT,
     car_archive,
     deepracer_folder,
 )
 from tests.helpers.models import ready_model
-from training import artifacts, configuration, imports, selectors, services
+from training import artifacts, configuration, selectors, services
 from training.models import Quota, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db

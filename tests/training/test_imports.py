@@ -16,6 +16,7 @@ from django.core.management import CommandError, call_command
 from django.urls import reverse
 from safetensors.torch import save as save_tensors
 
+from archives import history, imports
 from rl.learner import load_tensors
 from tests.helpers.archives import (
     CHECKED_IMPORT,
@@ -29,7 +30,7 @@ from tests.helpers.archives import (
     virtual_archive,
 )
 from tests.helpers.models import ready_model
-from training import artifacts, history, imports, selectors
+from training import artifacts, selectors
 from training.configuration import ModelSettings, check
 from training.models import RLModel, ShellColour, Track, TrainingJob
 from training.rewards import EXAMPLES

@@ -5,10 +5,10 @@ import time
 
 import pytest
 
+from jobs.rollouts import Viewing
 from sandbox import MiB, Sandbox
 from simulator.spectator import FRAME_INTERVAL
 from training.rewards import EXAMPLES
-from training.rollouts import Viewing
 
 
 class Publisher:

@@ -1,4 +1,4 @@
-"""A rollout worker whose sandbox drives several cars (``training.rollouts._drive``): each episode
+"""A rollout worker whose sandbox drives several cars (``jobs.rollouts._drive``): each episode
 goes to the buffer as its car ends it, no more are started than the trainer wants of a version,
 and the weights change only while no car drives, so no episode mixes two versions. The sandbox
 here is a stand-in that ends the cars' episodes in a scripted order; Redis is real."""
@@ -11,11 +11,11 @@ import msgpack
 import pytest
 
 from common.redis_client import redis_client
+from jobs.rollouts import Printed, _drive, _where, cars_for
 from rl import hyperparameters as hp
 from rl.experience import JobChannel
 from sandbox import SandboxFailure
 from tests.helpers.rollouts import ScriptedCars, Unwatched
-from training.rollouts import Printed, _drive, _where, cars_for
 
 
 @pytest.fixture

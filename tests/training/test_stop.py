@@ -10,6 +10,7 @@ import pytest
 
 import simulator
 from common.redis_client import redis_client
+from jobs import rollouts
 from rl import hyperparameters
 from rl.experience import JobChannel
 from rl.learner import Interrupted, Learner
@@ -21,7 +22,7 @@ from tests.helpers.training import (
     wait_for_job,
 )
 from tests.services import wait_for
-from training import configuration, rollouts, tasks
+from training import configuration, tasks
 from training.models import Iteration, JobLogLine, RLModel, TrainingJob
 from training.services import training_stop
 

@@ -6,12 +6,12 @@ import pytest
 from django.urls import reverse
 
 from common.redis_client import redis_client
+from jobs import rollouts
 from rl.experience import JobChannel, LogEntry
 from sandbox import LOG_KEEP, Sandbox
 from sandbox.reward import MAX_LOG
 from tests.helpers.models import ready_model
 from tests.helpers.sandbox import PARAMS, reward
-from training import rollouts
 from training.models import JobLogLine, TrainingJob
 
 FLOOD = """\

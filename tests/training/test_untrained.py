@@ -4,10 +4,11 @@ may be evaluated, and are refused for races, downloads and clones."""
 import pytest
 from django.urls import reverse
 
+from archives import exports
 from racing import services as racing_services
 from tests.helpers.league import event
 from tests.helpers.models import ready_model
-from training import artifacts, configuration, exports, selectors, services
+from training import artifacts, configuration, selectors, services
 from training.models import EvaluationJob, RLModel, TrainingJob
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]

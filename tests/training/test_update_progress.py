@@ -4,11 +4,11 @@ time it has left, and the episodes counted as the cars end them, not only once l
 import pytest
 
 from common.redis_client import redis_client
+from jobs.trainer import update_message
 from rl.experience import JobChannel
 from tests.helpers.training import training_job
 from training import selectors
 from training.models import TrainingJob
-from training.trainer import update_message
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 ABOUT = "iteration 4, from 20 episodes"

@@ -2,8 +2,9 @@ from django.core.management.base import BaseCommand, CommandError
 
 from common.formatting import laptime
 from common.refusals import Refused
+from jobs import evaluation
 from simulator import config as sim
-from training import evaluation, services
+from training import services
 from training.management.lookup import find_model
 from training.models import EvaluationJob
 

@@ -3,7 +3,7 @@ from pathlib import Path
 from django.core.files.storage import default_storage
 from django.core.management.base import BaseCommand, CommandError
 
-from training import exports, logs_archive
+from archives import exports, logs_archive
 from training.management.lookup import find_model
 
 

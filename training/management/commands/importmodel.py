@@ -2,8 +2,8 @@ from pathlib import Path
 
 from django.core.management.base import BaseCommand, CommandError
 
+from archives import imports
 from common.refusals import Refused
-from training import imports
 from training.management.lookup import find_racer
 
 

@@ -5,7 +5,7 @@ table, and the totals of its training.
 The file holds one row per episode, in the order they were driven: the training episodes of an
 iteration (``phase: "training"``, ``trial`` counting 1, 2, ... within the iteration), then the
 evaluation episodes of the policy learnt from them (``phase: "evaluation"``). Our trainer writes
-it so (``training.trainer``), and so does DeepRacer's simulation application, whose exports read
+it so (``jobs.trainer``), and so does DeepRacer's simulation application, whose exports read
 the same way. An iteration begins at a training row that follows an evaluation, or whose trial
 count starts again; a file without trial counts is cut every ``episodes_per_iteration`` rows.
 """

@@ -31,6 +31,7 @@ from django.utils import timezone
 import simulator
 from common.formatting import clock
 from common.redis_client import redis_client
+from jobs import checkpoints
 from notifications import services as notifications
 from rl import hyperparameters as hp
 from rl.experience import Episode, JobChannel, decode_episode
@@ -39,7 +40,7 @@ from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stop
 from sandbox.protocol import unpack
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, checkpoints, leases, lifecycle, live, services, signals
+from training import artifacts, leases, lifecycle, live, services, signals
 from training.leases import LeaseLost
 from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 

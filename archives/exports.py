@@ -44,10 +44,11 @@ from dataclasses import dataclass
 from django.core.files.storage import default_storage
 from django.db.models import Sum
 
+from archives import history, logs_archive
 from common.refusals import Refused
 from common.transactions import outside_transaction
 from rl import hyperparameters
-from training import artifacts, history, logs_archive, selectors
+from training import artifacts, selectors
 from training.models import RLModel
 
 CAR_GRAPH = "agent/model.pb"  # where simapp puts it (tensorflow_model.py:355-371, 01f5f01)

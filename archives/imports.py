@@ -43,22 +43,14 @@ from django.utils import timezone
 from google.protobuf.message import DecodeError
 from safetensors import SafetensorError
 
+from archives import exports, history
 from common import documents
 from common.refusals import Refused
 from common.transactions import outside_transaction
 from rl import hyperparameters, tfcheckpoint, tfgraph
 from simulator import config as sim
 from simulator import tracks as sim_tracks
-from training import (
-    artifacts,
-    configuration,
-    exports,
-    history,
-    leases,
-    lifecycle,
-    rewards,
-    services,
-)
+from training import artifacts, configuration, leases, lifecycle, rewards, services
 from training.models import (
     Algorithm,
     BestCheckpointBy,
