@@ -16,7 +16,7 @@ from django.core.management import CommandError, call_command
 from django.urls import reverse
 from safetensors.torch import save as save_tensors
 
-from archives import history, imports
+from archives import deepracer_settings, history, imports
 from rl.learner import load_tensors
 from tests.helpers.archives import (
     CHECKED_IMPORT,
@@ -528,7 +528,7 @@ def test_world_name_finds_the_loaded_track_and_its_direction(params, expected, n
     track_row("rookie-loop", display_name="Rookie Loop")
     track_row("one-way", display_name="One Way", clockwise=False)
     notes = []
-    assert imports._deepracer_track(params, notes) == expected
+    assert deepracer_settings.deepracer_track(params, notes) == expected
     if noted:
         assert len(notes) == 1 and noted in notes[0], notes
     else:
@@ -556,7 +556,7 @@ def test_a_deepracer_world_name_lands_on_the_built_in_track_and_its_direction(
     tracks, params, expected, noted
 ):
     notes = []
-    assert imports._deepracer_track(params, notes) == expected
+    assert deepracer_settings.deepracer_track(params, notes) == expected
     if noted:
         assert len(notes) == 1 and noted in notes[0], notes
     else:
@@ -749,5 +749,5 @@ def test_an_exported_track_names_deepracers_world_and_imports_back_onto_itself(
         reverse = world_name.endswith("_ccw")
         assert (params["WORLD_NAME"], params["REVERSE_DIR"]) == (world_name, reverse)
     notes = []
-    assert imports._deepracer_track(params, notes) == (track, direction, world_name)
+    assert deepracer_settings.deepracer_track(params, notes) == (track, direction, world_name)
     assert len(notes) == bool(world_name)
