@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import json
 import re
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from archives.members import ImportRefused, Members, member_json, member_place, member_yaml
 from rl import hyperparameters
 from simulator import config as sim
 from simulator import tracks as sim_tracks
@@ -25,11 +25,6 @@ from training.models import (
     ShellColour,
     Track,
 )
-
-if TYPE_CHECKING:
-    pass
-
-from archives.members import ImportRefused, Members, member_json, member_place, member_yaml
 
 DEFAULT_TRACK = "rookie-loop"
 

@@ -5,16 +5,12 @@ of DeepRacer's files, and their text, JSON and YAML, each refused in words when 
 from __future__ import annotations
 
 import json
-from typing import TYPE_CHECKING
 
 import yaml
 
 from archives import exports
 from common import documents
 from common.refusals import Refused
-
-if TYPE_CHECKING:
-    pass
 
 
 class Members(dict[str, bytes | None]):
