@@ -8,6 +8,10 @@ play it); the frames someone watches live go to the ``evaluation_<id>`` group, a
 watches, the simulation keeps to real time so that they see the race at its speed (an operator
 may speed it up: PITLANE_WATCHED_SPEEDUP).
 
+Model against model: an evaluation may be one car of a race of several (``grid_leader``), each
+car another model's evaluation with its own trials, trace, video and live frames. The run of the
+race's first car drives them all together (``_race``), one car alone being a race of one.
+
 Long because an evaluation's run is one piece: its lease, its drive with the video encoder, the
 live frames, the racer's stop, the trials it records and the files it saves.
 """
