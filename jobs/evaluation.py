@@ -232,9 +232,15 @@ def _race(cars: list[Evaluator]) -> None:
     racing = [car for car in cars if not car.failure]
     if not racing:
         return
-    race = [car.evaluation for car in racing]
-    for car in racing:
-        car.prepare(race)
+    race, prepared = [car.evaluation for car in racing], []
+    try:
+        for car in racing:
+            car.prepare(race)
+            prepared.append(car)
+    except EvaluationFailed:  # the race fails with it: the simulations built are let go
+        for car in prepared:
+            car.env.close()
+        raise
     if not all([car.begin() for car in racing]):  # the racer stopped it as it loaded
         for car in racing:
             car.stopped = True

@@ -33,8 +33,6 @@ from training.rewards import EXAMPLES
 from training.services import model_create, training_stop
 
 
-@pytest.mark.slow
-@pytest.mark.django_db(transaction=True)
 def iterations(job, count: int) -> None:
     """``count`` iterations of ``job`` recorded, as its trainer records them."""
     for number in range(1, count + 1):
@@ -49,6 +47,8 @@ def iterations(job, count: int) -> None:
         )
 
 
+@pytest.mark.slow
+@pytest.mark.django_db(transaction=True)
 def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     alice, tracks, celery_worker_process
 ):
