@@ -1,4 +1,5 @@
-"""An evaluation's files as it stored them, and its trials' paths read from its trace."""
+"""An evaluation's form as a racer sends it, its files as it stored them, and its trials' paths
+read from its trace."""
 
 import csv
 import io
@@ -6,6 +7,17 @@ import io
 from training import artifacts
 from training.artifacts import EVALUATION_TRACE as TRACE
 from training.models import EvaluationJob
+
+# The evaluate page's form as a racer sends it with the defaults: 3 trials on the oval.
+EVALUATION_FORM = {
+    "track": "pitlane-oval",
+    "direction": "counterclockwise",
+    "race_type": "TIME_TRIAL",
+    "trials": "3",
+    "off_track_penalty": "2",
+    "crash_penalty": "5",
+    "checkpoint": "best",
+}
 
 
 def stored(evaluation: EvaluationJob, name: str) -> bytes:

@@ -6,6 +6,7 @@ from django.urls import reverse
 
 from racing import services
 from racing.models import Submission
+from tests.helpers.evaluations import EVALUATION_FORM
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
 
@@ -51,15 +52,7 @@ def test_a_new_evaluation_page_carries_no_queued_message_beside_its_live_status(
     client.force_login(alice)
     response = client.post(
         reverse("training:evaluation-create", args=[model.pk]),
-        {
-            "track": "pitlane-oval",
-            "direction": "counterclockwise",
-            "race_type": "TIME_TRIAL",
-            "trials": "3",
-            "off_track_penalty": "2",
-            "crash_penalty": "5",
-            "checkpoint": "best",
-        },
+        EVALUATION_FORM,
         follow=True,
     )
     assert "The evaluation is queued." not in response.text

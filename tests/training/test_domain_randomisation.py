@@ -17,6 +17,7 @@ from archives import exports, imports
 from simulator import randomisation_ranges
 from simulator.randomisation import LookView
 from tests.helpers.archives import DEEPRACER_PARAMS, deepracer_export, tar_gz
+from tests.helpers.evaluations import EVALUATION_FORM
 from tests.helpers.models import ready_model, trained_model
 from tests.helpers.training import post
 from tests.helpers.training import settings as training_settings
@@ -149,16 +150,7 @@ def test_the_evaluate_page_offers_randomised_scenes(client, alice, tracks):
     assert 'name="domain_randomisation"' in client.get(url).text
     response = client.post(
         url,
-        {
-            "track": "pitlane-oval",
-            "direction": "counterclockwise",
-            "race_type": "TIME_TRIAL",
-            "trials": "3",
-            "off_track_penalty": "2",
-            "crash_penalty": "5",
-            "checkpoint": "best",
-            "domain_randomisation": "on",
-        },
+        {**EVALUATION_FORM, "domain_randomisation": "on"},
     )
     assert response.status_code == 302
     evaluation = EvaluationJob.objects.get()
