@@ -43,6 +43,7 @@ from django.db import DatabaseError, transaction
 from django.utils import timezone
 
 import simulator
+from common.every import Every
 from common.redis_client import redis_client
 from common.transactions import outside_transaction
 from notifications import services as notifications
@@ -249,10 +250,8 @@ def _race(cars: list[Evaluator]) -> None:
     with contextlib.ExitStack() as recordings:
         for car in racing:
             recordings.enter_context(car.recording())
-        try:
+        with contextlib.suppress(_StopAsked):  # the car that asked is ``stopped``
             _drive(racing)
-        except _StopAsked:
-            racing[0].stopped = True  # the trials it finished, and what was driven, are saved
 
 
 def _drive(cars: list[Evaluator]) -> None:
@@ -316,7 +315,9 @@ class Evaluator:
         self.failure = ""  # why it cannot drive (its weights), when it cannot
         self.stopped = False  # the racer stopped it: it ends with the trials it finished
         self._seed: int | None = None  # the seed of the episode driving
-        self._renewed = self._looked = time.monotonic()
+        # the lease renewed, and the racer's stop looked for, every so often while it drives
+        self.renewals = Every(LEASE_RENEWAL, at_once=False)
+        self.stop_looks = Every(leases.EVALUATION_STOP_LOOK, at_once=False)
         self._last_live = 0.0  # when it last offered live frames
         self._weights = b""
 
@@ -429,26 +430,24 @@ class Evaluator:
         return bool(watched) or self.evaluation.real_time
 
     def _look_for_stop(self) -> None:
-        """``_StopAsked`` once the racer has asked to stop (looked for twice a second)."""
-        now = time.monotonic()
-        if now - self._looked < leases.EVALUATION_STOP_LOOK:
+        """``_StopAsked``, the car ``stopped``, once the racer has asked to stop (looked for
+        twice a second)."""
+        if not self.stop_looks.due():
             return
-        self._looked = now
         stopping = EvaluationJob.Status.STOPPING
         try:
             asked = EvaluationJob.objects.filter(pk=self.evaluation.pk, status=stopping).exists()
         except DatabaseError:
             return  # looked for again in half a second
         if asked:
+            self.stopped = True  # the trials it finished, and what was driven, are saved
             raise _StopAsked
 
     def _renew(self) -> None:
         """Hold the lease while driving; ``leases.LeaseLost`` once another run has it. A database
         that does not answer is tried again at the next renewal, within the lease."""
-        now = time.monotonic()
-        if now - self._renewed < LEASE_RENEWAL:
+        if not self.renewals.due():
             return
-        self._renewed = now
         evaluation = self.evaluation
         try:
             held = EvaluationJob.objects.filter(

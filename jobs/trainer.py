@@ -16,7 +16,6 @@ import contextlib
 import functools
 import json
 import logging
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -29,6 +28,7 @@ from django.db.models import Sum
 from django.utils import timezone
 
 import simulator
+from common.every import Every
 from common.formatting import clock
 from common.redis_client import redis_client
 from jobs import checkpoints
@@ -113,21 +113,6 @@ def run(job_id: int, owner: str, start_rollouts, queued_rollouts=None) -> bool:
             "error is in the worker's log. Your last checkpoint is kept.",
         )
     return True
-
-
-class Every:
-    """Says when ``seconds`` have passed since it last said so (the first time at once)."""
-
-    def __init__(self, seconds: float) -> None:
-        self.seconds = seconds
-        self._last = -math.inf
-
-    def due(self) -> bool:
-        now = time.monotonic()
-        if now - self._last < self.seconds:
-            return False
-        self._last = now
-        return True
 
 
 class Trainer:

@@ -17,6 +17,7 @@ from django.urls import reverse
 from django.utils import timezone
 
 from analysis.models import TraceSummary
+from common.every import Every
 from jobs import evaluation as evaluations
 from jobs.evaluation import EvaluationFailed, _VideoWriter
 from tests.helpers.evaluations import stored, trial_paths
@@ -350,7 +351,7 @@ def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_a
     assert done.status == EvaluationJob.Status.COMPLETED and done.lease_owner == ""
     # The dead run, were it alive, stops at its next renewal rather than write.
     stale = evaluations.Evaluator(EvaluationJob.objects.get(pk=started.pk))
-    stale.evaluation.lease_owner, stale._renewed = dead, float("-inf")
+    stale.evaluation.lease_owner, stale.renewals = dead, Every(0.0)  # renewed at once
     with pytest.raises(leases.LeaseLost):
         stale._renew()
 
