@@ -6,7 +6,7 @@ class RacingConfig(AppConfig):
     verbose_name = "League racing"
 
     def ready(self) -> None:
-        from racing import services
+        from racing import receivers, services  # noqa: F401  (receivers: every account's division)
         from training.signals import evaluation_lapsed, evaluations_waiting
 
         evaluation_lapsed.connect(services.submission_resend, dispatch_uid="racing.resend")

@@ -94,6 +94,12 @@ class Event(RaceConditions):
     slug = models.SlugField(max_length=100, unique=True)
     track = models.ForeignKey(Track, on_delete=models.PROTECT, related_name="events")
     division = models.CharField(max_length=8, choices=Division.choices, default=Division.OPEN)
+    any_division = models.BooleanField(
+        "open to both divisions",
+        default=False,
+        help_text="Racers of either division may enter, as the organiser says, without moving "
+        "anyone between divisions; its points count in its own division's standings.",
+    )
     opens_at = models.DateTimeField()
     closes_at = models.DateTimeField()
     ranking_method = models.CharField(
@@ -181,6 +187,13 @@ class Event(RaceConditions):
         editable=False,
         help_text="SHA-256 of the token a timing device sends (racing.timing); the token itself "
         "is shown once, when it is made.",
+    )
+    winner_shown_at = models.DateTimeField(
+        null=True,
+        blank=True,
+        editable=False,
+        help_text="When the organiser showed the winner on the broadcast (empty: not shown); a "
+        "broadcast opened later shows it too.",
     )
     created_at = models.DateTimeField(auto_now_add=True, null=True, editable=False)
 
