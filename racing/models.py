@@ -25,6 +25,14 @@ from training import configuration
 from training.configuration import PENALTY_MAX
 from training.models import EvaluationJob, RaceConditions, RaceType, RLModel, Track
 
+# The shortest lap a real 1/18 car can drive, the default of an event's ``min_lap_s`` [s]: the
+# shortest DeepRacer track, A to Z Speedway (16.6 m, simulator/tracks/data/deepracer/catalog.json),
+# at the car's 4 m/s top speed (simulator.config.SPEED_RANGE) takes 4.15 s. DREM has no
+# per-event minimum; its timing gate ignores a second trigger within 2 s (debounceMs:
+# guidance-for-aws-deepracer-event-management@18030a1 leaderboard-timer/timer.js:12 and :89-93).
+MIN_LAP_S = 4.0
+MIN_LAP_S_RANGE = (0.5, 600.0)  # [s]
+
 
 class Division(models.TextChoices):
     OPEN = "OPEN", "Open"
@@ -188,6 +196,13 @@ class Event(RaceConditions):
         help_text="SHA-256 of the token a timing device sends (racing.timing); the token itself "
         "is shown once, when it is made.",
     )
+    min_lap_s = models.FloatField(
+        "shortest lap [s]",
+        default=MIN_LAP_S,
+        validators=[MinValueValidator(MIN_LAP_S_RANGE[0]), MaxValueValidator(MIN_LAP_S_RANGE[1])],
+        help_text="Real cars: a crossing sooner than this after the last one is refused (a "
+        "double press, a gate's bounce), and the timekeeper is told why.",
+    )
     winner_shown_at = models.DateTimeField(
         null=True,
         blank=True,
@@ -289,6 +304,24 @@ class Event(RaceConditions):
         laps"."""
         rule = self.get_ranking_method_display().replace(" N ", f" {self.laps_required} ")
         return rule[0].lower() + rule[1:]
+
+    @property
+    def laps_to_qualify(self) -> int:
+        """Counted laps in a row a run needs to rank. Real cars raced for the best lap rank any
+        counted lap, as DREM's fastest-lap format does (its BEST_LAP_TIME ranks the fastest valid
+        lap of any race: guidance-for-aws-deepracer-event-management@18030a1
+        lib/lambdas/pdf_api/race_summary.py:48 and :68-70); otherwise N."""
+        if self.physical and self.ranking_method == RankingMethod.BEST_LAP:
+            return 1
+        return self.laps_required
+
+    @property
+    def qualifying_rule(self) -> str:
+        """What a run needs to rank, in words: "one counted lap ranks" or "a run ranks once it
+        has 3 counted laps in a row"."""
+        if self.laps_to_qualify == 1:
+            return "any counted lap ranks: one is enough to qualify"
+        return f"a run ranks once it has {self.laps_to_qualify} counted laps in a row"
 
 
 def _day(day: date) -> str:
@@ -474,6 +507,17 @@ class Lap(models.Model):
     crashes = models.PositiveIntegerField(default=0)
     resets = models.PositiveIntegerField(default=0)
     penalty_ms = models.PositiveIntegerField("penalty [ms]", default=0)
+    struck_at = models.DateTimeField(
+        null=True, blank=True, help_text="When the timekeeper struck it out: it does not count."
+    )
+    struck_by = models.ForeignKey(
+        settings.AUTH_USER_MODEL,
+        null=True,
+        blank=True,
+        on_delete=models.SET_NULL,
+        related_name="+",
+        help_text="The timekeeper who struck it out.",
+    )
 
     class Meta:
         ordering = ["submission", "number"]
@@ -486,6 +530,34 @@ class Lap(models.Model):
 
     def scoring_lap(self) -> scoring.Lap:
         return scoring.Lap(self.time_ms, self.counted)
+
+
+class LapEdit(models.Model):
+    """A timekeeper's change to a real car's laps after they were timed (racing.lap_edits): what,
+    to which lap, who and when. DREM's race admin edits a race's laps the same way (its
+    editRace page: guidance-for-aws-deepracer-event-management@18030a1
+    website/src/admin/race-admin/pages/editRace.tsx:82-124)."""
+
+    class Action(models.TextChoices):
+        STRIKE = "strike", "Struck out"
+        RESTORE = "restore", "Restored"
+        SPLIT = "split", "Split at a missed crossing"
+        ADD = "add", "Added"
+
+    submission = models.ForeignKey(Submission, on_delete=models.CASCADE, related_name="lap_edits")
+    lap_number = models.PositiveSmallIntegerField()
+    action = models.CharField(max_length=8, choices=Action.choices)
+    detail = models.CharField(max_length=200, blank=True)
+    by = models.ForeignKey(
+        settings.AUTH_USER_MODEL, null=True, on_delete=models.SET_NULL, related_name="+"
+    )
+    at = models.DateTimeField(default=timezone.now)
+
+    class Meta:
+        ordering = ["submission", "at", "pk"]
+
+    def __str__(self) -> str:
+        return f"{self.get_action_display()} lap {self.lap_number}"
 
 
 # Places on a leaderboard: the lower score, then the earlier submission, then the older row.
