@@ -191,7 +191,7 @@ def submission_video(request: HttpRequest, pk: int) -> HttpResponse:
         raise Http404("No such video.")
     filename = f"{submission.event.slug}-{submission.model_name}-{submission.pk}.webm"
     return artifacts.download(
-        submission.video, filename, attachment=False, content_type="video/webm"
+        request, submission.video, filename, attachment=False, content_type="video/webm"
     )
 
 

@@ -9,8 +9,9 @@ import re
 import yaml
 from django.core.files.base import ContentFile
 from django.core.files.storage import FileSystemStorage, default_storage
-from django.http import FileResponse, HttpResponse, HttpResponseRedirect
+from django.http import HttpRequest, HttpResponse, HttpResponseRedirect
 
+from common.downloads import file_response
 from common.transactions import outside_transaction
 from rl.hyperparameters import deepracer_json
 from simulator import tracks as sim_tracks
@@ -97,18 +98,25 @@ def read(name: str) -> bytes:
 
 
 def download(
-    name: str, filename: str, *, attachment: bool = True, content_type: str | None = None
+    request: HttpRequest,
+    name: str,
+    filename: str,
+    *,
+    attachment: bool = True,
+    content_type: str | None = None,
 ) -> HttpResponse:
     """The stored file ``name`` for a racer whose right to it the caller has checked: streamed
-    from local storage, or a redirect to a presigned URL that expires in minutes from a bucket
-    (the bytes then never pass through the web server)."""
+    from local storage, the byte range asked for if one is (``common.downloads``: a video seeks
+    so), or a redirect to a presigned URL that expires in minutes from a bucket (the bytes then
+    never pass through the web server, and S3 answers the range itself)."""
     if isinstance(default_storage, FileSystemStorage):
-        response = FileResponse(
-            default_storage.open(name, "rb"), as_attachment=attachment, filename=filename
+        return file_response(
+            request,
+            default_storage.open(name, "rb"),
+            filename=filename,
+            attachment=attachment,
+            content_type=content_type,
         )
-        if content_type:
-            response["Content-Type"] = content_type
-        return response
     disposition = "attachment" if attachment else "inline"
     parameters = {"ResponseContentDisposition": f'{disposition}; filename="{filename}"'}
     if content_type:

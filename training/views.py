@@ -30,6 +30,7 @@ from django.views.decorators.http import require_POST, require_safe
 
 from archives import exports, imports, logs_archive
 from common import ratelimits
+from common.downloads import file_response
 from common.refusals import Refused
 from sandbox import SandboxFailure, SandboxUnavailable
 from simulator import config as sim_config
@@ -529,7 +530,7 @@ def model_file(request: HttpRequest, pk: int, relative: str) -> HttpResponse:
     model = _get_model_for_user(request, pk)
     if relative not in {f.relative for f in selectors.model_files(model=model)}:
         raise Http404("No such file")
-    return artifacts.download(artifacts.path(model, relative), relative.replace("/", "-"))
+    return artifacts.download(request, artifacts.path(model, relative), relative.replace("/", "-"))
 
 
 @login_required
@@ -550,7 +551,9 @@ def model_export(request: HttpRequest, pk: int, kind: str) -> HttpResponse:
     except exports.ExportRefused as refused:
         messages.error(request, str(refused))
         return redirect("training:model-detail", pk=model.pk)
-    return artifacts.download(export.name, export.filename, content_type="application/gzip")
+    return artifacts.download(
+        request, export.name, export.filename, content_type="application/gzip"
+    )
 
 
 @login_required
@@ -566,10 +569,14 @@ def model_logs(request: HttpRequest, pk: int) -> HttpResponse:
         archive.close()
         messages.error(request, str(refused))
         return redirect("training:model-detail", pk=model.pk)
-    archive.seek(0)
-    response = FileResponse(archive, as_attachment=True, filename=logs_archive.filename(model))
-    response["Content-Type"] = "application/gzip"
-    return response
+    return file_response(
+        request,
+        archive,
+        filename=logs_archive.filename(model),
+        attachment=True,
+        content_type="application/gzip",
+        ranges=False,  # built for this request: another's bytes differ
+    )
 
 
 @login_required
@@ -904,6 +911,7 @@ def evaluation_file(request: HttpRequest, pk: int, evaluation: int, name: str) -
         raise Http404("No such file")
     video = name == artifacts.EVALUATION_VIDEO
     filename = f"{job.model.name}-evaluation-{job.pk}-{name.replace('/', '-')}"
+    content_type = "video/webm" if video else None
     return artifacts.download(
-        stored, filename, attachment=not video, content_type="video/webm" if video else None
+        request, stored, filename, attachment=not video, content_type=content_type
     )
