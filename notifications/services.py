@@ -109,7 +109,8 @@ def evaluation_ended(*, evaluation) -> Notification | None:
     if evaluation.status != evaluation.Status.COMPLETED:
         text = f"{where} failed: {evaluation.failure_reason or 'see its page.'}"
     else:
-        laps = f"{evaluation.completed_trials} of {evaluation.trials} laps completed"
+        done, trials = evaluation.completed_trials, evaluation.trials
+        laps = f"{done} of {trials} lap{'s' if trials != 1 else ''} completed"
         best = evaluation.best_lap_ms
         text = f"{where} is done: {laps}" + (f", best lap {laptime(best)}." if best else ".")
     return notification_send(recipient=model.owner, text=text, url=url)
@@ -119,12 +120,12 @@ def evaluation_ended(*, evaluation) -> Notification | None:
 def submission_scored(*, submission) -> Notification | None:
     """A race submission has been driven and scored."""
     where = f"{submission.model_name} in {submission.event.name}"
+    count = submission.laps_completed
+    laps = f"{count} lap{'s' if count != 1 else ''} completed"
     if submission.qualified and submission.score_ms is not None:
-        text = f"{where} is scored: {laptime(submission.score_ms)}"
-        text += f", {submission.laps_completed} laps completed."
+        text = f"{where} is scored: {laptime(submission.score_ms)}, {laps}."
     else:
-        text = f"{where} is scored: it did not qualify ({submission.laps_completed} laps "
-        text += "completed)."
+        text = f"{where} is scored: it did not qualify ({laps})."
     return notification_send(
         recipient=submission.racer, text=text, url=submission.get_absolute_url()
     )

@@ -97,6 +97,21 @@ def test_a_scored_race_tells_the_racer_its_score(alice, tracks):
     assert told.url == reverse("racing:submission-detail", args=[submission.pk])
 
 
+def test_it_counts_one_lap_in_the_singular(alice, tracks):
+    league.scored(league.event(), alice, 61_234, None, None, model_name="short")
+    assert Notification.objects.get().text.endswith("it did not qualify (1 lap completed).")
+
+    model = ready_model(alice)
+    single = EvaluationJob.objects.create(model=model, track=model.track, trials=1)
+    EvaluationTrial.objects.create(
+        evaluation=single, number=1, time_ms=12_345, progress=100, status="lap_complete"
+    )
+    evaluation._finish(driven(single), EvaluationJob.Status.COMPLETED)
+    assert "is done: 1 of 1 lap completed, best lap 0:12.345." in (
+        Notification.objects.filter(recipient=alice).latest("pk").text
+    )
+
+
 def test_email_goes_out_only_where_an_email_server_is_configured(
     alice, settings, django_capture_on_commit_callbacks
 ):
