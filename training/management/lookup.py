@@ -1,9 +1,13 @@
-"""What the model commands share: finding a model by its name (or number) and racer."""
+"""What the model commands share: finding a model by its name (or number) and racer, and
+checking that Redis answers before a command queues work."""
 
 from __future__ import annotations
 
+import redis
+from django.conf import settings
 from django.contrib.auth import get_user_model
 from django.core.management.base import CommandError
+from kombu.utils.url import maybe_sanitize_url
 
 from training.models import RLModel
 
@@ -28,3 +32,20 @@ def find_racer(username: str):
     if racer is None:
         raise CommandError(f"No racer named {username!r}.")
     return racer
+
+
+def redis_check(nothing_done: str) -> None:
+    """``CommandError`` in words when Redis, Celery's broker, does not answer, for a command that
+    queues work (a training) to call before it changes anything: it then stops with nothing
+    done (``nothing_done`` says so) rather than leave work whose task could not be sent."""
+    broker = settings.CELERY_BROKER_URL
+    where = maybe_sanitize_url(broker)  # its password masked
+    try:
+        redis.Redis.from_url(broker, socket_connect_timeout=2.0, socket_timeout=2.0).ping()
+    except (redis.ConnectionError, redis.TimeoutError):
+        raise CommandError(
+            f"Redis at {where} does not answer: start it (make run does) and try again. "
+            f"{nothing_done}"
+        ) from None
+    except redis.RedisError as error:
+        raise CommandError(f"Redis at {where} refuses: {error}. {nothing_done}") from None

@@ -6,6 +6,7 @@ from django.core.management.base import BaseCommand, CommandError
 
 from common.refusals import Refused
 from rl import hyperparameters
+from training.management.lookup import redis_check
 from training.services import model_create
 
 
@@ -33,6 +34,7 @@ class Command(BaseCommand):
             raise CommandError(f"Cannot read the settings: {error}") from None
         if not isinstance(settings, dict):
             raise CommandError(f"{config} must hold a mapping of settings.")
+        redis_check("No model was created.")
         algorithm = settings.get("algorithm", hyperparameters.PPO)
         settings.setdefault("hyperparameters", hyperparameters.defaults(algorithm))
         try:

@@ -4,7 +4,7 @@ from django.core.management.base import BaseCommand, CommandError
 
 from archives import imports
 from common.refusals import Refused
-from training.management.lookup import find_racer
+from training.management.lookup import find_racer, redis_check
 
 
 class Command(BaseCommand):
@@ -22,6 +22,7 @@ class Command(BaseCommand):
 
     def handle(self, *args, file: Path, owner: str, name: str, **options) -> None:
         racer = find_racer(owner)
+        redis_check("Nothing was imported.")  # a model without weights queues its training
         try:
             with file.open("rb") as archive:
                 imported = imports.import_model(owner=racer, archive=archive, name=name)
