@@ -14,6 +14,7 @@ from django.http import HttpRequest
 from django.template.defaultfilters import pluralize
 from django.template.response import TemplateResponse
 
+from accounts.selectors import racer_name
 from common.formatting import laptime
 from racing import services
 from racing.forms import LOCAL, RACE_FIELDS, RaceObstaclesForm
@@ -131,7 +132,7 @@ class EventAdmin(admin.ModelAdmin):
     readonly_fields = ["invite_token"]
     actions = ["close_events", "recompute_rankings"]
     fieldsets = [
-        (None, {"fields": ["season", "name", "slug", "division"]}),
+        (None, {"fields": ["season", "name", "slug", "division", "any_division"]}),
         ("Race", {"fields": ["track", "direction", "race_type", "cars", "physical"]}),
         ("Object avoidance", {"fields": ["box_count", "box_randomize"]}),
         ("Head-to-bot", {"fields": ["bot_count", "bot_speed", "bot_lane_changes"]}),
@@ -329,12 +330,16 @@ class RankingAdmin(admin.ModelAdmin):
 
 @admin.register(Racer)
 class RacerAdmin(admin.ModelAdmin):
-    list_display = ["user", "division", "division_set_by_staff", "promoted_at"]
+    list_display = ["name", "user", "division", "division_set_by_staff", "promoted_at"]
     list_filter = ["division", "division_set_by_staff"]
-    search_fields = ["user__username"]
-    list_select_related = ["user"]
-    readonly_fields = ["user", "promoted_at"]
-    fields = ["user", "division", "division_set_by_staff", "promoted_at"]
+    search_fields = ["user__profile__racer_name", "user__username"]
+    list_select_related = ["user__profile"]
+    readonly_fields = ["name", "user", "promoted_at"]
+    fields = ["name", "user", "division", "division_set_by_staff", "promoted_at"]
+
+    @admin.display(description="racer name", ordering="user__profile__racer_name")
+    def name(self, racer: Racer) -> str:
+        return racer_name(racer=racer.user)
 
     def save_model(self, request, racer: Racer, form, change: bool) -> None:
         if "division" in form.changed_data:
@@ -342,7 +347,7 @@ class RacerAdmin(admin.ModelAdmin):
         super().save_model(request, racer, form, change)
 
     def has_add_permission(self, request) -> bool:
-        return False  # every racer gets one on first use
+        return False  # every account gets one as it is made (racing.receivers)
 
 
 class LiveEntryInline(admin.TabularInline):

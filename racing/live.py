@@ -14,10 +14,11 @@ import time
 from django.db import transaction
 
 from accounts.selectors import racer_name
-from racing.models import Event, LiveSession, PhysicalRun, Submission
+from racing.models import Event, LiveEntry, LiveSession, PhysicalRun, Submission
 from training import live
 
 
+from training.models import scaled_speeds, top_speed
 def event_group(event_id: int) -> str:
     return f"event_{event_id}"
 
@@ -100,7 +101,7 @@ def queue_state(session: LiveSession | None) -> dict:
     order), then the racers waiting, in order."""
     if session is None:
         return {"type": "queue", "open": False, "entries": [], "driving": None, "cars": []}
-    entries = session.entries.select_related("racer__profile", "submission__evaluation")
+    entries = session.entries.select_related("racer__profile", "submission__evaluation", "model")
     entries = entries.order_by("position", "pk")
     shown, cars = [], []
     for entry in entries:
@@ -134,6 +135,7 @@ def queue_state(session: LiveSession | None) -> dict:
 
 
 def announce_queue(session: LiveSession) -> None:
+            **_speeds(entry),
     """A live session's queue or turn changed."""
     event_id = session.event_id
 
@@ -145,6 +147,9 @@ def announce_queue(session: LiveSession) -> None:
 
 
 def announce_winner(event: Event, ranking: dict | None) -> None:
+    waiting = [row for row in shown if row["status"] == LiveEntry.Status.WAITING]
+    for place, row in enumerate(waiting, start=1):  # the facilitator moves only what can move
+        row.update(place=place, first_waiting=place == 1, last_waiting=place == len(waiting))
     """The organiser shows the winner on the broadcast: ``ranking`` is the leader (None: none)."""
     message = {"type": "winner", "event": event.pk, "winner": ranking}
     transaction.on_commit(lambda: live.send(event_group(event.pk), _update(message)))
@@ -152,6 +157,16 @@ def announce_winner(event: Event, ranking: dict | None) -> None:
 
 def _now_ms() -> int:
     return round(time.time() * 1000)
+
+def _speeds(entry: LiveEntry) -> dict:
+    """What the speed multiplier makes of the model's speeds: its fastest action's speed as
+    driven [m/s], and whether the car's limit (4 m/s) cut it, so a racer sees what 1.2x does."""
+    if entry.model is None:
+        return {"top_speed": None, "capped": False}
+    fastest = top_speed(entry.model.action_space)
+    driven = top_speed(scaled_speeds(entry.model.action_space, entry.speed))
+    return {"top_speed": driven, "capped": driven < fastest * entry.speed - 1e-9}
+
 
 
 def _update(message: dict) -> dict:

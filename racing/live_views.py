@@ -26,9 +26,12 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
     user = request.user
     facilitator = live_races.may_facilitate(event=event, user=user)
     join = None
-    if session is not None and user.is_authenticated:
+    queued = session is not None and _queued(session, user)
+    if session is not None and user.is_authenticated and not queued:
         join = LiveJoinForm(request.POST or None, racer=user, session=session)
-        if request.method == "POST" and join.is_valid():
+        if not join.fields["model"].queryset.exists():
+            join = None  # nothing to race with: the page says how to get a model instead
+        elif request.method == "POST" and join.is_valid():
             try:
                 live_races.live_entry_join(
                     session=session,
@@ -50,6 +53,7 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
         "session": session,
         "facilitator": facilitator,
         "join": join,
+        "queued": queued,
         "mine": mine,
         "queue": live.queue_state(session),
         "speedup": settings.PITLANE_WATCHED_SPEEDUP,
@@ -58,6 +62,14 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
     if request.GET.get("fragment") == "queue":
         return render(request, "racing/includes/live_queue.html", context)
     return render(request, "racing/live_race.html", context)
+
+
+def _queued(session: LiveSession, user) -> bool:
+    """Whether ``user`` has a place in the queue or a car on the track: one place a racer."""
+    if not user.is_authenticated:
+        return False
+    places = session.entries.filter(racer=user)
+    return places.filter(status__in=(LiveEntry.Status.WAITING, LiveEntry.Status.DRIVING)).exists()
 
 
 def _settings(session: LiveSession | None) -> dict:

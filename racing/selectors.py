@@ -96,6 +96,28 @@ def leaders(*, event: Event, count: int) -> list[Ranking]:
     return list(rankings.order_by(*RANKING_ORDER)[:count])
 
 
+def top_entries(*, event: Event, count: int) -> list[dict]:
+    """The event's first ``count`` places as the broadcast shows them (JSON)."""
+    return [
+        {
+            "place": place,
+            "racer": racer_name(racer=ranking.racer),
+            "model_name": ranking.model_name,
+            "score_ms": ranking.score_ms,
+            "physical": ranking.submission.physical,
+        }
+        for place, ranking in enumerate(leaders(event=event, count=count), start=1)
+    ]
+
+
+def winner_shown(*, event: Event) -> dict | None:
+    """The winner the broadcast shows: the leader now, once the organiser has shown the winner
+    (``Event.winner_shown_at``); None before, or with nobody ranked."""
+    if event.winner_shown_at is None:
+        return None
+    return next(iter(top_entries(event=event, count=1)), None)
+
+
 def rivals_for(*, event: Event, racer: AbstractBaseUser) -> list[Submission]:
     """What a submission to ``event`` races against when the event puts several cars on the
     track (``Event.cars``): the ranked submissions of the leaders other than ``racer``, best
@@ -200,7 +222,7 @@ def submission_refusal(
         joined = event.participants.filter(pk=racer.pk).exists()
         if not joined:
             return "This is a private race: join it through its invitation link first."
-    else:
+    elif not event.any_division:
         division = Racer.of(racer).division
         if division != event.division:
             return (
@@ -232,13 +254,14 @@ def submissions_counted(*, racer: AbstractBaseUser, event: Event) -> int:
 
 
 def events_open_to(*, racer: AbstractBaseUser) -> list[Event]:
-    """The open events ``racer`` may enter now: public ones of their division and community
-    races they joined."""
+    """The open events ``racer`` may enter now: public ones of their division or open to both,
+    and community races they joined."""
     now = timezone.now()
     division = Racer.of(racer).division
+    public = Q(public=True) & (Q(division=division) | Q(any_division=True))
     return list(
         Event.objects.filter(opens_at__lte=now, closes_at__gt=now, physical=False)
-        .filter(Q(public=True, division=division) | Q(public=False, participants=racer))
+        .filter(public | Q(public=False, participants=racer))
         .select_related("track", "season")
         .distinct()
         .order_by("closes_at", "name")

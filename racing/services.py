@@ -560,6 +560,16 @@ def invitation_renew(*, event: Event) -> str:
 # Divisions
 
 
+def event_winner_show(*, event: Event, shown: bool = True) -> dict | None:
+    """The organiser shows the winner on the broadcast (or hides it again): kept on the event,
+    so that a broadcast opened or reloaded later shows it too. The winner shown, if any."""
+    event.winner_shown_at = timezone.now() if shown else None
+    Event.objects.filter(pk=event.pk).update(winner_shown_at=event.winner_shown_at)
+    winner = selectors.winner_shown(event=event)
+    live.announce_winner(event, winner)
+    return winner
+
+
 def divisions_promote(*, today: date | None = None) -> list[Racer]:
     """The monthly promotion: the racers in the top 10% (at least one) of each of last month's
     public Open time trials move up to Pro, unless staff set their division. Running it again

@@ -23,8 +23,7 @@ from django.shortcuts import redirect, render
 from django.views.decorators.csrf import csrf_exempt
 from django.views.decorators.http import require_POST
 
-from accounts.selectors import racer_name
-from racing import live, live_races, selectors, timing
+from racing import live, live_races, selectors, services, timing
 from racing.forms import TimedRunForm
 from racing.models import Event, LiveSession
 from racing.views import _get_event_for_user, _get_event_run_by
@@ -91,9 +90,16 @@ def winner(request: HttpRequest, slug: str) -> HttpResponse:
         back = "racing:live-race"
     else:
         raise Http404("No such event to run.")
-    leaders = _top(event, 1)
-    live.announce_winner(event, leaders[0] if leaders else None)
-    messages.success(request, "The broadcast shows the winner.")
+    shown = request.POST.get("show", "1") != "0"
+    winner = services.event_winner_show(event=event, shown=shown)
+    if not shown:
+        messages.success(request, "The broadcast no longer shows the winner.")
+    elif winner is None:
+        messages.warning(
+            request, "Nobody is ranked yet: the broadcast will show the winner once someone is."
+        )
+    else:
+        messages.success(request, f"The broadcast shows the winner: {winner['racer']}.")
     return redirect(back, slug=event.slug)
 
 
@@ -113,22 +119,10 @@ def broadcast_state(request: HttpRequest, slug: str) -> JsonResponse:
         {
             "timing": live.timing_state(run),
             "queue": live.queue_state(session),
-            "top": _top(event, TOP),
+            "top": selectors.top_entries(event=event, count=TOP),
+            "winner": selectors.winner_shown(event=event),
         }
     )
-
-
-def _top(event: Event, count: int) -> list[dict]:
-    return [
-        {
-            "place": place,
-            "racer": racer_name(racer=ranking.racer),
-            "model_name": ranking.model_name,
-            "score_ms": ranking.score_ms,
-            "physical": ranking.submission.physical,
-        }
-        for place, ranking in enumerate(selectors.leaders(event=event, count=count), start=1)
-    ]
 
 
 @csrf_exempt

@@ -812,6 +812,14 @@ class Quota(models.Model):
         )[0]
 
 
+def top_speed(action_space) -> float:
+    """The fastest speed [m/s] of ``action_space`` (DeepRacer's discrete list or continuous
+    ranges)."""
+    if isinstance(action_space, dict):
+        return float(action_space["speed"]["high"])
+    return max(float(action["speed"]) for action in action_space)
+
+
 def scaled_speeds(action_space, multiplier: float):
     """``action_space`` (DeepRacer's: a list of discrete actions, or continuous ranges) with every
     speed times ``multiplier``, kept within the car's 0.1-4 m/s; itself when that is 1."""

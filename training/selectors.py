@@ -482,11 +482,13 @@ def evaluation_snapshot(*, evaluation: EvaluationJob) -> dict:
 
 
 def evaluations_for_model(*, model: RLModel) -> QuerySet[EvaluationJob]:
-    """The evaluations the racer ran; a race submission's evaluation is listed with the model's
-    races (``races_for_model``) instead."""
+    """The evaluations the racer ran, and the races their model drove as another racer's rival
+    (each labelled with that entry: ``rival_entry``); a race submission's own evaluation is
+    listed with the model's races (``races_for_model``) instead."""
     return (
         model.evaluations.filter(submission__isnull=True)
-        .select_related("track")
+        .select_related("track", "grid_leader__submission__event")
+        .select_related("grid_leader__submission__racer__profile")
         .prefetch_related("trial_rows")
     )
 

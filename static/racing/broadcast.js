@@ -1,7 +1,7 @@
 // The broadcast: the car on the track (a physical event's run with its running lap, or a live
 // race's turn with its video), its laps, the top ten, and the winner when the organiser shows
 // it; kept current over the event's websocket.
-import { LapClock, laptime, listen } from "./timing.js";
+import { LapClock, laptime, listen, offTracks, speedText } from "./timing.js";
 import { Turn } from "./turn.js";
 
 const root = document.querySelector("[data-broadcast]");
@@ -35,7 +35,7 @@ function showTiming(state) {
   showCar(state.racer, state.on_track ? `car ${state.car} · ${state.model_name}`
     : state.qualified ? `finished: ${laptime(state.score_ms)}` : "finished: did not qualify");
   find("laps").replaceChildren(...state.laps.map((lap) =>
-    item(`${laptime(lap.time_ms)}${lap.off_tracks ? ` (${lap.off_tracks} off)` : ""}`,
+    item(`${laptime(lap.time_ms)}${offTracks(lap.off_tracks)}`,
       lap.counted ? "" : "not-counted")));
   root.dataset.laps = String(state.laps.length);
 }
@@ -43,7 +43,7 @@ function showTiming(state) {
 function showQueue(queue) {
   const cars = queue.cars || [];
   showCar(cars.length ? cars.map((car) => car.racer).join(" vs ") : null,
-    cars.map((car) => `${car.model_name} · ${car.speed.toFixed(1)}×`).join(" vs "));
+    cars.map((car) => `${car.model_name} · ${speedText(car)}`).join(" vs "));
   turn.watch(cars.length ? cars[0].evaluation : null); // the first car on the grid
 }
 
@@ -65,6 +65,15 @@ function showTop(top) {
   }));
 }
 
+// The winner over the whole picture, once the organiser shows it (part of the state a fresh
+// broadcast fetches, so a reload keeps it).
+function showWinner(winner) {
+  find("winner").hidden = !winner;
+  if (!winner) return;
+  find("winner-racer").textContent = winner.racer;
+  find("winner-detail").textContent = `${winner.model_name} · ${laptime(winner.score_ms)}`;
+}
+
 async function refresh() {
   const response = await fetch(root.dataset.stateUrl);
   if (!response.ok) return;
@@ -72,19 +81,13 @@ async function refresh() {
   if (physical) showTiming(state.timing);
   else showQueue(state.queue);
   showTop(state.top);
+  showWinner(state.winner);
 }
 
 listen(root.dataset.event, (message) => {
   if (message.type === "timing" && physical) showTiming(message);
   if (message.type === "queue" && !physical) showQueue(message);
   if (message.type === "leaderboard" || (message.type === "submission" && message.ranked)) refresh();
-  if (message.type === "winner") {
-    const winner = find("winner");
-    winner.hidden = !message.winner;
-    if (message.winner) {
-      find("winner-racer").textContent = message.winner.racer;
-      find("winner-detail").textContent = `${message.winner.model_name} · ${laptime(message.winner.score_ms)}`;
-    }
-  }
+  if (message.type === "winner") showWinner(message.winner);
 });
 refresh();

@@ -1,6 +1,6 @@
 // The live race page: the queue follows the event's websocket (the page fetches its queue again
 // on each change), and the turn on the track is watched as it drives (./turn.js).
-import { listen } from "./timing.js";
+import { listen, speedText } from "./timing.js";
 import { Turn } from "./turn.js";
 
 const root = document.querySelector("[data-live-race]");
@@ -14,7 +14,7 @@ let last = null; // the turn that drove last: shown until the next one starts
 let watched = null; // the car followed: the first of a turn, or the one the viewer chose
 
 const described = (cars, speed = true) => cars.map((car) =>
-  `${car.racer} · ${car.model_name}${speed ? ` · ${car.speed.toFixed(1)}× speed` : ""}`).join(" vs ");
+  `${car.racer} · ${car.model_name}${speed ? ` · ${speedText(car)}` : ""}`).join(" vs ");
 
 function showDriving(queue) {
   const cars = queue.cars || [];

@@ -26,6 +26,17 @@ export function laptime(milliseconds) {
   return `${minutes}:${String(seconds).padStart(2, "0")}.${String(millis).padStart(3, "0")}`;
 }
 
+// A lap's off-tracks as every race page words them after its time: " (2 off-tracks)", or nothing.
+export function offTracks(count) {
+  return count ? ` (${count} off-track${count > 1 ? "s" : ""})` : "";
+}
+
+// A live car's speed multiplier and what it makes of its model's top speed (racing.live's queue).
+export function speedText(car) {
+  const top = car.top_speed ? `, up to ${car.top_speed.toFixed(1)} m/s${car.capped ? " (the car's limit)" : ""}` : "";
+  return `${car.speed.toFixed(1)}× speed${top}`;
+}
+
 // The lap on track's time: started at the server's lap_started_ms; the server said server_ms
 // when it sent the state, which this browser heard at receivedAt (its own clock).
 export class LapClock {

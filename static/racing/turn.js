@@ -7,7 +7,7 @@
 // simulation drifts from real time), never more than a frame and a half past the newest frame's
 // word (a simulation that falls behind). At the line it stops on the lap's
 // time for a second, as a race's timing screen does, then runs on with the next lap.
-import { laptime } from "./timing.js";
+import { laptime, offTracks } from "./timing.js";
 
 const decoder = new TextDecoder();
 const FRAME_MS = 1000 / 15;
@@ -96,7 +96,7 @@ export class Turn {
     const item = document.createElement("li");
     item.dataset.lap = row.number;
     item.textContent = row.status === "lap_complete"
-      ? `${laptime(row.time_ms + row.penalty_ms)}${row.off_tracks ? ` (${row.off_tracks} off-track${row.off_tracks > 1 ? "s" : ""})` : ""}`
+      ? `${laptime(row.time_ms)}${offTracks(row.off_tracks)}` // time_ms holds the penalties
       : `${row.status_display} at ${row.progress.toFixed(0)}%`;
     if (this.lapMs !== null && row.status === "lap_complete") { // a lap ending as it drives
       this.timer.dataset.atLine = laptime(this.running()); // the running clock at the line

@@ -272,7 +272,7 @@ def test_the_monthly_promotion_moves_the_top_tenth_of_last_months_open_time_tria
 
 @pytest.mark.django_db
 def test_a_pro_racer_enters_pro_events_and_not_open_ones(alice):
-    Racer.objects.create(user=alice, division=Division.PRO)
+    Racer.objects.filter(user=alice).update(division=Division.PRO)
     model = ready_model(alice)
     avoidance = event(
         "Pro boxes",
@@ -284,6 +284,19 @@ def test_a_pro_racer_enters_pro_events_and_not_open_ones(alice):
     assert "Pro racers enter Pro events" in selectors.submission_refusal(
         racer=alice, event=event(), model=model
     )
+
+
+@pytest.mark.django_db
+def test_an_event_open_to_both_divisions_takes_either_without_moving_anyone(alice, bob):
+    Racer.objects.filter(user=alice).update(division=Division.PRO)
+    shared = event("Club night", any_division=True)
+    only_open = event("Open only")
+    for racer in (alice, bob):
+        model = ready_model(racer)
+        assert selectors.submission_refusal(racer=racer, event=shared, model=model) is None
+        assert shared in selectors.events_open_to(racer=racer)
+    assert only_open not in selectors.events_open_to(racer=alice)
+    assert [Racer.of(alice).division, Racer.of(bob).division] == [Division.PRO, Division.OPEN]
 
 
 @pytest.mark.django_db

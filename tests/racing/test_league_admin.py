@@ -6,9 +6,10 @@ from django.contrib.auth.models import Group, User
 from django.templatetags.static import static
 from django.urls import reverse
 
+from accounts.models import Profile
 from notifications.models import Notification
-from racing.models import Event, Ranking, Submission
-from tests.helpers.accounts import PASSWORD
+from racing.models import Event, Racer, Ranking, Submission
+from tests.helpers.accounts import PASSWORD, racer
 from tests.helpers.league import DAY, event, scored
 
 pytestmark = pytest.mark.usefixtures("tracks")
@@ -85,8 +86,6 @@ def test_staff_close_an_event_and_disqualify_from_the_admin(client, race_staff, 
 
 @pytest.mark.django_db
 def test_a_staff_division_change_is_kept_from_the_monthly_promotion(client, race_staff, alice):
-    from racing.models import Racer
-
     racer = Racer.of(alice)
     client.force_login(race_staff)
     response = client.post(
@@ -95,6 +94,19 @@ def test_a_staff_division_change_is_kept_from_the_monthly_promotion(client, race
     assert response.status_code == 302
     racer.refresh_from_db()
     assert racer.division == "PRO" and racer.division_set_by_staff
+
+
+def test_staff_set_the_division_of_a_racer_who_never_opened_a_race_page(client, race_staff):
+    vera = racer("vera")
+    Profile.objects.filter(user=vera).update(racer_name="VeraFast")
+    client.force_login(race_staff)
+    found = client.get(reverse("admin:racing_racer_changelist"), {"q": "VeraFast"}).text
+    assert "VeraFast" in found  # a row from sign-up, found by the racer name
+    league = Racer.objects.get(user=vera)
+    change = reverse("admin:racing_racer_change", args=[league.pk])
+    assert client.post(change, {"division": "PRO"}).status_code == 302
+    league.refresh_from_db()
+    assert league.division == "PRO" and league.division_set_by_staff
 
 
 # Community races

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from racing import live_races
+from accounts.selectors import racer_name
+from racing import live, live_races
 from racing.models import LiveEntry, Submission
-from tests.helpers.league import event
+from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
 from training.models import scaled_speeds
 
@@ -116,3 +117,64 @@ def test_a_racer_leaves_the_queue_and_nobody_else_can_take_them_out(
     assert "You left the queue." in client.post(leave, follow=True).text
     entry.refresh_from_db()
     assert entry.status == _E.REMOVED
+
+
+def test_the_queue_says_what_each_multiplier_drives_and_moves_only_what_can_move(
+    tracks, alice, bob, stella
+):
+    race = event("Live cup")
+    session = live_races.live_session_open(event=race, facilitator=stella)
+    live_races.live_entry_join(session=session, racer=alice, model=ready_model(alice), speed=0.8)
+    live_races.live_entry_join(session=session, racer=bob, model=ready_model(bob), speed=1.2)
+    first, second = live.queue_state(session)["entries"]  # both models drive at 4 m/s
+    assert (first["place"], first["first_waiting"], first["last_waiting"]) == (1, True, False)
+    assert (second["place"], second["first_waiting"], second["last_waiting"]) == (2, False, True)
+    assert (first["top_speed"], first["capped"]) == (pytest.approx(3.2), False)
+    assert (second["top_speed"], second["capped"]) == (4.0, True)  # 4.8 m/s asked, 4 driven
+
+
+def test_a_broadcast_opened_after_the_winner_was_shown_shows_it_until_hidden(
+    client, tracks, alice, stella
+):
+    from django.urls import reverse
+
+    race = event("Live cup")
+    live_races.live_session_open(event=race, facilitator=stella)
+    scored(race, alice, 20_000, 21_000, 22_000)
+    state = reverse("racing:broadcast-state", args=[race.slug])
+    assert client.get(state).json()["winner"] is None
+    client.force_login(stella)
+    winner = reverse("racing:winner", args=[race.slug])
+    shown = client.post(winner, follow=True).text
+    assert f"The broadcast shows the winner: {racer_name(racer=alice)}." in shown
+    assert "Hide the winner" in shown
+    client.logout()  # a fresh broadcast, anyone's
+    assert client.get(state).json()["winner"] == {
+        "place": 1,
+        "racer": racer_name(racer=alice),
+        "model_name": "m",
+        "score_ms": 21_000,
+        "physical": False,
+    }
+    client.force_login(stella)
+    client.post(winner, {"show": "0"})
+    assert client.get(state).json()["winner"] is None
+
+
+def test_the_join_form_is_offered_only_to_a_racer_with_a_model_not_yet_queued(
+    client, tracks, alice, bob, stella
+):
+    from django.urls import reverse
+
+    race = event("Live cup")
+    session = live_races.live_session_open(event=race, facilitator=stella)
+    page = reverse("racing:live-race", args=[race.slug])
+    client.force_login(stella)  # staff without a model: the controls, no join form
+    text = client.get(page).text
+    assert "Launch the next turn" in text and "Join the queue</button>" not in text
+    client.force_login(bob)
+    assert "You have no ready model to race." in client.get(page).text
+    live_races.live_entry_join(session=session, racer=alice, model=ready_model(alice))
+    client.force_login(alice)
+    text = client.get(page).text
+    assert "Leave the queue" in text and "Join the queue</button>" not in text

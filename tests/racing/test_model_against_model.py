@@ -11,6 +11,7 @@ import pytest
 from django.core.files.storage import default_storage
 from django.urls import reverse
 
+from accounts.selectors import racer_name
 from racing import live_races, services
 from racing.models import Division, LiveEntry, Racer, Submission
 from tests.helpers import accounts
@@ -94,10 +95,13 @@ def test_a_submission_races_the_leaders_models_and_each_car_keeps_its_own_race(
     client.force_login(alice)
     page = client.get(submission.get_absolute_url()).text
     assert "The race" in page and "carols" in page and "Model against model: 2 cars" in page
-    client.force_login(carol)  # the rival's owner finds the race on their model's page
+    client.force_login(carol)  # the rival's owner finds the race on their model's page, named
+    entry = f"raced as the rival in {racer_name(racer=alice)}&#x27;s entry"
+    listed = client.get(reverse("training:model-detail", args=[carols.pk])).text
+    assert f"Raced as the rival in {racer_name(racer=alice)}&#x27;s entry" in listed
     url = reverse("training:evaluation-detail", args=[carols.pk, rivals[0].pk])
     page = client.get(url).text
-    assert "raced against another racer" in page and "Stop evaluation" not in page
+    assert entry in page and "Head to model" in page and "Stop evaluation" not in page
     assert "straight-ahead" in page  # alice's model, first on the grid
     # the rival's owner: the model as it was, not told, nothing submitted for them
     assert RLModel.objects.get(pk=carols.pk).status == RLModel.Status.TRAINING
