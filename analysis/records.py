@@ -17,12 +17,6 @@ from training import artifacts
 from training.models import EvaluationJob, RLModel, TrainingJob
 
 
-@functools.lru_cache(maxsize=32)
-def track_of(name: str, direction: str) -> tracks.Track:
-    """The simulator's track ``name`` driven ``direction`` (numbers only: no engine is built)."""
-    return tracks.load(name).with_direction(direction)
-
-
 @dataclass(frozen=True)
 class Source:
     """Recorded driving: a training job's iterations, or an evaluation's trials."""
@@ -39,10 +33,11 @@ class Source:
     def of_evaluation(cls, evaluation: EvaluationJob) -> Source:
         return cls(model=evaluation.model, evaluation=evaluation)
 
-    @property
+    @functools.cached_property
     def track(self) -> tracks.Track:
-        where = self.evaluation or self.model
-        return track_of(where.track.name, where.direction)
+        """The track as the recorded driving drove it, on the route file it drove (numbers only:
+        no engine is built): a DeepRacer for Cloud import's own, not the console's."""
+        return (self.evaluation or self.model).driven_track()
 
     @property
     def actions(self) -> int | None:

@@ -38,7 +38,7 @@ from simulator.rewards import checked_reward, follow_centre_line
 from simulator.room import room_for
 from simulator.texture import render, style_for
 from simulator.trace import SimTraceRow
-from simulator.tracks import Track, load
+from simulator.tracks import Track, driven
 from simulator.world import World
 
 
@@ -193,9 +193,10 @@ class DeepRacerEnv(gym.Env):
         grid: int | None = None,
     ) -> None:
         self.config = default_config(camera_lens)
-        loaded = load(track) if route is None else load(track).on_route(route)
-        self.track: Track = loaded.with_direction(
-            config.choice("The direction", direction, ("counterclockwise", "clockwise"))
+        self.track: Track = driven(
+            track,
+            config.choice("The direction", direction, ("counterclockwise", "clockwise")),
+            route,
         )
         self.camera_name, self.lidar_name = config.sensors(sensors)
         self.actions = config.action_space(action_space)

@@ -16,6 +16,7 @@ from django.db import models
 
 from rl import hyperparameters
 from simulator import randomisation_ranges
+from simulator import tracks as sim_tracks
 from simulator.config import SPEED_RANGE
 
 
@@ -341,14 +342,31 @@ class RLModel(RaceConditions):
     def __str__(self) -> str:
         return self.name
 
+    def route_on(self, track: str | None = None) -> str | None:
+        """The route file (a WORLD_NAME) it drives ``track`` on: on its own track (None), its
+        ``world_name``, simapp's file for an import's bare WORLD_NAME (simapp
+        bundle/markov/track_geom/track_data.py:194-198 loads routes/<WORLD_NAME>.npy, 01f5f01);
+        None for the console's file, as on any other track."""
+        own = track in (None, self.track.name)
+        return (self.world_name or None) if own else None
+
+    def driven_track(
+        self, track: str | None = None, direction: str | None = None
+    ) -> sim_tracks.Track:
+        """The track as this model drives it, and so as it drove it: its own (or ``track``,
+        an evaluation's) ``direction`` (its own when None), on ``route_on``'s file. Everything
+        that replays its driving (the Analysis map, re-scoring, ``simulator.params.replayed``)
+        reads this, so that its steps lie on the route they were driven on."""
+        name = track or self.track.name
+        return sim_tracks.driven(name, direction or self.direction, self.route_on(name))
+
     def environment_settings(self, track: str | None = None) -> dict:
         """The keyword arguments of ``gymnasium.make("Pitlane/DeepRacer-v0", ...)``; on another
-        ``track`` than its own, that track's route for the direction."""
-        own = track in (None, self.track.name)
+        ``track`` than its own, that track's route for the direction (``route_on``)."""
         return {
             "track": track or self.track.name,
             "direction": self.direction,
-            "route": (self.world_name or None) if own else None,
+            "route": self.route_on(track),
             "sensors": list(self.sensors),
             "action_space": self.action_space,
             "race_type": self.race_type,
@@ -720,6 +738,11 @@ class EvaluationJob(RaceConditions):
             "action_space": scaled_speeds(self.model.action_space, self.speed_multiplier),
             **together,
         }
+
+    def driven_track(self) -> sim_tracks.Track:
+        """The track as this evaluation drives it (``RLModel.driven_track``): its model's route
+        file on the model's own track, the console's on another."""
+        return self.model.driven_track(self.track.name, self.direction)
 
     def trial_seed(self, number: int) -> int | None:
         """The seed of the episode of trial ``number`` (0 on; continuous laps drive one):

@@ -263,6 +263,17 @@ def _surroundings() -> dict[str, dict]:
         return json.load(file)
 
 
+def driven(
+    source: str | Path | Mapping[str, Any], direction: str, route: str | None = None
+) -> Track:
+    """Track ``source`` (as ``load`` takes it) as a car drives it ``direction``: on its route file
+    ``route`` (a WORLD_NAME, held to it: ``Track.on_route``), or, where None, on the file the
+    console drives that way. What the environment drives, and so what replays of its driving
+    read (a model's: ``training.models.RLModel.driven_track``)."""
+    loaded = load(source)
+    return (loaded if route is None else loaded.on_route(route)).with_direction(direction)
+
+
 def deepracer_world(name: str, direction: str) -> tuple[str, bool]:
     """(WORLD_NAME, REVERSE_DIR) that have DeepRacer drive track ``name`` ``direction``, as a
     training_params.yaml says it: the route file DeepRacer drives that way where there is one

@@ -17,6 +17,7 @@ from django.urls import reverse
 import simulator
 from analysis import records, selectors, summaries, traces
 from analysis.models import TraceSummary
+from simulator import tracks as sim_tracks
 from simulator.controller import CentreLineDriver
 from simulator.params import replayed
 from simulator.trace import to_csv
@@ -115,7 +116,7 @@ def test_the_params_replayed_from_a_trace_are_those_the_car_was_given(tracks):
     env.close()
     steps = traces.read(to_csv(rows))  # through the CSV, rounded as it is stored
     recorded = steps.recorded(slice(None))
-    track = records.track_of("pitlane-oval", "counterclockwise")
+    track = sim_tracks.driven("pitlane-oval", "counterclockwise")
     for theirs, ours in zip(given, replayed(track, recorded), strict=True):
         assert set(ours) == set(theirs) - {"waypoints"}
         for name in (
