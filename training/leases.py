@@ -269,6 +269,15 @@ def log(
     JobLogLine.objects.create(job=job, text=text[:500], level=level, source=source)
 
 
+def trainers_free() -> int:
+    """Trainers (``PITLANE_TRAINERS``) that hold no job: each job past the queue and not yet
+    ended holds one."""
+    training = TrainingJob.objects.filter(status__in=TrainingJob.ACTIVE).exclude(
+        status=TrainingJob.Status.QUEUED
+    )
+    return max(settings.PITLANE_TRAINERS - training.count(), 0)
+
+
 def queue_position(job: TrainingJob) -> int | None:
     """1 for the next job to start; None when the job is not waiting."""
     if job.status != TrainingJob.Status.QUEUED:

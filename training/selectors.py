@@ -55,6 +55,7 @@ def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
             Prefetch("jobs", queryset=newest_first, to_attr="jobs_newest_first")
         )
     )
+    free = None  # trainers, counted once and only when a job waits
     for model in models:
         model.training = model.jobs_newest_first[0] if model.jobs_newest_first else None
         saved = [job.last_checkpoint for job in model.jobs_newest_first if job.last_checkpoint]
@@ -65,8 +66,23 @@ def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
         if model.training is not None:
             model.training.imported_only = job_imported_only(job=model.training)
             model.training.queue_position = leases.queue_position(model.training)
+            if model.training.queue_position is not None:
+                free = leases.trainers_free() if free is None else free
+                model.training.queue_words = queue_words(job=model.training, free=free)
             model.training.clock = training_clock(job=model.training, now=now)
     return models
+
+
+def queue_words(*, job: TrainingJob, free: int | None = None) -> str:
+    """Where ``job`` stands in the queue, in the racer's words: starting, while a trainer is free
+    for it (``free``, the trainers holding no job, counted when not given), else its place and
+    that it waits for a free trainer; "" for a job that does not wait."""
+    place = leases.queue_position(job)
+    if place is None:
+        return ""
+    if place <= (leases.trainers_free() if free is None else free):
+        return "starting on a free trainer"
+    return f"number {place} in the queue, waiting for a free trainer"
 
 
 def job_imported_only(*, job: TrainingJob | None) -> bool:
@@ -229,6 +245,7 @@ def training_status(*, job: TrainingJob) -> dict:
         "message": job.message,
         "failure_reason": job.failure_reason,
         "queue_position": leases.queue_position(job),
+        "queue_words": queue_words(job=job),
         "iterations": job.iterations,
         "episodes": job.episodes + episodes_arrived(job=job),
         "steps": job.steps,

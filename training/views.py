@@ -36,7 +36,7 @@ from sandbox import SandboxFailure, SandboxUnavailable
 from simulator import config as sim_config
 from simulator import randomisation_ranges
 from simulator import tracks as simulator_tracks
-from training import artifacts, checkers, configuration, leases, rewards, selectors, services
+from training import artifacts, checkers, configuration, rewards, selectors, services
 from training.forms import (
     EvaluationForm,
     ModelCreateForm,
@@ -433,7 +433,7 @@ def model_detail(request: HttpRequest, pk: int) -> HttpResponse:
         {
             "model": model,
             "job": job,
-            "queue_position": leases.queue_position(job) if job else None,
+            "queue_words": selectors.queue_words(job=job) if job else "",
             "iterations": iterations,
             "time_split": selectors.time_split(row=iterations[-1]) if iterations else [],
             "evaluations": selectors.evaluations_for_model(model=model)[:20],
@@ -477,7 +477,8 @@ def model_stop(request: HttpRequest, pk: int) -> HttpResponse:
         if job.status == job.Status.CANCELED:
             messages.success(request, "Canceled: the model had not started training.")
         else:
-            messages.success(request, f"Stopping: {job.message[0].lower()}{job.message[1:]}.")
+            said = f"Stopping: {job.message[0].lower()}{job.message[1:]}."
+            messages.success(request, said, extra_tags="while-active")  # not once it has ended
         return redirect("training:model-detail", pk=model.pk)
     return render(
         request,

@@ -151,9 +151,7 @@ function setStatus(message) {
   state = message;
   section.dataset.jobStatus = message.status;
   let text = message.status_display;
-  if (message.queue_position) {
-    text += `: number ${message.queue_position} in the queue, waiting for a free trainer`;
-  }
+  if (message.queue_words) text += `: ${message.queue_words}`;
   if (message.message) text += ` · ${message.message}`;
   find("status").textContent = text;
   const failure = find("failure");
@@ -185,6 +183,7 @@ function setStatus(message) {
       + `${message.episodes} episode${message.episodes === 1 ? "" : "s"}, ${message.steps} steps`;
   }
   if (!message.active) {
+    if (kind === "training") showTimeSplit(); // its evaluation no longer comes
     say(message.status === "COMPLETED" ? "Finished: no more live video." : `${message.status_display}.`);
     const ended = message.status === "COMPLETED" || message.status === "CANCELED"; // a video to show
     if (kind === "evaluation" && wasActive && ended && !leaving) window.location.reload();
@@ -284,9 +283,10 @@ function showTimeSplit() {
     item.append(key, `${part.label} `, figures);
     return item;
   }));
-  panel.querySelector("[data-split-evaluation]").textContent = row.evaluation_seconds === null
-    ? "Its evaluation drives beside the next iteration."
-    : `Its evaluation drove ${row.evaluation_seconds.toFixed(1)} s beside the next iteration.`;
+  const ended = state && !state.active;
+  panel.querySelector("[data-split-evaluation]").textContent = row.evaluation_seconds !== null
+    ? `Its evaluation drove ${row.evaluation_seconds.toFixed(1)} s beside the next iteration.`
+    : ended ? "Training ended before its evaluation finished." : "Its evaluation drives beside the next iteration.";
 }
 
 // The completion axis ends at 100%, and points there are drawn whole (clip: false), not cut

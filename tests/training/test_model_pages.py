@@ -68,7 +68,7 @@ def test_a_racer_creates_a_model_and_its_training_is_queued(client, alice, track
     assert [a["steering_angle"] for a in model.action_space] == [-20, 0, 20]
     assert model.jobs.get().status == TrainingJob.Status.QUEUED
     page = client.get(response["Location"])
-    assert "number 1 in the queue" in page.text
+    assert "Queued: starting on a free trainer" in page.text  # no trainer is busy
     assert "Stop training" in page.text
 
 
@@ -88,7 +88,8 @@ def test_the_model_list_shows_each_models_training_progress(
     )
     assert ahead.jobs.get().status == TrainingJob.Status.QUEUED
     client.force_login(alice)
-    with django_assert_max_num_queries(8):  # session, racer, models, jobs, one waiting job
+    # session, racer, models, jobs, one waiting job, the trainers' jobs
+    with django_assert_max_num_queries(9):
         page = client.get(reverse("training:model-list")).text
     rows = {
         name: re.search(rf">{name}</a>.*?</tr>", page, re.S).group(0)
