@@ -1,14 +1,18 @@
 """A live race in Chromium: two racers join the queue from the race page, the facilitator
 reorders it and launches a turn, which a real simulation worker drives in real time while the
-race page and the broadcast show it; its score lands on the leaderboard."""
+race page and the broadcast show it, uncovered; its lap reads the same on the race page, the
+broadcast, the leaderboard and the submission page; the winner shown stays shown on a reloaded
+broadcast; and the race page fits a phone."""
 
 import pytest
 from playwright.sync_api import Page, expect
 
 from accounts.selectors import racer_name
+from common.formatting import laptime
 from racing.models import Submission
+from tests.browser.checks import page_problems
 from tests.helpers.accounts import PASSWORD
-from tests.helpers.browser import log_in
+from tests.helpers.browser import expect_seen, log_in
 from tests.helpers.league import event
 from tests.helpers.models import ready_model
 
@@ -41,8 +45,11 @@ def test_two_racers_queue_the_facilitator_reorders_and_a_turn_drives_live(
     expect(page.get_by_text("Nobody is in the queue yet.")).to_be_visible()
 
     screen = page.context.new_page()
+    screen.set_viewport_size({"width": 1920, "height": 1080})  # a projector
     screen.goto(f"/events/{race.slug}/broadcast/")
     expect(screen.locator("body")).to_have_attribute("data-listening", "true")
+    expect_seen(screen.locator("[data-racer]"))  # nothing over the picture until the winner
+    expect(screen.locator("[data-winner]")).to_be_hidden()
 
     for username, model in models.items():
         own = racer_page(page, daphne_server, username)
@@ -60,6 +67,9 @@ def test_two_racers_queue_the_facilitator_reorders_and_a_turn_drives_live(
     page.get_by_role("button", name=f"Move {racer_name(racer=bob)} up").click()
     expect(rows.nth(0)).to_contain_text(racer_name(racer=bob))
 
+    page.set_viewport_size({"width": 1366, "height": 850})  # a laptop at the track
+    expect_seen(page.get_by_role("button", name="Launch the next turn"))
+    expect_seen(page.locator("[data-turn-timer]"))  # the car's timer above the fold
     page.get_by_role("button", name="Launch the next turn").click()
     expect(page.get_by_text("bob-straight is on the track.")).to_be_visible()
     expect(watcher.locator("[data-turn-racer]")).to_contain_text(racer_name(racer=bob))
@@ -75,5 +85,31 @@ def test_two_racers_queue_the_facilitator_reorders_and_a_turn_drives_live(
     assert submission.evaluation.real_time and submission.evaluation.speed_multiplier == 1.2
     expect(watcher.locator("[data-turn-laps] li")).to_have_count(1)
     expect(screen.locator("[data-top] li").first).to_contain_text(racer_name(racer=bob))
+    expect_seen(screen.locator("[data-top] li").first)
+    # one lap, with its off-track penalties inside its time: the same figure on every page
+    lap = submission.laps.get()
+    assert lap.off_tracks and lap.penalty_ms, "the straight model leaves the oval at its bends"
+    shown = laptime(lap.time_ms)
+    listed = f"{shown} ({lap.off_tracks} off-track{'s' if lap.off_tracks > 1 else ''})"
+    expect(watcher.locator("[data-turn-laps] li")).to_have_text(listed)
+    expect(screen.locator("[data-laps] li")).to_have_text(listed)
+    expect(watcher.locator("[data-turn-timer]")).to_have_text(shown)
+
+    page.get_by_role("button", name="Show the winner on the broadcast").click()
+    winner = screen.locator("[data-winner]")
+    expect(winner).to_contain_text(racer_name(racer=bob))
+    expect_seen(screen.locator("[data-winner-racer]"))
+    screen.reload()  # a broadcast opened after the winner was shown shows it too
+    expect_seen(screen.locator("[data-winner-racer]"))
+    expect(winner).to_contain_text(f"bob-straight · {laptime(submission.score_ms)}")
+
     watcher.goto(race.get_absolute_url())
     expect(watcher.locator("tbody tr").first).to_contain_text(racer_name(racer=bob))
+    expect(watcher.locator("tbody tr").first).to_contain_text(laptime(submission.score_ms))
+    watcher.goto(submission.get_absolute_url())
+    expect(watcher.locator("tr[data-lap='1'] [data-lap-time]")).to_have_text(shown)
+
+    watcher.set_viewport_size({"width": 390, "height": 844})  # a racer's phone
+    watcher.goto(live)
+    assert page_problems(watcher) == []  # the queue scrolls in its card, the page fits
+    expect_seen(watcher.locator("[data-turn-timer]"))

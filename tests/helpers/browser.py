@@ -1,6 +1,6 @@
 """A racer's steps in Chromium that several browser tests take."""
 
-from playwright.sync_api import Page
+from playwright.sync_api import Locator, Page, expect
 
 from tests.helpers.accounts import PASSWORD
 
@@ -29,3 +29,21 @@ def sign_up_here(page: Page, username: str) -> None:
     page.get_by_label("Password", exact=True).fill(PASSWORD)
     page.get_by_label("Password confirmation").fill(PASSWORD)
     page.get_by_role("button", name="Sign up").click()
+
+
+# What is drawn at the element's centre, when that is not the element or inside it ("" if it is).
+_COVER = """element => {
+  const box = element.getBoundingClientRect();
+  const top = document.elementFromPoint(box.left + box.width / 2, box.top + box.height / 2);
+  if (top && (top === element || element.contains(top))) return "";
+  return top ? top.outerHTML.slice(0, 160) : "nothing: it is outside the window";
+}"""
+
+
+def expect_seen(locator: Locator) -> None:
+    """A person sees it: visible, in the window, and not covered by another layer at its
+    centre (Playwright's visibility alone passes an element under an opaque overlay)."""
+    expect(locator).to_be_visible()
+    expect(locator).to_be_in_viewport()
+    covered = locator.evaluate(_COVER)
+    assert not covered, f"{locator} is covered by {covered}"
