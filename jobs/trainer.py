@@ -464,13 +464,14 @@ class Trainer:
         ``UPDATE_SAID_EVERY`` at most."""
         epochs = self.model.hyperparameters["num_epochs"] if self.ppo else 0
         about = f"iteration {number}, from {len(episodes)} episode{'s' * (len(episodes) > 1)}"
-        started, said = time.monotonic(), [-UPDATE_SAID_EVERY]
+        estimate, said = UpdateEstimate(), [-UPDATE_SAID_EVERY]
 
         def progress(done: int, total: int) -> None:
             now = time.monotonic()
+            left = estimate.report(done, total, now)
             if done == 0 or (done < total and now - said[0] >= UPDATE_SAID_EVERY):
                 said[0] = now
-                message = update_message(done, total, epochs, now - started, about)
+                message = update_message(done, total, epochs, left, about)
                 leases.clock_write(self.job, self._spent(), message=message)
                 live.announce_training(self.job.pk)
 
@@ -832,13 +833,46 @@ def _workers(count: int) -> str:
     return f"{count} simulation worker{'s' if count != 1 else ''}"
 
 
-def update_message(done: int, total: int, epochs: int, seconds: float, about: str) -> str:
-    """What the racer reads while the policy is updated: ``done`` of ``total`` gradient steps
-    after ``seconds``, in epochs of ``epochs`` (PPO) or in steps (SAC, ``epochs`` 0), the time
-    left estimated from the time per step so far; ``about``: which iteration, from what."""
+class UpdateEstimate:
+    """The time a policy update has left, from the pace of its gradient steps (PPO's minibatches,
+    SAC's steps), as the learner reports them done.
+
+    The pace counts from the first step reported, not from the update's start: the rollout's copy
+    to the device and its advantages come once, before it, and would make every step look as
+    slow. The time is said once the pace is measured over ``SETTLED`` of the steps or
+    ``SETTLED_AFTER`` seconds: before that, the first step's warm-up and the steps a GPU has
+    queued but not yet run would set it. And it never rises within the update: a slower stretch
+    holds it where it was rather than turning it back up."""
+
+    SETTLED = 0.1  # of the update's steps done, or
+    SETTLED_AFTER = 2.0  # [s] since the first, before the time left is said
+
+    def __init__(self) -> None:
+        self.first: tuple[int, float] | None = None  # (steps done, [s] monotonic) when first told
+        self.left: float | None = None  # [s] the least said so far
+
+    def report(self, done: int, total: int, now: float) -> float | None:
+        """[s] left after ``done`` of ``total`` steps at ``now`` (``time.monotonic()``); None
+        while it is too soon to say, and once the update is done."""
+        if not 0 < done < total:
+            return None
+        if self.first is None:
+            self.first = (done, now)
+        steps, seconds = done - self.first[0], now - self.first[1]
+        if steps <= 0 or (done < self.SETTLED * total and seconds < self.SETTLED_AFTER):
+            return self.left
+        pace = seconds / steps * (total - done)
+        self.left = pace if self.left is None else min(self.left, pace)
+        return self.left
+
+
+def update_message(done: int, total: int, epochs: int, left: float | None, about: str) -> str:
+    """What the racer reads while the policy is updated: ``done`` of ``total`` gradient steps, in
+    epochs of ``epochs`` (PPO) or in steps (SAC, ``epochs`` 0), with the time ``left`` [s]
+    (``UpdateEstimate``) where it can be said; ``about``: which iteration, from what."""
     if epochs:
         where = f"epoch {min(done * epochs // max(total, 1) + 1, epochs)} of {epochs}"
     else:
         where = f"{done:,} of {total:,} gradient steps"
-    left = f", about {clock(seconds / done * (total - done))} left" if 0 < done < total else ""
-    return f"Updating the policy: {where}{left} ({about})"
+    left_words = f", about {clock(left)} left" if left is not None and 0 < done < total else ""
+    return f"Updating the policy: {where}{left_words} ({about})"

@@ -4,7 +4,7 @@ time it has left, and the episodes counted as the cars end them, not only once l
 import pytest
 
 from common.redis_client import redis_client
-from jobs.trainer import update_message
+from jobs.trainer import UpdateEstimate, update_message
 from rl.experience import JobChannel
 from tests.helpers.training import training_job
 from training import selectors
@@ -14,27 +14,55 @@ pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 ABOUT = "iteration 4, from 20 episodes"
 
 
-def test_a_ppo_update_says_its_epoch_and_the_time_left_at_the_pace_so_far():
-    # 10 epochs of 30 minibatches: 90 done in 36 s is 0.4 s each, 210 to go.
-    assert update_message(90, 300, 10, 36.0, ABOUT) == (
+def test_a_ppo_update_says_its_epoch_and_the_time_left():
+    assert update_message(90, 300, 10, 84.0, ABOUT) == (
         "Updating the policy: epoch 4 of 10, about 1:24 left (iteration 4, from 20 episodes)"
     )
-    assert update_message(299, 300, 10, 299.0, ABOUT).startswith(
+    assert update_message(299, 300, 10, 1.0, ABOUT).startswith(
         "Updating the policy: epoch 10 of 10, about 0:01 left"
     )
 
 
 def test_an_update_just_begun_says_its_first_epoch_without_guessing_the_time():
-    assert update_message(0, 300, 10, 0.0, ABOUT) == (
+    assert update_message(0, 300, 10, None, ABOUT) == (
         "Updating the policy: epoch 1 of 10 (iteration 4, from 20 episodes)"
     )
+    assert UpdateEstimate().report(0, 300, 5.0) is None
 
 
 def test_a_sac_update_counts_its_gradient_steps():
-    assert update_message(1_024, 4_000, 0, 32.0, "iteration 9, from 1 episode") == (
+    assert update_message(1_024, 4_000, 0, 93.0, "iteration 9, from 1 episode") == (
         "Updating the policy: 1,024 of 4,000 gradient steps, about 1:33 left "
         "(iteration 9, from 1 episode)"
     )
+
+
+def test_it_estimates_the_time_left_from_the_steps_done_not_from_the_updates_start():
+    estimate = UpdateEstimate()
+    # 20 s copying the rollout to the device before the first of 300 minibatches is done
+    assert estimate.report(1, 300, 20.0) is None
+    assert estimate.report(20, 300, 21.9) is None  # too few, too soon, to set the pace
+    assert estimate.report(31, 300, 23.0) == pytest.approx(0.1 * 269)  # 0.1 s a minibatch
+
+
+def test_a_long_update_says_its_time_left_within_seconds():
+    estimate = UpdateEstimate()
+    estimate.report(1, 1_500_000, 0.0)
+    assert estimate.report(11, 1_500_000, 1.0) is None
+    assert estimate.report(21, 1_500_000, 2.0) == pytest.approx(0.1 * (1_500_000 - 21))
+
+
+def test_it_never_raises_the_time_left_while_an_epoch_runs():
+    estimate, now, said = UpdateEstimate(), 0.0, []
+    for done in range(1, 300):
+        now += 0.1 if done < 60 or done > 90 else 0.5  # a slower stretch in the third epoch
+        left = estimate.report(done, 300, now)
+        if left is not None:
+            said.append(left)
+    assert len(said) > 250
+    assert said == sorted(said, reverse=True)
+    assert said[-1] < 1.0
+    assert estimate.report(300, 300, now + 0.1) is None  # done
 
 
 @pytest.fixture
