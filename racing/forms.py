@@ -12,7 +12,7 @@ from django.utils import timezone
 
 from common.forms import RacerWords
 from common.time_zones import local_text
-from racing import selectors
+from racing import selectors, timing
 from racing.models import Event, RaceType, RankingMethod
 from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
 from training import selectors as training_selectors
@@ -244,24 +244,90 @@ class CommunityRaceForm(RaceObstaclesForm):
 
 
 class TimedRunForm(RacerWords, forms.Form):
-    """A real car about to be timed: whose it is, the model it runs, and which car."""
+    """A real car about to be timed: whose it is (by racer name, never the login name, which
+    sign-up promises nobody sees), the model it runs, and which car (by its number)."""
 
     racer = forms.CharField(
-        label="Racer", max_length=150, help_text="Their user name on this console."
+        label="Racer",
+        max_length=64,
+        help_text="Their racer name, as the leaderboard shows it: type a few letters to search.",
+        widget=forms.TextInput(
+            attrs={"list": "racer-names", "autocomplete": "off", "data-racer-search": ""}
+        ),
     )
     model_name = forms.CharField(
         label="Model", max_length=64, help_text="The model loaded on the car, as it is known."
     )
-    car = forms.CharField(label="Car", max_length=64, help_text="Its number or name.")
+    car = forms.CharField(
+        label="Car number",
+        max_length=64,
+        help_text="The number on the car (its name, where it has no number).",
+    )
 
     def clean_racer(self):
-        from django.contrib.auth import get_user_model
+        try:
+            return timing.racer_named(name=self.cleaned_data["racer"])
+        except timing.TimingRefused as refused:
+            raise ValidationError(str(refused)) from None
 
-        name = self.cleaned_data["racer"].strip()
-        racer = get_user_model().objects.filter(username__iexact=name, is_active=True).first()
-        if racer is None:
-            raise ValidationError(f"No racer goes by the name {name} here: check the spelling.")
-        return racer
+    def clean_car(self) -> str:
+        return self.cleaned_data["car"].strip()
+
+
+class LapEditForm(RacerWords, forms.Form):
+    """A timekeeper's edit of one run's laps (``racing.lap_edits``): strike a lap out, restore
+    it, split it at a missed crossing, or add a lap at the end of a finished run."""
+
+    ACTIONS = {
+        "strike": "Strike the lap out",
+        "restore": "Restore the lap",
+        "split": "Split the lap at a missed crossing",
+        "add": "Add a lap at the end",
+    }
+    action = forms.ChoiceField(choices=list(ACTIONS.items()), widget=forms.HiddenInput)
+    lap = forms.IntegerField(label="Lap", min_value=1, max_value=32_767, required=False)
+    first_s = forms.DecimalField(
+        label="Its first part took [s]",
+        min_value=0,
+        max_value=timing.MAX_LAP_MS // 1000,
+        max_digits=9,
+        decimal_places=3,
+        required=False,
+        help_text="From the lap's start to the crossing you missed; its off-tracks stay with it.",
+    )
+    time_s = forms.DecimalField(
+        label="Lap time [s]",
+        min_value=0,
+        max_value=timing.MAX_LAP_MS // 1000,
+        max_digits=9,
+        decimal_places=3,
+        required=False,
+        help_text="The time the car drove, off a stopwatch or a video; penalties are added.",
+    )
+    off_tracks = forms.IntegerField(
+        label="Off-tracks", min_value=0, max_value=timing.MAX_OFF_TRACKS, initial=0, required=False
+    )
+
+    def __init__(self, *args, submission, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.submission = submission
+
+    def clean(self) -> dict:
+        data = super().clean()
+        action = data.get("action")
+        if action in ("strike", "restore", "split"):
+            number = data.get("lap")
+            data["lap_row"] = self.submission.laps.filter(number=number).first()
+            if number is None or data["lap_row"] is None:
+                self.add_error("lap", "Choose one of the run's laps by its number.")
+        if action == "split" and data.get("first_s") is None and "first_s" not in self.errors:
+            self.add_error("first_s", "Say how long the lap's first part took, in seconds.")
+        if action == "add" and data.get("time_s") is None and "time_s" not in self.errors:
+            self.add_error("time_s", "Say the lap's time, in seconds.")
+        for name in ("first_s", "time_s"):
+            if data.get(name) is not None:
+                data[name.replace("_s", "_ms")] = round(data[name] * 1000)
+        return data
 
 
 class LiveJoinForm(RacerWords, forms.Form):

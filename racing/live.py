@@ -14,11 +14,13 @@ import time
 from django.db import transaction
 
 from accounts.selectors import racer_name
+from common.formatting import laptime
+from racing import scoring
 from racing.models import Event, LiveEntry, LiveSession, PhysicalRun, Submission
 from training import live
-
-
 from training.models import scaled_speeds, top_speed
+
+
 def event_group(event_id: int) -> str:
     return f"event_{event_id}"
 
@@ -51,6 +53,8 @@ def timing_state(run: PhysicalRun | None) -> dict:
     if run is None:
         return {"type": "timing", "on_track": False, "server_ms": _now_ms()}
     submission = run.submission
+    rows = list(submission.laps.order_by("number"))
+    short = scoring.far_below([lap.scoring_lap() for lap in rows])
     laps = [
         {
             "number": lap.number,
@@ -59,8 +63,10 @@ def timing_state(run: PhysicalRun | None) -> dict:
             "off_tracks": lap.off_tracks,
             "resets": lap.resets,
             "counted": lap.counted,
+            "struck": lap.struck_at is not None,
+            "far_below": far_below and lap.struck_at is None,
         }
-        for lap in submission.laps.order_by("number")
+        for lap, far_below in zip(rows, short, strict=True)
     ]
     started = run.line_crossed_at
     return {
@@ -80,7 +86,26 @@ def timing_state(run: PhysicalRun | None) -> dict:
         "server_ms": _now_ms(),
         "score_ms": submission.score_ms,
         "qualified": submission.qualified,
+        "verdict": _verdict(submission, rows),
     }
+
+
+def _verdict(submission: Submission, laps: list) -> str:
+    """A finished run's result in the timekeeper's words: its score, or why it did not qualify
+    ("did not qualify: 2 of the 3 counted laps in a row the event needs")."""
+    if submission.status != Submission.Status.COMPLETED:
+        return ""
+    name = racer_name(racer=submission.racer)
+    if submission.qualified and submission.score_ms is not None:
+        return f"{name}'s run scored {laptime(submission.score_ms)}."
+    needed = submission.event.laps_to_qualify
+    if needed == 1:
+        return f"{name}'s run did not qualify: it has no counted lap."
+    done = scoring.counted_in_a_row([lap.scoring_lap() for lap in laps])
+    return (
+        f"{name}'s run did not qualify: {done} of the {needed} counted laps in a row the "
+        "event needs."
+    )
 
 
 def announce_timing(run: PhysicalRun) -> None:
@@ -110,6 +135,7 @@ def queue_state(session: LiveSession | None) -> dict:
             "racer": racer_name(racer=entry.racer),
             "model_name": entry.model_name,
             "speed": entry.speed,
+            **_speeds(entry),
             "status": entry.status,
             "submission": entry.submission_id,
             "evaluation": entry.submission.evaluation_id if entry.submission else None,
@@ -121,6 +147,9 @@ def queue_state(session: LiveSession | None) -> dict:
         elif entry.status != entry.Status.REMOVED:
             shown.append(row)
     cars = [row for _, row in sorted(cars, key=lambda car: car[0])]
+    waiting = [row for row in shown if row["status"] == LiveEntry.Status.WAITING]
+    for place, row in enumerate(waiting, start=1):  # the facilitator moves only what can move
+        row.update(place=place, first_waiting=place == 1, last_waiting=place == len(waiting))
     return {
         "type": "queue",
         "open": True,
@@ -134,8 +163,17 @@ def queue_state(session: LiveSession | None) -> dict:
     }
 
 
+def _speeds(entry: LiveEntry) -> dict:
+    """What the speed multiplier makes of the model's speeds: its fastest action's speed as
+    driven [m/s], and whether the car's limit (4 m/s) cut it, so a racer sees what 1.2x does."""
+    if entry.model is None:
+        return {"top_speed": None, "capped": False}
+    fastest = top_speed(entry.model.action_space)
+    driven = top_speed(scaled_speeds(entry.model.action_space, entry.speed))
+    return {"top_speed": driven, "capped": driven < fastest * entry.speed - 1e-9}
+
+
 def announce_queue(session: LiveSession) -> None:
-            **_speeds(entry),
     """A live session's queue or turn changed."""
     event_id = session.event_id
 
@@ -147,9 +185,6 @@ def announce_queue(session: LiveSession) -> None:
 
 
 def announce_winner(event: Event, ranking: dict | None) -> None:
-    waiting = [row for row in shown if row["status"] == LiveEntry.Status.WAITING]
-    for place, row in enumerate(waiting, start=1):  # the facilitator moves only what can move
-        row.update(place=place, first_waiting=place == 1, last_waiting=place == len(waiting))
     """The organiser shows the winner on the broadcast: ``ranking`` is the leader (None: none)."""
     message = {"type": "winner", "event": event.pk, "winner": ranking}
     transaction.on_commit(lambda: live.send(event_group(event.pk), _update(message)))
@@ -157,16 +192,6 @@ def announce_winner(event: Event, ranking: dict | None) -> None:
 
 def _now_ms() -> int:
     return round(time.time() * 1000)
-
-def _speeds(entry: LiveEntry) -> dict:
-    """What the speed multiplier makes of the model's speeds: its fastest action's speed as
-    driven [m/s], and whether the car's limit (4 m/s) cut it, so a racer sees what 1.2x does."""
-    if entry.model is None:
-        return {"top_speed": None, "capped": False}
-    fastest = top_speed(entry.model.action_space)
-    driven = top_speed(scaled_speeds(entry.model.action_space, entry.speed))
-    return {"top_speed": driven, "capped": driven < fastest * entry.speed - 1e-9}
-
 
 
 def _update(message: dict) -> dict:

@@ -64,3 +64,30 @@ def score(laps: Sequence[Lap], *, method: str, size: int) -> int | None:
     if method == BEST_LAP:
         return min(lap.time_ms for lap in laps if lap.counted)
     return sum(lap.time_ms for lap in laps[: starts[0] + size])
+
+
+def counted_in_a_row(laps: Sequence[Lap]) -> int:
+    """The most counted laps one after another (what a run lacked when it did not qualify)."""
+    most = run = 0
+    for lap in laps:
+        run = run + 1 if lap.counted else 0
+        most = max(most, run)
+    return most
+
+
+def far_below(laps: Sequence[Lap], *, share: float = 0.65) -> list[bool]:
+    """For each lap, whether it is under ``share`` of the median of the run's other counted laps:
+    a lap that short is more likely a double press or a cut corner than a fast lap. A lap with no
+    other counted lap to compare with is not."""
+    flags = []
+    for index, lap in enumerate(laps):
+        others = sorted(
+            other.time_ms for i, other in enumerate(laps) if i != index and other.counted
+        )
+        if not others:
+            flags.append(False)
+            continue
+        middle = len(others) // 2
+        median = others[middle] if len(others) % 2 else (others[middle - 1] + others[middle]) / 2
+        flags.append(lap.time_ms < share * median)
+    return flags

@@ -19,6 +19,12 @@ Signals, from the page's keys or the device's ``signal``:
   the lap on track (the first crossing undone stops the clock);
 - ``finish`` (F): the run is over: score it.
 
+A crossing sooner than the event's shortest lap (``Event.min_lap_s``) after the last one is
+refused in words (a double press, a gate's bounce); laps and clock readings are bounded by what a
+race can take (``MAX_LAP_MS``, ``MAX_CLOCK_MS``), so no reading can overflow a lap or an undo.
+After a crossing, or after the finish, the timekeeper may strike a lap out, restore it, or add a
+crossing they missed (``racing.lap_edits``); a finished run is then scored again.
+
 The DeepRacer Event Manager times physical events the same way: a timekeeper records each lap and
 its resets, and its leaderboards take the best lap or the best average of X laps.
 """
@@ -31,30 +37,57 @@ import secrets
 from dataclasses import dataclass
 from datetime import timedelta
 
+from django.contrib.auth import get_user_model
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import transaction
+from django.db.models import QuerySet
 from django.utils import timezone
 
 from accounts.selectors import racer_name
+from common.formatting import laptime
 from common.refusals import Refused
 from notifications import services as notifications
 from racing import live, scoring, selectors
 from racing.models import Event, Lap, PhysicalRun, Submission
-from racing.services import SUBMISSION, ranking_offer
+from racing.services import SUBMISSION, ranking_offer, ranking_recompute
 
 SIGNALS = ("crossing", "off_track", "reset", "undo", "finish")
-MIN_LAP_MS = 1_000  # a second crossing sooner than this is the same crossing pressed twice
-MAX_CLOCK_MS = 2**62  # readings beyond this are not a clock's
+MAX_LAP_MS = 3 * 3600 * 1000  # no lap of a race night takes longer: a longer one is a clock's slip
+MAX_CLOCK_MS = 2**53  # a clock's reading [ms]: what JSON and a browser's numbers hold exactly
+MAX_OFF_TRACKS = 999  # off-tracks in one lap
+RACERS_SHOWN = 10  # the racer search's answers, at most
 
 
 class TimingRefused(Refused):
     """The signal cannot be taken; the message says why, in the timekeeper's words."""
 
 
+class SignalUnreadable(ValueError):
+    """A signal's body that cannot be read (the device endpoint's 400); the message says why."""
+
+
 @dataclass(frozen=True)
 class Signal:
     kind: str
     at_ms: int | None = None  # the clock's reading, for a crossing
+
+
+def signal_read(data: object) -> Signal:
+    """The signal in a device's (or the page's) JSON body; ``SignalUnreadable`` says what is
+    wrong with it: not an object, an unknown signal, a crossing without its clock reading."""
+    if not isinstance(data, dict) or not isinstance(data.get("signal"), str):
+        raise SignalUnreadable(
+            'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a signal of '
+            "off_track, reset, undo or finish."
+        )
+    kind, at_ms = data["signal"], data.get("at_ms")
+    if kind not in SIGNALS:
+        raise SignalUnreadable(f"Unknown signal {kind!r}: send one of {', '.join(SIGNALS)}.")
+    if kind == "crossing" and (type(at_ms) is not int or not 0 <= at_ms < MAX_CLOCK_MS):
+        raise SignalUnreadable(
+            "A crossing needs the clock's reading, at_ms: whole milliseconds from 0 to 2^53."
+        )
+    return Signal(kind, at_ms if kind == "crossing" else None)
 
 
 def timing_token_renew(*, event: Event) -> str:
@@ -75,6 +108,42 @@ def timing_token_matches(*, event: Event, token: str) -> bool:
 
 def _digest(token: str) -> str:
     return hashlib.sha256(token.encode()).hexdigest()
+
+
+def racers_named_like(*, text: str, limit: int = RACERS_SHOWN) -> list[str]:
+    """The racer names of active accounts that start with ``text`` (then those that hold it),
+    any case, at most ``limit``: the timekeeper's search as they type. Never a login name."""
+    text = text.strip()
+    if not text:
+        return []
+    names = _racers().filter(profile__racer_name__icontains=text)
+    names = list(
+        names.values_list("profile__racer_name", flat=True).order_by("profile__racer_name")
+    )
+    starting = [name for name in names if name.lower().startswith(text.lower())]
+    return (starting + [name for name in names if name not in starting])[:limit]
+
+
+def racer_named(*, name: str) -> AbstractBaseUser:
+    """The active racer called ``name`` (any case); ``TimingRefused`` says, in words, when nobody
+    is, naming the racers it may have meant."""
+    name = name.strip()
+    racer = _racers().filter(profile__racer_name__iexact=name).first()
+    if racer is not None:
+        return racer
+    alike = racers_named_like(text=name, limit=4)
+    if not alike:
+        raise TimingRefused(f"No racer is called {name}: check the spelling of their racer name.")
+    if len(alike) == 1:
+        raise TimingRefused(f"No racer is called {name}: did you mean {alike[0]}?")
+    raise TimingRefused(
+        f"No racer is called {name}, and {len(alike)} names hold it ({', '.join(alike)}): "
+        "type the whole racer name."
+    )
+
+
+def _racers() -> QuerySet:
+    return get_user_model().objects.filter(is_active=True, profile__isnull=False)
 
 
 def physical_run_start(
@@ -114,7 +183,7 @@ def running_run(*, event: Event) -> PhysicalRun | None:
 def run_signal(*, run: PhysicalRun, signal: Signal) -> PhysicalRun:
     """Apply one signal to the run on the track; its pages hear the new state."""
     if signal.kind not in SIGNALS:
-        raise TimingRefused(f"Unknown signal {signal.kind!r}: one of {', '.join(SIGNALS)}.")
+        raise TimingRefused(f"Unknown signal {signal.kind!r}: send one of {', '.join(SIGNALS)}.")
     if signal.kind == "finish":
         return physical_run_finish(run=run)
     with transaction.atomic():
@@ -124,6 +193,8 @@ def run_signal(*, run: PhysicalRun, signal: Signal) -> PhysicalRun:
         elif signal.kind == "undo":
             _undo(run)
         else:
+            if run.off_tracks >= MAX_OFF_TRACKS:
+                raise TimingRefused(f"{MAX_OFF_TRACKS} off-tracks on one lap is all a lap holds.")
             run.off_tracks += 1
             run.resets += signal.kind == "reset"
             run.save(update_fields=["off_tracks", "resets"])
@@ -147,18 +218,14 @@ def _crossing(run: PhysicalRun, at_ms: int | None) -> None:
     if at_ms is None or not 0 <= at_ms < MAX_CLOCK_MS:
         raise TimingRefused("A crossing needs the clock's reading, at_ms: whole milliseconds.")
     if run.line_crossed_ms is not None:
-        lap_ms = at_ms - run.line_crossed_ms
-        if lap_ms < MIN_LAP_MS:
-            raise TimingRefused(
-                f"A lap of {lap_ms} ms: the same crossing twice, or the clock went back."
-            )
         event = run.submission.event
-        penalty_ms = round(run.off_tracks * event.off_track_penalty_s * 1000)
+        lap_refusal(event=event, lap_ms=at_ms - run.line_crossed_ms)
+        penalty_ms = penalty_for(event=event, off_tracks=run.off_tracks)
         limit = event.max_off_tracks_per_lap
         Lap.objects.create(
             submission=run.submission,
             number=run.submission.laps.count() + 1,
-            time_ms=lap_ms + penalty_ms,
+            time_ms=at_ms - run.line_crossed_ms + penalty_ms,
             penalty_ms=penalty_ms,
             status="lap_complete",
             off_tracks=run.off_tracks,
@@ -168,6 +235,29 @@ def _crossing(run: PhysicalRun, at_ms: int | None) -> None:
     run.line_crossed_ms, run.line_crossed_at = at_ms, timezone.now()
     run.off_tracks = run.resets = 0
     run.save(update_fields=["line_crossed_ms", "line_crossed_at", "off_tracks", "resets"])
+
+
+def lap_refusal(*, event: Event, lap_ms: int, what: str = "A crossing") -> None:
+    """``TimingRefused`` for a lap a real car cannot have driven: shorter than the event's
+    shortest lap (the same crossing twice, or the clock went back), or longer than a race."""
+    shortest = round(event.min_lap_s * 1000)
+    if lap_ms < 0:
+        raise TimingRefused(f"{what} before the last one: the clock went back. Not counted.")
+    if lap_ms < shortest:
+        raise TimingRefused(
+            f"{what} {laptime(lap_ms)} after the last one: shorter than this event's shortest "
+            f"lap ({event.min_lap_s:g} s), so the same crossing twice. Not counted."
+        )
+    if lap_ms > MAX_LAP_MS:
+        raise TimingRefused(
+            f"{what} {lap_ms // 60_000:,} minutes after the last one: longer than a race "
+            f"({MAX_LAP_MS // 3_600_000} hours at most). Was the clock reset? Not counted."
+        )
+
+
+def penalty_for(*, event: Event, off_tracks: int) -> int:
+    """The event's off-track penalty for ``off_tracks`` [ms]."""
+    return round(off_tracks * event.off_track_penalty_s * 1000)
 
 
 def _undo(run: PhysicalRun) -> None:
@@ -192,27 +282,59 @@ def physical_run_finish(*, run: PhysicalRun) -> PhysicalRun:
     ranking, and tell the racer."""
     with transaction.atomic():
         run = _locked(run)
-        submission, event = run.submission, run.submission.event
-        laps = list(submission.laps.order_by("number"))
-        score = scoring.score(
-            [lap.scoring_lap() for lap in laps],
-            method=event.ranking_method,
-            size=event.laps_required,
-        )
+        submission = run.submission
         SUBMISSION.move(
             submission,
             Submission.Status.COMPLETED,
             finished_at=timezone.now(),
-            score_ms=score,
-            qualified=score is not None,
-            laps_completed=len(laps),
-            off_tracks=sum(lap.off_tracks for lap in laps),
+            **_scored(submission),
         )
         ranked = ranking_offer(submission=submission)
     live.announce_submission(submission, ranked=ranked)
     live.announce_timing(run)
     notifications.submission_scored(submission=submission)
     return run
+
+
+def physical_run_rescore(*, submission: Submission) -> Submission:
+    """A finished run's laps were edited: score them again by the event's rules. The racer's
+    ranking is made again from all their runs (``ranking_recompute``), so a score that got worse
+    gives way to their next best, or leaves the leaderboard; its pages hear the change."""
+    with transaction.atomic():
+        fields = _scored(submission)
+        Submission.objects.filter(pk=submission.pk).update(**fields)
+        for name, value in fields.items():
+            setattr(submission, name, value)
+        ranking_recompute(event=submission.event, racer=submission.racer)
+    live.announce_submission(submission, ranked=True)
+    live.announce_leaderboard(submission.event, submission=submission.pk)
+    return submission
+
+
+def _scored(submission: Submission) -> dict:
+    """The submission's score fields from its laps, by the event's method; a best-lap event
+    raced by real cars ranks any counted lap (``Event.laps_to_qualify``)."""
+    event = submission.event
+    laps = list(submission.laps.order_by("number"))
+    score = scoring.score(
+        [lap.scoring_lap() for lap in laps],
+        method=event.ranking_method,
+        size=event.laps_to_qualify,
+    )
+    return {
+        "score_ms": score,
+        "qualified": score is not None,
+        "laps_completed": len(laps),
+        "off_tracks": sum(lap.off_tracks for lap in laps),
+    }
+
+
+def timed_runs(*, event: Event, count: int = 10) -> QuerySet:
+    """The event's last ``count`` runs by real cars, newest first (the timekeeper's list)."""
+    runs = Submission.objects.filter(event=event, physical=True).select_related(
+        "racer__profile", "physical_run"
+    )
+    return runs.order_by("-created_at", "-pk")[:count]
 
 
 def may_keep_time(*, event: Event, user: AbstractBaseUser) -> bool:

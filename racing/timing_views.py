@@ -5,10 +5,15 @@ The device endpoint, ``POST /api/timing/<event slug>/``, takes JSON ``{"signal":
 "at_ms": 123456}`` (the device's own clock, in whole milliseconds: only differences of its
 readings matter) or ``{"signal": "off_track" | "reset" | "undo" | "finish"}``, with the header
 ``Authorization: Bearer <token>``, the event's device token (made on its timekeeper page, shown
-once). It answers 200 with the timing state, 400 for a signal it cannot read, 401 for a missing
-or wrong token, 404 for an event that is not raced by real cars, 409 when no car is on the
-track or the signal does not fit the run (a second crossing within a second, say), each with
+once). It answers 200 with the timing state; 400 for a body it cannot read (not JSON, an
+unknown signal, a crossing without its whole-millisecond ``at_ms``); 401 for a missing or wrong
+token; 404 for an event that is not raced by real cars; 409 when no car is on the track or the
+signal does not fit the run (a crossing sooner than the event's shortest lap, say); each with
 ``{"error": "..."}``.
+
+The timekeeper's page names racers by their racer name, searched as they type
+(``timekeeper_racers``), and edits a run's laps during it and after it (``timed_run``,
+``lap_edit``: ``racing.lap_edits``).
 """
 
 from __future__ import annotations
@@ -23,9 +28,9 @@ from django.shortcuts import redirect, render
 from django.views.decorators.csrf import csrf_exempt
 from django.views.decorators.http import require_POST
 
-from racing import live, live_races, selectors, services, timing
-from racing.forms import TimedRunForm
-from racing.models import Event, LiveSession
+from racing import lap_edits, live, live_races, selectors, services, timing
+from racing.forms import LapEditForm, TimedRunForm
+from racing.models import Event, LiveSession, Submission
 from racing.views import _get_event_for_user, _get_event_run_by
 
 TOP = 10  # the broadcast's leaderboard
@@ -54,11 +59,100 @@ def timekeeper(request: HttpRequest, slug: str) -> HttpResponse:
         else:
             return redirect("racing:timekeeper", slug=event.slug)
     state = live.timing_state(timing.running_run(event=event))
-    return render(
-        request,
-        "racing/timekeeper.html",
-        {"event": event, "form": form, "state": state, "token": request.session.pop("token", "")},
-    )
+    context = {
+        "event": event,
+        "form": form,
+        "state": state,
+        "token": request.session.pop("token", ""),
+        "runs": timing.timed_runs(event=event),
+    }
+    return render(request, "racing/timekeeper.html", context)
+
+
+@login_required
+def timekeeper_racers(request: HttpRequest, slug: str) -> JsonResponse:
+    """The racer names that match what the timekeeper typed (``?q=``), at most ten."""
+    _event_to_time(request, slug)
+    text = request.GET.get("q", "")[:64]
+    return JsonResponse({"racers": timing.racers_named_like(text=text)})
+
+
+def _run_to_edit(request: HttpRequest, slug: str, pk: int) -> tuple[Event, Submission]:
+    """A run by a real car in an event this user times; 404 otherwise."""
+    event = _event_to_time(request, slug)
+    submission = Submission.objects.filter(pk=pk, event=event, physical=True).first()
+    if submission is None:
+        raise Http404("No such run in this event.")
+    return event, submission
+
+
+@login_required
+def timed_run(request: HttpRequest, slug: str, pk: int) -> HttpResponse:
+    """A run's laps, with what the timekeeper may change in them and who changed what."""
+    event, submission = _run_to_edit(request, slug, pk)
+    laps = list(submission.laps.select_related("struck_by__profile").order_by("number"))
+    state = live.timing_state(getattr(submission, "physical_run", None))
+    for lap, shown in zip(laps, state.get("laps", []), strict=False):
+        lap.far_below = shown["far_below"]
+    context = {
+        "event": event,
+        "submission": submission,
+        "laps": laps,
+        "state": state,
+        "edits": submission.lap_edits.select_related("by__profile"),
+        "split_form": LapEditForm(initial={"action": "split"}, submission=submission),
+        "add_form": LapEditForm(initial={"action": "add"}, submission=submission),
+    }
+    return render(request, "racing/timed_run.html", context)
+
+
+@login_required
+@require_POST
+def lap_edit(request: HttpRequest, slug: str, pk: int) -> HttpResponse:
+    """One edit of a run's laps; JSON (the run's new state, or the error) for the page's
+    scripts, a message and the run's page otherwise."""
+    event, submission = _run_to_edit(request, slug, pk)
+    form = LapEditForm(request.POST, submission=submission)
+    error = ""
+    if form.is_valid():
+        try:
+            done = _lap_edit_apply(form.cleaned_data, submission, request.user)
+        except timing.TimingRefused as refused:
+            error = str(refused)
+    else:
+        error = " ".join(message for errors in form.errors.values() for message in errors)
+    if "application/json" in request.headers.get("Accept", ""):
+        if error:
+            return JsonResponse({"error": error}, status=409)
+        submission.refresh_from_db()
+        return JsonResponse(live.timing_state(getattr(submission, "physical_run", None)))
+    if error:
+        messages.error(request, error)
+    else:
+        messages.success(request, done)
+    return redirect("racing:timed-run", slug=event.slug, pk=submission.pk)
+
+
+def _lap_edit_apply(data: dict, submission: Submission, user) -> str:
+    """Call the edit's service; what was done, in words."""
+    action = data["action"]
+    if action == "add":
+        lap = lap_edits.lap_add(
+            submission=submission,
+            time_ms=data["time_ms"],
+            off_tracks=data.get("off_tracks") or 0,
+            by=user,
+        )
+        return f"Lap {lap.number} added."
+    lap = data["lap_row"]
+    if action == "strike":
+        lap_edits.lap_strike(lap=lap, by=user)
+        return f"Lap {lap.number} is struck out: it no longer counts."
+    if action == "restore":
+        lap_edits.lap_restore(lap=lap, by=user)
+        return f"Lap {lap.number} is restored."
+    second = lap_edits.lap_split(lap=lap, first_ms=data["first_ms"], by=user)
+    return f"Lap {lap.number} is split: lap {second.number} is the rest of it."
 
 
 @login_required
@@ -140,14 +234,13 @@ def device(request: HttpRequest, slug: str) -> JsonResponse:
 
 def _signal(event: Event, body: bytes) -> JsonResponse:
     try:
-        data = json.loads(body or b"{}")
-        kind, at_ms = data["signal"], data.get("at_ms")
-        if not isinstance(kind, str) or not (at_ms is None or type(at_ms) is int):
-            raise TypeError
-    except (ValueError, KeyError, TypeError, AttributeError):
+        signal = timing.signal_read(json.loads(body or b"{}"))
+    except ValueError as unreadable:  # not JSON, or not a signal (timing.SignalUnreadable)
+        error = str(unreadable) if isinstance(unreadable, timing.SignalUnreadable) else ""
         return JsonResponse(
             {
-                "error": 'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a '
+                "error": error
+                or 'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a '
                 "signal of off_track, reset, undo or finish."
             },
             status=400,
@@ -156,7 +249,7 @@ def _signal(event: Event, body: bytes) -> JsonResponse:
     if run is None:
         return JsonResponse({"error": "No car is on the track: start a run first."}, status=409)
     try:
-        run = timing.run_signal(run=run, signal=timing.Signal(kind, at_ms))
+        run = timing.run_signal(run=run, signal=signal)
     except timing.TimingRefused as refused:
         return JsonResponse({"error": str(refused)}, status=409)
     return JsonResponse(live.timing_state(run))

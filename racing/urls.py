@@ -49,6 +49,21 @@ urlpatterns = [
         timing_views.timekeeper_token,
         name="timekeeper-token",
     ),
+    path(
+        "events/<slug:slug>/timekeeper/racers",
+        timing_views.timekeeper_racers,
+        name="timekeeper-racers",
+    ),
+    path(
+        "events/<slug:slug>/timekeeper/runs/<int:pk>/",
+        timing_views.timed_run,
+        name="timed-run",
+    ),
+    path(
+        "events/<slug:slug>/timekeeper/runs/<int:pk>/laps",
+        timing_views.lap_edit,
+        name="lap-edit",
+    ),
     path("events/<slug:slug>/winner", timing_views.winner, name="winner"),
     path("events/<slug:slug>/broadcast/", timing_views.broadcast, name="broadcast"),
     path(

@@ -1,5 +1,7 @@
 // The timekeeper's page: one key per signal (racing.timing), the car on the track kept current
-// from the answers and from the event's websocket (a timing device may signal too).
+// from the answers and from the event's websocket (a timing device may signal too); each lap
+// struck out or restored from its row (racing.lap_edits); racers searched by racer name as the
+// timekeeper types; the device token copied with one press.
 import { LapClock, laptime, listen } from "./timing.js";
 
 const root = document.querySelector("[data-timekeeper]");
@@ -9,19 +11,56 @@ const error = root.querySelector("[data-error]");
 const clock = new LapClock(root.querySelector("[data-timer]"));
 const csrf = document.querySelector("[name=csrfmiddlewaretoken]").value;
 const KEYS = { " ": "crossing", o: "off_track", r: "reset", u: "undo", f: "finish" };
+const runUrl = (submission) => root.dataset.runUrl.replace(/\/0\/$/, `/${submission}/`);
+let shown = null; // the last state shown
+
+function counts(lap) {
+  if (lap.struck) return "no: struck out";
+  if (!lap.counted) return "no";
+  return lap.far_below ? "yes · far below the others: a double press? Strike it out if so" : "yes";
+}
+
+function lapRow(lap) {
+  const row = document.createElement("tr");
+  if (lap.struck) row.className = "struck";
+  else if (lap.far_below) row.className = "far-below";
+  for (const [text, numeric] of [[lap.number, true], [laptime(lap.time_ms), true],
+    [laptime(lap.penalty_ms), true], [lap.off_tracks, true], [lap.resets, true],
+    [counts(lap), false]]) {
+    const cell = document.createElement("td");
+    cell.textContent = String(text);
+    if (numeric) cell.className = "num mono";
+    row.append(cell);
+  }
+  const edit = document.createElement("button");
+  edit.type = "button";
+  edit.className = lap.struck ? "button button-secondary" : "button button-danger";
+  edit.textContent = lap.struck ? `Restore lap ${lap.number}` : `Strike lap ${lap.number} out`;
+  edit.addEventListener("click", () => editLap(lap.struck ? "restore" : "strike", lap.number));
+  const cell = document.createElement("td");
+  cell.append(edit);
+  row.append(cell);
+  return row;
+}
+
+function showResult(state) {
+  const result = root.querySelector("[data-last-result]");
+  if (!state.submission) return;
+  const link = document.createElement("a");
+  link.href = runUrl(state.submission);
+  link.textContent = "Edit this run's laps";
+  result.replaceChildren(`${state.verdict} `, link);
+}
 
 function show(state) {
   if (state.type !== "timing") return;
+  shown = state;
   clock.set(state);
   onTrack.hidden = !state.on_track;
   offTrackForm.hidden = state.on_track;
   root.dataset.laps = String(state.laps ? state.laps.length : 0);
   if (!state.on_track) {
-    if (state.submission) {
-      root.querySelector("[data-last-result]").textContent = state.qualified
-        ? `${state.racer}'s run scored ${laptime(state.score_ms)}.`
-        : `${state.racer}'s run did not qualify.`;
-    }
+    showResult(state);
     return;
   }
   root.querySelector("[data-racer]").textContent = state.racer;
@@ -31,35 +70,40 @@ function show(state) {
   root.querySelector("[data-off-tracks]").textContent = String(state.off_tracks);
   root.querySelector("[data-resets]").textContent = String(state.resets);
   root.querySelector("[data-waiting]").hidden = state.lap_started_ms !== null;
-  const rows = state.laps.map((lap) => {
-    const row = document.createElement("tr");
-    for (const [text, numeric] of [[lap.number, true], [laptime(lap.time_ms), true],
-      [laptime(lap.penalty_ms), true], [lap.off_tracks, true], [lap.resets, true],
-      [lap.counted ? "yes" : "no", false]]) {
-      const cell = document.createElement("td");
-      cell.textContent = String(text);
-      if (numeric) cell.className = "num mono";
-      row.append(cell);
-    }
-    return row;
-  });
-  root.querySelector("[data-laps]").replaceChildren(...rows);
+  root.querySelector("[data-run-link]").href = runUrl(state.submission);
+  root.querySelector("[data-laps]").replaceChildren(...state.laps.map(lapRow));
+}
+
+async function answered(response) {
+  const answer = await response.json().catch(() => ({ error: "The console did not answer: try again." }));
+  error.textContent = response.ok ? "" : answer.error;
+  if (response.ok) show(answer);
 }
 
 async function send(signal) {
   if (signal === "finish" && !confirm("Finish this run and score its laps?")) return;
   const body = { signal };
   if (signal === "crossing") body.at_ms = Math.round(performance.timeOrigin + performance.now());
-  const response = await fetch(root.dataset.signalUrl, {
+  await answered(await fetch(root.dataset.signalUrl, {
     method: "POST",
     headers: { "Content-Type": "application/json", "X-CSRFToken": csrf },
     body: JSON.stringify(body),
-  });
-  const answer = await response.json();
-  error.textContent = response.ok ? "" : answer.error;
-  if (response.ok) show(answer);
+  }));
 }
 
+async function editLap(action, number) {
+  if (!shown || !shown.submission) return;
+  const body = new FormData();
+  body.append("action", action);
+  body.append("lap", String(number));
+  await answered(await fetch(`${runUrl(shown.submission)}laps`, {
+    method: "POST",
+    headers: { Accept: "application/json", "X-CSRFToken": csrf },
+    body,
+  }));
+}
+
+// Space is always a crossing, even with a button focused (Enter presses a focused button).
 document.addEventListener("keydown", (key) => {
   if (onTrack.hidden || key.target.closest("input, textarea, select") || key.repeat) return;
   const signal = KEYS[key.key.toLowerCase()];
@@ -67,8 +111,41 @@ document.addEventListener("keydown", (key) => {
   key.preventDefault();
   send(signal);
 });
+document.addEventListener("keyup", (key) => {
+  if (!onTrack.hidden && key.key === " " && key.target.closest("button")) key.preventDefault();
+});
 root.querySelectorAll("[data-send]").forEach((button) => {
   button.addEventListener("click", () => send(button.dataset.send));
 });
+
+// The racer search: the racer names that match what is typed, as the field's suggestions.
+const search = root.querySelector("[data-racer-search]");
+const names = document.getElementById("racer-names");
+let typing = null;
+search?.addEventListener("input", () => {
+  clearTimeout(typing);
+  typing = setTimeout(async () => {
+    const text = search.value.trim();
+    if (!text) return names.replaceChildren();
+    const response = await fetch(`${root.dataset.racersUrl}?q=${encodeURIComponent(text)}`);
+    if (!response.ok) return;
+    const { racers } = await response.json();
+    names.replaceChildren(...racers.map((name) => Object.assign(document.createElement("option"), { value: name })));
+  }, 150);
+});
+
+const copy = document.querySelector("[data-copy-token]");
+copy?.addEventListener("click", async () => {
+  const token = document.querySelector("[data-device-token]").textContent;
+  const said = document.querySelector("[data-copied]");
+  try {
+    await navigator.clipboard.writeText(token);
+    said.textContent = "Copied.";
+  } catch {
+    getSelection().selectAllChildren(document.querySelector("[data-device-token]"));
+    said.textContent = "Selected: press Ctrl+C to copy it.";
+  }
+});
+
 show(JSON.parse(document.getElementById("timing-state").textContent));
 listen(root.dataset.event, show);

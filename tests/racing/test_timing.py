@@ -8,6 +8,7 @@ import json
 import pytest
 from django.urls import reverse
 
+from accounts.selectors import racer_name
 from racing import timing
 from racing.models import Ranking, RankingMethod, Submission
 from tests.helpers.league import DAY, event
@@ -79,7 +80,7 @@ def test_a_physical_run_is_scored_by_each_ranking_method_into_the_leaderboard(
 
 
 def test_undo_takes_back_the_last_crossing_and_its_off_tracks(tracks, alice, stella):
-    run = a_run(event(physical=True), alice, stella)
+    run = a_run(event(physical=True, min_lap_s=1.0), alice, stella)
     with pytest.raises(timing.TimingRefused, match="not crossed the line"):
         drive(run, "undo")
     run = drive(run, 1_000, "undo")  # the first crossing undone: the clock stops again
@@ -141,7 +142,14 @@ def test_a_timing_device_needs_the_events_token(client, tracks, alice, stella):
         device_post(client, race, json.dumps({"signal": "crossing", "at_ms": "soon"}), token)[0]
         == 400
     )
-    assert device_post(client, race, json.dumps({"signal": "lap"}), token)[0] == 409
+    assert device_post(client, race, json.dumps({"signal": "lap"}), token)[0] == 400
+    assert device_post(client, race, json.dumps({"signal": "crossing"}), token) == (
+        400,
+        {
+            "error": "A crossing needs the clock's reading, at_ms: whole milliseconds from 0 "
+            "to 2^53."
+        },
+    )
     # a new token: the old one stops working
     assert device_post(client, race, crossing, timing.timing_token_renew(event=race))[0] == 409
     assert device_post(client, race, crossing, token)[0] == 401
@@ -163,4 +171,259 @@ def test_only_staff_and_the_organiser_keep_time_and_racers_cannot_submit_models(
     client.force_login(stella)
     assert "Put the car on the track" in client.get(page).text
     response = client.post(page, {"racer": "nobody", "model_name": "m", "car": "1"})
-    assert "No racer goes by the name nobody here" in response.text
+    assert "No racer is called nobody: check the spelling of their racer name." in response.text
+
+
+# Racers by racer name (issue 54, item 7)
+
+
+def named(user, name):
+    user.profile.racer_name = name
+    user.profile.save(update_fields=["racer_name"])
+    return user
+
+
+def test_it_picks_the_racer_by_racer_name_and_never_by_login_name(tracks, alice, bob):
+    from racing.forms import TimedRunForm
+
+    named(alice, "VeraFast")
+    named(bob, "VeraSlow")
+
+    def picked(name):
+        form = TimedRunForm({"racer": name, "model_name": "sim2real-v3", "car": " 7 "})
+        return form.cleaned_data if form.is_valid() else form.errors["racer"][0]
+
+    assert picked("VeraFast")["racer"] == alice
+    assert picked("verafast")["car"] == "7"
+    assert picked("alice") == "No racer is called alice: check the spelling of their racer name."
+    assert picked("VeraF") == "No racer is called VeraF: did you mean VeraFast?"
+    assert picked("Vera") == (
+        "No racer is called Vera, and 2 names hold it (VeraFast, VeraSlow): type the whole "
+        "racer name."
+    )
+
+
+def test_the_racer_search_answers_its_timekeeper_with_at_most_ten_racer_names(
+    client, tracks, alice, stella
+):
+    from tests.helpers.accounts import racer
+
+    named(alice, "VeraFast")
+    for number in range(12):
+        named(racer(f"login{number}"), f"Verano{number:02}")
+    race = event(physical=True)
+    search = reverse("racing:timekeeper-racers", args=[race.slug])
+    client.force_login(alice)
+    assert client.get(search, {"q": "ver"}).status_code == 404  # a racer may not search
+    client.force_login(stella)
+    racers = client.get(search, {"q": "ver"}).json()["racers"]
+    assert len(racers) == 10 and racers[0] == "VeraFast" and "Verano00" in racers
+    assert client.get(search, {"q": "fast"}).json() == {"racers": ["VeraFast"]}
+    assert client.get(search, {"q": "login"}).json() == {"racers": []}  # never a login name
+    assert client.get(search, {"q": ""}).json() == {"racers": []}
+
+
+# The shortest lap, the longest, and laps far below the others (item 8)
+
+
+def test_a_crossing_sooner_than_the_events_shortest_lap_is_refused_in_words(tracks, alice, stella):
+    race = event(physical=True)
+    assert race.min_lap_s == 4.0  # the shortest DeepRacer track at the car's top speed
+    run = drive(a_run(race, alice, stella), 10_000)
+    with pytest.raises(timing.TimingRefused) as refused:
+        drive(run, 11_017)
+    assert str(refused.value) == (
+        "A crossing 0:01.017 after the last one: shorter than this event's shortest lap (4 s), "
+        "so the same crossing twice. Not counted."
+    )
+    with pytest.raises(timing.TimingRefused, match="the clock went back"):
+        drive(run, 9_000)
+    run = drive(run, 14_000)
+    assert [lap.time_ms for lap in run.submission.laps.all()] == [4_000]
+
+
+def test_a_lap_longer_than_a_race_is_refused_and_undo_never_overflows(
+    client, tracks, alice, stella
+):
+    race = event(physical=True)
+    token = timing.timing_token_renew(event=race)
+    run = drive(a_run(race, alice, stella), 0)
+    with pytest.raises(timing.TimingRefused, match="longer than a race"):
+        drive(run, timing.MAX_LAP_MS + 1)
+    with pytest.raises(timing.TimingRefused, match="whole milliseconds"):
+        drive(run, 2**62)
+    crossing = json.dumps({"signal": "crossing", "at_ms": 2**62})
+    assert device_post(client, race, crossing, token)[0] == 400
+    run = drive(run, timing.MAX_LAP_MS, "undo", "undo")  # the longest lap, taken back
+    assert run.line_crossed_ms is None and run.submission.laps.count() == 0
+
+
+def test_a_lap_far_below_the_runs_others_is_flagged(tracks, alice, stella):
+    from racing import live
+
+    run = drive(a_run(event(physical=True), alice, stella), 0, 10_000, 20_000, 26_000, 36_000)
+    laps = live.timing_state(run)["laps"]
+    assert [lap["far_below"] for lap in laps] == [False, False, True, False]  # 6 s among 10 s
+
+
+# Lap edits: strike, restore, a missed crossing (item 8)
+
+
+def finished(race, racer, staff, *crossings):
+    run = drive(a_run(race, racer, staff), *crossings, "finish")
+    return Submission.objects.get(pk=run.submission_id)
+
+
+def test_striking_the_best_lap_of_a_finished_run_ranks_it_again_even_when_worse(
+    tracks, alice, stella
+):
+    from racing import lap_edits
+    from racing.models import LapEdit
+
+    race = event(physical=True, ranking_method=RankingMethod.BEST_LAP, min_lap_s=1.0)
+    slower = finished(race, alice, stella, 0, 8_000)  # a run of one 8 s lap
+    faster = finished(race, alice, stella, 0, 9_000, 10_017, 19_017)  # a double press: 1.017 s
+    assert Ranking.objects.get(event=race, racer=alice).score_ms == 1_017
+
+    lap = faster.laps.get(number=2)
+    lap_edits.lap_strike(lap=lap, by=stella)
+    faster.refresh_from_db()
+    assert faster.score_ms == 9_000 and faster.qualified
+    ranking = Ranking.objects.get(event=race, racer=alice)
+    assert (ranking.submission_id, ranking.score_ms) == (slower.pk, 8_000)  # her next best
+    lap.refresh_from_db()
+    assert not lap.counted and lap.struck_by == stella and lap.struck_at is not None
+
+    lap_edits.lap_restore(lap=lap, by=stella)
+    assert Ranking.objects.get(event=race, racer=alice).score_ms == 1_017
+    edits = LapEdit.objects.filter(submission=faster)
+    assert [(edit.action, edit.lap_number, edit.by) for edit in edits] == [
+        ("strike", 2, stella),
+        ("restore", 2, stella),
+    ]
+    with pytest.raises(timing.TimingRefused, match="not struck out"):
+        lap_edits.lap_restore(lap=lap, by=stella)
+
+
+def test_a_run_whose_only_counted_lap_is_struck_leaves_the_leaderboard(tracks, alice, stella):
+    from racing import lap_edits
+
+    race = event(physical=True, ranking_method=RankingMethod.BEST_LAP)
+    run = finished(race, alice, stella, 0, 8_000)
+    assert Ranking.objects.filter(event=race, racer=alice).exists()
+    lap_edits.lap_strike(lap=run.laps.get(), by=stella)
+    run.refresh_from_db()
+    assert not run.qualified and run.score_ms is None
+    assert not Ranking.objects.filter(event=race, racer=alice).exists()
+
+
+def test_a_missed_crossing_splits_a_lap_in_two_during_the_run(tracks, alice, stella):
+    from racing import lap_edits
+
+    race = event(physical=True, off_track_penalty_s=2.0)
+    run = drive(a_run(race, alice, stella), 0, 10_000, "off_track", 30_000, 40_000)
+    long_lap = run.submission.laps.get(number=2)  # 20 s and 2 s of penalty: two laps in one
+    with pytest.raises(timing.TimingRefused, match="shorter than this event's shortest lap"):
+        lap_edits.lap_split(lap=long_lap, first_ms=3_000, by=stella)
+    lap_edits.lap_split(lap=long_lap, first_ms=9_000, by=stella)
+    laps = run.submission.laps.order_by("number")
+    assert [(lap.time_ms, lap.penalty_ms, lap.off_tracks) for lap in laps] == [
+        (10_000, 0, 0),
+        (11_000, 2_000, 1),  # the off-track stays with the first part
+        (11_000, 0, 0),
+        (10_000, 0, 0),
+    ]
+    run = drive(run, "undo")  # the crossing at 40 s, taken back: the clock is as it was
+    assert run.line_crossed_ms == 30_000
+
+
+def test_a_lap_missed_at_the_end_is_added_after_the_finish_only(tracks, alice, stella):
+    from racing import lap_edits
+
+    race = event(physical=True, laps_required=2, ranking_method=RankingMethod.FIRST_CONSECUTIVE)
+    run = drive(a_run(race, alice, stella), 0, 10_000)
+    with pytest.raises(timing.TimingRefused, match="still on the track"):
+        lap_edits.lap_add(submission=run.submission, time_ms=9_000, by=stella)
+    drive(run, "finish")
+    submission = Submission.objects.get(pk=run.submission_id)
+    assert not submission.qualified
+    lap = lap_edits.lap_add(submission=submission, time_ms=9_000, off_tracks=1, by=stella)
+    assert (lap.number, lap.time_ms, lap.penalty_ms) == (2, 11_000, 2_000)
+    submission.refresh_from_db()
+    assert submission.qualified and submission.score_ms == 10_500
+    assert Ranking.objects.get(event=race, racer=alice).score_ms == 10_500
+
+
+# Qualifying (item 10)
+
+
+def test_a_best_lap_physical_event_ranks_any_counted_lap(tracks, alice, stella):
+    from racing import live
+
+    race = event(physical=True, ranking_method=RankingMethod.BEST_LAP, laps_required=3)
+    run = drive(a_run(race, alice, stella), 0, 9_000, "finish")
+    submission = Submission.objects.get(pk=run.submission_id)
+    assert submission.qualified and submission.score_ms == 9_000
+    assert live.timing_state(run)["verdict"].endswith("'s run scored 0:09.000.")
+    assert race.qualifying_rule == "any counted lap ranks: one is enough to qualify"
+
+
+def test_the_finish_says_why_a_run_did_not_qualify(tracks, alice, stella):
+    from racing import live
+
+    named(alice, "VeraFast")
+    race = event(physical=True, laps_required=3, laps_to_drive=3)
+    run = drive(a_run(race, alice, stella), 0, 9_000, 18_000, "finish")
+    assert live.timing_state(run)["verdict"] == (
+        "VeraFast's run did not qualify: 2 of the 3 counted laps in a row the event needs."
+    )
+    assert race.qualifying_rule == "a run ranks once it has 3 counted laps in a row"
+
+
+# The pages
+
+
+def test_the_timekeeper_edits_a_runs_laps_from_its_page_and_its_script(
+    client, tracks, alice, stella
+):
+    race = event(physical=True, ranking_method=RankingMethod.BEST_LAP)
+    submission = finished(race, alice, stella, 0, 8_000, 16_500)
+    page = reverse("racing:timed-run", args=[race.slug, submission.pk])
+    edit = reverse("racing:lap-edit", args=[race.slug, submission.pk])
+    client.force_login(alice)
+    assert client.get(page).status_code == 404
+    assert client.post(edit, {"action": "strike", "lap": 1}).status_code == 404
+
+    client.force_login(stella)
+    response = client.post(edit, {"action": "strike", "lap": 1}, follow=True)
+    assert "Lap 1 is struck out: it no longer counts." in response.text
+    assert "Restore lap 1" in response.text and "struck out by" in response.text
+    response = client.post(edit, {"action": "split", "lap": 2}, follow=True)
+    assert "Say how long the lap&#x27;s first part took, in seconds." in response.text
+    response = client.post(
+        edit, {"action": "restore", "lap": 1}, headers={"Accept": "application/json"}
+    )
+    assert response.status_code == 200 and response.json()["score_ms"] == 8_000
+    response = client.post(
+        edit, {"action": "strike", "lap": 9}, headers={"Accept": "application/json"}
+    )
+    assert response.status_code == 409
+    assert response.json() == {"error": "Choose one of the run's laps by its number."}
+    response = client.post(edit, {"action": "add", "time_s": "7.25"}, follow=True)
+    assert "Lap 3 added." in response.text
+    assert Submission.objects.get(pk=submission.pk).score_ms == 7_250
+
+
+def test_the_timekeeper_page_states_the_rule_and_offers_to_copy_the_token(
+    client, tracks, alice, stella
+):
+    race = event(physical=True, ranking_method=RankingMethod.BEST_LAP, min_lap_s=5.5)
+    finished(race, alice, stella, 0, 8_000)
+    page = reverse("racing:timekeeper", args=[race.slug])
+    client.force_login(stella)
+    client.post(reverse("racing:timekeeper-token", args=[race.slug]))
+    text = client.get(page).text
+    assert "any counted lap ranks: one is enough to qualify" in text
+    assert "A crossing sooner than 5.5 s after the last one is refused" in text
+    assert "data-copy-token" in text and "Car number" in text
+    assert f"Edit the laps of {racer_name(racer=alice)}'s run" in text
