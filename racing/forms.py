@@ -13,7 +13,7 @@ from django.utils import timezone
 from common.forms import RacerWords
 from common.time_zones import local_text
 from racing import selectors, timing
-from racing.models import Event, RaceType, RankingMethod
+from racing.models import MIN_LAP_S, Event, RaceType, RankingMethod
 from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
 from training import selectors as training_selectors
 from training.models import EvaluationJob, RLModel, Track
@@ -21,6 +21,13 @@ from training.models import EvaluationJob, RLModel, Track
 LOCAL = "%Y-%m-%dT%H:%M"  # what <input type="datetime-local"> sends
 RACE_LENGTH = timedelta(days=7)  # a new community race closes a week after it opens
 FORM_TOKEN = re.compile(r"[A-Za-z0-9_-]{32,43}")  # secrets.token_urlsafe(32) makes 43
+
+
+def _choose_the_only(field: forms.ModelChoiceField) -> None:
+    """A list of one is chosen already: a racer with one ready model need not pick it."""
+    found = list(field.queryset.values_list("pk", flat=True)[:2])
+    if len(found) == 1:
+        field.initial = found[0]
 
 
 class SubmissionForm(RacerWords, forms.Form):
@@ -54,6 +61,8 @@ class SubmissionForm(RacerWords, forms.Form):
         self.fields["event"].label_from_instance = _event_label
         self.fields["model"].queryset = selectors.models_ready_for(racer=racer)
         self.fields["model"].label_from_instance = _model_label
+        _choose_the_only(self.fields["event"])
+        _choose_the_only(self.fields["model"])
 
     def clean(self) -> dict:
         data = super().clean()
@@ -157,9 +166,15 @@ class RaceObstaclesForm(RacerWords, forms.ModelForm):
                 self.initial[name] = value
         if "cars" in self.fields:  # left out: each model alone, as before the field existed
             self.fields["cars"].required = False
+        if "min_lap_s" in self.fields:  # left out: the default shortest lap of a real car
+            self.fields["min_lap_s"].required = False
 
     def clean_cars(self) -> int:
         return self.cleaned_data.get("cars") or 1
+
+    def clean_min_lap_s(self) -> float:
+        shortest = self.cleaned_data.get("min_lap_s")
+        return MIN_LAP_S if shortest is None else shortest
 
     def clean(self) -> dict:
         data = super().clean()
@@ -348,6 +363,7 @@ class LiveJoinForm(RacerWords, forms.Form):
         super().__init__(*args, **kwargs)
         self.fields["model"].queryset = selectors.models_ready_for(racer=racer)
         self.fields["model"].label_from_instance = _model_label
+        _choose_the_only(self.fields["model"])
         speed = self.fields["speed"]
         speed.min_value, speed.max_value = session.min_speed, session.max_speed
         speed.widget.attrs.update(min=session.min_speed, max=session.max_speed, step=0.1)

@@ -398,6 +398,8 @@ def test_the_timekeeper_edits_a_runs_laps_from_its_page_and_its_script(
     response = client.post(edit, {"action": "strike", "lap": 1}, follow=True)
     assert "Lap 1 is struck out: it no longer counts." in response.text
     assert "Restore lap 1" in response.text and "struck out by" in response.text
+    run_page = client.get(submission.get_absolute_url()).text  # the run's page, as racers see it
+    assert "Not counted: struck out by the timekeeper" in run_page
     response = client.post(edit, {"action": "split", "lap": 2}, follow=True)
     assert "Say how long the lap&#x27;s first part took, in seconds." in response.text
     response = client.post(
