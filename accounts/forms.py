@@ -1,4 +1,5 @@
 from django import forms
+from django.conf import settings
 
 from accounts.countries import COUNTRIES
 from accounts.models import RACER_NAME_RULE, AvatarColour, Profile
@@ -7,7 +8,7 @@ from common.forms import RacerWords
 
 class ProfileForm(RacerWords, forms.ModelForm):
     """The racer's profile page: what the leaderboards show, and the email address that reset
-    links and notifications go to."""
+    links and notifications go to where the console sends email (``email_help``)."""
 
     country = forms.ChoiceField(
         choices=[("", "Not shown"), *sorted(COUNTRIES.items(), key=lambda item: item[1])],
@@ -25,9 +26,6 @@ class ProfileForm(RacerWords, forms.ModelForm):
     email = forms.EmailField(
         required=False,
         label="Email address",
-        help_text="Where this console sends email, your password reset links and your "
-        "notifications (training, evaluations and races ended) go here; never shown to other "
-        "racers.",
         error_messages={"invalid": "That is not an email address: it looks like name@example.org."},
     )
 
@@ -49,6 +47,10 @@ class ProfileForm(RacerWords, forms.ModelForm):
             "racer_name": forms.TextInput(attrs={"data-racer-name": "", "autocomplete": "nickname"})
         }
 
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.fields["email"].help_text = email_help()
+
     def clean_racer_name(self) -> str:
         name = self.cleaned_data["racer_name"].strip()
         taken = Profile.objects.filter(racer_name__iexact=name).exclude(pk=self.instance.pk)
@@ -58,3 +60,20 @@ class ProfileForm(RacerWords, forms.ModelForm):
                 "another."
             )
         return name
+
+
+def email_help() -> str:
+    """What goes to a racer's email address on this console: only what it sends, and nothing
+    where its operator named no mail server (``PITLANE_EMAIL_URL``)."""
+    sent = []
+    if settings.PITLANE_PASSWORD_RESET_BY_EMAIL:
+        sent.append("your password reset links")
+    if settings.PITLANE_EMAIL_NOTIFICATIONS:
+        sent.append("your notifications (training, evaluations and races ended)")
+    if not sent:
+        return (
+            "This console sends no email (its operator has set up no mail server), so nothing "
+            "goes here for now; never shown to other racers."
+        )
+    listed = " and ".join(sent)
+    return f"{listed[0].upper()}{listed[1:]} go here; never shown to other racers."

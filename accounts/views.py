@@ -1,3 +1,4 @@
+from django.conf import settings
 from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.http import HttpRequest, HttpResponse
@@ -10,7 +11,7 @@ from accounts.services import RacerNameTaken, profile_ensure, profile_update
 @login_required
 def profile(request: HttpRequest) -> HttpResponse:
     """The racer's profile: their racer name, country and avatar as leaderboards show them,
-    their email address for password resets, and the way to change their password."""
+    their email address, and how to change or reset their password."""
     current = profile_ensure(user=request.user)
     form = ProfileForm(
         request.POST or None, instance=current, initial={"email": request.user.email}
@@ -24,5 +25,8 @@ def profile(request: HttpRequest) -> HttpResponse:
             messages.success(request, "Your profile is saved.")
             return redirect("accounts:profile")
     return render(
-        request, "accounts/profile.html", {"form": form}, status=400 if form.errors else 200
+        request,
+        "accounts/profile.html",
+        {"form": form, "reset_by_email": settings.PITLANE_PASSWORD_RESET_BY_EMAIL},
+        status=400 if form.errors else 200,
     )

@@ -93,11 +93,35 @@ def test_a_racer_may_keep_their_own_name_in_other_capitals(client, alice):
     assert Profile.objects.get(user=alice).racer_name == "ALICE"
 
 
-def test_the_profile_page_says_notifications_go_to_the_email_address_too(client, alice):
+def test_the_profile_page_says_notifications_go_to_the_email_address_too(client, alice, settings):
+    settings.PITLANE_PASSWORD_RESET_BY_EMAIL = settings.PITLANE_EMAIL_NOTIFICATIONS = True
     client.force_login(alice)
     page = client.get(reverse("accounts:profile")).text
-    assert "your password reset links and your notifications" in page
+    assert "Your password reset links and your notifications" in page
     assert "Only for password reset links" not in page and "flag" not in page
+    assert '"Forgot your password?" on the login page emails a reset link' in page
+
+
+def test_the_header_names_the_racer_by_their_racer_name_not_their_login_name(client, alice):
+    Profile.objects.filter(user=alice).update(racer_name="VeraFast")
+    client.force_login(alice)
+    for page in (reverse("home"), reverse("accounts:profile"), reverse("racing:race-list")):
+        header = client.get(page).text.split('<main id="main"', 1)[0]
+        assert '<a href="/accounts/profile/" title="Your racer profile"' in header
+        assert ">VeraFast</a>" in header
+        assert "alice" not in header
+    assert "Welcome back, VeraFast" in client.get(reverse("home")).text
+
+
+def test_without_a_mail_server_the_profile_promises_no_email_and_says_who_resets_a_password(
+    client, alice, settings
+):
+    settings.PITLANE_PASSWORD_RESET_BY_EMAIL = settings.PITLANE_EMAIL_NOTIFICATIONS = False
+    client.force_login(alice)
+    page = client.get(reverse("accounts:profile")).text
+    assert "This console sends no email (its operator has set up no mail server)" in page
+    assert "reset links" not in page and "notifications (" not in page
+    assert "If you forget your password, ask your league staff" in page
 
 
 def test_the_profile_page_is_for_racers_who_are_logged_in(client):

@@ -88,6 +88,7 @@ def test_on_a_phone_a_racer_who_forgot_their_password_is_told_whom_to_ask_and_ed
     page.get_by_label("Racer name").fill("zoom_z")
     page.get_by_role("button", name="Save profile").click()
     expect(page.get_by_text("Your profile is saved.")).to_be_visible()
+    expect(page.locator(".nav-account").get_by_role("link", name="zoom_z")).to_be_visible()
     expect(preview.locator(".avatar")).to_have_class("avatar avatar-orange")
     profile = Profile.objects.get(user=alice)
     assert (profile.racer_name, profile.country, profile.avatar_colour) == (

@@ -37,6 +37,8 @@ def test_a_racer_reads_the_results_and_plays_the_recorded_video(page: Page, alic
     )
     assert video.evaluate("v => [v.videoWidth, v.videoHeight]") == [640, 480]
     assert video.evaluate("v => v.error") is None
+    # Served in byte ranges, the video can be scrubbed: a whole-body 200 leaves seekable [0, 0].
+    assert video.evaluate("v => v.seekable.length && v.seekable.end(0)") > 0
     video.evaluate("v => { v.muted = true; return v.play(); }")
     page.wait_for_function(
         "() => document.querySelector('[data-evaluation-video]').currentTime > 0.5"

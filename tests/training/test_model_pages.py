@@ -88,8 +88,9 @@ def test_the_model_list_shows_each_models_training_progress(
     )
     assert ahead.jobs.get().status == TrainingJob.Status.QUEUED
     client.force_login(alice)
-    # session, racer, models, jobs, one waiting job, the trainers' jobs
-    with django_assert_max_num_queries(9):
+    # session, racer, their racer name (the header), models, jobs, one waiting job, the
+    # trainers' jobs
+    with django_assert_max_num_queries(10):
         page = client.get(reverse("training:model-list")).text
     rows = {
         name: re.search(rf">{name}</a>.*?</tr>", page, re.S).group(0)
