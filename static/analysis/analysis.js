@@ -59,12 +59,39 @@ const round = (v) => (Math.abs(v) >= 100 ? v.toFixed(0) : Math.abs(v) >= 10 ? v.
 
 const canvas = root && find("map");
 let view = null; // the transform from metres to canvas pixels
+const MARGIN = 0.25; // [m] around what the map shows
+
+// What the map shows: the track's borders and every point drawn over them (the steps, the
+// marks, the fastest lap, or the episode followed), with a margin. A car that left the track
+// is drawn where it went, not cut off at the canvas's edge.
+function extent() {
+  const box = [Infinity, -Infinity, Infinity, -Infinity];
+  const add = (x, y) => {
+    if (!Number.isFinite(x) || !Number.isFinite(y)) return;
+    box[0] = Math.min(box[0], x);
+    box[1] = Math.max(box[1], x);
+    box[2] = Math.min(box[2], y);
+    box[3] = Math.max(box[3], y);
+  };
+  const path = (points) => points?.forEach(([x, y]) => add(x, y));
+  path(overview.track.inner);
+  path(overview.track.outer);
+  if (state.episode) {
+    path(state.episode.path);
+  } else {
+    if (state.points && state.points.n) {
+      const xs = state.points.column("x");
+      const ys = state.points.column("y");
+      for (let i = 0; i < state.points.n; i += 1) add(xs[i], ys[i]);
+    }
+    path(state.picked?.marks);
+    path(state.fastest?.path);
+  }
+  return [box[0] - MARGIN, box[1] + MARGIN, box[2] - MARGIN, box[3] + MARGIN];
+}
 
 function fitMap() {
-  const all = [...overview.track.inner, ...overview.track.outer];
-  const xs = all.map((p) => p[0]);
-  const ys = all.map((p) => p[1]);
-  const [minX, maxX, minY, maxY] = [Math.min(...xs), Math.max(...xs), Math.min(...ys), Math.max(...ys)];
+  const [minX, maxX, minY, maxY] = extent();
   const ratio = devicePixelRatio || 1;
   const width = canvas.clientWidth || 900;
   const height = Math.min(width * ((maxY - minY) / (maxX - minX)), innerHeight * 0.8) + 24;
@@ -116,7 +143,7 @@ function drawTrack(context) {
 }
 
 function drawMap() {
-  if (!view) fitMap();
+  fitMap(); // what it shows may reach past the track: steps off it, another episode
   const context = canvas.getContext("2d");
   drawTrack(context);
   if (state.episode) {
