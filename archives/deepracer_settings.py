@@ -194,6 +194,15 @@ def _truthy(value) -> bool:
     return value is True or str(value).strip().lower() == "true"
 
 
+ROUTE_NOTE = "Trains on "  # how the note begins that says which route file the model drives
+
+
+def is_route_note(note: str) -> bool:
+    """Whether ``note`` says which route file the model drives (``deepracer_track``): what is
+    carried over and used, not what was left out."""
+    return note.startswith(ROUTE_NOTE)
+
+
 def deepracer_track(params: dict, notes: list[str]) -> tuple[str, str, str]:
     """``WORLD_NAME`` as one of our tracks, the direction to drive it, and the route file to
     drive where DeepRacer drove one the console does not (``RLModel.world_name``, else ""). The
@@ -246,7 +255,7 @@ def deepracer_track(params: dict, notes: list[str]) -> tuple[str, str, str]:
     if route:
         drove = sim_tracks.load(track.name).on_route(route).with_direction(direction)
         notes.append(
-            f"Trains on {route}.npy ({len(drove.waypoints)} waypoints), the route file "
+            f"{ROUTE_NOTE}{route}.npy ({len(drove.waypoints)} waypoints), the route file "
             f"DeepRacer drove for WORLD_NAME {world}, not the one DeepRacer's console "
             f"drives {track.display_name} {configuration.direction_words(direction)}: "
             "a reward function that reads waypoints by index sees the route it was "

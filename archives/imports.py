@@ -58,7 +58,7 @@ from training.models import (
 if TYPE_CHECKING:
     from rl.policies import Policy
 
-from archives.deepracer_settings import SENSOR_ALIASES, archive_settings, shown
+from archives.deepracer_settings import SENSOR_ALIASES, archive_settings, is_route_note, shown
 from archives.members import (
     NOT_AN_ARCHIVE,
     PLACES,
@@ -145,6 +145,17 @@ class ImportPreview:
     settings: configuration.Draft
     notes: list[str]
     problems: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def route(self) -> str:
+        """The note on the route file the model drives, where it drives the one DeepRacer drove
+        rather than the console's (``settings["world_name"]``): carried over, and used."""
+        return next((note for note in self.notes if is_route_note(note)), "")
+
+    @property
+    def left_out(self) -> list[str]:
+        """The notes on what the archive held that was not carried over (or was changed)."""
+        return [note for note in self.notes if not is_route_note(note)]
 
     @property
     def track(self) -> Track | None:

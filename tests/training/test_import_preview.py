@@ -226,3 +226,21 @@ def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, track
     response = client.post(reverse("training:model-import"), {**posted, "name": "another"})
     assert response.status_code == 400 and "no longer kept" in response.content.decode()
     assert RLModel.objects.count() == 1
+
+
+@pytest.mark.slow
+@CHECKED_IMPORT
+def test_the_route_a_drfc_folder_drove_is_shown_with_what_the_import_creates(alice, tracks, client):
+    client.force_login(alice)
+    folder = deepracer_folder(WORLD_NAME="reInvent2019_track")  # DeepRacer for Cloud's bare name
+    upload = SimpleUploadedFile("drfc.tar.gz", folder)
+    page = client.post(reverse("training:model-import"), {"archive": upload}).content.decode()
+    page = page.replace("&#x27;", "'")
+    creates, left_out = page.split("<h3>Not carried over</h3>")
+    assert (
+        "<dd data-preview-track>Smile Speedway (counter-clockwise, on DeepRacer's route file "
+        "reInvent2019_track.npy)</dd>" in creates
+    )
+    assert "<dd data-preview-route>Trains on reInvent2019_track.npy (154 waypoints)" in creates
+    assert "reInvent2019_track.npy" not in left_out
+    assert "Nothing: every setting the archive holds was carried over." in left_out
