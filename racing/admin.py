@@ -16,6 +16,7 @@ from django.template.response import TemplateResponse
 
 from accounts.selectors import racer_name
 from common.formatting import laptime
+from common.time_zones import local_text
 from racing import services
 from racing.forms import LOCAL, RACE_FIELDS, RaceObstaclesForm
 from racing.models import (
@@ -111,18 +112,17 @@ class SeasonAdmin(admin.ModelAdmin):
 
 @admin.register(Event)
 class EventAdmin(admin.ModelAdmin):
-    list_display = [
-        "name",
+    list_display = ["name", "season", "track", "race", "divisions", "runs", "state", "public"]
+    list_filter = [
         "season",
-        "track",
-        "race_type",
         "division",
-        "opens_at",
-        "closes_at",
-        "state",
+        "race_type",
+        "cars",
+        "physical",
+        "track",
         "public",
+        "ranking_method",
     ]
-    list_filter = ["season", "division", "race_type", "track", "public", "ranking_method"]
     search_fields = ["name", "slug", "organiser__username"]
     form = EventAdminForm
     prepopulated_fields = {"slug": ["name"]}
@@ -149,6 +149,23 @@ class EventAdmin(admin.ModelAdmin):
     @admin.display(description="state")
     def state(self, event: Event) -> str:
         return event.state.label
+
+    @admin.display(description="race", ordering="race_type")
+    def race(self, event: Event) -> str:
+        return event.format_display  # the race type, with its cars a race or real cars
+
+    @admin.display(description="division", ordering="division")
+    def divisions(self, event: Event) -> str:
+        return event.division_display
+
+    @admin.display(description="open", ordering="opens_at")
+    def runs(self, event: Event) -> str:
+        return f"{local_text(event.opens_at)} to {local_text(event.closes_at)}"
+
+    def changelist_view(self, request, extra_context=None):
+        # The events list needs the page's width: no side menu, as on a season's page.
+        extra_context = {**(extra_context or {}), "is_nav_sidebar_enabled": False}
+        return super().changelist_view(request, extra_context)
 
     @admin.action(description="Close the selected events now")
     def close_events(self, request: HttpRequest, queryset: QuerySet[Event]) -> None:

@@ -23,6 +23,13 @@ RACE_LENGTH = timedelta(days=7)  # a new community race closes a week after it o
 FORM_TOKEN = re.compile(r"[A-Za-z0-9_-]{32,43}")  # secrets.token_urlsafe(32) makes 43
 
 
+def _choose_the_only(field: forms.ModelChoiceField) -> None:
+    """A list of one is chosen already: a racer with one ready model need not pick it."""
+    found = list(field.queryset.values_list("pk", flat=True)[:2])
+    if len(found) == 1:
+        field.initial = found[0]
+
+
 class SubmissionForm(RacerWords, forms.Form):
     """A racer's ready model and an open event they may enter."""
 
@@ -54,6 +61,8 @@ class SubmissionForm(RacerWords, forms.Form):
         self.fields["event"].label_from_instance = _event_label
         self.fields["model"].queryset = selectors.models_ready_for(racer=racer)
         self.fields["model"].label_from_instance = _model_label
+        _choose_the_only(self.fields["event"])
+        _choose_the_only(self.fields["model"])
 
     def clean(self) -> dict:
         data = super().clean()
@@ -258,7 +267,7 @@ class TimedRunForm(RacerWords, forms.Form):
         max_length=64,
         help_text="Their racer name, as the leaderboard shows it: type a few letters to search.",
         widget=forms.TextInput(
-            attrs={"list": "racer-names", "autocomplete": "off", "data-racer-search": ""}
+            attrs={"autocomplete": "off", "data-racer-search": ""}
         ),
     )
     model_name = forms.CharField(
@@ -354,6 +363,7 @@ class LiveJoinForm(RacerWords, forms.Form):
         super().__init__(*args, **kwargs)
         self.fields["model"].queryset = selectors.models_ready_for(racer=racer)
         self.fields["model"].label_from_instance = _model_label
+        _choose_the_only(self.fields["model"])
         speed = self.fields["speed"]
         speed.min_value, speed.max_value = session.min_speed, session.max_speed
         speed.widget.attrs.update(min=session.min_speed, max=session.max_speed, step=0.1)

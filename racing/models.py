@@ -306,6 +306,20 @@ class Event(RaceConditions):
         return rule[0].lower() + rule[1:]
 
     @property
+    def format_display(self) -> str:
+        """What kind of race it is, in a few words for lists: "Time trial, real cars",
+        "Head-to-bot, 2 cars a race" (model against model), or the race type alone."""
+        kind = self.get_race_type_display()
+        if self.physical:
+            return f"{kind}, real cars"
+        return f"{kind}, {self.cars} cars a race" if self.cars > 1 else kind
+
+    @property
+    def division_display(self) -> str:
+        """The division(s) that may enter: "Open", "Pro", or "Open and Pro"."""
+        return "Open and Pro" if self.any_division else self.get_division_display()
+
+    @property
     def laps_to_qualify(self) -> int:
         """Counted laps in a row a run needs to rank. Real cars raced for the best lap rank any
         counted lap, as DREM's fastest-lap format does (its BEST_LAP_TIME ranks the fastest valid

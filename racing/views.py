@@ -104,7 +104,9 @@ def season_standings(request: HttpRequest, pk: int) -> HttpResponse:
 
 @login_required
 def submission_create(request: HttpRequest) -> HttpResponse:
-    initial = {"model": request.GET.get("model"), "event": None}
+    initial = {}  # what the link chose; the form chooses a list's only entry itself
+    if model := request.GET.get("model"):
+        initial["model"] = model
     if slug := request.GET.get("event"):
         initial["event"] = Event.objects.filter(slug=slug).values_list("pk", flat=True).first()
     form = SubmissionForm(request.POST or None, racer=request.user, initial=initial)

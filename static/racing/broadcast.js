@@ -10,13 +10,25 @@ const find = (name) => root.querySelector(`[data-${name}]`);
 const clock = physical ? new LapClock(find("timer")) : null;
 const turn = physical ? null : new Turn({
   frame: find("frame"), timer: find("timer"), laps: find("laps"),
-  speedup: Number(root.dataset.speedup || 1),
+  speedup: Number(root.dataset.speedup || 1), onLap: () => fitLaps(),
 });
 
-function item(text, className) {
+// The newest laps that fit the 16:9 picture: the oldest are left out first (each keeps its
+// number), so the list never runs off the bottom of the projector.
+function fitLaps() {
+  const items = [...find("laps").children];
+  items.forEach((li) => { li.hidden = false; });
+  for (const li of items.slice(0, -1)) {
+    if (root.scrollHeight <= root.clientHeight) break;
+    li.hidden = true;
+  }
+}
+
+function item(text, className, number) {
   const li = document.createElement("li");
   li.textContent = text;
   if (className) li.className = className;
+  if (number) li.value = number;
   return li;
 }
 
@@ -36,8 +48,9 @@ function showTiming(state) {
     : state.qualified ? `finished: ${laptime(state.score_ms)}` : "finished: did not qualify");
   find("laps").replaceChildren(...state.laps.map((lap) =>
     item(`${laptime(lap.time_ms)}${offTracks(lap.off_tracks)}`,
-      lap.counted ? "" : "not-counted")));
+      lap.counted ? "" : "not-counted", lap.number)));
   root.dataset.laps = String(state.laps.length);
+  fitLaps();
 }
 
 function showQueue(queue) {
@@ -84,6 +97,7 @@ async function refresh() {
   showWinner(state.winner);
 }
 
+addEventListener("resize", fitLaps);
 listen(root.dataset.event, (message) => {
   if (message.type === "timing" && physical) showTiming(message);
   if (message.type === "queue" && !physical) showQueue(message);

@@ -16,9 +16,10 @@ async function refresh(update) {
   root.querySelector("[data-leaderboard-table]").replaceWith(holder.firstElementChild);
   root.dataset.updates = String(Number(root.dataset.updates || 0) + 1);
   note.hidden = false;
+  const now = new Date().toLocaleTimeString("en-GB", { hourCycle: "h23" }); // the site's H:i:s
   note.textContent = update.type === "submission"
-    ? `A new time was just ranked (${new Date().toLocaleTimeString()}).`
-    : `The standings changed (${new Date().toLocaleTimeString()}).`;
+    ? `A new time was just ranked (${now}).`
+    : `The standings changed (${now}).`;
 }
 
 listen(root.dataset.event, (update) => {

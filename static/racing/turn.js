@@ -95,6 +95,7 @@ export class Turn {
     if (this.laps.querySelector(`[data-lap="${row.number}"]`)) return;
     const item = document.createElement("li");
     item.dataset.lap = row.number;
+    item.value = row.number; // numbered as the lap it is, when earlier ones are left out
     item.textContent = row.status === "lap_complete"
       ? `${laptime(row.time_ms)}${offTracks(row.off_tracks)}` // time_ms holds the penalties
       : `${row.status_display} at ${row.progress.toFixed(0)}%`;

@@ -1,12 +1,13 @@
-"""League staff in the admin, in Chromium: a season's inline event table fits a laptop screen,
-and a new event's slug fills in from its name."""
+"""League staff in the admin, in Chromium: a season's inline event table and the events list fit
+a laptop screen, and a new event's slug fills in from its name."""
 
 import pytest
 from django.contrib.auth.models import User
 from playwright.sync_api import Page, expect
 
 from tests.helpers.accounts import PASSWORD
-from tests.helpers.browser import log_in
+from tests.helpers.browser import expect_seen, log_in
+from tests.helpers.league import event
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -37,3 +38,20 @@ def test_the_seasons_event_table_fits_a_laptop_and_fills_slugs(page: Page, race_
 
     page.locator("#id_events-0-name").press_sequentially("Summer Cup July")
     expect(page.locator("#id_events-0-slug")).to_have_value("summer-cup-july")
+
+
+def test_the_events_list_shows_every_kind_of_race_within_a_laptop_screen(
+    page: Page, race_staff, tracks
+):
+    event("Club Pro Duel", division="PRO", cars=2)
+    event("Track day", physical=True, any_division=True)
+    page.set_viewport_size({"width": 1366, "height": 850})
+    log_in(page, "rita", PASSWORD)
+    page.goto("/admin/racing/event/")
+    duel = page.locator("tr", has_text="Club Pro Duel")
+    expect(duel).to_contain_text("Time trial, 2 cars a race")
+    expect(page.locator("tr", has_text="Track day")).to_contain_text("Time trial, real cars")
+    expect(page.locator("tr", has_text="Track day")).to_contain_text("Open and Pro")
+    expect_seen(duel.locator("td").last)  # the last column, in the window
+    wider = page.evaluate("document.documentElement.scrollWidth - innerWidth")
+    assert wider <= 0, f"the events list runs {wider} px past the window"

@@ -76,9 +76,14 @@ def test_the_submit_page_keeps_the_choice_and_says_why_it_is_refused(client, ali
     page = client.get(reverse("racing:submission-create"))
     assert "No event is open to you right now" in page.text
     trial = event()
-    page = client.get(reverse("racing:submission-create") + f"?model={model.pk}")
-    assert page.status_code == 200 and "Pro trial" not in page.text  # not offered
+    page = client.get(reverse("racing:submission-create"))  # the only event, the only model
+    assert f'<option value="{trial.pk}" selected>' in page.text
     assert f'<option value="{model.pk}" selected>' in page.text
+    other = ready_model(alice, name="other")
+    page = client.get(reverse("racing:submission-create") + f"?model={other.pk}")
+    assert page.status_code == 200 and "Pro trial" not in page.text  # not offered
+    assert f'<option value="{other.pk}" selected>' in page.text
+    assert f'<option value="{model.pk}" selected>' not in page.text
     response = client.post(
         reverse("racing:submission-create"), {"event": pro.pk, "model": model.pk}
     )
