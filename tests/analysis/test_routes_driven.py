@@ -184,6 +184,14 @@ def test_an_evaluation_is_replayed_on_its_own_track_and_on_the_models_route_on_t
     consoles = sim_tracks.load(WORLD).with_direction("counterclockwise")
     assert (consoles.world_name, len(consoles.centre)) == ("reInvent2019_track_ccw", 79)
     assert Source.of_job(model.jobs.get()).track.world_name == WORLD
+    # What is replayed is what was driven: the environment of each (its video's map, too).
+    for evaluation in (elsewhere, at_home):
+        env = gymnasium.make(simulator.ENV_ID, **evaluation.environment_settings()).unwrapped
+        assert np.array_equal(env.track.centre, Source.of_evaluation(evaluation).track.centre)
+        env.close()
+    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings()).unwrapped
+    assert np.array_equal(env.track.centre, model.driven_track().centre)
+    env.close()
 
 
 def test_summaries_made_on_the_consoles_route_are_made_again_on_the_models(alice):
