@@ -1,7 +1,7 @@
 // The timekeeper's page: one key per signal (racing.timing), the car on the track kept current
 // from the answers and from the event's websocket (a timing device may signal too); each lap
 // struck out or restored from its row (racing.lap_edits); racers searched by racer name as the
-// timekeeper types; the device token copied with one press.
+// timekeeper types, never by login name; the device token copied with one press.
 import { LapClock, laptime, listen } from "./timing.js";
 
 const root = document.querySelector("[data-timekeeper]");
@@ -118,19 +118,34 @@ root.querySelectorAll("[data-send]").forEach((button) => {
   button.addEventListener("click", () => send(button.dataset.send));
 });
 
-// The racer search: the racer names that match what is typed, as the field's suggestions.
+// The racer search: the racer names that match what is typed, as buttons under the field (Tab
+// reaches them); pressing one puts the name in the field.
 const search = root.querySelector("[data-racer-search]");
-const names = document.getElementById("racer-names");
+const suggestions = root.querySelector("[data-racer-suggestions]");
 let typing = null;
+
+function suggest(racers) {
+  suggestions.replaceChildren(...racers.map((name) => {
+    const button = document.createElement("button");
+    button.type = "button";
+    button.className = "button button-secondary button-small";
+    button.textContent = name;
+    button.addEventListener("click", () => {
+      search.value = name;
+      suggestions.replaceChildren();
+      search.focus();
+    });
+    return button;
+  }));
+}
+
 search?.addEventListener("input", () => {
   clearTimeout(typing);
   typing = setTimeout(async () => {
     const text = search.value.trim();
-    if (!text) return names.replaceChildren();
+    if (!text) return suggest([]);
     const response = await fetch(`${root.dataset.racersUrl}?q=${encodeURIComponent(text)}`);
-    if (!response.ok) return;
-    const { racers } = await response.json();
-    names.replaceChildren(...racers.map((name) => Object.assign(document.createElement("option"), { value: name })));
+    if (response.ok) suggest((await response.json()).racers);
   }, 150);
 });
 
