@@ -322,6 +322,8 @@ class Trainer:
                 continue  # PPO learns on-policy: episodes of older weights are dropped
             self.collected.append(episode)
         self.stopwatch.charge(TRANSFER)
+        if payloads:  # the page's Progress line counts each episode as its car ends it
+            live.announce_training(job.pk)
         wanted = model.hyperparameters["num_episodes_between_training"]
         if len(self.collected) >= wanted:
             # Exactly ``wanted`` episodes an iteration, as DeepRacer's workers play their shares

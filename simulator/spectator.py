@@ -129,10 +129,7 @@ class Spectator:
         cv2.polylines(inset, [body], True, (255, 255, 255), 1, cv2.LINE_AA, 4)
 
     def _draw_status(self, frame: np.ndarray, env: DeepRacerEnv) -> None:
-        laps = (
-            f"Lap {env.lap}/{env.laps}" if env.mode == "evaluation" else f"Episode {env._episode}"
-        )
-        text = f"{laps}   {env.progress:5.1f}%   {env.car.speed:4.2f} m/s   {env.sim_time:6.2f} s"
+        text = status_line(env)
         cv2.rectangle(frame, (0, SIZE[1] - 30), (SIZE[0], SIZE[1]), (30, 30, 30), -1)
         cv2.putText(
             frame,
@@ -220,6 +217,15 @@ def car_windows(car: Car) -> tuple[np.ndarray, np.ndarray]:
         ]
     )
     return windows, np.array([-forward, forward, up])
+
+
+def status_line(env: DeepRacerEnv) -> str:
+    """The frame's status bar: the lap of an evaluation, the progress, the speed and the time.
+    A training episode is not numbered here: each car counts its own episodes, several cars
+    drive on a worker, so no number of theirs is the job's; the page counts the job's episodes,
+    from the same state as its iterations (``training.selectors.training_status``)."""
+    text = f"{env.progress:5.1f}%   {env.car.speed:4.2f} m/s   {env.sim_time:6.2f} s"
+    return f"Lap {env.lap}/{env.laps}   {text}" if env.mode == "evaluation" else text
 
 
 def view_image(env: DeepRacerEnv, view: str, observation: dict | None = None) -> np.ndarray:

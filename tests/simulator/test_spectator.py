@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from simulator.camera import Solid
-from simulator.spectator import DRAWN_HEIGHT, WHEEL, view_image
+from simulator.spectator import DRAWN_HEIGHT, WHEEL, status_line, view_image
 from tests.simulator.conftest import drive
 
 RED = (47, 36, 209)  # BGR of the garage's red shell
@@ -118,3 +118,17 @@ def test_what_the_policy_sees_does_not_show_the_racers_own_car(environments):
     assert first.keys() == second.keys()
     for key in first:
         assert np.array_equal(first[key], second[key])
+
+
+def test_it_numbers_no_training_episode_of_its_own_only_an_evaluations_lap(environments):
+    training = environments(track="rookie-loop")
+    for seed in (1, 2):  # a car's second episode: its own count, not the job's, would say 1
+        training.reset(seed=seed)
+    drive(training, steps=3)
+    line = status_line(training.unwrapped)
+    assert "Episode" not in line
+    assert line.endswith(" s") and "m/s" in line and "%" in line
+
+    evaluation = environments(track="rookie-loop", mode="evaluation")
+    evaluation.reset(seed=1)
+    assert status_line(evaluation.unwrapped).startswith("Lap 1/")

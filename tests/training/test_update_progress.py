@@ -4,10 +4,11 @@ time it has left, and the episodes counted as the cars end them, not only once l
 import pytest
 
 from common.redis_client import redis_client
+from jobs import trainer
 from jobs.trainer import UpdateEstimate, update_message
 from rl.experience import JobChannel
-from tests.helpers.training import training_job
-from training import selectors
+from tests.helpers.training import queued_job, training_job
+from training import leases, live, selectors
 from training.models import TrainingJob
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
@@ -111,3 +112,23 @@ def test_a_stopped_job_counts_only_the_episodes_it_learnt_from(alice, channel):
     TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.STOPPING)
     job.refresh_from_db()
     assert selectors.training_status(job=job)["episodes"] == 40
+
+
+@pytest.mark.django_db(transaction=True)
+def test_the_trainer_tells_the_page_each_episode_as_its_car_ends_it(alice, monkeypatch):
+    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
+    run = trainer.Trainer(job, start_rollouts=lambda job, slot: None)
+    run.channel.start(job.attempt)
+    run.training_message, run.first_run = "Training with 1 simulation worker", False
+    run.worker_checks.due()  # the workers were just checked
+    leases.move(job, TrainingJob.Status.INITIALIZING)
+    monkeypatch.setattr(run, "_decode", lambda payload: None)  # no learner to read it with
+    told = []
+    monkeypatch.setattr(live, "announce", lambda group, message: told.append(message))
+    run.channel.beat(0)
+    run._turn()  # the car drives
+    told.clear()
+
+    run.channel.push_episode(b"an episode", run.version, 0)
+    run._turn()  # seconds before the trainer's next word of its clock
+    assert [message["episodes"] for message in told if message["type"] == "status"] == [1]
