@@ -300,6 +300,7 @@ def physical_run_rescore(*, submission: Submission) -> Submission:
     """A finished run's laps were edited: score them again by the event's rules. The racer's
     ranking is made again from all their runs (``ranking_recompute``), so a score that got worse
     gives way to their next best, or leaves the leaderboard; its pages hear the change."""
+    before = (submission.score_ms, submission.qualified)
     with transaction.atomic():
         fields = _scored(submission)
         Submission.objects.filter(pk=submission.pk).update(**fields)
@@ -308,6 +309,8 @@ def physical_run_rescore(*, submission: Submission) -> Submission:
         ranking_recompute(event=submission.event, racer=submission.racer)
     live.announce_submission(submission, ranked=True)
     live.announce_leaderboard(submission.event, submission=submission.pk)
+    if (submission.score_ms, submission.qualified) != before:  # the racer hears the new score
+        notifications.submission_scored(submission=submission)
     return submission
 
 

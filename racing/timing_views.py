@@ -235,7 +235,7 @@ def device(request: HttpRequest, slug: str) -> JsonResponse:
 def _signal(event: Event, body: bytes) -> JsonResponse:
     try:
         signal = timing.signal_read(json.loads(body or b"{}"))
-    except ValueError as unreadable:  # not JSON, or not a signal (timing.SignalUnreadable)
+    except (ValueError, RecursionError) as unreadable:  # not JSON, not a signal, too deep
         error = str(unreadable) if isinstance(unreadable, timing.SignalUnreadable) else ""
         return JsonResponse(
             {

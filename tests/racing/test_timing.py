@@ -242,6 +242,14 @@ def test_a_crossing_sooner_than_the_events_shortest_lap_is_refused_in_words(trac
     assert [lap.time_ms for lap in run.submission.laps.all()] == [4_000]
 
 
+def test_the_shortest_lap_is_one_a_real_car_can_drive(tracks):
+    from django.core.exceptions import ValidationError
+
+    with pytest.raises(ValidationError) as refused:
+        event(physical=True, min_lap_s=0.1)
+    assert "min_lap_s" in refused.value.message_dict
+
+
 def test_a_lap_longer_than_a_race_is_refused_and_undo_never_overflows(
     client, tracks, alice, stella
 ):
@@ -254,6 +262,7 @@ def test_a_lap_longer_than_a_race_is_refused_and_undo_never_overflows(
         drive(run, 2**62)
     crossing = json.dumps({"signal": "crossing", "at_ms": 2**62})
     assert device_post(client, race, crossing, token)[0] == 400
+    assert device_post(client, race, "[" * 100_000, token)[0] == 400  # too deep to read
     run = drive(run, timing.MAX_LAP_MS, "undo", "undo")  # the longest lap, taken back
     assert run.line_crossed_ms is None and run.submission.laps.count() == 0
 
@@ -293,6 +302,8 @@ def test_striking_the_best_lap_of_a_finished_run_ranks_it_again_even_when_worse(
     assert (ranking.submission_id, ranking.score_ms) == (slower.pk, 8_000)  # her next best
     lap.refresh_from_db()
     assert not lap.counted and lap.struck_by == stella and lap.struck_at is not None
+
+    assert alice.notifications.filter(text__contains="scored: 0:09.000").exists()
 
     lap_edits.lap_restore(lap=lap, by=stella)
     assert Ranking.objects.get(event=race, racer=alice).score_ms == 1_017
