@@ -4,15 +4,19 @@ A video element seeks by asking for ``Range: bytes=<offset>-``: a server that an
 whole body leaves the video unseekable (``seekable`` is [0, 0], a seek snaps back to the start).
 ``file_response`` answers one range with 206, a range beyond the end with 416, and anything else
 (no range, one it cannot read, several ranges) with the whole file, as RFC 9110 allows; the file is
-read in chunks as it is sent, never whole.
+read in chunks as it is sent, never whole: under Daphne through an asynchronous iterator, since
+Django's ASGI handler reads a synchronous one to its end before it sends a byte.
 """
 
 from __future__ import annotations
 
 import io
 import re
+from collections.abc import AsyncIterator
 from typing import IO
 
+from asgiref.sync import sync_to_async
+from django.core.handlers.asgi import ASGIRequest
 from django.http import FileResponse, HttpRequest, HttpResponse
 
 CHUNK = 64 * 1024  # [bytes] read from the file per write to the client
@@ -95,8 +99,9 @@ def file_response(
         return refused
     start, end = wanted or (0, size - 1)
     file.seek(start)
+    piece = _Slice(file, end - start + 1)
     response = FileResponse(
-        _Slice(file, end - start + 1),
+        piece,
         status=206 if wanted else 200,
         as_attachment=attachment,
         filename=filename,
@@ -111,4 +116,13 @@ def file_response(
         headers = dict(response.items())
         response.close()
         return HttpResponse(status=response.status_code, headers=headers)
+    if isinstance(request, ASGIRequest):  # the file is still closed with the response
+        response.streaming_content = _chunks(piece)
     return response
+
+
+async def _chunks(piece: _Slice) -> AsyncIterator[bytes]:
+    """``piece`` in chunks of ``CHUNK`` bytes, each read in a thread (off the event loop)."""
+    read = sync_to_async(piece.read, thread_sensitive=False)
+    while chunk := await read(CHUNK):
+        yield chunk

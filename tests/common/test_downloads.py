@@ -1,9 +1,13 @@
 """Which bytes a Range header asks for (RFC 9110 section 14): one range is answered, a range past
 the end is refused, and anything else gets the whole file."""
 
-import pytest
+import asyncio
+import io
 
-from common.downloads import Unsatisfiable, byte_range
+import pytest
+from django.test import AsyncRequestFactory, RequestFactory
+
+from common.downloads import Unsatisfiable, byte_range, file_response
 
 
 @pytest.mark.parametrize(
@@ -34,3 +38,34 @@ def test_it_answers_the_whole_file_for_no_range_an_unreadable_one_or_several(hea
 def test_it_refuses_a_range_that_no_byte_of_the_file_is_in(header, size):
     with pytest.raises(Unsatisfiable):
         byte_range(header, size)
+
+
+def _collected(response) -> bytes:
+    async def collect() -> bytes:
+        return b"".join([chunk async for chunk in response.streaming_content])
+
+    return asyncio.run(collect())
+
+
+def test_under_daphne_the_file_is_read_as_it_is_sent_not_before():
+    """Django's ASGI handler would read a synchronous iterator to its end before sending a byte:
+    under Daphne the range comes as an asynchronous one, read chunk by chunk."""
+    data = bytes(range(256)) * 1024  # 256 KiB: several chunks
+    file = io.BytesIO(data)
+    request = AsyncRequestFactory().get("/video", headers={"Range": "bytes=1000-"})
+    response = file_response(request, file, filename="v.webm", attachment=False)
+    assert response.is_async and response.status_code == 206
+    assert file.tell() == 1000  # nothing read yet
+    assert _collected(response) == data[1000:]
+
+
+def test_a_file_built_for_each_request_is_sent_whole_and_says_it_takes_no_ranges():
+    """The logs archive: a range of one request's archive would be spliced onto another's."""
+    request = RequestFactory().get("/logs", headers={"Range": "bytes=0-9"})
+    response = file_response(
+        request, io.BytesIO(b"x" * 100), filename="logs.tar.gz", attachment=True, ranges=False
+    )
+    assert (response.status_code, response["Accept-Ranges"]) == (200, "none")
+    assert response["Content-Length"] == "100"
+    assert b"".join(response.streaming_content) == b"x" * 100
+    assert response["Content-Type"] == "application/gzip"  # guessed from the name, as before
