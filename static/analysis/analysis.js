@@ -373,8 +373,8 @@ function drawIterations() {
   charts.laps = new window.Chart(find("lap-chart"), {
     data: {
       datasets: [
-        { ...common, label: "Best lap [s]", data: line("best_lap"), borderColor: "#cf222e", backgroundColor: "#cf222e" },
-        { ...common, label: "Median lap [s]", data: line("median_lap"), borderColor: "#8250df", backgroundColor: "#8250df" },
+        { ...common, label: "Best training lap [s]", data: line("best_lap"), borderColor: "#cf222e", backgroundColor: "#cf222e" },
+        { ...common, label: "Median training lap [s]", data: line("median_lap"), borderColor: "#8250df", backgroundColor: "#8250df" },
       ],
     },
     options: { animation: false, maintainAspectRatio: false, scales: { x: linear, y: { title: { display: true, text: "Lap time [s]" } } } },

@@ -1,6 +1,6 @@
 """The Analysis tab as a person sees it (issue 54): the iterations a re-scoring covers stand on
-one line, each label with its input, on a laptop and on a phone; and a car's steps far off the
-track are drawn whole on the map, not cut off at its edge."""
+one line, each label with its input, on a laptop and on a phone; a car's steps far off the track
+are drawn whole on the map, not cut off at its edge; and its lap times say they are training's."""
 
 from __future__ import annotations
 
@@ -62,6 +62,12 @@ def test_it_draws_the_steps_off_the_track_whole_and_keeps_each_iteration_input_b
     assert len(columns) - 1 - last >= 8, "a step is cut off at the map's right edge"
     before = columns[: last + 1].rstrip("1")
     assert len(before) - len(before.rstrip("0")) >= 20, "the far step is not apart from the track"
+
+    # Its laps are training laps, as the model page's table names them ("Best training lap").
+    laps = page.locator("[data-lap-chart]").evaluate(
+        "canvas => Chart.getChart(canvas).legend.legendItems.map((item) => item.text)"
+    )
+    assert laps == ["Best training lap [s]", "Median training lap [s]"]
 
     first, last_label = page.locator("[data-score-range] label").all()
     inputs = page.locator("[data-score-range] input")
