@@ -406,6 +406,9 @@ def test_the_timekeeper_edits_a_runs_laps_from_its_page_and_its_script(
     assert client.post(edit, {"action": "strike", "lap": 1}).status_code == 404
 
     client.force_login(stella)
+    shown = client.get(page).text  # a finished run: its result, and a lap may be added
+    assert "run scored 0:08.000." in shown
+    assert "Add the lap" in shown and "still on the track" not in shown
     response = client.post(edit, {"action": "strike", "lap": 1}, follow=True)
     assert "Lap 1 is struck out: it no longer counts." in response.text
     assert "Restore lap 1" in response.text and "struck out by" in response.text
@@ -437,6 +440,7 @@ def test_the_timekeeper_page_states_the_rule_and_offers_to_copy_the_token(
     client.post(reverse("racing:timekeeper-token", args=[race.slug]))
     text = client.get(page).text
     assert "any counted lap ranks: one is enough to qualify" in text
+    assert "0:08.000" in text  # the finished run's score in "Runs timed"
     assert "A crossing sooner than 5.5 s after the last one is refused" in text
     assert "data-copy-token" in text and "Car number" in text
     assert f"Edit the laps of {racer_name(racer=alice)}'s run" in text
