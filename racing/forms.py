@@ -266,9 +266,7 @@ class TimedRunForm(RacerWords, forms.Form):
         label="Racer",
         max_length=64,
         help_text="Their racer name, as the leaderboard shows it: type a few letters to search.",
-        widget=forms.TextInput(
-            attrs={"autocomplete": "off", "data-racer-search": ""}
-        ),
+        widget=forms.TextInput(attrs={"autocomplete": "off", "data-racer-search": ""}),
     )
     model_name = forms.CharField(
         label="Model", max_length=64, help_text="The model loaded on the car, as it is known."
