@@ -180,6 +180,16 @@ def running_run(*, event: Event) -> PhysicalRun | None:
     )
 
 
+def shown_run(*, event: Event) -> PhysicalRun | None:
+    """The run the broadcast shows: the one on the track, else the last one timed, with its laps
+    and result, until the next car starts (as a live race's last turn stays shown)."""
+    found = running_run(event=event)
+    if found is not None:
+        return found
+    runs = PhysicalRun.objects.select_related("submission__racer", "submission__event")
+    return runs.filter(submission__event=event).order_by("-submission__created_at", "-pk").first()
+
+
 def run_signal(*, run: PhysicalRun, signal: Signal) -> PhysicalRun:
     """Apply one signal to the run on the track; its pages hear the new state."""
     if signal.kind not in SIGNALS:

@@ -207,7 +207,7 @@ def broadcast_state(request: HttpRequest, slug: str) -> JsonResponse:
     """What the broadcast shows: the car on the track (a physical event's run, or a live race's
     turn) and the top ten."""
     event = _get_event_for_user(request, slug)
-    run = timing.running_run(event=event) if event.physical else None
+    run = timing.shown_run(event=event) if event.physical else None
     session = None if event.physical else LiveSession.objects.filter(event=event).first()
     return JsonResponse(
         {

@@ -9,6 +9,7 @@ import pytest
 from playwright.sync_api import Page, expect
 
 from accounts.selectors import racer_name
+from common.formatting import laptime
 from racing.models import RankingMethod, Submission
 from tests.helpers.accounts import PASSWORD
 from tests.helpers.browser import expect_seen, log_in
@@ -52,6 +53,7 @@ def test_the_timekeeper_times_a_real_car_by_keyboard_and_the_broadcast_follows(
     expect(page.locator("body")).to_have_attribute("data-listening", "true")
     name = racer_name(racer=alice)
     expect(screen.locator("[data-racer]")).to_have_text(name)
+    expect_seen(screen.locator("[data-racer]"))  # no winner layer over the race
 
     page.keyboard.press(" ")  # the car crosses the line: the clock starts
     expect(page.locator("[data-waiting]")).to_be_hidden()
@@ -63,11 +65,11 @@ def test_the_timekeeper_times_a_real_car_by_keyboard_and_the_broadcast_follows(
     page.wait_for_timeout(LAP)
     page.keyboard.press(" ")
     expect(keeper).to_have_attribute("data-laps", "2")
-    expect(screen.locator("[data-laps] li")).to_have_count(2)
+    expect(screen.locator("ol[data-laps] li")).to_have_count(2)
     page.keyboard.press("u")  # that crossing was a mistake: lap 2 runs on, its off-track with it
     expect(keeper).to_have_attribute("data-laps", "1")
     expect(page.locator("[data-off-tracks]")).to_have_text("1")
-    expect(screen.locator("[data-laps] li")).to_have_count(1)
+    expect(screen.locator("ol[data-laps] li")).to_have_count(1)
     page.wait_for_timeout(LAP)
     page.keyboard.press(" ")
     expect(keeper).to_have_attribute("data-laps", "2")
@@ -100,10 +102,20 @@ def test_the_timekeeper_times_a_real_car_by_keyboard_and_the_broadcast_follows(
     expect(top).to_have_count(1)
     expect(top.first).to_contain_text(name)
     expect(top.first).to_contain_text("real car")
+    # each lap's one time, its penalty inside, on the timekeeper's page and the broadcast
+    shown = [laptime(lap.time_ms) for lap in laps]
+    expect(page.locator("tbody[data-laps] tr td:nth-child(2)")).to_have_text(shown)
+    expect(screen.locator("ol[data-laps] li")).to_have_text([shown[0], f"{shown[1]} (1 off-track)"])
     page.get_by_role("button", name="Show the winner on the broadcast").click()
-    expect(screen.locator("[data-winner]")).to_be_visible()
+    expect_seen(screen.locator("[data-winner-racer]"))
     expect(screen.locator("[data-winner-racer]")).to_have_text(name)
+    screen.reload()  # the projector reloaded after the final still shows the winner
+    expect_seen(screen.locator("[data-winner-racer]"))
 
     # the leaderboard heard the ranking and fetched its table again, without a reload
     expect(board.locator("[data-physical]")).to_have_text("Real car")
     expect(board.locator("[data-leaderboard]")).to_have_attribute("data-updates", "1")
+    expect(board.locator("tbody tr").first).to_contain_text(laptime(submission.score_ms))
+    board.goto(submission.get_absolute_url())  # the racer's own page: the same laps
+    for number, time in enumerate(shown, start=1):
+        expect(board.locator(f"tr[data-lap='{number}'] [data-lap-time]")).to_have_text(time)
