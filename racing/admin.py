@@ -133,7 +133,9 @@ class EventAdmin(admin.ModelAdmin):
     actions = ["close_events", "recompute_rankings"]
     fieldsets = [
         (None, {"fields": ["season", "name", "slug", "division", "any_division"]}),
-        ("Race", {"fields": ["track", "direction", "race_type", "cars", "physical", "min_lap_s"]}),
+        ("Race", {"fields": [
+            "track", "direction", "race_type", "cars", "physical", "min_lap_s", "race_time_min",
+        ]}),
         ("Object avoidance", {"fields": ["box_count", "box_randomize"]}),
         ("Head-to-bot", {"fields": ["bot_count", "bot_speed", "bot_lane_changes"]}),
         ("When", {"fields": ["opens_at", "closes_at"]}),

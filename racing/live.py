@@ -68,7 +68,7 @@ def timing_state(run: PhysicalRun | None) -> dict:
         }
         for lap, far_below in zip(rows, short, strict=True)
     ]
-    started = run.line_crossed_at
+    started, ends = run.line_crossed_at, run.race_ends_at
     return {
         "type": "timing",
         "event": submission.event_id,
@@ -83,6 +83,9 @@ def timing_state(run: PhysicalRun | None) -> dict:
         # the lap on track started then, in the server's epoch milliseconds; with server_ms a page
         # sets its timer against its own clock, whatever that clock says
         "lap_started_ms": None if started is None else round(started.timestamp() * 1000),
+        # the racer's race time runs out then (None: no race time, or not started)
+        "race_ends_ms": None if ends is None else round(ends.timestamp() * 1000),
+        "race_time_min": submission.event.race_time_min,
         "server_ms": _now_ms(),
         "score_ms": submission.score_ms,
         "qualified": submission.qualified,

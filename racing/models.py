@@ -32,6 +32,9 @@ from training.models import EvaluationJob, RaceConditions, RaceType, RLModel, Tr
 # guidance-for-aws-deepracer-event-management@18030a1 leaderboard-timer/timer.js:12 and :89-93).
 MIN_LAP_S = 4.0
 MIN_LAP_S_RANGE = (0.5, 600.0)  # [s]
+# A racer's time on the track, at most [min]: DREM offers 1 to 10 minutes, 2 by default
+# (website/src/admin/events/support-functions/raceConfig.js RaceTimeConfig, eventDomain.js:11).
+RACE_TIME_MAX_MIN = 10
 
 
 class Division(models.TextChoices):
@@ -202,6 +205,16 @@ class Event(RaceConditions):
         validators=[MinValueValidator(MIN_LAP_S_RANGE[0]), MaxValueValidator(MIN_LAP_S_RANGE[1])],
         help_text="Real cars: a crossing sooner than this after the last one is refused (a "
         "double press, a gate's bounce), and the timekeeper is told why.",
+    )
+    race_time_min = models.PositiveSmallIntegerField(
+        "race time per racer [min]",
+        null=True,
+        blank=True,
+        validators=[MinValueValidator(1), MaxValueValidator(RACE_TIME_MAX_MIN)],
+        help_text="Real cars: each racer's time on the track, counted down from their first "
+        "crossing on the timekeeper's page and the broadcast; a crossing after it is not "
+        "counted (the DeepRacer Event Manager's race time: 1-10 min, 2 by default). Empty: "
+        "no limit.",
     )
     winner_shown_at = models.DateTimeField(
         null=True,
@@ -497,6 +510,12 @@ class PhysicalRun(models.Model):
         help_text="The clock's reading when the car last crossed the line: "
         "the lap on track started then. Empty until the first crossing.",
     )
+    started_at = models.DateTimeField(
+        null=True,
+        blank=True,
+        help_text="When the server heard the first crossing: the racer's race time runs from "
+        "then (Event.race_time_min).",
+    )
     line_crossed_at = models.DateTimeField(
         null=True,
         blank=True,
@@ -507,6 +526,15 @@ class PhysicalRun(models.Model):
 
     def __str__(self) -> str:
         return f"{self.car} for {self.submission}"
+
+    @property
+    def race_ends_at(self) -> datetime | None:
+        """When the racer's race time runs out (the event's, from the first crossing); None
+        before that crossing or with no race time."""
+        minutes = self.submission.event.race_time_min
+        if minutes is None or self.started_at is None:
+            return None
+        return self.started_at + timedelta(minutes=minutes)
 
 
 class Lap(models.Model):

@@ -35,7 +35,7 @@ import hashlib
 import hmac
 import secrets
 from dataclasses import dataclass
-from datetime import timedelta
+from datetime import datetime, timedelta
 
 from django.contrib.auth import get_user_model
 from django.contrib.auth.models import AbstractBaseUser
@@ -227,8 +227,12 @@ def _locked(run: PhysicalRun) -> PhysicalRun:
 def _crossing(run: PhysicalRun, at_ms: int | None) -> None:
     if at_ms is None or not 0 <= at_ms < MAX_CLOCK_MS:
         raise TimingRefused("A crossing needs the clock's reading, at_ms: whole milliseconds.")
-    if run.line_crossed_ms is not None:
+    now = timezone.now()
+    if run.line_crossed_ms is None:
+        run.started_at = now  # the racer's race time runs from the first crossing
+    else:
         event = run.submission.event
+        _race_time_refusal(run, now)
         lap_refusal(event=event, lap_ms=at_ms - run.line_crossed_ms)
         penalty_ms = penalty_for(event=event, off_tracks=run.off_tracks)
         limit = event.max_off_tracks_per_lap
@@ -242,9 +246,26 @@ def _crossing(run: PhysicalRun, at_ms: int | None) -> None:
             resets=run.resets,
             counted=limit is None or run.off_tracks <= limit,
         )
-    run.line_crossed_ms, run.line_crossed_at = at_ms, timezone.now()
+    run.line_crossed_ms, run.line_crossed_at = at_ms, now
     run.off_tracks = run.resets = 0
-    run.save(update_fields=["line_crossed_ms", "line_crossed_at", "off_tracks", "resets"])
+    run.save(
+        update_fields=["started_at", "line_crossed_ms", "line_crossed_at", "off_tracks", "resets"]
+    )
+
+
+def _race_time_refusal(run: PhysicalRun, now: datetime) -> None:
+    """``TimingRefused`` for a crossing after the racer's race time: as the DeepRacer Event
+    Manager ends a race when its timer expires (website/src/pages/timekeeper/pages/
+    racePage.tsx: RaceTimer's onExpire sends EXPIRE, whose endRace asks to end the race), the
+    lap on track when time ran out is not counted."""
+    ends = run.race_ends_at
+    if ends is not None and now > ends:
+        minutes = run.submission.event.race_time_min
+        raise TimingRefused(
+            f"The race time ({minutes} min from the first crossing) ran out "
+            f"{laptime((now - ends).total_seconds() * 1000)} ago: this lap is not counted. "
+            "Finish the run."
+        )
 
 
 def lap_refusal(*, event: Event, lap_ms: int, what: str = "A crossing") -> None:
@@ -275,7 +296,7 @@ def _undo(run: PhysicalRun) -> None:
     if last is None:
         if run.line_crossed_ms is None:
             raise TimingRefused("Nothing to undo: the car has not crossed the line yet.")
-        run.line_crossed_ms = run.line_crossed_at = None  # the clock stops again
+        run.line_crossed_ms = run.line_crossed_at = run.started_at = None  # the clocks stop
     else:
         run.line_crossed_ms -= last.time_ms - last.penalty_ms
         run.line_crossed_at = (run.line_crossed_at or timezone.now()) - timedelta(
@@ -284,7 +305,9 @@ def _undo(run: PhysicalRun) -> None:
         run.off_tracks += last.off_tracks
         run.resets += last.resets
         last.delete()
-    run.save(update_fields=["line_crossed_ms", "line_crossed_at", "off_tracks", "resets"])
+    run.save(
+        update_fields=["started_at", "line_crossed_ms", "line_crossed_at", "off_tracks", "resets"]
+    )
 
 
 def physical_run_finish(*, run: PhysicalRun) -> PhysicalRun:

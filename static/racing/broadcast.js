@@ -1,13 +1,14 @@
 // The broadcast: the car on the track (a physical event's run with its running lap, or a live
 // race's turn with its video), its laps, the top ten, and the winner when the organiser shows
 // it; kept current over the event's websocket.
-import { LapClock, laptime, listen, offTracks, speedText } from "./timing.js";
+import { LapClock, RaceClock, laptime, listen, offTracks, speedText } from "./timing.js";
 import { Turn } from "./turn.js";
 
 const root = document.querySelector("[data-broadcast]");
 const physical = root.dataset.physical === "true";
 const find = (name) => root.querySelector(`[data-${name}]`);
 const clock = physical ? new LapClock(find("timer")) : null;
+const raceClock = physical ? new RaceClock(find("race-time")) : null;
 const turn = physical ? null : new Turn({
   frame: find("frame"), timer: find("timer"), laps: find("laps"),
   speedup: Number(root.dataset.speedup || 1), onLap: () => fitLaps(),
@@ -39,6 +40,7 @@ function showCar(racer, detail) {
 
 function showTiming(state) {
   clock.set(state);
+  raceClock.set(state);
   if (!state.submission) {
     showCar();
     find("laps").replaceChildren();

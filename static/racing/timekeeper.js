@@ -2,13 +2,14 @@
 // from the answers and from the event's websocket (a timing device may signal too); each lap
 // struck out or restored from its row (racing.lap_edits); racers searched by racer name as the
 // timekeeper types, never by login name; the device token copied with one press.
-import { LapClock, laptime, listen } from "./timing.js";
+import { LapClock, RaceClock, laptime, listen } from "./timing.js";
 
 const root = document.querySelector("[data-timekeeper]");
 const onTrack = root.querySelector("[data-on-track]");
 const offTrackForm = root.querySelector("[data-off-track-form]");
 const error = root.querySelector("[data-error]");
 const clock = new LapClock(root.querySelector("[data-timer]"));
+const raceClock = new RaceClock(root.querySelector("[data-race-time]"));
 const csrf = document.querySelector("[name=csrfmiddlewaretoken]").value;
 const KEYS = { " ": "crossing", o: "off_track", r: "reset", u: "undo", f: "finish" };
 const runUrl = (submission) => root.dataset.runUrl.replace(/\/0\/$/, `/${submission}/`);
@@ -56,6 +57,7 @@ function show(state) {
   if (state.type !== "timing") return;
   shown = state;
   clock.set(state);
+  raceClock.set(state);
   onTrack.hidden = !state.on_track;
   offTrackForm.hidden = state.on_track;
   root.dataset.laps = String(state.laps ? state.laps.length : 0);

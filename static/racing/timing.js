@@ -56,3 +56,34 @@ export class LapClock {
   }
   now() { return Date.now() + this.offset; }
 }
+
+// The racer's race time left (the event's race time, from the first crossing: racing.timing),
+// counted down against this browser's clock as LapClock counts up. Its holder is shown only while
+// a car with a race time is on the track, and marked data-expired once the time is up.
+export class RaceClock {
+  constructor(holder) {
+    this.holder = holder;
+    this.left = holder.querySelector("[data-race-left]");
+    this.ends = null;
+    this.minutes = null;
+    this.offset = 0;
+    const tick = () => {
+      this.show();
+      requestAnimationFrame(tick);
+    };
+    requestAnimationFrame(tick);
+  }
+  set(state) {
+    this.offset = state.server_ms - Date.now();
+    this.minutes = state.on_track ? state.race_time_min ?? null : null;
+    this.ends = state.race_ends_ms ?? null;
+    this.holder.hidden = this.minutes === null;
+  }
+  show() {
+    if (this.minutes === null) return;
+    const left = this.ends === null ? this.minutes * 60000 : this.ends - (Date.now() + this.offset);
+    const seconds = Math.max(0, Math.ceil(left / 1000));
+    this.left.textContent = seconds > 0 ? `${Math.floor(seconds / 60)}:${String(seconds % 60).padStart(2, "0")}` : "time is up";
+    this.holder.dataset.expired = String(seconds === 0);
+  }
+}

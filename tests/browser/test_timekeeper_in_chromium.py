@@ -30,6 +30,7 @@ def test_the_timekeeper_times_a_real_car_by_keyboard_and_the_broadcast_follows(
         ranking_method=RankingMethod.BEST_LAP,
         off_track_penalty_s=2.0,
         min_lap_s=1.0,
+        race_time_min=2,
     )
     alice.profile.racer_name = "VeraFast"  # her login name, alice, is nobody's business
     alice.profile.save(update_fields=["racer_name"])
@@ -57,6 +58,10 @@ def test_the_timekeeper_times_a_real_car_by_keyboard_and_the_broadcast_follows(
 
     page.keyboard.press(" ")  # the car crosses the line: the clock starts
     expect(page.locator("[data-waiting]")).to_be_hidden()
+    left = re.compile(r"^(1:5\d|2:00)$")  # the racer's two minutes, counting down
+    for watched in (page, screen):
+        expect(watched.locator("[data-race-left]")).to_have_text(left)
+        expect_seen(watched.locator("[data-race-time]"))
     page.wait_for_timeout(LAP)
     page.keyboard.press(" ")
     expect(keeper).to_have_attribute("data-laps", "1")

@@ -4,13 +4,15 @@ into the same leaderboard, from the timekeeper's keys or a timing device's posts
 from __future__ import annotations
 
 import json
+from datetime import timedelta
 
 import pytest
 from django.urls import reverse
+from django.utils import timezone
 
 from accounts.selectors import racer_name
-from racing import timing
-from racing.models import Ranking, RankingMethod, Submission
+from racing import live, timing
+from racing.models import PhysicalRun, Ranking, RankingMethod, Submission
 from tests.helpers.league import DAY, event
 
 pytestmark = pytest.mark.django_db
@@ -444,3 +446,27 @@ def test_the_timekeeper_page_states_the_rule_and_offers_to_copy_the_token(
     assert "A crossing sooner than 5.5 s after the last one is refused" in text
     assert "data-copy-token" in text and "Car number" in text
     assert f"Edit the laps of {racer_name(racer=alice)}'s run" in text
+
+
+def test_a_racers_race_time_runs_from_their_first_crossing_and_a_later_crossing_is_refused(
+    tracks, alice, stella
+):
+    race = event(physical=True, race_time_min=2, laps_required=1)
+    run = a_run(race, alice, stella)
+    waiting = live.timing_state(run)
+    assert (waiting["race_time_min"], waiting["race_ends_ms"]) == (2, None)  # not started yet
+    run = drive(run, 0, 10_000)
+    started = PhysicalRun.objects.get(pk=run.pk).started_at
+    ends = live.timing_state(run)["race_ends_ms"]
+    assert ends == round((started + timedelta(minutes=2)).timestamp() * 1000)
+    # the racer's two minutes run out on the track: the lap then is not counted
+    PhysicalRun.objects.filter(pk=run.pk).update(
+        started_at=timezone.now() - timedelta(minutes=2, seconds=5)
+    )
+    with pytest.raises(
+        timing.TimingRefused, match=r"race time \(2 min from the first .*not counted"
+    ):
+        drive(PhysicalRun.objects.get(pk=run.pk), 20_000)
+    run = drive(PhysicalRun.objects.get(pk=run.pk), "undo", "undo")  # back before the start
+    assert PhysicalRun.objects.get(pk=run.pk).started_at is None
+    assert live.timing_state(run)["race_ends_ms"] is None
