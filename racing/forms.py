@@ -287,6 +287,19 @@ class TimedRunForm(RacerWords, forms.Form):
         return self.cleaned_data["car"].strip()
 
 
+def _lap_seconds(label: str, help_text: str) -> forms.DecimalField:
+    """A time within a lap [s], to the millisecond, no longer than a lap may be."""
+    return forms.DecimalField(
+        label=label,
+        min_value=0,
+        max_value=timing.MAX_LAP_MS // 1000,
+        max_digits=9,
+        decimal_places=3,
+        required=False,
+        help_text=help_text,
+    )
+
+
 class LapEditForm(RacerWords, forms.Form):
     """A timekeeper's edit of one run's laps (``racing.lap_edits``): strike a lap out, restore
     it, split it at a missed crossing, or add a lap at the end of a finished run."""
@@ -299,23 +312,12 @@ class LapEditForm(RacerWords, forms.Form):
     }
     action = forms.ChoiceField(choices=list(ACTIONS.items()), widget=forms.HiddenInput)
     lap = forms.IntegerField(label="Lap", min_value=1, max_value=32_767, required=False)
-    first_s = forms.DecimalField(
-        label="Its first part took [s]",
-        min_value=0,
-        max_value=timing.MAX_LAP_MS // 1000,
-        max_digits=9,
-        decimal_places=3,
-        required=False,
-        help_text="From the lap's start to the crossing you missed; its off-tracks stay with it.",
+    first_s = _lap_seconds(
+        "Its first part took [s]",
+        "From the lap's start to the crossing you missed; its off-tracks stay with it.",
     )
-    time_s = forms.DecimalField(
-        label="Lap time [s]",
-        min_value=0,
-        max_value=timing.MAX_LAP_MS // 1000,
-        max_digits=9,
-        decimal_places=3,
-        required=False,
-        help_text="The time the car drove, off a stopwatch or a video; penalties are added.",
+    time_s = _lap_seconds(
+        "Lap time [s]", "The time the car drove, off a stopwatch or a video; penalties are added."
     )
     off_tracks = forms.IntegerField(
         label="Off-tracks", min_value=0, max_value=timing.MAX_OFF_TRACKS, initial=0, required=False
