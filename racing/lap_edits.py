@@ -26,7 +26,7 @@ from django.utils import timezone
 
 from common.formatting import laptime
 from racing import live
-from racing.models import Event, Lap, LapEdit, Submission
+from racing.models import Lap, LapEdit, Submission
 from racing.timing import (
     MAX_OFF_TRACKS,
     TimingRefused,
@@ -55,7 +55,7 @@ def lap_restore(*, lap: Lap, by: AbstractBaseUser) -> Lap:
         lap = _locked(lap)
         if lap.struck_at is None:
             raise TimingRefused(f"Lap {lap.number} is not struck out: nothing to restore.")
-        lap.counted = _counts(lap.submission.event, lap.off_tracks)
+        lap.counted = lap.submission.event.lap_counts(off_tracks=lap.off_tracks)
         lap.struck_at = lap.struck_by = None
         lap.save(update_fields=["counted", "struck_at", "struck_by"])
         _kept(lap.submission, lap.number, LapEdit.Action.RESTORE, laptime(lap.time_ms), by)
@@ -83,7 +83,7 @@ def lap_split(*, lap: Lap, first_ms: int, by: AbstractBaseUser) -> Lap:
             number=lap.number + 1,
             time_ms=driven - first_ms,
             status="lap_complete",
-            counted=_counts(event, 0),
+            counted=event.lap_counts(off_tracks=0),
         )
         lap.time_ms = first_ms + lap.penalty_ms
         lap.save(update_fields=["time_ms"])
@@ -121,7 +121,7 @@ def lap_add(
             penalty_ms=penalty_ms,
             off_tracks=off_tracks,
             status="lap_complete",
-            counted=_counts(event, off_tracks),
+            counted=event.lap_counts(off_tracks=off_tracks),
         )
         _kept(submission, lap.number, LapEdit.Action.ADD, laptime(lap.time_ms), by)
     _edited(submission)
@@ -136,11 +136,6 @@ def _locked(lap: Lap) -> Lap:
     if fresh is None or not fresh.submission.physical:
         raise TimingRefused("That lap is gone: the run was changed meanwhile. Reload the page.")
     return fresh
-
-
-def _counts(event: Event, off_tracks: int) -> bool:
-    limit = event.max_off_tracks_per_lap
-    return limit is None or off_tracks <= limit
 
 
 def _kept(

@@ -318,6 +318,12 @@ class Event(RaceConditions):
         rule = self.get_ranking_method_display().replace(" N ", f" {self.laps_required} ")
         return rule[0].lower() + rule[1:]
 
+    def lap_counts(self, *, off_tracks: int) -> bool:
+        """Whether a complete lap with ``off_tracks`` counts: within the event's off-track limit
+        per lap (none: any number)."""
+        limit = self.max_off_tracks_per_lap
+        return limit is None or off_tracks <= limit
+
     @property
     def format_display(self) -> str:
         """What kind of race it is, in a few words for lists: "Time trial, real cars",

@@ -231,8 +231,7 @@ def submission_score(
     """Store the laps the race drove, score them by the event's rules, keep the video, and offer
     the score to the racer's ranking. Scoring the same laps again changes nothing."""
     event = submission.event
-    limit = event.max_off_tracks_per_lap
-    laps = [_lap(submission, trial, limit) for trial in trials]
+    laps = [_lap(submission, trial, event) for trial in trials]
     score = scoring.score(
         [lap.scoring_lap() for lap in laps], method=event.ranking_method, size=event.laps_required
     )
@@ -256,8 +255,8 @@ def submission_score(
     return submission
 
 
-def _lap(submission: Submission, trial: EvaluationTrial, limit: int | None) -> Lap:
-    """A lap counts when the car finished it with at most ``limit`` off-tracks (None: any)."""
+def _lap(submission: Submission, trial: EvaluationTrial, event: Event) -> Lap:
+    """A lap counts when the car finished it within the event's off-track limit."""
     return Lap(
         submission=submission,
         number=trial.number,
@@ -267,7 +266,7 @@ def _lap(submission: Submission, trial: EvaluationTrial, limit: int | None) -> L
         crashes=trial.crashes,
         resets=trial.resets,
         penalty_ms=trial.penalty_ms,
-        counted=trial.completed and (limit is None or trial.off_tracks <= limit),
+        counted=trial.completed and event.lap_counts(off_tracks=trial.off_tracks),
     )
 
 

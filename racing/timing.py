@@ -235,7 +235,6 @@ def _crossing(run: PhysicalRun, at_ms: int | None) -> None:
         _race_time_refusal(run, now)
         lap_refusal(event=event, lap_ms=at_ms - run.line_crossed_ms)
         penalty_ms = penalty_for(event=event, off_tracks=run.off_tracks)
-        limit = event.max_off_tracks_per_lap
         Lap.objects.create(
             submission=run.submission,
             number=run.submission.laps.count() + 1,
@@ -244,7 +243,7 @@ def _crossing(run: PhysicalRun, at_ms: int | None) -> None:
             status="lap_complete",
             off_tracks=run.off_tracks,
             resets=run.resets,
-            counted=limit is None or run.off_tracks <= limit,
+            counted=event.lap_counts(off_tracks=run.off_tracks),
         )
     run.line_crossed_ms, run.line_crossed_at = at_ms, now
     run.off_tracks = run.resets = 0
