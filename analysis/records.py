@@ -17,6 +17,13 @@ from training import artifacts
 from training.models import EvaluationJob, RLModel, TrainingJob
 
 
+@functools.lru_cache(maxsize=32)
+def track_driven(name: str, direction: str, route: str | None) -> tracks.Track:
+    """``simulator.tracks.driven``, kept per process: a track's geometry (its borders' polygon,
+    its waypoints' tree) is built once for every page and re-scoring that reads it."""
+    return tracks.driven(name, direction, route)
+
+
 @dataclass(frozen=True)
 class Source:
     """Recorded driving: a training job's iterations, or an evaluation's trials."""
@@ -37,7 +44,9 @@ class Source:
     def track(self) -> tracks.Track:
         """The track as the recorded driving drove it, on the route file it drove (numbers only:
         no engine is built): a DeepRacer for Cloud import's own, not the console's."""
-        return (self.evaluation or self.model).driven_track()
+        where = self.evaluation or self.model  # an evaluation drives its own track, its way
+        name = where.track.name
+        return track_driven(name, where.direction, self.model.route_on(name))
 
     @property
     def actions(self) -> int | None:

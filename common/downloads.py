@@ -21,8 +21,9 @@ from django.http import FileResponse, HttpRequest, HttpResponse
 
 CHUNK = 64 * 1024  # [bytes] read from the file per write to the client
 # One range: first-last, first- (to the end), or -suffix (the last bytes). The unit is
-# case-insensitive (RFC 9110 section 14.1).
-ONE_RANGE = re.compile(r"\s*bytes\s*=\s*(\d*)\s*-\s*(\d*)\s*", re.IGNORECASE)
+# case-insensitive (RFC 9110 section 14.1). Positions of up to 18 digits (an exabyte): a longer
+# one is no file's, and int() of thousands of digits raises; such a header reads as no range.
+ONE_RANGE = re.compile(r"\s*bytes\s*=\s*(\d{0,18})\s*-\s*(\d{0,18})\s*", re.IGNORECASE)
 
 
 class Unsatisfiable(Exception):

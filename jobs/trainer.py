@@ -50,6 +50,9 @@ EVALUATION_EPISODES = 5
 CHECK_EVERY = 3.0  # [s] between lease renewals, clock writes and worker checks
 STOP_CHECK = 1.0  # [s] between looks for the racer's stop request, even in the middle of an update
 UPDATE_SAID_EVERY = 1.5  # [s] at least between two words of how far the update has gone
+# [s] at least between two words of the episodes that arrived: each costs a query, a Redis
+# connection and a group send in the learner's loop, and short early episodes come in bursts
+EPISODES_TOLD_EVERY = 0.5
 REPLACEMENTS = 2  # per worker slot, before the job carries on without it
 REDIS_PATIENCE = 60.0  # [s] the trainer waits for a Redis that went away
 MAX_PRINTED_LINES = 20_000  # reward function and worker lines a job's log keeps, in all
@@ -155,6 +158,7 @@ class Trainer:
         self.stop_looks = Every(STOP_CHECK)  # for the racer's stop and the time limit
         self.renewals = Every(CHECK_EVERY)  # of the lease, with the clock written
         self.worker_checks = Every(CHECK_EVERY)  # the workers, their logs and evaluations
+        self.episodes_told = Every(EPISODES_TOLD_EVERY)  # the page's Progress line, as cars end
 
     # The loop
 
@@ -322,7 +326,7 @@ class Trainer:
                 continue  # PPO learns on-policy: episodes of older weights are dropped
             self.collected.append(episode)
         self.stopwatch.charge(TRANSFER)
-        if payloads:  # the page's Progress line counts each episode as its car ends it
+        if payloads and self.episodes_told.due():  # the Progress line follows the cars
             live.announce_training(job.pk)
         wanted = model.hyperparameters["num_episodes_between_training"]
         if len(self.collected) >= wanted:

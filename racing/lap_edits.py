@@ -45,7 +45,7 @@ def lap_strike(*, lap: Lap, by: AbstractBaseUser) -> Lap:
         lap.counted, lap.struck_at, lap.struck_by = False, timezone.now(), by
         lap.save(update_fields=["counted", "struck_at", "struck_by"])
         _kept(lap.submission, lap.number, LapEdit.Action.STRIKE, laptime(lap.time_ms), by)
-    _edited(lap.submission)
+        _edited(lap.submission)
     return lap
 
 
@@ -59,7 +59,7 @@ def lap_restore(*, lap: Lap, by: AbstractBaseUser) -> Lap:
         lap.struck_at = lap.struck_by = None
         lap.save(update_fields=["counted", "struck_at", "struck_by"])
         _kept(lap.submission, lap.number, LapEdit.Action.RESTORE, laptime(lap.time_ms), by)
-    _edited(lap.submission)
+        _edited(lap.submission)
     return lap
 
 
@@ -89,7 +89,7 @@ def lap_split(*, lap: Lap, first_ms: int, by: AbstractBaseUser) -> Lap:
         lap.save(update_fields=["time_ms"])
         detail = f"{laptime(driven)} into {laptime(first_ms)} and {laptime(second.time_ms)}"
         _kept(submission, lap.number, LapEdit.Action.SPLIT, detail, by)
-    _edited(submission)
+        _edited(submission)
     return second
 
 
@@ -124,7 +124,7 @@ def lap_add(
             counted=event.lap_counts(off_tracks=off_tracks),
         )
         _kept(submission, lap.number, LapEdit.Action.ADD, laptime(lap.time_ms), by)
-    _edited(submission)
+        _edited(submission)
     return lap
 
 
@@ -147,7 +147,9 @@ def _kept(
 
 
 def _edited(submission: Submission) -> None:
-    """A finished run is scored again; a run on the track is shown anew."""
+    """A finished run is scored again; a run on the track is shown anew. Called under the run's
+    lock (``_locked``), which the timekeeper's signals take too (``timing._locked``), so an edit,
+    a crossing and a finish of one run happen one after the other."""
     submission.refresh_from_db()
     if submission.status == Submission.Status.COMPLETED:
         physical_run_rescore(submission=submission)

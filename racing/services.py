@@ -556,17 +556,20 @@ def invitation_renew(*, event: Event) -> str:
     return token
 
 
-# Divisions
-
-
 def event_winner_show(*, event: Event, shown: bool = True) -> dict | None:
     """The organiser shows the winner on the broadcast (or hides it again): kept on the event,
-    so that a broadcast opened or reloaded later shows it too. The winner shown, if any."""
+    so that a broadcast opened or reloaded later shows it too. The winner shown, if any: with
+    nobody ranked there is none, and nothing is kept that would cover the race once someone is."""
+    if shown and not selectors.leaders(event=event, count=1):
+        return None
     event.winner_shown_at = timezone.now() if shown else None
     Event.objects.filter(pk=event.pk).update(winner_shown_at=event.winner_shown_at)
     winner = selectors.winner_shown(event=event)
     live.announce_winner(event, winner)
     return winner
+
+
+# Divisions
 
 
 def divisions_promote(*, today: date | None = None) -> list[Racer]:

@@ -40,7 +40,7 @@ from datetime import datetime, timedelta
 from django.contrib.auth import get_user_model
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import transaction
-from django.db.models import QuerySet
+from django.db.models import Q, QuerySet
 from django.utils import timezone
 
 from accounts.selectors import racer_name
@@ -116,12 +116,14 @@ def racers_named_like(*, text: str, limit: int = RACERS_SHOWN) -> list[str]:
     text = text.strip()
     if not text:
         return []
-    names = _racers().filter(profile__racer_name__icontains=text)
-    names = list(
-        names.values_list("profile__racer_name", flat=True).order_by("profile__racer_name")
+    names = (
+        _racers()
+        .filter(profile__racer_name__icontains=text)
+        .annotate(starts=Q(profile__racer_name__istartswith=text))
+        .order_by("-starts", "profile__racer_name")
+        .values_list("profile__racer_name", flat=True)
     )
-    starting = [name for name in names if name.lower().startswith(text.lower())]
-    return (starting + [name for name in names if name not in starting])[:limit]
+    return list(names[:limit])  # ordered and cut in the database: "a" reads ten rows, not all
 
 
 def racer_named(*, name: str) -> AbstractBaseUser:
@@ -213,6 +215,9 @@ def run_signal(*, run: PhysicalRun, signal: Signal) -> PhysicalRun:
 
 
 def _locked(run: PhysicalRun) -> PhysicalRun:
+    """``run``, freshly read under its submission's lock: the lock the timekeeper's lap edits
+    take too (``lap_edits``), so a signal and an edit of one run never interleave."""
+    Submission.objects.select_for_update().filter(pk=run.submission_id).first()
     locked = (
         PhysicalRun.objects.select_for_update()
         .select_related("submission__event", "submission__racer")
@@ -332,8 +337,9 @@ def physical_run_rescore(*, submission: Submission) -> Submission:
     """A finished run's laps were edited: score them again by the event's rules. The racer's
     ranking is made again from all their runs (``ranking_recompute``), so a score that got worse
     gives way to their next best, or leaves the leaderboard; its pages hear the change."""
-    before = (submission.score_ms, submission.qualified)
     with transaction.atomic():
+        locked = Submission.objects.select_for_update().filter(pk=submission.pk).first()
+        before = (locked.score_ms, locked.qualified)
         fields = _scored(submission)
         Submission.objects.filter(pk=submission.pk).update(**fields)
         for name, value in fields.items():

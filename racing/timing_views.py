@@ -190,7 +190,7 @@ def winner(request: HttpRequest, slug: str) -> HttpResponse:
         messages.success(request, "The broadcast no longer shows the winner.")
     elif winner is None:
         messages.warning(
-            request, "Nobody is ranked yet: the broadcast will show the winner once someone is."
+            request, "Nobody is ranked yet: there is no winner to show. Show it once someone is."
         )
     else:
         messages.success(request, f"The broadcast shows the winner: {winner['racer']}.")

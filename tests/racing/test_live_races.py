@@ -145,6 +145,12 @@ def test_a_broadcast_opened_after_the_winner_was_shown_shows_it_until_hidden(
     assert client.get(state).json()["winner"] is None
     client.force_login(stella)
     winner = reverse("racing:winner", args=[race.slug])
+    nobody = event("Empty cup")
+    live_races.live_session_open(event=nobody, facilitator=stella)
+    empty = reverse("racing:winner", args=[nobody.slug])
+    assert "there is no winner to show" in client.post(empty, follow=True).text
+    nobody.refresh_from_db()
+    assert nobody.winner_shown_at is None  # nothing armed to cover a race to come
     shown = client.post(winner, follow=True).text
     assert f"The broadcast shows the winner: {racer_name(racer=alice)}." in shown
     assert "Hide the winner" in shown
