@@ -73,6 +73,11 @@ def lap_split(*, lap: Lap, first_ms: int, by: AbstractBaseUser) -> Lap:
         if lap.struck_at is not None:
             raise TimingRefused(f"Lap {lap.number} is struck out: restore it before splitting it.")
         driven = lap.time_ms - lap.penalty_ms
+        if first_ms >= driven:
+            raise TimingRefused(
+                f"Lap {lap.number} took {laptime(driven)} of driving: the missed crossing came "
+                "before its end. Give a time within the lap."
+            )
         lap_refusal(event=event, lap_ms=first_ms, what="The missed crossing came")
         lap_refusal(event=event, lap_ms=driven - first_ms, what="The next crossing came")
         for later in submission.laps.filter(number__gt=lap.number).order_by("-number"):

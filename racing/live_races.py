@@ -100,8 +100,7 @@ def live_entry_join(
         )
     with transaction.atomic():
         LiveSession.objects.select_for_update().filter(pk=session.pk).first()
-        queued = session.entries.filter(racer=racer, status__in=(_E.WAITING, _E.DRIVING))
-        if queued.exists():
+        if live_place_held(session=session, racer=racer):
             raise LiveRefused("You are in the queue already: one place a racer.")
         last = session.entries.aggregate(last=Max("position"))["last"] or 0
         entry = LiveEntry.objects.create(
@@ -114,6 +113,14 @@ def live_entry_join(
         )
     live.announce_queue(session)
     return entry
+
+
+def live_place_held(*, session: LiveSession, racer: AbstractBaseUser) -> bool:
+    """Whether ``racer`` has a place in the queue or a car on the track: one place a racer."""
+    if not racer.is_authenticated:
+        return False
+    held = session.entries.filter(racer=racer, status__in=(_E.WAITING, _E.DRIVING))
+    return held.exists()
 
 
 def live_entry_move(*, entry: LiveEntry, places: int) -> LiveEntry:

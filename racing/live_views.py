@@ -26,7 +26,7 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
     user = request.user
     facilitator = live_races.may_facilitate(event=event, user=user)
     join = None
-    queued = session is not None and _queued(session, user)
+    queued = session is not None and live_races.live_place_held(session=session, racer=user)
     if session is not None and user.is_authenticated and not queued:
         join = LiveJoinForm(request.POST or None, racer=user, session=session)
         if not join.fields["model"].queryset.exists():
@@ -62,14 +62,6 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
     if request.GET.get("fragment") == "queue":
         return render(request, "racing/includes/live_queue.html", context)
     return render(request, "racing/live_race.html", context)
-
-
-def _queued(session: LiveSession, user) -> bool:
-    """Whether ``user`` has a place in the queue or a car on the track: one place a racer."""
-    if not user.is_authenticated:
-        return False
-    places = session.entries.filter(racer=user)
-    return places.filter(status__in=(LiveEntry.Status.WAITING, LiveEntry.Status.DRIVING)).exists()
 
 
 def _settings(session: LiveSession | None) -> dict:

@@ -122,8 +122,8 @@ def lap_edit(request: HttpRequest, slug: str, pk: int) -> HttpResponse:
     else:
         error = " ".join(message for errors in form.errors.values() for message in errors)
     if "application/json" in request.headers.get("Accept", ""):
-        if error:
-            return JsonResponse({"error": error}, status=409)
+        if error:  # a form it cannot read is the request's fault; a refused edit, the run's state
+            return JsonResponse({"error": error}, status=409 if form.is_valid() else 400)
         submission.refresh_from_db()
         return JsonResponse(live.timing_state(getattr(submission, "physical_run", None)))
     if error:

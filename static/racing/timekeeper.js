@@ -141,13 +141,16 @@ function suggest(racers) {
   }));
 }
 
+let searches = 0;
 search?.addEventListener("input", () => {
   clearTimeout(typing);
   typing = setTimeout(async () => {
     const text = search.value.trim();
     if (!text) return suggest([]);
+    const asked = ++searches; // a slower answer to an older search must not overwrite this one
     const response = await fetch(`${root.dataset.racersUrl}?q=${encodeURIComponent(text)}`);
-    if (response.ok) suggest((await response.json()).racers);
+    const json = (response.headers.get("Content-Type") || "").includes("json");
+    if (asked === searches && response.ok && json) suggest((await response.json()).racers);
   }, 150);
 });
 
