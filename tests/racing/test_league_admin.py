@@ -1,7 +1,10 @@
 """Who may do what: race staff in the admin, racers in their own community races, and anyone
 reading the leaderboards."""
 
+import importlib
+
 import pytest
+from django.apps import apps as django_apps
 from django.contrib.auth.models import Group, User
 from django.templatetags.static import static
 from django.urls import reverse
@@ -302,3 +305,12 @@ def test_the_admin_shows_the_sites_icon_and_favicon_ico_finds_it(client, race_st
     favicon = client.get("/favicon.ico")
     assert favicon.status_code == 302 and favicon.url == icon
     assert client.get(icon)["Content-Type"].startswith("image/svg+xml")
+
+
+def test_the_migration_gives_every_older_account_its_division(alice, bob):
+    Racer.objects.filter(user=alice).delete()  # an account made before sign-up made the row
+    migration = importlib.import_module("racing.migrations.0011_event_divisions_and_winner")
+    migration.racer_rows(django_apps, None)
+    migration.racer_rows(django_apps, None)  # run again: nothing more
+    assert Racer.objects.filter(user=alice, division="OPEN").count() == 1
+    assert Racer.objects.filter(user=bob).count() == 1
