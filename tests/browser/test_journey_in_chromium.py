@@ -155,6 +155,10 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     )
     submission = Submission.objects.get(event=race)
     assert submission.status == Submission.Status.COMPLETED
+    # the page reloads itself with the laps once the race has ended: shoot that page, not the
+    # one it leaves (a shot taken as it navigates loses its script: a flake of the full suite)
+    expect(page.locator("tr[data-lap='1']")).to_be_visible()
+    page.wait_for_load_state()
     album.shoot("submission")
     page.get_by_role("link", name="Leaderboard", exact=True).click()
     mine = page.locator("[data-my-submissions]")
