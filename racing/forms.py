@@ -277,9 +277,13 @@ class TimedRunForm(RacerWords, forms.Form):
         help_text="The number on the car (its name, where it has no number).",
     )
 
+    def __init__(self, *args, racers, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.racers = racers  # those this timekeeper may time (timing.racers_timed_by)
+
     def clean_racer(self):
         try:
-            return timing.racer_named(name=self.cleaned_data["racer"])
+            return timing.racer_named(name=self.cleaned_data["racer"], among=self.racers)
         except timing.TimingRefused as refused:
             raise ValidationError(str(refused)) from None
 

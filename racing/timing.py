@@ -110,15 +110,26 @@ def _digest(token: str) -> str:
     return hashlib.sha256(token.encode()).hexdigest()
 
 
-def racers_named_like(*, text: str, limit: int = RACERS_SHOWN) -> list[str]:
-    """The racer names of active accounts that start with ``text`` (then those that hold it),
-    any case, at most ``limit``: the timekeeper's search as they type. Never a login name."""
+def racers_timed_by(*, event: Event, timekeeper: AbstractBaseUser) -> QuerySet:
+    """The racers ``timekeeper`` may put on the track in ``event``: any active racer for league
+    staff; for a community race's organiser, only its participants and themselves, so that an
+    organiser can neither time, notify nor look up anyone else on the console."""
+    racers = get_user_model().objects.filter(is_active=True, profile__isnull=False)
+    if timekeeper.is_staff:
+        return racers
+    joined = Q(joined_events=event) & ~Q(removed_from_events=event)
+    return racers.filter(joined | Q(pk=event.organiser_id)).distinct()
+
+
+def racers_named_like(*, text: str, among: QuerySet, limit: int = RACERS_SHOWN) -> list[str]:
+    """The racer names ``among`` those racers that start with ``text`` (then those that hold
+    it), any case, at most ``limit``: the timekeeper's search as they type. Never a login
+    name."""
     text = text.strip()
     if not text:
         return []
     names = (
-        _racers()
-        .filter(profile__racer_name__icontains=text)
+        among.filter(profile__racer_name__icontains=text)
         .annotate(starts=Q(profile__racer_name__istartswith=text))
         .order_by("-starts", "profile__racer_name")
         .values_list("profile__racer_name", flat=True)
@@ -126,14 +137,15 @@ def racers_named_like(*, text: str, limit: int = RACERS_SHOWN) -> list[str]:
     return list(names[:limit])  # ordered and cut in the database: "a" reads ten rows, not all
 
 
-def racer_named(*, name: str) -> AbstractBaseUser:
-    """The active racer called ``name`` (any case); ``TimingRefused`` says, in words, when nobody
-    is, naming the racers it may have meant."""
+def racer_named(*, name: str, among: QuerySet) -> AbstractBaseUser:
+    """The racer ``among`` those called ``name`` (any case); ``TimingRefused`` says, in words,
+    when nobody is, naming the racers it may have meant (the same words for a racer who is not
+    among them as for one who does not exist)."""
     name = name.strip()
-    racer = _racers().filter(profile__racer_name__iexact=name).first()
+    racer = among.filter(profile__racer_name__iexact=name).first()
     if racer is not None:
         return racer
-    alike = racers_named_like(text=name, limit=4)
+    alike = racers_named_like(text=name, among=among, limit=4)
     if not alike:
         raise TimingRefused(f"No racer is called {name}: check the spelling of their racer name.")
     if len(alike) == 1:
@@ -142,10 +154,6 @@ def racer_named(*, name: str) -> AbstractBaseUser:
         f"No racer is called {name}, and {len(alike)} names hold it ({', '.join(alike)}): "
         "type the whole racer name."
     )
-
-
-def _racers() -> QuerySet:
-    return get_user_model().objects.filter(is_active=True, profile__isnull=False)
 
 
 def physical_run_start(
@@ -157,6 +165,8 @@ def physical_run_start(
         raise TimingRefused(f"{event.name} is not raced by real cars: its laps are simulated.")
     if event.state == Event.State.CLOSED:
         raise TimingRefused(f"{event.name} has closed: no more runs are timed.")
+    if not racers_timed_by(event=event, timekeeper=timekeeper).filter(pk=racer.pk).exists():
+        raise TimingRefused(f"No racer is called {racer_name(racer=racer)} in {event.name}.")
     with transaction.atomic():
         Event.objects.select_for_update().filter(pk=event.pk).first()  # one start at a time
         if (running := running_run(event=event)) is not None:

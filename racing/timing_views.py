@@ -43,7 +43,8 @@ def _event_to_time(request: HttpRequest, slug: str) -> Event:
 @login_required
 def timekeeper(request: HttpRequest, slug: str) -> HttpResponse:
     event = _event_to_time(request, slug)
-    form = TimedRunForm(request.POST or None)
+    racers = timing.racers_timed_by(event=event, timekeeper=request.user)
+    form = TimedRunForm(request.POST or None, racers=racers)
     if request.method == "POST" and form.is_valid():
         data = form.cleaned_data
         try:
@@ -72,9 +73,10 @@ def timekeeper(request: HttpRequest, slug: str) -> HttpResponse:
 @login_required
 def timekeeper_racers(request: HttpRequest, slug: str) -> JsonResponse:
     """The racer names that match what the timekeeper typed (``?q=``), at most ten."""
-    _event_to_time(request, slug)
+    event = _event_to_time(request, slug)
     text = request.GET.get("q", "")[:64]
-    return JsonResponse({"racers": timing.racers_named_like(text=text)})
+    racers = timing.racers_timed_by(event=event, timekeeper=request.user)
+    return JsonResponse({"racers": timing.racers_named_like(text=text, among=racers)})
 
 
 def _run_to_edit(request: HttpRequest, slug: str, pk: int) -> tuple[Event, Submission]:

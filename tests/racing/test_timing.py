@@ -185,14 +185,16 @@ def named(user, name):
     return user
 
 
-def test_it_picks_the_racer_by_racer_name_and_never_by_login_name(tracks, alice, bob):
+def test_it_picks_the_racer_by_racer_name_and_never_by_login_name(tracks, alice, bob, stella):
     from racing.forms import TimedRunForm
 
     named(alice, "VeraFast")
     named(bob, "VeraSlow")
+    racers = timing.racers_timed_by(event=event(physical=True), timekeeper=stella)
 
     def picked(name):
-        form = TimedRunForm({"racer": name, "model_name": "sim2real-v3", "car": " 7 "})
+        data = {"racer": name, "model_name": "sim2real-v3", "car": " 7 "}
+        form = TimedRunForm(data, racers=racers)
         return form.cleaned_data if form.is_valid() else form.errors["racer"][0]
 
     assert picked("VeraFast")["racer"] == alice
@@ -223,6 +225,32 @@ def test_the_racer_search_answers_its_timekeeper_with_at_most_ten_racer_names(
     assert client.get(search, {"q": "fast"}).json() == {"racers": ["VeraFast"]}
     assert client.get(search, {"q": "login"}).json() == {"racers": []}  # never a login name
     assert client.get(search, {"q": ""}).json() == {"racers": []}
+
+
+def test_an_organiser_times_only_their_races_participants_and_learns_of_nobody_else(
+    client, tracks, alice, bob, django_capture_on_commit_callbacks
+):
+    from tests.helpers.accounts import racer
+
+    carol = named(racer("carol"), "CarolQuick")  # on the console, not in alice's race
+    named(bob, "BobRapid")
+    race = event("Garage night", physical=True, public=False, season=None, organiser=alice)
+    race.participants.add(bob)
+    search = reverse("racing:timekeeper-racers", args=[race.slug])
+    client.force_login(alice)
+    assert client.get(search, {"q": "r"}).json() == {"racers": ["BobRapid"]}
+    page = reverse("racing:timekeeper", args=[race.slug])
+    refused = client.post(page, {"racer": "CarolQuick", "model_name": "m", "car": "3"}).text
+    unknown = client.post(page, {"racer": "Nobody", "model_name": "m", "car": "3"}).text
+    assert "No racer is called CarolQuick: check the spelling" in refused
+    assert "No racer is called Nobody: check the spelling" in unknown  # the same words
+    with pytest.raises(timing.TimingRefused, match="No racer is called CarolQuick"):
+        a_run(race, carol, alice)  # nor through the service: nothing made, nobody told
+    assert not Submission.objects.filter(racer=carol).exists()
+    assert (
+        client.post(page, {"racer": "bobrapid", "model_name": "m", "car": "3"}).status_code == 302
+    )
+    assert Submission.objects.get(event=race).racer == bob
 
 
 # The shortest lap, the longest, and laps far below the others (item 8)
