@@ -12,9 +12,12 @@ The checkers are shared by racer, not by check, so that a few racers (or a few a
 sending check after check cannot keep the others out: a racer has at most ``RACER_PLACES``
 checks in the pool, running or waiting (past that, ``Busy`` again, in words about their own
 checks), and a free checker takes the next check of the racer who has the fewest running, and
-among those of the one whose last check ended longest ago (or who came first): the racers take
-turns. A racer who waits is therefore served before any flooder's next check, and one racer holds
-a second checker only while nobody else waits.
+among those of the one whose last check started longest ago; a racer with no check started in
+the last ``SERVED_MEMORY`` seconds comes before all who had one (among them, who came first). The
+racers take turns, and a racer with nothing running is served by the next free checker ahead of
+every flooder's waiting check (issue 55: a flooder whose check ended before the bystander came
+went first before), and one racer holds a second checker only while nobody else waits.
+Re-scorings take turns by racer by the same rule (``analysis.selectors.rescorings_in_turn``).
 
 A check's thread waits on the sandbox's pipes; the racer's code itself runs in the sandbox's
 processes, under their own limits (``sandbox``). A check keeps running to its end when
@@ -26,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import threading
+import time
 from collections import Counter, deque
 from collections.abc import Callable, Hashable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -41,6 +45,9 @@ RETRY_AFTER = 5  # [s] what a racer turned away is asked to wait
 # racer who validates, then saves, need not wait between the two); no more, so that a flood
 # from a handful of accounts leaves the waiting line's other places to everyone else.
 RACER_PLACES = 2
+# [s] how long a racer's last check's start is remembered once they have nothing in the pool:
+# one who checks again within it is still behind a racer who has not checked since.
+SERVED_MEMORY = 600
 
 
 class Busy(Exception):
@@ -66,10 +73,11 @@ class _Pool:
         self._queues: dict[Hashable, deque[tuple[Future[Any], Callable[[], Any]]]] = {}
         self._placed: Counter[Hashable] = Counter()  # a racer's checks, running or waiting
         self._running: Counter[Hashable] = Counter()
-        # Each racer's turn: when their last check ended, or when they came if none has yet
-        # (while one runs, they wait behind those with fewer running anyway); forgotten once
-        # they have nothing in the pool, so that one who comes back is behind those waiting.
-        self._turn: dict[Hashable, int] = {}
+        # When each racer's last check started (time.monotonic), kept SERVED_MEMORY seconds
+        # after it: the least recently served waiting racer goes first, one never served (or
+        # not lately) before all of them.
+        self._served: dict[Hashable, float] = {}
+        self._came: dict[Hashable, int] = {}  # the order racers with checks waiting came in
         self._ticks = itertools.count(1)
         self._free = checkers
 
@@ -83,7 +91,7 @@ class _Pool:
             if self._placed[racer] >= RACER_PLACES:
                 raise Busy(own=True)
             self._placed[racer] += 1
-            self._turn.setdefault(racer, next(self._ticks))
+            self._came.setdefault(racer, next(self._ticks))
             self._queues.setdefault(racer, deque()).append((future, work))
             # A place is given back when the work ends, or when it is cancelled before it
             # starts, not when the racer stops waiting: racers who leave cannot pile work up.
@@ -94,14 +102,19 @@ class _Pool:
     def _dispatch(self) -> None:
         """Hand waiting checks to free checkers, fairest first (the module's docstring)."""
         while self._free and self._queues:
-            racer = min(self._queues, key=lambda r: (self._running[r], self._turn[r]))
+            racer = min(self._queues, key=self._turn)
             queue = self._queues[racer]
             future, work = queue.popleft()
             if not queue:
                 del self._queues[racer]
             self._free -= 1
             self._running[racer] += 1
+            self._served[racer] = time.monotonic()
             self.executor.submit(self._check, racer, future, work)
+
+    def _turn(self, racer: Hashable) -> tuple[int, float, int]:
+        """``racer``'s place in line for the next free checker: the least first."""
+        return (self._running[racer], self._served.get(racer, 0.0), self._came[racer])
 
     def _check(self, racer: Hashable, future: Future[Any], work: Callable[[], Any]) -> None:
         try:
@@ -114,7 +127,6 @@ class _Pool:
             with self._lock:
                 self._free += 1
                 self._running[racer] -= 1
-                self._turn[racer] = next(self._ticks)
                 self._release(racer)
                 self._dispatch()
 
@@ -139,7 +151,10 @@ class _Pool:
             if counts[racer] <= 0:
                 del counts[racer]
         if racer not in self._placed:
-            del self._turn[racer]
+            self._came.pop(racer, None)
+            forgotten = time.monotonic() - SERVED_MEMORY
+            for served in [r for r, at in self._served.items() if at < forgotten]:
+                del self._served[served]
 
 
 def _in_checker(work: Callable[[], T]) -> T:

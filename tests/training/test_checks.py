@@ -113,6 +113,34 @@ def test_a_racer_who_waits_is_served_before_any_flooders_next_check(one_checker)
     ]
 
 
+def test_a_racer_with_nothing_running_goes_before_a_flooder_served_lately(one_checker):
+    """Issue 55: a flooder whose check ended before a bystander came went before the bystander
+    (their turn was when they came back); now the racer served longest ago goes first."""
+    releases: dict[str, threading.Event] = {}
+    started: list[str] = []
+
+    def submit(name: str, racer: str):
+        releases[name] = threading.Event()
+
+        def work():
+            started.append(name)
+            releases[name].wait(10)
+            return name
+
+        return checkers.pool().submit(work, racer=racer)
+
+    first = submit("f1 a", "f1")
+    waiting = submit("f2 a", "f2")
+    releases["f1 a"].set()  # f1's check ends; f2's runs
+    assert first.result(timeout=10) == "f1 a"
+    again = submit("f1 b", "f1")  # f1 comes back before the bystander does
+    bystander = submit("bystander", "bystander")
+    for event in releases.values():
+        event.set()
+    assert [f.result(timeout=10) for f in (waiting, again, bystander)]
+    assert started == ["f1 a", "f2 a", "bystander", "f1 b"]
+
+
 def test_a_check_cancelled_while_it_waits_gives_its_place_back(small_pool):
     release = threading.Event()
     running = checkers.pool().submit(release.wait, racer="alice")

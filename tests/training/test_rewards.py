@@ -1,6 +1,7 @@
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import gymnasium
@@ -10,6 +11,7 @@ from django.urls import reverse
 import simulator.samples
 from tests.helpers.sandbox import driving
 from tests.services import ROOT
+from training import rewards
 from training.rewards import EXAMPLES, MAX_SOURCE_SIZE, reward_validate, static_problems
 
 CORPUS = sorted((Path(__file__).parent / "reward_corpus").glob("*.py"))
@@ -286,3 +288,25 @@ def test_a_misspelt_get_is_a_warning_naming_the_closest_real_key():
             "did you mean 'speed'?",
         ),
     ]
+
+
+def test_a_slow_function_holds_a_check_no_longer_than_the_samples_budget():
+    """Issue 55: each sample could take 5 s (a function that catches its own time limit
+    returned at 5 s, five times); now 1 s, training's limit, and the samples stop once
+    they have taken ``SAMPLES_BUDGET`` together, with a warning that says so."""
+    source = (
+        "def reward_function(params):\n"
+        "    try:\n"
+        "        while True:\n"
+        "            pass\n"
+        "    except BaseException:\n"
+        "        return 1.0\n"
+    )
+    started = time.monotonic()
+    result = rewards.reward_validate(source=source, track="rookie-loop")
+    took = time.monotonic() - started
+    assert result.valid
+    assert len(result.samples) < 5
+    (slow,) = [w for w in result.warnings if w.type == "slow"]
+    assert "were not run" in slow.message
+    assert took < rewards.SAMPLES_BUDGET + rewards.SAMPLE_TIMEOUT + 6  # the sandbox's start
