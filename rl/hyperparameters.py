@@ -40,9 +40,12 @@ class Setting:
         """``value`` in this setting's type, or ValueError with a racer's message."""
         if self.choices:
             if self.integer:
+                # int() of Infinity raises OverflowError (an import answered 500), and of 64.9
+                # gives 64: a choice is only a whole number that is one
                 try:
-                    value = int(value)
-                except (TypeError, ValueError):
+                    number = float(value)
+                    value = int(number) if number == int(number) else None
+                except (TypeError, ValueError, OverflowError):
                     value = None
             elif isinstance(value, str):
                 # simapp lower-cases the string settings (sagemaker_graph_manager.py:192-199)
@@ -57,6 +60,8 @@ class Setting:
             raise ValueError(f"{self.label} must be a number.")
         try:
             number = float(value)
+        except OverflowError:  # a whole number of hundreds of digits: no float holds it
+            number = math.inf
         except (TypeError, ValueError):
             raise ValueError(f"{self.label} must be a number.") from None
         if not math.isfinite(number) or not self.low <= number <= self.high:

@@ -21,6 +21,7 @@ from rl import hyperparameters as hp
 from simulator import config as sim
 from simulator import tracks as sim_tracks
 from training.models import (
+    SEEDS,
     Algorithm,
     BestCheckpointBy,
     CameraLens,
@@ -38,6 +39,7 @@ NAME = re.compile(r"^[A-Za-z0-9-]{1,64}$")
 MINUTES = (10, 1440)
 MAX_WORKERS = 4
 TRIALS = (3, 5)
+SEED_RANGE = f"A seed is a whole number from 0 to {SEEDS - 1}."  # a model's, as an evaluation's
 PENALTY_MAX = 10.0  # [s]
 
 
@@ -252,7 +254,12 @@ def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
     if set(extra) - known:
         errors["extra_tracks"] = "Choose extra tracks from the listed ones."
     clean["extra_tracks"] = extra
-    clean["seed"] = _integer(settings.get("seed", 0)) or 0
+    # An imported model's seed (its pitlane.json): one the trainer cannot take fails its training
+    # at once, and one the database cannot hold failed the import with a 500.
+    given = settings.get("seed")
+    clean["seed"] = 0 if given is None else _integer(given)
+    if clean["seed"] is None or not 0 <= clean["seed"] < SEEDS:
+        errors["seed"] = SEED_RANGE
     clean["best_checkpoint_by"] = settings.get("best_checkpoint_by") or BestCheckpointBy.PROGRESS
     if clean["best_checkpoint_by"] not in BestCheckpointBy.values:
         errors["best_checkpoint_by"] = "Pick the best checkpoint by progress, reward or lap time."

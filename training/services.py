@@ -601,7 +601,7 @@ def evaluation_start(
     clean = configuration.check_evaluation(settings, model=model)
     if seed is not None:
         if not 0 <= seed < SEEDS:
-            raise configuration.Invalid({"seed": "A seed is a whole number from 0 to 2147483647."})
+            raise configuration.Invalid({"seed": configuration.SEED_RANGE})
         clean["seed"] = seed
     with transaction.atomic():
         evaluation = evaluation_reserve(model=model, purpose=RLModel.Status.EVALUATING, **clean)
