@@ -11,7 +11,7 @@ import numpy as np
 from celery.exceptions import SoftTimeLimitExceeded
 from django.utils import timezone
 
-from analysis import lifecycle, summaries, traces
+from analysis import lifecycle, selectors, summaries, traces
 from analysis.models import Rescoring
 from analysis.records import Source
 from sandbox import Sandbox, SandboxFailure, SandboxUnavailable, verified
@@ -29,7 +29,18 @@ class Failed(Exception):
     """The re-scoring cannot finish; the message says why, in the racer's words."""
 
 
-def run(rescoring_id: int) -> None:
+def run_next() -> None:
+    """Run the queued re-scoring whose turn it is (``selectors.rescorings_in_turn``: racers take
+    turns), if any is left. Each re-scoring asked for queues one task, and each task runs the
+    next in turn rather than its own: one racer's line cannot hold another racer's for more than
+    one re-scoring. A task that finds none waiting (a redelivery) does nothing."""
+    for pk in selectors.rescorings_in_turn():
+        if run(pk):
+            return
+
+
+def run(rescoring_id: int) -> bool:
+    """Run the re-scoring ``rescoring_id`` if it still waits; whether this call took it up."""
     rescoring = (
         Rescoring.objects.select_related("job__model__track", "evaluation__model", "evaluation")
         .filter(pk=rescoring_id)
@@ -38,7 +49,7 @@ def run(rescoring_id: int) -> None:
     if rescoring is None or not lifecycle.RESCORING.move(
         rescoring, _R.RUNNING, only_from={_R.QUEUED}, started_at=timezone.now()
     ):
-        return  # deleted with its model, or already taken up (a redelivery)
+        return False  # deleted with its model, or taken up by another worker
     source = (
         Source.of_job(rescoring.job)
         if rescoring.job
@@ -62,6 +73,7 @@ def run(rescoring_id: int) -> None:
         lifecycle.RESCORING.move(
             rescoring, _R.DONE, finished_at=timezone.now(), log=lines[:LOG_LINES], **result
         )
+    return True
 
 
 def _fail(rescoring: Rescoring, why: str) -> None:

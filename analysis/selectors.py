@@ -3,13 +3,18 @@ racer picks, and single episodes read back from their trace."""
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
+from datetime import timedelta
 
 import numpy as np
+from django.db.models import Max
+from django.utils import timezone
 
 from analysis import summaries, traces
 from analysis.models import Rescoring
 from analysis.records import Source
+from common import turns
 from simulator import params as reward_params
 
 EPISODE_COLUMNS = (
@@ -24,6 +29,9 @@ EPISODE_COLUMNS = (
 )
 MAP_POINTS = 60_000  # the most steps one map draws: evenly spread over what was picked
 ROUND = 3  # decimals of a metre sent to the browser: a millimetre
+# [s] how long a racer's last re-scoring's start counts against them: one who asks again within
+# it waits behind a racer who has not had one since (common.turns).
+SERVED_MEMORY = 3600
 
 
 @dataclass(frozen=True)
@@ -195,3 +203,38 @@ def episode(source: Source, iteration: int, number: int) -> dict | None:
         "statuses": steps.status[rows].tolist(),
         "params": params,
     }
+
+
+def rescorings_in_turn() -> list[int]:
+    """The queued re-scorings' ids in the order the workers will take them up: racers take
+    turns (``common.turns``, as the reward checkers do), each racer's own first come first."""
+    queued = Rescoring.objects.filter(status=Rescoring.Status.QUEUED).order_by("created_at", "pk")
+    queues: dict[int, list[int]] = {}
+    came: dict[int, float] = {}
+    for pk, owner, created in queued.values_list("pk", "owner_id", "created_at"):
+        queues.setdefault(owner, []).append(pk)
+        came.setdefault(owner, created.timestamp())
+    if not queues:
+        return []
+    theirs = Rescoring.objects.filter(owner_id__in=queues)
+    running = Counter(
+        theirs.filter(status=Rescoring.Status.RUNNING).values_list("owner_id", flat=True)
+    )
+    since = timezone.now() - timedelta(seconds=SERVED_MEMORY)
+    served = {
+        owner: started.timestamp()
+        for owner, started in theirs.filter(started_at__gte=since)
+        .values("owner_id")
+        .annotate(last=Max("started_at"))
+        .values_list("owner_id", "last")
+    }
+    return turns.in_turn(queues, running=running, served=served, came=came)
+
+
+def rescoring_place(rescoring: Rescoring) -> int | None:
+    """How many re-scorings, of every racer, a worker takes up before ``rescoring``, if it
+    waits (0: it is next); None once it runs or has ended."""
+    if rescoring.status != Rescoring.Status.QUEUED:
+        return None
+    order = rescorings_in_turn()
+    return order.index(rescoring.pk) if rescoring.pk in order else None

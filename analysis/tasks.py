@@ -15,7 +15,9 @@ RESCORE_HARD_LIMIT = RESCORE_LIMIT + 60  # [s] its worker process is killed afte
     soft_time_limit=RESCORE_LIMIT,
     time_limit=RESCORE_HARD_LIMIT,
 )
-def rescore(rescoring_id: int) -> None:
+def rescore(rescoring_id: int | None = None) -> None:
+    """Run the next re-scoring in turn, by racer (``rescoring.run_next``): ``rescoring_id``,
+    the one whose asking queued this task, is not necessarily it."""
     from analysis import rescoring
 
-    rescoring.run(rescoring_id)
+    rescoring.run_next()

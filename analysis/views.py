@@ -166,6 +166,7 @@ def _rescoring(rescoring: Rescoring, source: Source) -> dict:
         "url": f"{_base(source)}rescorings/{rescoring.pk}/",
         "status": rescoring.status,
         "status_display": rescoring.get_status_display(),
+        "place": selectors.rescoring_place(rescoring),  # re-scorings taken up before it
         "first": rescoring.first,
         "last": rescoring.last,
         "steps": rescoring.steps,

@@ -13,11 +13,11 @@ sending check after check cannot keep the others out: a racer has at most ``RACE
 checks in the pool, running or waiting (past that, ``Busy`` again, in words about their own
 checks), and a free checker takes the next check of the racer who has the fewest running, and
 among those of the one whose last check started longest ago; a racer with no check started in
-the last ``SERVED_MEMORY`` seconds comes before all who had one (among them, who came first). The
-racers take turns, and a racer with nothing running is served by the next free checker ahead of
-every flooder's waiting check (issue 55: a flooder whose check ended before the bystander came
-went first before), and one racer holds a second checker only while nobody else waits.
-Re-scorings take turns by racer by the same rule (``analysis.selectors.rescorings_in_turn``).
+the last ``SERVED_MEMORY`` seconds comes before all who had one (among them, who came first):
+``common.turns``, the rule re-scorings take turns by too. A racer with nothing running is served
+by the next free checker ahead of every flooder's waiting check (issue 55: a flooder whose check
+ended before the bystander came went first before), and one racer holds a second checker only
+while nobody else waits.
 
 A check's thread waits on the sandbox's pipes; the racer's code itself runs in the sandbox's
 processes, under their own limits (``sandbox``). A check keeps running to its end when
@@ -37,6 +37,8 @@ from typing import Any, TypeVar
 
 from django.conf import settings
 from django.db import close_old_connections
+
+from common import turns
 
 T = TypeVar("T")
 
@@ -102,7 +104,9 @@ class _Pool:
     def _dispatch(self) -> None:
         """Hand waiting checks to free checkers, fairest first (the module's docstring)."""
         while self._free and self._queues:
-            racer = min(self._queues, key=self._turn)
+            racer = turns.next_racer(
+                list(self._queues), running=self._running, served=self._served, came=self._came
+            )
             queue = self._queues[racer]
             future, work = queue.popleft()
             if not queue:
@@ -111,10 +115,6 @@ class _Pool:
             self._running[racer] += 1
             self._served[racer] = time.monotonic()
             self.executor.submit(self._check, racer, future, work)
-
-    def _turn(self, racer: Hashable) -> tuple[int, float, int]:
-        """``racer``'s place in line for the next free checker: the least first."""
-        return (self._running[racer], self._served.get(racer, 0.0), self._came[racer])
 
     def _check(self, racer: Hashable, future: Future[Any], work: Callable[[], Any]) -> None:
         try:

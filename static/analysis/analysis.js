@@ -500,11 +500,19 @@ function chooseRewardFunction(form) {
   });
 }
 
+// Where a queued re-scoring stands: racers take turns, so the place is among every racer's.
+function waiting(place) {
+  if (place === null || place === undefined) return "Waiting for a re-scoring worker…";
+  if (place === 0) return "Waiting: yours is the next re-scoring a worker takes up.";
+  const others = place === 1 ? "1 re-scoring goes" : `${place} re-scorings go`;
+  return `Waiting: ${others} before yours (racers take turns).`;
+}
+
 async function follow(data) {
   const status = find("rescore-status");
   while (data.status === "QUEUED" || data.status === "RUNNING") {
     status.textContent = data.status === "QUEUED"
-      ? "Waiting for a simulation worker…"
+      ? waiting(data.place)
       : `Scoring: ${data.steps.toLocaleString()} of ${data.total_steps.toLocaleString()} steps.`;
     await new Promise((resolve) => setTimeout(resolve, 1000));
     const response = await fetch(data.url).catch(() => null);
