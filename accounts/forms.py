@@ -1,14 +1,18 @@
 from django import forms
 from django.conf import settings
+from django.contrib.auth.base_user import BaseUserManager
 
 from accounts.countries import COUNTRIES
+from accounts.email_changes import ADDRESS_TAKEN, EMAIL_LINK_DAYS, address_taken
 from accounts.models import RACER_NAME_RULE, AvatarColour, Profile
 from common.forms import RacerWords
 
 
 class ProfileForm(RacerWords, forms.ModelForm):
     """The racer's profile page: what the leaderboards show, and the email address that reset
-    links and notifications go to where the console sends email (``email_help``)."""
+    links and notifications go to where the console sends email (``email_help``). Changing the
+    address asks for the password, and an address belongs to one account
+    (``accounts.email_changes``)."""
 
     country = forms.ChoiceField(
         choices=[("", "Not shown"), *sorted(COUNTRIES.items(), key=lambda item: item[1])],
@@ -27,6 +31,13 @@ class ProfileForm(RacerWords, forms.ModelForm):
         required=False,
         label="Email address",
         error_messages={"invalid": "That is not an email address: it looks like name@example.org."},
+    )
+    password = forms.CharField(
+        required=False,
+        strip=False,
+        label="Current password",
+        widget=forms.PasswordInput(attrs={"autocomplete": "current-password"}),
+        help_text="Needed only to change your email address.",
     )
 
     class Meta:
@@ -50,6 +61,31 @@ class ProfileForm(RacerWords, forms.ModelForm):
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.fields["email"].help_text = email_help()
+        self.account = self.instance.user
+
+    def clean_email(self) -> str:
+        email = self.cleaned_data["email"].strip()
+        if email and email != self.account.email:
+            email = BaseUserManager.normalize_email(email)
+        if email != self.account.email and address_taken(email=email, user=self.account):
+            raise forms.ValidationError(ADDRESS_TAKEN)
+        return email
+
+    def clean(self) -> dict:
+        cleaned = super().clean()
+        email, password = cleaned.get("email"), cleaned.get("password", "")
+        if email is not None and email != self.account.email:
+            if not password:
+                self.add_error(
+                    "password", "Enter your current password to change your email address."
+                )
+            elif not self.account.check_password(password):
+                self.add_error(
+                    "password",
+                    "That is not your current password, so nothing was saved. Enter it again "
+                    "to change your email address.",
+                )
+        return cleaned
 
     def clean_racer_name(self) -> str:
         name = self.cleaned_data["racer_name"].strip()
@@ -76,4 +112,7 @@ def email_help() -> str:
             "goes here for now; never shown to other racers."
         )
     listed = " and ".join(sent)
-    return f"{listed[0].upper()}{listed[1:]} go here; never shown to other racers."
+    return (
+        f"{listed[0].upper()}{listed[1:]} go here; never shown to other racers. A new address "
+        f"takes over once you follow the link we email to it (within {EMAIL_LINK_DAYS} days)."
+    )

@@ -60,6 +60,13 @@ class Profile(models.Model):
     avatar_colour = models.CharField(
         max_length=16, choices=AvatarColour.choices, default=AvatarColour.TEAL
     )
+    # A new email address waits here until its racer follows the link sent to it
+    # (accounts.email_changes): mail goes only to the account's own, verified address.
+    pending_email = models.EmailField(blank=True, help_text="Not yet confirmed: nothing goes here.")
+    pending_email_token = models.CharField(
+        max_length=64, blank=True, help_text="SHA-256 of the confirmation link's token."
+    )
+    pending_email_sent_at = models.DateTimeField(null=True, blank=True)
 
     class Meta:
         constraints = [

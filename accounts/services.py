@@ -9,6 +9,7 @@ from django.contrib.auth.forms import PasswordResetForm
 from django.contrib.auth.models import AbstractBaseUser
 from django.db import IntegrityError, transaction
 
+from accounts.email_changes import EmailChange, email_change_request
 from accounts.models import RACER_NAME_MAX, RACER_NAME_MIN, AvatarColour, Profile
 
 
@@ -48,18 +49,19 @@ def profile_create(*, user: AbstractBaseUser) -> Profile:
 
 def profile_update(
     *, profile: Profile, racer_name: str, country: str, avatar_colour: str, email: str
-) -> Profile:
-    """Save what the racer chose on their profile page (already validated), and the email
-    address that password reset links and notifications go to."""
+) -> EmailChange:
+    """Save what the racer chose on their profile page (already validated, the password checked
+    where the email address changes), and the email address that password reset links and
+    notifications go to: at once, or pending its confirmation (``accounts.email_changes``).
+    Nothing is saved where another racer took the name (``RacerNameTaken``) or another account
+    the address (``AddressTaken``) since the form's check."""
     profile.racer_name, profile.country, profile.avatar_colour = racer_name, country, avatar_colour
     try:
         with transaction.atomic():
             profile.save(update_fields=["racer_name", "country", "avatar_colour"])
-            profile.user.email = email
-            profile.user.save(update_fields=["email"])
+            return email_change_request(profile=profile, email=email)
     except IntegrityError:
         raise RacerNameTaken(racer_name) from None
-    return profile
 
 
 def profile_ensure(*, user: AbstractBaseUser) -> Profile:

@@ -6,4 +6,5 @@ app_name = "accounts"
 
 urlpatterns = [
     path("profile/", views.profile, name="profile"),
+    path("email/confirm/<str:token>/", views.email_confirm, name="email-confirm"),
 ]

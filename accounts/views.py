@@ -3,8 +3,18 @@ from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.http import HttpRequest, HttpResponse
 from django.shortcuts import redirect, render
+from django.views.decorators.cache import never_cache
 
+from accounts.email_changes import (
+    EMAIL_LINK_DAYS,
+    AddressTaken,
+    EmailChange,
+    LinkRefused,
+    email_change_confirm,
+    pending_email_for_link,
+)
 from accounts.forms import ProfileForm
+from accounts.models import Profile
 from accounts.services import RacerNameTaken, profile_ensure, profile_update
 
 
@@ -17,16 +27,56 @@ def profile(request: HttpRequest) -> HttpResponse:
         request.POST or None, instance=current, initial={"email": request.user.email}
     )
     if request.method == "POST" and form.is_valid():
+        chosen = {name: form.cleaned_data[name] for name in PROFILE_CHOICES}
         try:
-            profile_update(profile=current, **form.cleaned_data)
+            change = profile_update(profile=current, **chosen)
         except RacerNameTaken:
             form.add_error("racer_name", "Another racer took that racer name just now.")
+        except AddressTaken:
+            form.add_error("email", "That address belongs to another account.")
         else:
-            messages.success(request, "Your profile is saved.")
+            messages.success(request, _saved_words(change, current))
             return redirect("accounts:profile")
     return render(
         request,
         "accounts/profile.html",
-        {"form": form, "reset_by_email": settings.PITLANE_PASSWORD_RESET_BY_EMAIL},
+        {
+            "form": form,
+            "reset_by_email": settings.PITLANE_PASSWORD_RESET_BY_EMAIL,
+            "link_days": EMAIL_LINK_DAYS,
+        },
         status=400 if form.errors else 200,
     )
+
+
+PROFILE_CHOICES = ("racer_name", "country", "avatar_colour", "email")
+
+
+def _saved_words(change: EmailChange, profile: Profile) -> str:
+    if change is not EmailChange.PENDING:
+        return "Your profile is saved."
+    until = (
+        f"until then, email still goes to {profile.user.email}"
+        if profile.user.email
+        else "until then, nothing is emailed to you"
+    )
+    return (
+        f"Your profile is saved. To make {profile.pending_email} your email address, follow the "
+        f"link we sent to it within {EMAIL_LINK_DAYS} days; {until}."
+    )
+
+
+@never_cache
+@login_required
+def email_confirm(request: HttpRequest, token: str) -> HttpResponse:
+    """The link sent to a new email address: it shows the address, and its button makes it
+    the logged-in racer's own (once, within its days, for the account that asked)."""
+    try:
+        if request.method == "POST":
+            address = email_change_confirm(user=request.user, token=token)
+            messages.success(request, f"{address} is now your email address.")
+            return redirect("accounts:profile")
+        address = pending_email_for_link(user=request.user, token=token)
+    except LinkRefused as refused:
+        return render(request, "accounts/email_confirm.html", {"refusal": str(refused)}, status=400)
+    return render(request, "accounts/email_confirm.html", {"address": address})
