@@ -120,20 +120,28 @@ class Held:
                 logger.warning("Rate limit %s not given back: %s", action, error)
 
 
-def hold(request: HttpRequest, *actions: str, key: str | None = None) -> Held:
+def hold(
+    request: HttpRequest, *actions: str, key: str | None = None, keys: dict[str, str] | None = None
+) -> Held:
     """For a POST: count it at once as an attempt at each of ``actions``, so that attempts made
     in parallel count each other before any outcome is known. ``limited``: the first of them it
-    is over, the attempt then given back to all; else the caller gives it back, once its outcome
-    is known, to those it does not count against (an import that arrives is not a refused one)."""
+    is over (or ``Unavailable``), the attempt then given back to all; else the caller gives it
+    back, once its outcome is known, to those it does not count against (an import that arrives
+    is not a refused one, a sign-in that succeeds not a failed one). Each action is counted by
+    its key in ``keys``, else by ``key`` (the signed-in racer where None)."""
     held = Held({})
     if request.method != "POST":
         return held
-    key = key or f"racer:{request.user.pk}"
     for action in actions:
-        usage = _counted(request, action, key)
+        by = (keys or {}).get(action) or key or f"racer:{request.user.pk}"
+        try:
+            usage = _counted(request, action, by)
+        except Unavailable as unavailable:
+            held.limited = held.limited or _refusing(request, unavailable)
+            break
         if usage is None:
             continue
-        held._counted[action] = _cache_key(action, key)
+        held._counted[action] = _cache_key(action, by)
         if usage["should_limit"] and held.limited is None:
             held.limited = _refusing(request, Limited(action, usage["time_left"]))
     if held.limited is not None:

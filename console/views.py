@@ -61,22 +61,39 @@ def signup(request: HttpRequest) -> HttpResponse:
     )
 
 
+SIGN_IN_LIMITS = ("sign-in-address", "sign-in-account")  # failed sign-ins, per address and name
+
+
 class SignInView(LoginView):
     """Django's sign-in, limited per login name and per address: past either limit the form
-    says how long to wait, and the password is not checked at all."""
+    says how long to wait, and the password is not checked at all. Only failures count: each
+    attempt is counted before its password is checked (so guesses sent together count each
+    other) and given back when it succeeds, so that a race day's racers behind one address
+    sign in as often as they need."""
 
     form_class = SignInForm
+    held: ratelimits.Held | None = None
 
     def post(self, request: HttpRequest, *args, **kwargs) -> HttpResponse:
         name = str(request.POST.get("username", "")).strip().lower()[:150]
-        limited = ratelimits.over(
-            request, "sign-in-address", ratelimits.address(request)
-        ) or ratelimits.over(request, "sign-in-account", f"name:{name}")
-        if limited:
+        self.held = ratelimits.hold(
+            request,
+            *SIGN_IN_LIMITS,
+            keys={
+                "sign-in-address": ratelimits.address(request),
+                "sign-in-account": f"name:{name}",
+            },
+        )
+        if limited := self.held.limited:
             form = self.get_form_class()(request, initial={"username": name})
             context = self.get_context_data(form=form, limited=limited)
             return self.render_to_response(context, status=limited.status)
         return super().post(request, *args, **kwargs)
+
+    def form_valid(self, form) -> HttpResponse:
+        if self.held is not None:
+            self.held.give_back(*SIGN_IN_LIMITS)
+        return super().form_valid(form)
 
 
 class ForgottenPasswordView(PasswordResetView):
