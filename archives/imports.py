@@ -17,8 +17,8 @@ DeepRacer's settings are mapped in ``archives.deepracer_settings``, an archive's
 text, JSON and YAML in ``archives.members``, the weights' formats in their own modules.
 
 Long because an import is one piece read together: the archive's hostile-input checks, the
-preview and its kept upload, the weights found and checked, the history, and the undo that
-leaves nothing behind a refused import.
+preview, the weights found and checked, the history, and the undo that leaves nothing behind a
+refused import. The upload kept for a preview's confirmation is ``archives.kept_uploads``.
 """
 
 from __future__ import annotations
@@ -26,7 +26,6 @@ from __future__ import annotations
 import heapq
 import logging
 import re
-import secrets
 import tarfile
 import zlib
 from dataclasses import dataclass, field
@@ -35,16 +34,12 @@ from pathlib import PurePosixPath
 from typing import IO, TYPE_CHECKING
 
 from django.contrib.auth.models import AbstractBaseUser
-from django.contrib.sessions.backends.base import SessionBase
-from django.core.files.storage import default_storage
-from django.core.files.uploadedfile import UploadedFile
 from django.db import transaction
 from django.utils import timezone
 from google.protobuf.message import DecodeError
 from safetensors import SafetensorError
 
 from archives import exports, history
-from common.transactions import outside_transaction
 from rl import hyperparameters, tfcheckpoint, tfgraph
 from training import artifacts, configuration, leases, lifecycle, rewards, services
 from training.models import (
@@ -117,9 +112,6 @@ COACH_CHECKPOINTS = (".coach_checkpoint", "coach_checkpoint")  # the second as r
 STEP = re.compile(r"(\d+)_Step-\d+\.ckpt$")  # rl_coach's checkpoint names: <N>_Step-<steps>.ckpt
 GRAPH = re.compile(r"model_(\d+)\.pb$")  # simapp's frozen graph of checkpoint N
 CAR_GRAPH = "agent/model.pb"  # the car archive's (exports.physical)
-KEPT_FOLDER = "imports/kept"  # in storage: archives kept between a racer's attempts
-KEPT_FOR = timedelta(hours=6)
-KEPT_SESSION_KEY = "training:kept-import"
 
 
 @dataclass
@@ -390,65 +382,6 @@ def _preview_problems(
     except configuration.Invalid as invalid:
         return dict(invalid.errors)
     return {}
-
-
-@dataclass(frozen=True)
-class KeptUpload:
-    """An archive the racer uploaded to a form that had to be corrected, kept in storage so that
-    they need not choose it again (a browser cannot fill a file input in)."""
-
-    token: str
-    filename: str
-    name: str  # in storage
-
-    def open(self) -> IO[bytes]:
-        return default_storage.open(self.name, "rb")
-
-
-def upload_keep(*, session: SessionBase, upload: UploadedFile) -> KeptUpload:
-    """Keep ``upload`` for the racer's next attempt (replacing one kept before); kept archives
-    older than ``KEPT_FOR`` are deleted on the way, whoever left them."""
-    outside_transaction("An uploaded archive kept in storage")
-    upload_discard(session=session)
-    _delete_stale_uploads()
-    token = secrets.token_urlsafe(16)
-    upload.seek(0)
-    name = default_storage.save(f"{KEPT_FOLDER}/{token}.tar.gz", upload)
-    filename = PurePosixPath(upload.name or "model.tar.gz").name[:120]
-    session[KEPT_SESSION_KEY] = {"token": token, "filename": filename, "name": name}
-    return KeptUpload(token, filename, name)
-
-
-def upload_kept(*, session: SessionBase, token: str) -> KeptUpload | None:
-    """The archive kept for this racer under ``token`` (the form's hidden field), if it still is."""
-    kept = session.get(KEPT_SESSION_KEY)
-    if not kept or not token or not secrets.compare_digest(kept["token"], token):
-        return None
-    if not default_storage.exists(kept["name"]):
-        return None
-    return KeptUpload(kept["token"], kept["filename"], kept["name"])
-
-
-def upload_discard(*, session: SessionBase) -> None:
-    """Forget, and delete, the archive kept for this racer."""
-    kept = session.pop(KEPT_SESSION_KEY, None)
-    if kept and default_storage.exists(kept["name"]):
-        default_storage.delete(kept["name"])
-
-
-def _delete_stale_uploads() -> None:
-    try:
-        _, names = default_storage.listdir(KEPT_FOLDER)
-    except FileNotFoundError:
-        return
-    oldest = timezone.now() - KEPT_FOR
-    for file in names:
-        name = f"{KEPT_FOLDER}/{file}"
-        try:
-            if default_storage.get_modified_time(name) < oldest:
-                default_storage.delete(name)
-        except (FileNotFoundError, NotImplementedError):
-            continue
 
 
 def read_archive(archive: IO[bytes]) -> Members:

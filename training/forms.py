@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from django import forms
 
 from archives import imports
+from archives.models import KeptUpload
 from common.forms import RacerWords
 from rl import hyperparameters
 from simulator import config as sim
@@ -49,7 +50,7 @@ class ModelImportForm(RacerWords, forms.Form):
     )
     kept = forms.CharField(required=False, widget=forms.HiddenInput)
 
-    def __init__(self, *args, owner, kept: imports.KeptUpload | None = None, **kwargs) -> None:
+    def __init__(self, *args, owner, kept: KeptUpload | None = None, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self.owner = owner
         self.kept_upload = kept
@@ -73,7 +74,7 @@ class ModelImportForm(RacerWords, forms.Form):
             raise forms.ValidationError(f"The archive is over {imports.size(imports.MAX_ARCHIVE)}.")
         return archive
 
-    def keep(self, kept: imports.KeptUpload | None) -> None:
+    def keep(self, kept: KeptUpload | None) -> None:
         """Show ``kept`` (or nothing) as the archive the next attempt uses."""
         self.kept_upload = kept
         self.data = self.data.copy()
@@ -107,9 +108,7 @@ class ModelImportConfirmForm(RacerWords, forms.Form):
         limit(self.fields["max_minutes"], *configuration.MINUTES, step=1)
 
     @classmethod
-    def of(
-        cls, preview: imports.ImportPreview, kept: imports.KeptUpload
-    ) -> "ModelImportConfirmForm":
+    def of(cls, preview: imports.ImportPreview, kept: KeptUpload) -> "ModelImportConfirmForm":
         """The preview's settings as the form's values, its problems on their fields."""
         settings = preview.settings
         form = cls({"kept": kept.token, **{key: settings[key] for key in imports.PREVIEW_CHANGES}})

@@ -69,10 +69,11 @@ def resume_lapsed() -> list[str]:
     """Send a trainer for each job whose run died (``leases.lapsed_claim``), and a simulation
     worker for each evaluation or race whose run died (``leases.lapsed_evaluations``); what was
     sent for, in words for the log; then what lost its task while queued (``resend_lost``),
-    and the imports that died storing their files (``imports.abandoned_imports_remove``).
+    and the imports that died storing their files (``imports.abandoned_imports_remove``), and
+    the uploads kept for an import that expired (``kept_uploads.uploads_expire``).
     Every worker calls it every few seconds (``console.workers``), so the work goes on
     whichever machines are left."""
-    from archives import imports
+    from archives import imports, kept_uploads
     from training import leases
 
     sent = []
@@ -82,7 +83,8 @@ def resume_lapsed() -> list[str]:
     for evaluation in leases.lapsed_evaluations():
         _evaluation_send(evaluation)
         sent.append(f"evaluation {evaluation.pk} lost its simulation worker; it is driven again")
-    return sent + resend_lost() + imports.abandoned_imports_remove()
+    removed = imports.abandoned_imports_remove() + kept_uploads.uploads_expire()
+    return sent + resend_lost() + removed
 
 
 def resend_lost() -> list[str]:

@@ -7,6 +7,7 @@ urlpatterns = [
     path("models/", views.model_list, name="model-list"),
     path("models/create/", views.model_create, name="model-create"),
     path("models/import/", views.model_import, name="model-import"),
+    path("models/import/cancel/", views.model_import_cancel, name="model-import-cancel"),
     path("models/name-check/", views.model_name_check, name="model-name-check"),
     path("models/<int:pk>/", views.model_detail, name="model-detail"),
     path("models/<int:pk>/stop/", views.model_stop, name="model-stop"),

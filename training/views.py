@@ -28,7 +28,8 @@ from django.urls import reverse
 from django.utils.cache import patch_cache_control
 from django.views.decorators.http import require_POST, require_safe
 
-from archives import exports, imports, logs_archive
+from archives import exports, imports, kept_uploads, logs_archive
+from archives.models import KEPT_FOR, KeptUpload
 from common import ratelimits
 from common.downloads import file_response
 from common.refusals import Refused
@@ -600,9 +601,21 @@ async def model_import(request: HttpRequest) -> HttpResponse:
 
 
 def _model_import_blank(request: HttpRequest) -> HttpResponse:
-    imports.upload_discard(session=request.session)
-    form = ModelImportForm(owner=request.user)
+    """The form, with the archive kept for the racer's next attempt, if one waits."""
+    kept = kept_uploads.upload_held(racer=request.user)
+    initial = {"kept": kept.token} if kept else {}
+    form = ModelImportForm(owner=request.user, kept=kept, initial=initial)
     return render(request, "training/model_import.html", {"form": form})
+
+
+@login_required
+@require_POST
+def model_import_cancel(request: HttpRequest) -> HttpResponse:
+    """Delete the archive kept for the racer's import (a preview or a form to correct)."""
+    kept = kept_uploads.upload_discard(racer=request.user)
+    if kept is not None:
+        messages.success(request, f"Cancelled: {kept.filename} is deleted, nothing was imported.")
+    return redirect("training:model-import")
 
 
 class _ModelImportAttempt:
@@ -613,7 +626,7 @@ class _ModelImportAttempt:
         self.request = request
         self.work = None
         self.outcome: imports.Imported | imports.ImportPreview | Exception | None = None
-        self.kept = imports.upload_kept(session=request.session, token=request.POST.get("kept", ""))
+        self.kept = kept_uploads.upload_kept(racer=request.user, token=request.POST.get("kept", ""))
         self.confirm = ModelImportConfirmForm(request.POST) if "confirm" in request.POST else None
         posted = (
             (request.POST, request.FILES)
@@ -642,7 +655,7 @@ class _ModelImportAttempt:
         owner, kept = self.request.user, self.kept
 
         def work() -> imports.Imported | imports.ImportPreview:
-            with nullcontext(upload) if upload else kept.open() as archive:
+            with nullcontext(upload) if upload else kept_uploads.upload_open(kept) as archive:
                 return imports.import_start(owner=owner, archive=archive, name=name, **step)
 
         return work
@@ -655,7 +668,7 @@ class _ModelImportAttempt:
         _import_counted(self.held, outcome)
         refused = False
         if isinstance(outcome, imports.Imported):
-            imports.upload_discard(session=request.session)
+            kept_uploads.upload_discard(racer=request.user)
             messages.success(
                 request,
                 _imported_message(outcome.model)
@@ -678,10 +691,10 @@ class _ModelImportAttempt:
         elif isinstance(outcome, Exception):
             form.add_error(None, _check_failed(outcome))
         if refused or ("archive" in form.errors and upload is not None):
-            imports.upload_discard(session=request.session)  # the racer must choose another
+            kept_uploads.upload_discard(racer=request.user)  # the racer must choose another
             form.keep(None)
         elif upload is not None:
-            form.keep(imports.upload_keep(session=request.session, upload=upload))
+            form.keep(self._keep(upload))
         elif self.confirm is not None:
             form.keep(self.kept)
         response = render(request, "training/model_import.html", {"form": form}, status=400)
@@ -692,7 +705,12 @@ class _ModelImportAttempt:
     def _preview(self, preview: imports.ImportPreview, upload) -> HttpResponse:
         """What the import would create, to confirm or change: the archive kept for it."""
         request = self.request
-        kept = imports.upload_keep(session=request.session, upload=upload) if upload else self.kept
+        kept = self.kept
+        if upload is not None:
+            try:
+                kept = kept_uploads.upload_keep(racer=request.user, upload=upload)
+            except kept_uploads.UploadNotKept as refused:
+                return self._not_kept(refused)
         confirm = self.confirm
         if confirm is None:
             confirm = ModelImportConfirmForm.of(preview, kept)
@@ -714,11 +732,30 @@ class _ModelImportAttempt:
         status = 400 if confirm.errors else 200
         return render(request, "training/model_import.html", context, status=status)
 
+    def _keep(self, upload) -> KeptUpload | None:
+        """``upload`` kept for the next attempt, or its refusal said by the archive."""
+        try:
+            return kept_uploads.upload_keep(racer=self.request.user, upload=upload)
+        except kept_uploads.UploadNotKept as refused:
+            self.form.add_error("archive", str(refused))
+            return None
+
+    def _not_kept(self, refused: kept_uploads.UploadNotKept) -> HttpResponse:
+        """The form again (the name as typed), saying why the archive to confirm is not kept."""
+        form = self.form
+        form.add_error("archive", str(refused))
+        form.keep(None)
+        status = 400 if refused.retry_after is None else 503
+        response = render(self.request, "training/model_import.html", {"form": form}, status=status)
+        if refused.retry_after is not None:
+            response["Retry-After"] = str(refused.retry_after)
+        return response
+
 
 KEPT_GONE = (
     f"The archive you uploaded is no longer kept (it is kept for "
-    f"{imports.KEPT_FOR.total_seconds() / 3600:g} hours, in this browser's session): choose it "
-    "again."
+    f"{KEPT_FOR.total_seconds() / 3600:g} hour after you upload it, until you import it, "
+    "cancel or log out): choose it again."
 )
 
 

@@ -208,6 +208,9 @@ PITLANE_CHECKS_WAITING = env.int("PITLANE_CHECKS_WAITING", 8, minimum=0)
 # (archives.imports.MAX_ARCHIVE, 256 MiB, with room for the form around it).
 PITLANE_MAX_BODY = env.int("PITLANE_MAX_BODY", 10 * 2**20, minimum=2**20)  # [bytes]
 PITLANE_MAX_IMPORT_BODY = env.int("PITLANE_MAX_IMPORT_BODY", 257 * 2**20, minimum=2**20)  # [bytes]
+# All racers' uploads kept for an import's next step (archives.kept_uploads) together: past it
+# a new one is refused in words until one is confirmed, cancelled or expires.
+PITLANE_KEPT_UPLOADS_MAX = env.int("PITLANE_KEPT_UPLOADS_MAX", 2 * 2**30, minimum=2**20)  # [bytes]
 # The queues a complete deployment serves; /healthz reports any that no worker consumes. Each has
 # a worker (a pool of processes) of its own, on one machine too (console.supervisor), so that
 # no kind of work can take the processes another waits on: trainers never hold the places their

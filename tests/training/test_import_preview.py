@@ -12,6 +12,7 @@ from django.core.files.uploadedfile import SimpleUploadedFile
 from django.urls import reverse
 
 from archives import imports
+from archives.models import KeptUpload
 from tests.helpers.archives import (
     CHECKED_IMPORT,
     car_archive,
@@ -221,6 +222,7 @@ def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, track
         "counter-clockwise." in model.import_notes
     )
     assert not artifacts.default_storage.exists(kept.name)
+    assert not KeptUpload.objects.exists()  # nor its bytes counted against anyone
 
     # A preview confirmed after its archive is gone asks for the archive again, in words.
     response = client.post(reverse("training:model-import"), {**posted, "name": "another"})
