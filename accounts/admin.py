@@ -2,10 +2,13 @@
 for a racer who forgot theirs (the console's "Forgot your password?" page sends them here where
 the site sends no email)."""
 
+from django import forms
 from django.contrib import admin
 from django.contrib.auth.admin import UserAdmin
+from django.contrib.auth.forms import UserChangeForm
 from django.contrib.auth.models import User
 
+from accounts.email_changes import ADDRESS_TAKEN, address_taken
 from accounts.models import Profile
 
 STAFF_RESET_HINT = (
@@ -22,7 +25,19 @@ class ProfileInline(admin.StackedInline):
     fields = ["racer_name", "country", "avatar_colour"]
 
 
+class RacerChangeForm(UserChangeForm):
+    """Staff set an address at once (they are trusted, no link is sent), but not one that
+    another account has, as on the racer's profile (``accounts.email_changes``)."""
+
+    def clean_email(self) -> str:
+        email = self.cleaned_data.get("email", "")
+        if email != self.instance.email and address_taken(email=email, user=self.instance):
+            raise forms.ValidationError(ADDRESS_TAKEN)
+        return email
+
+
 class RacerAdmin(UserAdmin):
+    form = RacerChangeForm
     inlines = [ProfileInline]
     list_display = ["username", "racer_name", "email", "is_staff", "last_login"]
     list_select_related = ["profile"]

@@ -241,3 +241,34 @@ def test_removing_the_address_needs_the_password_and_tells_the_old_one(
     assert User.objects.get(pk=alice.pk).email == ""
     (notice,) = mail.outbox
     assert notice.to == ["old@example.org"] and "was removed" in notice.body
+
+
+def test_staff_cannot_give_one_racers_address_to_another_in_the_admin(client, alice, bob, stella):
+    with_address(bob, "bob@example.org")
+    stella.is_superuser = True
+    stella.save()
+    client.force_login(stella)
+    url = reverse("admin:auth_user_change", args=[alice.pk])
+    form = {
+        "username": "alice",
+        "email": "BOB@example.org",
+        "is_active": "on",
+        "date_joined_0": "2026-11-29",
+        "date_joined_1": "04:00:00",
+        "profile-TOTAL_FORMS": "1",
+        "profile-INITIAL_FORMS": "1",
+        "profile-MIN_NUM_FORMS": "0",
+        "profile-MAX_NUM_FORMS": "1",
+        "profile-0-id": str(alice.profile.pk),
+        "profile-0-user": str(alice.pk),
+        "profile-0-racer_name": "alice",
+        "profile-0-country": "",
+        "profile-0-avatar_colour": "teal",
+    }
+    response = client.post(url, form)
+    assert (
+        response.status_code == 200 and "That address belongs to another account." in response.text
+    )
+    assert User.objects.get(pk=alice.pk).email == ""
+    assert client.post(url, {**form, "email": "alice@example.org"}).status_code == 302
+    assert User.objects.get(pk=alice.pk).email == "alice@example.org"
