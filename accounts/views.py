@@ -6,6 +6,7 @@ from django.shortcuts import redirect, render
 from django.views.decorators.cache import never_cache
 
 from accounts.email_changes import (
+    ADDRESS_TAKEN,
     EMAIL_LINK_DAYS,
     AddressTaken,
     EmailChange,
@@ -16,6 +17,9 @@ from accounts.email_changes import (
 from accounts.forms import ProfileForm
 from accounts.models import Profile
 from accounts.services import RacerNameTaken, profile_ensure, profile_update
+
+# What profile_update saves; the password is only the form's to check.
+PROFILE_CHOICES = ("racer_name", "country", "avatar_colour", "email")
 
 
 @login_required
@@ -33,7 +37,7 @@ def profile(request: HttpRequest) -> HttpResponse:
         except RacerNameTaken:
             form.add_error("racer_name", "Another racer took that racer name just now.")
         except AddressTaken:
-            form.add_error("email", "That address belongs to another account.")
+            form.add_error("email", ADDRESS_TAKEN)
         else:
             messages.success(request, _saved_words(change, current))
             return redirect("accounts:profile")
@@ -47,9 +51,6 @@ def profile(request: HttpRequest) -> HttpResponse:
         },
         status=400 if form.errors else 200,
     )
-
-
-PROFILE_CHOICES = ("racer_name", "country", "avatar_colour", "email")
 
 
 def _saved_words(change: EmailChange, profile: Profile) -> str:
