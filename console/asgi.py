@@ -12,12 +12,15 @@ from channels.auth import AuthMiddlewareStack  # noqa: E402
 from channels.routing import ProtocolTypeRouter, URLRouter  # noqa: E402
 from channels.security.websocket import AllowedHostsOriginValidator  # noqa: E402
 
+from console import daphne_body  # noqa: E402
 from console.bodylimit import BodyLimit  # noqa: E402
 from console.routing import websocket_urlpatterns  # noqa: E402
 
+# Daphne loads this module before it listens: its requests keep a body only to its limit, on disk.
+daphne_body.install()
 application = ProtocolTypeRouter(
     {
-        "http": BodyLimit(django_asgi_app),
+        "http": daphne_body.BodyFromFile(BodyLimit(django_asgi_app)),
         "websocket": AllowedHostsOriginValidator(
             AuthMiddlewareStack(URLRouter(websocket_urlpatterns))
         ),

@@ -5,7 +5,9 @@ or middleware can look at it, and Daphne sets no limit, so a client could otherw
 server take gigabytes. ``BodyLimit`` wraps the HTTP application: a body whose Content-Length is
 over the limit is refused at once, and one sent in chunks as soon as the chunks pass it, with
 413 and a sentence saying the limit. Every page takes ``PITLANE_MAX_BODY``; the model import,
-the one large upload, takes ``PITLANE_MAX_IMPORT_BODY``.
+the one large upload, takes ``PITLANE_MAX_IMPORT_BODY``. Under Daphne, ``console.daphne_body``
+refuses such a body earlier still, as it arrives, before Twisted keeps any more of it; this stays
+for any other server.
 """
 
 from __future__ import annotations
@@ -65,13 +67,18 @@ class BodyLimit:
             await _refuse(send, limit)
 
 
-async def _refuse(send, limit: int) -> None:
+def refusal_page(limit: int) -> bytes:
+    """The page a 413 answers with: the limit, in words (Daphne's refusal says the same)."""
     size = f"{limit / 2**20:g} MiB" if limit >= 2**20 else f"{limit:,} bytes"
-    body = (
+    return (
         "<!doctype html><title>Too large</title><h1>That is too large to send</h1>"
         f"<p>The console takes at most {escape(size)} in one request here. Nothing was saved: "
         "go back and send something smaller.</p>"
     ).encode()
+
+
+async def _refuse(send, limit: int) -> None:
+    body = refusal_page(limit)
     await send(
         {
             "type": "http.response.start",

@@ -1,0 +1,169 @@
+"""The real web server (Daphne, as `make run` starts it) keeps a body only to its limit, on disk:
+300 MiB sent to a page is refused at once and leaves its memory flat, and a large allowed body
+neither swells it nor holds up other requests (console.daphne_body)."""
+
+from __future__ import annotations
+
+import select
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from django.urls import reverse
+
+from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
+
+pytestmark = [pytest.mark.slow, pytest.mark.django_db]
+
+MiB = 2**20
+PIECE = bytes(MiB)  # the test's whole body in memory: one piece, sent again and again
+
+
+class WebServer:
+    def __init__(self, process: ServiceProcess, port: int) -> None:
+        self.process = process
+        self.port = port
+
+    def memory(self, field: str) -> int:
+        """[bytes] VmRSS (now) or VmHWM (the peak so far) of the Daphne process."""
+        for line in Path(f"/proc/{self.process.pid}/status").read_text().splitlines():
+            if line.startswith(f"{field}:"):
+                return int(line.split()[1]) * 1024
+        raise LookupError(field)
+
+
+@pytest.fixture(scope="module")
+def web_server(test_database, logs_dir) -> Iterator[WebServer]:
+    """A Daphne of this module's own (the suite's ``daphne_server``, but its process is needed)."""
+    port = free_port()
+    process = ServiceProcess(
+        python_module("daphne", "-b", "127.0.0.1", "-p", str(port), "console.asgi:application"),
+        env=service_env(test_database),
+        log=logs_dir / "daphne-body.log",
+    )
+
+    def listening() -> bool:
+        process.ensure_running()
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+            return True
+        except OSError:
+            return False
+
+    try:
+        wait_for(listening, "Daphne to listen")
+        server = WebServer(process, port)
+        get(server, "/healthz")  # Django loaded, the first request's imports done
+        yield server
+    finally:
+        process.stop()
+
+
+def get(server: WebServer, path: str) -> bytes:
+    with socket.create_connection(("127.0.0.1", server.port), timeout=30) as connection:
+        request = f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n"
+        connection.sendall(request.encode())
+        return read_all(connection)
+
+
+def read_all(connection: socket.socket) -> bytes:
+    answer = b""
+    try:
+        while data := connection.recv(65536):
+            answer += data
+    except ConnectionResetError:
+        pass
+    return answer
+
+
+def post(server: WebServer, path: str, size: int, *, chunked: bool = False) -> tuple[bytes, int]:
+    """POST ``size`` bytes to ``path`` a MiB at a time, with its Content-Length or in chunks,
+    reading between pieces; (the answer, the bytes sent by the time it came)."""
+    with socket.create_connection(("127.0.0.1", server.port), timeout=30) as connection:
+        framing = "Transfer-Encoding: chunked" if chunked else f"Content-Length: {size}"
+        connection.sendall(
+            f"POST {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n{framing}\r\n"
+            "Content-Type: multipart/form-data; boundary=pitlane\r\n\r\n".encode()
+        )
+        sent = 0
+        try:
+            while sent < size and not select.select([connection], [], [], 0)[0]:
+                piece = PIECE[: size - sent]
+                connection.sendall(b"%x\r\n%b\r\n" % (len(piece), piece) if chunked else piece)
+                sent += len(piece)
+            if chunked and sent == size:
+                connection.sendall(b"0\r\n\r\n")
+        except (BrokenPipeError, ConnectionResetError):
+            pass  # the server answered and closed: its answer is still to read
+        return read_all(connection), sent
+
+
+def test_300_mib_to_a_page_is_refused_at_once_and_the_server_stays_small(web_server):
+    before = web_server.memory("VmHWM")
+    started = time.monotonic()
+    answer, sent = post(web_server, reverse("login"), 300 * MiB)
+    assert answer.startswith(b"HTTP/1.1 413 ")
+    assert b"at most 10 MiB" in answer
+    assert time.monotonic() - started < 5
+    assert sent < 100 * MiB  # answered long before the body was sent
+    assert web_server.memory("VmHWM") - before < 50 * MiB
+
+
+def test_a_body_in_chunks_is_refused_once_it_passes_the_limit(web_server):
+    before = web_server.memory("VmHWM")
+    answer, sent = post(web_server, reverse("login"), 300 * MiB, chunked=True)
+    assert answer.startswith(b"HTTP/1.1 413 ")
+    assert b"Nothing was saved" in answer
+    assert 10 * MiB <= sent < 100 * MiB
+    assert web_server.memory("VmHWM") - before < 50 * MiB
+
+
+def test_the_largest_import_reaches_django_and_the_server_stays_small_and_answers(web_server):
+    """An allowed body of the import's limit (257 MiB) is read to disk and handed to Django (which
+    refuses a POST with no CSRF cookie, after reading it); /healthz answers within a second
+    throughout, and the server's peak memory grows by less than 50 MiB."""
+    before = web_server.memory("VmHWM")
+    outcome = {}
+
+    def send() -> None:
+        outcome["answer"], _ = post(web_server, reverse("training:model-import"), 257 * MiB)
+
+    sender = threading.Thread(target=send)
+    sender.start()
+    waits = []
+    while sender.is_alive():
+        started = time.monotonic()
+        assert get(web_server, "/healthz").startswith(b"HTTP/1.1 ")
+        waits.append(time.monotonic() - started)
+        time.sleep(0.05)
+    sender.join()
+    assert outcome["answer"].startswith(b"HTTP/1.1 403 ")  # Django's CSRF refusal: no 413
+    assert len(waits) > 3 and max(waits) < 1.0
+    assert web_server.memory("VmHWM") - before < 50 * MiB
+
+
+def test_a_multipart_body_within_the_limit_reaches_django_whole(web_server):
+    """The CSRF token comes last, after 8 MiB of a file: the sign-in page accepts it (and says the
+    password is wrong) only if the whole body arrived, through Django's own upload handlers."""
+    secret = "p" * 32  # a CSRF cookie's secret, which the form may send as it is
+    body = (
+        b'--pitlane\r\nContent-Disposition: form-data; name="file"; filename="a.bin"\r\n\r\n'
+        + bytes(8 * MiB)
+        + b'\r\n--pitlane\r\nContent-Disposition: form-data; name="username"\r\n\r\nnobody'
+        + b'\r\n--pitlane\r\nContent-Disposition: form-data; name="password"\r\n\r\nwrong'
+        + b'\r\n--pitlane\r\nContent-Disposition: form-data; name="csrfmiddlewaretoken"\r\n\r\n'
+        + secret.encode()
+        + b"\r\n--pitlane--\r\n"
+    )
+    with socket.create_connection(("127.0.0.1", web_server.port), timeout=30) as connection:
+        connection.sendall(
+            f"POST {reverse('login')} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n"
+            f"Cookie: csrftoken={secret}\r\nContent-Length: {len(body)}\r\n"
+            "Content-Type: multipart/form-data; boundary=pitlane\r\n\r\n".encode()
+            + body
+        )
+        answer = read_all(connection)
+    assert answer.startswith(b"HTTP/1.1 200 "), answer[:300]
