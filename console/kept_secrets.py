@@ -15,7 +15,7 @@ from pathlib import Path
 
 def kept_secret(path: Path) -> str:
     """The secret kept in ``path``, generated (URL-safe, 50 random bytes) if there is none."""
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # var/: console.private_files
     try:
         descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     except FileExistsError:

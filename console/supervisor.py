@@ -41,6 +41,7 @@ from django.core.management import call_command
 
 from common.redis_client import redis_client
 from console.env import _redact, env
+from console.private_files import data_dir_private, files_private, private_dir
 from console.workers import live_workers
 
 STOP_GRACE = 15.0  # [s] between SIGTERM and SIGKILL
@@ -133,8 +134,10 @@ class Supervisor:
     def run(self) -> int:
         """Start everything, serve (restarting a child that dies) until Ctrl-C, then stop
         everything."""
-        self.var_dir.mkdir(parents=True, exist_ok=True)
+        files_private()  # what it and its children create under var/ is their owner's alone
+        private_dir(self.var_dir)
         with _InstanceLock(self.var_dir):
+            data_dir_private(self.var_dir)  # what an earlier install left readable to others
             _check_port(self.host, self.port, "the web server", "PITLANE_PORT")
             if self.local_redis_port is not None:
                 _check_port("127.0.0.1", self.local_redis_port, "Redis", "PITLANE_REDIS_PORT")

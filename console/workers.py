@@ -13,11 +13,13 @@ import logging
 import os
 import threading
 import time
+from pathlib import Path
 
 import redis
 from celery import signals
 
 from common.redis_client import redis_client
+from console.private_files import files_private, temporary_uploads_sweep
 
 logger = logging.getLogger(__name__)
 
@@ -33,6 +35,14 @@ def live_workers(client: redis.Redis) -> list[dict]:
     """The workers whose heartbeat has not expired: hostname, pid, queues, started_at."""
     keys = sorted(client.scan_iter(match=f"{KEY_PREFIX}*", count=100))
     return [json.loads(value) for value in client.mget(keys) if value] if keys else []
+
+
+@signals.celeryd_init.connect
+@signals.beat_init.connect
+def _files_private(sender, **kwargs) -> None:
+    """A worker or scheduler started on its own (not by ``make run``'s supervisor, whose umask
+    its children inherit) creates its files under var/ for its owner only, too."""
+    files_private()
 
 
 @signals.worker_ready.connect
@@ -70,6 +80,7 @@ def _beat(record: dict) -> None:
         if time.monotonic() - resumed_at >= RESUME_EVERY:
             resumed_at = time.monotonic()
             _resume_lapsed()
+            _sweep_temporary_uploads()
         if not checked:
             record["sandbox"] = _check_sandbox()
             checked = True
@@ -94,6 +105,18 @@ def _resume_lapsed() -> None:
         logger.warning("Could not look for work that lost its worker: %s", error)
     finally:
         close_old_connections()
+
+
+def _sweep_temporary_uploads() -> None:
+    """Delete the temporary uploads a killed web server left on this machine
+    (``private_files.temporary_uploads_sweep``)."""
+    from django.conf import settings
+
+    try:
+        for deleted in temporary_uploads_sweep(Path(settings.FILE_UPLOAD_TEMP_DIR)):
+            logger.warning("A %s", deleted)
+    except OSError as error:
+        logger.warning("Could not sweep the temporary uploads: %s", error)
 
 
 def _check_sandbox() -> dict:

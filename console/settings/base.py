@@ -15,6 +15,7 @@ from celery.schedules import crontab
 
 from console.env import env
 from console.kept_secrets import kept_secret
+from console.private_files import private_dir
 
 # OpenVINO (the physical car's download) reports usage to Intel over the network, and writes under
 # ~/intel, as soon as it is imported, unless its telemetry package is missing; then it uses its own
@@ -297,6 +298,12 @@ STATIC_ROOT = VAR_DIR / "static"
 STATICFILES_DIRS = [BASE_DIR / "static"]
 MEDIA_ROOT = VAR_DIR / "media"
 MEDIA_URL = "/media/"
+# Uploads and what is stored from them are their owner's alone, as all of var/ is
+# (console.private_files); an upload over 2.5 MiB is spooled under var/, where a web server killed
+# during it leaves its file for the workers' housekeeping to delete, not in /tmp for ever.
+FILE_UPLOAD_PERMISSIONS = 0o600
+FILE_UPLOAD_DIRECTORY_PERMISSIONS = 0o700
+FILE_UPLOAD_TEMP_DIR = str(private_dir(private_dir(VAR_DIR) / "uploads-tmp"))
 
 S3_BUCKET = env.str("PITLANE_S3_BUCKET", "")
 if S3_BUCKET:

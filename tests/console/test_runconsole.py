@@ -6,6 +6,8 @@ import json
 import os
 import signal
 import socket
+import sqlite3
+import stat
 import subprocess
 import sys
 import threading
@@ -17,6 +19,7 @@ import pytest
 import redis
 
 from console.workers import live_workers
+from tests.helpers.private_files import an_install_from_before, read_as_another_user
 from tests.services import ROOT, free_port, parent_of, wait_for
 
 pytestmark = pytest.mark.slow  # each test starts the console: Redis, workers and Daphne
@@ -80,6 +83,9 @@ class Output:
 @pytest.fixture(scope="module")
 def console_running(tmp_path_factory) -> Iterator[tuple[subprocess.Popen, dict[str, str], Output]]:
     var_dir = tmp_path_factory.mktemp("var")
+    # A model's file that an install from before left readable by everyone (its database and
+    # Redis's files made up would not start): test_it_lets_no_other_user_read_the_data_directory
+    an_install_from_before(var_dir, ("media/models/1/best.pt",))
     port, redis_port = free_port(), free_port()
     env = environment(var_dir, port, redis_port)
     process = runconsole(env)
@@ -111,10 +117,43 @@ def test_it_serves_the_console_with_redis_and_a_worker_per_queue(console_running
     }
 
 
-def workers_of(env: dict[str, str]) -> list[dict]:
+def test_it_lets_no_other_user_read_the_data_directory(console_running):
+    _, env, _ = console_running
+    var = Path(env["PITLANE_VAR_DIR"])
+    redis_of(env).save()  # Redis's dump, born as the console writes it
+    with sqlite3.connect(var / "db.sqlite3") as database:  # its WAL and shared memory open
+        database.execute("SELECT count(*) FROM django_session").fetchone()
+        assert (var / "db.sqlite3-wal").exists() and (var / "db.sqlite3-shm").exists()
+        names = [
+            ".",
+            "db.sqlite3",
+            "db.sqlite3-wal",
+            "db.sqlite3-shm",
+            "redis/dump.rdb",
+            "redis/redis.log",
+            "redis/appendonlydir",
+            "media/models/1/best.pt",  # left readable by an install from before
+            "uploads-tmp",
+            "secret_key",
+        ]
+        assert read_as_another_user(var, names) == dict.fromkeys(names, "EACCES")
+        # Nor would they, could they reach var/: nothing in it is the group's or others'.
+        opened = {
+            str(path.relative_to(var)): oct(stat.S_IMODE(path.stat().st_mode))
+            for path in var.rglob("*")
+            if not path.is_symlink() and path.stat().st_mode & 0o077
+        }
+        assert opened == {}
+
+
+def redis_of(env: dict[str, str]) -> redis.Redis:
     password = (Path(env["PITLANE_VAR_DIR"]) / "redis_password").read_text().strip()
     url = f"redis://:{password}@127.0.0.1:{env['PITLANE_REDIS_PORT']}/0"
-    return live_workers(redis.Redis.from_url(url, socket_connect_timeout=2, socket_timeout=2))
+    return redis.Redis.from_url(url, socket_connect_timeout=2, socket_timeout=5)
+
+
+def workers_of(env: dict[str, str]) -> list[dict]:
+    return live_workers(redis_of(env))
 
 
 def test_a_second_run_is_refused_with_a_clear_message(console_running):

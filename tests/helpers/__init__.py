@@ -14,6 +14,7 @@
 - ``rollouts``: stand-ins for what a rollout worker drives with.
 - ``analysis``: a trace written by hand and recorded as a job's, and a reward function for it.
 - ``tracks``: route files and the admin's upload of one.
+- ``private_files``: var/ as an install from before left it, and reads tried as another user.
 
 Fixtures shared by a folder's modules are in its conftest.py (``env`` in tests/rl,
 ``admin_client`` in tests/training), not here.
