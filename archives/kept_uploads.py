@@ -26,6 +26,7 @@ from django.db.models import Min, Sum
 from django.utils import timezone
 
 from archives.imports import MAX_ARCHIVE, size
+from archives.members import ImportRefused
 from archives.models import KEPT_FOR, KeptUpload
 from common.transactions import outside_transaction
 
@@ -44,7 +45,15 @@ class UploadNotKept(Exception):
 
 
 def upload_open(kept: KeptUpload) -> IO[bytes]:
-    return default_storage.open(kept.name, "rb")
+    """``kept``'s archive; refused in words when it was deleted since it was found (it expired
+    or was cancelled in another tab as the racer confirmed)."""
+    try:
+        return default_storage.open(kept.name, "rb")
+    except FileNotFoundError:
+        raise ImportRefused(
+            "The archive you uploaded is no longer kept (it expired or was cancelled): choose "
+            "it again."
+        ) from None
 
 
 def upload_keep(*, racer: AbstractBaseUser, upload: UploadedFile) -> KeptUpload:

@@ -12,8 +12,11 @@ from django.core.files.uploadedfile import SimpleUploadedFile
 from django.urls import reverse
 
 from archives import kept_uploads
+from archives.members import ImportRefused
 from archives.models import KEPT_FOR, KeptUpload
+from tests.helpers.archives import CHECKED_IMPORT, deepracer_folder
 from training import artifacts, tasks
+from training.models import RLModel
 
 pytestmark = pytest.mark.django_db
 
@@ -45,7 +48,7 @@ def test_a_second_upload_replaces_the_first_and_its_bytes(alice, client):
     other = type(client)()
     other.force_login(alice)
     page = other.get(reverse("training:model-import")).text
-    assert f'name="kept" value="{second.token}"' in page and "Cancel the import" in page
+    assert f'name="kept" value="{second.token}"' in page and ">Cancel</button>" in page
 
 
 def test_a_racer_keeps_one_archive_of_at_most_the_imports_maximum(alice, monkeypatch):
@@ -85,6 +88,8 @@ def test_the_workers_housekeeping_deletes_an_expired_upload(alice, bob):
     removed = tasks.resume_lapsed()  # what every worker's heartbeat runs
     assert f"upload kept for racer {alice.pk}'s import expired; it was deleted" in removed
     assert not stored(old) and stored(new)
+    with pytest.raises(ImportRefused, match="no longer kept"):  # a confirm that found it before
+        kept_uploads.upload_open(old)
     assert list(KeptUpload.objects.all()) == [new]
 
 
@@ -113,3 +118,19 @@ def test_a_full_console_refuses_a_new_upload_in_words_and_keeps_the_form(
     post_to_correct(client, bytes(5000))
     post_to_correct(client, bytes(9000))
     assert KeptUpload.objects.get().size == 9000
+
+
+@pytest.mark.slow
+@CHECKED_IMPORT
+def test_a_preview_the_console_cannot_keep_is_refused_in_words_with_retry_after(
+    alice, bob, tracks, client, settings
+):
+    settings.PITLANE_KEPT_UPLOADS_MAX = 2 * len(deepracer_folder()) - 1
+    kept_uploads.upload_keep(racer=bob, upload=SimpleUploadedFile("b.tar.gz", deepracer_folder()))
+    client.force_login(alice)
+    upload = SimpleUploadedFile("mine.tar.gz", deepracer_folder())
+    response = client.post(reverse("training:model-import"), {"name": "mine", "archive": upload})
+    assert response.status_code == 503 and int(response["Retry-After"]) > 3000
+    assert "The console is holding too many imports waiting for their racers" in response.text
+    assert "What the import creates" not in response.text and 'value="mine"' in response.text
+    assert KeptUpload.objects.get().racer == bob and not RLModel.objects.exists()
