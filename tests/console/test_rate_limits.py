@@ -61,6 +61,7 @@ def test_one_address_trying_many_racers_ends_in_a_wait(alice, bob, stella, clien
     assert sign_in(client_from("10.0.0.7"), "stella", PASSWORD).status_code == 302
 
 
+@pytest.mark.slow  # 40 sign-ins: 3 s
 def test_it_lets_a_race_day_behind_one_address_sign_in_as_often_as_it_succeeds(
     alice, bob, client, rates
 ):
