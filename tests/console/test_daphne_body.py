@@ -8,15 +8,18 @@ import select
 import socket
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+from django.conf import settings
+from django.test import Client
 from django.urls import reverse
 
+from tests.helpers.accounts import racer
 from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
 
-pytestmark = [pytest.mark.slow, pytest.mark.django_db]
+pytestmark = pytest.mark.slow
 
 MiB = 2**20
 PIECE = bytes(MiB)  # the test's whole body in memory: one piece, sent again and again
@@ -79,9 +82,12 @@ def read_all(connection: socket.socket) -> bytes:
     return answer
 
 
-def post(server: WebServer, path: str, size: int, *, chunked: bool = False) -> tuple[bytes, int]:
+def post(
+    server: WebServer, path: str, size: int, *, chunked: bool = False, heed: bool = True
+) -> tuple[bytes, int]:
     """POST ``size`` bytes to ``path`` a MiB at a time, with its Content-Length or in chunks,
-    reading between pieces; (the answer, the bytes sent by the time it came)."""
+    stopping when an answer comes (unless not ``heed``, as an attacker would not); (the answer,
+    the bytes sent by the time it came)."""
     with socket.create_connection(("127.0.0.1", server.port), timeout=30) as connection:
         framing = "Transfer-Encoding: chunked" if chunked else f"Content-Length: {size}"
         connection.sendall(
@@ -90,7 +96,7 @@ def post(server: WebServer, path: str, size: int, *, chunked: bool = False) -> t
         )
         sent = 0
         try:
-            while sent < size and not select.select([connection], [], [], 0)[0]:
+            while sent < size and not (heed and select.select([connection], [], [], 0)[0]):
                 piece = PIECE[: size - sent]
                 connection.sendall(b"%x\r\n%b\r\n" % (len(piece), piece) if chunked else piece)
                 sent += len(piece)
@@ -121,26 +127,42 @@ def test_a_body_in_chunks_is_refused_once_it_passes_the_limit(web_server):
     assert web_server.memory("VmHWM") - before < 50 * MiB
 
 
+def health_waits_while(server: WebServer, action: Callable[[], object]) -> tuple[object, list]:
+    """What ``action`` returns, and the seconds each /healthz asked meanwhile took to answer."""
+    outcome = {}
+    worker = threading.Thread(target=lambda: outcome.setdefault("value", action()))
+    worker.start()
+    waits = []
+    while worker.is_alive():
+        started = time.monotonic()
+        assert get(server, "/healthz").startswith(b"HTTP/1.1 ")
+        waits.append(time.monotonic() - started)
+        time.sleep(0.05)
+    worker.join()
+    return outcome["value"], waits
+
+
+def test_a_client_that_sends_on_after_the_413_neither_swells_nor_holds_the_server(web_server):
+    """The rest of a refused body is read and dropped (for 2 s, then the connection closed)."""
+    before = web_server.memory("VmHWM")
+    (answer, _), waits = health_waits_while(
+        web_server, lambda: post(web_server, reverse("login"), 300 * MiB, heed=False)
+    )
+    assert answer == b"" or answer.startswith(b"HTTP/1.1 413 ")  # unread when the reset came
+    assert max(waits) < 1.0
+    assert web_server.memory("VmHWM") - before < 50 * MiB
+
+
 def test_the_largest_import_reaches_django_and_the_server_stays_small_and_answers(web_server):
     """An allowed body of the import's limit (257 MiB) is read to disk and handed to Django (which
     refuses a POST with no CSRF cookie, after reading it); /healthz answers within a second
     throughout, and the server's peak memory grows by less than 50 MiB."""
     before = web_server.memory("VmHWM")
-    outcome = {}
-
-    def send() -> None:
-        outcome["answer"], _ = post(web_server, reverse("training:model-import"), 257 * MiB)
-
-    sender = threading.Thread(target=send)
-    sender.start()
-    waits = []
-    while sender.is_alive():
-        started = time.monotonic()
-        assert get(web_server, "/healthz").startswith(b"HTTP/1.1 ")
-        waits.append(time.monotonic() - started)
-        time.sleep(0.05)
-    sender.join()
-    assert outcome["answer"].startswith(b"HTTP/1.1 403 ")  # Django's CSRF refusal: no 413
+    (answer, sent), waits = health_waits_while(
+        web_server, lambda: post(web_server, reverse("training:model-import"), 257 * MiB)
+    )
+    assert answer.startswith(b"HTTP/1.1 403 ")  # Django's CSRF refusal: no 413
+    assert sent == 257 * MiB
     assert len(waits) > 3 and max(waits) < 1.0
     assert web_server.memory("VmHWM") - before < 50 * MiB
 
@@ -167,3 +189,21 @@ def test_a_multipart_body_within_the_limit_reaches_django_whole(web_server):
         )
         answer = read_all(connection)
     assert answer.startswith(b"HTTP/1.1 200 "), answer[:300]
+
+
+@pytest.mark.django_db(transaction=True)
+def test_a_websocket_still_opens_through_the_request(web_server):
+    """Daphne's request hands a websocket's handshake to its websocket protocol as before: a
+    staff member's probe is accepted."""
+    client = Client()
+    client.force_login(racer("marshal", is_staff=True))
+    session = client.cookies[settings.SESSION_COOKIE_NAME].value
+    with socket.create_connection(("127.0.0.1", web_server.port), timeout=30) as connection:
+        connection.sendall(
+            b"GET /ws/system/probe/ HTTP/1.1\r\nHost: 127.0.0.1\r\nOrigin: http://127.0.0.1\r\n"
+            b"Upgrade: websocket\r\nConnection: Upgrade\r\n"
+            b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+            + f"Cookie: {settings.SESSION_COOKIE_NAME}={session}\r\n\r\n".encode()
+        )
+        head = connection.recv(4096)
+    assert head.startswith(b"HTTP/1.1 101 "), head
