@@ -9,6 +9,8 @@ import stat
 import time
 from pathlib import Path
 
+import pytest
+from celery import signals
 from django.conf import settings
 from django.core.files.base import ContentFile
 from django.core.files.storage import default_storage
@@ -88,3 +90,13 @@ def test_it_sweeps_the_uploads_a_killed_web_server_left_and_keeps_those_in_progr
         caplog.text
     )
     assert temporary_uploads_sweep(tmp_path / "gone") == []
+
+
+@pytest.mark.parametrize("started", [signals.celeryd_init, signals.beat_init])
+def test_a_worker_or_scheduler_started_on_its_own_creates_files_for_its_owner_only(started):
+    before = os.umask(0o022)
+    try:
+        started.send(sender=None)
+        assert os.umask(0o022) == 0o077
+    finally:
+        os.umask(before)
