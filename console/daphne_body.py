@@ -84,10 +84,18 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         self._body.seek(0)
         super().requestReceived(command, path, version)
 
+    def finish(self) -> None:
+        self._close_body()
+        super().finish()
+
     def connectionLost(self, reason) -> None:
-        if self._body is not None:  # never handed to an application
-            self._body.close()
+        self._close_body()
         super().connectionLost(reason)
+
+    def _close_body(self) -> None:
+        if self._body is not None:  # never handed to an application (Daphne answered itself)
+            self._body.close()
+            self._body = None
 
     def handed_over(self) -> io.IOBase | None:
         """The body, for the application; from then on the application closes it."""
@@ -112,8 +120,20 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         channel, transport = self.channel, self.channel.transport
         channel.dataReceived = _discard
         transport.write(head.encode() + page)
-        transport.loseWriteConnection()
+        getattr(transport, "loseWriteConnection", transport.loseConnection)()
         channel.callLater(LINGER, transport.abortConnection)
+        self.server.log_action(  # in Daphne's access log, as the answers it sends are
+            "http",
+            "complete",
+            {
+                "path": getattr(channel, "_path", b"").decode("ascii", "replace"),
+                "status": 413,
+                "method": getattr(channel, "_command", b"").decode("ascii", "replace"),
+                "client": f"{getattr(self.client, 'host', '')}:{getattr(self.client, 'port', '')}",
+                "time_taken": 0.0,
+                "size": len(page),
+            },
+        )
 
 
 class _ServerForRequest:

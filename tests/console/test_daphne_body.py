@@ -142,6 +142,18 @@ def health_waits_while(server: WebServer, action: Callable[[], object]) -> tuple
     return outcome["value"], waits
 
 
+def test_a_client_that_asks_to_continue_is_refused_before_it_sends(web_server):
+    """Expect: 100-continue with a length over the limit: 413 at once, never "100 Continue"."""
+    with socket.create_connection(("127.0.0.1", web_server.port), timeout=30) as connection:
+        connection.sendall(
+            f"POST {reverse('login')} HTTP/1.1\r\nHost: 127.0.0.1\r\nExpect: 100-continue\r\n"
+            f"Content-Length: {300 * MiB}\r\n\r\n".encode()
+        )
+        answer = read_all(connection)
+    assert answer.startswith(b"HTTP/1.1 413 ")
+    assert b"100 Continue" not in answer
+
+
 def test_a_client_that_sends_on_after_the_413_neither_swells_nor_holds_the_server(web_server):
     """The rest of a refused body is read and dropped (for 2 s, then the connection closed)."""
     before = web_server.memory("VmHWM")
