@@ -19,7 +19,9 @@ bytes received pass it, keeping nothing more; a body within it goes to a tempora
 application, in the scope's ``pitlane.body_file`` extension, which ``BodyFromFile`` reads a piece
 (``PIECE``) at a time as the application asks: Django then writes it to its own spooled file
 (``FILE_UPLOAD_MAX_MEMORY_SIZE``). The tests in ``tests/console/test_daphne_body.py`` hold these
-versions to it.
+versions to it. HTTP/1.1 only: Daphne speaks HTTP/2 only with Twisted's ``http2`` extra, which is
+not installed (an H2 stream has no request line of its own, so every path would get the default
+limit).
 """
 
 from __future__ import annotations
