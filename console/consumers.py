@@ -9,12 +9,13 @@ from channels.generic.websocket import AsyncJsonWebsocketConsumer
 from django.conf import settings
 from kombu.exceptions import OperationalError
 
+from common.sockets import ClosesOnLayerOutage
 from console.tasks import probe_worker
 
 PROBE_EXPIRES = 30  # [s] a probe no worker took by then is dropped, not run late
 
 
-class WorkerProbeConsumer(AsyncJsonWebsocketConsumer):
+class WorkerProbeConsumer(ClosesOnLayerOutage, AsyncJsonWebsocketConsumer):
     """Staff only: ``{"action": "probe"}`` probes every queue and relays the answers."""
 
     async def connect(self) -> None:

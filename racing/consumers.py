@@ -15,6 +15,7 @@ import json
 from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncWebsocketConsumer
 
+from common.sockets import ClosesOnLayerOutage
 from racing import selectors
 from racing.live import event_group
 from racing.models import Event, LiveEntry
@@ -25,7 +26,7 @@ from training.live import evaluation_group
 REFUSED = 4404
 
 
-class EventConsumer(AsyncWebsocketConsumer):
+class EventConsumer(ClosesOnLayerOutage, AsyncWebsocketConsumer):
     async def connect(self) -> None:
         pk = self.scope["url_route"]["kwargs"]["pk"]
         if not await database_sync_to_async(self.may_watch)(self.scope.get("user"), pk):

@@ -16,7 +16,15 @@ from common.redis_client import redis_client
 from console.supervisor import worker_pools
 from console.workers import live_workers
 from tests.helpers.accounts import racer
-from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
+from tests.services import (
+    SUITE_REDIS,
+    RedisServer,
+    ServiceProcess,
+    free_port,
+    python_module,
+    service_env,
+    wait_for,
+)
 
 TRAINERS = 2  # the suite's training worker's processes (celery_worker_process)
 BROWSER_TESTS = Path(__file__).parent / "browser"
@@ -146,6 +154,12 @@ def celery_worker_process(test_database, logs_dir) -> Iterator[WorkerPools]:
         yield pools
     finally:
         pools.stop()
+
+
+@pytest.fixture(scope="session")
+def suite_redis(pytestconfig) -> RedisServer:
+    """The suite's own Redis (``tests.services``), for a test that restarts it."""
+    return pytestconfig.stash[SUITE_REDIS]
 
 
 @pytest.fixture(scope="session")

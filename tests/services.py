@@ -81,6 +81,14 @@ class RedisServer:
         self.stop()
         self.start()
 
+    def save(self) -> None:
+        """Write the data to the directory's dump, which the next start loads: a restart after
+        it keeps the data, as a Redis with persistence does."""
+        with socket.create_connection(("127.0.0.1", self.port), timeout=10) as connection:
+            connection.sendall(b"SAVE\r\n")
+            if not connection.recv(16).startswith(b"+OK"):
+                raise RuntimeError(f"Redis on port {self.port} did not save its data")
+
     def answers(self) -> bool:
         try:
             with socket.create_connection(("127.0.0.1", self.port), timeout=0.5) as connection:
@@ -93,6 +101,9 @@ class RedisServer:
         if self.process.poll() is None:
             self.process.terminate()
             self.process.wait(10)
+
+
+SUITE_REDIS = pytest.StashKey[RedisServer]()  # the suite's Redis, in the config's stash
 
 
 class ServiceProcess:
@@ -148,6 +159,7 @@ def pytest_load_initial_conftests(early_config, parser, args):
     os.environ["PITLANE_TEST_DB"] = str(scratch / "test.sqlite3")
     redis_server = RedisServer(scratch / "redis")
     os.environ["REDIS_URL"] = redis_server.url
+    early_config.stash[SUITE_REDIS] = redis_server
     early_config.add_cleanup(lambda: shutil.rmtree(scratch, ignore_errors=True))
     early_config.add_cleanup(redis_server.stop)
     return (yield)

@@ -24,6 +24,7 @@ from channels.db import database_sync_to_async
 from channels.generic.websocket import AsyncWebsocketConsumer
 
 from common.redis_client import redis_client
+from common.sockets import ClosesOnLayerOutage
 from training import live, selectors
 from training.models import EvaluationJob, TrainingJob
 
@@ -38,7 +39,7 @@ def _viewers_redis() -> redis.Redis:
     return redis_client(timeout=2.0)
 
 
-class LiveConsumer(AsyncWebsocketConsumer):
+class LiveConsumer(ClosesOnLayerOutage, AsyncWebsocketConsumer):
     """What the training and evaluation streams share: who may watch, flow control, viewers."""
 
     workers = 1

@@ -12,6 +12,9 @@ from pathlib import Path
 
 import dj_database_url
 from celery.schedules import crontab
+from redis.asyncio.retry import Retry
+from redis.backoff import NoBackoff
+from redis.exceptions import ConnectionError as RedisConnectionError
 
 from console.env import env
 from console.kept_secrets import kept_secret
@@ -138,7 +141,24 @@ CHANNEL_LAYERS = {
         "CONFIG": {
             # redis-py 8 times reads out after 5 s by default, as long as the layer's blocking
             # BZPOPMIN waits: an idle websocket's consumer would die (channels_redis#422).
-            "hosts": [{"address": REDIS_URL, "socket_timeout": 30}],
+            # After a Redis restart the layer's pool (channels_redis builds it with
+            # ConnectionPool.from_url, whose connections retry nothing: redis-py's
+            # AbstractConnection.__init__ gives them Retry(NoBackoff(), 0)) still holds
+            # connections to the old server, and the first command on one failed, a websocket
+            # handshake with it (500). A connection idle for 10 s is pinged before use, and a
+            # command or ping that finds its connection dead drops it and is tried once more on a
+            # new one (redis.asyncio.client.Redis.execute_command, Connection.check_health). Once,
+            # at once, and not after a timeout: a Redis that is down or silent still fails the
+            # consumers, which close their sockets (common.sockets) for the pages to reconnect
+            # and catch up.
+            "hosts": [
+                {
+                    "address": REDIS_URL,
+                    "socket_timeout": 30,
+                    "health_check_interval": 10,
+                    "retry": Retry(NoBackoff(), 1, supported_errors=(RedisConnectionError,)),
+                }
+            ],
             "prefix": "pitlane:asgi",
             # A viewer that falls behind loses old messages instead of growing a backlog.
             "capacity": 100,

@@ -1,11 +1,12 @@
-// The System page's worker probe: one websocket, a button that asks for a probe, a line per answer.
+// The System page's worker probe: one websocket (reconnecting: ./socket.js), a button that asks
+// for a probe while it is open, a line per answer.
+import { reconnecting } from "./socket.js";
+
 const PROBE_TIMEOUT_MS = 10000;
 
 const section = document.querySelector("[data-probe-url]");
 const button = section.querySelector("[data-probe-button]");
 const log = section.querySelector("[data-probe-log]");
-const scheme = window.location.protocol === "https:" ? "wss" : "ws";
-const socket = new WebSocket(`${scheme}://${window.location.host}${section.dataset.probeUrl}`);
 const pending = new Map();
 
 function line(queue, ok, text) {
@@ -23,13 +24,7 @@ function line(queue, ok, text) {
   log.append(item);
 }
 
-socket.addEventListener("open", () => { button.disabled = false; });
-socket.addEventListener("close", () => {
-  button.disabled = true;
-  line("websocket", false, "The connection to the server closed; reload the page to probe again.");
-});
-
-socket.addEventListener("message", (event) => {
+function receive(event) {
   const message = JSON.parse(event.data);
   if (message.type === "probe.sent") {
     for (const queue of message.queues) {
@@ -45,9 +40,19 @@ socket.addEventListener("message", (event) => {
   } else if (message.type === "error") {
     line("probe", false, message.message);
   }
+}
+
+const socket = reconnecting(section.dataset.probeUrl, {
+  onOpen: () => { button.disabled = false; },
+  onMessage: receive,
+  onClose: () => {
+    if (button.disabled) return; // it was not open: said already
+    button.disabled = true;
+    line("websocket", false, "The connection to the server closed; reconnecting…");
+  },
 });
 
 button.addEventListener("click", () => {
   log.replaceChildren();
-  socket.send(JSON.stringify({ action: "probe" }));
+  socket.send({ action: "probe" });
 });

@@ -1,6 +1,7 @@
 // The broadcast: the car on the track (a physical event's run with its running lap, or a live
 // race's turn with its video), its laps, the top ten, and the winner when the organiser shows
-// it; kept current over the event's websocket.
+// it; kept current over the event's websocket, and fetched whole again each time the socket
+// opens (updates sent while it was closed reached nobody).
 import { LapClock, RaceClock, laptime, listen, offTracks, speedText } from "./timing.js";
 import { Turn } from "./turn.js";
 
@@ -105,5 +106,5 @@ listen(root.dataset.event, (message) => {
   if (message.type === "queue" && !physical) showQueue(message);
   if (message.type === "leaderboard" || (message.type === "submission" && message.ranked)) refresh();
   if (message.type === "winner") showWinner(message.winner);
-});
+}, refresh);
 refresh();

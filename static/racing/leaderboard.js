@@ -1,5 +1,6 @@
 // An event's leaderboard, kept current: when a submission is scored (or a ranking changes), the
-// event's group says so over the websocket and the page fetches its table again.
+// event's group says so over the websocket and the page fetches its table again; and when the
+// socket opens again after a close, as what was said meanwhile reached nobody.
 import { listen } from "./timing.js";
 
 const root = document.querySelector("[data-leaderboard]");
@@ -15,6 +16,7 @@ async function refresh(update) {
   holder.innerHTML = await response.text();
   root.querySelector("[data-leaderboard-table]").replaceWith(holder.firstElementChild);
   root.dataset.updates = String(Number(root.dataset.updates || 0) + 1);
+  if (!update) return;
   note.hidden = false;
   const now = new Date().toLocaleTimeString("en-GB", { hourCycle: "h23" }); // the site's H:i:s
   note.textContent = update.type === "submission"
@@ -22,9 +24,14 @@ async function refresh(update) {
     : `The standings changed (${now}).`;
 }
 
+let opened = false; // the page was drawn just before the first opening
+
 listen(root.dataset.event, (update) => {
   const own = root.querySelector(`[data-my-submission="${update.submission}"]`);
   if (update.type === "leaderboard" || (update.type === "submission" && (update.ranked || own))) {
     refresh(update);
   }
+}, () => {
+  if (opened) refresh(null);
+  opened = true;
 });

@@ -1,5 +1,7 @@
 // The live race page: the queue follows the event's websocket (the page fetches its queue again
-// on each change), and the turn on the track is watched as it drives (./turn.js).
+// on each change, and the cars driving too each time the socket opens: updates sent before, or
+// while it was closed, reached nobody), and the turn on the track is watched as it drives
+// (./turn.js).
 import { listen, speedText } from "./timing.js";
 import { Turn } from "./turn.js";
 
@@ -51,6 +53,13 @@ async function refreshQueue() {
   root.dataset.updates = String(Number(root.dataset.updates || 0) + 1);
 }
 
+async function catchUp() {
+  const response = await fetch(root.dataset.stateUrl);
+  if (!response.ok) return;
+  showDriving((await response.json()).queue);
+  await refreshQueue();
+}
+
 listen(root.dataset.event, (message) => {
   if (message.type === "queue") {
     showDriving(message);
@@ -58,5 +67,5 @@ listen(root.dataset.event, (message) => {
   } else if (message.type === "submission") {
     refreshQueue();
   }
-});
+}, catchUp);
 showDriving(JSON.parse(document.getElementById("live-queue").textContent));

@@ -1,10 +1,11 @@
 // A submission still racing: its status badge follows the race over the event's websocket (the
 // one place the page says how far the race is), and the page reloads with the laps and score
-// once the submission has ended.
+// once the submission has ended. The socket reconnects (../console/socket.js), and the status is
+// read again at each opening.
+import { reconnecting } from "../console/socket.js";
+
 const root = document.querySelector("[data-submission-live]");
 const badge = document.querySelector("[data-submission-status]");
-const scheme = location.protocol === "https:" ? "wss" : "ws";
-const socket = new WebSocket(`${scheme}://${location.host}/ws/events/${root.dataset.event}/`);
 const ENDED = ["COMPLETED", "FAILED", "CANCELED"];
 
 function show(status, display) {
@@ -13,11 +14,13 @@ function show(status, display) {
   if (ENDED.includes(status)) location.reload();
 }
 
-let updated = false; // a socket update has been shown: it is newer than any page fetched
+let updated = false; // a socket update has been shown since the socket opened: newer than a fetch
 
-socket.addEventListener("open", async () => {
-  // The race may have moved on between this page being drawn and the socket opening (its
-  // updates went to nobody): read the status once more, now that no update can be missed.
+// The race may have moved on between this page being drawn (or the socket closing) and the
+// socket opening (its updates went to nobody): read the status once more, now that no update
+// can be missed.
+async function catchUp() {
+  updated = false;
   try {
     const response = await fetch(location.href, { headers: { Accept: "text/html" } });
     if (!response.ok) return;
@@ -30,10 +33,15 @@ socket.addEventListener("open", async () => {
   } finally {
     root.dataset.listening = "true";
   }
-});
-socket.addEventListener("message", (message) => {
-  const update = JSON.parse(message.data);
-  if (update.type !== "submission" || String(update.submission) !== root.dataset.submission) return;
-  updated = true;
-  show(update.status, update.status_display);
+}
+
+reconnecting(`/ws/events/${root.dataset.event}/`, {
+  onOpen: catchUp,
+  onClose: () => { root.dataset.listening = "false"; },
+  onMessage: (message) => {
+    const update = JSON.parse(message.data);
+    if (update.type !== "submission" || String(update.submission) !== root.dataset.submission) return;
+    updated = true;
+    show(update.status, update.status_display);
+  },
 });

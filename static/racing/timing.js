@@ -1,20 +1,15 @@
-// The event's websocket (reconnecting, its page's body marked data-listening while connected),
-// shared by the leaderboard, live race, timekeeper and broadcast pages; and a physical event's
+// The event's websocket (reconnecting: ../console/socket.js, its page's body marked
+// data-listening while connected), shared by the leaderboard, live race, timekeeper and broadcast
+// pages, with onOpen called at each (re)opening for the page to catch up; and a physical event's
 // running lap clock, set against this browser's clock by the server's time in each message.
-export function listen(eventId, onMessage) {
-  let retry = 1000;
-  function connect() {
-    const scheme = location.protocol === "https:" ? "wss" : "ws";
-    const socket = new WebSocket(`${scheme}://${location.host}/ws/events/${eventId}/`);
-    socket.addEventListener("open", () => { retry = 1000; document.body.dataset.listening = "true"; });
-    socket.addEventListener("message", (message) => onMessage(JSON.parse(message.data)));
-    socket.addEventListener("close", () => {
-      document.body.dataset.listening = "false";
-      setTimeout(connect, retry);
-      retry = Math.min(retry * 2, 30000);
-    });
-  }
-  connect();
+import { reconnecting } from "../console/socket.js";
+
+export function listen(eventId, onMessage, onOpen = () => {}) {
+  return reconnecting(`/ws/events/${eventId}/`, {
+    marker: document.body,
+    onOpen,
+    onMessage: (message) => onMessage(JSON.parse(message.data)),
+  });
 }
 
 export function laptime(milliseconds) {

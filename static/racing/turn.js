@@ -6,7 +6,10 @@
 // arrival: a frame that waited on the way would set it back; only the last few, as the
 // simulation drifts from real time), never more than a frame and a half past the newest frame's
 // word (a simulation that falls behind). At the line it stops on the lap's
-// time for a second, as a race's timing screen does, then runs on with the next lap.
+// time for a second, as a race's timing screen does, then runs on with the next lap. Its socket
+// reconnects (../console/socket.js) and watches again at each opening: the frames resume, and the
+// state message the server sends on connecting brings the laps missed meanwhile.
+import { reconnecting } from "../console/socket.js";
 import { laptime, offTracks } from "./timing.js";
 
 const decoder = new TextDecoder();
@@ -47,21 +50,20 @@ export class Turn {
   watch(evaluation) {
     if (evaluation === this.evaluation) return;
     this.evaluation = evaluation;
-    if (this.socket) this.socket.close();
+    if (this.socket) this.socket.stop();
     this.socket = null;
     this.lapMs = null;
     if (!evaluation) return;
     this.finished = null;
     this.laps.replaceChildren();
-    const scheme = location.protocol === "https:" ? "wss" : "ws";
-    const socket = new WebSocket(`${scheme}://${location.host}/ws/live-turns/${evaluation}/`);
-    socket.binaryType = "arraybuffer";
-    socket.addEventListener("open", () => socket.send(JSON.stringify({ type: "watch", worker: 0, view: "spectator" })));
-    socket.addEventListener("message", (message) => {
-      if (message.data instanceof ArrayBuffer) this.show(socket, message.data);
-      else this.receive(JSON.parse(message.data));
+    this.socket = reconnecting(`/ws/live-turns/${evaluation}/`, {
+      binary: true,
+      onOpen: (socket) => socket.send(JSON.stringify({ type: "watch", worker: 0, view: "spectator" })),
+      onMessage: (message, socket) => {
+        if (message.data instanceof ArrayBuffer) this.show(socket, message.data);
+        else this.receive(JSON.parse(message.data));
+      },
     });
-    this.socket = socket;
   }
 
   show(socket, data) {

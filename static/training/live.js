@@ -1,8 +1,10 @@
 // A live job on the page: its video, its status and its graph (training) or results (evaluation),
 // over one websocket. Frames come as binary messages: a 4-byte length, a JSON header, the JPEG.
 // Each drawn frame is acknowledged, and the server sends the next one only then: a slow page
-// gets the newest frame, never a backlog. The server sends the whole state on connecting, so a
-// page that reconnects is up to date at once.
+// gets the newest frame, never a backlog. The socket reconnects with backoff
+// (../console/socket.js), and the server sends the whole state on connecting, so a page that
+// reconnects is up to date at once; it watches again what it watched.
+import { reconnecting } from "../console/socket.js";
 
 const section = document.querySelector("[data-live-url]");
 const kind = section.dataset.liveKind;
@@ -14,7 +16,6 @@ const decoder = new TextDecoder();
 const REFUSED = new Set([4401, 4403]);
 
 let socket = null;
-let retryDelay = 1000;
 let state = null;
 let frameUrl = null;
 let framesShown = 0;
@@ -37,31 +38,24 @@ function clock(seconds) {
 // The connection
 
 function connect() {
-  const scheme = window.location.protocol === "https:" ? "wss" : "ws";
-  socket = new WebSocket(`${scheme}://${window.location.host}${section.dataset.liveUrl}`);
-  socket.binaryType = "arraybuffer";
-  socket.addEventListener("open", () => {
-    retryDelay = 1000;
-    watch();
-  });
-  socket.addEventListener("message", (event) => {
-    if (event.data instanceof ArrayBuffer) showFrame(event.data);
-    else receive(JSON.parse(event.data));
-  });
-  socket.addEventListener("close", (event) => {
-    if (REFUSED.has(event.code)) {
-      say("You may not watch this job.");
-      return;
-    }
-    if (state && !state.active) return;
-    say("The connection was lost; reconnecting…");
-    setTimeout(connect, retryDelay);
-    retryDelay = Math.min(retryDelay * 2, 10000);
+  socket = reconnecting(section.dataset.liveUrl, {
+    binary: true,
+    refused: [...REFUSED],
+    onOpen: watch,
+    onMessage: (event) => {
+      if (event.data instanceof ArrayBuffer) showFrame(event.data);
+      else receive(JSON.parse(event.data));
+    },
+    onClose: (event) => {
+      if (REFUSED.has(event.code)) say("You may not watch this job.");
+      else if (state && !state.active) socket.stop(); // a job that ended sends nothing more
+      else say("The connection was lost; reconnecting…");
+    },
   });
 }
 
 function send(message) {
-  if (socket && socket.readyState === WebSocket.OPEN) socket.send(JSON.stringify(message));
+  socket?.send(message);
 }
 
 function watch() {
