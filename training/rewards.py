@@ -26,8 +26,9 @@ MAX_SOURCE_SIZE = 140_000  # [characters]
 # slower function anyway; 5 s before issue 55 let a flood of such functions hold every checker
 # for 30 s a check.
 SAMPLE_TIMEOUT = 1.0
-# [s] the samples' time together: once spent, the samples left are not run (a warning says so),
-# so that no check holds a checker (training.checkers) much longer than this and its start.
+# [s] the code's load and samples together: once spent, the samples left are not run (a warning
+# says so), so that no check holds a checker (training.checkers) much longer than this and the
+# sandbox's start.
 SAMPLES_BUDGET = 2.0
 NESTED_TOO_DEEP = (
     "The code is nested too deeply for Python to read: split long expressions and deep blocks "
@@ -193,6 +194,7 @@ def reward_validate(
     verified()  # SandboxUnavailable where racers' code cannot be held safely
     where = {"track": track, "direction": direction}
     with Sandbox(call_timeout=SAMPLE_TIMEOUT, samples=where) as sandbox:
+        budget_ends = time.monotonic() + SAMPLES_BUDGET
         try:
             sandbox.load(source)
         except SandboxFailure as failure:
@@ -200,7 +202,6 @@ def reward_validate(
             return result
         samples = sandbox.situations()
         failed: dict[tuple[str, str, int | None], list[str]] = {}
-        budget_ends = time.monotonic() + SAMPLES_BUDGET
         for number, situation in enumerate(samples):
             if time.monotonic() > budget_ends:
                 result.warnings.append(_budget_spent(samples[number:], number))
@@ -227,9 +228,9 @@ def _budget_spent(left: list[dict], run: int) -> Problem:
     names = ", ".join(situation["name"] for situation in left)
     return Problem(
         "slow",
-        f"The first {run} samples took more than {SAMPLES_BUDGET:g} s together, so the "
-        f"others ({names}) were not run: a training step calls the function several times "
-        "a second.",
+        f"Loading the code and the first {run} samples took more than {SAMPLES_BUDGET:g} s, "
+        f"so the others ({names}) were not run: a training step calls the function several "
+        "times a second.",
     )
 
 
