@@ -290,6 +290,7 @@ def test_a_misspelt_get_is_a_warning_naming_the_closest_real_key():
     ]
 
 
+@pytest.mark.slow  # about 3 s: it spends the samples' budget
 def test_a_slow_function_holds_a_check_no_longer_than_the_samples_budget():
     """Issue 55: each sample could take 5 s (a function that catches its own time limit
     returned at 5 s, five times); now 1 s, training's limit, and the samples stop once they
