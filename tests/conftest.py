@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,7 +19,7 @@ from tests.services import (
     SUITE_REDIS,
     RedisServer,
     ServiceProcess,
-    free_port,
+    daphne_started,
     python_module,
     service_env,
     wait_for,
@@ -165,23 +164,8 @@ def suite_redis(pytestconfig) -> RedisServer:
 @pytest.fixture(scope="session")
 def daphne_server(test_database, logs_dir) -> Iterator[str]:
     """Daphne serving console.asgi on a free port; the base URL."""
-    port = free_port()
-    server = ServiceProcess(
-        python_module("daphne", "-b", "127.0.0.1", "-p", str(port), "console.asgi:application"),
-        env=service_env(test_database),
-        log=logs_dir / "daphne.log",
-    )
-
-    def listening() -> bool:
-        server.ensure_running()
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
-            return True
-        except OSError:
-            return False
-
+    server, port = daphne_started(test_database, logs_dir / "daphne.log")
     try:
-        wait_for(listening, "Daphne to listen")
         yield f"http://127.0.0.1:{port}"
     finally:
         server.stop()

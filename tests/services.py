@@ -148,6 +148,31 @@ def service_env(database: str) -> dict[str, str]:
     return env
 
 
+def daphne_started(database: str, log: Path) -> tuple[ServiceProcess, int]:
+    """Daphne serving console.asgi on a free port, listening; its process and port (stop it)."""
+    port = free_port()
+    process = ServiceProcess(
+        python_module("daphne", "-b", "127.0.0.1", "-p", str(port), "console.asgi:application"),
+        env=service_env(database),
+        log=log,
+    )
+
+    def listening() -> bool:
+        process.ensure_running()
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
+            return True
+        except OSError:
+            return False
+
+    try:
+        wait_for(listening, "Daphne to listen")
+    except BaseException:
+        process.stop()
+        raise
+    return process, port
+
+
 def python_module(*args: str) -> list[str]:
     return [sys.executable, "-m", *args]
 

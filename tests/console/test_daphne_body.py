@@ -17,7 +17,7 @@ from django.test import Client
 from django.urls import reverse
 
 from tests.helpers.accounts import racer
-from tests.services import ServiceProcess, free_port, python_module, service_env, wait_for
+from tests.services import ServiceProcess, daphne_started
 
 pytestmark = pytest.mark.slow
 
@@ -41,23 +41,8 @@ class WebServer:
 @pytest.fixture(scope="module")
 def web_server(test_database, logs_dir) -> Iterator[WebServer]:
     """A Daphne of this module's own (the suite's ``daphne_server``, but its process is needed)."""
-    port = free_port()
-    process = ServiceProcess(
-        python_module("daphne", "-b", "127.0.0.1", "-p", str(port), "console.asgi:application"),
-        env=service_env(test_database),
-        log=logs_dir / "daphne-body.log",
-    )
-
-    def listening() -> bool:
-        process.ensure_running()
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=0.5).close()
-            return True
-        except OSError:
-            return False
-
+    process, port = daphne_started(test_database, logs_dir / "daphne-body.log")
     try:
-        wait_for(listening, "Daphne to listen")
         server = WebServer(process, port)
         get(server, "/healthz")  # Django loaded, the first request's imports done
         yield server
