@@ -164,6 +164,7 @@ def test_the_largest_import_reaches_django_and_the_server_stays_small_and_answer
     assert web_server.memory("VmHWM") - before < 50 * MiB
 
 
+@pytest.mark.django_db(transaction=True)  # the sign-in page reads the accounts' table
 def test_a_multipart_body_within_the_limit_reaches_django_whole(web_server):
     """The CSRF token comes last, after 8 MiB of a file: the sign-in page accepts it (and says the
     password is wrong) only if the whole body arrived, through Django's own upload handlers."""
