@@ -12,10 +12,12 @@ import os
 import secrets
 from pathlib import Path
 
+from console.private_files import private_dir
+
 
 def kept_secret(path: Path) -> str:
     """The secret kept in ``path``, generated (URL-safe, 50 random bytes) if there is none."""
-    path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)  # var/: console.private_files
+    private_dir(path.parent)  # var/: its owner's alone
     try:
         descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     except FileExistsError:

@@ -15,10 +15,13 @@ nothing has written to for ``STALE_UPLOAD`` (``temporary_uploads_sweep``).
 
 from __future__ import annotations
 
+import logging
 import os
 import stat
 import time
 from pathlib import Path
+
+logger = logging.getLogger(__name__)
 
 PRIVATE_UMASK = 0o077  # files 0600, folders 0700
 STALE_UPLOAD = 3600  # [s] a temporary upload unwritten this long is its dead request's: an
@@ -49,17 +52,37 @@ def data_dir_private(var_dir: Path) -> int:
 
 
 def _private(path: str) -> int:
+    """1 where ``path``'s mode was changed. It is opened without following a link (one swapped in
+    after os.walk saw a file is refused) and changed through that descriptor; a file deleted
+    meanwhile, or another user's (left by a ``sudo make run``), is logged and left, never a
+    traceback that stops the console's start."""
     try:
-        status = os.lstat(path)
+        descriptor = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_NOCTTY)
     except FileNotFoundError:  # deleted meanwhile by a process of the console
         return 0
-    if not (stat.S_ISDIR(status.st_mode) or stat.S_ISREG(status.st_mode)):
-        return 0  # a link, a socket, a FIFO
-    mode = stat.S_IMODE(status.st_mode)
-    if not mode & 0o077:
+    except OSError as error:  # a link (ELOOP), a socket, or not ours to open
+        if not os.path.islink(path):
+            logger.warning("var/: %s could not be opened to make it private: %s", path, error)
         return 0
-    os.chmod(path, mode & 0o700)
-    return 1
+    try:
+        status = os.fstat(descriptor)
+        if not (stat.S_ISDIR(status.st_mode) or stat.S_ISREG(status.st_mode)):
+            return 0  # a FIFO, a device
+        mode = stat.S_IMODE(status.st_mode)
+        if not mode & 0o077:
+            return 0
+        os.fchmod(descriptor, mode & 0o700)
+        return 1
+    except PermissionError:
+        logger.warning(
+            "var/: %s belongs to uid %s, not this user: others may still read it; remove it or "
+            "chown it to this user",
+            path,
+            os.fstat(descriptor).st_uid,
+        )
+        return 0
+    finally:
+        os.close(descriptor)
 
 
 def temporary_uploads_sweep(folder: Path, *, older_than: float = STALE_UPLOAD) -> list[str]:
