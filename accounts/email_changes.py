@@ -84,7 +84,9 @@ def email_change_request(*, profile: Profile, email: str) -> EmailChange:
     checked): at once where it is removed or the console sends no email, else pending until
     the link sent to it is followed. Raises ``AddressTaken``."""
     user = profile.user
-    if email == user.email:
+    if email == user.email:  # the current address typed again: any pending change is cancelled
+        if profile.pending_email or profile.pending_email_token:
+            _pending_set(profile, email="", token="")
         return EmailChange.UNCHANGED
     old_address, sends = user.email, console_sends_email()
     with transaction.atomic():

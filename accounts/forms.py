@@ -1,11 +1,15 @@
 from django import forms
 from django.conf import settings
 from django.contrib.auth.base_user import BaseUserManager
+from django.http import HttpRequest
 
 from accounts.countries import COUNTRIES
 from accounts.email_changes import ADDRESS_TAKEN, EMAIL_LINK_DAYS, address_taken
 from accounts.models import RACER_NAME_RULE, AvatarColour, Profile
+from common import ratelimits
 from common.forms import RacerWords
+
+GUESS_LIMIT = "profile-password"  # wrong current passwords on the profile, per racer
 
 
 class ProfileForm(RacerWords, forms.ModelForm):
@@ -58,8 +62,10 @@ class ProfileForm(RacerWords, forms.ModelForm):
             "racer_name": forms.TextInput(attrs={"data-racer-name": "", "autocomplete": "nickname"})
         }
 
-    def __init__(self, *args, **kwargs) -> None:
+    def __init__(self, *args, request: HttpRequest | None = None, **kwargs) -> None:
         super().__init__(*args, **kwargs)
+        self.request = request  # whose wrong passwords count against the limit
+        self.limited: ratelimits.Limited | None = None
         self.fields["email"].help_text = email_help()
         self.account = self.instance.user
 
@@ -67,24 +73,36 @@ class ProfileForm(RacerWords, forms.ModelForm):
         email = self.cleaned_data["email"].strip()
         if email and email != self.account.email:
             email = BaseUserManager.normalize_email(email)
-        if email != self.account.email and address_taken(email=email, user=self.account):
-            raise forms.ValidationError(ADDRESS_TAKEN)
         return email
 
     def clean(self) -> dict:
+        """A new address needs the current password, checked within the limit on guesses
+        (``GUESS_LIMIT``, counted only when it is wrong, like a sign-in's); whether
+        another account has the address is said only once the password is right, so that the
+        page tells nobody without it who has an account."""
         cleaned = super().clean()
         email, password = cleaned.get("email"), cleaned.get("password", "")
-        if email is not None and email != self.account.email:
-            if not password:
-                self.add_error(
-                    "password", "Enter your current password to change your email address."
-                )
-            elif not self.account.check_password(password):
-                self.add_error(
-                    "password",
-                    "That is not your current password, so nothing was saved. Enter it again "
-                    "to change your email address.",
-                )
+        if email is None or email == self.account.email:
+            return cleaned
+        if not password:
+            self.add_error("password", "Enter your current password to change your email address.")
+            return cleaned
+        held = ratelimits.hold(self.request, GUESS_LIMIT) if self.request else None
+        if held is not None and held.limited:
+            self.limited = held.limited
+            ratelimits.refuse(self, held.limited)
+            return self.cleaned_data
+        if not self.account.check_password(password):
+            self.add_error(
+                "password",
+                "That is not your current password, so nothing was saved. Enter it again "
+                "to change your email address.",
+            )
+            return cleaned
+        if held is not None:
+            held.give_back(GUESS_LIMIT)
+        if address_taken(email=email, user=self.account):
+            self.add_error("email", ADDRESS_TAKEN)
         return cleaned
 
     def clean_racer_name(self) -> str:

@@ -28,7 +28,10 @@ def profile(request: HttpRequest) -> HttpResponse:
     their email address, and how to change or reset their password."""
     current = profile_ensure(user=request.user)
     form = ProfileForm(
-        request.POST or None, instance=current, initial={"email": request.user.email}
+        request.POST or None,
+        instance=current,
+        initial={"email": request.user.email},
+        request=request,
     )
     if request.method == "POST" and form.is_valid():
         chosen = {name: form.cleaned_data[name] for name in PROFILE_CHOICES}
@@ -49,7 +52,7 @@ def profile(request: HttpRequest) -> HttpResponse:
             "reset_by_email": settings.PITLANE_PASSWORD_RESET_BY_EMAIL,
             "link_days": EMAIL_LINK_DAYS,
         },
-        status=400 if form.errors else 200,
+        status=form.limited.status if form.limited else 400 if form.errors else 200,
     )
 
 

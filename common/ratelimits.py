@@ -39,6 +39,7 @@ WHAT = {
     "sign-in-account": "sign-in attempts for this racer",
     "sign-in-address": "sign-in attempts from your address",
     "sign-up": "new accounts from your address",
+    "profile-password": "wrong current passwords on your profile",
     "validate": "reward function checks",
     "import": "imports",
     "import-refused": "refused or unconfirmed imports",

@@ -204,6 +204,7 @@ PITLANE_RATES = {
         "sign-in-account": "10/15m",
         "sign-in-address": "30/15m",
         "sign-up": "5/h",
+        "profile-password": "10/15m",
         "validate": "30/10m",
         "import": "10/h",
         "import-refused": "30/h",

@@ -272,3 +272,27 @@ def test_staff_cannot_give_one_racers_address_to_another_in_the_admin(client, al
     assert User.objects.get(pk=alice.pk).email == ""
     assert client.post(url, {**form, "email": "alice@example.org"}).status_code == 302
     assert User.objects.get(pk=alice.pk).email == "alice@example.org"
+
+
+@pytest.mark.parametrize("password", ["", "guess"])
+def test_without_the_right_password_the_page_says_nothing_of_who_has_an_address(
+    client, alice, bob, password
+):
+    with_address(bob, "bob@example.org")
+    client.force_login(alice)
+    response = change_email(client, "bob@example.org", password=password)
+    assert response.status_code == 400
+    assert "That address belongs to another account." not in response.text
+    assert "password" in response.text
+
+
+def test_typing_the_current_address_again_cancels_a_pending_change(
+    client, alice, by_email, django_capture_on_commit_callbacks
+):
+    with_address(alice, "alice@example.org")
+    client.force_login(alice)
+    link = request_change(client, django_capture_on_commit_callbacks, "new@example.org")
+    assert change_email(client, "alice@example.org", password="").status_code == 302
+    assert Profile.objects.get(user=alice).pending_email == ""
+    assert "This link no longer works" in client.post(link).text
+    assert User.objects.get(pk=alice.pk).email == "alice@example.org"

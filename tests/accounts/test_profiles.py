@@ -152,3 +152,23 @@ def test_the_leaderboard_shows_racer_names_countries_and_avatars(client, alice, 
 def test_the_help_page_says_where_a_racer_chooses_how_leaderboards_show_them(client):
     page = client.get(reverse("help")).text
     assert f'<a href="{reverse("accounts:profile")}">racer profile</a>' in page
+
+
+def test_wrong_current_passwords_on_the_profile_end_in_a_wait_even_for_the_right_one(
+    client, alice, settings
+):
+    settings.PITLANE_RATES = {**settings.PITLANE_RATES, "profile-password": "2/15m"}
+    client.force_login(alice)
+    url = reverse("accounts:profile")
+    asked = profile_form(email="new@example.org")
+    assert client.post(url, {**asked, "password": PASSWORD}).status_code == 302  # not counted
+    for _ in range(2):
+        assert (
+            client.post(url, {**asked, "email": "x@example.org", "password": "guess"}).status_code
+            == 400
+        )
+    response = client.post(url, {**asked, "email": "y@example.org", "password": PASSWORD})
+    assert response.status_code == 429
+    assert 1 <= int(response.headers["Retry-After"]) <= 15 * 60
+    assert "Too many wrong current passwords on your profile for now: try again in" in response.text
+    assert User.objects.get(pk=alice.pk).email == "new@example.org"
