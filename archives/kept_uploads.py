@@ -58,16 +58,22 @@ def upload_open(kept: KeptUpload) -> IO[bytes]:
 
 def upload_keep(*, racer: AbstractBaseUser, upload: UploadedFile) -> KeptUpload:
     """Keep ``upload`` for the racer's next attempt, replacing (deleting) the one kept before;
-    ``UploadNotKept`` when it is over the racer's allowance or the console's. The row is
-    written, and the console's total read, before the file: two racers at once may both be
-    refused, never both kept past the total."""
+    ``UploadNotKept`` when it is over the racer's allowance or the console's, and then the one
+    kept before stays (its bytes, which the new one would replace, do not count against the
+    console's). The row is written, and the console's total read again, before the file: two
+    racers at once may both be refused, never both kept past the total (the one kept before
+    is then gone already: only when another racer's upload took the room in that instant)."""
     outside_transaction("An uploaded archive kept in storage")
-    upload_discard(racer=racer)
     _delete_unclaimed_files()
     if upload.size > MAX_ARCHIVE:
         raise UploadNotKept(
             f"The archive is over {size(MAX_ARCHIVE)}, the most an upload kept for you may hold."
         )
+    previous = KeptUpload.objects.filter(racer=racer).first() if racer.is_authenticated else None
+    others = _kept_total() - (previous.size if previous is not None else 0)
+    if others + upload.size > settings.PITLANE_KEPT_UPLOADS_MAX:
+        raise _console_full(others)
+    upload_discard(racer=racer)  # accepted: the new one replaces it
     token = secrets.token_urlsafe(16)
     try:
         kept = KeptUpload.objects.create(

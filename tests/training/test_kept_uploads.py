@@ -134,3 +134,29 @@ def test_a_preview_the_console_cannot_keep_is_refused_in_words_with_retry_after(
     assert "The console is holding too many imports waiting for their racers" in response.text
     assert "What the import creates" not in response.text and 'value="mine"' in response.text
     assert KeptUpload.objects.get().racer == bob and not RLModel.objects.exists()
+
+
+@pytest.mark.parametrize("refused", ["over the racer's allowance", "over the console's total"])
+def test_a_refused_second_upload_leaves_the_first_kept(alice, bob, monkeypatch, settings, refused):
+    monkeypatch.setattr(kept_uploads, "MAX_ARCHIVE", 5000)
+    settings.PITLANE_KEPT_UPLOADS_MAX = 10_000
+    kept_uploads.upload_keep(racer=bob, upload=SimpleUploadedFile("b.tar.gz", bytes(4000)))
+    first = kept_uploads.upload_keep(
+        racer=alice, upload=SimpleUploadedFile("a.tar.gz", bytes(3000))
+    )
+    second = bytes(5001) if refused == "over the racer's allowance" else bytes(5000)
+    if refused == "over the console's total":
+        settings.PITLANE_KEPT_UPLOADS_MAX = 8000  # 4,000 + 5,000 without Alice's first: over
+    with pytest.raises(kept_uploads.UploadNotKept):
+        kept_uploads.upload_keep(racer=alice, upload=SimpleUploadedFile("a2.tar.gz", second))
+    assert KeptUpload.objects.get(racer=alice) == first and stored(first)
+    assert first.size == 3000
+
+
+def test_a_racers_own_kept_upload_does_not_count_against_the_console_total(alice, settings):
+    settings.PITLANE_KEPT_UPLOADS_MAX = 10_000
+    kept_uploads.upload_keep(racer=alice, upload=SimpleUploadedFile("a.tar.gz", bytes(6000)))
+    second = kept_uploads.upload_keep(
+        racer=alice, upload=SimpleUploadedFile("b.tar.gz", bytes(9000))
+    )
+    assert list(KeptUpload.objects.all()) == [second] and stored(second)
