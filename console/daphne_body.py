@@ -22,6 +22,18 @@ application, in the scope's ``pitlane.body_file`` extension, which ``BodyFromFil
 versions to it. HTTP/1.1 only: Daphne speaks HTTP/2 only with Twisted's ``http2`` extra, which is
 not installed (an H2 stream has no request line of its own, so every path would get the default
 limit).
+
+What bounds the disk: the bodies being received by the process together, counted here
+(``_in_flight``; a declared length reserved whole when the headers arrive, a chunked body as its
+bytes arrive, released when the request finishes or its connection drops). A body over
+``IN_MEMORY`` that would take the count past ``PITLANE_BODIES_IN_FLIGHT_MAX`` is answered 503
+(``Retry-After``) before any of it is kept; smaller ones, kept in memory, are never refused, so
+that sign-in and other forms go on working while large uploads fill the count. And a deadline per
+body, from its headers (Twisted's idle timeout restarts with every byte, and Daphne sets none): the
+longer of ``PITLANE_BODY_DEADLINE`` and the body's length (its path's limit if sent in chunks) at
+``PITLANE_BODY_RATE``: 30 s for a page's 10 MiB, 8.6 min for the import's 257 MiB at 512 KiB/s (a
+4 Mbit/s uplink), so a client that trickles a byte at a time is dropped, and its file with it. The
+file is opened only once a body passes ``IN_MEMORY``.
 """
 
 from __future__ import annotations
@@ -39,7 +51,17 @@ from console.bodylimit import limit_for, refusal_page
 EXTENSION = "pitlane.body_file"  # scope["extensions"][EXTENSION] = {"file": the body}
 PIECE = 1 << 20  # [bytes] of the body in one http.request message
 IN_MEMORY = 100_000  # [bytes] a declared body under this is kept in memory (Twisted's own figure)
-LINGER = 2.0  # [s] after a 413, the rest of the body is read and dropped, then the socket closed
+LINGER = 2.0  # [s] after a refusal, the rest of the body is read and dropped, then closed
+RETRY_AFTER = 30  # [s] a 503 for too many bodies at once asks the client to wait this long
+BUSY_PAGE = (
+    b"<!doctype html><title>Busy</title><h1>The console is receiving too much at once</h1>"
+    b"<p>Nothing was saved: try again in a minute.</p>"
+)
+SLOW_PAGE = (
+    b"<!doctype html><title>Too slow</title><h1>That took too long to send</h1>"
+    b"<p>Nothing was saved: try again, on a faster connection if you can.</p>"
+)
+_in_flight = 0  # [bytes] of the bodies this process is receiving (reserved or received) together
 
 
 def _discard(data: bytes) -> None:
@@ -54,6 +76,8 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         self._refused = False
         self._received = 0
         self._limit = 0
+        self._reserved = 0  # [bytes] of _in_flight this request holds
+        self._deadline = None  # the DelayedCall that drops a body still arriving
         self._body: io.IOBase | None = None
         super().__init__(*args, **kwargs)
         self.server = _ServerForRequest(self.server, self)
@@ -62,24 +86,59 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         # The target of the request line; HTTPChannel.lineReceived keeps it before the headers.
         target = getattr(self.channel, "_path", b"").split(b"?", 1)[0]
         self._limit = limit_for(unquote(target.decode("ascii", "replace")))
+        self.content = io.BytesIO()  # to a file once past IN_MEMORY (handleContentChunk)
         if length is not None and length > self._limit:
-            self._refuse()
-        elif length is not None and length < IN_MEMORY:
-            self.content = io.BytesIO()
-        else:
-            # closed by the request (as Twisted closes content) or, handed over, by BodyFromFile
-            self.content = tempfile.TemporaryFile(dir=settings.FILE_UPLOAD_TEMP_DIR)  # noqa: SIM115
+            self._refuse_too_large()
+        elif length is not None and not self._reserve(length):
+            self._refuse_busy()
+        elif length != 0:
+            seconds = max(
+                settings.PITLANE_BODY_DEADLINE, (length or self._limit) / settings.PITLANE_BODY_RATE
+            )
+            self._deadline = self.channel.callLater(seconds, self._too_slow)
+
+    def _reserve(self, size: int) -> bool:
+        """Count ``size`` more bytes in flight for this request, unless that passes the maximum
+        for a body kept on disk (one within IN_MEMORY is always counted, never refused)."""
+        global _in_flight
+        if (
+            max(size, self._received) > IN_MEMORY
+            and _in_flight + size > settings.PITLANE_BODIES_IN_FLIGHT_MAX
+        ):
+            return False
+        _in_flight += size
+        self._reserved += size
+        return True
+
+    def _release(self) -> None:
+        global _in_flight
+        _in_flight -= self._reserved
+        self._reserved = 0
+        if self._deadline is not None and self._deadline.active():
+            self._deadline.cancel()
+        self._deadline = None
 
     def handleContentChunk(self, data: bytes) -> None:
         if self._refused:
             return
         self._received += len(data)
         if self._received > self._limit:
-            self._refuse()
-        else:
-            self.content.write(data)
+            self._refuse_too_large()
+            return
+        if self._received > self._reserved and not self._reserve(self._received - self._reserved):
+            self._refuse_busy()
+            return
+        if self._received > IN_MEMORY and isinstance(self.content, io.BytesIO):
+            # closed by the request (as Twisted closes content) or, handed over, by BodyFromFile
+            spool = tempfile.TemporaryFile(dir=settings.FILE_UPLOAD_TEMP_DIR)  # noqa: SIM115
+            spool.write(self.content.getvalue())
+            self.content = spool
+        self.content.write(data)
 
     def requestReceived(self, command: bytes, path: bytes, version: bytes) -> None:
+        if self._deadline is not None and self._deadline.active():
+            self._deadline.cancel()  # the whole body is here (the count is kept till finish)
+        self._deadline = None
         if self._refused:
             return
         self._body, self.content = self.content, io.BytesIO()
@@ -87,10 +146,12 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         super().requestReceived(command, path, version)
 
     def finish(self) -> None:
+        self._release()
         self._close_body()
         super().finish()
 
     def connectionLost(self, reason) -> None:
+        self._release()
         self._close_body()
         super().connectionLost(reason)
 
@@ -104,18 +165,30 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         body, self._body = self._body, None
         return body
 
-    def _refuse(self) -> None:
-        """Answer 413 at once; read the rest only to drop it, so that the client can read the
+    def _refuse_too_large(self) -> None:
+        self._refuse(413, "Content Too Large", refusal_page(self._limit))
+
+    def _refuse_busy(self) -> None:
+        self._refuse(503, "Service Unavailable", BUSY_PAGE, f"Retry-After: {RETRY_AFTER}\r\n")
+
+    def _too_slow(self) -> None:
+        """The body's deadline passed before the whole of it arrived: drop it and its file."""
+        self._deadline = None
+        if not self._refused:
+            self._refuse(408, "Request Timeout", SLOW_PAGE)
+
+    def _refuse(self, status: int, reason: str, page: bytes, extra: str = "") -> None:
+        """Answer at once; read the rest only to drop it, so that the client can read the
         answer (a socket closed on unread data resets, and may take the answer with it)."""
         self._refused = True
+        self._release()
         if self.content is not None:
             self.content.close()
             self.content = None
         # allHeadersReceived would send "100 Continue" after the answer
         self.requestHeaders.removeHeader(b"expect")
-        page = refusal_page(self._limit)
         head = (
-            "HTTP/1.1 413 Content Too Large\r\n"
+            f"HTTP/1.1 {status} {reason}\r\n{extra}"
             "Content-Type: text/html; charset=utf-8\r\n"
             f"Content-Length: {len(page)}\r\nConnection: close\r\n\r\n"
         )
@@ -129,7 +202,7 @@ class BoundedBodyRequest(http_protocol.WebRequest):
             "complete",
             {
                 "path": getattr(channel, "_path", b"").decode("ascii", "replace"),
-                "status": 413,
+                "status": status,
                 "method": getattr(channel, "_command", b"").decode("ascii", "replace"),
                 "client": f"{getattr(self.client, 'host', '')}:{getattr(self.client, 'port', '')}",
                 "time_taken": 0.0,

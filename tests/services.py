@@ -148,12 +148,15 @@ def service_env(database: str) -> dict[str, str]:
     return env
 
 
-def daphne_started(database: str, log: Path) -> tuple[ServiceProcess, int]:
-    """Daphne serving console.asgi on a free port, listening; its process and port (stop it)."""
+def daphne_started(
+    database: str, log: Path, settings: dict[str, str] | None = None
+) -> tuple[ServiceProcess, int]:
+    """Daphne serving console.asgi on a free port, listening, with ``settings`` added to its
+    environment; its process and port (stop it)."""
     port = free_port()
     process = ServiceProcess(
         python_module("daphne", "-b", "127.0.0.1", "-p", str(port), "console.asgi:application"),
-        env=service_env(database),
+        env={**service_env(database), **(settings or {})},
         log=log,
     )
 

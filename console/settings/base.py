@@ -230,6 +230,12 @@ PITLANE_CHECKS_WAITING = env.int("PITLANE_CHECKS_WAITING", 8, minimum=0)
 # (archives.imports.MAX_ARCHIVE, 256 MiB, with room for the form around it).
 PITLANE_MAX_BODY = env.int("PITLANE_MAX_BODY", 10 * 2**20, minimum=2**20)  # [bytes]
 PITLANE_MAX_IMPORT_BODY = env.int("PITLANE_MAX_IMPORT_BODY", 257 * 2**20, minimum=2**20)  # [bytes]
+# Bodies being received by one web process together (console.daphne_body): past it a body over
+# 100 kB is refused (503, Retry-After) until others finish; and each body's deadline, from its
+# headers: this many seconds, or its size at PITLANE_BODY_RATE if longer.
+PITLANE_BODIES_IN_FLIGHT_MAX = env.int("PITLANE_BODIES_IN_FLIGHT_MAX", 2**30, minimum=2**20)
+PITLANE_BODY_DEADLINE = env.int("PITLANE_BODY_DEADLINE", 30, minimum=1)  # [s]
+PITLANE_BODY_RATE = env.int("PITLANE_BODY_RATE", 512 * 2**10, minimum=2**10)  # [bytes/s]
 # All racers' uploads kept for an import's next step (archives.kept_uploads) together: past it
 # a new one is refused in words until one is confirmed, cancelled or expires.
 PITLANE_KEPT_UPLOADS_MAX = env.int("PITLANE_KEPT_UPLOADS_MAX", 2 * 2**30, minimum=2**20)  # [bytes]

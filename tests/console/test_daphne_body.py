@@ -4,6 +4,7 @@ neither swells it nor holds up other requests (console.daphne_body)."""
 
 from __future__ import annotations
 
+import os
 import select
 import socket
 import threading
@@ -17,7 +18,7 @@ from django.test import Client
 from django.urls import reverse
 
 from tests.helpers.accounts import racer
-from tests.services import ServiceProcess, daphne_started
+from tests.services import ServiceProcess, daphne_started, wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -205,3 +206,91 @@ def test_a_websocket_still_opens_through_the_request(web_server):
         )
         head = connection.recv(4096)
     assert head.startswith(b"HTTP/1.1 101 "), head
+
+
+@pytest.fixture(scope="module")
+def capped_server(test_database, logs_dir) -> Iterator[WebServer]:
+    """A Daphne that takes 4 MiB of bodies at once, each within 4 s."""
+    process, port = daphne_started(
+        test_database,
+        logs_dir / "daphne-capped.log",
+        {
+            "PITLANE_BODIES_IN_FLIGHT_MAX": str(4 * MiB),
+            "PITLANE_BODY_DEADLINE": "4",
+            "PITLANE_BODY_RATE": str(2**30),
+        },
+    )
+    try:
+        server = WebServer(process, port)
+        get(server, "/healthz")
+        yield server
+    finally:
+        process.stop()
+
+
+def spooled(server: WebServer) -> list[int]:
+    """[bytes] each body file the server holds open in FILE_UPLOAD_TEMP_DIR (anonymous files)."""
+    sizes = []
+    for fd in Path(f"/proc/{server.process.pid}/fd").iterdir():
+        try:
+            if os.readlink(fd).startswith(f"{settings.FILE_UPLOAD_TEMP_DIR}/"):
+                sizes.append(fd.stat().st_size)
+        except FileNotFoundError:
+            pass  # closed meanwhile
+    return sorted(sizes)
+
+
+def begun(server: WebServer, size: int, sent: int) -> socket.socket:
+    """A connection that declares a body of ``size`` bytes to the sign-in page, and ``sent`` of
+    them."""
+    connection = socket.create_connection(("127.0.0.1", server.port), timeout=30)
+    connection.sendall(
+        f"POST {reverse('login')} HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n"
+        f"Content-Length: {size}\r\n"
+        "Content-Type: multipart/form-data; boundary=pitlane\r\n\r\n".encode()
+        + bytes(sent)
+    )
+    return connection
+
+
+def test_bodies_past_the_in_flight_cap_are_refused_and_nothing_more_is_spooled(capped_server):
+    first, second = begun(capped_server, 2 * MiB, MiB), begun(capped_server, 2 * MiB, MiB)
+    try:
+        wait_for(lambda: spooled(capped_server) == [MiB, MiB], "two bodies half sent", 3)
+        for chunked in (False, True):
+            answer, _ = post(capped_server, reverse("login"), 2 * MiB, chunked=chunked)
+            assert answer.startswith(b"HTTP/1.1 503 "), answer[:200]
+            assert b"Retry-After: 30\r\n" in answer
+            assert b"try again in a minute" in answer
+        assert spooled(capped_server) == [MiB, MiB]  # the refused bodies kept nothing
+        first.sendall(bytes(MiB))
+        assert not read_all(first).startswith(b"HTTP/1.1 503 ")  # Django's answer
+        answer, _ = post(capped_server, reverse("login"), 2 * MiB)  # the first's room is free
+        assert answer.startswith(b"HTTP/1.1 ") and not answer.startswith(b"HTTP/1.1 503 ")
+    finally:
+        first.close()
+        second.close()
+
+
+def test_a_body_that_stalls_past_its_deadline_is_dropped_with_its_file(capped_server):
+    started = time.monotonic()
+    with begun(capped_server, 3 * MiB, MiB) as connection:
+        wait_for(lambda: spooled(capped_server) == [MiB], "the body's first MiB", 3)
+        answer = read_all(connection)  # nothing more sent: the server answers when 4 s are up
+    assert answer.startswith(b"HTTP/1.1 408 "), answer[:200]
+    assert 3.5 < time.monotonic() - started < 10
+    wait_for(lambda: spooled(capped_server) == [], "the body's file to go", 2)
+    answer, _ = post(capped_server, reverse("login"), 3 * MiB)  # its 3 MiB no longer counted
+    assert not answer.startswith(b"HTTP/1.1 503 ")
+
+
+def test_an_empty_body_in_chunks_opens_no_file(capped_server):
+    with socket.create_connection(("127.0.0.1", capped_server.port), timeout=30) as connection:
+        connection.sendall(
+            f"POST {reverse('login')} HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+            "Transfer-Encoding: chunked\r\n\r\n".encode()
+        )
+        time.sleep(0.3)
+        assert spooled(capped_server) == []
+        connection.sendall(b"0\r\n\r\n")
+        assert connection.recv(4096).startswith(b"HTTP/1.1 ")
