@@ -91,9 +91,14 @@ function showWinner(winner) {
 }
 
 async function refresh() {
-  const response = await fetch(root.dataset.stateUrl);
-  if (!response.ok) return;
-  const state = await response.json();
+  let state;
+  try {
+    const response = await fetch(root.dataset.stateUrl);
+    if (!response.ok) return;
+    state = await response.json();
+  } catch {
+    return; // the server is restarting too: the socket's next opening fetches it again
+  }
   if (physical) showTiming(state.timing);
   else showQueue(state.queue);
   showTop(state.top);

@@ -54,10 +54,14 @@ async function refreshQueue() {
 }
 
 async function catchUp() {
-  const response = await fetch(root.dataset.stateUrl);
-  if (!response.ok) return;
-  showDriving((await response.json()).queue);
-  await refreshQueue();
+  try {
+    const response = await fetch(root.dataset.stateUrl);
+    if (!response.ok) return;
+    showDriving((await response.json()).queue);
+    await refreshQueue();
+  } catch {
+    // the server is restarting too: the socket's next opening catches up instead
+  }
 }
 
 listen(root.dataset.event, (message) => {

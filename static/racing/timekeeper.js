@@ -170,11 +170,15 @@ copy?.addEventListener("click", async () => {
 // The car on the track as this page's server draws it now: after the socket opens again, since a
 // device's signals while it was closed reached nobody.
 async function catchUp() {
-  const response = await fetch(location.href, { headers: { Accept: "text/html" } });
-  if (!response.ok) return;
-  const page = new DOMParser().parseFromString(await response.text(), "text/html");
-  const state = page.getElementById("timing-state");
-  if (state) show(JSON.parse(state.textContent));
+  try {
+    const response = await fetch(location.href, { headers: { Accept: "text/html" } });
+    if (!response.ok) return;
+    const page = new DOMParser().parseFromString(await response.text(), "text/html");
+    const state = page.getElementById("timing-state");
+    if (state) show(JSON.parse(state.textContent));
+  } catch {
+    // the server is restarting too: the socket's next opening catches up instead
+  }
 }
 
 let opened = false; // the page was drawn just before the first opening
