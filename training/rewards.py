@@ -204,9 +204,8 @@ def reward_validate(
         failed: dict[tuple[str, str, int | None], list[str]] = {}
         for number, situation in enumerate(samples):
             if time.monotonic() > budget_ends:
-                spent = _budget_spent(samples[number:], number)
-                # not one sample run: nothing says the function works, so it is not valid
-                (result.warnings if number else result.errors).append(spent)
+                problems = result.warnings if number else result.errors  # none run: not valid
+                problems.append(_budget_spent(samples[number:], number))
                 break
             name, description = situation["name"], situation["description"]
             try:
@@ -226,20 +225,13 @@ def reward_validate(
 
 
 def _budget_spent(left: list[dict], run: int) -> Problem:
-    """The warning for the samples ``left`` unrun once the first ``run`` spent the budget."""
+    """The problem of the samples ``left`` unrun once the first ``run`` spent the budget."""
     names = ", ".join(situation["name"] for situation in left)
-    if not run:
-        return Problem(
-            "slow",
-            f"Loading the code took more than {SAMPLES_BUDGET:g} s, so no sample could be run "
-            "and the function could not be checked: make what runs when the module loads "
-            "quicker (a training step calls the function several times a second).",
-        )
+    what = f"the first {run} samples" if run else "the module (no sample could be run)"
     return Problem(
         "slow",
-        f"Loading the code and the first {run} samples took more than {SAMPLES_BUDGET:g} s, "
-        f"so the others ({names}) were not run: a training step calls the function several "
-        "times a second.",
+        f"Loading the code and {what} took more than {SAMPLES_BUDGET:g} s, so {names} were not "
+        "run: a training step calls the function several times a second.",
     )
 
 
