@@ -72,14 +72,18 @@ class Signal:
     at_ms: int | None = None  # the clock's reading, for a crossing
 
 
+# What a device sends, in words: for any body that is not a signal.
+SIGNAL_FORMAT = (
+    'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a signal of '
+    "off_track, reset, undo or finish."
+)
+
+
 def signal_read(data: object) -> Signal:
     """The signal in a device's (or the page's) JSON body; ``SignalUnreadable`` says what is
     wrong with it: not an object, an unknown signal, a crossing without its clock reading."""
     if not isinstance(data, dict) or not isinstance(data.get("signal"), str):
-        raise SignalUnreadable(
-            'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a signal of '
-            "off_track, reset, undo or finish."
-        )
+        raise SignalUnreadable(SIGNAL_FORMAT)
     kind, at_ms = data["signal"], data.get("at_ms")
     if kind not in SIGNALS:
         raise SignalUnreadable(f"Unknown signal {kind!r}: send one of {', '.join(SIGNALS)}.")

@@ -238,14 +238,9 @@ def _signal(event: Event, body: bytes) -> JsonResponse:
     try:
         signal = timing.signal_read(json.loads(body or b"{}"))
     except (ValueError, RecursionError) as unreadable:  # not JSON, not a signal, too deep
-        error = str(unreadable) if isinstance(unreadable, timing.SignalUnreadable) else ""
+        readable = isinstance(unreadable, timing.SignalUnreadable)
         return JsonResponse(
-            {
-                "error": error
-                or 'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a '
-                "signal of off_track, reset, undo or finish."
-            },
-            status=400,
+            {"error": str(unreadable) if readable else timing.SIGNAL_FORMAT}, status=400
         )
     run = timing.running_run(event=event)
     if run is None:
