@@ -72,8 +72,7 @@ class Signal:
     at_ms: int | None = None  # the clock's reading, for a crossing
 
 
-# What a device sends, in words: for any body that is not a signal.
-SIGNAL_FORMAT = (
+SIGNAL_FORMAT = (  # what a device sends, in words, for any body that is not a signal
     'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a signal of '
     "off_track, reset, undo or finish."
 )
