@@ -3,8 +3,8 @@
 Each queue has a worker of its own (``worker_pools``), as on several machines: the trainers, the
 simulations (rollouts, evaluations, races) and the re-scorings each have their own processes, so
 no job's trainer can take the place one of its rollouts needs (three trainers in one pool of three
-processes waited for ever), and a re-scoring never holds an evaluation's. A job past the trainers'
-processes waits in the queue, its place shown.
+processes waited for ever), and a re-scoring never holds an evaluation's. The trainers are as many
+as the machine's memory holds (``console.sizing``); a job past them waits in the queue.
 
 The supervisor starts each process in its own session, so Ctrl-C in the terminal reaches only the
 supervisor, which then stops what it started in reverse order (web server, workers, Redis), each
@@ -42,6 +42,7 @@ from django.core.management import call_command
 from common.redis_client import redis_client
 from console.env import _redact, env
 from console.private_files import data_dir_private, files_private, private_dir
+from console.sizing import Sizing
 from console.workers import live_workers
 
 STOP_GRACE = 15.0  # [s] between SIGTERM and SIGKILL
@@ -108,8 +109,7 @@ class Supervisor:
     port: int
     var_dir: Path
     local_redis_port: int | None  # None: REDIS_URL names a Redis that someone else runs
-    trainers: int
-    concurrency: int  # the simulation worker's processes
+    sizing: Sizing  # the trainers, simulation processes, cars and threads chosen for the machine
     out: IO[str] = field(default_factory=lambda: sys.stdout)
     children: list[Child] = field(default_factory=list)
     _stopping: bool = False
@@ -121,10 +121,7 @@ class Supervisor:
             port=env.int("PITLANE_PORT", 8000, minimum=1, maximum=65535),
             var_dir=settings.VAR_DIR,
             local_redis_port=None if "REDIS_URL" in os.environ else settings.REDIS_PORT,
-            trainers=settings.PITLANE_TRAINERS,
-            concurrency=env.int(
-                "PITLANE_WORKER_CONCURRENCY", max(2, os.cpu_count() or 1), minimum=1
-            ),
+            sizing=settings.SIZING,  # each figure the environment's where it sets one
         )
 
     @property
@@ -159,7 +156,9 @@ class Supervisor:
         call_command("migrate", interactive=False, verbosity=0)
         call_command("loadtracks", stdout=self.out)
         call_command("loaddemoseason", stdout=self.out)
-        for pool in worker_pools(trainers=self.trainers, simulations=self.concurrency):
+        self._say(self.sizing.in_words())
+        pools = worker_pools(trainers=self.sizing.trainers, simulations=self.sizing.simulations)
+        for pool in pools:
             # the scheduler (the monthly promotion, a simulation task) runs inside one worker
             beat = ["--beat"] if pool.queue == "simulation" else []
             self._spawn(pool.name, [sys.executable, "-m", "celery", *pool.arguments(), *beat])
@@ -258,7 +257,7 @@ class Supervisor:
             time.sleep(0.2)
 
     def _spawn(self, name: str, command: list[str]) -> None:
-        self.children.append(Child(name, _popen(command), command))
+        self.children.append(Child(name, _popen(command, self.sizing), command))
 
     # Serving and stopping
 
@@ -276,7 +275,7 @@ class Supervisor:
         started again (its data kept in its append-only file)."""
         if child.restart_at is not None:
             if now >= child.restart_at and not self._stopping:
-                child.process, child.restart_at = _popen(child.command), None
+                child.process, child.restart_at = _popen(child.command, self.sizing), None
                 child.started = now
                 self._say(f"Started the {child.name} again (process {child.process.pid}).")
             return
@@ -374,10 +373,13 @@ def _check_port(host: str, port: int, what: str, variable: str) -> None:
             ) from None
 
 
-def _popen(command: list[str]) -> subprocess.Popen:
+def _popen(command: list[str], sizing: Sizing) -> subprocess.Popen:
+    """Start ``command`` with the figures chosen for the machine in its environment: a child
+    (re)started once memory has changed counts the same trainers as the workers beside it."""
     return subprocess.Popen(
         command,
         cwd=settings.BASE_DIR,
+        env={**os.environ, **sizing.environment()},
         start_new_session=True,  # Ctrl-C reaches the supervisor only; it stops us in order
         preexec_fn=_stop_with_parent,
     )

@@ -272,7 +272,11 @@ class Cluster:
         self.s3 = S3Server()
         self.port = port or free_port()
         self.url = f"http://127.0.0.1:{self.port}"
-        env = {**cluster_env(self.postgres.url, self.redis.url, self.s3.url), **(settings or {})}
+        env = {
+            **cluster_env(self.postgres.url, self.redis.url, self.s3.url),
+            "PITLANE_TRAINERS": str(training),  # the queue's words count every machine's trainers
+            **(settings or {}),
+        }
         if not proxied:  # a browser straight at Daphne: no redirect to the HTTPS it lacks
             env["PITLANE_SSL_REDIRECT"] = "false"
         self.web = Machine("web", folder / "web", env)

@@ -19,6 +19,7 @@ from datetime import timedelta
 
 from django.conf import settings
 from django.db import DatabaseError, connection, transaction
+from django.db.models import QuerySet
 from django.utils import timezone
 
 from training import lifecycle
@@ -269,13 +270,16 @@ def log(
     JobLogLine.objects.create(job=job, text=text[:500], level=level, source=source)
 
 
-def trainers_free() -> int:
-    """Trainers (``PITLANE_TRAINERS``) that hold no job: each job past the queue and not yet
-    ended holds one."""
-    training = TrainingJob.objects.filter(status__in=TrainingJob.ACTIVE).exclude(
+def jobs_holding_trainers() -> QuerySet[TrainingJob]:
+    """The jobs past the queue and not yet ended: each holds a trainer."""
+    return TrainingJob.objects.filter(status__in=TrainingJob.ACTIVE).exclude(
         status=TrainingJob.Status.QUEUED
     )
-    return max(settings.PITLANE_TRAINERS - training.count(), 0)
+
+
+def trainers_free() -> int:
+    """Trainers (``PITLANE_TRAINERS``) that hold no job."""
+    return max(settings.PITLANE_TRAINERS - jobs_holding_trainers().count(), 0)
 
 
 def queue_position(job: TrainingJob) -> int | None:

@@ -256,10 +256,11 @@ def announce_training(job_id: int) -> None:
 
 
 def announce_queue() -> None:
-    """A job left the queue: the jobs still waiting have moved up."""
+    """A job left the queue: the jobs still waiting have moved up, and those training share the
+    machine with one more (``selectors.sharing_words``)."""
     from training.models import TrainingJob
 
-    for job_id in TrainingJob.objects.filter(status=TrainingJob.Status.QUEUED).values_list(
+    for job_id in TrainingJob.objects.filter(status__in=TrainingJob.ACTIVE).values_list(
         "pk", flat=True
     ):
         announce_training(job_id)

@@ -76,13 +76,27 @@ def models_with_training(*, racer: AbstractBaseUser) -> list[RLModel]:
 def queue_words(*, job: TrainingJob, free: int | None = None) -> str:
     """Where ``job`` stands in the queue, in the racer's words: starting, while a trainer is free
     for it (``free``, the trainers holding no job, counted when not given), else its place and
-    that it waits for a free trainer; "" for a job that does not wait."""
+    that it waits for a free trainer; for a job that trains, whom it shares the machine with
+    (``sharing_words``)."""
     place = leases.queue_position(job)
     if place is None:
-        return ""
+        return sharing_words(job=job)
     if place <= (leases.trainers_free() if free is None else free):
         return "starting on a free trainer"
     return f"number {place} in the queue, waiting for a free trainer"
+
+
+def sharing_words(*, job: TrainingJob) -> str:
+    """While ``job`` trains beside others (each holding a trainer of its own and its rollout
+    workers, the machine's cores shared among them all), how many, in the racer's words; "" when
+    it trains alone or does not train."""
+    if job.status not in (TrainingJob.Status.INITIALIZING, TrainingJob.Status.IN_PROGRESS):
+        return ""
+    others = leases.jobs_holding_trainers().exclude(pk=job.pk).count()
+    if not others:
+        return ""
+    trainings = "1 other training" if others == 1 else f"{others} other trainings"
+    return f"sharing the machine with {trainings}, each taking an equal share"
 
 
 def job_imported_only(*, job: TrainingJob | None) -> bool:

@@ -6,7 +6,6 @@ docs/operating.md, "Running on several machines", for the variables that switch 
 S3 and a shared Redis.
 """
 
-import os
 import sys
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from redis.exceptions import ConnectionError as RedisConnectionError
 from console.env import env
 from console.kept_secrets import kept_secret
 from console.private_files import private_dir
+from console.sizing import machine_sizing
 
 # OpenVINO (the physical car's download) reports usage to Intel over the network, and writes under
 # ~/intel, as soon as it is imported, unless its telemetry package is missing; then it uses its own
@@ -245,14 +245,15 @@ PITLANE_KEPT_UPLOADS_MAX = env.int("PITLANE_KEPT_UPLOADS_MAX", 2 * 2**30, minimu
 # rollouts need, and re-scorings (a racer's reward function over recorded driving, minutes of
 # sandbox calls) never hold those of training, evaluations and races.
 PITLANE_QUEUES = ("training", "simulation", "rescoring")
-# Jobs that train at once on a machine `make run` serves (console.supervisor): processes of its
-# training worker. A trainer learns while its rollout workers wait for the new weights
-# (jobs.rollouts' _await_next_version), so the trainers share the cores then: two trainers
-# with every core each made each update several times slower than with half of them each.
-PITLANE_TRAINERS = env.int("PITLANE_TRAINERS", 1, minimum=1)
-PITLANE_TRAINER_THREADS = env.int(
-    "PITLANE_TRAINER_THREADS", max(1, (os.cpu_count() or 1) // PITLANE_TRAINERS), minimum=1
-)
+# What `make run` (console.supervisor) starts, from the machine's cores and free memory
+# (console.sizing; a variable set wins; its children get the same): jobs training at once, the
+# simulation worker's processes (rollouts, evaluations, races), the cores shared among the
+# trainers as their threads (a trainer learns while its rollouts wait for the new weights: two
+# trainers with every core each made each update several times slower than with half each).
+SIZING = machine_sizing()
+PITLANE_TRAINERS = env.int("PITLANE_TRAINERS", SIZING.trainers, minimum=1)
+PITLANE_WORKER_CONCURRENCY = env.int("PITLANE_WORKER_CONCURRENCY", SIZING.simulations, minimum=1)
+PITLANE_TRAINER_THREADS = env.int("PITLANE_TRAINER_THREADS", SIZING.trainer_threads, minimum=1)
 # What a trainer's policy updates compute the features in, the camera's convolutions and the
 # middleware (rl.learner.update_precision): "fp32"; "bf16", autocast, the weights, heads, losses
 # and optimiser in float32 (log-probabilities within 0.013 of fp32's on the same weights and
@@ -278,8 +279,8 @@ PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # 
 # The same on any machine: the gain is per core, not from more of them. Not more: each car adds
 # an environment (about 28 MiB) and an episode in memory, and an iteration is 20 episodes by
 # default, which more cars would finish with fewer and fewer of them driving. A SAC worker drives
-# one (it wants an episode per update: jobs.rollouts.cars_for).
-PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", 8, minimum=1, maximum=64)
+# one (it wants an episode per update: jobs.rollouts.cars_for). Fewer where memory is short.
+PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", SIZING.cars, minimum=1, maximum=64)
 # Where a rollout worker runs its cars' policy: "cuda" serves it from the worker's own process on
 # the GPU (the sandbox child, which runs racers' code, is never given the GPU's driver: it sends
 # the cars' observations each step and reads back their actions), "cpu" runs it inside the

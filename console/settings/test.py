@@ -23,3 +23,6 @@ PITLANE_WATCHED_SPEEDUP = 5
 # Slow work (a sandbox run, a route file's check) run inside a transaction fails the test that
 # ran it (common.transactions.outside_transaction), where production only logs it.
 PITLANE_TRANSACTION_GUARD = True
+# The suite's training worker has two processes (tests.conftest.TRAINERS) whatever this machine
+# would train at once (console.sizing), and its pages count the free trainers as it has them.
+PITLANE_TRAINERS = 2

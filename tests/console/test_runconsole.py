@@ -33,6 +33,7 @@ def environment(var_dir: Path, port: int, redis_port: int) -> dict[str, str]:
         PITLANE_VAR_DIR=str(var_dir),
         PITLANE_PORT=str(port),
         PITLANE_REDIS_PORT=str(redis_port),
+        PITLANE_TRAINERS="1",
         PITLANE_WORKER_CONCURRENCY="1",
         PYTHONUNBUFFERED="1",
     )
@@ -103,6 +104,10 @@ def test_it_serves_the_console_with_redis_and_a_worker_per_queue(console_running
     port = env["PITLANE_PORT"]
     assert f"Pitlane is running: http://127.0.0.1:{port}" in output
     assert "78 built-in tracks loaded: 8 of Pitlane's and 70 of DeepRacer's." in output
+    # What it chose for the machine, the variables set winning, and how to choose otherwise
+    assert "This machine: " in output
+    assert "Training 1 job at once (PITLANE_TRAINERS), 1 simulation process for" in output
+    assert "set any of them to choose otherwise." in output
     assert (Path(env["PITLANE_VAR_DIR"]) / "secret_key").stat().st_mode & 0o777 == 0o600
     assert (Path(env["PITLANE_VAR_DIR"]) / "redis" / "appendonlydir").is_dir()
     with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=10) as response:
@@ -115,6 +120,11 @@ def test_it_serves_the_console_with_redis_and_a_worker_per_queue(console_running
         ("simulation",),
         ("rescoring",),
     }
+    # Each child is given the figures the supervisor chose, so that all of them agree
+    for worker in workers_of(env):
+        given = Path(f"/proc/{worker['pid']}/environ").read_bytes().split(b"\0")
+        assert b"PITLANE_TRAINERS=1" in given
+        assert any(name.startswith(b"PITLANE_CARS_PER_WORKER=") for name in given)
 
 
 def test_it_lets_no_other_user_read_the_data_directory(console_running):

@@ -1,6 +1,7 @@
 """A model's page says only what is so now (issue 54): a queued job with a trainer free is
 starting, not waiting; the words of a running job (the "Stopping" message, the evaluation still
-to come) go once it has ended; and the iteration table's best lap says it is a training lap."""
+to come) go once it has ended; the iteration table's best lap says it is a training lap; and a
+job that trains beside others says how many it shares the machine with (issue 56)."""
 
 import pytest
 from django.urls import reverse
@@ -79,3 +80,19 @@ def test_it_names_the_iteration_tables_best_lap_a_training_lap(client, alice):
     page = page_of(client, alice, job.model)
     assert '<th class="num">Best training lap</th>' in page
     assert "0:21.500" in page
+
+
+def test_it_says_a_training_shares_the_machine_with_the_others_running(client, alice, bob):
+    job = training_job(alice, seconds=60, ago=1)
+    assert "sharing the machine" not in page_of(client, alice, job.model)  # it trains alone
+
+    training_job(bob, seconds=60, ago=1)
+    started = queued_job(bob)
+    TrainingJob.objects.filter(pk=started.pk).update(status=TrainingJob.Status.INITIALIZING)
+    queued_job(alice)  # waits for a trainer: it shares nothing yet
+    words = "sharing the machine with 2 other trainings, each taking an equal share"
+    assert f"In progress: {words}" in page_of(client, alice, job.model)
+    assert selectors.training_status(job=job)["queue_words"] == words
+
+    TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.COMPLETED)
+    assert "sharing the machine" not in page_of(client, alice, job.model)
