@@ -11,10 +11,9 @@ episode's encoding.
 ``--cars 1 4 8``: the rollouts alone with that many cars in one sandbox (``Sandbox(cars=...)``,
 driven as a rollout worker drives them: every idle car starts an episode, each step one batched
 forward pass for all): steps/s of all the cars together, on the same one core. With
-``--served``, each beside the same with the policy served to the child from this process
-(``Sandbox(policy_device="cpu")``, as a worker serves it from the GPU): the cost of the round trip
-a step, the cars' observations sent and their actions read back, on that same core; ``--served
-cuda``, served from the GPU, as a rollout worker on a GPU machine drives.
+``--served``, each beside the same with the policy served to the child by a machine's policy
+server (``rl.policy_server``, started for the bench on that same core): the cost of the round
+trip a step through shared memory; ``--served cuda``, the server on the GPU.
 """
 
 from __future__ import annotations
@@ -22,13 +21,16 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import tempfile
 import time
+from pathlib import Path
 
 import gymnasium
 
 import simulator
 from rl import episode
 from rl.policies import Policy
+from rl.policy_lease import PolicyLease
 from sandbox import MiB, Sandbox
 from training.rewards import EXAMPLES
 
@@ -36,6 +38,7 @@ STEPS = 3000
 ROUNDS = 3
 TRACK = "rookie-loop"
 POLICY = {"algorithm": "clipped_ppo", "architecture": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"}
+SOCKET = str(Path(tempfile.mkdtemp(prefix="bench-")) / "policy.sock")  # the bench's own server
 
 
 def reward_source() -> str:
@@ -75,7 +78,7 @@ def in_sandbox(cars: int = 1, steps_wanted: int = STEPS, device: str | None = No
         env={"track": TRACK},
         cars=cars,
         policy=POLICY,
-        policy_device=device,
+        policy_lease=None if device is None else PolicyLease(SOCKET, device),
         memory_allowance=1024 * MiB,
         car_memory=384 * MiB,
     ) as sandbox:
@@ -90,10 +93,6 @@ def in_sandbox(cars: int = 1, steps_wanted: int = STEPS, device: str | None = No
 
 def cars_alone(options: argparse.Namespace) -> None:
     """``--cars``' figures: steps/s with the policy in the child (and, ``--served``, served)."""
-    if options.served:
-        import torch
-
-        torch.set_num_threads(1)  # the served policy's, on the one core, as the child's
     served = {f"served ({options.served})": options.served} if options.served else {}
     places = {"in the child": None, **served}
     print(f"{'cars in one sandbox, one core':<32}" + "".join(f"{p:>20}" for p in places))

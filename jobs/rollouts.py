@@ -1,16 +1,17 @@
 """A rollout worker: the loop of the ``training.rollout`` task, one per simulation slot of a job.
 
 It starts a sandbox child that holds the simulator (``PITLANE_CARS_PER_WORKER`` cars, driven
-together), the policy network and the racer's reward function, keeps the child's weights at the
-newest published version, and relays what the child drives. Where the policy runs on the GPU
-(``PITLANE_ROLLOUT_DEVICE``), this process holds it and answers the child's cars each step
-(``sandbox.served``): the child, which runs racers' code, is never given the GPU. It relays
+together) and the racer's reward function, keeps the child's weights at the newest published
+version, and relays what the child drives. The cars' policy is served by the machine's policy
+server (``rl.policy_server``, ``PITLANE_ROLLOUT_DEVICE``), which this worker opens the child's
+slots in and gives the weights (the child, which runs racers' code, is given its slots alone and
+never the GPU); or, with "child", it runs in the child. It relays
 training episodes to the experience buffer as each car ends one, evaluation results after each
 update, and what the reward function printed. It never writes the job's rows; a failure of the
 racer's code is reported to the trainer, which fails the job.
 
 Long because a rollout worker's loop and its ways out (new weights, a stop, a sandbox that
-died, a lost Redis, a policy served from the GPU) are one state machine, read together.
+died, a lost Redis, a policy server that went away) are one state machine, read together.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from django.conf import settings
 from common.redis_client import redis_client
 from rl import hyperparameters as hp
 from rl.experience import JobChannel, LogEntry
-from rl.policies import rollout_device
+from rl.policy_lease import PolicyLease
 from rl.weights_cache import WeightsCache
 from sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
 from training import live
@@ -82,14 +83,10 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
     name = f"Simulation worker {worker + 1}"
     try:
         verified()
-        device = rollout_device(settings.PITLANE_ROLLOUT_DEVICE)
     except SandboxUnavailable as error:
         channel.report_failure(str(error))
         return
-    except ValueError as error:
-        channel.report_failure(f"{name} cannot drive: {error}")
-        return
-    sandbox = _sandboxes(model, worker, track, device)
+    sandbox = _sandboxes(model, job_id, worker, track)
     label = name if model.workers > 1 else ""
     printed = Printed(label)
     try:
@@ -105,7 +102,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
                 evaluator.sandbox.load(model.reward_function)
                 stack.callback(evaluator.close)
             shown = Track.objects.filter(name=track).values_list("display_name", flat=True)
-            where = ", its cars' policy on the GPU" if device != "cpu" else ""
+            where = _served_words(driver)
             driving = f"{name} is driving {shown.first() or track}{where}."
             channel.push_log([LogEntry("worker", driving)])
             with live.FramePublisher(channel.client, live.training_group(job_id)) as publisher:
@@ -128,27 +125,39 @@ def cars_for(algorithm: str) -> int:
     return 1 if algorithm == hp.SAC else settings.PITLANE_CARS_PER_WORKER
 
 
-def _sandboxes(model, worker: int, track: str, device: str) -> Callable[[int], Sandbox]:
-    """The worker's sandboxes, of so many cars, each holding ``model``'s policy; where
-    ``device`` is not the CPU, it is served to them from this process (``sandbox.served``)."""
+def _sandboxes(model, job_id: int, worker: int, track: str) -> Callable[[int], Sandbox]:
+    """The worker's sandboxes, of so many cars, each driving with ``model``'s policy: served by
+    the machine's policy server, unless ``PITLANE_ROLLOUT_DEVICE`` keeps it in the child."""
     policy = {
         "algorithm": model.algorithm,
         "architecture": model.architecture,
         "seed": model.seed + worker * cars_for(model.algorithm),  # car k takes this + k
+        "job": job_id,
     }
+    device = settings.PITLANE_ROLLOUT_DEVICE
 
     def sandbox(cars: int) -> Sandbox:
+        served = device != "child"
         return Sandbox(
             env=model.environment_settings(track),
             cars=cars,
             policy=policy,
-            policy_device=None if device == "cpu" else device,
+            policy_lease=PolicyLease(settings.PITLANE_POLICY_SOCKET, device) if served else None,
             call_timeout=REWARD_CALL_LIMIT,
             memory_allowance=MEMORY_ALLOWANCE,
             car_memory=CAR_MEMORY,
         )
 
     return sandbox
+
+
+def _served_words(sandbox: Sandbox) -> str:
+    """Where the cars' policy runs, for the worker's first log line."""
+    lease = sandbox.policy_lease
+    if lease is None:
+        return ""
+    where = "the GPU" if lease.served_on.startswith("cuda") else "the CPU"
+    return f", its cars' policy served by the machine's policy server on {where}"
 
 
 class Viewing:

@@ -165,17 +165,3 @@ def _sample(distribution, generators: list[torch.Generator | None]) -> torch.Ten
         distribution.gaussian_actions = actions
         return torch.tanh(actions)
     return actions
-
-
-def rollout_device(setting: str) -> str:
-    """Where a rollout worker runs its policy for ``PITLANE_ROLLOUT_DEVICE``'s ``setting``: "auto"
-    is "cuda" where PyTorch finds a GPU, else "cpu". ``ValueError``, in words, for "cuda" where
-    it finds none."""
-    if setting == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if setting == "cuda" and not torch.cuda.is_available():
-        raise ValueError(
-            "PITLANE_ROLLOUT_DEVICE is cuda, but PyTorch finds no GPU on this simulation "
-            "machine: set it to auto or cpu, or give the machine a GPU PyTorch can use."
-        )
-    return setting

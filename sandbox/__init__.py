@@ -8,10 +8,9 @@ worker by it. Here, every request has a deadline from the moment it is sent (an 
 least every ``GRACE`` past its cars' calls' deadlines), every write to the child has one, the
 frames read ahead and the standard error kept are bounded, and a child that breaks the protocol is
 killed; so no reward function can hang, flood or take down a worker. The child dies with the
-worker. Where the worker serves the child its policy (``policy_device``, ``served.py``: how a
-rollout infers on the GPU, which the child is never given), the child asks for its cars' actions
-each step and the worker's time answering is never counted as the child's. This package imports no
-Django: the child imports it too.
+worker. Where the machine's policy server serves the child its policy (``policy_lease``,
+``served.py``), the child is handed its slots there and nothing else of the server's, and loads
+no torch. This package imports no Django: the child imports it too.
 
 Long because every bound above lives in the one client class, where a reader checks them all.
 """
@@ -35,6 +34,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from rl.policy_lease import PolicyLease, PolicyServerFailed
 from sandbox import served
 from sandbox.protocol import Late, ProtocolError, pack, read_frame, write_by
 from simulator.rewards import RewardError, checked_reward
@@ -111,9 +111,9 @@ class Sandbox:
 
     env: dict | None = None
     cars: int = 1
-    policy: dict | None = None  # {"algorithm", "architecture", "seed"}: a policy to act with
-    policy_device: str | None = None  # where this process serves the child its policy ("cuda",
-    # "cpu": ``sandbox.served``); None: the child holds it
+    policy: dict | None = None  # {"algorithm", "architecture", "seed", "job"}: a policy to act with
+    policy_lease: PolicyLease | None = None  # the child's slots in the machine's policy server,
+    # where it serves the policy (``sandbox.served``); None: the child holds it
     samples: dict | None = None  # {"track", "direction"}: sample situations, made before sealing
     call_timeout: float = 1.0  # [s] per call of the reward function
     memory_allowance: int = 512 * MiB  # [bytes] the child may map beyond what it has at sealing,
@@ -132,12 +132,11 @@ class Sandbox:
         self._closed = threading.Event()
         self.stderr_tail = b""
         self.driving = 0  # cars with episodes under way, as the child last said
-        self.server: served.PolicyServer | None = None  # the policy served to the child, if so
 
     def __enter__(self) -> Sandbox:
         try:
             self.start()
-        except BaseException:  # a served policy, the child, its readers: none outlives it
+        except BaseException:  # the policy's slots, the child, its readers: none outlives it
             self.close()
             raise
         return self
@@ -146,17 +145,24 @@ class Sandbox:
         self.close()
 
     def start(self) -> dict:
-        """Start the child and wait until it is sealed; what it reports of its seals. The policy
-        served to it, if it is, is built first (and run once: its device made ready)."""
+        """Start the child and wait until it is sealed; what it reports of its seals. Where its
+        policy is served, its slots are opened first and handed to it."""
         env, policy = portable_env(self.env), self.policy
-        if policy is not None and self.policy_device is not None:
+        handed: tuple[int, ...] = ()
+        if policy is not None and self.policy_lease is not None:
             try:
-                self.server = _policy_server(policy, env, self.cars, self.policy_device)
-            except Exception as error:  # the device's own: out of memory, its driver
-                where = _device_words(self.policy_device)
-                message = f"The policy could not be made ready on {where}: {error}"
-                raise SandboxFailure("policy", message[:500]) from None
-            policy = {**policy, "served": {"patience": served.CHILD_PATIENCE}}
+                self.policy_lease.open(
+                    job=int(policy.get("job", 0)),
+                    algorithm=policy["algorithm"],
+                    architecture=policy["architecture"],
+                    env=env,
+                    seed=int(policy.get("seed", 0)),
+                    cars=self.cars,
+                )
+            except PolicyServerFailed as error:
+                raise SandboxFailure("policy", str(error)[:500]) from None
+            policy = {**policy, "served": self.policy_lease.child_settings(served.CHILD_PATIENCE)}
+            handed = self.policy_lease.fds
         self._process = subprocess.Popen(
             [sys.executable, "-s", "-m", "sandbox.child"],
             cwd=ROOT,
@@ -165,8 +171,11 @@ class Sandbox:
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             close_fds=True,
+            pass_fds=handed,
             start_new_session=True,
         )
+        if self.policy_lease is not None:
+            self.policy_lease.handed()  # the server sees the child go when it goes
         os.set_blocking(self._process.stdin.fileno(), False)
         threading.Thread(target=self._read_frames, daemon=True).start()
         threading.Thread(target=self._read_stderr, daemon=True).start()
@@ -228,8 +237,11 @@ class Sandbox:
     def set_weights(self, version: int, data: bytes) -> None:
         """Act with the policy weights of ``version`` from now on: loaded where the policy is
         (here, where it is served), the child told the version its episodes are of."""
-        if self.server is not None:
-            self.server.policy.load_published(data)
+        if self.policy_lease is not None:
+            try:
+                self.policy_lease.weights(data)
+            except PolicyServerFailed as error:
+                raise SandboxFailure("policy", str(error)[:500]) from None
             data = b""
         self._request(
             {"op": "weights", "version": version, "data": data}, {"weights"}, WEIGHTS_TIMEOUT
@@ -285,8 +297,8 @@ class Sandbox:
         return [str(item) for item in reply.get("escaped", [])]
 
     def close(self) -> None:
-        if self.server is not None:
-            self.server.close()
+        if self.policy_lease is not None:
+            self.policy_lease.close()
         process = self._process
         if process is None:
             return
@@ -323,7 +335,8 @@ class Sandbox:
         """[s] the most a step of all the cars may hold the child: the reward process is
         asked once for them all, and the child gives each car's call its own deadline, the
         call's limit and ``KILL_GRACE`` after the car before it answered."""
-        return self.cars * (self.call_timeout + KILL_GRACE)
+        served_wait = served.CHILD_PATIENCE if self.policy_lease is not None else 0.0
+        return self.cars * (self.call_timeout + KILL_GRACE) + served_wait
 
     def _send(self, message: dict, deadline: float) -> None:
         if self._process is None:
@@ -378,14 +391,6 @@ class Sandbox:
                 steps, deadline = now, time.monotonic() + stall
                 on_progress(now)
                 continue
-            if kind == "act" and stall is not None and self.server is not None:
-                answer = self._served(frame)
-                try:
-                    self._send({"op": "acted", **answer}, time.monotonic() + GRACE)
-                except SandboxFailure as failure:  # the child gone meanwhile: why, if it said
-                    raise self._words_left() or failure from None
-                deadline = time.monotonic() + stall  # the time this process took is not the child's
-                continue
             if kind == "frame" and (stall is not None or what == "show"):
                 if self.on_frame is not None:
                     self.on_frame(frame)
@@ -398,36 +403,6 @@ class Sandbox:
             raise SandboxFailure(
                 "protocol", f"The sandbox answered {str(kind)[:20]!r} to {what!r}."
             )
-
-    def _served(self, request: dict) -> dict:
-        """The served policy's answer to the child's ``act`` request. A request out of protocol
-        is the child's failure; a policy that fails or hangs on its device, this process's."""
-        try:
-            return self.server.answer(request)
-        except ProtocolError as error:
-            self._kill()
-            raise SandboxFailure(
-                "protocol", f"The sandbox asked for actions wrongly: {error}"
-            ) from None
-        except TimeoutError as error:  # a device that hangs
-            self._kill()
-            where = _device_words(self.server.device)
-            raise SandboxFailure("policy", f"The policy on {where} gave {error}.") from None
-        except Exception as error:  # the device's own: out of memory, its driver
-            self._kill()
-            message = f"The policy on {_device_words(self.server.device)} failed: {error}"
-            raise SandboxFailure("policy", message[:500]) from None
-
-    def _words_left(self) -> SandboxFailure | None:
-        """The error the child sent before it ended, where one waits unread: a child that gave
-        up waiting for the served policy's answer says so, then ends."""
-        try:
-            while (frame := self._frames.get(timeout=1.0)) is not None:
-                if isinstance(frame, dict) and frame.get("type") == "error":
-                    return _failure_of(frame)
-        except queue.Empty:
-            pass
-        return None
 
     def take_logs(self) -> tuple[list[str], int]:
         """The printed lines kept since the last take, and how many more were not kept."""
@@ -513,19 +488,6 @@ def _failure_of(frame: dict) -> SandboxFailure:
         str(frame["status"])[:20] if frame.get("status") else None,
         _int_or_none(frame.get("car")),
     )
-
-
-def _policy_server(policy: dict, env: dict | None, cars: int, device: str) -> served.PolicyServer:
-    """The policy ``policy`` describes, for the cars of ``env``, served from ``device``."""
-    from rl.policies import Policy  # torch: only where a policy is served
-
-    built = Policy.for_environment(policy["algorithm"], policy["architecture"], env or {}, device)
-    return served.PolicyServer(built, int(policy.get("seed", 0)), cars)
-
-
-def _device_words(device: str) -> str:
-    """``device`` (torch's name) as a racer reads it."""
-    return "the GPU" if device.startswith("cuda") else "the CPU"
 
 
 def _ignore(steps: int) -> None:

@@ -30,6 +30,7 @@ import msgpack
 
 from rl import episode
 from rl.experience import encode_arrays
+from rl.slots import SlotsFailed
 from sandbox import seal, served
 from sandbox.protocol import pack, read_frame
 from sandbox.reward import RewardFailure, RewardProcess
@@ -101,9 +102,10 @@ class Child:
         address_space = seal.current_address_space() + allowance
         namespaces = seal.enter_namespaces()
         seal.limit_resources(address_space)
+        ring = (self.policy.socket_fd,) if isinstance(self.policy, served.ServedPolicy) else ()
         seal.install_seccomp(
-            read_fds=(0, self.reward.replies),
-            write_fds=(self.reply_fd, 2, self.reward.requests),
+            read_fds=(0, self.reward.replies, *ring),
+            write_fds=(self.reply_fd, 2, self.reward.requests, *ring),
             children=(self.reward.pid,),
         )
         self.send({"type": "ready", "namespaces": namespaces, "address_space": address_space})
@@ -116,6 +118,9 @@ class Child:
                 handler(request)
             except WorldUnavailable as error:  # a car near a box where PyBullet is missing
                 self.send(_unavailable(error))
+            except SlotsFailed as error:  # the policy server's, never the racer's code's
+                self.send({"type": "error", "kind": "policy", "message": str(error)}, log=True)
+                os._exit(75)
 
     def _build_envs(self, settings: dict, cars: int) -> list:
         """An environment per car. Car ``k`` of ``cars`` starts its training episodes
@@ -143,13 +148,13 @@ class Child:
 
     def _build_policy(self, settings: dict) -> None:
         """The policy the rollout acts with: its network, built and run once before sealing;
-        or, where the worker serves it (``served``), its stand-in, and torch never loaded."""
+        or, where the machine's policy server serves it (``served``), its stand-in over the
+        slots it was handed, and torch never loaded."""
         # Car k takes seed + k: the worker gives each of its children seeds of their own.
         seeds = [int(settings.get("seed", 0)) + car for car in range(len(self.envs))]
         observations = [env.reset(seed=seed)[0] for env, seed in zip(self.envs, seeds, strict=True)]
         if settings.get("served"):
-            self.policy = served.ServedPolicy(settings["algorithm"], self.ask)
-            self.patience = float(settings["served"]["patience"])  # [s] for each answer
+            self.policy = served.ServedPolicy(settings["algorithm"], settings["served"])
         else:
             import torch
 
@@ -167,31 +172,6 @@ class Child:
         # One round trip to the reward process a step for all the cars (RewardProcess.calls).
         self.fleet = episode.Fleet(self.envs, self.policy, seeds, score=self.reward.calls)
         self.version = -1
-
-    def ask(self, message: dict) -> dict:
-        """The worker's answer to ``message`` (its served policy's ``acted``), the watch requests
-        that come before it taken. A worker silent past ``patience`` is told, and this child
-        ends: never a wait for ever."""
-        self.send(message)
-        deadline = time.monotonic() + self.patience
-        while self._requests_ready.poll(max(int((deadline - time.monotonic()) * 1000), 0)):
-            request = read_frame(self.requests)
-            if request is None or request.get("op") == "exit":
-                os._exit(0)
-            if request.get("op") == "acted":
-                return request
-            if request.get("op") == "watch":
-                self.op_watch(request)
-                continue
-            break
-        self.send(
-            {
-                "type": "error",
-                "kind": "policy",
-                "message": "The worker did not answer with the cars' actions.",
-            }
-        )
-        os._exit(75)
 
     # Requests
 

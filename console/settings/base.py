@@ -281,17 +281,20 @@ PITLANE_ROLLOUT_STARTUP = env.int("PITLANE_ROLLOUT_STARTUP", 90, minimum=10)  # 
 # default, which more cars would finish with fewer and fewer of them driving. A SAC worker drives
 # one (it wants an episode per update: jobs.rollouts.cars_for). Fewer where memory is short.
 PITLANE_CARS_PER_WORKER = env.int("PITLANE_CARS_PER_WORKER", SIZING.cars, minimum=1, maximum=64)
-# Where a rollout worker runs its cars' policy: "cuda" serves it from the worker's own process on
-# the GPU (the sandbox child, which runs racers' code, is never given the GPU's driver: it sends
-# the cars' observations each step and reads back their actions), "cpu" runs it inside the
-# child, "auto" is "cuda" where PyTorch finds a GPU (read by the worker, not here: no Django
-# process imports PyTorch to start). "cpu" by default, GPU or not: on an H200 machine of 16 cores
-# (2026-11-27, bench_pipeline --minutes 1 --jobs 1: 15 workers of 2 cars) a job trained at 291.5
-# steps/s with "cpu" and 157.8 with "cuda", the workers' 15 CUDA contexts taking turns on the one
-# GPU for forward passes of 2 observations; the GPU earns its keep in the trainer's update.
+# Where a rollout's cars' policy runs. "auto", "cpu" and "cuda": in the machine's policy server
+# (rl.policy_server, one process a machine, started by the first rollout worker that needs it and
+# ended once none has for 5 minutes), which answers every sandbox child of every job on the machine
+# through shared memory, one batched forward pass a policy for all the children that drive with
+# it: on the GPU where PyTorch finds one ("auto"), on the CPU, or on the GPU ("cuda": a job fails
+# in words where there is none). One CUDA context for the machine, not one a worker (decision
+# 0006's 15 contexts took turns on the GPU), and no child loads PyTorch. "child": the policy in
+# each sandbox child, as before issue 56 (docs/decisions/0011-one-policy-server-a-machine.md).
 PITLANE_ROLLOUT_DEVICE = env.choice(
-    "PITLANE_ROLLOUT_DEVICE", "cpu", choices=("auto", "cpu", "cuda")
+    "PITLANE_ROLLOUT_DEVICE", "auto", choices=("auto", "cpu", "cuda", "child")
 )
+# Where the machine's rollout workers reach its policy server: a Unix socket (at most 107 bytes
+# of path), under var/, which only its owner may enter.
+PITLANE_POLICY_SOCKET = env.path("PITLANE_POLICY_SOCKET", VAR_DIR / "policy.sock")
 # Where a machine's rollout workers share the policy weights they drive with (rl.weights_cache):
 # Redis sends each iteration's weights once per machine, not once per worker. On disk under var/
 # rather than in /dev/shm: a container's /dev/shm is often 64 MiB, less than a 5-layer model's

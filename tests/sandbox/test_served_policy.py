@@ -1,26 +1,30 @@
-"""A policy served to the sandbox child by its worker (``Sandbox(policy_device=...)``,
-``sandbox.served``), as a rollout worker does where it infers on the GPU: the child, which never
-loads torch, drives the same episodes as one holding the policy; the worker's time over the
-policy is never counted against the reward function; a policy that fails or gives no answer
-fails the worker in words; and a request for the policy out of protocol is refused."""
+"""The machine's policy server (``rl.policy_server``), serving sandbox children their policy
+through shared memory (``Sandbox(policy_lease=...)``, ``sandbox.served``): children of two jobs
+served together drive the episodes each would with the policy in the child, without torch; the
+server batches every child of a policy into one pass; a child that writes nonsense, dies or
+hangs loses its own slots and no other child's; a server that gives no answer fails the worker
+in words."""
 
 import contextlib
+import os
+import signal
+import tempfile
+import threading
 import time
-import zlib
 from collections.abc import Iterator
+from pathlib import Path
 from types import SimpleNamespace
 
-import msgpack
 import numpy as np
 import pytest
 import torch
 
-import sandbox as sandbox_package
-from rl.experience import decode_array, encode_arrays
-from rl.policies import Policy, rollout_device
-from rl.wire import ProtocolError
+from rl.learner import weights_bytes
+from rl.policies import Policy
+from rl.policy_lease import PolicyLease
+from rl.policy_server import server_device
+from rl.slots import ASK, REFUSED, SlotClient
 from sandbox import MiB, Sandbox, SandboxFailure, served
-from sandbox.served import PolicyServer
 from tests.helpers.sandbox import ENV, POLICY, REWARD, SEED, array, episodes_by_car
 
 CARS = 2
@@ -28,20 +32,45 @@ EPISODES = 2  # per car
 needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA on this machine")
 
 
+@pytest.fixture
+def socket_path() -> Iterator[str]:
+    """A policy server's socket of the test's own; the server ends once its path is gone."""
+    folder = Path(tempfile.mkdtemp(prefix="ps-"))
+    yield str(folder / "policy.sock")
+    for leftover in folder.iterdir():
+        leftover.unlink()
+    folder.rmdir()
+
+
+@pytest.fixture(scope="module")
+def other_weights(policy) -> bytes:
+    """Another job's network: the same architecture, other weights."""
+    other = Policy.for_environment(POLICY["algorithm"], POLICY["architecture"], ENV)
+    return weights_bytes(other.weights_module.state_dict())
+
+
 @contextlib.contextmanager
-def started(weights: bytes, *, cars: int = 1, device: str | None) -> Iterator[Sandbox]:
-    """A rollout's child of ``cars`` cars seeded ``SEED``, its policy served from ``device``
-    (None: held in the child), its reward function loaded and acting with ``weights``."""
+def started(weights: bytes, *, seed: int, lease: PolicyLease | None, job: int = 1):
+    """A rollout's child of ``CARS`` cars seeded ``seed``, its policy in its slots of ``lease``'s
+    server (None: held in the child), its reward function loaded and acting with ``weights``."""
     with Sandbox(
         env=ENV,
-        cars=cars,
-        policy={**POLICY, "seed": SEED},
-        policy_device=device,
+        cars=CARS,
+        policy={**POLICY, "seed": seed, "job": job},
+        policy_lease=lease,
         memory_allowance=1024 * MiB,
     ) as sandbox:
         sandbox.load(REWARD)
         sandbox.set_weights(1, weights)
         yield sandbox
+
+
+def drives(sandbox: Sandbox) -> dict:
+    """What ``sandbox``'s cars drive: ``EPISODES`` each, then one evaluation."""
+    return {
+        "episodes": episodes_by_car(sandbox, EPISODES),
+        "evaluation": sandbox.episode("evaluate", start=1)["summary"],
+    }
 
 
 def torch_loaded(sandbox: Sandbox) -> bool:
@@ -50,214 +79,211 @@ def torch_loaded(sandbox: Sandbox) -> bool:
         return "libtorch" in maps.read()
 
 
-@pytest.mark.slow
-def test_a_child_whose_policy_is_served_drives_the_episodes_one_holding_it_would_without_torch(
-    weights,
-):
-    driven, evaluated, loaded = {}, {}, {}
-    for device in (None, "cpu"):
-        with started(weights, cars=CARS, device=device) as sandbox:
-            loaded[device] = torch_loaded(sandbox)
-            driven[device] = episodes_by_car(sandbox, EPISODES)
-            evaluated[device] = sandbox.episode("evaluate", start=1)["summary"]  # as Evaluator
-    assert loaded == {None: True, "cpu": False}
-    assert evaluated["cpu"] == evaluated[None]
+def assert_same_driving(got: dict, want: dict) -> None:
+    assert got["evaluation"] == want["evaluation"]
     for car in range(CARS):
-        for got, want in zip(driven["cpu"][car], driven[None][car], strict=True):
-            assert got["trace"] == want["trace"]  # every row: place, action, reward, status
+        for served_episode, held in zip(got["episodes"][car], want["episodes"][car], strict=True):
+            assert served_episode["trace"] == held["trace"]  # every row: place, action, reward
             for name in ("actions", "rewards", "obs:FRONT_FACING_CAMERA"):
-                assert got["arrays"][name] == want["arrays"][name], name
-            # The same network on the same rows, though on this process's threads there.
+                assert served_episode["arrays"][name] == held["arrays"][name], name
+            # The same network on the same rows, in batches of other sizes on other threads.
             for name in ("values", "log_probs"):
-                assert np.allclose(array(got, name), array(want, name), rtol=1e-5, atol=1e-6)
+                close = np.allclose(array(served_episode, name), array(held, name), 1e-5, 1e-6)
+                assert close, name
 
 
 @pytest.mark.slow
-def test_the_time_the_worker_takes_over_the_policy_is_not_counted_against_the_reward_function(
-    weights, monkeypatch
+def test_children_of_two_jobs_served_together_drive_what_each_would_hold_its_policy_without_torch(
+    weights, other_weights, socket_path
 ):
-    # The worker kills a child silent for a call's limit and the grace (1.5 s here); its own
-    # policy taking longer than that over a step is not the child's silence.
-    monkeypatch.setattr(sandbox_package, "GRACE", 0.5)
-    answered = PolicyServer._run
-    slow = iter([2.0])
+    # Job 1 has two children (as two rollout workers), job 2 one, with other weights.
+    children = {"job 1, first": (1, SEED, weights), "job 1, second": (1, SEED + CARS, weights)}
+    children["job 2"] = (2, SEED, other_weights)  # the same seeds as job 1's first
+    held = {}
+    for name, (job, seed, given) in children.items():
+        with started(given, seed=seed, lease=None, job=job) as sandbox:
+            held[name] = drives(sandbox)
+    served_drives, loaded, failures = {}, {}, []
 
-    def slow_run(self, *args):
-        time.sleep(next(slow, 0.0))
-        return answered(self, *args)
+    def drive(name: str) -> None:
+        job, seed, given = children[name]
+        try:
+            with started(given, seed=seed, lease=PolicyLease(socket_path, "cpu"), job=job) as child:
+                loaded[name] = torch_loaded(child)
+                served_drives[name] = drives(child)
+        except Exception as error:  # said by the test's thread below
+            failures.append(error)
 
-    monkeypatch.setattr(PolicyServer, "_run", slow_run)
-    with started(weights, device="cpu") as sandbox:
-        reply = sandbox.episode("explore", start=1)
-    assert msgpack.unpackb(reply["payload"])["steps"] > 1
+    threads = [threading.Thread(target=drive, args=(name,)) for name in children]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    assert failures == []
+    assert loaded == dict.fromkeys(children, False)
+    for name in children:
+        assert_same_driving(served_drives[name], held[name])
+    first_of = {name: drove["episodes"][0][0]["trace"] for name, drove in held.items()}
+    assert first_of["job 2"] != first_of["job 1, first"]  # another policy drives otherwise
+
+
+class Child:
+    """A sandbox child as the server sees one, played by the test: its lease and its slots."""
+
+    def __init__(self, socket_path: str, weights: bytes, *, job: int = 1, patience: float = 5.0):
+        self.lease = PolicyLease(socket_path, "cpu")
+        self.lease.open(
+            job=job, algorithm=POLICY["algorithm"], architecture=POLICY["architecture"], env=ENV,
+            seed=SEED, cars=CARS,
+        )  # fmt: skip
+        self.slots = SlotClient(self.lease.layout, *self.lease.fds, patience)
+        self.ring = self.lease.fds[1]
+        self.lease.fds = ()  # the test holds them, as a child would
+        self.lease.weights(weights)
+
+    def explore(self, frames: list[np.ndarray]) -> dict:
+        observations = [{"FRONT_FACING_CAMERA": frame} for frame in frames]
+        return self.slots.act("explore", observations, [SEED + car for car in range(len(frames))])
+
+    def close(self) -> None:
+        with contextlib.suppress(OSError):
+            os.close(self.ring)
+        self.lease.close()
+
+
+def frames(count: int, fill: int) -> list[np.ndarray]:
+    shape = (1, 120, 160)  # the camera's, channel first
+    return [np.full(shape, fill + car, np.uint8) for car in range(count)]
+
+
+def expected(policy: Policy, given: bytes, seen: list[np.ndarray]) -> tuple:
+    policy.load_published(given)
+    observations = [{"FRONT_FACING_CAMERA": frame} for frame in seen]
+    return policy.explore(observations, [Policy.generator(SEED + car) for car in range(len(seen))])
 
 
 @pytest.mark.slow
-def test_a_policy_that_gives_no_answer_fails_the_worker_in_words_rather_than_hang(
-    weights, monkeypatch
+def test_two_jobs_children_are_answered_in_one_pass_each_and_never_with_the_others_policy(
+    policy, weights, other_weights, socket_path
+):
+    first, second, other = (
+        Child(socket_path, weights),
+        Child(socket_path, weights),
+        Child(socket_path, other_weights, job=2),
+    )
+    try:
+        # All three ring while the server is stopped: it finds them together when it goes on.
+        os.kill(first.lease.server_pid, signal.SIGSTOP)
+        answers: dict[str, dict] = {}
+        threads = [
+            threading.Thread(target=lambda n=n, c=c, f=f: answers.update({n: c.explore(f)}))
+            for n, c, f in (
+                ("first", first, frames(2, 10)),
+                ("second", second, frames(2, 50)),
+                ("other", other, frames(2, 10)),
+            )
+        ]
+        for thread in threads:
+            thread.start()
+        time.sleep(0.5)
+        os.kill(first.lease.server_pid, signal.SIGCONT)
+        for thread in threads:
+            thread.join()
+        stats = first.lease.stats()
+    finally:
+        os.kill(first.lease.server_pid, signal.SIGCONT)
+        for child in (first, second, other):
+            child.close()
+    assert (stats["passes"], stats["most_rows"], stats["policies"]) == (2, 4, 2)
+    for name, given, seen in (
+        ("first", weights, frames(2, 10)),
+        ("second", weights, frames(2, 50)),
+        ("other", other_weights, frames(2, 10)),
+    ):
+        actions, values, log_probs = expected(policy, given, seen)
+        assert np.array_equal(answers[name]["actions"], actions), name
+        assert np.allclose(answers[name]["values"], values, rtol=1e-5, atol=1e-6), name
+        assert np.allclose(answers[name]["log_probs"], log_probs, rtol=1e-5, atol=1e-6), name
+    assert not np.array_equal(answers["first"]["values"], answers["other"]["values"])
+
+
+@pytest.mark.slow
+def test_a_child_that_writes_nonsense_dies_or_hangs_loses_its_own_slots_and_no_one_elses(
+    weights, socket_path
+):
+    bystander = Child(socket_path, weights)
+    try:
+        cases = {
+            "it asked for something the policy does not do": (0, 7),
+            "it asked for 5 rows of a policy serving 2": (1, 5),
+            "it named cars that are not its own": (2, SEED + 9),
+        }
+        for reason, (field, value) in cases.items():
+            liar = Child(socket_path, weights)
+            try:
+                header = liar.slots.views["header"]
+                header[:] = [0, 1, SEED, SEED + 1]
+                header[field] = value
+                os.write(liar.ring, ASK)
+                assert liar.slots.ready.poll(5000)
+                words = f"The policy server refused the cars: {reason}."
+                assert os.read(liar.ring, 4096) == REFUSED + words.encode()
+                assert os.read(liar.ring, 16) == b""  # its socket closed: its slots are gone
+            finally:
+                liar.close()
+            bystander.explore(frames(2, 0))  # still served
+        dying = Child(socket_path, weights)
+        os.write(dying.ring, ASK)
+        dying.close()  # gone before the answer
+        hanging = Child(socket_path, weights)
+        os.write(hanging.ring, ASK)  # and never reads
+        try:
+            assert bystander.explore(frames(2, 0))["actions"].shape == (2,)
+            assert bystander.lease.stats()["policies"] == 1
+        finally:
+            hanging.close()
+    finally:
+        bystander.close()
+
+
+@pytest.mark.slow
+def test_a_policy_server_that_gives_no_answer_fails_the_worker_in_words_rather_than_hang(
+    weights, socket_path, monkeypatch
 ):
     from jobs.rollouts import failure_words
 
-    monkeypatch.setattr(served, "ANSWER_TIMEOUT", 0.5)
-    monkeypatch.setattr(PolicyServer, "_run", lambda self, *args: time.sleep(3.0))
-    with started(weights, device="cpu") as sandbox, pytest.raises(SandboxFailure) as failed:
-        sandbox.episode("explore", start=1)
+    monkeypatch.setattr(served, "CHILD_PATIENCE", 1.0)
+    lease = PolicyLease(socket_path, "cpu")
+    with started(weights, seed=SEED, lease=lease) as sandbox:
+        os.kill(lease.server_pid, signal.SIGSTOP)
+        try:
+            with pytest.raises(SandboxFailure) as failed:
+                sandbox.episode("explore", start=1)
+        finally:
+            os.kill(lease.server_pid, signal.SIGCONT)
     assert failed.value.kind == "policy"
-    assert str(failed.value) == "The policy on the CPU gave no answer in 0.5 s."
+    assert str(failed.value) == "The policy server gave no answer in 1 s."
     assert failure_words(failed.value, 1) == (
         "Simulation worker 2 failed (not your reward function): "
-        "The policy on the CPU gave no answer in 0.5 s."
+        "The policy server gave no answer in 1 s."
     )
 
 
-@pytest.mark.slow
-def test_a_child_left_without_an_answer_gives_up_and_says_so_rather_than_wait_for_ever(
-    weights, monkeypatch
-):
-    # The worker stalls past the child's patience (elsewhere than over the policy, which has a
-    # limit of its own): the child ends, and the worker reads why.
-    monkeypatch.setattr(served, "CHILD_PATIENCE", 0.5)
-    answered = PolicyServer.answer
-    monkeypatch.setattr(
-        PolicyServer, "answer", lambda self, request: time.sleep(2.0) or answered(self, request)
-    )
-    with started(weights, device="cpu") as sandbox, pytest.raises(SandboxFailure) as failed:
-        sandbox.episode("explore", start=1)
-    assert failed.value.kind == "policy"
-    assert str(failed.value) == "The worker did not answer with the cars' actions."
-
-
-def pack_array(array: np.ndarray) -> dict:
-    """An array as a child's request carries it (uncompressed, over a pipe)."""
-    return encode_arrays({"array": array}, compress=False)["array"]
-
-
-def request(policy: Policy, cars: int, how: str = "explore", **changes) -> dict:
-    """A child's request for the policy's answer for ``cars`` cars seeded ``SEED`` on."""
-    spaces = policy.network.observation_space.spaces
-    observations = {
-        name: pack_array(np.zeros((cars, *space.shape), space.dtype))
-        for name, space in spaces.items()
-    }
-    seeds = [SEED + car for car in range(cars)] if how == "explore" else None
-    return {"type": "act", "how": how, "observations": observations, "seeds": seeds, **changes}
-
-
-def test_the_worker_answers_each_car_from_its_own_stream_as_the_policy_would(policy):
-    server = PolicyServer(policy, SEED, cars=3)
-    space = policy.network.observation_space["FRONT_FACING_CAMERA"]
-    observations = [{"FRONT_FACING_CAMERA": np.zeros(space.shape, np.uint8)}] * 2
-    generators = [Policy.generator(SEED + 2), Policy.generator(SEED)]
-    expected = policy.explore(observations, generators)
-    try:
-        answer = server.answer(request(policy, 2, seeds=[SEED + 2, SEED]))["arrays"]
-        value = server.answer(request(policy, 1, "value"))["arrays"]["values"]
-    finally:
-        server.close()
-    for name, want in zip(("actions", "values", "log_probs"), expected, strict=True):
-        got = np.frombuffer(answer[name]["data"], dtype=answer[name]["dtype"])
-        assert np.array_equal(got, want), name
-    assert np.frombuffer(value["data"], "float32")[0] == pytest.approx(
-        policy.value(observations[0]), rel=1e-6
-    )
-
-
-@pytest.mark.parametrize(
-    ("cars", "changes", "how"),
-    [
-        (2, {"seeds": [SEED, SEED + 5]}, "explore"),  # a car the child does not drive
-        (2, {"seeds": [SEED, SEED]}, "explore"),  # one car's stream twice
-        (2, {"seeds": [SEED, [SEED]]}, "explore"),
-        (4, {}, "explore"),  # more cars than it drives
-        (2, {}, "drive"),  # evaluations drive one car
-        (1, {}, "train"),
-        (1, {"observations": {}}, "explore"),
-    ],
-)
-def test_a_request_for_the_policy_out_of_protocol_is_refused(policy, cars, changes, how):
-    server = PolicyServer(policy, SEED, cars=3)
-    try:
-        with pytest.raises(ProtocolError):
-            server.answer(request(policy, cars, how, **changes))
-    finally:
-        server.close()
-
-
-def test_an_observation_of_another_kind_is_refused_before_the_network_sees_it(policy):
-    server = PolicyServer(policy, SEED, cars=3)
-    shape = (1, *policy.network.observation_space["FRONT_FACING_CAMERA"].shape)
-    cases = [
-        ("expected uint8", pack_array(np.zeros(shape, np.float64))),
-        ("expected shape", pack_array(np.zeros((1, 3, 4), np.uint8))),
-        ("expected shape", {**pack_array(np.zeros(shape, np.uint8)), "shape": [2**70, *shape[1:]]}),
-        ("bytes do not match", {**pack_array(np.zeros(shape, np.uint8)), "data": b"\0" * 10}),
-    ]
-    try:
-        for message, packed in cases:
-            with pytest.raises(ProtocolError, match=message):
-                server.answer(request(policy, 1, observations={"FRONT_FACING_CAMERA": packed}))
-    finally:
-        server.close()
-
-
-@pytest.mark.parametrize("compressed", [False, True], ids=["served", "experience"])
-def test_an_array_is_held_to_its_shape_served_or_from_the_experience_buffer(compressed):
-    # One decoder for both: each size a whole number under 2**31, exactly its shape's bytes.
-    def encoded(array: np.ndarray, **changes) -> dict:
-        return {**encode_arrays({"a": array}, compress=compressed)["a"], **changes}
-
-    frames = np.arange(24, dtype=np.uint8).reshape(2, 3, 4)
-    decoded = decode_array(encoded(frames), "uint8", (None, 3, 4), compressed=compressed)
-    assert np.array_equal(decoded, frames)
-    inflating = zlib.compress(bytes(1 << 20)) if compressed else bytes(1 << 20)  # 1 MB for 24 B
-    cases = [
-        ("expected shape", encoded(frames, shape=[2.0, 3, 4])),
-        ("expected shape", encoded(frames, shape=[2**31, 3, 4])),
-        ("do not match its shape", encoded(frames, data=inflating)),
-        ("do not match its shape", encoded(frames[:1], shape=[2, 3, 4])),
-    ]
-    for message, case in cases:
-        with pytest.raises(ProtocolError, match=message):
-            decode_array(case, "uint8", (None, 3, 4), compressed=compressed)
-
-
-def test_a_sensor_reading_that_is_not_a_finite_number_is_refused_before_the_network_sees_it():
-    import gymnasium
-
-    ran = []
-    lidar = gymnasium.spaces.Box(0.0, 1.0, (8,), np.float32)
-    stand_in = SimpleNamespace(  # a policy on a lidar's readings, which counts what it runs
-        network=SimpleNamespace(observation_space=gymnasium.spaces.Dict({"LIDAR": lidar})),
-        generator=Policy.generator,
-        explore=lambda *args: ran.append(args),
-    )
-    server = PolicyServer(stand_in, SEED, cars=1)
-    ran.clear()  # its run once, made ready
-    readings = np.full((1, 8), 0.5, np.float32)
-    readings[0, 3] = np.nan
-    try:
-        with pytest.raises(ProtocolError, match="not finite"):
-            server.answer(
-                {"how": "explore", "seeds": [SEED], "observations": {"LIDAR": pack_array(readings)}}
-            )
-    finally:
-        server.close()
-    assert ran == []
-
-
-def test_the_rollout_device_is_the_gpu_where_torch_finds_one_and_a_gpu_asked_for_must_be_there(
+def test_the_server_runs_on_the_gpu_where_torch_finds_one_and_a_gpu_asked_for_must_be_there(
     monkeypatch,
 ):
     monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
-    assert rollout_device("auto") == "cpu"
-    assert rollout_device("cpu") == "cpu"
+    assert server_device("auto") == "cpu"
+    assert server_device("cpu") == "cpu"
     with pytest.raises(ValueError, match="PITLANE_ROLLOUT_DEVICE is cuda, but PyTorch finds no"):
-        rollout_device("cuda")
+        server_device("cuda")
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
-    assert rollout_device("auto") == "cuda"
+    assert server_device("auto") == "cuda"
 
 
-def test_a_rollout_worker_serves_its_sandboxes_the_policy_where_it_runs_off_the_cpu():
+def test_a_rollout_worker_has_its_sandboxes_served_unless_the_policy_is_kept_in_the_child(
+    settings,
+):
     from jobs.rollouts import _sandboxes, cars_for
 
     model = SimpleNamespace(
@@ -266,30 +292,32 @@ def test_a_rollout_worker_serves_its_sandboxes_the_policy_where_it_runs_off_the_
         seed=3,
         environment_settings=lambda track: {"track": track},
     )
-    for device, served_from in (("cuda", "cuda"), ("cpu", None)):
-        sandbox = _sandboxes(model, 1, "pitlane-oval", device)(2)  # made, not started
-        assert (sandbox.policy_device, sandbox.cars) == (served_from, 2)
+    for device, served_by in (("auto", True), ("cuda", True), ("child", False)):
+        settings.PITLANE_ROLLOUT_DEVICE = device
+        sandbox = _sandboxes(model, 12, 1, "pitlane-oval")(2)  # made, not started
+        assert (sandbox.policy_lease is not None, sandbox.cars) == (served_by, 2)
+        if served_by:
+            assert sandbox.policy_lease.device == device
         assert sandbox.policy["seed"] == 3 + cars_for("clipped_ppo")  # after worker 0's cars
+        assert sandbox.policy["job"] == 12
 
 
 @needs_cuda
-def test_a_child_whose_policy_is_served_from_the_gpu_drives_its_cars(weights):
-    with started(weights, cars=CARS, device="cuda") as sandbox:
-        assert sandbox.server.device.startswith("cuda")
+def test_a_child_whose_policy_is_served_from_the_gpu_drives_its_cars(weights, socket_path):
+    lease = PolicyLease(socket_path, "cuda")
+    with started(weights, seed=SEED, lease=lease) as sandbox:
+        assert lease.served_on.startswith("cuda")
         assert not torch_loaded(sandbox)
-        driven = episodes_by_car(sandbox, 1)
-        evaluated = sandbox.episode("evaluate", start=1)["summary"]
-    assert all(len(episodes) == 1 and episodes[0]["steps"] > 0 for episodes in driven.values())
-    assert evaluated["steps"] > 0
+        driven = drives(sandbox)
+    assert all(len(episodes) == EPISODES for episodes in driven["episodes"].values())
+    assert driven["evaluation"]["steps"] > 0
 
 
 @needs_cuda
 @pytest.mark.django_db(transaction=True)
-def test_a_job_on_a_machine_with_a_gpu_learns_on_it_and_its_cars_drive_on_the_cpu(
+def test_a_job_on_a_machine_with_a_gpu_learns_and_serves_its_cars_on_it(
     alice, tracks, celery_worker_process
 ):
-    """PITLANE_ROLLOUT_DEVICE's default, cpu, on a GPU machine too (console/settings/base.py says
-    why); a child served from the GPU drives in the test above."""
     from tests.helpers.training import settings, wait_for_job
     from training.models import TrainingJob
     from training.services import model_create, training_stop
@@ -300,7 +328,6 @@ def test_a_job_on_a_machine_with_a_gpu_learns_on_it_and_its_cars_drive_on_the_cp
     assert any(
         line.startswith("Training started") and "learning on the GPU" in line for line in lines
     ), lines
-    driving = [line for line in lines if "is driving" in line]
-    assert driving and not any("policy on the GPU" in line for line in driving), lines
+    assert any("served by the machine's policy server on the GPU" in line for line in lines), lines
     training_stop(job=job)
     wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)

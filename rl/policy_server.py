@@ -1,0 +1,410 @@
+"""The machine's policy server: ``python -m rl.policy_server --socket PATH``, one per machine.
+
+Every sandbox child that drives a rollout on the machine, of every rollout worker and every job,
+acts through it (in the spirit of sample-factory's inference worker): the child writes its
+cars' observations into slots of shared memory (``rl.slots``) and rings; the server runs one
+batched forward pass per policy for every child that rang with it, and writes the actions back.
+It holds each job's current policy once for the machine, on the GPU where there is one (one CUDA
+context for the machine, rather than one a worker), and each car's random stream, so a car
+drives the same episodes, step for step, as it would with the policy in its own child.
+
+A rollout worker (``rl.policy_lease``) opens a connection a child: it asks for the child's
+slots (the file and the socket come back with the answer, for the worker to hand the child) and
+tells the server the weights the child drives with, sending them only where no other worker on
+the machine has. Policies are shared by every child of the same job, algorithm, architecture,
+spaces and weights, and forgotten when the last of those children goes. Every policy that has
+children waiting is served once a round, in turn: each job's cars get an equal share of the
+server.
+
+What a child writes is checked before the network sees it; a child that writes nonsense is
+refused in words and its socket closed, a child that dies or hangs only loses its own slots,
+and nothing a child does reaches another child's slots or the server's policies. The server
+ends itself once no worker has held a connection for ``--idle`` seconds.
+
+Long because the server is one select loop whose parts (the workers' requests, the children's
+rings, the batched passes, the idle end) share its state and are read together.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import hashlib
+import logging
+import os
+import selectors
+import socket
+import sys
+import time
+from collections import defaultdict
+from dataclasses import dataclass, field
+
+import gymnasium
+import numpy as np
+import torch
+
+import simulator
+from rl.policies import Policy
+from rl.slots import ANSWERED, ASK, HEADER_FIELDS, HOW, REFUSED, Layout, mapped
+from rl.wire import ProtocolError, receive_message, send_message
+
+logger = logging.getLogger("pitlane.policy_server")
+
+IDLE = 300.0  # [s] without a worker's connection before the server ends itself
+LOOK = 1.0  # [s] between looks at the idle clock while nothing happens
+
+
+@dataclass
+class Shared:
+    """A policy the server holds for the children of one job that drive with the same weights."""
+
+    policy: Policy
+    children: int = 0
+
+
+@dataclass(eq=False)
+class Child:
+    """A sandbox child's slots: its worker's connection, its socket, the mapped file, its cars'
+    random streams, and the policy it drives with."""
+
+    worker: socket.socket
+    job: int
+    algorithm: str
+    architecture: str
+    spaces: tuple
+    layout: Layout
+    seeds: range
+    ring: socket.socket | None = None
+    views: dict = field(default_factory=dict)
+    generators: dict = field(default_factory=dict)
+    key: tuple | None = None  # of the policy it drives with
+    rang: bool = False
+
+
+class Server:
+    def __init__(self, path: str, device: str, idle: float = IDLE) -> None:
+        self.path, self.device, self.idle = path, device, idle
+        self.selector = selectors.DefaultSelector()
+        self.children: dict[socket.socket, Child | None] = {}  # by their worker's connection
+        self.rings: dict[socket.socket, Child] = {}  # by the socket they ring on
+        self.policies: dict[tuple, Shared] = {}
+        self.spaces: dict[bytes, tuple] = {}  # the environments' spaces, by their settings
+        self.quiet_since = time.monotonic()
+        self.stats = {"passes": 0, "rows": 0, "most_rows": 0, "pid": os.getpid()}
+        self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(path)
+        self.listener.bind(path)
+        os.chmod(path, 0o600)
+        self.inode, self.looked = os.stat(path).st_ino, time.monotonic()
+        self.listener.listen(64)
+        self.selector.register(self.listener, selectors.EVENT_READ, self._accept)
+
+    def serve(self) -> None:
+        """Serve until no worker has held a connection for ``idle`` seconds, or the socket's
+        path is gone (its machine's console stopped, or another server took the path over)."""
+        while self.children or time.monotonic() - self.quiet_since < self.idle:
+            for key, _ in self.selector.select(LOOK):
+                key.data(key.fileobj)
+            self._answer_rings()
+            if not self._still_listening():
+                logger.info("The socket %s is gone: the policy server ends", self.path)
+                return
+        logger.info("No worker for %g s: the policy server ends", self.idle)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.path)
+
+    def _still_listening(self) -> bool:
+        """Whether the socket's path is still this server's (looked at once a ``LOOK``)."""
+        if time.monotonic() - self.looked < LOOK:
+            return True
+        self.looked = time.monotonic()
+        try:
+            return os.stat(self.path).st_ino == self.inode
+        except FileNotFoundError:
+            return False
+
+    # The workers
+
+    def _accept(self, listener: socket.socket) -> None:
+        connection, _ = listener.accept()
+        connection.settimeout(60.0)  # a worker is ours: a stalled one is a bug, not an attack
+        self.selector.register(connection, selectors.EVENT_READ, self._from_worker)
+        self.children[connection] = None  # its slots not yet opened
+
+    def _from_worker(self, connection: socket.socket) -> None:
+        try:
+            message, _ = receive_message(connection)
+        except (OSError, ProtocolError):
+            message = None
+        if message is None:
+            self._forget(connection)
+            return
+        try:
+            answer = self._worker_asks(connection, message)
+        except (KeyError, TypeError, ValueError) as error:
+            answer = {"type": "error", "message": f"a request out of protocol: {error}"[:300]}
+        except Exception as error:  # the device's own: out of memory, its driver
+            logger.exception("The policy server failed a worker's request")
+            answer = {"type": "error", "message": f"the policy failed on {self.device}: {error}"}
+        fds = answer.pop("fds", ())
+        try:
+            send_message(connection, answer, fds)
+        except OSError:
+            self._forget(connection)
+        finally:
+            for fd in fds:
+                os.close(fd)
+
+    def _worker_asks(self, connection: socket.socket, message: dict) -> dict:
+        op = message["op"]
+        if op == "stats":
+            return {"type": "stats", **self.stats, "policies": len(self.policies)}
+        if op == "open" and self.children.get(connection) is None:
+            return self._open(connection, message)
+        child = self.children.get(connection)
+        if child is None:
+            raise ValueError("no slots are open on this connection")
+        if op == "weights":
+            key = self._key(child, message["digest"])
+            if key not in self.policies:
+                return {"type": "weights", "have": False}
+            self._drive_with(child, key)
+            return {"type": "weights", "have": True}
+        if op == "weights_data":
+            data = bytes(message["data"])
+            key = self._key(child, hashlib.sha256(data).hexdigest())
+            if key not in self.policies:
+                built = (child.algorithm, child.architecture, *child.spaces, self.device)
+                policy = Policy.build(*built)
+                policy.load_published(data)
+                self.policies[key] = Shared(policy)
+            self._drive_with(child, key)
+            return {"type": "weights", "have": True}
+        raise ValueError(f"no request {op!r}")
+
+    def _open(self, connection: socket.socket, message: dict) -> dict:
+        spaces = self._spaces_of(message["env"])
+        layout = Layout.of(*spaces, int(message["cars"]))
+        seed = int(message["seed"])
+        child = Child(
+            connection,
+            int(message["job"]),
+            str(message["algorithm"]),
+            str(message["architecture"]),
+            spaces,
+            layout,
+            range(seed, seed + layout.cars),
+        )
+        memory = os.memfd_create(f"pitlane-slots-{child.job}", os.MFD_CLOEXEC)
+        os.ftruncate(memory, layout.size)
+        child.views = layout.views(mapped(memory, layout.size))
+        child.generators = {seed: Policy.generator(seed) for seed in child.seeds}
+        ring, given = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+        ring.setblocking(False)
+        child.ring = ring
+        self.rings[ring] = child
+        self.selector.register(ring, selectors.EVENT_READ, self._rung)
+        self.children[connection] = child
+        return {
+            "type": "opened",
+            "layout": layout.message(),
+            "device": self.device,
+            "pid": os.getpid(),
+            "fds": (memory, given.detach()),
+        }
+
+    def _spaces_of(self, env: dict) -> tuple:
+        """The observation and action spaces of the environment ``env`` describes."""
+        key = hashlib.sha256(repr(sorted(env.items())).encode()).digest()
+        if key not in self.spaces:
+            made = gymnasium.make(simulator.ENV_ID, **env)
+            try:
+                self.spaces[key] = (made.observation_space, made.action_space)
+            finally:
+                made.close()
+        return self.spaces[key]
+
+    @staticmethod
+    def _key(child: Child, digest: str) -> tuple:
+        return (child.job, child.algorithm, child.architecture, child.layout, str(digest))
+
+    def _drive_with(self, child: Child, key: tuple) -> None:
+        if child.key == key:
+            return
+        self._let_go(child)
+        child.key = key
+        self.policies[key].children += 1
+
+    def _let_go(self, child: Child) -> None:
+        if child.key is not None:
+            shared = self.policies[child.key]
+            shared.children -= 1
+            if shared.children == 0:
+                del self.policies[child.key]
+            child.key = None
+
+    def _forget(self, connection: socket.socket) -> None:
+        child = self.children.pop(connection, None)
+        self.selector.unregister(connection)
+        connection.close()
+        if child is not None:
+            self._let_go(child)
+            self._close_ring(child)
+        if not self.children:
+            self.quiet_since = time.monotonic()
+
+    # The children
+
+    def _rung(self, ring: socket.socket) -> None:
+        child = self.rings[ring]
+        try:
+            data = ring.recv(16)
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        if data == ASK:
+            child.rang = True
+        elif data:
+            self._refuse(child, "it rang the policy server with something else than a request")
+        else:  # the child has gone: its worker will close its connection
+            self._close_ring(child)
+
+    def _answer_rings(self) -> None:
+        """Every child that rang, answered: one batched forward pass per policy of those that
+        explore, each evaluating or valuing child on its own."""
+        together: dict[tuple, list] = defaultdict(list)
+        for child in [c for c in self.children.values() if c is not None and c.rang]:
+            child.rang = False
+            try:
+                how, observations, seeds = self._read(child)
+            except ProtocolError as error:
+                self._refuse(child, str(error))
+                continue
+            if how == "explore":
+                together[child.key].append((child, observations, seeds))
+            else:
+                self._answer_one(child, how, observations[0])
+        for key, asked in together.items():
+            self._answer_together(self.policies[key].policy, asked)
+
+    def _read(self, child: Child) -> tuple[str, list[dict], list[int]]:
+        """(how, one observation a row, the rows' seeds) the child wrote, copied out of its
+        slots and checked."""
+        if child.key is None:
+            raise ProtocolError("its cars asked for actions before its worker gave the weights")
+        header = child.views["header"].copy()
+        how, rows = int(header[0]), int(header[1])
+        if not 0 <= how < len(HOW):
+            raise ProtocolError("it asked for something the policy does not do")
+        how_words = HOW[how]
+        most = child.layout.cars if how_words == "explore" else 1
+        if not 1 <= rows <= most:
+            raise ProtocolError(f"it asked for {rows} rows of a policy serving {most}")
+        seeds = [int(seed) for seed in header[HEADER_FIELDS : HEADER_FIELDS + rows]]
+        if how_words == "explore" and (
+            len(set(seeds)) != rows or not all(seed in child.generators for seed in seeds)
+        ):
+            raise ProtocolError("it named cars that are not its own")
+        batch = {}
+        for name, _, _ in child.layout.observations:
+            rows_of = child.views[f"obs:{name}"][:rows].copy()
+            if rows_of.dtype.kind == "f" and not np.isfinite(rows_of).all():
+                raise ProtocolError("it wrote observations that are not finite numbers")
+            batch[name] = rows_of
+        observations = [{name: array[row] for name, array in batch.items()} for row in range(rows)]
+        return how_words, observations, seeds
+
+    def _answer_together(self, policy: Policy, asked: list) -> None:
+        observations = [seen for _, rows, _ in asked for seen in rows]
+        generators = [child.generators[seed] for child, _, seeds in asked for seed in seeds]
+        actions, values, log_probs = policy.explore(observations, generators)
+        self.stats["passes"] += 1
+        self.stats["rows"] += len(observations)
+        self.stats["most_rows"] = max(self.stats["most_rows"], len(observations))
+        start = 0
+        for child, rows, _ in asked:
+            end = start + len(rows)
+            child.views["actions"][: len(rows)] = actions[start:end]
+            if values is not None:
+                child.views["values"][: len(rows)] = values[start:end]
+                child.views["log_probs"][: len(rows)] = log_probs[start:end]
+            start = end
+            self._answered(child)
+
+    def _answer_one(self, child: Child, how: str, observation: dict) -> None:
+        policy = self.policies[child.key].policy
+        if how == "drive":
+            child.views["actions"][0] = policy.drive(observation)
+        else:
+            child.views["values"][0] = policy.value(observation)
+        self._answered(child)
+
+    def _answered(self, child: Child) -> None:
+        try:
+            child.ring.send(ANSWERED)
+        except OSError:  # gone, or a child that never reads: it loses its slots
+            self._close_ring(child)
+
+    def _refuse(self, child: Child, reason: str) -> None:
+        logger.warning("A sandbox child of job %s was refused: %s", child.job, reason)
+        with contextlib.suppress(OSError):
+            child.ring.send(REFUSED + f"The policy server refused the cars: {reason}.".encode())
+        self._close_ring(child)
+
+    def _close_ring(self, child: Child) -> None:
+        if child.ring is not None:
+            del self.rings[child.ring]
+            self.selector.unregister(child.ring)
+            child.ring.close()
+            child.ring = None
+            child.rang = False
+
+
+def server_device(setting: str) -> str:
+    """Where the server runs its policies for ``PITLANE_ROLLOUT_DEVICE``'s ``setting``: "auto"
+    is "cuda" where PyTorch finds a GPU, else "cpu"."""
+    if setting == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if setting == "cuda" and not torch.cuda.is_available():
+        raise ValueError(
+            "PITLANE_ROLLOUT_DEVICE is cuda, but PyTorch finds no GPU on this simulation "
+            "machine: set it to auto or cpu, or give the machine a GPU PyTorch can use."
+        )
+    return setting
+
+
+def server_threads(device: str) -> int:
+    """PyTorch threads for the server's passes: one on a GPU, which does the work, and on a
+    CPU of up to 15 cores. On the 2-core box, two rollout workers of 8 cars drove 787 steps/s
+    with one thread, 412 with two (each pass's second thread took the core a child simulates
+    on) and 607 with the policy in each child (bench.bench_policy_server). A core more for
+    each 8 past them on a larger CPU, where one thread would be all the children's bottleneck
+    (not yet measured)."""
+    cores = len(os.sched_getaffinity(0))
+    return 1 if device != "cpu" else max(1, cores // 8)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--socket", required=True, help="the path the workers connect to")
+    parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
+    parser.add_argument("--idle", type=float, default=IDLE, help="[s] idle before it ends")
+    parser.add_argument("--threads", type=int, default=0, help="PyTorch threads (0: chosen)")
+    arguments = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    try:
+        device = server_device(arguments.device)
+    except ValueError as error:
+        sys.stderr.write(f"{error}\n")
+        return 2
+    torch.set_num_threads(arguments.threads or server_threads(device))
+    server = Server(arguments.socket, device, arguments.idle)
+    logger.info("The policy server listens on %s, its policies on %s", arguments.socket, device)
+    server.serve()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
