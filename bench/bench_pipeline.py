@@ -29,6 +29,11 @@ its cores: simulating (its jobs' workers) and feeding (its trainers) of the mach
 trainers learn while their workers wait for the new weights, on the GPU where PyTorch finds one
 (each gets ``cores // jobs`` threads, PITLANE_TRAINER_THREADS' rule).
 
+``--policy child`` keeps each rollout's policy in its sandbox child rather than the machine's
+policy server; ``--update stub`` has the trainers learn nothing (``bench.pipeline_settings``:
+each update republishes the weights it had), which shows the pipeline's ceiling without the
+update: driving, transfer, saving and the checks alone.
+
 Runs wherever the project's packages are: here on the CPU in a short form (``--minutes 2 --jobs
 1``), on the device machine from the wheels scripts/device-bundle.sh fetches (the command it
 prints); ``--redis-server`` names Redis's executable where it is not on the PATH.
@@ -186,6 +191,18 @@ def arguments() -> argparse.Namespace:
     parser.add_argument("--workers", type=int, default=None, help="rollout workers per job")
     parser.add_argument("--cars", type=int, default=None, help="cars per rollout worker")
     parser.add_argument("--redis-server", default=None, help="Redis's executable")
+    parser.add_argument(
+        "--policy",
+        default="auto",
+        choices=("auto", "cpu", "cuda", "child"),
+        help="where the cars' policy runs (PITLANE_ROLLOUT_DEVICE): the machine's server, or child",
+    )
+    parser.add_argument(
+        "--update",
+        default="real",
+        choices=("real", "stub"),
+        help="stub: the trainers learn nothing, republishing their weights (the ceiling)",
+    )
     chosen = parser.parse_args()
     if any(jobs < 1 for jobs in chosen.jobs):
         parser.error("--jobs takes counts of 1 or more")
@@ -204,6 +221,8 @@ def rounds(chosen: argparse.Namespace, var_dir: str, redis_url: str) -> None:
         PITLANE_VAR_DIR=var_dir,
         REDIS_URL=redis_url,
         PYTHONUNBUFFERED="1",
+        PITLANE_ROLLOUT_DEVICE=chosen.policy,
+        PITLANE_BENCH_UPDATE=chosen.update,
     )
     os.environ.update(env)
     import django
@@ -216,6 +235,8 @@ def rounds(chosen: argparse.Namespace, var_dir: str, redis_url: str) -> None:
 
     owner = bench_racer()
     print(f"Training throughput without the web tier, DeepRacer's defaults: {machine_words()}")
+    stub = ", the update stubbed out (nothing learnt)" if chosen.update == "stub" else ""
+    print(f"The cars' policy: PITLANE_ROLLOUT_DEVICE={chosen.policy}{stub}")
     cores = os.cpu_count() or 1
     for jobs in chosen.jobs:
         workers, cars = layout(cores, jobs, chosen.workers, chosen.cars)

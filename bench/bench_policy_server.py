@@ -88,16 +88,11 @@ def round_of(options: argparse.Namespace, socket: str | None, weights: list[byte
     finally:
         for sandbox in sandboxes:
             sandbox.close()
-    began = max(mine[0][1] for mine in seen)  # all driving
-    ended = min(mine[-1][1] for mine in seen)  # all still driving
-    steps = sum(_steps_between(mine, began, ended) for mine in seen)
+    # Every child's steps from its first progress message to its last, over the time from the
+    # first child's first to the last child's last: a child left driving alone counts against it.
+    began, ended = min(mine[0][1] for mine in seen), max(mine[-1][1] for mine in seen)
+    steps = sum(mine[-1][0] - mine[0][0] for mine in seen)
     return {"rate": steps / (ended - began), "memory": statistics.mean(memory), **stats}
-
-
-def _steps_between(mine: list[tuple[int, float]], began: float, ended: float) -> float:
-    """The steps one child drove between ``began`` and ``ended``, from its progress."""
-    inside = [(steps, at) for steps, at in mine if began <= at <= ended]
-    return inside[-1][0] - inside[0][0] if len(inside) > 1 else 0.0
 
 
 def main() -> None:

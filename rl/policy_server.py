@@ -52,6 +52,7 @@ logger = logging.getLogger("pitlane.policy_server")
 
 IDLE = 300.0  # [s] without a worker's connection before the server ends itself
 LOOK = 1.0  # [s] between looks at the idle clock while nothing happens
+GATHER = 0.002  # [s] a round waits at most for the children of the last to ring again
 
 
 @dataclass
@@ -90,6 +91,8 @@ class Server:
         self.policies: dict[tuple, Shared] = {}
         self.spaces: dict[bytes, tuple] = {}  # the environments' spaces, by their settings
         self.quiet_since = time.monotonic()
+        self.rounds = 0
+        self.last_round: list[Child] = []  # the children answered in the last round
         self.stats = {"passes": 0, "rows": 0, "most_rows": 0, "pid": os.getpid()}
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         with contextlib.suppress(FileNotFoundError):
@@ -101,18 +104,46 @@ class Server:
         self.selector.register(self.listener, selectors.EVENT_READ, self._accept)
 
     def serve(self) -> None:
-        """Serve until no worker has held a connection for ``idle`` seconds, or the socket's
-        path is gone (its machine's console stopped, or another server took the path over)."""
+        """Serve until no worker has held a connection for ``idle`` seconds, or none holds
+        one and the socket's path is gone (its machine's console stopped, or another server
+        took the path over): the children it serves are served to their end."""
         while self.children or time.monotonic() - self.quiet_since < self.idle:
-            for key, _ in self.selector.select(LOOK):
-                key.data(key.fileobj)
-            self._answer_rings()
-            if not self._still_listening():
+            self._handle(LOOK)
+            self._gather()
+            self._guarded(self._answer_rings)
+            if not self.children and not self._still_listening():
                 logger.info("The socket %s is gone: the policy server ends", self.path)
                 return
         logger.info("No worker for %g s: the policy server ends", self.idle)
         with contextlib.suppress(FileNotFoundError):
             os.unlink(self.path)
+
+    def _handle(self, timeout: float) -> None:
+        """The events that come within ``timeout``: workers' requests, children's rings."""
+        for key, _ in self.selector.select(timeout):
+            if key.fileobj.fileno() != -1:  # not closed by an event before it this round
+                self._guarded(key.data, key.fileobj)
+
+    def _gather(self) -> None:
+        """Once a child has rung, wait up to ``GATHER`` for the others answered last round: a
+        child answered early in a round rings again before one answered late, and would
+        otherwise be answered in every round while the late one waited out every other."""
+        if not any(child.rang for child in self.rings.values()):
+            return
+        deadline = time.monotonic() + GATHER
+        while (left := deadline - time.monotonic()) > 0 and any(
+            not child.rang for child in self.last_round if child.ring is not None
+        ):
+            self._handle(left)
+
+    @staticmethod
+    def _guarded(handler, *arguments) -> None:
+        """``handler(*arguments)``; a bug of its own is logged, never the end of the server and
+        of every child it serves."""
+        try:
+            handler(*arguments)
+        except Exception:
+            logger.exception("The policy server failed in %s", handler.__name__)
 
     def _still_listening(self) -> bool:
         """Whether the socket's path is still this server's (looked at once a ``LOOK``)."""
@@ -257,7 +288,9 @@ class Server:
     # The children
 
     def _rung(self, ring: socket.socket) -> None:
-        child = self.rings[ring]
+        child = self.rings.get(ring)
+        if child is None:
+            return
         try:
             data = ring.recv(16)
         except BlockingIOError:
@@ -275,7 +308,8 @@ class Server:
         """Every child that rang, answered: one batched forward pass per policy of those that
         explore, each evaluating or valuing child on its own."""
         together: dict[tuple, list] = defaultdict(list)
-        for child in [c for c in self.children.values() if c is not None and c.rang]:
+        self.last_round = [c for c in self.children.values() if c is not None and c.rang]
+        for child in self.last_round:
             child.rang = False
             try:
                 how, observations, seeds = self._read(child)
@@ -285,9 +319,23 @@ class Server:
             if how == "explore":
                 together[child.key].append((child, observations, seeds))
             else:
-                self._answer_one(child, how, observations[0])
-        for key, asked in together.items():
-            self._answer_together(self.policies[key].policy, asked)
+                try:
+                    self._answer_one(child, how, observations[0])
+                except Exception as error:  # the device's own
+                    logger.exception("The policy server failed a pass")
+                    self._refuse(child, f"its policy failed on {self.device} ({error})"[:300])
+        # Who is answered first rings again first, in time for the next round: the policies
+        # take turns at going first, or the first would be answered twice as often.
+        self.rounds += 1
+        turns = list(together.items())
+        turn = self.rounds % len(turns) if turns else 0
+        for key, asked in turns[turn:] + turns[:turn]:
+            try:
+                self._answer_together(self.policies[key].policy, asked)
+            except Exception as error:  # the device's own: out of memory, its driver
+                logger.exception("The policy server failed a pass")
+                for child, _, _ in asked:
+                    self._refuse(child, f"its policy failed on {self.device} ({error})"[:300])
 
     def _read(self, child: Child) -> tuple[str, list[dict], list[int]]:
         """(how, one observation a row, the rows' seeds) the child wrote, copied out of its

@@ -134,10 +134,13 @@ class SlotClient:
             slots = self.views[f"obs:{name}"]
             for row, observation in enumerate(observations):
                 slots[row] = observation[name]
-        os.write(self.socket_fd, ASK)
-        if not self.ready.poll(int(self.patience * 1000)):
-            raise SlotsFailed(f"The policy server gave no answer in {self.patience:g} s.")
-        answer = os.read(self.socket_fd, 4096)
+        try:
+            os.write(self.socket_fd, ASK)
+            if not self.ready.poll(int(self.patience * 1000)):
+                raise SlotsFailed(f"The policy server gave no answer in {self.patience:g} s.")
+            answer = os.read(self.socket_fd, 4096)
+        except OSError:
+            answer = b""
         if answer != ANSWERED:
             reason = answer[1:].decode("utf-8", "replace") if answer[:1] == REFUSED else ""
             raise SlotsFailed(reason or "The policy server went away.")

@@ -6,6 +6,7 @@ hangs loses its own slots and no other child's; a server that gives no answer fa
 in words."""
 
 import contextlib
+import multiprocessing
 import os
 import signal
 import tempfile
@@ -205,6 +206,39 @@ def test_two_jobs_children_are_answered_in_one_pass_each_and_never_with_the_othe
         assert np.allclose(answers[name]["values"], values, rtol=1e-5, atol=1e-6), name
         assert np.allclose(answers[name]["log_probs"], log_probs, rtol=1e-5, atol=1e-6), name
     assert not np.array_equal(answers["first"]["values"], answers["other"]["values"])
+
+
+@pytest.mark.slow
+def test_three_jobs_children_that_keep_asking_are_answered_in_turn_none_starved(
+    weights, other_weights, socket_path
+):
+    children = [Child(socket_path, given, job=job) for job, given in enumerate(
+        (weights, other_weights, weights), start=1
+    )]  # fmt: skip
+    forked = multiprocessing.get_context("fork")  # each child a process, as sandbox children are
+    answered = [forked.Value("i", 0) for _ in children]
+    enough = forked.Event()  # the first to have 60 answers ends the race
+
+    def keep_asking(place: int) -> None:
+        while not enough.is_set():
+            children[place].explore(frames(2, place))
+            answered[place].value += 1
+            if answered[place].value >= 60:
+                enough.set()
+
+    processes = [forked.Process(target=keep_asking, args=(place,)) for place in range(3)]
+    try:
+        for process in processes:
+            process.start()
+        for process in processes:
+            process.join(60)
+        stats = children[0].lease.stats()
+    finally:
+        for child in children:
+            child.close()
+    counts = [count.value for count in answered]
+    assert min(counts) >= 50, counts  # each answered once a round while it asks
+    assert stats["policies"] == 3
 
 
 @pytest.mark.slow

@@ -89,7 +89,9 @@ def test_a_stop_in_the_middle_of_an_update_abandons_it_and_bills_the_time_up_to_
         " more lines printed in iteration 1 not kept"
     )
     assert job.log_lines.filter(
-        source=JobLogLine.Source.WORKER, text="Simulation worker 1 is driving Pitlane Oval."
+        source=JobLogLine.Source.WORKER,
+        text="Simulation worker 1 is driving Pitlane Oval, its cars' policy served by the "
+        "machine's policy server on the CPU.",
     ).exists()
     assert job.log_lines.filter(text__contains="1 simulation worker,").exists()
 
