@@ -1,7 +1,9 @@
 """A club evening on one machine: `python -m bench.bench_club_evening` (issue 42).
 
 Starts the whole console as `make run` does (its supervisor, its own Redis, a Celery worker per
-queue with make run's processes, Daphne, SQLite, all in a scratch directory on free ports), then
+queue with the processes make run would choose for this machine, ``console.sizing``, unless
+``--trainers`` and ``--simulations`` say; Daphne, SQLite, all in a scratch directory on free
+ports), then
 plays an evening: ``--racers`` racers (6) each create a model with DeepRacer's defaults (as
 bench_training does, through training.services as the create page does) at once, and each
 presses Stop after ``--minutes`` (5) of training, then evaluates the model (3 trials, defaults).
@@ -16,11 +18,14 @@ Meanwhile, over real HTTP with signed-in sessions and CSRF tokens, as the pages'
 Validate's rate limit is lifted (``PITLANE_RATE_VALIDATE``) so that the flood lasts the whole
 evening; ``--console-rates`` keeps make run's rates (the flooders are then turned away with 429s
 within a minute). Printed: each job's wait in the queue, training time, iterations, steps/s and
-final status; each evaluation's wait and whether a re-scoring ran while it waited; Validate's
+final status, when its car drove and its first policy update landed (from Train), and the machine's
+total steps/s; each evaluation's wait and whether a re-scoring ran while it waited; Validate's
 p50/p95 for the flooders and for the bystander; the home page's p50/p95; the re-scorings; and a
 PASS or FAIL line per target of the issue: no job fails or starves, the bystander's Validate
 answers within 10 s at p95 (a refused try counts as never answered), no evaluation waits behind a
-re-scoring. A shorter evening: ``--racers 2 --flooders 1`` (about 15 minutes); with fewer
+re-scoring; and issue 56's: every car drives within 2 minutes of Train, every first update within
+10.
+A shorter evening: ``--racers 2 --flooders 1`` (about 15 minutes); with fewer
 ``--minutes`` a job on a busy machine may be stopped before its first iteration, which counts as
 starving. Every process it started is stopped when it ends, fails or is interrupted (Ctrl-C,
 SIGTERM).
@@ -43,6 +48,7 @@ import requests
 from bench.bench_console import percentile
 from bench.stack import running_console
 from common.formatting import clock
+from console.sizing import machine_sizing
 
 TRACK = "rookie-loop"
 BYSTANDER_PAUSE = 10.0  # [s] between the bystander's checks, as someone editing their code
@@ -56,6 +62,8 @@ VALIDATE_TARGET = 10.0  # [s] the bystander's Validate at p95 (issue 42)
 # [s] an evaluation's longest wait in the queue, with a simulation process free for it: taking a
 # task up is a matter of seconds; behind a re-scoring it waited minutes (issue 42: 14 min 46 s).
 EVALUATION_WAIT_TARGET = 30.0
+DRIVES_TARGET = 120.0  # [s] from Train to the racer's car driving (issue 56)
+UPDATE_TARGET = 600.0  # [s] from Train to the job's first policy update (issue 56)
 LIFTED_VALIDATE_RATE = "100000/10m"
 # A racer's heavy reward function, to re-score with: every waypoint's distance, many times over,
 # at every step, so that one re-scoring holds its process for minutes.
@@ -353,6 +361,20 @@ class Evening:
             "completed, with at least one iteration"
         )
         print(
+            f"{'PASS' if self.driving_within else 'FAIL'}  every racer's car drives within "
+            f"{clock(DRIVES_TARGET)} of pressing Train"
+        )
+        print(
+            f"{'PASS' if self.updated_within else 'FAIL'}  every job's first policy update lands "
+            f"within {clock(UPDATE_TARGET)} of pressing Train"
+        )
+        if self.span:
+            print(
+                f"      the machine's total: {self.total_steps:,} steps in {clock(self.span)}, "
+                f"from the first Train to the last job's end: {self.total_steps / self.span:.1f} "
+                "steps/s (compare one job alone's)"
+            )
+        print(
             f"{'PASS' if validate_ok else 'FAIL'}  the bystander's Validate answers within "
             f"{VALIDATE_TARGET:g} s at p95: {p95:.2f} s (refused tries count as never answered)"
         )
@@ -366,25 +388,38 @@ class Evening:
         from training.models import Iteration
 
         print(
-            f"\n{'job':<14}{'queue wait':>11}{'training':>10}{'iterations':>11}{'steps':>8}"
-            f"{'steps/s':>9}  status"
+            f"\n{'job':<14}{'queue wait':>11}{'drives at':>10}{'1st update':>11}{'training':>10}"
+            f"{'iterations':>11}{'steps':>8}{'steps/s':>9}  status"
         )
-        healthy = unfinished is None
+        healthy, self.driving_within, self.updated_within = unfinished is None, True, True
+        self.total_steps, ends = 0, []
         for model in self.models:
             job = job_of(model)
-            rows = Iteration.objects.filter(job=job)
+            rows = Iteration.objects.filter(job=job).order_by("number")
             wall = sum(row.wall_seconds for row in rows)
             rate = f"{sum(row.steps for row in rows) / wall:9.1f}" if wall else f"{'—':>9}"
             started = job.started_at
             wait = clock((started - job.created_at).total_seconds()) if started else "never"
+            # From Train: the car drives when the clock starts (the trainer's first log line)
+            drove = job.log_lines.filter(text__startswith="Training started").first()
+            drives = (drove.at - job.created_at).total_seconds() if drove else None
+            first = rows.first()
+            updated = (first.created_at - job.created_at).total_seconds() if first else None
+            self.driving_within &= drives is not None and drives <= DRIVES_TARGET
+            self.updated_within &= updated is not None and updated <= UPDATE_TARGET
+            self.total_steps += job.steps
+            ends.append(job.finished_at)
             reason = f" ({job.failure_reason})" if job.failure_reason else ""
             print(
-                f"{model.owner.username:<14}{wait:>11}{clock(job.training_seconds):>10}"
+                f"{model.owner.username:<14}{wait:>11}{_clock_or(drives):>10}"
+                f"{_clock_or(updated):>11}{clock(job.training_seconds):>10}"
                 f"{job.iterations:>11}{job.steps:>8}{rate}  {job.status}{reason}"
             )
             healthy &= job.status == "COMPLETED" and job.iterations > 0
         if unfinished:
             print(f"{unfinished}: the jobs not completed above waited or trained on.")
+        first = min(job_of(model).created_at for model in self.models)
+        self.span = (max(ends) - first).total_seconds() if all(ends) else 0.0
         return healthy
 
     def _evaluations_table(self) -> str:
@@ -447,17 +482,18 @@ def main() -> None:
     parser.add_argument("--racers", type=int, default=6, help="racers training one job each")
     parser.add_argument("--minutes", type=float, default=5.0, help="[min] each job trains")
     parser.add_argument("--flooders", type=int, default=2, help="racers flooding Validate")
+    sizing = machine_sizing()  # what make run would choose here
     parser.add_argument(
         "--trainers",
         type=int,
-        default=1,
-        help="jobs training at once (make run's PITLANE_TRAINERS)",
+        default=sizing.trainers,
+        help="jobs training at once (make run's PITLANE_TRAINERS, chosen for the machine)",
     )
     parser.add_argument(
         "--simulations",
         type=int,
-        default=max(2, os.cpu_count() or 1),
-        help="simulation processes (make run's PITLANE_WORKER_CONCURRENCY)",
+        default=sizing.simulations,
+        help="simulation processes (make run's PITLANE_WORKER_CONCURRENCY, chosen likewise)",
     )
     parser.add_argument(
         "--console-rates",
@@ -506,3 +542,7 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
+
+
+def _clock_or(seconds: float | None) -> str:
+    return clock(seconds) if seconds is not None else "never"
