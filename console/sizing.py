@@ -12,9 +12,11 @@ What a job costs, measured on the 2-core dev box (2026-11-29, VmRSS): PyTorch al
 DeepRacer's default network built (``rl.policies.Policy.for_environment``, clipped PPO, the
 shallow CNN) 396 MiB; after three Adam updates of 64 observations 672 MiB. A Django and Celery
 process with the training tasks imported holds 305 MiB. So a trainer is taken as 1 GiB (its
-iteration's episodes included), and a rollout worker as 600 MiB (its Celery process and its
-sandbox child's PyTorch and network) plus 28 MiB a car (an environment and its episode:
-``PITLANE_CARS_PER_WORKER``'s note). No Django here: the settings import it.
+iteration's episodes included), and a rollout worker as 450 MiB (its Celery process, and its
+sandbox child: 105 MiB with 8 cars and no PyTorch, its policy served by the machine's policy
+server, ``bench.bench_policy_server``) plus 28 MiB a car (an environment and its episode:
+``PITLANE_CARS_PER_WORKER``'s note). The reserve holds the policy server too (PyTorch, 400 MiB,
+and a network of a few tens of MiB a job). No Django here: the settings import it.
 """
 
 from __future__ import annotations
@@ -25,9 +27,9 @@ from pathlib import Path
 
 MiB = 2**20
 GiB = 2**30
-RESERVE = 1 * GiB  # [bytes] the web server with its checkers, Redis, the supervisor, the OS
+RESERVE = 3 * GiB // 2  # [bytes] the web server, Redis, the policy server, the supervisor, the OS
 TRAINER = 1 * GiB  # [bytes] a trainer process
-ROLLOUT_WORKER = 600 * MiB  # [bytes] a simulation process with its sandbox and network, no car
+ROLLOUT_WORKER = 450 * MiB  # [bytes] a simulation process with its sandbox child, no car
 CAR = 28 * MiB  # [bytes] a car a rollout worker drives
 CARS = 8  # a rollout worker's cars where memory allows: a batched forward pass (see settings)
 SPARE_SIMULATIONS = 2  # simulation processes beside the jobs' rollouts: evaluations and races
