@@ -321,9 +321,7 @@ class Supervisor:
                     child.process.wait()
             _kill_group(child.process)
         self.children.clear()
-        # The machine's policy server (rl.policy_server), started by the first rollout that
-        # needed it, ends within a second of its socket's path going.
-        Path(settings.PITLANE_POLICY_SOCKET).unlink(missing_ok=True)
+        Path(settings.PITLANE_POLICY_SOCKET).unlink(missing_ok=True)  # the policy server ends
 
     def _say(self, text: str) -> None:
         self.out.write(text + "\n")

@@ -334,7 +334,9 @@ class Sandbox:
     def _step_limit(self) -> float:
         """[s] the most a step of all the cars may hold the child: the reward process is
         asked once for them all, and the child gives each car's call its own deadline, the
-        call's limit and ``KILL_GRACE`` after the car before it answered."""
+        call's limit and ``KILL_GRACE`` after the car before it answered; a child whose policy
+        is served also waits up to ``served.CHILD_PATIENCE`` for the server's answer, then says
+        so itself."""
         served_wait = served.CHILD_PATIENCE if self.policy_lease is not None else 0.0
         return self.cars * (self.call_timeout + KILL_GRACE) + served_wait
 
