@@ -56,6 +56,7 @@ EPISODES = 20  # DeepRacer's episodes between policy updates (REFERENCE section 
 MAX_CARS = 8  # PITLANE_CARS_PER_WORKER's default
 START_LIMIT = 240.0  # [s] for every job to be driving (workers load torch and the simulator)
 STOP_LIMIT = 300.0  # [s] for every job to finish once stopped (its last checkpoint)
+EARLY_SHOWN = 6  # the first job's iterations shown one by one: where an early one's time goes
 
 
 def layout(cores: int, jobs: int, workers: int | None, cars: int | None) -> tuple[int, int]:
@@ -172,6 +173,11 @@ def report(jobs: list) -> None:
             f"{rate:7.1f}  {shares}"
         )
     print(f"  all {len(jobs)} job(s): {total:.1f} steps/s", flush=True)
+    first = Iteration.objects.filter(job=jobs[0]).order_by("number")[:EARLY_SHOWN]
+    print(f"  job {jobs[0].pk}'s first iterations, seconds: " + ", ".join(PHASES), flush=True)
+    for row in first:
+        split = ", ".join(f"{row.time_split.get(p, 0.0):.1f}" for p in PHASES)
+        print(f"    {row.number:3d}: {row.steps:5d} steps in {row.wall_seconds:6.1f} s ({split})")
 
 
 def machine_words() -> str:
