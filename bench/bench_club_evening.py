@@ -477,6 +477,10 @@ class Evening:
         )
 
 
+def _clock_or(seconds: float | None) -> str:
+    return clock(seconds) if seconds is not None else "never"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--racers", type=int, default=6, help="racers training one job each")
@@ -542,7 +546,3 @@ def main() -> None:
 
 if __name__ == "__main__":
     main()
-
-
-def _clock_or(seconds: float | None) -> str:
-    return clock(seconds) if seconds is not None else "never"
