@@ -8,7 +8,7 @@ runs its own forward pass of its cars on one thread), then served by the machine
 (``rl.policy_server``: one batched pass for every child that rang). It prints the steps/s of all
 the cars together (from the children's progress messages, past a warm-up), the server's passes
 and the rows of an average one, and the memory each child maps (resident), median of
-``--rounds``. ``--jobs 2`` gives each half of the children a job (and weights) of its own.
+``--rounds`` (the two taken in turn, round by round). ``--jobs 2`` gives each half of the children a job (and weights) of its own.
 """
 
 from __future__ import annotations
@@ -112,15 +112,17 @@ def main() -> None:
         f"{options.steps:,} steps a child timed, median of {options.rounds}"
     )
     print(f"{'policy':<30}{'steps/s':>10}{'child MiB':>12}{'rows a pass':>13}")
-    for name, place in (("in each child", None), (f"served ({options.device})", socket)):
-        rounds = []
-        for _ in range(options.rounds):
-            rounds.append(round_of(options, place, weights))
-        rate = statistics.median(r["rate"] for r in rounds)
-        memory = statistics.median(r["memory"] for r in rounds) / MiB
+    places = {"in each child": None, f"served ({options.device})": socket}
+    rounds: dict[str, list[dict]] = {name: [] for name in places}
+    for _ in range(options.rounds):  # in turn, so that the machine's drift touches both alike
+        for name, place in places.items():
+            rounds[name].append(round_of(options, place, weights))
+    for name, place in places.items():
+        rate = statistics.median(r["rate"] for r in rounds[name])
+        memory = statistics.median(r["memory"] for r in rounds[name]) / MiB
         rows = ""
         if place:
-            last = rounds[-1]
+            last = rounds[name][-1]
             rows = f"{last['rows'] / max(last['passes'], 1):.1f}"
         print(f"{name:<30}{rate:>10,.0f}{memory:>12,.0f}{rows:>13}")
     Path(socket).unlink(missing_ok=True)

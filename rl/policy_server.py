@@ -28,6 +28,7 @@ rings, the batched passes, the idle end) share its state and are read together.
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
 import contextlib
 import hashlib
 import logging
@@ -52,6 +53,7 @@ logger = logging.getLogger("pitlane.policy_server")
 
 IDLE = 300.0  # [s] without a worker's connection before the server ends itself
 LOOK = 1.0  # [s] between looks at the idle clock while nothing happens
+LANE_ROWS = 8  # rows a pass takes at least before one policy's batch is cut among lanes
 GATHER = 0.002  # [s] a round waits at most for the children of the last to ring again
 
 
@@ -83,8 +85,11 @@ class Child:
 
 
 class Server:
-    def __init__(self, path: str, device: str, idle: float = IDLE) -> None:
+    def __init__(self, path: str, device: str, idle: float = IDLE, lanes: int = 1) -> None:
         self.path, self.device, self.idle = path, device, idle
+        # Passes of several policies run at once on so many threads (each pass on one)
+        self.lane_count = lanes
+        self.lanes = concurrent.futures.ThreadPoolExecutor(lanes) if lanes > 1 else None
         self.selector = selectors.DefaultSelector()
         self.children: dict[socket.socket, Child | None] = {}  # by their worker's connection
         self.rings: dict[socket.socket, Child] = {}  # by the socket they ring on
@@ -329,13 +334,48 @@ class Server:
         self.rounds += 1
         turns = list(together.items())
         turn = self.rounds % len(turns) if turns else 0
-        for key, asked in turns[turn:] + turns[:turn]:
-            try:
-                self._answer_together(self.policies[key].policy, asked)
-            except Exception as error:  # the device's own: out of memory, its driver
-                logger.exception("The policy server failed a pass")
-                for child, _, _ in asked:
-                    self._refuse(child, f"its policy failed on {self.device} ({error})"[:300])
+        passes = [
+            (self.policies[key].policy, part)
+            for key, asked in turns[turn:] + turns[:turn]
+            for part in self._parts(asked)
+        ]
+        if self.lanes is None or len(passes) < 2:
+            for policy, asked in passes:
+                self._answer_pass(asked, self._run_pass, policy, asked)
+            return
+        running = {self.lanes.submit(self._run_pass, *each): each[1] for each in passes}
+        for done in concurrent.futures.as_completed(running):
+            self._answer_pass(running[done], done.result)
+
+    def _parts(self, asked: list) -> list[list]:
+        """``asked`` (children of one policy) cut into a pass a lane, of ``LANE_ROWS`` rows or
+        more, where the server has several lanes: one policy's children are run at once."""
+        rows = sum(len(observations) for _, observations, _ in asked)
+        if self.lanes is None or rows < 2 * LANE_ROWS:
+            return [asked]
+        parts: list[list] = [[]]
+        size = max(LANE_ROWS, -(-rows // self.lane_count))
+        for each in asked:
+            if parts[-1] and sum(len(o) for _, o, _ in parts[-1]) + len(each[1]) > size:
+                parts.append([])
+            parts[-1].append(each)
+        return parts
+
+    def _answer_pass(self, asked: list, run, *arguments) -> None:
+        """Answer the children of one pass (``run(*arguments)``), or refuse them in words
+        where it failed."""
+        try:
+            rows = run(*arguments)
+        except Exception as error:  # the device's own: out of memory, its driver
+            logger.exception("The policy server failed a pass")
+            for child, _, _ in asked:
+                self._refuse(child, f"its policy failed on {self.device} ({error})"[:300])
+            return
+        self.stats["passes"] += 1
+        self.stats["rows"] += rows
+        self.stats["most_rows"] = max(self.stats["most_rows"], rows)
+        for child, _, _ in asked:
+            self._answered(child)
 
     def _read(self, child: Child) -> tuple[str, list[dict], list[int]]:
         """(how, one observation a row, the rows' seeds) the child wrote, copied out of its
@@ -364,13 +404,13 @@ class Server:
         observations = [{name: array[row] for name, array in batch.items()} for row in range(rows)]
         return how_words, observations, seeds
 
-    def _answer_together(self, policy: Policy, asked: list) -> None:
+    def _run_pass(self, policy: Policy, asked: list) -> int:
+        """One batched pass of ``policy`` for the children ``asked``, their answers written into
+        their slots (on a lane's thread where there are several: it touches nothing else); the
+        rows it ran."""
         observations = [seen for _, rows, _ in asked for seen in rows]
         generators = [child.generators[seed] for child, _, seeds in asked for seed in seeds]
         actions, values, log_probs = policy.explore(observations, generators)
-        self.stats["passes"] += 1
-        self.stats["rows"] += len(observations)
-        self.stats["most_rows"] = max(self.stats["most_rows"], len(observations))
         start = 0
         for child, rows, _ in asked:
             end = start + len(rows)
@@ -379,7 +419,7 @@ class Server:
                 child.views["values"][: len(rows)] = values[start:end]
                 child.views["log_probs"][: len(rows)] = log_probs[start:end]
             start = end
-            self._answered(child)
+        return len(observations)
 
     def _answer_one(self, child: Child, how: str, observation: dict) -> None:
         policy = self.policies[child.key].policy
@@ -423,15 +463,13 @@ def server_device(setting: str) -> str:
     return setting
 
 
-def server_threads(device: str) -> int:
-    """PyTorch threads for the server's passes: one on a GPU, which does the work, and on a
-    CPU of up to 15 cores. On the 2-core box, two rollout workers of 8 cars drove 787 steps/s
-    with one thread, 412 with two (each pass's second thread took the core a child simulates
-    on) and 607 with the policy in each child (bench.bench_policy_server). A core more for
-    each 8 past them on a larger CPU, where one thread would be all the children's bottleneck
-    (not yet measured)."""
-    cores = len(os.sched_getaffinity(0))
-    return 1 if device != "cpu" else max(1, cores // 8)
+def server_lanes(device: str) -> int:
+    """Passes the server runs at once, each on one thread: on a GPU one (the GPU does the
+    work); on a CPU one a core, so that several policies' passes, or the parts of one policy's
+    large batch, run at once rather than in turn. PyTorch's threads inside a pass stay one: on
+    the 2-core box, two rollout workers of 8 cars drove 412 steps/s where each pass took two
+    threads against 787 with one (the second thread spun on the core a child simulates on)."""
+    return 1 if device != "cpu" else len(os.sched_getaffinity(0))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -439,7 +477,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--socket", required=True, help="the path the workers connect to")
     parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
     parser.add_argument("--idle", type=float, default=IDLE, help="[s] idle before it ends")
-    parser.add_argument("--threads", type=int, default=0, help="PyTorch threads (0: chosen)")
+    parser.add_argument("--lanes", type=int, default=0, help="passes at once (0: chosen)")
     arguments = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     try:
@@ -447,8 +485,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as error:
         sys.stderr.write(f"{error}\n")
         return 2
-    torch.set_num_threads(arguments.threads or server_threads(device))
-    server = Server(arguments.socket, device, arguments.idle)
+    torch.set_num_threads(1)
+    lanes = arguments.lanes or server_lanes(device)
+    server = Server(arguments.socket, device, arguments.idle, lanes)
     logger.info("The policy server listens on %s, its policies on %s", arguments.socket, device)
     server.serve()
     return 0

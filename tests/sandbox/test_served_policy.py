@@ -124,8 +124,10 @@ def test_children_of_two_jobs_served_together_drive_what_each_would_hold_its_pol
     assert loaded == dict.fromkeys(children, False)
     for name in children:
         assert_same_driving(served_drives[name], held[name])
-    first_of = {name: drove["episodes"][0][0]["trace"] for name, drove in held.items()}
-    assert first_of["job 2"] != first_of["job 1, first"]  # another policy drives otherwise
+    # Another network values the same first frame otherwise (untrained, both may pick the same
+    # actions from the same seeds).
+    first_of = {name: array(drove["episodes"][0][0], "values")[0] for name, drove in held.items()}
+    assert first_of["job 2"] != first_of["job 1, first"]
 
 
 class Child:
