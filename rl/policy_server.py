@@ -13,8 +13,10 @@ slots (the file and the socket come back with the answer, for the worker to hand
 tells the server the weights the child drives with, sending them only where no other worker on
 the machine has. Policies are shared by every child of the same job, algorithm, architecture,
 spaces and weights, and forgotten when the last of those children goes. Every policy that has
-children waiting is served once a round, in turn: each job's cars get an equal share of the
-server.
+children waiting is served once a round, the policies taking turns at going first, and a round
+waits a moment for the children of the last: each job's cars get an equal share of the server.
+On a CPU, a round's passes run at once on lanes of one thread each (several policies, or the
+parts of one large batch); on a GPU, one after another.
 
 What a child writes is checked before the network sees it; a child that writes nonsense is
 refused in words and its socket closed, a child that dies or hangs only loses its own slots,
