@@ -8,7 +8,8 @@ runs its own forward pass of its cars on one thread), then served by the machine
 (``rl.policy_server``: one batched pass for every child that rang). It prints the steps/s of all
 the cars together (from the children's progress messages, past a warm-up), the server's passes
 and the rows of an average one, and the memory each child maps (resident), median of
-``--rounds`` (the two taken in turn, round by round). ``--jobs 2`` gives each half of the children a job (and weights) of its own.
+``--rounds`` (the two taken in turn, round by round). ``--jobs 2`` gives each half of the
+children a job (and weights) of its own.
 """
 
 from __future__ import annotations
