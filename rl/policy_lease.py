@@ -151,6 +151,7 @@ def _started(path: str, device: str) -> socket.socket:
     with contextlib.suppress(FileNotFoundError):
         os.unlink(path)  # a dead server's
     with open(f"{path}.log", "ab") as log:  # the server keeps its own copy open
+        before = log.tell()
         server = subprocess.Popen(
             [sys.executable, "-m", "rl.policy_server", "--socket", path, "--device", device],
             cwd=ROOT,
@@ -162,8 +163,9 @@ def _started(path: str, device: str) -> socket.socket:
     deadline = time.monotonic() + START_PATIENCE
     while time.monotonic() < deadline:
         if server.poll() is not None:
-            tail = Path(f"{path}.log").read_bytes()[-400:].decode("utf-8", "replace").strip()
-            raise PolicyServerFailed(f"The policy server did not start: {tail}")
+            said = Path(f"{path}.log").read_bytes()[before:][-400:]
+            words = said.decode("utf-8", "replace").strip() or f"it exited with {server.returncode}"
+            raise PolicyServerFailed(f"The policy server did not start: {words}")
         with contextlib.suppress(OSError):
             return _connected(path)
         time.sleep(0.05)

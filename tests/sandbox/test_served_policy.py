@@ -317,6 +317,22 @@ def test_the_server_runs_on_the_gpu_where_torch_finds_one_and_a_gpu_asked_for_mu
     assert server_device("auto") == "cuda"
 
 
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a GPU")
+def test_a_gpu_asked_for_where_there_is_none_fails_the_worker_in_words(socket_path):
+    from jobs.rollouts import failure_words
+
+    with pytest.raises(SandboxFailure) as failed, started(b"", seed=SEED, lease=PolicyLease(
+        socket_path, "cuda"
+    )):  # fmt: skip
+        pass
+    assert failed.value.kind == "policy"
+    assert failure_words(failed.value, 0) == (
+        "Simulation worker 1 failed (not your reward function): The policy server did not "
+        "start: PITLANE_ROLLOUT_DEVICE is cuda, but PyTorch finds no GPU on this simulation "
+        "machine: set it to auto or cpu, or give the machine a GPU PyTorch can use."
+    )
+
+
 def test_a_rollout_worker_has_its_sandboxes_served_unless_the_policy_is_kept_in_the_child(
     settings,
 ):
