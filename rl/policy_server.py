@@ -15,8 +15,8 @@ the machine has. Policies are shared by every child of the same job, algorithm, 
 spaces and weights, and forgotten when the last of those children goes. Every policy that has
 children waiting is served once a round, the policies taking turns at going first, and a round
 waits a moment for the children of the last: each job's cars get an equal share of the server.
-On a CPU, a round's passes run at once on lanes of one thread each (several policies, or the
-parts of one large batch); on a GPU, one after another.
+On a CPU, a round's passes of several policies run at once on lanes of one thread each; on a
+GPU, one after another.
 
 What a child writes is checked before the network sees it; a child that writes nonsense is
 refused in words and its socket closed, a child that dies or hangs only loses its own slots,
@@ -55,7 +55,6 @@ logger = logging.getLogger("pitlane.policy_server")
 
 IDLE = 300.0  # [s] without a worker's connection before the server ends itself
 LOOK = 1.0  # [s] between looks at the idle clock while nothing happens
-LANE_ROWS = 8  # rows a pass takes at least before one policy's batch is cut among lanes
 GATHER = 0.002  # [s] a round waits at most for the children of the last to ring again
 
 
@@ -90,7 +89,6 @@ class Server:
     def __init__(self, path: str, device: str, idle: float = IDLE, lanes: int = 1) -> None:
         self.path, self.device, self.idle = path, device, idle
         # Passes of several policies run at once on so many threads (each pass on one)
-        self.lane_count = lanes
         self.lanes = concurrent.futures.ThreadPoolExecutor(lanes) if lanes > 1 else None
         self.selector = selectors.DefaultSelector()
         self.children: dict[socket.socket, Child | None] = {}  # by their worker's connection
@@ -336,11 +334,9 @@ class Server:
         self.rounds += 1
         turns = list(together.items())
         turn = self.rounds % len(turns) if turns else 0
-        passes = [
-            (self.policies[key].policy, part)
-            for key, asked in turns[turn:] + turns[:turn]
-            for part in self._parts(asked)
-        ]
+        # One pass a policy, never two of one at once: SB3 keeps a pass's distribution on the
+        # policy's module, where a second pass would replace it before the first samples.
+        passes = [(self.policies[key].policy, asked) for key, asked in turns[turn:] + turns[:turn]]
         if self.lanes is None or len(passes) < 2:
             for policy, asked in passes:
                 self._answer_pass(asked, self._run_pass, policy, asked)
@@ -348,20 +344,6 @@ class Server:
         running = {self.lanes.submit(self._run_pass, *each): each[1] for each in passes}
         for done in concurrent.futures.as_completed(running):
             self._answer_pass(running[done], done.result)
-
-    def _parts(self, asked: list) -> list[list]:
-        """``asked`` (children of one policy) cut into a pass a lane, of ``LANE_ROWS`` rows or
-        more, where the server has several lanes: one policy's children are run at once."""
-        rows = sum(len(observations) for _, observations, _ in asked)
-        if self.lanes is None or rows < 2 * LANE_ROWS:
-            return [asked]
-        parts: list[list] = [[]]
-        size = max(LANE_ROWS, -(-rows // self.lane_count))
-        for each in asked:
-            if parts[-1] and sum(len(o) for _, o, _ in parts[-1]) + len(each[1]) > size:
-                parts.append([])
-            parts[-1].append(each)
-        return parts
 
     def _answer_pass(self, asked: list, run, *arguments) -> None:
         """Answer the children of one pass (``run(*arguments)``), or refuse them in words
@@ -467,8 +449,8 @@ def server_device(setting: str) -> str:
 
 def server_lanes(device: str) -> int:
     """Passes the server runs at once, each on one thread: on a GPU one (the GPU does the
-    work); on a CPU one a core, so that several policies' passes, or the parts of one policy's
-    large batch, run at once rather than in turn. PyTorch's threads inside a pass stay one: on
+    work); on a CPU one a core, so that several policies' passes run at once rather than in
+    turn. PyTorch's threads inside a pass stay one: on
     the 2-core box, two rollout workers of 8 cars drove 412 steps/s where each pass took two
     threads against 787 with one (the second thread spun on the core a child simulates on)."""
     return 1 if device != "cpu" else len(os.sched_getaffinity(0))
