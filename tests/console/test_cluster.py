@@ -358,12 +358,14 @@ def test_a_racer_uses_a_console_spread_over_machines_that_share_no_disk_through_
 
     # No machine kept on its own disk what another needed: every artifact went to S3. (A
     # simulation machine's weights/ is its rollout workers' shared copy of what Redis published,
-    # rl.weights_cache, removed an hour after its job's last use.)
+    # rl.weights_cache, removed an hour after its job's last use; policy.sock.lock and .log its
+    # policy server's start lock and log, rl.policy_lease.)
+    kept_here = ("static/", "celerybeat-schedule", "weights/", "policy.sock.")
     for machine in cluster.machines:
         kept = [
             name
             for name in machine.files()  # collected static files, beat's schedule
-            if not name.startswith(("static/", "celerybeat-schedule", "weights/"))
+            if not name.startswith(kept_here)
         ]
         assert kept == [], f"{machine.name} keeps {kept}"
     assert all(Path(machine.var, "media").exists() is False for machine in cluster.machines)
