@@ -29,6 +29,7 @@ import importlib
 import io
 import linecache
 import os
+import resource
 import signal
 import sys
 import time
@@ -302,6 +303,11 @@ class RewardProcess:
 # The reward process's side
 
 
+def _fd_limit() -> int:
+    """One past the highest descriptor this process may hold."""
+    return resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+
+
 def _serve(
     parent: int, requests: int, replies: int, call_timeout: float, memory_allowance: int
 ) -> None:
@@ -309,6 +315,12 @@ def _serve(
     seal.die_with(parent)
     for fd in (0, 1):  # the worker's pipes are the child's alone
         os.close(fd)
+    # And so is all else the child was handed: its slots in the machine's policy server above all
+    # (sandbox.served), which the racer's code could otherwise map.
+    for low, high in ((3, min(requests, replies)), (max(requests, replies) + 1, _fd_limit())):
+        os.closerange(low, high)
+    if abs(requests - replies) > 1:
+        os.closerange(min(requests, replies) + 1, max(requests, replies))
     os.set_blocking(requests, True)
     for name in PRELOADED:
         importlib.import_module(name)

@@ -130,6 +130,36 @@ def test_children_of_two_jobs_served_together_drive_what_each_would_hold_its_pol
     assert first_of["job 2"] != first_of["job 1, first"]
 
 
+PROBING = """import mmap
+
+mapped = []
+for fd in range(3, 256):  # whatever descriptor the child was handed, its slots' memory first
+    try:
+        mmap.mmap(fd, 4096)
+        mapped.append(fd)
+    except (OSError, ValueError):
+        pass
+print("mapped", mapped)
+
+
+def reward_function(params):
+    return 1.0
+"""
+
+
+@pytest.mark.slow
+def test_the_racers_code_cannot_map_its_childs_slots_in_the_policy_server(socket_path):
+    with Sandbox(
+        env=ENV,
+        policy={**POLICY, "seed": SEED, "job": 1},
+        policy_lease=PolicyLease(socket_path, "cpu"),
+        memory_allowance=1024 * MiB,
+    ) as sandbox:
+        sandbox.load(PROBING)
+        # It mapped the slots' memory before the reward process closed what the child was handed
+        assert sandbox.take_logs() == (["mapped []"], 0)
+
+
 class Child:
     """A sandbox child as the server sees one, played by the test: its lease and its slots."""
 
