@@ -100,8 +100,8 @@ def machine_sizing(
     if simulations is None:
         simulations = max(trainers + SPARE_SIMULATIONS, cores, 2)
     threads = _given(environ, "PITLANE_TRAINER_THREADS")
-    if threads is None:
-        threads = max(1, cores // max(trainers, 1))
+    if threads is None:  # the most: each trainer shares the cores among the jobs training now
+        threads = cores
     return Sizing(cores, available, trainers, simulations, cars, threads)
 
 

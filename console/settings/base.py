@@ -247,9 +247,9 @@ PITLANE_KEPT_UPLOADS_MAX = env.int("PITLANE_KEPT_UPLOADS_MAX", 2 * 2**30, minimu
 PITLANE_QUEUES = ("training", "simulation", "rescoring")
 # What `make run` (console.supervisor) starts, from the machine's cores and free memory
 # (console.sizing; a variable set wins; its children get the same): jobs training at once, the
-# simulation worker's processes (rollouts, evaluations, races), the cores shared among the
-# trainers as their threads (a trainer learns while its rollouts wait for the new weights: two
-# trainers with every core each made each update several times slower than with half each).
+# simulation worker's processes (rollouts, evaluations, races), and a trainer's most threads:
+# before each update it takes the cores shared among the jobs training then (jobs.trainer's
+# share_cores: two trainers with every core each were several times slower than with half).
 SIZING = machine_sizing()
 PITLANE_TRAINERS = env.int("PITLANE_TRAINERS", SIZING.trainers, minimum=1)
 PITLANE_WORKER_CONCURRENCY = env.int("PITLANE_WORKER_CONCURRENCY", SIZING.simulations, minimum=1)

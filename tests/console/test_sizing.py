@@ -12,7 +12,7 @@ def test_the_club_box_trains_six_racers_at_once():
     assert sizing.trainers <= MAX_TRAINERS
     assert sizing.simulations >= sizing.trainers + 2  # a rollout worker each, and evaluations
     assert sizing.cars == CARS
-    assert sizing.trainer_threads == 1
+    assert sizing.trainer_threads == 2  # the most: a job alone learns on both (share_cores)
 
 
 def test_a_tiny_machine_still_trains_one_job_with_fewer_cars():
@@ -25,7 +25,7 @@ def test_the_memory_bounds_the_trainers_before_the_cores_do():
     assert machine_sizing(cores=16, available=6 * GiB, environ=NOTHING_SET).trainers == 2
     assert machine_sizing(cores=16, available=500 * GiB, environ=NOTHING_SET).trainers == 8
     big = machine_sizing(cores=16, available=500 * GiB, environ=NOTHING_SET)
-    assert (big.simulations, big.trainer_threads) == (16, 2)  # a process a core at least
+    assert (big.simulations, big.trainer_threads) == (16, 16)  # a process a core at least
 
 
 def test_one_core_trains_at_most_four_jobs_however_much_memory_it_has():
@@ -36,7 +36,7 @@ def test_each_variable_the_operator_sets_wins_and_what_depends_on_it_follows():
     environ = {"PITLANE_TRAINERS": "3", "PITLANE_CARS_PER_WORKER": "4"}
     sizing = machine_sizing(cores=4, available=2 * GiB, environ=environ)
     assert (sizing.trainers, sizing.cars) == (3, 4)
-    assert (sizing.simulations, sizing.trainer_threads) == (5, 1)
+    assert (sizing.simulations, sizing.trainer_threads) == (5, 4)
 
     environ = {"PITLANE_WORKER_CONCURRENCY": "2", "PITLANE_TRAINER_THREADS": "6"}
     sizing = machine_sizing(cores=2, available=23 * GiB, environ=environ)
@@ -72,3 +72,12 @@ def test_one_of_each_is_said_in_the_singular():
     assert words.startswith("This machine: 1 core, 2.0 GiB of memory free. Training 1 job at")
     assert "1 simulation process for" in words
     assert "1 car a rollout worker" in words
+
+
+def test_a_trainer_shares_the_cores_among_the_jobs_training_now():
+    from jobs.trainer import cores_shared
+
+    assert cores_shared(2, 1, most=2) == 2  # a job alone learns on both cores
+    assert cores_shared(2, 6, most=2) == 1  # six on one each, not spinning on each other's
+    assert cores_shared(16, 4, most=16) == 4
+    assert cores_shared(16, 1, most=6) == 6  # the operator's PITLANE_TRAINER_THREADS
