@@ -3,6 +3,7 @@ them between a worker and its child (``sandbox.protocol``); an episode crosses R
 
 from __future__ import annotations
 
+import socket
 from typing import Any
 
 import msgpack
@@ -34,8 +35,6 @@ MAX_FDS = 4  # file descriptors that may come with a message
 
 def send_message(connection, message: dict[str, Any], fds=()) -> None:
     """``message`` on the stream socket ``connection``, with ``fds`` (``SCM_RIGHTS``)."""
-    import socket
-
     body = encode(message)
     framed = len(body).to_bytes(_LENGTH, "big") + body
     sent = socket.send_fds(connection, [framed], list(fds)) if fds else 0
@@ -45,8 +44,6 @@ def send_message(connection, message: dict[str, Any], fds=()) -> None:
 def receive_message(connection) -> tuple[dict[str, Any] | None, list[int]]:
     """The next message on the stream socket ``connection`` and the descriptors that came with
     it; (None, []) where the peer closed between messages."""
-    import socket
-
     head, fds, _, _ = socket.recv_fds(connection, _LENGTH, MAX_FDS)
     if not head:
         return None, []
