@@ -13,7 +13,8 @@ defaults, the default discrete action space, the camera) and lets them train.
   measured beside it (``UPDATE_VARIANTS``: stock layers, Adam not fused, SB3's minibatches
   copied one by one, bf16 features, channels-last tensors, torch.compile), on one thread and on
   all; ``--algorithm sac`` for SAC; ``--device cuda`` on a GPU, where torch.compile's
-  reduce-overhead mode and a CUDA graph of PPO's whole minibatch step are measured too. A GPU
+  reduce-overhead mode, PPO's eager minibatch step (the trainer replays a CUDA graph of it there,
+  rl.graphed) and a CUDA graph of SAC's gradient step are measured too. A GPU
   session runs, each a minute or two on an H100:
   `python -m bench.bench_training --update --device cuda --steps 5000` and
   `python -m bench.bench_training --update --device cuda --algorithm sac --steps 2000`.
@@ -326,35 +327,17 @@ def _sb3_sac_step(built) -> None:
     model.train = lambda gradient_steps, batch_size: SB3SAC.train(model, gradient_steps, batch_size)
 
 
-def _batch_tensors(batch) -> list:
-    """A PPO minibatch's or a SAC batch's tensors, in a fixed order."""
-    return [
-        value
-        for field in batch
-        if field is not None
-        for value in (field.values() if isinstance(field, dict) else [field])
-    ]
-
-
 def _captured(step, optimizers: list):
-    """``step`` (a whole gradient step on fixed input tensors) as a CUDA graph: warmed up off
-    the default stream, as torch.cuda.graph asks, its gradients made in the graph's memory."""
-    import torch
+    """``step`` (a whole gradient step on fixed input tensors) as a CUDA graph's replay, its
+    gradients made in the graph's memory (set to None before the step, so never accumulated)."""
+    from rl.graphed import cuda_capture
 
-    side = torch.cuda.Stream()
-    side.wait_stream(torch.cuda.current_stream())
-    with torch.cuda.stream(side):
-        for _ in range(3):
-            for optimizer in optimizers:
-                optimizer.zero_grad(set_to_none=True)
-            step()
-    torch.cuda.current_stream().wait_stream(side)
-    graph = torch.cuda.CUDAGraph()
-    for optimizer in optimizers:
-        optimizer.zero_grad(set_to_none=True)
-    with torch.cuda.graph(graph):
+    def zeroed() -> None:
+        for optimizer in optimizers:
+            optimizer.zero_grad(set_to_none=True)
         step()
-    return graph
+
+    return cuda_capture(zeroed)
 
 
 def _capturable(module, **options) -> None:
@@ -371,47 +354,13 @@ def _capturable(module, **options) -> None:
     torch.distributions.Distribution.set_default_validate_args(False)
 
 
-def _cuda_graph(built) -> None:
-    """PPO's whole minibatch step (forward, backward, gradient clip and fused Adam) captured
-    once as a CUDA graph and replayed for each full minibatch, its inputs copied into the
-    graph's; the smaller last minibatch of each epoch is left out (the figure is still per
-    step of the rollout)."""
-    import torch
-
-    model, policy = built.model, built.model.policy
-    _capturable(policy, eps=1e-5)
-    captured = {}
-
-    def step() -> None:
-        loss, _, _ = model._loss(captured["batch"])
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(policy.parameters(), model.max_grad_norm)
-        policy.optimizer.step()
-
-    def train() -> None:
-        rollout, size, batch_size = model.rollout, model.rollout.size, model.batch_size
-        policy.set_training_mode(True)
-        if model.normalize_advantage:
-            advantages = rollout.advantages
-            advantages[:] = (advantages - advantages.mean()) / (advantages.std(correction=0) + 1e-8)
-        if "graph" not in captured:
-            captured["batch"] = rollout.minibatch(torch.arange(batch_size, device=model.device))
-            captured["graph"] = _captured(step, [policy.optimizer])
-        for _ in range(model.n_epochs):
-            shuffled = torch.randperm(size, device=model.device)
-            for start in range(0, size - batch_size + 1, batch_size):
-                fresh = rollout.minibatch(shuffled[start : start + batch_size])
-                torch._foreach_copy_(_batch_tensors(captured["batch"]), _batch_tensors(fresh))
-                captured["graph"].replay()
-
-    model.train = train
-
-
 def _sac_cuda_graph(built) -> None:
     """SAC's whole gradient step (critics, actor, target critics; the actor's draws from the
     default generator, which CUDA graphs replay anew) captured once as a CUDA graph and
     replayed for each step, each sampled batch copied into the graph's."""
     import torch
+
+    from rl.graphed import batch_tensors
 
     model = built.model
     _capturable(model.actor)
@@ -425,9 +374,9 @@ def _sac_cuda_graph(built) -> None:
             step = lambda: model.gradient_step(captured["batch"])  # noqa: E731
             captured["graph"] = _captured(step, [model.actor.optimizer, model.critic.optimizer])
         for _ in range(gradient_steps):
-            fresh = _batch_tensors(model.replay.sample(batch_size))
-            torch._foreach_copy_(_batch_tensors(captured["batch"]), fresh)
-            captured["graph"].replay()
+            fresh = batch_tensors(model.replay.sample(batch_size))
+            torch._foreach_copy_(batch_tensors(captured["batch"]), fresh)
+            captured["graph"]()
 
     model.train = train
 
@@ -443,7 +392,7 @@ UPDATE_VARIANTS = {
         "Pitlane, channels last": (_channels_last, False),
         "Pitlane, torch.compile": (_compiled(None), False),
         "Pitlane, torch.compile reduce-overhead": (_compiled("reduce-overhead"), True),
-        "Pitlane, CUDA graph of the minibatch step": (_cuda_graph, True),
+        "Pitlane, the eager minibatch step (no CUDA graph)": (lambda built: None, True),
     },
     SAC: {
         "SB3's gradient step": (_sb3_sac_step, False),
@@ -478,6 +427,7 @@ def update_speed(steps: int = 2000, *, algorithm: str = PPO, device: str = "cpu"
             if cuda_only and not device.startswith("cuda"):
                 print(f"  {name}: needs --device cuda", flush=True)
                 continue
+            validating = torch.distributions.Distribution._validate_args  # a capture's to undo
             built = Learner(
                 algorithm=algorithm,
                 hyperparameters=hyperparameters.defaults(algorithm),
@@ -486,7 +436,9 @@ def update_speed(steps: int = 2000, *, algorithm: str = PPO, device: str = "cpu"
                 action_space=spaces[1],
                 device=device,
             )
-            validating = torch.distributions.Distribution._validate_args  # _capturable's to undo
+            if name != "Pitlane" and algorithm == PPO:  # each change to the eager step
+                built.model.graphed = None
+                torch.distributions.Distribution.set_default_validate_args(validating)
             change(built)
             started = time.perf_counter()
             built.learn(warm_up)  # (and compile, capture)

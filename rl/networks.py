@@ -170,7 +170,9 @@ class LowerPrecision:
     def _precision(self, like: torch.Tensor) -> contextlib.AbstractContextManager:
         if self.precision is None:
             return contextlib.nullcontext()
-        return torch.autocast(like.device.type, dtype=self.precision)
+        # no cache of cast weights: each is cast once a pass anyway, and a CUDA graph's capture
+        # (rl.graphed) must not keep casts made outside it
+        return torch.autocast(like.device.type, dtype=self.precision, cache_enabled=False)
 
 
 @contextlib.contextmanager

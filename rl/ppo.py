@@ -78,6 +78,9 @@ class DeepRacerPPO(PPO):
         self.interrupted: Callable[[], bool] = lambda: False  # looked at between minibatches
         self.progress: Progress = lambda done, total: None  # told after each minibatch
         self.rollout: Rollout | None = None
+        # PPO's minibatch step as a CUDA graph (rl.graphed.GraphedStep), which the learner sets on
+        # a GPU; it reads no KL back between steps, so never with a target KL
+        self.graphed = None
         super().__init__(*args, **kwargs)
 
     def train(self) -> None:
@@ -91,13 +94,9 @@ class DeepRacerPPO(PPO):
         for done, batch in enumerate(self._minibatches()):
             if self.interrupted():
                 raise Interrupted
-            loss, terms, kl = self._loss(batch)
-            if self.target_kl is not None and float(kl) > 1.5 * self.target_kl:
+            terms = self._step(batch)
+            if terms is None:
                 break
-            self.policy.optimizer.zero_grad()
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
-            self.policy.optimizer.step()
             losses.append(terms)
             self.progress(done + 1, total)
         if len(losses) < total:  # a target KL ended it early: it is done all the same
@@ -107,6 +106,20 @@ class DeepRacerPPO(PPO):
             return
         means = torch.stack(losses).mean(dim=0).tolist()  # read once, at the end
         self.last_losses = dict(zip(("policy", "value", "entropy"), means, strict=True))
+
+    def _step(self, batch) -> torch.Tensor | None:
+        """One gradient step on ``batch``: its loss terms, or None where a target KL ends the
+        update before it. Replayed from a CUDA graph where the learner has one (``graphed``)."""
+        if self.graphed is not None:
+            return self.graphed.step(batch)
+        loss, terms, kl = self._loss(batch)
+        if self.target_kl is not None and float(kl) > 1.5 * self.target_kl:
+            return None
+        self.policy.optimizer.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+        self.policy.optimizer.step()
+        return terms
 
     def _minibatches(self) -> Iterator:
         """The rollout's minibatches, shuffled anew in each of ``n_epochs`` passes."""

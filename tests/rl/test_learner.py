@@ -317,6 +317,9 @@ def test_on_a_gpu_a_ppo_update_learns_there_what_it_learns_on_the_cpu(env, monke
             device=device,
         )
         assert learner.device.startswith(device)
+        # on the GPU its minibatch step is replayed from a CUDA graph (rl.graphed), the last
+        # short one (40 steps, minibatches of 16) stepped eagerly: both are checked here
+        assert (learner.model.graphed is not None) == (device == "cuda")
         episode = episode or driven(learner, env, steps=40)
         np.random.seed(3)
         learner.learn([episode])
