@@ -18,7 +18,11 @@ from django.core.files.uploadedfile import TemporaryUploadedFile
 
 from console import workers
 from console.private_files import data_dir_private, temporary_uploads_sweep
-from tests.helpers.private_files import NOBODY, an_install_from_before, read_as_another_user
+from tests.helpers.private_files import (
+    an_install_from_before,
+    as_nobody,
+    read_as_another_user,
+)
 
 
 def mode(path: Path) -> int:
@@ -105,33 +109,16 @@ def test_a_worker_or_scheduler_started_on_its_own_creates_files_for_its_owner_on
 def test_a_start_among_files_that_are_not_its_users_says_so_and_goes_on(tmp_path, caplog):
     """A var/ left by a ``sudo make run`` holds root's files: the console started by its user
     cannot change them, says which, and starts all the same (a traceback stopped it)."""
-    if os.geteuid() != 0:
-        pytest.skip("Being another user than the files' owner needs the suite to run as root.")
     var = tmp_path / "var"
     an_install_from_before(var)
-    above = os.open(var, os.O_PATH | os.O_DIRECTORY)
-    reader, writer = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: nobody, starting among root's files
-        code = 1
-        try:
-            os.close(reader)
-            os.setgroups([])
-            os.setgid(NOBODY)
-            os.setuid(NOBODY)
-            os.fchdir(above)
-            with caplog.at_level("WARNING", logger="console.private_files"):
-                changed = data_dir_private(Path("."))
-            os.write(writer, f"{changed} {len(caplog.records)}".encode())
-            code = 0
-        finally:
-            os._exit(code)
-    os.close(writer)
-    with os.fdopen(reader) as answer:
-        said = answer.read()
-    os.close(above)
-    _, status = os.waitpid(pid, 0)
-    assert os.waitstatus_to_exitcode(status) == 0, "the start raised"
+
+    def start(above: int) -> bytes:  # as nobody, among root's files
+        os.fchdir(above)
+        with caplog.at_level("WARNING", logger="console.private_files"):
+            changed = data_dir_private(Path("."))
+        return f"{changed} {len(caplog.records)}".encode()
+
+    said = as_nobody(var, start).decode()
     changed, warned = map(int, said.split())
     assert changed == 0 and warned >= 1  # nothing changed, and the log says which file
     assert mode(var / "db.sqlite3") == 0o644

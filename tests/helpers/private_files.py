@@ -7,6 +7,7 @@ import errno
 import json
 import os
 import stat
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -33,9 +34,17 @@ def read_as_another_user(root: Path, paths: list[str]) -> dict[str, str]:
     ``root`` as if the folders above it let everyone through, as an install's parents do
     (a home folder, /srv), though the test's own temporary folders do not. Skipped unless the
     suite runs as root: only root can become another user."""
+    reads = as_nobody(root, lambda above: json.dumps({p: _read(above, p) for p in paths}).encode())
+    return json.loads(reads)
+
+
+def as_nobody(root: Path, work: Callable[[int], bytes]) -> bytes:
+    """What ``work`` returns, run by a child process that has become user ``nobody``, given a
+    descriptor of ``root`` (root's to open, nobody's to use). Skipped unless the suite runs as
+    root: only root can become another user."""
     if os.geteuid() != 0:
-        pytest.skip("Trying another user's reads needs the suite to run as root (to be nobody).")
-    above = os.open(root, os.O_PATH | os.O_DIRECTORY)  # root's to open; nobody's to use
+        pytest.skip("Being another user than the files' owner needs the suite to run as root.")
+    above = os.open(root, os.O_PATH | os.O_DIRECTORY)
     reader, writer = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child: syscalls only, then out, whatever happens
@@ -45,7 +54,7 @@ def read_as_another_user(root: Path, paths: list[str]) -> dict[str, str]:
             os.setgroups([])
             os.setgid(NOBODY)
             os.setuid(NOBODY)
-            os.write(writer, json.dumps({path: _read(above, path) for path in paths}).encode())
+            os.write(writer, work(above))
             code = 0
         finally:
             os._exit(code)
@@ -55,7 +64,7 @@ def read_as_another_user(root: Path, paths: list[str]) -> dict[str, str]:
     os.close(above)
     _, status = os.waitpid(pid, 0)
     assert os.waitstatus_to_exitcode(status) == 0, "the child that became nobody failed"
-    return json.loads(results)
+    return results
 
 
 def _read(above: int, path: str) -> str:
