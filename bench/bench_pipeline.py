@@ -90,9 +90,7 @@ def worker_commands(jobs: int, workers: int) -> dict[str, list[str]]:
 
     pools = worker_pools(trainers=jobs, simulations=jobs * workers, prefix=f"bench{jobs}-")
     return {
-        pool.queue: [sys.executable, "-m", "celery", *pool.arguments()]
-        for pool in pools
-        if pool.queue in ("training", "simulation")
+        pool.queue: pool.command() for pool in pools if pool.queue in ("training", "simulation")
     }
 
 

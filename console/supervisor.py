@@ -64,32 +64,30 @@ class Pool:
     queue: str
     hostname: str  # unique per worker on a machine: each has its own heartbeat (console.workers)
     concurrency: int
+    niceness: int = 0  # its processes' and their children's: 10 gives way to everyone at 0
+
+    def command(self) -> list[str]:
+        """The worker's whole command line: ``nice`` first where it yields the cores."""
+        niced = ["nice", "-n", str(self.niceness)] if self.niceness else []
+        return [*niced, sys.executable, "-m", "celery", *self.arguments()]
 
     def arguments(self) -> list[str]:
         """``celery -A console worker`` and what follows it, for this pool."""
-        return [
-            "-A",
-            "console",
-            "worker",
-            "-Q",
-            self.queue,
-            "--hostname",
-            self.hostname,
-            "--concurrency",
-            str(self.concurrency),
-            "--loglevel",
-            "INFO",
-        ]
+        processes = ["--concurrency", str(self.concurrency)]
+        named = ["-Q", self.queue, "--hostname", self.hostname, *processes]
+        return ["-A", "console", "worker", *named, "--loglevel", "INFO"]
 
 
 def worker_pools(*, trainers: int, simulations: int, prefix: str = "") -> list[Pool]:
     """The workers of one machine, one per queue (``settings.PITLANE_QUEUES``): ``trainers`` jobs
     train at once, ``simulations`` processes drive their rollouts, evaluations and races, and one
-    process re-scores (analysis.rescore: minutes of a racer's reward function, taking no more)."""
+    process re-scores (analysis.rescore: minutes of a racer's reward function, taking no more).
+    The re-scoring yields the cores to the trainings: a racer's look back at driving already
+    done waits where a club's trainings would otherwise lose a core to it (issue 56's evening)."""
     return [
         Pool("training worker", "training", f"{prefix}trainer@%h", trainers),
         Pool("simulation worker", "simulation", f"{prefix}sim@%h", simulations),
-        Pool("re-scoring worker", "rescoring", f"{prefix}rescore@%h", 1),
+        Pool("re-scoring worker", "rescoring", f"{prefix}rescore@%h", 1, niceness=10),
     ]
 
 
@@ -161,7 +159,7 @@ class Supervisor:
         for pool in pools:
             # the scheduler (the monthly promotion, a simulation task) runs inside one worker
             beat = ["--beat"] if pool.queue == "simulation" else []
-            self._spawn(pool.name, [sys.executable, "-m", "celery", *pool.arguments(), *beat])
+            self._spawn(pool.name, [*pool.command(), *beat])
         self._spawn(
             "web server",
             [

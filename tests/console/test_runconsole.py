@@ -125,6 +125,10 @@ def test_it_serves_the_console_with_redis_and_a_worker_per_queue(console_running
         given = Path(f"/proc/{worker['pid']}/environ").read_bytes().split(b"\0")
         assert b"PITLANE_TRAINERS=1" in given
         assert any(name.startswith(b"PITLANE_CARS_PER_WORKER=") for name in given)
+    # The re-scoring gives the cores way to the trainings and the rest; they keep their priority
+    niceness = {w["queues"][0]: os.getpriority(os.PRIO_PROCESS, w["pid"]) for w in workers_of(env)}
+    ours = os.getpriority(os.PRIO_PROCESS, 0)
+    assert niceness == {"training": ours, "simulation": ours, "rescoring": min(ours + 10, 19)}
 
 
 def test_it_lets_no_other_user_read_the_data_directory(console_running):
