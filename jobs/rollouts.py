@@ -27,6 +27,7 @@ import redis
 from django.conf import settings
 
 from common.redis_client import redis_client
+from jobs.shares import rollout_niceness
 from rl import hyperparameters as hp
 from rl.experience import JobChannel, LogEntry
 from rl.policy_lease import PolicyLease
@@ -135,6 +136,7 @@ def _sandboxes(model, job_id: int, worker: int, track: str) -> Callable[[int], S
         "job": job_id,
     }
     device = settings.PITLANE_ROLLOUT_DEVICE
+    niceness = rollout_niceness(job_id)  # the job's share of the machine against the others'
 
     def sandbox(cars: int) -> Sandbox:
         served = device != "child"
@@ -146,6 +148,7 @@ def _sandboxes(model, job_id: int, worker: int, track: str) -> Callable[[int], S
             call_timeout=REWARD_CALL_LIMIT,
             memory_allowance=MEMORY_ALLOWANCE,
             car_memory=CAR_MEMORY,
+            niceness=niceness,
         )
 
     return sandbox

@@ -16,7 +16,6 @@ import contextlib
 import functools
 import json
 import logging
-import os
 import time
 from dataclasses import dataclass, field
 
@@ -33,6 +32,7 @@ from common.every import Every
 from common.formatting import clock
 from common.redis_client import redis_client
 from jobs import checkpoints
+from jobs.shares import share_cores
 from notifications import services as notifications
 from rl import hyperparameters as hp
 from rl.experience import Episode, JobChannel, decode_episode
@@ -80,28 +80,6 @@ class Slot:
     started_wall: float = field(default_factory=time.time)
     replacements: int = 0
     gone: bool = False
-
-
-def share_cores() -> None:
-    """Before each update, this trainer's PyTorch threads: the machine's cores shared among the
-    jobs training now, ``PITLANE_TRAINER_THREADS`` at most. A job alone learns on every core (a
-    share fixed by the trainers the machine could run gave it one of two: 35.9 steps/s over 20
-    minutes against 62.9), and six learn on one each rather than spin on each other's (two
-    trainers with every core each were several times slower than with half each). Jobs counted
-    are the console's: on several training machines a trainer takes less than its machine's
-    share, never more."""
-    import torch
-
-    training = TrainingJob.objects.filter(status=TrainingJob.Status.IN_PROGRESS).count()
-    threads = cores_shared(len(os.sched_getaffinity(0)), training, settings.PITLANE_TRAINER_THREADS)
-    if torch.get_num_threads() != threads:
-        torch.set_num_threads(threads)
-
-
-def cores_shared(cores: int, training: int, most: int) -> int:
-    """A trainer's threads: ``cores`` shared among the ``training`` jobs (itself among them),
-    ``most`` at most, one at least."""
-    return max(1, min(most, cores // max(training, 1)))
 
 
 def run(job_id: int, owner: str, start_rollouts, queued_rollouts=None) -> bool:
@@ -436,7 +414,7 @@ class Trainer:
         meanwhile (the racer stopped it, or its time ran out) and the iteration was abandoned."""
         number = self.version + 1
         progress = self._update_progress(number, episodes)
-        share_cores()
+        share_cores(self.job.pk)
         self.stopwatch.charge(CHECKS)
         try:
             update = self.learner.learn(episodes, interrupted=self._should_end, progress=progress)

@@ -121,6 +121,8 @@ class Sandbox:
     # the cars
     car_memory: int = 0  # [bytes] more the child (never the racer's code) may map per car past one
     start_timeout: float = 60.0  # [s]
+    niceness: int = 0  # the child's and its reward process's, above this process's own: a job
+    # with a smaller share of the machine drives behind the others (jobs.shares)
     logs: deque = field(default_factory=lambda: deque(maxlen=LOG_KEEP))
     logs_dropped: int = 0  # lines printed and not kept: past LOG_KEEP, or the child's bound
     report: dict = field(default_factory=dict)
@@ -174,6 +176,9 @@ class Sandbox:
             pass_fds=handed,
             start_new_session=True,
         )
+        if self.niceness:  # its whole process group: the reward process too, started or not
+            ours = os.getpriority(os.PRIO_PROCESS, 0)
+            os.setpriority(os.PRIO_PGRP, self._process.pid, min(ours + self.niceness, 19))
         if self.policy_lease is not None:
             self.policy_lease.handed()  # the server sees the child go when it goes
         os.set_blocking(self._process.stdin.fileno(), False)

@@ -235,7 +235,7 @@ class QuotaDefaultsAdmin(admin.ModelAdmin):
 
 @admin.register(Quota)
 class QuotaAdmin(admin.ModelAdmin):
-    list_display = ["racer", "max_models", "max_minutes_per_month"]
+    list_display = ["racer", "max_models", "max_minutes_per_month", "machine_share"]
     search_fields = ["racer__username"]
     list_select_related = ["racer"]
     autocomplete_fields = ["racer"]

@@ -277,6 +277,13 @@ def jobs_holding_trainers() -> QuerySet[TrainingJob]:
     )
 
 
+def machine_shares(jobs: QuerySet[TrainingJob]) -> dict[int, int]:
+    """``jobs``' shares of the machine, by job: their racers' (``Quota.machine_share``), 1 for a
+    racer without a quota row yet."""
+    rows = jobs.values_list("pk", "model__owner__quota__machine_share")
+    return {pk: share or 1 for pk, share in rows}
+
+
 def trainers_free() -> int:
     """Trainers (``PITLANE_TRAINERS``) that hold no job."""
     return max(settings.PITLANE_TRAINERS - jobs_holding_trainers().count(), 0)

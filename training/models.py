@@ -11,7 +11,7 @@ from collections.abc import Sequence
 
 import numpy as np
 from django.conf import settings
-from django.core.validators import RegexValidator
+from django.core.validators import MaxValueValidator, MinValueValidator, RegexValidator
 from django.db import models
 
 from rl import hyperparameters
@@ -793,6 +793,9 @@ class EvaluationTrial(models.Model):
         return self.STATUS_LABELS.get(self.status, self.status.replace("_", " ").capitalize())
 
 
+MOST_MACHINE_SHARE = 8  # a racer's share of the machine: 1 (everyone's) to this
+
+
 class QuotaDefaults(models.Model):
     """What new racers get (one row, edited by staff in the admin): DeepRacer on AWS limited
     models per account and training hours per month."""
@@ -819,6 +822,15 @@ class Quota(models.Model):
     )
     max_models = models.PositiveIntegerField("models")
     max_minutes_per_month = models.PositiveIntegerField("training minutes per month")
+    machine_share = models.PositiveSmallIntegerField(
+        "share of the machine",
+        default=1,
+        validators=[MinValueValidator(1), MaxValueValidator(MOST_MACHINE_SHARE)],
+        help_text=(
+            "Each of this racer's trainings takes this many shares of the machine's cores "
+            "against the others training at the same time: 2 is twice what a racer at 1 gets."
+        ),
+    )
 
     def __str__(self) -> str:
         return f"{self.racer}: {self.max_models} models, {self.max_minutes_per_month} min/month"

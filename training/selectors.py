@@ -88,15 +88,19 @@ def queue_words(*, job: TrainingJob, free: int | None = None) -> str:
 
 def sharing_words(*, job: TrainingJob) -> str:
     """While ``job`` trains beside others (each holding a trainer of its own and its rollout
-    workers, the machine's cores shared among them all), how many, in the racer's words; "" when
-    it trains alone or does not train."""
+    workers, the machine's cores shared among them all by their racers' shares, jobs.shares),
+    how many and its share, in the racer's words; "" when it trains alone or does not train."""
     if job.status not in (TrainingJob.Status.INITIALIZING, TrainingJob.Status.IN_PROGRESS):
         return ""
-    others = leases.jobs_holding_trainers().exclude(pk=job.pk).count()
-    if not others:
+    shares = leases.machine_shares(leases.jobs_holding_trainers())
+    mine = shares.pop(job.pk, 1)
+    if not shares:
         return ""
-    trainings = "1 other training" if others == 1 else f"{others} other trainings"
-    return f"sharing the machine with {trainings}, each taking an equal share"
+    trainings = "1 other training" if len(shares) == 1 else f"{len(shares)} other trainings"
+    if all(share == mine for share in shares.values()):
+        return f"sharing the machine with {trainings}, each taking an equal share"
+    total = mine + sum(shares.values())
+    return f"sharing the machine with {trainings}, taking {mine} of {total} shares"
 
 
 def job_imported_only(*, job: TrainingJob | None) -> bool:

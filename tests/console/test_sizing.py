@@ -74,10 +74,18 @@ def test_one_of_each_is_said_in_the_singular():
     assert "1 car a rollout worker" in words
 
 
-def test_a_trainer_shares_the_cores_among_the_jobs_training_now():
-    from jobs.trainer import cores_shared
+def test_a_trainer_shares_the_cores_among_the_jobs_training_now_by_their_shares():
+    from jobs.shares import cores_shared, niceness_for
 
-    assert cores_shared(2, 1, most=2) == 2  # a job alone learns on both cores
-    assert cores_shared(2, 6, most=2) == 1  # six on one each, not spinning on each other's
-    assert cores_shared(16, 4, most=16) == 4
-    assert cores_shared(16, 1, most=6) == 6  # the operator's PITLANE_TRAINER_THREADS
+    assert cores_shared(2, share=1, shares=1, most=2) == 2  # a job alone learns on both cores
+    assert cores_shared(2, share=1, shares=6, most=2) == 1  # six on one each, never spinning
+    assert cores_shared(16, share=1, shares=4, most=16) == 4
+    assert cores_shared(16, share=1, shares=1, most=6) == 6  # PITLANE_TRAINER_THREADS
+    # A racer staff gave 2 shares, beside two at 1: half the cores, and cars at full priority
+    assert cores_shared(16, share=2, shares=4, most=16) == 8
+    assert cores_shared(16, share=1, shares=4, most=16) == 4
+    assert niceness_for(2, heaviest=2) == 0
+    # Linux weighs niceness 3 at 526 against 1024 at 0 (kernel/sched/core.c): about half
+    assert niceness_for(1, heaviest=2) == 3
+    assert niceness_for(1, heaviest=4) == 6
+    assert niceness_for(1, heaviest=8) == 9

@@ -297,3 +297,23 @@ def test_a_rollout_without_pybullet_says_so_when_its_car_nears_a_box(
 def test_nothing_was_left_behind_in_tmp():
     assert not Path("/tmp/pitlane-sandbox-probe").exists()
     assert os.getpid() > 0  # still here
+
+
+def test_a_sandbox_of_a_lighter_job_runs_its_child_and_the_racers_code_nicer():
+    """A job with a smaller share of the machine (jobs.shares) drives behind the others: its
+    child and the reward process the racer's code runs in, both, at the niceness asked for."""
+    ours = os.getpriority(os.PRIO_PROCESS, 0)
+    with Sandbox(niceness=3) as sandbox:
+        sandbox.load(reward("return 1.0"))
+        assert sandbox.call(PARAMS) == 1.0
+        group = sandbox._process.pid
+        niceness = {}
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                fields = stat.read_text().rsplit(")", 1)[1].split()
+            except OSError:  # a process of someone else's that ended meanwhile
+                continue
+            if int(fields[2]) == group:  # the process group: the child and what it started
+                niceness[int(stat.parent.name)] = int(fields[16])
+    assert len(niceness) >= 2  # the child and its reward process
+    assert set(niceness.values()) == {min(ours + 3, 19)}

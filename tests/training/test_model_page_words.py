@@ -8,7 +8,7 @@ from django.urls import reverse
 
 from tests.helpers.training import queued_job, training_job
 from training import selectors
-from training.models import Iteration, RLModel, TrainingJob
+from training.models import Iteration, Quota, RLModel, TrainingJob
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 EVALUATION_TO_COME = "Its evaluation drives beside the next iteration."
@@ -93,6 +93,11 @@ def test_it_says_a_training_shares_the_machine_with_the_others_running(client, a
     words = "sharing the machine with 2 other trainings, each taking an equal share"
     assert f"In progress: {words}" in page_of(client, alice, job.model)
     assert selectors.training_status(job=job)["queue_words"] == words
+
+    # Staff give alice twice everyone's share: her page says what she takes of the machine
+    Quota.objects.filter(pk=Quota.of(alice).pk).update(machine_share=2)
+    words = "sharing the machine with 2 other trainings, taking 2 of 4 shares"
+    assert f"In progress: {words}" in page_of(client, alice, job.model)
 
     TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.COMPLETED)
     assert "sharing the machine" not in page_of(client, alice, job.model)
