@@ -1,5 +1,5 @@
-"""What a racer downloads (REFERENCE section 6): the archives for the physical car, for other
-runtimes (ONNX) and of the virtual model, each kept in storage under the model's prefix
+"""What a racer downloads (docs/models.md, "Downloads"): the archives for the physical car,
+for other runtimes (ONNX) and of the virtual model, each kept in storage under the model's prefix
 (``exports/``) once built.
 
 The physical car gets ``physicalmodel-<name>.tar.gz`` as DeepRacer builds it:

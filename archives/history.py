@@ -1,6 +1,6 @@
 """A model's training history read back from DeepRacer's ``metrics/training_metrics.json``
-(REFERENCE section 5), as an imported model's page shows it: the iterations of its graph and
-table, and the totals of its training.
+(docs/coming-from-deepracer.md), as an imported model's page shows it: the iterations of its
+graph and table, and the totals of its training.
 
 The file holds one row per episode, in the order they were driven: the training episodes of an
 iteration (``phase: "training"``, ``trial`` counting 1, 2, ... within the iteration), then the

@@ -52,7 +52,7 @@ from pathlib import Path
 
 from bench.stack import private_redis, sigterm_exits, started
 
-EPISODES = 20  # DeepRacer's episodes between policy updates (REFERENCE section 3)
+EPISODES = 20  # DeepRacer's episodes between policy updates (num_episodes_between_training)
 MAX_CARS = 8  # PITLANE_CARS_PER_WORKER's default
 START_LIMIT = 240.0  # [s] for every job to be driving (workers load torch and the simulator)
 STOP_LIMIT = 300.0  # [s] for every job to finish once stopped (its last checkpoint)

@@ -9,7 +9,12 @@ CHANGELOG.md and docs/**/*.md is checked against this checkout.
 - ``python -m X`` names a module of ours (``X.py``, ``X/__init__.py`` or ``X/__main__.py``);
   third-party modules (pytest, pip, celery...) are skipped;
 - ``manage.py NAME`` names a management command of ours or a Django or third-party built-in;
-- ``make TARGET`` names a target of the Makefile.
+- ``make TARGET`` names a target of the Makefile;
+- a dotted name in backticks whose first part is one of our packages (``jobs.shares``,
+  ``rl.episode.Fleet``) names a module of ours, or a name a module of ours defines at its top;
+  a Celery task's name (``training.train``) is one too;
+- every environment variable the code reads through ``console.env`` or ``os.environ`` is in
+  docs/operating.md's settings (docs/testing.md's, for the test settings').
 
     python scripts/check_docs.py     # exit 1, listing each problem, when one is found
 """
@@ -83,6 +88,14 @@ LINE_SUFFIX = re.compile(r":\d+(-\d+)?$")
 PYTHON_MODULE = re.compile(r"python3? -m ([A-Za-z_][\w.]*)(<?)")
 MANAGE_COMMAND = re.compile(r"manage\.py ([a-z_]+)")
 MAKE_TARGET = re.compile(r"(?:^|[\s;&|(])make ([a-z][\w-]*)")
+DOTTED = re.compile(r"^([a-z_][a-z0-9_]*)((?:\.[A-Za-z_]\w*)+)$")
+TASK_NAME = re.compile(r"\bname=\"([a-z_]+(?:\.[a-z_]+)+)\"")
+SETTING_READ = re.compile(r"(?:env\.[a-z]+\(\s*|environ(?:\.get)?[\[(]\s*)\"([A-Z][A-Z0-9_]+)\"")
+# Where the code's settings are read: the apps and the libraries below them, not tests or benches
+SETTINGS_READERS = ("accounts", "analysis", "archives", "common", "console", "jobs")
+SETTINGS_READERS += ("notifications", "racing", "rl", "sandbox", "simulator", "training")
+FILE_SUFFIXES = {"py", "md", "json", "yaml", "txt", "html", "js", "css", "csv", "sh", "toml"}
+TEST_SETTINGS = "console/settings/test.py"  # its variables are the suite's: docs/testing.md
 
 
 def documents(root: Path) -> list[Path]:
@@ -144,6 +157,72 @@ def module_problem(module: str, root: Path, entries: set[str]) -> str | None:
     return None
 
 
+def packages(root: Path) -> set[str]:
+    return {path.parent.name for path in root.glob("*/__init__.py")} - {"tests"}
+
+
+def task_names(root: Path) -> set[str]:
+    return {
+        name
+        for package in packages(root)
+        for path in (root / package).rglob("tasks.py")
+        for name in TASK_NAME.findall(path.read_text(encoding="utf-8"))
+    }
+
+
+def defines(source: str, name: str) -> bool:
+    """Whether a module's ``source`` defines ``name`` at its top (a class, a function, an
+    assignment or an import)."""
+    word = re.escape(name)
+    return bool(
+        re.search(rf"^(?:class|def|async def) {word}\b|^{word}\s*[:=]", source, re.M)
+        or re.search(rf"^(?:from \S+ )?import .*\b{word}\b", source, re.M)
+    )
+
+
+def dotted_problem(token: str, context: dict) -> str | None:
+    """Why ``token`` (``jobs.shares.share_cores``) names nothing of ours, or None."""
+    token = token.strip("\"'()[],;:").removesuffix("()")
+    match = DOTTED.match(token)
+    if not match or match.group(1) not in context["packages"] or token in context["tasks"]:
+        return None
+    if token.rsplit(".", 1)[1] in FILE_SUFFIXES:  # a file's name: `jobs.py`
+        return None
+    parts, root = token.split("."), context["root"]
+    for length in range(len(parts), 0, -1):
+        base = root.joinpath(*parts[:length])
+        module = next(
+            (p for p in (base.with_suffix(".py"), base / "__init__.py") if p.exists()), None
+        )
+        if module is None:
+            continue
+        if length == len(parts) or defines(module.read_text(encoding="utf-8"), parts[length]):
+            return None
+        break
+    return f"no such module or name of ours: {token}"
+
+
+def setting_problems(root: Path) -> list[str]:
+    """Every environment variable the code reads that its doc does not name."""
+    operating, testing = (
+        path.read_text(encoding="utf-8") if path.exists() else ""
+        for path in (root / "docs" / "operating.md", root / "docs" / "testing.md")
+    )
+    problems = []
+    for package in SETTINGS_READERS:
+        for path in sorted((root / package).rglob("*.py")):
+            name = path.relative_to(root).as_posix()
+            doc, where = (
+                (testing, "docs/testing.md")
+                if name == TEST_SETTINGS
+                else (operating, "docs/operating.md")
+            )
+            for variable in SETTING_READ.findall(path.read_text(encoding="utf-8")):
+                if variable not in doc:
+                    problems.append(f"{name}: reads {variable}, which {where} does not name")
+    return sorted(set(problems))
+
+
 def heading_slugs(path: Path) -> set[str]:
     """The anchors GitHub gives the headings of a Markdown file."""
     slugs = set()
@@ -172,7 +251,7 @@ def code_problems(code: str, inline: bool, context: dict) -> Iterator[str]:
     root, entries = context["root"], context["entries"]
     if inline:
         for token in code.split():
-            problem = path_problem(token, root, entries)
+            problem = path_problem(token, root, entries) or dotted_problem(token, context)
             if problem:
                 yield problem
     for module, placeholder in PYTHON_MODULE.findall(code):
@@ -210,8 +289,11 @@ def find_problems(root: Path = ROOT) -> list[str]:
         "entries": top_level_entries(root),
         "targets": make_targets(root),
         "commands": management_commands(root),
+        "packages": packages(root),
+        "tasks": task_names(root),
     }
-    return [problem for doc in documents(root) for problem in document_problems(doc, context)]
+    found = [problem for doc in documents(root) for problem in document_problems(doc, context)]
+    return found + setting_problems(root)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -126,7 +126,8 @@ class DeepRacerEnv(gym.Env):
     ``MultiBinary(8)``, each sector of 8 rays 1 when something is within 0.5 m.
 
     **Reward**: ``reward_fn(params)``, where ``params`` is the dict of DeepRacer's reward-function
-    input (REFERENCE section 1). It must return a finite real number within ±1e5.
+    input (docs/reward-functions.md, docs/coming-from-deepracer.md). It must return a finite
+    real number within ±1e5.
 
     **Steps and clock**: as DeepRacer counts them, ``reset()`` is the episode's prepare step
     (step 1, trace status ``prepare``, reward function not called) and the first ``step()`` is

@@ -7,9 +7,10 @@ The shared services are PostgreSQL (a throwaway cluster), Redis and an S3 API (m
 which the storage tests use too). Each "machine" is its own process group in a folder of its own:
 ``code/``, a copy of nothing but the repository's files, and ``var/``, its ``PITLANE_VAR_DIR``;
 it shares only the virtualenv's libraries and the services' addresses with the others, exactly
-the environment the README's "Running on several machines" gives. The web machine serves Daphne
-with the production settings behind what an HTTPS proxy would send (``X-Forwarded-Proto``); one
-machine serves the ``training`` queue and the others the ``simulation`` queue.
+the environment docs/operating.md's "Running on several machines" gives. The web machine
+serves Daphne with the production settings behind what an HTTPS proxy would send
+(``X-Forwarded-Proto``); one machine serves the ``training`` queue and the others the
+``simulation`` queue.
 """
 
 from __future__ import annotations
@@ -252,8 +253,8 @@ def _copy_code(destination: Path) -> None:
 class Cluster:
     """PostgreSQL, Redis and S3, a web machine, ``training`` training machines and
     ``simulation`` simulation machines (of ``processes`` worker processes each), each started as
-    the README's "Running on several machines" says. ``settings``: more environment variables
-    for every machine."""
+    docs/operating.md's "Running on several machines" says. ``settings``: more environment
+    variables for every machine."""
 
     def __init__(
         self,
@@ -386,7 +387,7 @@ class Cluster:
 
 
 def cluster_env(database: str, redis: str, s3: str) -> dict[str, str]:
-    """The environment every machine gets: the README's variables for several machines."""
+    """The environment every machine gets: docs/operating.md's variables for several machines."""
     env = {key: value for key, value in os.environ.items() if not key.startswith(OURS)}
     env.update(
         DJANGO_SETTINGS_MODULE="console.settings.prod",

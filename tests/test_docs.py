@@ -29,3 +29,24 @@ def test_the_check_finds_a_path_that_does_not_exist(tmp_path):
         "See `simulator/car.py:12`, DeepRacer's `track_geom/utils.py:156` and `make run`.\n"
     )
     assert _check_docs().find_problems(tmp_path) == ["README.md:1: no such path: simulator/car.py"]
+
+
+def test_the_check_finds_a_module_name_that_moved_and_a_setting_no_doc_names(tmp_path):
+    (tmp_path / "docs").mkdir()
+    for package in ("jobs", "training"):
+        (tmp_path / package).mkdir()
+        (tmp_path / package / "__init__.py").write_text("")
+    (tmp_path / "jobs" / "evaluation.py").write_text("class Race:\n    pass\n")
+    (tmp_path / "training" / "tasks.py").write_text('@app.task(name="training.evaluate")\n')
+    (tmp_path / "training" / "settings.py").write_text('A = env.int("PITLANE_A", 1)\n')
+    (tmp_path / "Makefile").write_text("")
+    (tmp_path / "docs" / "operating.md").write_text("| `PITLANE_B` | b |\n")
+    (tmp_path / "README.md").write_text(
+        "`jobs.evaluation.Race` runs `training.evaluate`; `training.evaluation` moved, and "
+        "`jobs.evaluation.Evaluator` is gone.\n"
+    )
+    assert _check_docs().find_problems(tmp_path) == [
+        "README.md:1: no such module or name of ours: training.evaluation",
+        "README.md:1: no such module or name of ours: jobs.evaluation.Evaluator",
+        "training/settings.py: reads PITLANE_A, which docs/operating.md does not name",
+    ]

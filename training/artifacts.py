@@ -17,7 +17,7 @@ from rl.hyperparameters import deepracer_json
 from simulator import tracks as sim_tracks
 from training.models import EvaluationJob, RLModel
 
-TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's, per REFERENCE section 5
+TRAINING_METRICS = "metrics/training_metrics.json"  # DeepRacer's (docs/coming-from-deepracer.md)
 CLONED_WEIGHTS = "checkpoints/cloned.safetensors"  # a clone's start: its source's best weights
 # Where a virtual model's archive keeps its best and last checkpoints (archives.exports), and an
 # import finds them (archives.imports).
