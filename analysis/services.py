@@ -11,12 +11,14 @@ from django.utils import timezone
 from analysis import lifecycle
 from analysis.models import Rescoring
 from analysis.records import Source
+from common import queueing
 from common.refusals import Refused
 
 MAX_RESCORE_STEPS = 200_000  # recorded steps one re-scoring may score (about a minute of work)
 MAX_RESCORINGS_AT_ONCE = 3  # a racer's re-scorings waiting or running
 LAPSE_MARGIN = 60  # [s] past the task's hard time limit before a running re-scoring is dead
 _R = Rescoring.Status
+RESCORE = "analysis.rescore"  # the task that runs a re-scoring (analysis.tasks), queued by name
 
 
 class RescoringRefused(Refused):
@@ -56,7 +58,7 @@ def rescoring_create(
             last=last,
             total_steps=total,
         )
-    transaction.on_commit(lambda: _enqueue(rescoring.pk))
+    transaction.on_commit(lambda: queueing.enqueue(RESCORE, rescoring.pk))
     return rescoring
 
 
@@ -100,9 +102,3 @@ def _range(steps: dict[int, int], first: int | None, last: int | None) -> tuple[
             }
         )
     return max(first, known[0]), min(last, known[-1])  # what was recorded of first..last
-
-
-def _enqueue(pk: int) -> None:
-    from analysis.tasks import rescore
-
-    rescore.delay(pk)

@@ -789,7 +789,7 @@ def abandoned_imports_remove() -> list[str]:
     go, as ``services.model_delete`` takes them, rather than stay as an ERROR model: the racer
     never saw it ready and its files may be partial, so there is nothing in it to keep, and
     they expect its name and their quota free to import it again. What was removed, in words
-    for the log; every worker's heartbeat calls it (``tasks.resume_lapsed``)."""
+    for the log; every worker's heartbeat calls it (``console.recovery.resume_lapsed``)."""
     importing = frozenset({RLModel.Status.IMPORTING})
     since = timezone.now() - timedelta(seconds=ABANDONED_AFTER)
     removed = []

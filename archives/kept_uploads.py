@@ -130,7 +130,7 @@ def upload_discard(*, racer: AbstractBaseUser) -> KeptUpload | None:
 
 def uploads_expire() -> list[str]:
     """Delete each kept upload ``KEPT_FOR`` old; what was deleted, in words for the log. Every
-    worker's housekeeping calls it (``training.tasks.resume_lapsed``)."""
+    worker's housekeeping calls it (``console.recovery.resume_lapsed``)."""
     since = timezone.now() - KEPT_FOR
     deleted = []
     for kept in KeptUpload.objects.filter(kept_at__lt=since):

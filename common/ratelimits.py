@@ -153,7 +153,7 @@ def hold(
 def _cache_key(action: str, key: str) -> str:
     """django-ratelimit's key for the count of ``action`` by ``key`` in the present window, as
     ``get_usage`` makes it (django-ratelimit 4.1 core.py: it has no public way to give one back;
-    tests/training/test_import_archives.py's rate tests prove it is the counter's)."""
+    tests/archives/test_import_archives.py's rate tests prove it is the counter's)."""
     rate = settings.PITLANE_RATES[action]
     window = ratelimit_core._get_window(key, ratelimit_core._split_rate(rate)[1])
     return ratelimit_core._make_cache_key(

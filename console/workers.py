@@ -90,12 +90,12 @@ def _beat(record: dict) -> None:
 
 def _resume_lapsed() -> None:
     """Send for the jobs whose trainer died, and the evaluations whose simulation worker died
-    (``training.tasks.resume_lapsed``). Any worker may: whichever looks first claims each, so it
-    is sent for once, and the work goes on as long as one worker of either queue is alive."""
+    (``console.recovery.resume_lapsed``). Any worker may: whichever looks first claims each, so
+    it is sent for once, and the work goes on as long as one worker of either queue is alive."""
     from django.db import DatabaseError, close_old_connections
     from kombu.exceptions import OperationalError
 
-    from training.tasks import resume_lapsed
+    from console.recovery import resume_lapsed
 
     close_old_connections()
     try:

@@ -163,7 +163,7 @@ def run(evaluation_id: int) -> EvaluationJob | None:
     race = [EvaluationJob.objects.select_related("model", "track").get(pk=car.pk) for car in race]
     for car in race:
         _announce(car)
-    cars = [Evaluator(car) for car in race]
+    cars = [EvaluationCar(car) for car in race]
     try:
         with _one_torch_thread():
             _race(cars)
@@ -221,7 +221,7 @@ def _claim(evaluation: EvaluationJob | None, owner: str) -> list[EvaluationJob]:
     return race
 
 
-def _race(cars: list[Evaluator]) -> None:
+def _race(cars: list[EvaluationCar]) -> None:
     """Drive ``cars`` (one evaluation, or a race's) from their weights to their saved files: a
     car whose weights cannot be read is left out (it fails with the reason); the others drive
     together."""
@@ -254,14 +254,14 @@ def _race(cars: list[Evaluator]) -> None:
             _drive(racing)
 
 
-def _drive(cars: list[Evaluator]) -> None:
+def _drive(cars: list[EvaluationCar]) -> None:
     """The trials: each car's an episode of one fleet (``rl.episode.Fleet``; continuous laps
     are one episode), each car with its own policy, every car of a race reset on its place on
     the grid and stepping together, each knowing where the others stand before it steps (a car
     whose trial is over parked off the field, as simapp parks it: DONE_CONDITION "all",
     evaluation_worker.py:343, 01f5f01, so that every racer drives its own laps). Each step,
     every car's trace row, video frame and live frames, and each lap recorded as it ends
-    (``Evaluator.stepped``); then one wait, while someone watches or the race is live, so that
+    (``EvaluationCar.stepped``); then one wait, while someone watches or the race is live, so that
     the step takes real time (or PITLANE_WATCHED_SPEEDUP times less)."""
     fleet = episode.Fleet([car.env for car in cars], cars[0].policy)
     for driving, car in zip(fleet.cars, cars, strict=True):
@@ -302,7 +302,7 @@ class LapCounts:
     started: float = 0.0  # [s] simulated time
 
 
-class Evaluator:
+class EvaluationCar:
     """One car of an evaluation's run: its model's policy and environment, the trials it
     records, its trace, video, live frames and lease, and its files once driven."""
 

@@ -97,7 +97,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             evaluator = None
             if worker == 0:  # DeepRacer's first worker evaluates (simapp
                 # bundle/markov/rollout_worker.py:327-329, 01f5f01)
-                evaluator = Evaluator(
+                evaluator = CheckpointEvaluator(
                     stack.enter_context(sandbox(1)), channel, token, Printed(label)
                 )
                 evaluator.sandbox.load(model.reward_function)
@@ -213,7 +213,7 @@ class Viewing:
         self.shown = None
 
 
-class Evaluator:
+class CheckpointEvaluator:
     """The first worker's evaluations, in a sandbox of their own, on a thread of their own: the
     evaluation episodes of checkpoint N drive while the training episodes of iteration N + 1 do,
     rather than in turn with them (DeepRacer's first worker drives them after its share of an
@@ -331,7 +331,7 @@ def _drive(
     worker: int,
     viewing: Viewing,
     printed: Printed,
-    evaluator: Evaluator | None = None,
+    evaluator: CheckpointEvaluator | None = None,
 ) -> str:
     """Drive episodes until the job's run ends; why it ended, in the racer's words.
 
@@ -398,7 +398,7 @@ def _await_next_version(
     version: int,
     worker: int,
     viewing: Viewing,
-    evaluator: Evaluator | None = None,
+    evaluator: CheckpointEvaluator | None = None,
 ) -> bool:
     """The trainer has the episodes it wants of this version: wait while it learns, rather than
     drive episodes it would drop (and take the CPU it learns with). False when the job's row says

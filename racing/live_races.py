@@ -27,18 +27,18 @@ from racing import live, selectors, services
 from racing.models import Event, LiveEntry, LiveSession, Submission
 from training.models import RLModel
 
-_E = LiveEntry.Status
+_L = LiveEntry.Status
 # A queue entry's status and its moves (see training.lifecycle): it waits, drives its turn, is
 # done; a facilitator takes a waiting one out, and puts one that is done or out back to wait.
 LIVE_ENTRY = Lifecycle(
     LiveEntry,
     {
-        _E.WAITING: frozenset({_E.DRIVING, _E.REMOVED}),
-        _E.DRIVING: frozenset({_E.DONE}),
-        _E.DONE: frozenset({_E.WAITING}),
-        _E.REMOVED: frozenset({_E.WAITING}),
+        _L.WAITING: frozenset({_L.DRIVING, _L.REMOVED}),
+        _L.DRIVING: frozenset({_L.DONE}),
+        _L.DONE: frozenset({_L.WAITING}),
+        _L.REMOVED: frozenset({_L.WAITING}),
     },
-    born=frozenset({_E.WAITING}),
+    born=frozenset({_L.WAITING}),
 )
 
 
@@ -119,7 +119,7 @@ def live_place_held(*, session: LiveSession, racer: AbstractBaseUser) -> bool:
     """Whether ``racer`` has a place in the queue or a car on the track: one place a racer."""
     if not racer.is_authenticated:
         return False
-    held = session.entries.filter(racer=racer, status__in=(_E.WAITING, _E.DRIVING))
+    held = session.entries.filter(racer=racer, status__in=(_L.WAITING, _L.DRIVING))
     return held.exists()
 
 
@@ -139,7 +139,7 @@ def live_entry_move(*, entry: LiveEntry, places: int) -> LiveEntry:
 
 def live_entry_remove(*, entry: LiveEntry) -> None:
     """Take a waiting racer out of the queue."""
-    if not LIVE_ENTRY.move(entry, _E.REMOVED, only_from=frozenset({_E.WAITING})):
+    if not LIVE_ENTRY.move(entry, _L.REMOVED, only_from=frozenset({_L.WAITING})):
         raise LiveRefused("Only a racer still waiting can be taken out: a turn drives to its end.")
     live.announce_queue(entry.session)
 
@@ -148,8 +148,8 @@ def live_entry_restart(*, entry: LiveEntry) -> LiveEntry:
     """A racer whose turn ended (or who was taken out) races again: back at the queue's head."""
     with transaction.atomic():
         waiting = list(_waiting(entry.session, lock=True))
-        again = frozenset({_E.DONE, _E.REMOVED})
-        if not LIVE_ENTRY.move(entry, _E.WAITING, only_from=again, submission=None):
+        again = frozenset({_L.DONE, _L.REMOVED})
+        if not LIVE_ENTRY.move(entry, _L.WAITING, only_from=again, submission=None):
             raise LiveRefused("Only a racer whose turn has ended can race again.")
         _number([entry, *waiting])
     live.announce_queue(entry.session)
@@ -162,7 +162,7 @@ def live_turn_launch(*, session: LiveSession) -> LiveEntry:
     (``Event.cars``: fewer when fewer wait); its first entry."""
     with transaction.atomic():
         session = LiveSession.objects.select_for_update().select_related("event").get(pk=session.pk)
-        if session.entries.filter(status=_E.DRIVING).exists():
+        if session.entries.filter(status=_L.DRIVING).exists():
             raise LiveRefused("A turn is driving: launch the next when it ends.")
         entries = list(_waiting(session)[: session.event.cars])
         if not entries:
@@ -185,7 +185,7 @@ def live_turn_launch(*, session: LiveSession) -> LiveEntry:
             except services.SubmissionRefused as refused:
                 raise LiveRefused(f"{entry.model_name} cannot race now: {refused}") from None
             leader = leader or submission.evaluation
-            LIVE_ENTRY.move(entry, _E.DRIVING, submission=submission)
+            LIVE_ENTRY.move(entry, _L.DRIVING, submission=submission)
         following = _waiting(session).select_related("session__event").first()
     live.announce_queue(session)
     if following is not None:
@@ -200,7 +200,7 @@ def live_turn_ended(*, submission: Submission) -> None:
     entry = LiveEntry.objects.select_related("session__event").filter(submission=submission).first()
     if entry is None:
         return
-    LIVE_ENTRY.move(entry, _E.DONE)
+    LIVE_ENTRY.move(entry, _L.DONE)
     session = entry.session
     live.announce_queue(session)
     if session.autolaunch and _waiting(session).exists():
@@ -209,7 +209,7 @@ def live_turn_ended(*, submission: Submission) -> None:
 
 
 def _waiting(session: LiveSession, *, lock: bool = False):
-    entries = session.entries.filter(status=_E.WAITING).order_by("position", "pk")
+    entries = session.entries.filter(status=_L.WAITING).order_by("position", "pk")
     return entries.select_for_update() if lock else entries
 
 

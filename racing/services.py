@@ -22,11 +22,12 @@ from django.utils import timezone
 from django.utils.crypto import get_random_string
 from django.utils.text import slugify
 
+from common import queueing
 from common.lifecycle import Lifecycle
 from common.refusals import Refused
 from common.transactions import outside_transaction
 from notifications import services as notifications
-from racing import live, scoring, selectors, tasks
+from racing import live, scoring, selectors
 from racing.models import (
     RANKING_ORDER,
     Division,
@@ -42,6 +43,8 @@ from training import services as training_services
 from training.models import EvaluationJob, EvaluationTrial, RLModel, Track
 
 logger = logging.getLogger(__name__)
+
+RACE = "racing.race"  # the task that drives a submission's race (racing.tasks), queued by name
 
 _S = Submission.Status
 # A race entry's status and its moves (see training.lifecycle): every write of it is a move.
@@ -130,8 +133,8 @@ def submission_create(
         if against_leaders:
             _rivals_add(evaluation, event=event, racer=racer)
         # A send that fails (the broker unreachable) is logged, not the racer's error: the
-        # workers send a queued task that is not in the broker again (tasks.resend_lost).
-        transaction.on_commit(lambda: tasks.race.delay(submission.pk), robust=True)
+        # workers send a queued task that is not in the broker again (console.recovery).
+        transaction.on_commit(lambda: queueing.enqueue(RACE, submission.pk), robust=True)
     return submission
 
 
@@ -683,10 +686,8 @@ def submission_resend(sender, *, evaluation: EvaluationJob, **kwargs) -> bool:
     """On ``training.signals.evaluation_lapsed``: a race entry's evaluation lost its simulation
     worker, so the race is sent again (it drives the evaluation from the start, then scores
     it); False when the evaluation is no race's."""
-    from racing.tasks import race
-
     submission = Submission.objects.filter(evaluation=evaluation).only("pk").first()
     if submission is None:
         return False
-    transaction.on_commit(lambda: race.delay(submission.pk))
+    transaction.on_commit(lambda: queueing.enqueue(RACE, submission.pk))
     return True

@@ -18,10 +18,11 @@ from django.core.files.storage import FileSystemStorage, default_storage
 from django.db import IntegrityError, transaction
 from django.utils import timezone
 
+from common import queueing
 from common.refusals import Refused
 from common.transactions import SlowStepInTransaction, outside_transaction
 from simulator import tracks as simulator_tracks
-from training import artifacts, configuration, leases, lifecycle, live, rewards, selectors, tasks
+from training import artifacts, configuration, leases, lifecycle, live, rewards, selectors
 from training.models import (
     SEEDS,
     Direction,
@@ -35,6 +36,10 @@ from training.models import (
 )
 
 logger = logging.getLogger(__name__)
+
+# The tasks training's services queue, by name (common.queueing): jobs.tasks defines them
+TRAIN = "training.train"
+EVALUATE = "training.evaluate"
 
 
 @transaction.atomic
@@ -363,8 +368,8 @@ def model_create(
     if weights is not None and not _clone_weights_start(job, weights):
         return model
     # A send that fails (the broker unreachable) is logged, not the racer's error: the
-    # workers send a queued task that is not in the broker again (tasks.resend_lost).
-    transaction.on_commit(lambda: tasks.train.delay(job.pk), robust=True)
+    # workers send a queued task that is not in the broker again (console.recovery).
+    transaction.on_commit(lambda: queueing.enqueue(TRAIN, job.pk), robust=True)
     return model
 
 
@@ -412,11 +417,11 @@ def _save_whole(model: RLModel, relative: str, data: bytes) -> None:
 
 def _clone_weights_start(job: TrainingJob, weights: str) -> bool:
     """Copy a new clone's starting weights (its source's checkpoint ``weights``); whether its
-    trainer may be sent. Its send stays held meanwhile (``leases.lease_renewed``), so
-    ``tasks.resend_lost`` does not send its trainer before they are all there, however long
-    the copy takes; a request that dies copying lets the hold lapse, and a trainer sent then
-    copies them. Where they cannot be copied, its job fails in words and the model is ERROR,
-    for the racer to delete."""
+    trainer may be sent. Its send stays held meanwhile (``leases.lease_renewed``), so the
+    workers' ``recovery.resend_lost`` does not send its trainer before they are all there,
+    however long the copy takes; a request that dies copying lets the hold lapse, and a trainer
+    sent then copies them. Where they cannot be copied, its job fails in words and the model is
+    ERROR, for the racer to delete."""
     with leases.lease_renewed(job):
         why = clone_weights_copy(model=job.model, weights=weights)
     if why is None:
@@ -499,7 +504,8 @@ def _model_save(
     if source is None:
         return model, TrainingJob.objects.create(model=model), None
     # Its weights are copied once this commits: its send is held meanwhile, so
-    # tasks.resend_lost does not send its trainer before they are there (_clone_weights_start).
+    # console.recovery.resend_lost does not send its trainer before they are there
+    # (_clone_weights_start).
     held = {"lease_owner": leases.RESUMING, "lease_expires": timezone.now() + leases.lease()}
     return model, TrainingJob.objects.create(model=model, **held), weights
 
@@ -607,8 +613,8 @@ def evaluation_start(
         evaluation = evaluation_reserve(model=model, purpose=RLModel.Status.EVALUATING, **clean)
         if enqueue:
             # A failed send is logged, not the racer's error: the workers send
-            # a queued task that is not in the broker again (tasks.resend_lost).
-            transaction.on_commit(lambda: tasks.evaluate.delay(evaluation.pk), robust=True)
+            # a queued task that is not in the broker again (console.recovery).
+            transaction.on_commit(lambda: queueing.enqueue(EVALUATE, evaluation.pk), robust=True)
     return evaluation
 
 

@@ -11,7 +11,7 @@ trace_recorded = Signal()
 # evaluation's own task is sent.
 evaluation_lapsed = Signal()
 
-# Which queued evaluations have their task waiting in the broker (``tasks.resend_lost``):
+# Which queued evaluations have their task waiting in the broker (``console.recovery.resend_lost``):
 # ``waiting`` maps a task's name to the first arguments of its messages; a receiver whose own
 # task drives evaluations (a race entry's) returns the ids of the evaluations it waits to drive.
 evaluations_waiting = Signal()

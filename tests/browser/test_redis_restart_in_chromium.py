@@ -13,7 +13,7 @@ from playwright.sync_api import Page, expect
 
 from accounts.selectors import racer_name
 from common.redis_client import redis_client
-from racing import live_races, services, tasks
+from racing import live_races, services
 from tests.browser.conftest import off_the_loop
 from tests.helpers.accounts import racer
 from tests.helpers.league import event, scored
@@ -61,7 +61,7 @@ async def handshakes(url: str, origin: str, count: int) -> list[int]:
 def test_the_broadcast_and_the_race_page_reconnect_and_catch_up_after_redis_restarts(
     page: Page, daphne_server, suite_redis, monkeypatch, alice, bob, stella, tracks
 ):
-    monkeypatch.setattr(tasks.race, "delay", lambda *args: None)  # the turn drives for nobody
+    monkeypatch.setattr(services.queueing, "enqueue", lambda *args: None)  # no car drives a turn
     race = event("Restart cup", laps_required=1, laps_to_drive=1)
     carol = racer("carol")
     off_the_loop(scored, race, carol, 61_000)  # a winner to show

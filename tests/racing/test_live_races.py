@@ -14,11 +14,11 @@ from training.models import scaled_speeds
 
 pytestmark = pytest.mark.django_db
 
-_E = LiveEntry.Status
+_L = LiveEntry.Status
 
 
 def order(session) -> list[str]:
-    waiting = session.entries.filter(status=_E.WAITING).order_by("position", "pk")
+    waiting = session.entries.filter(status=_L.WAITING).order_by("position", "pk")
     return [entry.racer.username for entry in waiting]
 
 
@@ -55,7 +55,7 @@ def test_a_turn_is_a_real_time_submission_at_the_racers_speed_and_the_next_racer
     live_races.live_entry_join(session=session, racer=bob, model=ready_model(bob))
 
     entry = live_races.live_turn_launch(session=session)
-    assert entry.racer == alice and entry.status == _E.DRIVING
+    assert entry.racer == alice and entry.status == _L.DRIVING
     evaluation = entry.submission.evaluation
     assert evaluation.real_time and evaluation.speed_multiplier == 0.5
     model_speeds = [action["speed"] for action in entry.model.action_space]
@@ -80,9 +80,9 @@ def test_when_a_turn_ends_autolaunch_starts_the_next(tracks, alice, bob, stella)
     Submission.objects.filter(pk=turn.submission_id).update(status=Submission.Status.COMPLETED)
     live_races.live_turn_ended(submission=turn.submission)
     turn.refresh_from_db()
-    assert turn.status == _E.DONE
+    assert turn.status == _L.DONE
     following = session.entries.get(racer=bob)
-    assert following.status == _E.DRIVING and following.submission is not None
+    assert following.status == _L.DRIVING and following.submission is not None
 
 
 def test_only_staff_and_the_organiser_run_a_live_race_and_never_a_physical_one(
@@ -116,7 +116,7 @@ def test_a_racer_leaves_the_queue_and_nobody_else_can_take_them_out(
     assert "Leave the queue" in client.get(reverse("racing:live-race", args=[race.slug])).text
     assert "You left the queue." in client.post(leave, follow=True).text
     entry.refresh_from_db()
-    assert entry.status == _E.REMOVED
+    assert entry.status == _L.REMOVED
 
 
 def test_the_queue_says_what_each_multiplier_drives_and_moves_only_what_can_move(

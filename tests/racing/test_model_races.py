@@ -53,7 +53,7 @@ def test_a_model_that_never_raced_shows_no_races_section(client, alice):
 def test_a_race_whose_simulation_worker_died_is_raced_again_and_an_evaluation_evaluated(
     alice, django_capture_on_commit_callbacks
 ):
-    # The heartbeat's resend (training.tasks.resume_lapsed): a race entry's evaluation is driven
+    # The heartbeat's resend (console.recovery.resume_lapsed): a race entry's evaluation is driven
     # by its race task, which scores it after; any other evaluation by its own task.
     model = ready_model(alice)
     cup = event("August cup")

@@ -50,7 +50,7 @@ def evaluated(monkeypatch):
     """Run an evaluation of a model through the path every evaluation and race takes, up to
     the weights it drives with; the driving itself is another test's business."""
     monkeypatch.setattr(evaluation, "_drive", lambda *args: None)
-    monkeypatch.setattr(evaluation.Evaluator, "_save", lambda *args: None)
+    monkeypatch.setattr(evaluation.EvaluationCar, "_save", lambda *args: None)
 
     def run(model: RLModel, which: str) -> EvaluationJob:
         started = services.evaluation_start(

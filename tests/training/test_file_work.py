@@ -15,13 +15,14 @@ from django.utils import timezone
 
 from archives import imports
 from common import transactions
+from console import recovery
 from jobs import trainer
 from rl.learner import Update
 from rl.stopwatch import Stopwatch
 from tests.helpers.archives import virtual_archive
 from tests.helpers.models import STRAIGHT_AHEAD, ready_model
 from tests.helpers.training import settings as training_settings
-from training import artifacts, configuration, leases, services, tasks
+from training import artifacts, configuration, leases, services
 from training.models import RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
@@ -101,7 +102,7 @@ def test_a_clone_whose_weights_cannot_be_copied_fails_in_words_and_its_source_st
 @pytest.mark.slow
 def test_a_trainer_that_finds_no_copy_of_its_clones_weights_makes_it(alice, tracks, monkeypatch):
     # The request that created the clone died before it copied them: the job, sent again by
-    # tasks.resend_lost, starts from the source's weights all the same.
+    # recovery.resend_lost, starts from the source's weights all the same.
     source = ready_model(alice)
     monkeypatch.setattr(services, "_clone_weights_start", lambda job, weights: True)
     clone = clone_of(source)
@@ -273,7 +274,7 @@ def test_an_import_that_died_storing_its_files_is_removed_by_the_workers_heartbe
     RLModel.objects.filter(pk=died.pk).update(created_at=long_ago)
     still_storing = importing(bob, "still-importing")
 
-    assert tasks.resume_lapsed()[-1:] == [
+    assert recovery.resume_lapsed()[-1:] == [
         f"import of model {died.pk} stopped as it stored its files; the model was removed"
     ]
     assert list(RLModel.objects.filter(owner=bob)) == [still_storing]  # its name, quota free

@@ -41,14 +41,14 @@ def test_a_stop_asked_during_a_trial_keeps_the_trials_finished(alice, monkeypatc
     evaluation = services.evaluation_start(
         model=model, settings={"trials": 3, "off_track_penalty": 0}, enqueue=False
     )
-    record = runner.Evaluator._record
+    record = runner.EvaluationCar._record
 
     def stop_after_the_first(self, *args, **kwargs):
         counts = record(self, *args, **kwargs)
         services.evaluation_stop(evaluation=self.evaluation)  # as the racer's button does
         return counts
 
-    monkeypatch.setattr(runner.Evaluator, "_record", stop_after_the_first)
+    monkeypatch.setattr(runner.EvaluationCar, "_record", stop_after_the_first)
     runner.run(evaluation.pk)
     check_stopped_after_its_first_trial(evaluation.pk)
     assert EvaluationJob.objects.get(pk=evaluation.pk).trial_rows.count() == 1

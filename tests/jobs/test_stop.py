@@ -10,7 +10,7 @@ import pytest
 
 import simulator
 from common.redis_client import redis_client
-from jobs import rollouts
+from jobs import rollouts, tasks
 from rl import hyperparameters
 from rl.experience import JobChannel
 from rl.learner import Interrupted, Learner
@@ -22,7 +22,7 @@ from tests.helpers.training import (
     wait_for_job,
 )
 from tests.services import wait_for
-from training import configuration, tasks
+from training import configuration
 from training.models import Iteration, JobLogLine, RLModel, TrainingJob
 from training.services import training_stop
 

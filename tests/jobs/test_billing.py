@@ -12,11 +12,11 @@ from django.db import connection
 from django.urls import reverse
 from django.utils import timezone
 
-from jobs import rollouts, trainer
+from jobs import rollouts, tasks, trainer
 from sandbox import SandboxUnavailable
 from tests.helpers.training import queued_job, reload, wait_for_job
 from tests.services import wait_for
-from training import leases, selectors, tasks
+from training import leases, selectors
 from training.models import TrainingJob
 from training.services import training_stop
 

@@ -17,7 +17,7 @@ from django.utils import timezone
 import simulator
 from analysis.models import TraceSummary
 from common.redis_client import redis_client
-from jobs import trainer
+from jobs import tasks, trainer
 from rl import hyperparameters
 from rl.experience import JobChannel, decode_episode
 from rl.learner import Learner
@@ -27,7 +27,7 @@ from simulator.trace import SimTraceRow
 from tests.helpers.training import queued_job, reload, settings, wait_for_job
 from tests.helpers.training_logs import assert_training_logs_read_as_recorded
 from tests.services import wait_for
-from training import artifacts, configuration, leases, rewards, tasks
+from training import artifacts, configuration, leases, rewards
 from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
 from training.services import model_create, training_stop

@@ -321,10 +321,10 @@ def test_a_video_encoder_that_fails_never_holds_the_car_up(tmp_path):
 def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_again(
     alice, tracks, monkeypatch
 ):
-    # What every worker's heartbeat does for evaluations (training.tasks.resume_lapsed), as for
+    # What every worker's heartbeat does for evaluations (console.recovery.resume_lapsed), as for
     # training jobs: the driving itself is the other tests' business.
     monkeypatch.setattr(evaluations, "_drive", lambda *args: None)
-    monkeypatch.setattr(evaluations.Evaluator, "_save", lambda *args: None)
+    monkeypatch.setattr(evaluations.EvaluationCar, "_save", lambda *args: None)
     model = trained_model(alice, "lapsing")
     started = services.evaluation_start(model=model, settings={"trials": 3}, enqueue=False)
     dead = "simulation-1:4242:cafe"
@@ -350,7 +350,7 @@ def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_a
     done = EvaluationJob.objects.get(pk=started.pk)
     assert done.status == EvaluationJob.Status.COMPLETED and done.lease_owner == ""
     # The dead run, were it alive, stops at its next renewal rather than write.
-    stale = evaluations.Evaluator(EvaluationJob.objects.get(pk=started.pk))
+    stale = evaluations.EvaluationCar(EvaluationJob.objects.get(pk=started.pk))
     stale.evaluation.lease_owner, stale.renewals = dead, Every(0.0)  # renewed at once
     with pytest.raises(leases.LeaseLost):
         stale._renew()
@@ -367,7 +367,7 @@ def test_a_run_overtaken_while_it_saves_leaves_the_evaluation_and_its_model_to_t
         EvaluationJob.objects.filter(pk=self.evaluation.pk).update(lease_owner=taker)
 
     monkeypatch.setattr(evaluations, "_drive", lambda *args: None)
-    monkeypatch.setattr(evaluations.Evaluator, "_save", overtaken)
+    monkeypatch.setattr(evaluations.EvaluationCar, "_save", overtaken)
     model = trained_model(alice, "overtaken")
     started = services.evaluation_start(model=model, settings={"trials": 3}, enqueue=False)
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.EVALUATING

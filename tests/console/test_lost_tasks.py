@@ -1,21 +1,24 @@
 """A queued job, evaluation or race entry whose task is gone (lost when sending it failed on a
 locked database, with a Redis restart, with a worker that died holding it) is found by every
-worker's heartbeat (``tasks.resume_lapsed``) and sent again, keeping its place in the queue
-(issue 42: three jobs read "number 1 in the queue" for an hour)."""
+worker's heartbeat (``console.recovery.resume_lapsed``) and sent again, keeping its place in
+the queue (issue 42: three jobs read "number 1 in the queue" for an hour)."""
 
 import uuid
 from datetime import timedelta
 
 import pytest
+from celery import current_app
 from django.utils import timezone
 from kombu.exceptions import OperationalError
 
+from console import recovery
+from jobs import tasks
 from racing import tasks as racing_tasks
 from racing.models import Submission
 from tests.helpers.league import event, race_evaluation
 from tests.helpers.models import ready_model
 from tests.helpers.training import settings
-from training import leases, tasks
+from training import leases
 from training.models import EvaluationJob, TrainingJob
 from training.services import model_create
 
@@ -35,8 +38,11 @@ def queued(owner, name: str, *, age: float = 60) -> TrainingJob:
 def sent(monkeypatch) -> list[tuple[str, int]]:
     """The tasks sent, in place of the broker."""
     record = []
-    for task in (tasks.train, tasks.evaluate, racing_tasks.race):
-        monkeypatch.setattr(task, "delay", lambda pk, name=task.name: record.append((name, pk)))
+
+    def send_task(name, args=None, kwargs=None, **options):  # a task's delay, or by its name
+        record.append((name, args[0]))
+
+    monkeypatch.setattr(current_app, "send_task", send_task)
     return record
 
 
@@ -45,16 +51,16 @@ def test_a_queued_job_whose_task_is_gone_is_sent_again_once_keeping_its_place(
 ):
     first, lost, fresh = queued(alice, "first"), queued(alice, "lost"), queued(alice, "new", age=0)
     place = leases.queue_position(lost)
-    monkeypatch.setattr(tasks, "waiting", lambda: {tasks.train.name: {first.pk}})
-    tasks.resume_lapsed()
+    monkeypatch.setattr(recovery, "waiting", lambda: {tasks.train.name: {first.pk}})
+    recovery.resume_lapsed()
     assert sent == [(tasks.train.name, lost.pk)]  # not the one waiting, nor the one just sent
-    tasks.resume_lapsed()
+    recovery.resume_lapsed()
     assert len(sent) == 1  # claimed once: sent again a lease later if no trainer took it
     assert leases.queue_position(TrainingJob.objects.get(pk=lost.pk)) == place == 2
     assert [line.text for line in lost.log_lines.all()] == [leases.QUEUED_LOST]
 
     TrainingJob.objects.filter(pk=lost.pk).update(lease_expires=timezone.now())  # none took it
-    tasks.resume_lapsed()
+    recovery.resume_lapsed()
     assert sent == [(tasks.train.name, lost.pk)] * 2 and lost.log_lines.count() == 1
     run = leases.lease_acquire(job_id=lost.pk, owner="trainer:1")  # a trainer takes it at last
     assert run.attempt == 1 and run.lease_owner == "trainer:1"
@@ -81,9 +87,9 @@ def test_a_queued_evaluation_or_race_entry_whose_task_is_gone_is_sent_again(
     )
     old = timezone.now() - timedelta(seconds=60)
     EvaluationJob.objects.update(created_at=old)
-    monkeypatch.setattr(tasks, "waiting", lambda: {racing_tasks.race.name: {waits.pk}})
+    monkeypatch.setattr(recovery, "waiting", lambda: {racing_tasks.race.name: {waits.pk}})
     with django_capture_on_commit_callbacks(execute=True):
-        tasks.resume_lapsed()
+        recovery.resume_lapsed()
     assert sorted(sent) == [(racing_tasks.race.name, entry.pk), (tasks.evaluate.name, plain.pk)]
     assert EvaluationJob.objects.get(pk=plain.pk).lease_owner == leases.RESUMING
 
@@ -105,10 +111,10 @@ def test_the_broker_says_which_tasks_wait_in_its_queues(monkeypatch):
 def test_a_job_whose_task_could_not_be_sent_is_queued_not_an_error(
     alice, monkeypatch, django_capture_on_commit_callbacks
 ):
-    def unreachable(pk):
+    def unreachable(name, args):
         raise OperationalError("Error 111 connecting to the broker. Connection refused.")
 
-    monkeypatch.setattr(tasks.train, "delay", unreachable)
+    monkeypatch.setattr(current_app, "send_task", unreachable)  # services queue by name
     with django_capture_on_commit_callbacks(execute=True) as callbacks:
         model = model_create(owner=alice, settings=settings(name="unsent"), validate_reward=False)
     assert len(callbacks) == 1  # the send was tried, failed and was logged

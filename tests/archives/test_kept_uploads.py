@@ -14,8 +14,9 @@ from django.urls import reverse
 from archives import kept_uploads
 from archives.members import ImportRefused
 from archives.models import KEPT_FOR, KeptUpload
+from console import recovery
 from tests.helpers.archives import CHECKED_IMPORT, deepracer_folder
-from training import artifacts, tasks
+from training import artifacts
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db
@@ -85,7 +86,7 @@ def test_the_workers_housekeeping_deletes_an_expired_upload(alice, bob):
     KeptUpload.objects.filter(pk=old.pk).update(kept_at=old.kept_at - KEPT_FOR)
     assert kept_uploads.upload_kept(racer=alice, token=old.token) is None  # expired: not used
 
-    removed = tasks.resume_lapsed()  # what every worker's heartbeat runs
+    removed = recovery.resume_lapsed()  # what every worker's heartbeat runs
     assert f"upload kept for racer {alice.pk}'s import expired; it was deleted" in removed
     assert not stored(old) and stored(new)
     with pytest.raises(ImportRefused, match="no longer kept"):  # a confirm that found it before

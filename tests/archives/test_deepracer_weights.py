@@ -18,9 +18,9 @@ from archives import exports, imports
 from rl import tfcheckpoint, tfweights
 from rl.networks import SHALLOW
 from rl.policies import Policy
+from tests.archives.deepracer_tf import build, checkpoints_json
 from tests.helpers.archives import DEEPRACER_METADATA, deepracer_export, drfc_layout, tar_gz
 from tests.helpers.models import ready_model, sensor_frames
-from tests.training.deepracer_tf import build, checkpoints_json
 from training import artifacts, services
 from training.models import RLModel
 
