@@ -18,7 +18,7 @@ from html import escape
 from django.conf import settings
 from django.urls import reverse
 
-LARGE_UPLOADS = ("training:model-import",)  # the pages whose forms upload a model archive
+LARGE_UPLOADS = ("archives:model-import",)  # the pages whose forms upload a model archive
 
 
 class BodyTooLarge(Exception):

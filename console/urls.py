@@ -46,6 +46,7 @@ urlpatterns = [
     ),
     path("accounts/", include("accounts.urls")),
     path("", include("training.urls")),
+    path("", include("archives.urls")),
     path("", include("racing.urls")),
     path("", include("analysis.urls")),
     path("notifications/", include("notifications.urls")),

@@ -87,7 +87,8 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
     except SandboxUnavailable as error:
         channel.report_failure(str(error))
         return
-    sandbox = _sandboxes(model, job_id, worker, track)
+    # the job's share of the machine against the others' (jobs.shares), as the worker starts
+    sandbox = _sandboxes(model, job_id, worker, track, rollout_niceness(job_id))
     label = name if model.workers > 1 else ""
     printed = Printed(label)
     try:
@@ -126,7 +127,9 @@ def cars_for(algorithm: str) -> int:
     return 1 if algorithm == hp.SAC else settings.PITLANE_CARS_PER_WORKER
 
 
-def _sandboxes(model, job_id: int, worker: int, track: str) -> Callable[[int], Sandbox]:
+def _sandboxes(
+    model, job_id: int, worker: int, track: str, niceness: int = 0
+) -> Callable[[int], Sandbox]:
     """The worker's sandboxes, of so many cars, each driving with ``model``'s policy: served by
     the machine's policy server, unless ``PITLANE_ROLLOUT_DEVICE`` keeps it in the child."""
     policy = {
@@ -136,7 +139,6 @@ def _sandboxes(model, job_id: int, worker: int, track: str) -> Callable[[int], S
         "job": job_id,
     }
     device = settings.PITLANE_ROLLOUT_DEVICE
-    niceness = rollout_niceness(job_id)  # the job's share of the machine against the others'
 
     def sandbox(cars: int) -> Sandbox:
         served = device != "child"

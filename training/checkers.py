@@ -37,8 +37,10 @@ from typing import Any, TypeVar
 
 from django.conf import settings
 from django.db import close_old_connections
+from django.http import HttpResponse
 
 from common import turns
+from sandbox import SandboxFailure, SandboxUnavailable
 
 T = TypeVar("T")
 
@@ -188,3 +190,23 @@ async def run(work: Callable[[], T], *, racer: Hashable) -> T:
     ``Busy`` at once when there is no place for it. Cancelling the await cancels the work only
     if it has not started."""
     return await asyncio.wrap_future(pool().submit(work, racer=racer))
+
+
+# A check that could not run: every checker busy, or the sandbox unable to start or to run it
+FAILURES = (Busy, SandboxUnavailable, SandboxFailure)
+
+
+def failure_words(error: Exception) -> str:
+    """What a racer reads when a check could not run (one of ``FAILURES``)."""
+    if isinstance(error, Busy):
+        return str(error)
+    return f"The reward function could not be checked: {error}"
+
+
+def failure_response(response: HttpResponse, error: Exception) -> HttpResponse:
+    """``response`` for a check that could not run: 503, for the racer's input is not at fault,
+    and when every checker was busy, when to try again."""
+    response.status_code = 503
+    if isinstance(error, Busy):
+        response["Retry-After"] = str(RETRY_AFTER)
+    return response

@@ -16,6 +16,7 @@ from django.contrib.auth.models import AbstractBaseUser
 from django.core.files.storage import default_storage
 from django.db.models import Count, F, FloatField, Prefetch, Q, QuerySet, Sum
 from django.db.models.functions import Least, Lower
+from django.shortcuts import get_object_or_404
 from django.utils import timezone
 
 from accounts.selectors import racer_name
@@ -84,6 +85,11 @@ def queue_words(*, job: TrainingJob, free: int | None = None) -> str:
     if place <= (leases.trainers_free() if free is None else free):
         return "starting on a free trainer"
     return f"number {place} in the queue, waiting for a free trainer"
+
+
+def model_of_racer(*, racer: AbstractBaseUser, pk: int) -> RLModel:
+    """The racer's own model ``pk``, or 404: the one access check of every page of a model."""
+    return get_object_or_404(RLModel.objects.select_related("track"), pk=pk, owner=racer)
 
 
 def sharing_words(*, job: TrainingJob) -> str:

@@ -6,24 +6,12 @@ app_name = "training"
 urlpatterns = [
     path("models/", views.model_list, name="model-list"),
     path("models/create/", views.model_create, name="model-create"),
-    path("models/import/", views.model_import, name="model-import"),
-    path("models/import/cancel/", views.model_import_cancel, name="model-import-cancel"),
     path("models/name-check/", views.model_name_check, name="model-name-check"),
     path("models/<int:pk>/", views.model_detail, name="model-detail"),
     path("models/<int:pk>/stop/", views.model_stop, name="model-stop"),
     path("models/<int:pk>/log.txt", views.model_log, name="model-log"),
     path("models/<int:pk>/log/", views.model_log_panel, name="model-log-panel"),
     path("models/<int:pk>/files/<path:relative>", views.model_file, name="model-file"),
-    path("models/<int:pk>/download/logs/", views.model_logs, name="model-logs"),
-    *(
-        path(
-            f"models/<int:pk>/download/{kind}/",
-            views.model_export,
-            {"kind": kind},
-            name=f"model-export-{kind}",
-        )
-        for kind in ("physical", "onnx", "virtual")
-    ),
     path("models/<int:pk>/delete/", views.model_delete, name="model-delete"),
     path("models/<int:pk>/evaluate/", views.evaluation_create, name="evaluation-create"),
     path(

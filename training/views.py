@@ -1,13 +1,11 @@
 """The training app's pages: the garage, reward functions, models (create, detail, clone,
-delete, downloads, import), training and evaluations.
+delete), training and evaluations. A model's downloads and the import are archives' pages.
 
 Long because these are the app's pages, thin over its services and selectors, in one module as
 Django apps keep them; each view is short.
 """
 
 import json
-import tempfile
-from contextlib import nullcontext
 from copy import copy
 from functools import partial
 
@@ -28,12 +26,9 @@ from django.urls import reverse
 from django.utils.cache import patch_cache_control
 from django.views.decorators.http import require_POST, require_safe
 
-from archives import exports, imports, kept_uploads, logs_archive
-from archives.models import KEPT_FOR, KeptUpload
 from common import ratelimits
-from common.downloads import file_response
 from common.refusals import Refused
-from sandbox import SandboxFailure, SandboxUnavailable
+from sandbox import SandboxFailure
 from simulator import config as sim_config
 from simulator import randomisation_ranges
 from simulator import tracks as simulator_tracks
@@ -41,8 +36,6 @@ from training import artifacts, checkers, configuration, rewards, selectors, ser
 from training.forms import (
     EvaluationForm,
     ModelCreateForm,
-    ModelImportConfirmForm,
-    ModelImportForm,
     RewardFunctionForm,
     RewardValidationForm,
     VehicleForm,
@@ -183,7 +176,7 @@ def _reward_editor_page(
     if isinstance(checked, ratelimits.Limited):
         ratelimits.refuse(form, checked)
     elif isinstance(checked, Exception):
-        form.add_error("source", _check_failed(checked))
+        form.add_error("source", checkers.failure_words(checked))
     elif request.method == "POST" and form.is_valid():
         try:
             saved = services.reward_function_save(
@@ -227,8 +220,8 @@ def _reward_editor_page(
         },
         status=429 if isinstance(checked, ratelimits.Limited) else 400 if form.errors else 200,
     )
-    if isinstance(checked, CHECK_FAILURES):
-        return _check_refused(response, checked)
+    if isinstance(checked, checkers.FAILURES):
+        return checkers.failure_response(response, checked)
     return response
 
 
@@ -244,27 +237,8 @@ async def _checked_reward(
             partial(rewards.reward_validate, source=source, track=where, direction=direction),
             racer=(await request.auser()).pk,
         )
-    except CHECK_FAILURES as error:
+    except checkers.FAILURES as error:
         return error
-
-
-CHECK_FAILURES = (checkers.Busy, SandboxUnavailable, SandboxFailure)
-
-
-def _check_failed(error: Exception) -> str:
-    """What a racer reads when a check could not run (one of ``CHECK_FAILURES``)."""
-    if isinstance(error, checkers.Busy):
-        return str(error)
-    return f"The reward function could not be checked: {error}"
-
-
-def _check_refused(response: HttpResponse, error: Exception) -> HttpResponse:
-    """``response`` for a check that could not run: 503, for the racer's input is not at fault,
-    and when every checker was busy, when to try again."""
-    response.status_code = 503
-    if isinstance(error, checkers.Busy):
-        response["Retry-After"] = str(checkers.RETRY_AFTER)
-    return response
 
 
 @login_required
@@ -297,7 +271,7 @@ async def reward_validation(request: HttpRequest) -> JsonResponse:
         message = str(checked)
     else:
         return JsonResponse(checked.as_dict())
-    return _check_refused(JsonResponse({"message": message}), checked)
+    return checkers.failure_response(JsonResponse({"message": message}), checked)
 
 
 def _pk(text: str) -> int:
@@ -309,7 +283,7 @@ def _pk(text: str) -> int:
 
 def _get_model_for_user(request: HttpRequest, pk: int) -> RLModel:
     """The racer's own model, or 404: no view can forget whose model it is."""
-    return get_object_or_404(RLModel.objects.select_related("track"), pk=pk, owner=request.user)
+    return selectors.model_of_racer(racer=request.user, pk=pk)
 
 
 @login_required
@@ -382,7 +356,7 @@ class _ModelCreatePage:
             return self.response
         form, source = self.form, self.source
         if isinstance(self.checked, Exception):
-            form.add_error("reward_function", _check_failed(self.checked))
+            form.add_error("reward_function", checkers.failure_words(self.checked))
         elif self.settings is not None:
             try:
                 model = services.model_create(
@@ -417,7 +391,7 @@ class _ModelCreatePage:
             status=429 if self.limited else 400 if form.errors else 200,
         )
         if isinstance(self.checked, Exception):
-            return _check_refused(response, self.checked)
+            return checkers.failure_response(response, self.checked)
         return response
 
 
@@ -533,269 +507,6 @@ def model_file(request: HttpRequest, pk: int, relative: str) -> HttpResponse:
     if relative not in {f.relative for f in selectors.model_files(model=model)}:
         raise Http404("No such file")
     return artifacts.download(request, artifacts.path(model, relative), relative.replace("/", "-"))
-
-
-@login_required
-@require_safe
-def model_export(request: HttpRequest, pk: int, kind: str) -> HttpResponse:
-    """The physical-car or ONNX archive (of the ``checkpoint`` asked for, best by default) or the
-    virtual-model archive, built on first request and kept in the model's storage."""
-    model = _get_model_for_user(request, pk)
-    which = request.GET.get("checkpoint", "best")
-    if which not in ("best", "last"):
-        messages.error(request, "Choose the best or the last checkpoint.")
-        return redirect("training:model-detail", pk=model.pk)
-    try:
-        if kind == "virtual":
-            export = exports.virtual(model)
-        else:
-            export = {"physical": exports.physical, "onnx": exports.onnx}[kind](model, which)
-    except exports.ExportRefused as refused:
-        messages.error(request, str(refused))
-        return redirect("training:model-detail", pk=model.pk)
-    return artifacts.download(
-        request, export.name, export.filename, content_type="application/gzip"
-    )
-
-
-@login_required
-@require_safe
-def model_logs(request: HttpRequest, pk: int) -> HttpResponse:
-    """The model's logs, laid out as a DeepRacer model folder (``archives.logs_archive``), built
-    for this request: its traces grow while it trains."""
-    model = _get_model_for_user(request, pk)
-    archive = tempfile.TemporaryFile()  # noqa: SIM115 (the response closes it once sent)
-    try:
-        logs_archive.write(model, archive)
-    except logs_archive.LogsRefused as refused:
-        archive.close()
-        messages.error(request, str(refused))
-        return redirect("training:model-detail", pk=model.pk)
-    return file_response(
-        request,
-        archive,
-        filename=logs_archive.filename(model),
-        attachment=True,
-        content_type="application/gzip",
-        ranges=False,  # built for this request: another's bytes differ
-    )
-
-
-@login_required
-async def model_import(request: HttpRequest) -> HttpResponse:
-    """The import form. The archive is read, its weights loaded and its reward function
-    validated by a checker (``training.checkers``). A model that arrives with its weights is
-    imported at once; one that would train is previewed first (``imports.import_start``), and
-    created, its training queued, once the racer confirms (the archive kept meanwhile, not sent
-    again). An attempt that has to be corrected keeps the racer's archive (unless the archive
-    itself was refused), so the next one need not choose it again."""
-    if request.method != "POST":
-        return await sync_to_async(_model_import_blank)(request)
-    attempt = await sync_to_async(_ModelImportAttempt)(request)  # the upload is read to disk here
-    if attempt.work is not None:
-        try:
-            attempt.outcome = await checkers.run(attempt.work, racer=(await request.auser()).pk)
-        except (Refused, *CHECK_FAILURES) as error:
-            attempt.outcome = error
-    return await sync_to_async(attempt.respond)()
-
-
-def _model_import_blank(request: HttpRequest) -> HttpResponse:
-    """The form, with the archive kept for the racer's next attempt, if one waits."""
-    kept = kept_uploads.upload_held(racer=request.user)
-    initial = {"kept": kept.token} if kept else {}
-    form = ModelImportForm(owner=request.user, kept=kept, initial=initial)
-    return render(request, "training/model_import.html", {"form": form})
-
-
-@login_required
-@require_POST
-def model_import_cancel(request: HttpRequest) -> HttpResponse:
-    """Delete the archive kept for the racer's import (a preview or a form to correct)."""
-    kept = kept_uploads.upload_discard(racer=request.user)
-    if kept is not None:
-        messages.success(request, f"Cancelled: {kept.filename} is deleted, nothing was imported.")
-    return redirect("training:model-import")
-
-
-class _ModelImportAttempt:
-    """A posted import, or its preview confirmed (``confirm``): the form and the racer's limit
-    (``work``: the import, for a checker, when both allow it), then the page its outcome makes."""
-
-    def __init__(self, request: HttpRequest) -> None:
-        self.request = request
-        self.work = None
-        self.outcome: imports.Imported | imports.ImportPreview | Exception | None = None
-        self.kept = kept_uploads.upload_kept(racer=request.user, token=request.POST.get("kept", ""))
-        self.confirm = ModelImportConfirmForm(request.POST) if "confirm" in request.POST else None
-        posted = (
-            (request.POST, request.FILES)
-            if self.confirm is None
-            else ({"kept": request.POST.get("kept", "")},)
-        )
-        self.form = ModelImportForm(*posted, owner=request.user, kept=self.kept)
-        if self.confirm is not None:
-            self.form.is_valid()  # for the page to go back to: the kept archive, or a choice
-        # Counted at once against both, so that parallel posts count each other; given back to
-        # the one its outcome does not count against (_import_counted).
-        self.held = ratelimits.hold(request, "import", "import-refused")
-        self.limited = self.held.limited
-        if self.limited:
-            ratelimits.refuse(self.form, self.limited)
-        elif self.confirm is not None and self.kept is None:
-            self.form.add_error(None, KEPT_GONE)
-        elif self.confirm is not None:
-            confirmed = self.confirm.is_valid()  # else the preview again, with what to correct
-            self.work = self._work(None, "", changes=self.confirm.changes(), confirmed=confirmed)
-        elif self.form.is_valid():
-            data = self.form.cleaned_data
-            self.work = self._work(data["archive"], data["name"])
-
-    def _work(self, upload, name: str, **step):
-        owner, kept = self.request.user, self.kept
-
-        def work() -> imports.Imported | imports.ImportPreview:
-            with nullcontext(upload) if upload else kept_uploads.upload_open(kept) as archive:
-                return imports.import_start(owner=owner, archive=archive, name=name, **step)
-
-        return work
-
-    def respond(self) -> HttpResponse:
-        request, form, outcome = self.request, self.form, self.outcome
-        if self.limited:
-            form.keep(self.kept)  # the racer tries again later with the archive they chose
-            return render(request, "training/model_import.html", {"form": form}, status=429)
-        _import_counted(self.held, outcome)
-        refused = False
-        if isinstance(outcome, imports.Imported):
-            kept_uploads.upload_discard(racer=request.user)
-            messages.success(
-                request,
-                _imported_message(outcome.model)
-                + (
-                    " “From its import” below says what the import rebuilt or left out."
-                    if outcome.model.import_notes
-                    else ""
-                ),
-            )
-            return redirect("training:model-detail", pk=outcome.model.pk)
-        upload = request.FILES.get("archive") if self.confirm is None else None
-        if isinstance(outcome, imports.ImportPreview):
-            return self._preview(outcome, upload)
-        if isinstance(outcome, imports.ImportRefused):
-            form.add_error("archive", str(outcome))
-            refused = True
-        elif isinstance(outcome, configuration.Invalid):
-            _import_errors(form, outcome.errors)
-            refused = not set(outcome.errors) <= imports.PREVIEW_PROBLEMS  # else the archive's
-        elif isinstance(outcome, Exception):
-            form.add_error(None, _check_failed(outcome))
-        if refused or ("archive" in form.errors and upload is not None):
-            kept_uploads.upload_discard(racer=request.user)  # the racer must choose another
-            form.keep(None)
-        elif upload is not None:
-            form.keep(self._keep(upload))
-        elif self.confirm is not None:
-            form.keep(self.kept)
-        response = render(request, "training/model_import.html", {"form": form}, status=400)
-        if isinstance(outcome, CHECK_FAILURES):
-            return _check_refused(response, outcome)
-        return response
-
-    def _preview(self, preview: imports.ImportPreview, upload) -> HttpResponse:
-        """What the import would create, to confirm or change: the archive kept for it."""
-        request = self.request
-        kept = self.kept
-        if upload is not None:
-            try:
-                kept = kept_uploads.upload_keep(racer=request.user, upload=upload)
-            except kept_uploads.UploadNotKept as refused:
-                return self._not_kept(refused)
-        confirm = self.confirm
-        if confirm is None:
-            confirm = ModelImportConfirmForm.of(preview, kept)
-        else:
-            confirm.add_problems(preview.problems)
-        settings = preview.settings
-        shown, _ = training_settings_shown(
-            algorithm=settings["algorithm"], stored=settings["hyperparameters"], max_minutes=0
-        )
-        context = {
-            "form": self.form,
-            "preview": preview,
-            "confirm": confirm,
-            "kept": kept,
-            "hyperparameters": [row for row in shown if row.key],
-            "tracks": selectors.tracks_available(),
-            "allowance": selectors.allowance_for(racer=request.user),
-        }
-        status = 400 if confirm.errors else 200
-        return render(request, "training/model_import.html", context, status=status)
-
-    def _keep(self, upload) -> KeptUpload | None:
-        """``upload`` kept for the next attempt, or its refusal said by the archive."""
-        try:
-            return kept_uploads.upload_keep(racer=self.request.user, upload=upload)
-        except kept_uploads.UploadNotKept as refused:
-            self.form.add_error("archive", str(refused))
-            return None
-
-    def _not_kept(self, refused: kept_uploads.UploadNotKept) -> HttpResponse:
-        """The form again (the name as typed), saying why the archive to confirm is not kept."""
-        form = self.form
-        form.add_error("archive", str(refused))
-        form.keep(None)
-        status = 400 if refused.retry_after is None else 503
-        response = render(self.request, "training/model_import.html", {"form": form}, status=status)
-        if refused.retry_after is not None:
-            response["Retry-After"] = str(refused.retry_after)
-        return response
-
-
-KEPT_GONE = (
-    f"The archive you uploaded is no longer kept (it is kept for "
-    f"{KEPT_FOR.total_seconds() / 3600:g} hour after you upload it, until you import it, "
-    "cancel or log out): choose it again."
-)
-
-
-def _imported_message(model: RLModel) -> str:
-    """What the import created, said as the model page says it."""
-    if model.status != RLModel.Status.READY:
-        return (
-            f"Imported {model.name}; its training is queued: up to {model.max_minutes} min on "
-            f"{model.track}."
-        )
-    if model.trainable:
-        return f"Imported {model.name}: it is ready to evaluate, race, clone or download."
-    return (
-        f"Imported {model.name}: a driving model without training history, ready to evaluate, "
-        "race and download. It came from a car archive, with no reward function: it cannot "
-        "train or be cloned."
-    )
-
-
-def _import_counted(held: ratelimits.Held, outcome: object) -> None:
-    """Count a posted import, held against both of the racer's import limits, against one: one
-    that arrived against "import"; any other attempt (refused, or a preview to confirm) against
-    the looser "import-refused", so that correcting an archive does not use up the hour's
-    imports; a check that could not run counts against neither."""
-    if isinstance(outcome, imports.Imported):
-        held.give_back("import-refused")
-    elif isinstance(outcome, CHECK_FAILURES):
-        held.give_back("import", "import-refused")
-    else:
-        held.give_back("import")
-
-
-def _import_errors(form: ModelImportForm, errors: dict[str, str]) -> None:
-    """The settings an archive brought that cannot be used, each where the racer can act."""
-    for setting, message in errors.items():
-        if setting == "name":
-            form.add_error("name", message)
-        else:  # a setting the archive brought: say which
-            label = setting.split(".")[-1].replace("_", " ").capitalize()
-            form.add_error(None, f"{label}: {message}")
 
 
 @login_required

@@ -113,7 +113,7 @@ def test_the_logs_archive_is_a_deepracer_model_folder(alice, tracks, client):
     model = new_model(alice, "paper-trained")
     train_on_paper(model)
     client.force_login(alice)
-    response = client.get(reverse("training:model-logs", args=[model.pk]))
+    response = client.get(reverse("archives:model-logs", args=[model.pk]))
     assert response.status_code == 200
     assert response["Content-Disposition"].startswith("attachment")
     assert "logs-paper-trained.tar.gz" in response["Content-Disposition"]
@@ -146,9 +146,9 @@ def test_only_the_models_owner_downloads_its_logs(alice, bob, tracks, client):
     model = new_model(alice, "paper-trained")
     train_on_paper(model)
     client.force_login(bob)
-    assert client.get(reverse("training:model-logs", args=[model.pk])).status_code == 404
+    assert client.get(reverse("archives:model-logs", args=[model.pk])).status_code == 404
     client.logout()
-    response = client.get(reverse("training:model-logs", args=[model.pk]))
+    response = client.get(reverse("archives:model-logs", args=[model.pk]))
     assert response.status_code == 302 and "login" in response["Location"]
 
 
@@ -156,7 +156,7 @@ def test_only_the_models_owner_downloads_its_logs(alice, bob, tracks, client):
 def test_a_model_with_no_logs_yet_says_so(alice, tracks, client, tmp_path):
     model = new_model(alice, "untrained")
     client.force_login(alice)
-    response = client.get(reverse("training:model-logs", args=[model.pk]), follow=True)
+    response = client.get(reverse("archives:model-logs", args=[model.pk]), follow=True)
     assert "no logs yet" in response.content.decode()
     with pytest.raises(CommandError, match="no logs yet"):
         call_command("exportmodel", "untrained", "--logs", "-o", str(tmp_path))

@@ -193,7 +193,7 @@ def test_a_model_without_weights_has_nothing_to_download(alice, tracks, tmp_path
     with pytest.raises(CommandError, match="no trained weights yet"):
         call_command("exportmodel", model.name, "--physical", "-o", str(tmp_path / "x.tar.gz"))
     client.force_login(alice)
-    response = client.get(reverse("training:model-export-virtual", args=[model.pk]), follow=True)
+    response = client.get(reverse("archives:model-export-virtual", args=[model.pk]), follow=True)
     assert "no trained weights yet" in response.text
     # A READY model without a trained checkpoint says why there is nothing to download.
     assert '<p class="muted" data-untrained>No downloads: untrained is ' in response.text
@@ -206,18 +206,18 @@ def test_the_model_page_offers_the_archives_to_its_owner_only(alice, bob, tracks
     page = client.get(reverse("training:model-detail", args=[model.pk])).text
     for kind in ("physicalmodel", "onnxmodel", "virtualmodel"):
         assert f"{kind}-downloadable.tar.gz" in page
-    url = reverse("training:model-export-physical", args=[model.pk])
+    url = reverse("archives:model-export-physical", args=[model.pk])
     response = client.get(url, {"checkpoint": "last"})
     assert response.status_code == 200
     assert 'filename="physicalmodel-downloadable.tar.gz"' in response["Content-Disposition"]
     assert "agent/model.pb" in archive_members(b"".join(response.streaming_content))
-    onnx = client.get(reverse("training:model-export-onnx", args=[model.pk]))
+    onnx = client.get(reverse("archives:model-export-onnx", args=[model.pk]))
     assert "model.onnx" in archive_members(b"".join(onnx.streaming_content))
     assert client.get(url, {"checkpoint": "worst"}).status_code == 302  # with a message
 
     client.force_login(bob)
     assert client.get(url).status_code == 404
-    assert client.get(reverse("training:model-export-virtual", args=[model.pk])).status_code == 404
+    assert client.get(reverse("archives:model-export-virtual", args=[model.pk])).status_code == 404
 
 
 @pytest.mark.slow

@@ -19,11 +19,11 @@ from django.urls import reverse
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from archives import history, imports
+from archives import history, imports, views
 from common import documents
 from tests.helpers.archives import CHECKED_IMPORT, deepracer_export, tar_gz, virtual_archive
 from tests.helpers.models import ready_model
-from training import artifacts, views
+from training import artifacts
 from training.models import RLModel
 
 pytestmark = pytest.mark.django_db
@@ -57,7 +57,7 @@ def test_the_import_page_takes_a_folder_packed_with_tar_c_folder_dot(
     data = packed_from_a_folder(virtual_archive(ready_model(alice)), tmp_path / "folder")
     client.force_login(alice)
     upload = SimpleUploadedFile("m.tar.gz", data)
-    response = client.post(reverse("training:model-import"), {"archive": upload, "name": "packed"})
+    response = client.post(reverse("archives:model-import"), {"archive": upload, "name": "packed"})
     model = RLModel.objects.get(owner=alice, name="packed")
     assert response.status_code == 302 and response["Location"].endswith(f"/models/{model.pk}/")
 
@@ -184,7 +184,7 @@ def test_the_import_page_answers_each_malformed_name_with_a_refusal_not_a_500(
     for case, tweak in MALFORMED.items():
         data = tar_gz(deepracer_export(), pax_format(tweak))
         upload = SimpleUploadedFile("model.tar.gz", data)
-        response = client.post(reverse("training:model-import"), {"archive": upload})
+        response = client.post(reverse("archives:model-import"), {"archive": upload})
         assert response.status_code == 400, case
         with pytest.raises(imports.ImportRefused) as refused:
             imports.read_archive(io.BytesIO(data))
@@ -195,7 +195,7 @@ def test_the_import_page_answers_each_malformed_name_with_a_refusal_not_a_500(
 
 def post_import(client, data: bytes, name: str = ""):
     upload = SimpleUploadedFile("model.tar.gz", data)
-    return client.post(reverse("training:model-import"), {"archive": upload, "name": name})
+    return client.post(reverse("archives:model-import"), {"archive": upload, "name": name})
 
 
 NOT_AN_ARCHIVE = b"just some notes, not a model"
@@ -222,7 +222,7 @@ def test_imports_posted_in_parallel_count_each_other_before_either_ends(alice, s
     settings.PITLANE_RATES = {**settings.PITLANE_RATES, "import": "1/h", "import-refused": "5/h"}
 
     def posted():
-        request = RequestFactory().post(reverse("training:model-import"), {"name": "twin"})
+        request = RequestFactory().post(reverse("archives:model-import"), {"name": "twin"})
         request.user, request.session = alice, SessionStore()
         return request
 

@@ -24,7 +24,7 @@ pytestmark = CHECKED_IMPORT
 
 def import_page(client, members: dict[str, bytes]):
     upload = SimpleUploadedFile("model.tar.gz", tar_gz(members))
-    return client.post(reverse("training:model-import"), {"archive": upload})
+    return client.post(reverse("archives:model-import"), {"archive": upload})
 
 
 @pytest.mark.parametrize(
@@ -47,7 +47,7 @@ def test_it_imports_a_seed_in_range(alice, tracks, client):
     preview = import_page(client, members)
     assert "Seed:" not in preview.text
     confirmed = {**preview.context["confirm"].data, "confirm": "1"}
-    client.post(reverse("training:model-import"), confirmed)
+    client.post(reverse("archives:model-import"), confirmed)
     assert RLModel.objects.get(owner=alice).seed == 2147483647
 
 
@@ -82,7 +82,7 @@ def test_it_leaves_a_hyperparameter_that_is_not_a_finite_number_in_range_at_its_
     ):
         assert "Not carried over from hyperparameters.json: " + note in page, note
     confirmed = {**preview.context["confirm"].data, "confirm": "1"}
-    client.post(reverse("training:model-import"), confirmed)
+    client.post(reverse("archives:model-import"), confirmed)
     model = RLModel.objects.get(owner=alice)
     assert (model.hyperparameters["batch_size"], model.hyperparameters["num_epochs"]) == (64, 10)
     assert model.hyperparameters["lr"] == 0.0003

@@ -156,7 +156,7 @@ def test_a_car_archive_is_shown_as_a_driving_model_without_training_history(
 ):
     client.force_login(bob)
     upload = SimpleUploadedFile("physicalmodel-straight-ahead.tar.gz", car_archive(alice))
-    response = client.post(reverse("training:model-import"), {"archive": upload}, follow=True)
+    response = client.post(reverse("archives:model-import"), {"archive": upload}, follow=True)
     model = RLModel.objects.get(owner=bob)
     page = response.content.decode().replace("&#x27;", "'")
     assert "a driving model without training history, ready to evaluate, race and download" in page
@@ -187,7 +187,7 @@ def test_a_car_archive_is_shown_as_a_driving_model_without_training_history(
 def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, tracks, client):
     client.force_login(alice)
     upload = SimpleUploadedFile("my-deepracer-car.tar.gz", deepracer_folder())
-    response = client.post(reverse("training:model-import"), {"archive": upload})
+    response = client.post(reverse("archives:model-import"), {"archive": upload})
     assert response.status_code == 200 and not RLModel.objects.exists()
     page = response.content.decode()
     assert "What the import creates" in page and "which is not loaded here" in page
@@ -204,12 +204,12 @@ def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, track
     posted = {**confirm.data, "confirm": "1"}
 
     # A value the create page refuses: the preview again, with the reason by its field.
-    response = client.post(reverse("training:model-import"), {**posted, "max_minutes": "5"})
+    response = client.post(reverse("archives:model-import"), {**posted, "max_minutes": "5"})
     assert response.status_code == 400 and not RLModel.objects.exists()
     assert "The maximum training time is 10 to 1440 minutes." in response.content.decode()
 
     # Confirmed without the archive sent again: created from the kept one, which is then deleted.
-    response = client.post(reverse("training:model-import"), {**posted, "track": "speedway"})
+    response = client.post(reverse("archives:model-import"), {**posted, "track": "speedway"})
     model = RLModel.objects.get(owner=alice)
     assert response.status_code == 302 and response["Location"].endswith(f"/models/{model.pk}/")
     # Its training is queued (the suite's worker may have taken it already), then stopped here:
@@ -225,7 +225,7 @@ def test_the_import_page_previews_then_creates_from_the_kept_upload(alice, track
     assert not KeptUpload.objects.exists()  # nor its bytes counted against anyone
 
     # A preview confirmed after its archive is gone asks for the archive again, in words.
-    response = client.post(reverse("training:model-import"), {**posted, "name": "another"})
+    response = client.post(reverse("archives:model-import"), {**posted, "name": "another"})
     assert response.status_code == 400 and "no longer kept" in response.content.decode()
     assert RLModel.objects.count() == 1
 
@@ -236,7 +236,7 @@ def test_the_route_a_drfc_folder_drove_is_shown_with_what_the_import_creates(ali
     client.force_login(alice)
     folder = deepracer_folder(WORLD_NAME="reInvent2019_track")  # DeepRacer for Cloud's bare name
     upload = SimpleUploadedFile("drfc.tar.gz", folder)
-    page = client.post(reverse("training:model-import"), {"archive": upload}).content.decode()
+    page = client.post(reverse("archives:model-import"), {"archive": upload}).content.decode()
     page = page.replace("&#x27;", "'")
     creates, left_out = page.split("<h3>Not carried over</h3>")
     assert (

@@ -85,14 +85,14 @@ def test_a_virtual_model_imports_ready_with_the_same_weights(alice, bob, tracks,
 def test_the_import_page_takes_an_archive_and_a_new_name(alice, tracks, client):
     original = ready_model(alice)
     client.force_login(alice)
-    assert "Import a model" in client.get(reverse("training:model-import")).text
+    assert "Import a model" in client.get(reverse("archives:model-import")).text
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(original))
     # The name is taken: the page says so and keeps the form.
-    response = client.post(reverse("training:model-import"), {"archive": upload})
+    response = client.post(reverse("archives:model-import"), {"archive": upload})
     assert response.status_code == 400
     assert "You already have a model named" in response.text
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(original))
-    response = client.post(reverse("training:model-import"), {"archive": upload, "name": "again"})
+    response = client.post(reverse("archives:model-import"), {"archive": upload, "name": "again"})
     model = RLModel.objects.get(owner=alice, name="again")
     assert response.status_code == 302 and response["Location"].endswith(f"/models/{model.pk}/")
     assert model.status == RLModel.Status.READY
@@ -216,7 +216,7 @@ def test_a_bad_archive_is_refused_with_its_reason_and_leaves_nothing(case, alice
     before = stored_objects()
     client.force_login(alice)
     response = client.post(
-        reverse("training:model-import"), {"archive": SimpleUploadedFile("model.tar.gz", data)}
+        reverse("archives:model-import"), {"archive": SimpleUploadedFile("model.tar.gz", data)}
     )
     assert response.status_code == 400
     assert reason in response.text.replace("&#x27;", "'")
@@ -242,7 +242,7 @@ def test_an_archive_over_the_upload_limit_is_refused_before_it_is_read(alice, cl
     monkeypatch.setattr(imports, "MAX_ARCHIVE", 1024)
     client.force_login(alice)
     upload = SimpleUploadedFile("model.tar.gz", b"\x1f\x8b" + bytes(4096))
-    response = client.post(reverse("training:model-import"), {"archive": upload})
+    response = client.post(reverse("archives:model-import"), {"archive": upload})
     assert response.status_code == 400
     assert "The archive is over" in response.text
 
@@ -252,7 +252,7 @@ def test_an_archive_over_the_upload_limit_is_refused_before_it_is_read(alice, cl
 def test_an_imported_virtual_model_keeps_its_training_history(alice, bob, tracks, client):
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(trained_with_history(alice)))
     client.force_login(bob)
-    response = client.post(reverse("training:model-import"), {"archive": upload})
+    response = client.post(reverse("archives:model-import"), {"archive": upload})
     model = RLModel.objects.get(owner=bob)
     assert response.status_code == 302
     job = model.jobs.get()
@@ -364,7 +364,7 @@ def test_a_virtual_model_without_readable_metrics_imports_without_history_and_sa
 def test_a_file_that_is_not_an_archive_is_refused_in_a_racers_words(alice, client):
     client.force_login(alice)
     upload = SimpleUploadedFile("notes.txt", b"just some notes, not a model")
-    response = client.post(reverse("training:model-import"), {"archive": upload})
+    response = client.post(reverse("archives:model-import"), {"archive": upload})
     assert response.status_code == 400
     assert "This file is not a .tar.gz model archive" in response.text
     for python in ("file could not be opened", "not a gzip file", "tarfile", "Error"):
@@ -379,7 +379,7 @@ def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
 ):
     original = ready_model(alice)
     client.force_login(alice)
-    page = client.get(reverse("training:model-import")).text
+    page = client.get(reverse("archives:model-import")).text
     assert page.index('name="name"') < page.index('name="archive"')  # the name comes first
     check = client.get(reverse("training:model-name-check"), {"name": "Straight-Ahead"}).json()
     assert check["ok"] is False and "You already have a model named" in check["message"]
@@ -388,7 +388,7 @@ def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
     # A taken name with a file that is no archive: the name is what the page talks about.
     upload = SimpleUploadedFile("model.tar.gz", b"not read yet")
     response = client.post(
-        reverse("training:model-import"), {"name": "straight-ahead", "archive": upload}
+        reverse("archives:model-import"), {"name": "straight-ahead", "archive": upload}
     )
     assert response.status_code == 400
     assert "You already have a model named" in response.text
@@ -397,19 +397,19 @@ def test_a_taken_name_is_said_before_the_archive_is_read_and_the_upload_is_kept(
     # The archive chosen is kept: correcting the name is enough.
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(original))
     response = client.post(
-        reverse("training:model-import"), {"name": "straight-ahead", "archive": upload}
+        reverse("archives:model-import"), {"name": "straight-ahead", "archive": upload}
     )
     assert "Using <strong>virtualmodel.tar.gz</strong> you uploaded" in response.text
     assert 'value="straight-ahead"' in response.text
     kept = response.context["form"].kept_upload
     assert artifacts.default_storage.exists(kept.name)
-    response = client.post(reverse("training:model-import"), {"name": "again", "kept": kept.token})
+    response = client.post(reverse("archives:model-import"), {"name": "again", "kept": kept.token})
     assert response.status_code == 302
     assert RLModel.objects.get(owner=alice, name="again").status == RLModel.Status.READY
     assert not artifacts.default_storage.exists(kept.name)  # cleaned up once used
 
     # Without a file or a kept one, the page asks for one.
-    response = client.post(reverse("training:model-import"), {"name": "third", "kept": "stale"})
+    response = client.post(reverse("archives:model-import"), {"name": "third", "kept": "stale"})
     assert response.status_code == 400 and "Choose the model&#x27;s archive" in response.text
 
 
@@ -418,11 +418,11 @@ def test_a_kept_archive_is_another_racers_to_use_never(alice, bob, tracks, clien
     client.force_login(alice)
     upload = SimpleUploadedFile("virtualmodel.tar.gz", virtual_archive(ready_model(alice)))
     response = client.post(
-        reverse("training:model-import"), {"name": "straight-ahead", "archive": upload}
+        reverse("archives:model-import"), {"name": "straight-ahead", "archive": upload}
     )
     token = response.context["form"].kept_upload.token
     client.force_login(bob)
-    response = client.post(reverse("training:model-import"), {"name": "mine", "kept": token})
+    response = client.post(reverse("archives:model-import"), {"name": "mine", "kept": token})
     assert response.status_code == 400 and not RLModel.objects.filter(owner=bob).exists()
 
 
@@ -431,7 +431,7 @@ def test_an_archive_at_fault_is_not_kept_for_the_next_attempt(alice, tracks, cli
     client.force_login(alice)
     bad_reward = deepracer_export(**{"reward_function.py": b"def reward_function(params:\n"})
     upload = SimpleUploadedFile("model.tar.gz", tar_gz(bad_reward))
-    response = client.post(reverse("training:model-import"), {"archive": upload})
+    response = client.post(reverse("archives:model-import"), {"archive": upload})
     assert response.status_code == 400 and "Reward function: syntax" in response.text
     assert response.context["form"].kept_upload is None and "you uploaded" not in response.text
 
@@ -657,10 +657,10 @@ def test_every_setting_that_is_not_carried_over_is_listed_on_the_result_page(ali
     )
     client.force_login(alice)
     upload = SimpleUploadedFile("model.tar.gz", tar_gz(drfc_layout(members)))
-    preview = client.post(reverse("training:model-import"), {"archive": upload})
+    preview = client.post(reverse("archives:model-import"), {"archive": upload})
     assert not RLModel.objects.exists()  # no weights: it trains, once the racer confirms
     confirmed = {**preview.context["confirm"].data, "confirm": "1"}
-    response = client.post(reverse("training:model-import"), confirmed, follow=True)
+    response = client.post(reverse("archives:model-import"), confirmed, follow=True)
     listed = [
         "Not carried over from hyperparameters.json: num_epochs 20. Number of epochs must be "
         "between 3 and 10. The model uses 10.",

@@ -26,7 +26,7 @@ BAD_NAME = "not a name!"  # the form is to correct before the archive is read: i
 
 def post_to_correct(client, content: bytes, filename: str = "model.tar.gz", name: str = BAD_NAME):
     upload = SimpleUploadedFile(filename, content)
-    return client.post(reverse("training:model-import"), {"name": name, "archive": upload})
+    return client.post(reverse("archives:model-import"), {"name": name, "archive": upload})
 
 
 def stored(kept: KeptUpload) -> bool:
@@ -48,7 +48,7 @@ def test_a_second_upload_replaces_the_first_and_its_bytes(alice, client):
     # In another browser the racer sees it too, and may use it or cancel it.
     other = type(client)()
     other.force_login(alice)
-    page = other.get(reverse("training:model-import")).text
+    page = other.get(reverse("archives:model-import")).text
     assert f'name="kept" value="{second.token}"' in page and ">Cancel</button>" in page
 
 
@@ -73,11 +73,11 @@ def test_cancel_deletes_the_kept_upload_and_says_so(alice, bob, client):
     client.force_login(alice)
     post_to_correct(client, b"alices" * 100, "mine.tar.gz")
     kept = KeptUpload.objects.get(racer=alice)
-    response = client.post(reverse("training:model-import-cancel"), follow=True)
+    response = client.post(reverse("archives:model-import-cancel"), follow=True)
     assert "Cancelled: mine.tar.gz is deleted, nothing was imported." in response.text
     assert not stored(kept) and not KeptUpload.objects.filter(racer=alice).exists()
     assert KeptUpload.objects.filter(racer=bob).exists()  # another racer's stays
-    assert client.get(reverse("training:model-import-cancel")).status_code == 405
+    assert client.get(reverse("archives:model-import-cancel")).status_code == 405
 
 
 def test_the_workers_housekeeping_deletes_an_expired_upload(alice, bob):
@@ -114,7 +114,7 @@ def test_a_full_console_refuses_a_new_upload_in_words_and_keeps_the_form(
 
     # Once Bob's is gone, Alice's fits; and a racer's own previous upload never counts.
     client.force_login(bob)
-    client.post(reverse("training:model-import-cancel"))
+    client.post(reverse("archives:model-import-cancel"))
     client.force_login(alice)
     post_to_correct(client, bytes(5000))
     post_to_correct(client, bytes(9000))
@@ -130,7 +130,7 @@ def test_a_preview_the_console_cannot_keep_is_refused_in_words_with_retry_after(
     kept_uploads.upload_keep(racer=bob, upload=SimpleUploadedFile("b.tar.gz", deepracer_folder()))
     client.force_login(alice)
     upload = SimpleUploadedFile("mine.tar.gz", deepracer_folder())
-    response = client.post(reverse("training:model-import"), {"name": "mine", "archive": upload})
+    response = client.post(reverse("archives:model-import"), {"name": "mine", "archive": upload})
     assert response.status_code == 503 and int(response["Retry-After"]) > 3000
     assert "The console is holding too many imports waiting for their racers" in response.text
     assert "What the import creates" not in response.text and 'value="mine"' in response.text

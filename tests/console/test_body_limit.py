@@ -37,7 +37,7 @@ async def test_a_body_sent_in_chunks_is_refused_once_it_passes_the_limit(limits)
 
 
 async def test_the_model_import_takes_its_own_larger_limit(limits):
-    path = reverse("training:model-import")
+    path = reverse("archives:model-import")
     status, _ = await post(path, [b"x" * 2000], declared=2000)
     assert status != 413  # read by Django (which asks for a sign-in)
     status, body = await post(path, [b"x" * 6000], declared=6000)

@@ -157,7 +157,7 @@ def test_the_largest_import_reaches_django_and_the_server_stays_small_and_answer
     throughout, and the server's peak memory grows by less than 50 MiB."""
     before = web_server.memory("VmHWM")
     (answer, sent), waits = health_waits_while(
-        web_server, lambda: post(web_server, reverse("training:model-import"), 257 * MiB)
+        web_server, lambda: post(web_server, reverse("archives:model-import"), 257 * MiB)
     )
     assert answer.startswith(b"HTTP/1.1 403 ")  # Django's CSRF refusal: no 413
     assert sent == 257 * MiB

@@ -122,7 +122,7 @@ def test_new_models_and_imports_are_limited_per_racer(alice, client, rates):
     client.force_login(alice)
     for page, what in (
         ("training:model-create", "new models"),
-        ("training:model-import", "refused or unconfirmed imports"),  # see test_import_archives
+        ("archives:model-import", "refused or unconfirmed imports"),  # see test_import_archives
     ):
         for _ in range(2):
             assert client.post(reverse(page), {"name": ""}).status_code == 400

@@ -108,7 +108,7 @@ def test_downloads_from_a_bucket_are_short_lived_presigned_urls_for_the_owner(
     client.force_login(bob)  # another racer can neither list the files nor get a URL for one
     assert client.get(reverse("training:model-detail", args=[model.pk])).status_code == 404
     assert client.get(url).status_code == 404
-    assert client.get(reverse("training:model-export-virtual", args=[model.pk])).status_code == 404
+    assert client.get(reverse("archives:model-export-virtual", args=[model.pk])).status_code == 404
 
     client.force_login(alice)
     response = client.get(url)
@@ -121,7 +121,7 @@ def test_downloads_from_a_bucket_are_short_lived_presigned_urls_for_the_owner(
     with urllib.request.urlopen(response["Location"]) as answer:  # moto, on this machine
         assert answer.read() == b'{"metrics": []}'
 
-    export = client.get(reverse("training:model-export-virtual", args=[model.pk]))
+    export = client.get(reverse("archives:model-export-virtual", args=[model.pk]))
     assert export.status_code == 302
     assert f"/models/{model.pk}/exports/" in export["Location"]
 
@@ -132,7 +132,7 @@ def test_deleting_a_model_leaves_nothing_in_the_bucket(alice, tracks, bucket, cl
     other = trained_model(alice, "to-keep")
     artifacts.save(model, "evaluations/1/video.webm", b"\x1a\x45\xdf\xa3")
     client.force_login(alice)
-    client.get(reverse("training:model-export-virtual", args=[model.pk]))
+    client.get(reverse("archives:model-export-virtual", args=[model.pk]))
     assert len(keys(bucket, f"models/{model.pk}/")) == 7
 
     response = client.post(reverse("training:model-delete", args=[model.pk]))

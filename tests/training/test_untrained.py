@@ -83,7 +83,7 @@ def test_it_refuses_to_download_a_model_that_is_not_trained(client, alice):
 
     client.force_login(alice)
     for kind in ("physical", "virtual"):
-        url = reverse(f"training:model-export-{kind}", args=[model.pk])
+        url = reverse(f"archives:model-export-{kind}", args=[model.pk])
         response = client.get(url, follow=True)
         assert response.redirect_chain[-1][0] == reverse("training:model-detail", args=[model.pk])
         assert "nothing to download yet" in response.content.decode()
