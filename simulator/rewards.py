@@ -16,23 +16,24 @@ def checked_reward(value: object) -> float:
     scalar is accepted); otherwise ``RewardError`` saying what came back."""
     if isinstance(value, complex) or not hasattr(value, "__float__") or isinstance(value, str):
         raise RewardError(
-            f"The reward function returned {type(value).__name__} {_shown(value)}, not a number."
+            f"The reward function returned {type(value).__name__} {_repr(value)}, not a number."
         )
     try:
         reward = float(value)
     except (TypeError, ValueError, OverflowError):
         raise RewardError(
-            f"The reward function returned {type(value).__name__} {_shown(value)}, not a number."
+            f"The reward function returned {type(value).__name__} {_repr(value)}, not a number."
         ) from None
     if not math.isfinite(reward) or abs(reward) > MAX_REWARD:
         raise RewardError(
-            f"The reward function returned {_shown(value)}; a reward is a finite number "
+            f"The reward function returned {_repr(value)}; a reward is a finite number "
             f"within ±{MAX_REWARD:g}."
         )
     return reward
 
 
-def _shown(value: object) -> str:
+def _repr(value: object) -> str:
+    """``value`` as Python writes it, for a racer's message: 60 characters at most."""
     try:
         text = repr(value)
     except Exception:  # a value whose repr fails is still reported

@@ -107,25 +107,25 @@ class RewardFunctionForm(RewardValidationForm):
     field_order = ["name", "source", "track"]
 
 
-def _shown(value: float) -> str:
+def _as_help(value: float) -> str:
     """A limit as a field's help shows it: 0.0003, 3e-5, 10."""
     return f"{value:g}".replace("e-0", "e-")
 
 
 def range_help(low: float, high: float, default: float, *, note: str = "") -> str:
     """“Range 3-10, default 10 (DeepRacer's default).”: what a number field allows."""
-    low_text, high_text = _shown(low), _shown(high)
+    low_text, high_text = _as_help(low), _as_help(high)
     span = (
         f"{low_text} to {high_text}"
         if low < 0 or "e" in low_text + high_text
         else f"{low_text}-{high_text}"
     )
-    return f"Range {span}, default {_shown(default)} (DeepRacer's default).{note}"
+    return f"Range {span}, default {_as_help(default)} (DeepRacer's default).{note}"
 
 
 def limit(field: forms.Field, low: float, high: float, step: float | str = "any") -> None:
     """Give a number input its range, so a racer sees the limits before submitting."""
-    field.widget.attrs.update(min=_shown(low), max=_shown(high), step=step)
+    field.widget.attrs.update(min=_as_help(low), max=_as_help(high), step=step)
 
 
 RANDOMISATION_HELP = (
@@ -369,7 +369,7 @@ class ModelCreateForm(TrackAndRaceFields):
             field = forms.FloatField(initial=setting.default)
             limit(field, setting.low, setting.high, 1 if setting.integer else "any")
             field.help_text = (
-                f"Fixed at {_shown(setting.low)}, as in DeepRacer."
+                f"Fixed at {_as_help(setting.low)}, as in DeepRacer."
                 if setting.low == setting.high
                 else range_help(setting.low, setting.high, setting.default)
             )
@@ -632,7 +632,7 @@ def training_settings_shown(
         each = hyperparameters.setting(algorithm, name)
         label = each.label if each else name
         if isinstance(value, float):
-            text = _shown(value)
+            text = _as_help(value)
         else:
             text = hyperparameters.LABELS.get(value, str(value))
         return SettingShown(label, text, name)
