@@ -563,22 +563,21 @@ def test_a_deepracer_world_name_lands_on_the_built_in_track_and_its_direction(
         assert notes == []
 
 
+def imported_by_command(tmp_path, world_name: str, owner) -> RLModel:
+    """A DeepRacer export trained on ``world_name`` (its training_params.yaml's WORLD_NAME),
+    imported for ``owner`` by ``manage.py importmodel``."""
+    archive = tmp_path / "deepracer.tar.gz"
+    params = {**DEEPRACER_PARAMS, "WORLD_NAME": world_name}
+    members = deepracer_export(**{"training_params.yaml": yaml.safe_dump(params).encode()})
+    archive.write_bytes(tar_gz(members))
+    call_command("importmodel", str(archive), "--owner", owner.username, stdout=io.StringIO())
+    return RLModel.objects.get(owner=owner)
+
+
 def test_a_bare_world_name_trains_on_simapps_own_file_and_a_clone_on_that_track_keeps_it(
     alice, tracks, tmp_path, client
 ):
-    archive = tmp_path / "deepracer.tar.gz"
-    params = {**DEEPRACER_PARAMS, "WORLD_NAME": "reInvent2019_track"}  # DeepRacer for Cloud's
-    archive.write_bytes(
-        tar_gz(
-            deepracer_export(
-                **{
-                    "training_params.yaml": yaml.safe_dump(params).encode(),
-                }
-            )
-        )
-    )
-    call_command("importmodel", str(archive), "--owner", "alice", stdout=io.StringIO())
-    model = RLModel.objects.get(owner=alice)
+    model = imported_by_command(tmp_path, "reInvent2019_track", alice)  # DeepRacer for Cloud's
     assert (model.track.name, model.direction, model.world_name) == (
         "reInvent2019_track",
         "counterclockwise",
@@ -606,19 +605,7 @@ def test_a_bare_world_name_trains_on_simapps_own_file_and_a_clone_on_that_track_
 
 
 def test_a_deepracer_export_imports_onto_its_own_track(alice, tracks, tmp_path):
-    archive = tmp_path / "deepracer.tar.gz"
-    params = {**DEEPRACER_PARAMS, "WORLD_NAME": "reInvent2019_track_cw"}
-    archive.write_bytes(
-        tar_gz(
-            deepracer_export(
-                **{
-                    "training_params.yaml": yaml.safe_dump(params).encode(),
-                }
-            )
-        )
-    )
-    call_command("importmodel", str(archive), "--owner", "alice", stdout=io.StringIO())
-    model = RLModel.objects.get(owner=alice)
+    model = imported_by_command(tmp_path, "reInvent2019_track_cw", alice)
     assert (model.track.display_name, model.direction) == ("Smile Speedway", "clockwise")
     assert not [note for note in model.import_notes if "track" in note.lower()]
 

@@ -96,6 +96,22 @@ def queued_job(owner) -> TrainingJob:
     return TrainingJob.objects.create(model=RLModel.objects.create(owner=owner, **clean.row()))
 
 
+def trainer_initializing(owner):
+    """The trainer (``jobs.trainer.Trainer``) of a new job of ``owner``'s, as its run begins: the
+    lease held, the job's keys in Redis, INITIALIZING, its workers just checked and none started
+    (its tests drive ``_turn`` and the workers' beats themselves)."""
+    from jobs import trainer
+    from training import leases
+
+    job = leases.lease_acquire(job_id=queued_job(owner).pk, owner="this-run")
+    run = trainer.Trainer(job, start_rollouts=lambda job, slot: None)
+    run.channel.start(job.attempt)
+    run.training_message, run.first_run = "Training with 1 simulation worker", False
+    run.worker_checks.due()  # the workers were just checked
+    leases.move(job, TrainingJob.Status.INITIALIZING)
+    return run
+
+
 def sandbox_children() -> dict[int, int]:
     """The running sandbox children: {pid: parent pid}. Their reward processes, forks of theirs
     with the same command line, are left out."""

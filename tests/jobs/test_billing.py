@@ -14,7 +14,7 @@ from django.utils import timezone
 
 from jobs import rollouts, tasks, trainer
 from sandbox import SandboxUnavailable
-from tests.helpers.training import queued_job, reload, wait_for_job
+from tests.helpers.training import queued_job, reload, trainer_initializing, wait_for_job
 from tests.services import wait_for
 from training import leases, selectors
 from training.models import TrainingJob
@@ -152,12 +152,8 @@ def test_a_job_no_simulation_worker_takes_fails_unbilled_rather_than_hold_its_tr
 def test_a_jobs_clock_stops_while_no_car_drives_and_starts_again_when_one_does(
     alice, tracks, settings, monkeypatch
 ):
-    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
-    run = trainer.Trainer(job, start_rollouts=lambda job, slot: None)
-    run.channel.start(job.attempt)
-    run.training_message, run.first_run = "Training with 1 simulation worker", False
-    run.worker_checks.due()  # the workers were just checked
-    leases.move(job, TrainingJob.Status.INITIALIZING)
+    run = trainer_initializing(alice)
+    job = run.job
     run.channel.beat(0)
     run._start_clock()
     run.session_started -= 5  # it drove 5 s

@@ -4,11 +4,10 @@ time it has left, and the episodes counted as the cars end them, not only once l
 import pytest
 
 from common.redis_client import redis_client
-from jobs import trainer
 from jobs.trainer import UpdateEstimate, update_message
 from rl.experience import JobChannel
-from tests.helpers.training import queued_job, training_job
-from training import leases, live, selectors
+from tests.helpers.training import trainer_initializing, training_job
+from training import live, selectors
 from training.models import TrainingJob
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
@@ -116,12 +115,7 @@ def test_a_stopped_job_counts_only_the_episodes_it_learnt_from(alice, channel):
 
 @pytest.mark.django_db(transaction=True)
 def test_the_trainer_tells_the_page_each_episode_as_its_car_ends_it(alice, monkeypatch):
-    job = leases.lease_acquire(job_id=queued_job(alice).pk, owner="this-run")
-    run = trainer.Trainer(job, start_rollouts=lambda job, slot: None)
-    run.channel.start(job.attempt)
-    run.training_message, run.first_run = "Training with 1 simulation worker", False
-    run.worker_checks.due()  # the workers were just checked
-    leases.move(job, TrainingJob.Status.INITIALIZING)
+    run = trainer_initializing(alice)
     monkeypatch.setattr(run, "_decode", lambda payload: None)  # no learner to read it with
     told = []
     monkeypatch.setattr(live, "announce", lambda group, message: told.append(message))
