@@ -14,8 +14,8 @@ from common.forms import RacerWords
 from common.time_zones import local_text
 from racing import selectors, timing
 from racing.models import MIN_LAP_S, Event, RaceType, RankingMethod
-from simulator.config import BOT_SPEED_RANGE, MAX_OBJECTS
 from training import selectors as training_selectors
+from training.forms import RaceConditionFields
 from training.models import EvaluationJob, RLModel, Track
 
 LOCAL = "%Y-%m-%dT%H:%M"  # what <input type="datetime-local"> sends
@@ -108,42 +108,11 @@ RACE_FIELDS = [
 ]
 
 
-class RaceObstaclesForm(RacerWords, forms.ModelForm):
-    """An event's boxes and bot cars as fields of their own (the model keeps them as JSON);
-    those of the chosen race type are required."""
+class RaceObstaclesForm(RaceConditionFields, forms.ModelForm):
+    """An event's boxes and bot cars as fields of their own (the model keeps them as JSON), with
+    the limits a model trains under (``training.forms.RaceConditionFields``); those of the chosen
+    race type are required: an event's rules are written out."""
 
-    box_count = forms.IntegerField(
-        label="Boxes",
-        min_value=1,
-        max_value=MAX_OBJECTS,
-        initial=3,
-        required=False,
-        help_text="Object avoidance: how many boxes stand on the track.",
-    )
-    box_randomize = forms.BooleanField(
-        label="Move the boxes every trial",
-        required=False,
-        help_text="Off: the boxes stand in the same places for every trial.",
-    )
-    bot_count = forms.IntegerField(
-        label="Bot cars",
-        min_value=1,
-        max_value=MAX_OBJECTS,
-        initial=3,
-        required=False,
-        help_text="Head-to-bot: how many bot cars drive the track.",
-    )
-    bot_speed = forms.FloatField(
-        label="Bot car speed [m/s]",
-        min_value=BOT_SPEED_RANGE[0],
-        max_value=BOT_SPEED_RANGE[1],
-        initial=1.0,
-        required=False,
-    )
-    bot_lane_changes = forms.BooleanField(label="Bot cars change lanes", required=False)
-
-    BOXES = ("box_count", "box_randomize")
-    BOTS = ("bot_count", "bot_speed", "bot_lane_changes")
     NEEDED = {
         RaceType.OBJECT_AVOIDANCE: {"box_count": "Say how many boxes the race has."},
         RaceType.HEAD_TO_BOT: {
@@ -154,16 +123,7 @@ class RaceObstaclesForm(RacerWords, forms.ModelForm):
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
-        boxes, bots = self.instance.boxes or {}, self.instance.bots or {}
-        for name, value in {
-            "box_count": boxes.get("count"),
-            "box_randomize": boxes.get("randomize"),
-            "bot_count": bots.get("count"),
-            "bot_speed": bots.get("speed"),
-            "bot_lane_changes": bots.get("lane_changes"),
-        }.items():
-            if value is not None:
-                self.initial[name] = value
+        self.initial.update(self.conditions_shown(self.instance.boxes, self.instance.bots))
         if "cars" in self.fields:  # left out: each model alone, as before the field existed
             self.fields["cars"].required = False
         if "min_lap_s" in self.fields:  # left out: the default shortest lap of a real car
@@ -182,20 +142,8 @@ class RaceObstaclesForm(RacerWords, forms.ModelForm):
         for name, message in self.NEEDED.get(race_type, {}).items():
             if data.get(name) is None and name not in self.errors:
                 self.add_error(name, message)
-        self.instance.boxes = (
-            {"count": data.get("box_count"), "randomize": bool(data.get("box_randomize"))}
-            if race_type == RaceType.OBJECT_AVOIDANCE
-            else None
-        )
-        self.instance.bots = (
-            {
-                "count": data.get("bot_count"),
-                "speed": data.get("bot_speed"),
-                "lane_changes": bool(data.get("bot_lane_changes")),
-            }
-            if race_type == RaceType.HEAD_TO_BOT
-            else None
-        )
+        self.instance.boxes = self.boxes() if race_type == RaceType.OBJECT_AVOIDANCE else None
+        self.instance.bots = self.bots() if race_type == RaceType.HEAD_TO_BOT else None
         return data
 
 

@@ -93,7 +93,8 @@ class Objects:
 @dataclass(frozen=True)
 class Bots:
     count: int = 3
-    speed: float = 0.5  # [m/s]
+    # [m/s] DeepRacer's: deepracer-simapp bundle/markov/agent_ctrl/bot_cars_agent_ctrl.py:39
+    speed: float = 0.2
     lane_changes: bool = False
 
 

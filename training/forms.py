@@ -134,7 +134,75 @@ RANDOMISATION_HELP = (
 )
 
 
-class TrackAndRaceFields(RacerWords, forms.Form):
+class RaceConditionFields(RacerWords, forms.Form):
+    """A race's boxes and bot cars, defined once: the create-model and evaluation pages train and
+    evaluate under the limits an event's (``racing.forms``) races are held under. The limits and
+    defaults are the simulator's (``simulator.config``), which are DeepRacer's: 3 boxes or bot
+    cars, bots at 0.2 m/s (deepracer-simapp bundle/markov/agent_ctrl/bot_cars_agent_ctrl.py:39,
+    and DeepRacer for Cloud's DR_H2B_BOT_CAR_SPEED)."""
+
+    box_count = forms.IntegerField(
+        label="Boxes",
+        min_value=1,
+        max_value=sim.MAX_OBJECTS,
+        initial=sim.Objects.count,
+        required=False,
+        help_text=range_help(1, sim.MAX_OBJECTS, sim.Objects.count),
+    )
+    box_randomize = forms.BooleanField(label="New box positions every episode", required=False)
+    bot_count = forms.IntegerField(
+        label="Bot cars",
+        min_value=1,
+        max_value=sim.MAX_OBJECTS,
+        initial=sim.Bots.count,
+        required=False,
+        help_text=range_help(1, sim.MAX_OBJECTS, sim.Bots.count),
+    )
+    bot_speed = forms.FloatField(
+        label="Bot car speed [m/s]",
+        min_value=sim.BOT_SPEED_RANGE[0],
+        max_value=sim.BOT_SPEED_RANGE[1],
+        initial=sim.Bots.speed,
+        required=False,
+        widget=forms.NumberInput(attrs={"step": "0.1"}),
+        help_text=range_help(*sim.BOT_SPEED_RANGE, sim.Bots.speed),
+    )
+    bot_lane_changes = forms.BooleanField(label="Bot cars change lanes", required=False)
+
+    @staticmethod
+    def conditions_shown(boxes: dict | None, bots: dict | None) -> dict:
+        """A saved race's boxes and bots (kept as JSON) as these fields' initial values."""
+        boxes, bots = boxes or {}, bots or {}
+        shown = {
+            "box_count": boxes.get("count"),
+            "box_randomize": boxes.get("randomize"),
+            "bot_count": bots.get("count"),
+            "bot_speed": bots.get("speed"),
+            "bot_lane_changes": bots.get("lane_changes"),
+        }
+        return {name: value for name, value in shown.items() if value is not None}
+
+    def boxes(self) -> dict:
+        """The boxes as the simulator takes them; a count left out is the default."""
+        data = self.cleaned_data
+        count = data.get("box_count")
+        return {
+            "count": sim.Objects.count if count is None else count,
+            "randomize": bool(data.get("box_randomize")),
+        }
+
+    def bots(self) -> dict:
+        """The bot cars as the simulator takes them; what is left out is the default."""
+        data = self.cleaned_data
+        count, speed = data.get("bot_count"), data.get("bot_speed")
+        return {
+            "count": sim.Bots.count if count is None else count,
+            "speed": sim.Bots.speed if speed is None else speed,
+            "lane_changes": bool(data.get("bot_lane_changes")),
+        }
+
+
+class TrackAndRaceFields(RaceConditionFields):
     """Where and how the car races: the fields the create-model and evaluation pages share."""
 
     track = forms.ModelChoiceField(
@@ -149,34 +217,8 @@ class TrackAndRaceFields(RacerWords, forms.Form):
     race_type = forms.ChoiceField(
         choices=RaceType.choices, widget=forms.RadioSelect, initial=RaceType.TIME_TRIAL
     )
-    box_count = forms.IntegerField(
-        label="Boxes",
-        min_value=1,
-        max_value=6,
-        initial=3,
-        required=False,
-        help_text=range_help(1, 6, 3),
-    )
-    box_randomize = forms.BooleanField(label="New box positions every episode", required=False)
-    bot_count = forms.IntegerField(
-        label="Bot cars",
-        min_value=1,
-        max_value=6,
-        initial=3,
-        required=False,
-        help_text=range_help(1, 6, 3),
-    )
-    bot_speed = forms.FloatField(
-        label="Bot speed [m/s]",
-        min_value=0.2,
-        max_value=6,
-        initial=0.5,
-        required=False,
-        widget=forms.NumberInput(attrs={"step": "0.1"}),
-        help_text=range_help(0.2, 6, 0.5),
-    )
-    bot_lane_changes = forms.BooleanField(label="Bots change lanes", required=False)
 
+    field_order = ["track", "direction", "race_type"]
     PLACES = {"boxes": "box_count", "bots": "bot_count"}  # where a setting's error shows
 
     def race_settings(self) -> dict:
@@ -185,12 +227,8 @@ class TrackAndRaceFields(RacerWords, forms.Form):
             "track": data["track"].name,
             "direction": data["direction"],
             "race_type": data["race_type"],
-            "boxes": {"count": data.get("box_count") or 3, "randomize": data.get("box_randomize")},
-            "bots": {
-                "count": data.get("bot_count") or 3,
-                "speed": data.get("bot_speed") or 0.5,
-                "lane_changes": data.get("bot_lane_changes"),
-            },
+            "boxes": self.boxes(),
+            "bots": self.bots(),
         }
 
     def add_setting_errors(self, errors: dict[str, str]) -> None:
@@ -425,17 +463,8 @@ class ModelCreateForm(TrackAndRaceFields):
             "reward_function": model.reward_function,
             "domain_randomisation": model.domain_randomisation,
             "best_checkpoint_by": model.best_checkpoint_by,
+            **RaceConditionFields.conditions_shown(model.boxes, model.bots),
         }
-        if model.boxes:
-            initial.update(
-                box_count=model.boxes.get("count"), box_randomize=model.boxes.get("randomize")
-            )
-        if model.bots:
-            initial.update(
-                bot_count=model.bots.get("count"),
-                bot_speed=model.bots.get("speed"),
-                bot_lane_changes=model.bots.get("lane_changes"),
-            )
         if model.action_space_type == "discrete":
             initial["actions"] = json.dumps(model.action_space)
         else:

@@ -2,6 +2,7 @@
 jobs, queued or in progress, and waiting on them."""
 
 import json
+import re
 from datetime import timedelta
 from pathlib import Path
 
@@ -29,6 +30,20 @@ def settings(**changes) -> dict:
         "reward_function": EXAMPLES[0].source,
     }
     return {**base, **changes}
+
+
+def field_html(page: str, name: str) -> str:
+    """The input (or select) a page shows for the field ``name``."""
+    return re.search(rf'<(?:input|select)[^>]*name="{name}"[^>]*>', page)[0]
+
+
+def field_words(page: str, name: str) -> tuple[str, str]:
+    """The label and the help a page shows for the field ``name`` (``includes/field.html``)."""
+    start = page.rindex('<div class="field', 0, page.index(f'name="{name}"'))
+    block = page[start : page.find('<div class="field"', start + 1)]
+    label = re.search(r"<label[^>]*>(?:<input[^>]*>)?(.*?)</label>", block, re.S)[1]
+    help_ = re.search(r'<div class="field-help">(.*?)</div>', block, re.S)
+    return label.strip(), help_[1] if help_ else ""
 
 
 def form_data(**changes) -> dict:

@@ -13,6 +13,7 @@ from racing.forms import CommunityRaceForm
 from racing.models import Event, Ranking, Submission
 from tests.helpers.league import scored
 from tests.helpers.models import ready_model
+from tests.helpers.training import field_html, field_words, form_data
 from tests.racing.conftest import race_form
 
 pytestmark = pytest.mark.django_db
@@ -122,6 +123,26 @@ def test_a_head_to_bot_race_without_its_bot_cars_says_so_and_keeps_them_shown(
     assert response.context["form"].errors["bot_count"] == ["Say how many bot cars the race has."]
     assert '<div data-race-fields="HEAD_TO_BOT" >' in response.text
     assert 'value="1.5"' in response.text
+
+
+def test_a_model_trains_under_the_limits_of_boxes_and_bot_cars_a_race_is_held_under(
+    client, alice, tracks
+):
+    """One definition of a race's boxes and bot cars: the create-model page and a race's page
+    show the same inputs, labels and help, and refuse a bot too fast in the same words."""
+    client.force_login(alice)
+    model_page = client.get(reverse("training:model-create")).text
+    race_page = client.get(reverse("racing:community-race-create")).text
+    for name in ("box_count", "box_randomize", "bot_count", "bot_speed", "bot_lane_changes"):
+        assert field_html(model_page, name) == field_html(race_page, name)
+        assert field_words(model_page, name) == field_words(race_page, name)
+    assert 'value="0.2"' in field_html(race_page, "bot_speed")  # DeepRacer's default
+    too_fast = {"race_type": "HEAD_TO_BOT", "bot_count": 2, "bot_speed": "6.5"}
+    model = client.post(reverse("training:model-create"), form_data(**too_fast))
+    race = client.post(reverse("racing:community-race-create"), race_form(**too_fast))
+    refused = ["Bot car speed [m/s] is at most 6."]
+    assert model.context["form"].errors["bot_speed"] == race.context["form"].errors["bot_speed"]
+    assert race.context["form"].errors["bot_speed"] == refused
 
 
 def test_the_same_race_form_sent_twice_creates_one_race(client, alice, tracks):

@@ -9,7 +9,7 @@ from django.urls import reverse
 
 from simulator import config as sim
 from tests.helpers.models import STRAIGHT_AHEAD, ready_model
-from tests.helpers.training import form_data, post
+from tests.helpers.training import field_html, form_data, post
 from tests.helpers.training import settings as training_settings
 from training import configuration
 from training.models import RLModel
@@ -140,10 +140,6 @@ def test_a_saved_models_settings_check_back_to_themselves(alice, tracks):
     assert again == saved.replace(name="again")
 
 
-def field_html(page: str, name: str) -> str:
-    return re.search(rf'<(?:input|select)[^>]*name="{name}"[^>]*>', page)[0]
-
-
 @pytest.mark.parametrize(
     ("name", "attributes", "help_text"),
     [
@@ -159,7 +155,7 @@ def field_html(page: str, name: str) -> str:
         ("steering_low", ('min="-30"', 'max="30"'), "Range -30 to 30, default -30"),
         ("speed_high", ('min="0.1"', 'max="4"', 'step="0.1"'), "Range 0.1-4, default 2"),
         ("box_count", ('min="1"', 'max="6"'), "Range 1-6, default 3"),
-        ("bot_speed", ('min="0.2"', 'max="6"'), "Range 0.2-6, default 0.5"),
+        ("bot_speed", ('min="0.2"', 'max="6.0"'), "Range 0.2-6, default 0.2"),
         ("workers", ('min="1"', 'max="4"'), "Range 1-4, default 1"),
         ("max_minutes", ('min="10"', 'max="600"'),  # a racer's monthly quota is 600 minutes
          "Range 10-1440, default 60 (DeepRacer's default). You have 600 training minutes"),
