@@ -10,7 +10,7 @@ may speed it up: PITLANE_WATCHED_SPEEDUP).
 
 Model against model: an evaluation may be one car of a race of several (``grid_leader``), each
 car another model's evaluation with its own trials, trace, video and live frames. The run of the
-race's first car drives them all together (``_race``), one car alone being a race of one.
+race's first car drives them all together (``Race``), one car alone being a race of one.
 
 Long because an evaluation's run is one piece: its lease, its drive with the video encoder, the
 live frames, the racer's stop, the trials it records and the files it saves.
@@ -49,7 +49,6 @@ from common.transactions import outside_transaction
 from notifications import services as notifications
 from rl import episode
 from rl.policies import Policy
-from simulator import head_to_head
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
@@ -166,7 +165,7 @@ def run(evaluation_id: int) -> EvaluationJob | None:
     cars = [EvaluationCar(car) for car in race]
     try:
         with _one_torch_thread():
-            _race(cars)
+            Race(cars).run()
     except leases.LeaseLost:
         logger.warning("Evaluation %s was taken over by another run; this one stops", evaluation_id)
         return None
@@ -221,73 +220,80 @@ def _claim(evaluation: EvaluationJob | None, owner: str) -> list[EvaluationJob]:
     return race
 
 
-def _race(cars: list[EvaluationCar]) -> None:
-    """Drive ``cars`` (one evaluation, or a race's) from their weights to their saved files: a
-    car whose weights cannot be read is left out (it fails with the reason); the others drive
-    together."""
-    for car in cars:
+class Race:
+    """An evaluation's cars driven together: one car, or a race's (model against model), each an
+    ``EvaluationCar`` driving its own episode of one fleet (``rl.episode.Fleet`` with
+    ``race=True``: every car of the race on its place on the grid, knowing where the others
+    stand before it steps)."""
+
+    def __init__(self, cars: list[EvaluationCar]) -> None:
+        self.cars = cars  # in grid order
+        self.racing: list[EvaluationCar] = []  # those whose weights could be read
+
+    def run(self) -> None:
+        """Drive the cars from their weights to their saved files: a car whose weights cannot be
+        read is left out (it fails with the reason); the others drive together."""
+        for car in self.cars:
+            try:
+                car.load()
+            except EvaluationFailed as failure:
+                car.failure = str(failure)
+        self.racing = [car for car in self.cars if not car.failure]
+        if not self.racing:
+            return
+        race, prepared = [car.evaluation for car in self.racing], []
         try:
-            car.load()
-        except EvaluationFailed as failure:
-            car.failure = str(failure)
-    racing = [car for car in cars if not car.failure]
-    if not racing:
-        return
-    race, prepared = [car.evaluation for car in racing], []
-    try:
-        for car in racing:
-            car.prepare(race)
-            prepared.append(car)
-    except EvaluationFailed:  # the race fails with it: the simulations built are let go
-        for car in prepared:
-            car.env.close()
-        raise
-    if not all([car.begin() for car in racing]):  # the racer stopped it as it loaded
-        for car in racing:
-            car.stopped = True
-            car.env.close()
-        return
-    with contextlib.ExitStack() as recordings:
-        for car in racing:
-            recordings.enter_context(car.recording())
-        with contextlib.suppress(_StopAsked):  # the car that asked is ``stopped``
-            _drive(racing)
+            for car in self.racing:
+                car.prepare(race)
+                prepared.append(car)
+        except EvaluationFailed:  # the race fails with it: the simulations built are let go
+            for car in prepared:
+                car.env.close()
+            raise
+        if not all([car.begin() for car in self.racing]):  # the racer stopped it as it loaded
+            for car in self.racing:
+                car.stopped = True
+                car.env.close()
+            return
+        with contextlib.ExitStack() as recordings:
+            for car in self.racing:
+                recordings.enter_context(car.recording())
+            with contextlib.suppress(_StopAsked):  # the car that asked is ``stopped``
+                self._drive()
 
+    def _drive(self) -> None:
+        """The trials: each car's an episode of the fleet (continuous laps are one episode), each
+        car with its own policy, every car reset on its place on the grid. A car whose trial is
+        over is parked off the field while the others drive on, as simapp parks it
+        (DONE_CONDITION "all", evaluation_worker.py:343, 01f5f01), so that every racer drives its
+        own laps. Each step, every car's trace row, video frame and live frames, and each lap
+        recorded as it ends (``EvaluationCar.stepped``); then one wait, while someone watches or
+        the race is live, so that the step takes real time (or PITLANE_WATCHED_SPEEDUP times
+        less)."""
+        cars = self.racing
+        rules = cars[0].evaluation  # the race's trials and laps, its first car's
+        fleet = episode.Fleet([car.env for car in cars], cars[0].policy, race=True)
+        for car, driving in zip(cars, fleet.cars, strict=True):
+            car.driving, driving.policy = driving, car.policy
+        pace = cars[0].env.unwrapped.dt / settings.PITLANE_WATCHED_SPEEDUP  # [s] a step, real
+        last_step = 0.0
+        paced: list[bool] = []  # this step's cars: whether each should take real time
 
-def _drive(cars: list[EvaluationCar]) -> None:
-    """The trials: each car's an episode of one fleet (``rl.episode.Fleet``; continuous laps
-    are one episode), each car with its own policy, every car of a race reset on its place on
-    the grid and stepping together, each knowing where the others stand before it steps (a car
-    whose trial is over parked off the field, as simapp parks it: DONE_CONDITION "all",
-    evaluation_worker.py:343, 01f5f01, so that every racer drives its own laps). Each step,
-    every car's trace row, video frame and live frames, and each lap recorded as it ends
-    (``EvaluationCar.stepped``); then one wait, while someone watches or the race is live, so that
-    the step takes real time (or PITLANE_WATCHED_SPEEDUP times less)."""
-    fleet = episode.Fleet([car.env for car in cars], cars[0].policy)
-    for driving, car in zip(fleet.cars, cars, strict=True):
-        driving.policy = car.policy
-    envs = [car.env.unwrapped for car in cars]
-    pace = envs[0].dt / settings.PITLANE_WATCHED_SPEEDUP  # [s] of real time a step
-    leader = cars[0].evaluation
-    last_step = 0.0
-    paced: list[bool] = []  # this step's cars: whether each should take real time
+        def stepped(driving: episode.Car, *seen) -> None:
+            paced.append(cars[driving.index].stepped(*seen))
 
-    def stepped(driving: episode.Car, *seen) -> None:
-        paced.append(cars[driving.index].stepped(*seen))
-
-    for number in range(1 if leader.continuous_laps else leader.trials):
-        for driving, car in zip(fleet.cars, cars, strict=True):
-            seed = car.trial_begins(number)
-            car.started(*fleet.start(driving, "evaluate", record=False, seed=seed))
-        while fleet.driving():
-            head_to_head.place_rivals(envs, [driving.mode is not None for driving in fleet.cars])
-            paced.clear()
-            fleet.step(stepped)
-            if any(paced):
-                time.sleep(max(0.0, pace - (time.monotonic() - last_step)))
-            last_step = time.monotonic()
-        for driving, car in zip(fleet.cars, cars, strict=True):
-            car.trial_ends(driving.driven)
+        for number in range(1 if rules.continuous_laps else rules.trials):
+            for car in cars:
+                seed = car.trial_begins(number)
+                car.started(*fleet.start(car.driving, "evaluate", record=False, seed=seed))
+            while fleet.driving():
+                paced.clear()
+                fleet.step(stepped)
+                if any(paced):
+                    time.sleep(max(0.0, pace - (time.monotonic() - last_step)))
+                last_step = time.monotonic()
+            for car in cars:
+                car.trial_ends(car.driving.driven)
 
 
 @dataclass
@@ -315,6 +321,7 @@ class EvaluationCar:
         self.failure = ""  # why it cannot drive (its weights), when it cannot
         self.stopped = False  # the racer stopped it: it ends with the trials it finished
         self._seed: int | None = None  # the seed of the episode driving
+        self.driving: episode.Car | None = None  # its car in the race's fleet, once it drives
         # the lease renewed, and the racer's stop looked for, every so often while it drives
         self.renewals = Every(LEASE_RENEWAL, at_once=False)
         self.stop_looks = Every(leases.EVALUATION_STOP_LOOK, at_once=False)

@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from simulator import head_to_head
+
 if TYPE_CHECKING:  # the loop only calls the policy: a child that validates loads no torch
     from rl.policies import Policy
 
@@ -73,7 +75,10 @@ class Fleet:
     seeds car ``i``'s sampling and its action space (their environments are seeded by their
     resets). ``score``, where given, takes each car's (index, params) of a step and gives their
     rewards, in one call for all the cars; a call that fails raises, naming the failing car's
-    index in the exception's ``car`` where it knows it."""
+    index in the exception's ``car`` where it knows it. With ``race``, the cars race on one
+    track (``simulator.head_to_head``: each environment made with the others as its rivals):
+    before each step every car learns where the others stand, a car whose episode is over
+    parked off the field."""
 
     def __init__(
         self,
@@ -81,9 +86,11 @@ class Fleet:
         policy: Policy,
         seeds: list[int] | None = None,
         score: Score | None = None,
+        race: bool = False,
     ) -> None:
         self.policy = policy
         self.score = score
+        self.race = race
         self.cars: list[Car] = []
         self.stepping: Car | None = None  # the car whose step raised, when one did
         for index, env in enumerate(envs):
@@ -122,6 +129,11 @@ class Fleet:
         whole. The reward function's failures propagate; the failing car (``stepping``) is
         left idle, its episode abandoned (with a scorer, every car of the step is: none of
         their steps can end without the rewards)."""
+        if self.race:
+            head_to_head.place_rivals(
+                [car.env.unwrapped for car in self.cars],
+                [car.mode is not None for car in self.cars],
+            )
         driving = self.driving()
         chosen = self._actions(driving)
         if self.score is not None:

@@ -323,7 +323,7 @@ def test_an_evaluation_whose_simulation_worker_died_is_claimed_once_and_driven_a
 ):
     # What every worker's heartbeat does for evaluations (console.recovery.resume_lapsed), as for
     # training jobs: the driving itself is the other tests' business.
-    monkeypatch.setattr(evaluations, "_drive", lambda *args: None)
+    monkeypatch.setattr(evaluations.Race, "_drive", lambda *args: None)
     monkeypatch.setattr(evaluations.EvaluationCar, "_save", lambda *args: None)
     model = trained_model(alice, "lapsing")
     started = services.evaluation_start(model=model, settings={"trials": 3}, enqueue=False)
@@ -366,7 +366,7 @@ def test_a_run_overtaken_while_it_saves_leaves_the_evaluation_and_its_model_to_t
     def overtaken(self, video_path):
         EvaluationJob.objects.filter(pk=self.evaluation.pk).update(lease_owner=taker)
 
-    monkeypatch.setattr(evaluations, "_drive", lambda *args: None)
+    monkeypatch.setattr(evaluations.Race, "_drive", lambda *args: None)
     monkeypatch.setattr(evaluations.EvaluationCar, "_save", overtaken)
     model = trained_model(alice, "overtaken")
     started = services.evaluation_start(model=model, settings={"trials": 3}, enqueue=False)

@@ -1,14 +1,15 @@
 """Model against model (simulator.head_to_head): cars on one track at once, on simapp's grid,
-seeing and hitting one another, each with its own trace and results."""
+seeing and hitting one another, each with its own trace and results, driven by the one episode
+loop (rl.episode.Fleet with race=True) as an evaluation's race is."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
+from rl.episode import Fleet
 from simulator.controller import CentreLineDriver
 from simulator.env import DeepRacerEnv
-from simulator.head_to_head import START_OFFSET, grid, race
+from simulator.head_to_head import START_OFFSET, grid
 
 CONTINUOUS = {"steering_angle": {"low": -30.0, "high": 30.0}, "speed": {"low": 0.5, "high": 4.0}}
 RED, BLUE = (40, 40, 220), (220, 90, 40)
@@ -55,23 +56,35 @@ def test_each_car_sees_the_other_and_the_lidar_meets_it():
     assert leader._observe()["LIDAR"].min() < 1.0
 
 
-def test_a_faster_car_behind_runs_into_the_slower_one_and_both_have_their_traces():
+class Driver:
+    """A policy as the fleet calls it: the centre-line driver, at a constant speed."""
+
+    def __init__(self, env: DeepRacerEnv, speed: float) -> None:
+        self.driver = CentreLineDriver(env, speed=speed)
+
+    def drive(self, observation):
+        return self.driver.act()
+
+    def command(self, action, discrete: bool):
+        return action
+
+
+def test_a_faster_car_behind_runs_into_the_slower_one_and_each_drives_its_own_race():
     envs = cars()
-    drivers = [
-        CentreLineDriver(env, speed=speed) for env, speed in zip(envs, (1.0, 3.0), strict=True)
-    ]
-    results = race(envs, [lambda _, d=driver: d.act() for driver in drivers], seed=0)
-    slow, fast = results
-    assert fast.counts["crashes"] >= 1 or slow.counts["crashes"] >= 1
-    assert len(slow.trace) > 10 and len(fast.trace) == len(slow.trace)
-    assert {row.episode for row in fast.trace} == {0}
-    ended = [result.status for result in results]
-    assert "race_over" in ended  # the first car done ended the race (DONE_CONDITION any)
-
-
-def test_a_race_needs_two_to_four_cars():
-    with pytest.raises(ValueError, match="2 to 4 cars"):
-        race(cars()[:1], [lambda _: np.zeros(2, dtype=np.float32)])
+    fleet = Fleet(envs, policy=None, race=True)
+    for car, speed in zip(fleet.cars, (1.0, 3.0), strict=True):
+        car.policy = Driver(car.env, speed)
+        fleet.start(car, "evaluate", seed=0)
+    ended = []
+    while fleet.driving():
+        ended += [(car.index, len(car.driven.trace)) for car in fleet.step()]
+    slow, fast = envs
+    assert fast.counts["crashes"] >= 1  # it ran into the slow car, and served its penalties
+    # the slow car finished first and was parked; the fast one drove on to its own lap's end
+    (first, first_steps), (second, second_steps) = ended
+    assert (first, second) == (0, 1) and second_steps > first_steps > 10
+    assert [env.status for env in envs] == ["lap_complete", "lap_complete"]
+    assert len(fast.lap_times) == len(slow.lap_times) == 1
 
 
 def test_a_car_that_hits_a_rival_serves_its_penalty_where_it_stands_as_a_ghost():
