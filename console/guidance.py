@@ -95,15 +95,16 @@ class HyperparameterHelp:
 def _allowed(setting: Setting) -> str:
     if setting.choices:
         if len(setting.choices) == 1:
-            return f"{_shown(setting.choices[0])} only"
-        shown = [_shown(choice) for choice in setting.choices]
+            return f"{_spelled(setting.choices[0])} only"
+        shown = [_spelled(choice) for choice in setting.choices]
         return ", ".join(shown[:-1]) + " or " + shown[-1]
     if setting.low == setting.high:
-        return f"{_shown(setting.low)} only"
-    return f"{_shown(setting.low)} to {_shown(setting.high)}"
+        return f"{_spelled(setting.low)} only"
+    return f"{_spelled(setting.low)} to {_spelled(setting.high)}"
 
 
-def _shown(value) -> str:
+def _spelled(value) -> str:
+    """A setting's value as a racer reads it: "Huber", 1e-8 (not 1e-08), 10."""
     names = {"huber": "Huber", "mse": "mean squared error"}
     if isinstance(value, str):
         return names.get(value, value)
@@ -119,7 +120,7 @@ def hyperparameter_help() -> dict[str, list[HyperparameterHelp]]:
                 setting.name,
                 setting.label,
                 _allowed(setting),
-                _shown(setting.default),
+                _spelled(setting.default),
                 *GUIDANCE[setting.name],
                 fixed=len(setting.choices) == 1
                 or (setting.low is not None and setting.low == setting.high),

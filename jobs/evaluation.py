@@ -52,7 +52,7 @@ from rl.policies import Policy
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, leases, lifecycle, live, selectors, signals
+from training import artifacts, leases, lifecycle, selectors, signals, streams
 from training.models import EvaluationJob, EvaluationTrial, RLModel
 
 logger = logging.getLogger(__name__)
@@ -374,9 +374,9 @@ class EvaluationCar:
         with tempfile.TemporaryDirectory(prefix="pitlane-evaluation-") as directory:
             video_path = Path(directory) / artifacts.EVALUATION_VIDEO
             self._writer = _VideoWriter(video_path)
-            group = live.evaluation_group(self.evaluation.pk)
+            group = streams.evaluation_group(self.evaluation.pk)
             try:
-                with live.FramePublisher(redis_client(timeout=5.0), group) as self._publisher:
+                with streams.FramePublisher(redis_client(timeout=5.0), group) as self._publisher:
                     yield
             finally:
                 self._writer.close()
@@ -466,13 +466,15 @@ class EvaluationCar:
         if not held:
             raise leases.LeaseLost(f"evaluation {evaluation.pk}")
 
-    def _show(self, publisher: live.FramePublisher, views, unwrapped, frame, observation) -> None:
+    def _show(
+        self, publisher: streams.FramePublisher, views, unwrapped, frame, observation
+    ) -> None:
         """Offer this step's ``views`` (the spectator's is the video's ``frame``) to the live
         viewers."""
         for view in views:
             image = frame if view == "spectator" else view_image(unwrapped, view, observation)
             publisher.offer(
-                live.frame_event(
+                streams.frame_event(
                     0,
                     view,
                     jpeg(image),
@@ -525,7 +527,7 @@ class EvaluationCar:
                 "trial": trial.number,
             }
         )
-        live.announce(live.evaluation_group(evaluation.pk), selectors.trial_row(trial=trial))
+        streams.announce(streams.evaluation_group(evaluation.pk), selectors.trial_row(trial=trial))
         return LapCounts(
             now["off_tracks"],
             now["crashes"],
@@ -614,6 +616,6 @@ def _model_free(evaluation: EvaluationJob) -> None:
 
 
 def _announce(evaluation: EvaluationJob) -> None:
-    live.announce(
-        live.evaluation_group(evaluation.pk), selectors.evaluation_status(evaluation=evaluation)
+    streams.announce(
+        streams.evaluation_group(evaluation.pk), selectors.evaluation_status(evaluation=evaluation)
     )

@@ -33,7 +33,7 @@ from rl.experience import JobChannel, LogEntry
 from rl.policy_lease import PolicyLease
 from rl.weights_cache import WeightsCache
 from sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
-from training import live
+from training import streams
 from training.models import Track, TrainingJob
 
 logger = logging.getLogger(__name__)
@@ -107,7 +107,9 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             where = _served_words(driver)
             driving = f"{name} is driving {shown.first() or track}{where}."
             channel.push_log([LogEntry("worker", driving)])
-            with live.FramePublisher(channel.client, live.training_group(job_id)) as publisher:
+            with streams.FramePublisher(
+                channel.client, streams.training_group(job_id)
+            ) as publisher:
                 viewing = Viewing(driver, publisher, worker)
                 try:
                     why = _drive(driver, channel, token, job, worker, viewing, printed, evaluator)
@@ -169,7 +171,7 @@ class Viewing:
     """A rollout worker's side of live viewing: it tells its sandbox which views someone watches,
     relays the frames the sandbox sends, and shows the car waiting while the trainer learns."""
 
-    def __init__(self, sandbox: Sandbox, publisher: live.FramePublisher, worker: int) -> None:
+    def __init__(self, sandbox: Sandbox, publisher: streams.FramePublisher, worker: int) -> None:
         self.sandbox, self.publisher, self.worker = sandbox, publisher, worker
         self.views: set[str] = set()
         self.last: dict[str, dict] = {}
@@ -184,7 +186,7 @@ class Viewing:
             self.views = views
 
     def relay(self, raw: dict) -> None:
-        frame = live.frame_from_child(raw, self.worker)
+        frame = streams.frame_from_child(raw, self.worker)
         if frame is not None:
             self.last[frame["view"]] = frame
             if self.shown is None:

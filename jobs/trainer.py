@@ -41,7 +41,7 @@ from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stop
 from sandbox.protocol import unpack
 from simulator.config import CONTROL_HZ
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, leases, lifecycle, live, services, signals
+from training import artifacts, leases, lifecycle, services, signals, streams
 from training.leases import LeaseLost
 from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 
@@ -177,8 +177,8 @@ class Trainer:
             return
         # never back from STOPPING: a stop that lands now wins
         lifecycle.MODEL.move(model.pk, RLModel.Status.TRAINING)
-        live.announce_training(job.pk)
-        live.announce_queue()
+        streams.announce_training(job.pk)
+        streams.announce_queue()
         self._build_learner()
         self.version = job.weights_version
         self.channel.start(job.attempt)
@@ -189,7 +189,7 @@ class Trainer:
         self.training_message = f"Training with {_workers(len(self.slots))} on {self._tracks()}"
         self.base_seconds = job.training_seconds
         waiting = leases.clock_write(job, self.base_seconds, message=WAITING_FOR_WORKER)
-        live.announce_training(job.pk)
+        streams.announce_training(job.pk)
         if not waiting:  # the racer stopped it while it was being prepared
             leases.log(job, "Stopped by the racer.")
             self.finish(TrainingJob.Status.COMPLETED)
@@ -215,7 +215,7 @@ class Trainer:
             to=TrainingJob.Status.IN_PROGRESS,
             message=self.training_message,
         )
-        live.announce_training(job.pk)
+        streams.announce_training(job.pk)
         if not started:  # the racer stopped it while it waited
             self.ending = "stop"
             return
@@ -246,7 +246,7 @@ class Trainer:
             to=TrainingJob.Status.INITIALIZING,
             message=WAITING_FOR_WORKER,
         )
-        live.announce_training(self.job.pk)
+        streams.announce_training(self.job.pk)
         if not waiting:  # the racer stopped it
             self.ending = "stop"
 
@@ -328,7 +328,7 @@ class Trainer:
             self.collected.append(episode)
         self.stopwatch.charge(TRANSFER)
         if payloads and self.episodes_told.due():  # the Progress line follows the cars
-            live.announce_training(job.pk)
+            streams.announce_training(job.pk)
         wanted = model.hyperparameters["num_episodes_between_training"]
         if len(self.collected) >= wanted:
             # Exactly ``wanted`` episodes an iteration, as DeepRacer's workers play their shares
@@ -362,7 +362,7 @@ class Trainer:
             leases.write(self.job, lease_expires=timezone.now() + leases.lease())
             if not leases.clock_write(self.job, spent):
                 self.ending = "stop"
-            live.announce_training(self.job.pk)
+            streams.announce_training(self.job.pk)
         elif self._stop_requested():
             self.ending = "stop"
         if self.ending is None and spent >= max_seconds:
@@ -456,8 +456,8 @@ class Trainer:
         split = self.stopwatch.take()
         wall = sum(split.values())
         Iteration.objects.filter(pk=row.pk).update(wall_seconds=wall, time_split=split)
-        live.announce_iteration(self.job.pk, number)
-        live.announce_training(self.job.pk)
+        streams.announce_iteration(self.job.pk, number)
+        streams.announce_training(self.job.pk)
         leases.log(
             self.job,
             f"Iteration {number}: {update.episodes} episodes, {update.steps} steps, "
@@ -481,7 +481,7 @@ class Trainer:
                 said[0] = now
                 message = update_message(done, total, epochs, left, about)
                 leases.clock_write(self.job, self._spent(), message=message)
-                live.announce_training(self.job.pk)
+                streams.announce_training(self.job.pk)
 
         progress(0, sum(e.steps for e in episodes))
         return progress
@@ -560,7 +560,7 @@ class Trainer:
             evaluation_points=[round(r["progress"], 2) for r in results],
             evaluation_seconds=round(sum(r["seconds"] for r in results), 3),
         )
-        live.announce_iteration(self.job.pk, version)
+        streams.announce_iteration(self.job.pk, version)
         learnt_from = Iteration.objects.filter(job=self.job, number__lte=version).aggregate(
             total=Sum("episodes")
         )["total"]
@@ -699,7 +699,7 @@ class Trainer:
         has_checkpoint = bool(job.last_checkpoint)
         ready = status == TrainingJob.Status.COMPLETED or has_checkpoint
         lifecycle.MODEL.move(self.model.pk, RLModel.Status.READY if ready else RLModel.Status.ERROR)
-        live.announce_training(job.pk)
+        streams.announce_training(job.pk)
         notifications.training_ended(job=job)
 
 

@@ -38,10 +38,10 @@ class EventInlineForm(forms.ModelForm):
 
     def add_error(self, field: str | None, error) -> None:
         if field is None and isinstance(error, ValidationError) and hasattr(error, "error_dict"):
-            error = ValidationError(self._shown(error.error_dict))
+            error = ValidationError(self._errors_where_seen(error.error_dict))
         super().add_error(field, error)
 
-    def _shown(self, errors: dict[str, list[ValidationError]]) -> dict:
+    def _errors_where_seen(self, errors: dict[str, list[ValidationError]]) -> dict:
         shown: dict[str, list] = {}
         for name, messages_ in errors.items():
             field = self.fields.get(name)

@@ -2,7 +2,7 @@
 
 Anyone who may see the event may listen (public events need no login). Messages are JSON:
 ``leaderboard`` when the rankings changed, ``submission`` when a submission's status or score
-did, ``queue``, ``timing`` and ``winner`` for live and physical races (see ``racing.live``).
+did, ``queue``, ``timing`` and ``winner`` for live and physical races (see ``racing.broadcasts``).
 
 ``ws/live-turns/<evaluation id>/`` streams a live race's turn (its evaluation's frames, as
 ``training.consumers`` streams an evaluation to its owner) to everyone who may see the event.
@@ -17,11 +17,11 @@ from channels.generic.websocket import AsyncWebsocketConsumer
 
 from common.sockets import ClosesOnLayerOutage
 from racing import selectors
-from racing.live import event_group
+from racing.broadcasts import event_group
 from racing.models import Event, LiveEntry
 from training import selectors as training_selectors
 from training.consumers import LiveConsumer
-from training.live import evaluation_group
+from training.streams import evaluation_group
 
 REFUSED = 4404
 

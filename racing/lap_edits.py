@@ -25,7 +25,7 @@ from django.db import transaction
 from django.utils import timezone
 
 from common.formatting import laptime
-from racing import live
+from racing import broadcasts
 from racing.models import Lap, LapEdit, Submission
 from racing.timing import (
     MAX_OFF_TRACKS,
@@ -159,4 +159,4 @@ def _edited(submission: Submission) -> None:
     if submission.status == Submission.Status.COMPLETED:
         physical_run_rescore(submission=submission)
     elif (run := getattr(submission, "physical_run", None)) is not None:
-        live.announce_timing(run)
+        broadcasts.announce_timing(run)

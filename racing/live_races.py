@@ -23,7 +23,7 @@ from django.db.models import Max
 from common.lifecycle import Lifecycle
 from common.refusals import Refused
 from notifications import services as notifications
-from racing import live, selectors, services
+from racing import broadcasts, selectors, services
 from racing.models import Event, LiveEntry, LiveSession, Submission
 from training.models import RLModel
 
@@ -79,7 +79,7 @@ def live_session_open(
             "autolaunch": autolaunch,
         },
     )
-    live.announce_queue(session)
+    broadcasts.announce_queue(session)
     return session
 
 
@@ -111,7 +111,7 @@ def live_entry_join(
             speed=speed,
             position=last + 1,
         )
-    live.announce_queue(session)
+    broadcasts.announce_queue(session)
     return entry
 
 
@@ -133,7 +133,7 @@ def live_entry_move(*, entry: LiveEntry, places: int) -> LiveEntry:
         moved = waiting.pop(index)
         waiting.insert(max(0, min(len(waiting), index + places)), moved)
         _number(waiting)
-    live.announce_queue(entry.session)
+    broadcasts.announce_queue(entry.session)
     return moved
 
 
@@ -141,7 +141,7 @@ def live_entry_remove(*, entry: LiveEntry) -> None:
     """Take a waiting racer out of the queue."""
     if not LIVE_ENTRY.move(entry, _L.REMOVED, only_from=frozenset({_L.WAITING})):
         raise LiveRefused("Only a racer still waiting can be taken out: a turn drives to its end.")
-    live.announce_queue(entry.session)
+    broadcasts.announce_queue(entry.session)
 
 
 def live_entry_restart(*, entry: LiveEntry) -> LiveEntry:
@@ -152,7 +152,7 @@ def live_entry_restart(*, entry: LiveEntry) -> LiveEntry:
         if not LIVE_ENTRY.move(entry, _L.WAITING, only_from=again, submission=None):
             raise LiveRefused("Only a racer whose turn has ended can race again.")
         _number([entry, *waiting])
-    live.announce_queue(entry.session)
+    broadcasts.announce_queue(entry.session)
     return entry
 
 
@@ -187,7 +187,7 @@ def live_turn_launch(*, session: LiveSession) -> LiveEntry:
             leader = leader or submission.evaluation
             LIVE_ENTRY.move(entry, _L.DRIVING, submission=submission)
         following = _waiting(session).select_related("session__event").first()
-    live.announce_queue(session)
+    broadcasts.announce_queue(session)
     if following is not None:
         notifications.live_turn_next(entry=following)
     return entries[0]
@@ -202,7 +202,7 @@ def live_turn_ended(*, submission: Submission) -> None:
         return
     LIVE_ENTRY.move(entry, _L.DONE)
     session = entry.session
-    live.announce_queue(session)
+    broadcasts.announce_queue(session)
     if session.autolaunch and _waiting(session).exists():
         with contextlib.suppress(LiveRefused):  # the facilitator sees the queue and decides
             live_turn_launch(session=session)

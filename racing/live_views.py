@@ -10,7 +10,7 @@ from django.http import Http404, HttpRequest, HttpResponse
 from django.shortcuts import get_object_or_404, redirect, render
 from django.views.decorators.http import require_POST
 
-from racing import live, live_races
+from racing import broadcasts, live_races
 from racing.forms import LiveJoinForm, LiveSessionForm
 from racing.models import Event, LiveEntry, LiveSession
 from racing.views import _get_event_for_user, _get_event_run_by
@@ -55,7 +55,7 @@ def live_race(request: HttpRequest, slug: str) -> HttpResponse:
         "join": join,
         "queued": queued,
         "mine": mine,
-        "queue": live.queue_state(session),
+        "queue": broadcasts.queue_state(session),
         "speedup": settings.PITLANE_WATCHED_SPEEDUP,
         "settings_form": LiveSessionForm(initial=_settings(session)) if facilitator else None,
     }

@@ -27,7 +27,7 @@ from common.lifecycle import Lifecycle
 from common.refusals import Refused
 from common.transactions import outside_transaction
 from notifications import services as notifications
-from racing import live, scoring, selectors
+from racing import broadcasts, scoring, selectors
 from racing.models import (
     RANKING_ORDER,
     Division,
@@ -185,7 +185,7 @@ def submission_run(*, submission_id: int) -> Submission | None:
         )
     for entry in race:
         SUBMISSION.move(entry, Submission.Status.IN_PROGRESS)
-        live.announce_submission(entry)
+        broadcasts.announce_submission(entry)
     if submission.evaluation_id is not None:
         evaluations.run(submission.evaluation_id)
     for entry in race[1:]:
@@ -205,7 +205,7 @@ def _conclude(submission: Submission) -> Submission | None:
         SUBMISSION.move(
             submission, Submission.Status.FAILED, failure_reason=reason, finished_at=timezone.now()
         )
-        live.announce_submission(submission)
+        broadcasts.announce_submission(submission)
         _live_turn_ended(submission)
         return submission
     Submission.objects.filter(pk=submission.pk).update(
@@ -253,7 +253,7 @@ def submission_score(
             video=video_name,
         )
         ranked = ranking_offer(submission=submission)
-    live.announce_submission(submission, ranked=ranked)
+    broadcasts.announce_submission(submission, ranked=ranked)
     notifications.submission_scored(submission=submission)
     return submission
 
@@ -376,7 +376,7 @@ def event_rankings_recompute(*, event: Event) -> int:
     )
     for racer in get_user_model().objects.filter(pk__in=racers):
         ranking_recompute(event=event, racer=racer)
-    live.announce_leaderboard(event)
+    broadcasts.announce_leaderboard(event)
     return event.rankings.count()
 
 
@@ -387,7 +387,7 @@ def submission_disqualify(*, submission: Submission, reason: str) -> Submission:
     news = not submission.disqualified or submission.disqualification_reason != reason
     _update(submission, disqualified=True, disqualification_reason=reason)
     ranking_recompute(event=submission.event, racer=submission.racer)
-    live.announce_leaderboard(submission.event)
+    broadcasts.announce_leaderboard(submission.event)
     if news:
         notifications.submission_disqualified(submission=submission)
     return submission
@@ -398,7 +398,7 @@ def submission_reinstate(*, submission: Submission) -> Submission:
     leaderboard comes back where it is the racer's best, and the leaderboard says so."""
     _update(submission, disqualified=False, disqualification_reason="")
     ranking_recompute(event=submission.event, racer=submission.racer)
-    live.announce_leaderboard(submission.event)
+    broadcasts.announce_leaderboard(submission.event)
     return submission
 
 
@@ -412,7 +412,7 @@ def event_close(*, event: Event) -> Event:
         event.closes_at = now
         event.opens_at = min(event.opens_at, now)
         event.save(update_fields=["opens_at", "closes_at"])
-    live.announce_leaderboard(event)
+    broadcasts.announce_leaderboard(event)
     return event
 
 
@@ -537,7 +537,7 @@ def participant_remove(*, event: Event, racer: AbstractBaseUser) -> None:
         event.participants.remove(racer)
         event.removed.add(racer)
         Ranking.objects.filter(event=event, racer=racer).delete()
-    live.announce_leaderboard(event)
+    broadcasts.announce_leaderboard(event)
 
 
 def participant_readmit(*, event: Event, racer: AbstractBaseUser) -> None:
@@ -547,7 +547,7 @@ def participant_readmit(*, event: Event, racer: AbstractBaseUser) -> None:
         event.removed.remove(racer)
         event.participants.add(racer)
     ranking_recompute(event=event, racer=racer)
-    live.announce_leaderboard(event)
+    broadcasts.announce_leaderboard(event)
 
 
 def invitation_renew(*, event: Event) -> str:
@@ -568,7 +568,7 @@ def event_winner_show(*, event: Event, shown: bool = True) -> dict | None:
     event.winner_shown_at = timezone.now() if shown else None
     Event.objects.filter(pk=event.pk).update(winner_shown_at=event.winner_shown_at)
     winner = selectors.winner_shown(event=event)
-    live.announce_winner(event, winner)
+    broadcasts.announce_winner(event, winner)
     return winner
 
 

@@ -47,7 +47,7 @@ from accounts.selectors import racer_name
 from common.formatting import laptime
 from common.refusals import Refused
 from notifications import services as notifications
-from racing import live, scoring, selectors
+from racing import broadcasts, scoring, selectors
 from racing.models import Event, Lap, PhysicalRun, Submission
 from racing.services import SUBMISSION, ranking_offer, ranking_recompute
 
@@ -182,7 +182,7 @@ def physical_run_start(
         )
         SUBMISSION.move(submission, Submission.Status.IN_PROGRESS)
         run = PhysicalRun.objects.create(submission=submission, car=car, timekeeper=timekeeper)
-    live.announce_timing(run)
+    broadcasts.announce_timing(run)
     return run
 
 
@@ -223,7 +223,7 @@ def run_signal(*, run: PhysicalRun, signal: Signal) -> PhysicalRun:
             run.off_tracks += 1
             run.resets += signal.kind == "reset"
             run.save(update_fields=["off_tracks", "resets"])
-    live.announce_timing(run)
+    broadcasts.announce_timing(run)
     return run
 
 
@@ -340,8 +340,8 @@ def physical_run_finish(*, run: PhysicalRun) -> PhysicalRun:
             **_scored(submission),
         )
         ranked = ranking_offer(submission=submission)
-    live.announce_submission(submission, ranked=ranked)
-    live.announce_timing(run)
+    broadcasts.announce_submission(submission, ranked=ranked)
+    broadcasts.announce_timing(run)
     notifications.submission_scored(submission=submission)
     return run
 
@@ -358,8 +358,8 @@ def physical_run_rescore(*, submission: Submission) -> Submission:
         for name, value in fields.items():
             setattr(submission, name, value)
         ranking_recompute(event=submission.event, racer=submission.racer)
-    live.announce_submission(submission, ranked=True)
-    live.announce_leaderboard(submission.event, submission=submission.pk)
+    broadcasts.announce_submission(submission, ranked=True)
+    broadcasts.announce_leaderboard(submission.event, submission=submission.pk)
     if (submission.score_ms, submission.qualified) != before:  # the racer hears the new score
         notifications.submission_scored(submission=submission)
     return submission

@@ -28,7 +28,7 @@ from django.shortcuts import redirect, render
 from django.views.decorators.csrf import csrf_exempt
 from django.views.decorators.http import require_POST
 
-from racing import lap_edits, live, live_races, selectors, services, timing
+from racing import broadcasts, lap_edits, live_races, selectors, services, timing
 from racing.forms import LapEditForm, TimedRunForm
 from racing.models import Event, LiveSession, Submission
 from racing.views import _get_event_for_user, _get_event_run_by
@@ -59,7 +59,7 @@ def timekeeper(request: HttpRequest, slug: str) -> HttpResponse:
             form.add_error(None, str(refused))
         else:
             return redirect("racing:timekeeper", slug=event.slug)
-    state = live.timing_state(timing.running_run(event=event))
+    state = broadcasts.timing_state(timing.running_run(event=event))
     context = {
         "event": event,
         "form": form,
@@ -93,7 +93,7 @@ def timed_run(request: HttpRequest, slug: str, pk: int) -> HttpResponse:
     """A run's laps, with what the timekeeper may change in them and who changed what."""
     event, submission = _run_to_edit(request, slug, pk)
     laps = list(submission.laps.select_related("struck_by__profile").order_by("number"))
-    state = live.timing_state(getattr(submission, "physical_run", None))
+    state = broadcasts.timing_state(getattr(submission, "physical_run", None))
     for lap, shown in zip(laps, state.get("laps", []), strict=False):
         lap.far_below = shown["far_below"]
     context = {
@@ -127,7 +127,7 @@ def lap_edit(request: HttpRequest, slug: str, pk: int) -> HttpResponse:
         if error:  # a form it cannot read is the request's fault; a refused edit, the run's state
             return JsonResponse({"error": error}, status=409 if form.is_valid() else 400)
         submission.refresh_from_db()
-        return JsonResponse(live.timing_state(getattr(submission, "physical_run", None)))
+        return JsonResponse(broadcasts.timing_state(getattr(submission, "physical_run", None)))
     if error:
         messages.error(request, error)
     else:
@@ -213,8 +213,8 @@ def broadcast_state(request: HttpRequest, slug: str) -> JsonResponse:
     session = None if event.physical else LiveSession.objects.filter(event=event).first()
     return JsonResponse(
         {
-            "timing": live.timing_state(run),
-            "queue": live.queue_state(session),
+            "timing": broadcasts.timing_state(run),
+            "queue": broadcasts.queue_state(session),
             "top": selectors.top_entries(event=event, count=TOP),
             "winner": selectors.winner_shown(event=event),
         }
@@ -249,4 +249,4 @@ def _signal(event: Event, body: bytes) -> JsonResponse:
         run = timing.run_signal(run=run, signal=signal)
     except timing.TimingRefused as refused:
         return JsonResponse({"error": str(refused)}, status=409)
-    return JsonResponse(live.timing_state(run))
+    return JsonResponse(broadcasts.timing_state(run))

@@ -3,7 +3,7 @@
 ``ws/jobs/<id>/`` (training) and ``ws/evaluations/<id>/``. On connecting, the viewer gets the
 whole current state at once (a ``state`` message, then the newest frame of the view it watches),
 then ``status`` and ``iteration`` messages as JSON text, in the order they were sent, and frames as
-binary messages (see ``training.live``), sent as the publisher built them.
+binary messages (see ``training.streams``), sent as the publisher built them.
 
 Frames are flow-controlled: at most ``WINDOW`` are in flight to the browser, each released by the
 page's ``{"type": "ack"}`` once it has drawn the frame. Frames that come meanwhile replace one
@@ -25,7 +25,7 @@ from channels.generic.websocket import AsyncWebsocketConsumer
 
 from common.redis_client import redis_client
 from common.sockets import ClosesOnLayerOutage
-from training import live, selectors
+from training import selectors, streams
 from training.models import EvaluationJob, TrainingJob
 
 WINDOW = 2  # frames sent and not yet acknowledged
@@ -62,7 +62,7 @@ class LiveConsumer(ClosesOnLayerOutage, AsyncWebsocketConsumer):
             await self.close(code=REFUSED_FORBIDDEN)
             return
         self.group = group
-        self.stream = live.Stream(_viewers_redis(), self.group)
+        self.stream = streams.Stream(_viewers_redis(), self.group)
         self.worker, self.view = 0, "spectator"
         self.in_flight, self.pending = 0, None
         await self._redis(self.stream.watch, self.channel_name, self.worker, self.view)
@@ -91,7 +91,7 @@ class LiveConsumer(ClosesOnLayerOutage, AsyncWebsocketConsumer):
             await self._flush()
         elif message.get("type") == "watch":
             worker, view = message.get("worker"), message.get("view")
-            if isinstance(worker, int) and 0 <= worker < self.workers and view in live.VIEWS:
+            if isinstance(worker, int) and 0 <= worker < self.workers and view in streams.VIEWS:
                 self.worker, self.view, self.pending = worker, view, None
                 await self._redis(self.stream.watch, self.channel_name, worker, view)
                 await self._show_latest()
@@ -127,7 +127,7 @@ class LiveConsumer(ClosesOnLayerOutage, AsyncWebsocketConsumer):
 
     async def _renew(self) -> None:
         while True:
-            await asyncio.sleep(live.VIEWER_RENEW)
+            await asyncio.sleep(streams.VIEWER_RENEW)
             await self._redis(self.stream.watch, self.channel_name, self.worker, self.view)
 
     async def _redis(self, function, *args):
@@ -150,7 +150,7 @@ class LiveConsumer(ClosesOnLayerOutage, AsyncWebsocketConsumer):
 
 class TrainingConsumer(LiveConsumer):
     def group_for(self, pk: int) -> str:
-        return live.training_group(pk)
+        return streams.training_group(pk)
 
     def snapshot_for(self, user, pk: int) -> dict | None:
         job = TrainingJob.objects.select_related("model").filter(pk=pk).first()
@@ -162,7 +162,7 @@ class TrainingConsumer(LiveConsumer):
 
 class EvaluationConsumer(LiveConsumer):
     def group_for(self, pk: int) -> str:
-        return live.evaluation_group(pk)
+        return streams.evaluation_group(pk)
 
     def snapshot_for(self, user, pk: int) -> dict | None:
         evaluation = EvaluationJob.objects.select_related("model").filter(pk=pk).first()

@@ -22,7 +22,7 @@ from common import queueing
 from common.refusals import Refused
 from common.transactions import SlowStepInTransaction, outside_transaction
 from simulator import tracks as simulator_tracks
-from training import artifacts, configuration, leases, lifecycle, live, rewards, selectors
+from training import artifacts, configuration, leases, lifecycle, rewards, selectors, streams
 from training.models import (
     SEEDS,
     Direction,
@@ -439,8 +439,8 @@ def _clone_weights_start(job: TrainingJob, weights: str) -> bool:
             failure_reason=CLONE_COPY_FAILED.format(why=why),
         )
         lifecycle.MODEL.move(job.model_id, RLModel.Status.ERROR)
-    live.announce_training(job.pk)
-    live.announce_queue()
+    streams.announce_training(job.pk)
+    streams.announce_queue()
     return False
 
 
@@ -536,9 +536,9 @@ def training_stop(*, job: TrainingJob) -> TrainingJob:
                 clock_at=clock.at,
             )
             lifecycle.MODEL.move(job.model_id, RLModel.Status.STOPPING)
-    live.announce_training(job.pk)
+    streams.announce_training(job.pk)
     if job.status == TrainingJob.Status.CANCELED:
-        live.announce_queue()
+        streams.announce_queue()
     return job
 
 
@@ -693,8 +693,8 @@ def evaluation_stop(*, evaluation: EvaluationJob) -> EvaluationJob:
                 statuses.STOPPING,
                 message="Stopping: the trials it finished are kept",
             )
-    live.announce(
-        live.evaluation_group(evaluation.pk), selectors.evaluation_status(evaluation=evaluation)
+    streams.announce(
+        streams.evaluation_group(evaluation.pk), selectors.evaluation_status(evaluation=evaluation)
     )
     return evaluation
 

@@ -26,7 +26,7 @@ export function offTracks(count) {
   return count ? ` (${count} off-track${count > 1 ? "s" : ""})` : "";
 }
 
-// A live car's speed multiplier and what it makes of its model's top speed (racing.live's queue).
+// A live car's speed multiplier and what it makes of its model's top speed (racing.broadcasts's queue).
 export function speedText(car) {
   const top = car.top_speed ? `, up to ${car.top_speed.toFixed(1)} m/s${car.capped ? " (the car's limit)" : ""}` : "";
   return `${car.speed.toFixed(1)}× speed${top}`;

@@ -6,7 +6,7 @@ import re
 import pytest
 from playwright.sync_api import Page, expect
 
-from racing import live as racing_live
+from racing import broadcasts
 from racing import services as racing_services
 from racing.models import Submission
 from tests.browser.conftest import off_the_loop
@@ -14,7 +14,7 @@ from tests.helpers.accounts import PASSWORD
 from tests.helpers.browser import log_in
 from tests.helpers.league import event, race_evaluation
 from tests.helpers.models import ready_model
-from training import live, selectors
+from training import selectors, streams
 from training.models import EvaluationJob, EvaluationTrial
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -26,7 +26,7 @@ def announce_evaluation(evaluation: EvaluationJob, **fields) -> None:
     EvaluationJob.objects.filter(pk=evaluation.pk).update(**fields)
     evaluation.refresh_from_db()
     status = selectors.evaluation_status(evaluation=evaluation)
-    off_the_loop(live.announce, live.evaluation_group(evaluation.pk), status)
+    off_the_loop(streams.announce, streams.evaluation_group(evaluation.pk), status)
 
 
 def test_the_evaluation_page_says_queued_once_then_follows_the_evaluation(
@@ -77,7 +77,7 @@ def test_the_submission_page_follows_its_race_and_then_shows_the_score(page: Pag
 
     Submission.objects.filter(pk=submission.pk).update(status=Submission.Status.IN_PROGRESS)
     submission.refresh_from_db()
-    off_the_loop(racing_live.announce_submission, submission)
+    off_the_loop(broadcasts.announce_submission, submission)
     expect(badge).to_have_text("In progress")
     expect(badge).to_have_class(re.compile("badge-in_progress"))
     expect(page.get_by_text(QUEUED)).to_have_count(0)

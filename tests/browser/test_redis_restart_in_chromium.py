@@ -18,7 +18,7 @@ from tests.browser.conftest import off_the_loop
 from tests.helpers.accounts import racer
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
-from training import live
+from training import streams
 
 pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.slow]
 
@@ -36,9 +36,9 @@ def frames_shown(page: Page) -> int:
 def show_a_frame(page: Page, evaluation: int) -> None:
     """Frames of the turn, as its simulation offers them, until the broadcast shows one more."""
     shown = frames_shown(page)
-    with live.FramePublisher(redis_client(), live.evaluation_group(evaluation)) as frames:
+    with streams.FramePublisher(redis_client(), streams.evaluation_group(evaluation)) as frames:
         for _ in range(100):
-            frames.offer(live.frame_event(0, "spectator", jpeg(), episode=0, step=1))
+            frames.offer(streams.frame_event(0, "spectator", jpeg(), episode=0, step=1))
             page.wait_for_timeout(100)
             if frames_shown(page) > shown:
                 return

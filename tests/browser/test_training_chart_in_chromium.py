@@ -5,7 +5,7 @@ from tests.browser.conftest import ARTIFACTS, off_the_loop
 from tests.helpers.accounts import PASSWORD
 from tests.helpers.browser import log_in
 from tests.helpers.models import ready_model
-from training import live
+from training import streams
 from training.models import Iteration
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -125,7 +125,7 @@ def test_where_the_newest_iterations_time_went_is_shown_beside_the_graph_and_fol
         wall_seconds=8.0,
         time_split={**dict.fromkeys(split, 0.0), "driving": 2.0, "update": 6.0},
     )
-    off_the_loop(live.announce_iteration, job.pk, 5)
+    off_the_loop(streams.announce_iteration, job.pk, 5)
     expect(shown).to_contain_text("in iteration 5: 8.0 s")
     expect(shown.locator('[data-phase="update"]')).to_have_text("Policy update 6.0 s · 75%")
     # The model's training has ended (issue 54): no evaluation of iteration 5 is to come.

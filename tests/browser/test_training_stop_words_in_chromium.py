@@ -11,7 +11,7 @@ from tests.browser.conftest import off_the_loop
 from tests.helpers.accounts import PASSWORD
 from tests.helpers.browser import log_in
 from tests.helpers.training import training_job
-from training import live
+from training import streams
 from training.models import Iteration, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db(transaction=True)
@@ -40,7 +40,7 @@ def test_the_stopping_message_goes_when_the_training_ends(page: Page, alice, tra
 
     TrainingJob.objects.filter(pk=job.pk).update(status=TrainingJob.Status.COMPLETED, message="")
     RLModel.objects.filter(pk=job.model_id).update(status=RLModel.Status.READY)
-    off_the_loop(live.announce_training, job.pk)
+    off_the_loop(streams.announce_training, job.pk)
     expect(page.locator("[data-live-status]")).to_have_text("Completed")
     expect(said).to_be_hidden()
     expect(to_come).to_be_hidden()

@@ -142,7 +142,7 @@ def test_a_run_that_died_while_stopping_is_ended_by_the_next_and_said_without_it
         lease_owner=leases.RESUMING,  # claimed by leases.lapsed_evaluations for this run
     )
     announced = []
-    monkeypatch.setattr(runner.live, "announce", lambda group, status: announced.append(group))
+    monkeypatch.setattr(runner.streams, "announce", lambda group, status: announced.append(group))
     with django_capture_on_commit_callbacks() as after_commit:
         assert runner.run(evaluation.pk) is None
         assert announced == []  # nothing said, nor the model freed, under the row's lock
@@ -154,4 +154,4 @@ def test_a_run_that_died_while_stopping_is_ended_by_the_next_and_said_without_it
     assert evaluation.failure_reason == leases.EVALUATION_STOPPED_UNSAVED
     assert "without them" in evaluation.failure_reason and not evaluation.video
     assert RLModel.objects.get(pk=model.pk).status == RLModel.Status.READY
-    assert announced == [runner.live.evaluation_group(evaluation.pk)]
+    assert announced == [runner.streams.evaluation_group(evaluation.pk)]

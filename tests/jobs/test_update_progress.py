@@ -7,7 +7,7 @@ from common.redis_client import redis_client
 from jobs.trainer import UpdateEstimate, update_message
 from rl.experience import JobChannel
 from tests.helpers.training import trainer_initializing, training_job
-from training import live, selectors
+from training import selectors, streams
 from training.models import TrainingJob
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
@@ -118,7 +118,7 @@ def test_the_trainer_tells_the_page_each_episode_as_its_car_ends_it(alice, monke
     run = trainer_initializing(alice)
     monkeypatch.setattr(run, "_decode", lambda payload: None)  # no learner to read it with
     told = []
-    monkeypatch.setattr(live, "announce", lambda group, message: told.append(message))
+    monkeypatch.setattr(streams, "announce", lambda group, message: told.append(message))
     run.channel.beat(0)
     run._turn()  # the car drives
     told.clear()

@@ -278,7 +278,7 @@ def test_disqualifying_on_a_submissions_admin_page_asks_why_and_tells_the_racer(
 def test_reinstating_on_a_submissions_admin_page_clears_the_reason_and_announces_it(
     client, race_staff, alice, monkeypatch
 ):
-    from racing import live
+    from racing import broadcasts
 
     run = scored(event(), alice, 9_000, 9_000, 9_000)
     client.force_login(race_staff)
@@ -286,7 +286,7 @@ def test_reinstating_on_a_submissions_admin_page_clears_the_reason_and_announces
     laps = _laps_inline(run)
     client.post(change, {**laps, "disqualified": "on", "disqualification_reason": "Wrong car"})
     announced = []
-    monkeypatch.setattr(live, "announce_leaderboard", announced.append)
+    monkeypatch.setattr(broadcasts, "announce_leaderboard", announced.append)
     saved = client.post(change, {**laps, "disqualification_reason": "Wrong car"})
     assert saved.status_code == 302
     run.refresh_from_db()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from accounts.selectors import racer_name
-from racing import live, live_races
+from racing import broadcasts, live_races
 from racing.models import LiveEntry, Submission
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
@@ -126,7 +126,7 @@ def test_the_queue_says_what_each_multiplier_drives_and_moves_only_what_can_move
     session = live_races.live_session_open(event=race, facilitator=stella)
     live_races.live_entry_join(session=session, racer=alice, model=ready_model(alice), speed=0.8)
     live_races.live_entry_join(session=session, racer=bob, model=ready_model(bob), speed=1.2)
-    first, second = live.queue_state(session)["entries"]  # both models drive at 4 m/s
+    first, second = broadcasts.queue_state(session)["entries"]  # both models drive at 4 m/s
     assert (first["place"], first["first_waiting"], first["last_waiting"]) == (1, True, False)
     assert (second["place"], second["first_waiting"], second["last_waiting"]) == (2, False, True)
     assert (first["top_speed"], first["capped"]) == (pytest.approx(3.2), False)

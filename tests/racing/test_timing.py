@@ -11,7 +11,7 @@ from django.urls import reverse
 from django.utils import timezone
 
 from accounts.selectors import racer_name
-from racing import live, timing
+from racing import broadcasts, timing
 from racing.models import PhysicalRun, Ranking, RankingMethod, Submission
 from tests.helpers.league import DAY, event
 
@@ -298,10 +298,10 @@ def test_a_lap_longer_than_a_race_is_refused_and_undo_never_overflows(
 
 
 def test_a_lap_far_below_the_runs_others_is_flagged(tracks, alice, stella):
-    from racing import live
+    from racing import broadcasts
 
     run = drive(a_run(event(physical=True), alice, stella), 0, 10_000, 20_000, 26_000, 36_000)
-    laps = live.timing_state(run)["laps"]
+    laps = broadcasts.timing_state(run)["laps"]
     assert [lap["far_below"] for lap in laps] == [False, False, True, False]  # 6 s among 10 s
 
 
@@ -399,23 +399,23 @@ def test_a_lap_missed_at_the_end_is_added_after_the_finish_only(tracks, alice, s
 
 
 def test_a_best_lap_physical_event_ranks_any_counted_lap(tracks, alice, stella):
-    from racing import live
+    from racing import broadcasts
 
     race = event(physical=True, ranking_method=RankingMethod.BEST_LAP, laps_required=3)
     run = drive(a_run(race, alice, stella), 0, 9_000, "finish")
     submission = Submission.objects.get(pk=run.submission_id)
     assert submission.qualified and submission.score_ms == 9_000
-    assert live.timing_state(run)["verdict"].endswith("'s run scored 0:09.000.")
+    assert broadcasts.timing_state(run)["verdict"].endswith("'s run scored 0:09.000.")
     assert race.qualifying_rule == "any counted lap ranks: one is enough to qualify"
 
 
 def test_the_finish_says_why_a_run_did_not_qualify(tracks, alice, stella):
-    from racing import live
+    from racing import broadcasts
 
     named(alice, "VeraFast")
     race = event(physical=True, laps_required=3, laps_to_drive=3)
     run = drive(a_run(race, alice, stella), 0, 9_000, 18_000, "finish")
-    assert live.timing_state(run)["verdict"] == (
+    assert broadcasts.timing_state(run)["verdict"] == (
         "VeraFast's run did not qualify: 2 of the 3 counted laps in a row the event needs."
     )
     assert race.qualifying_rule == "a run ranks once it has 3 counted laps in a row"
@@ -481,11 +481,11 @@ def test_a_racers_race_time_runs_from_their_first_crossing_and_a_later_crossing_
 ):
     race = event(physical=True, race_time_min=2, laps_required=1)
     run = a_run(race, alice, stella)
-    waiting = live.timing_state(run)
+    waiting = broadcasts.timing_state(run)
     assert (waiting["race_time_min"], waiting["race_ends_ms"]) == (2, None)  # not started yet
     run = drive(run, 0, 10_000)
     started = PhysicalRun.objects.get(pk=run.pk).started_at
-    ends = live.timing_state(run)["race_ends_ms"]
+    ends = broadcasts.timing_state(run)["race_ends_ms"]
     assert ends == round((started + timedelta(minutes=2)).timestamp() * 1000)
     # the racer's two minutes run out on the track: the lap then is not counted
     PhysicalRun.objects.filter(pk=run.pk).update(
@@ -497,4 +497,4 @@ def test_a_racers_race_time_runs_from_their_first_crossing_and_a_later_crossing_
         drive(PhysicalRun.objects.get(pk=run.pk), 20_000)
     run = drive(PhysicalRun.objects.get(pk=run.pk), "undo", "undo")  # back before the start
     assert PhysicalRun.objects.get(pk=run.pk).started_at is None
-    assert live.timing_state(run)["race_ends_ms"] is None
+    assert broadcasts.timing_state(run)["race_ends_ms"] is None

@@ -13,7 +13,7 @@ from channels.testing import WebsocketCommunicator
 from common.redis_client import redis_client
 from tests.helpers.live import frame_header, viewer
 from tests.helpers.models import ready_model
-from training import live, selectors
+from training import selectors, streams
 from training.consumers import WINDOW, TrainingConsumer
 from training.models import TrainingJob
 
@@ -47,8 +47,8 @@ async def watching(job: TrainingJob, user) -> WebsocketCommunicator:
 async def send_frames(group: str, count: int, size: int = len(JPEG), first: int = 1) -> None:
     layer = get_channel_layer()
     for seq in range(first, first + count):
-        frame = live.frame_event(0, "spectator", JPEG[:4] + bytes(size - 4), seq=seq)
-        await layer.group_send(group, live.pack_frame(frame))
+        frame = streams.frame_event(0, "spectator", JPEG[:4] + bytes(size - 4), seq=seq)
+        await layer.group_send(group, streams.pack_frame(frame))
 
 
 async def test_the_owner_connects_and_gets_the_whole_state_at_once(alice):
@@ -107,7 +107,7 @@ async def test_a_bad_origin_is_refused_even_for_the_owner(alice):
 async def test_updates_arrive_in_the_order_they_were_sent(alice):
     job = await sync_to_async(queued_job)(alice)
     communicator = await watching(job, alice)
-    group = live.training_group(job.pk)
+    group = streams.training_group(job.pk)
     layer = get_channel_layer()
     for number in range(1, 51):
         await layer.group_send(
@@ -121,7 +121,7 @@ async def test_updates_arrive_in_the_order_they_were_sent(alice):
 async def test_frames_are_binary_with_a_header_and_each_is_released_by_an_ack(alice):
     job = await sync_to_async(queued_job)(alice)
     communicator = await watching(job, alice)
-    group = live.training_group(job.pk)
+    group = streams.training_group(job.pk)
 
     await send_frames(group, 1)
     header, jpeg = frame_header(await communicator.receive_from(timeout=5))
@@ -131,8 +131,8 @@ async def test_frames_are_binary_with_a_header_and_each_is_released_by_an_ack(al
 
     # Another worker's frames, or another view, are not this viewer's.
     for worker, view in ((1, "spectator"), (0, "camera")):
-        frame = live.frame_event(worker, view, JPEG, seq=50)
-        await get_channel_layer().group_send(group, live.pack_frame(frame))
+        frame = streams.frame_event(worker, view, JPEG, seq=50)
+        await get_channel_layer().group_send(group, streams.pack_frame(frame))
     assert await communicator.receive_nothing(timeout=0.3)
     await communicator.disconnect()
 
@@ -141,7 +141,7 @@ async def test_frames_are_binary_with_a_header_and_each_is_released_by_an_ack(al
 async def test_a_slow_viewer_gets_the_newest_frame_and_never_a_backlog(alice):
     job = await sync_to_async(queued_job)(alice)
     communicator = await watching(job, alice)
-    group = live.training_group(job.pk)
+    group = streams.training_group(job.pk)
 
     await send_frames(group, 10)  # the viewer acknowledges nothing
     first = [
@@ -169,7 +169,7 @@ async def test_a_slow_viewer_gets_the_newest_frame_and_never_a_backlog(alice):
 
 async def test_viewers_register_what_they_watch_and_leave_no_registration_behind(alice):
     job = await sync_to_async(queued_job)(alice)
-    stream = live.Stream(redis_client(), live.training_group(job.pk))
+    stream = streams.Stream(redis_client(), streams.training_group(job.pk))
     communicator = await watching(job, alice)
     assert await sync_to_async(stream.wanted)(0) == {"spectator"}
 
@@ -188,10 +188,10 @@ async def test_viewers_register_what_they_watch_and_leave_no_registration_behind
 
 async def test_a_viewer_who_reconnects_gets_the_newest_frame_at_once(alice):
     job = await sync_to_async(queued_job)(alice)
-    group = live.training_group(job.pk)
-    stream = live.Stream(redis_client(), group)
-    frame = live.frame_event(0, "spectator", JPEG, seq=42)
-    await sync_to_async(stream.keep_frame)(live.pack_frame(frame))
+    group = streams.training_group(job.pk)
+    stream = streams.Stream(redis_client(), group)
+    frame = streams.frame_event(0, "spectator", JPEG, seq=42)
+    await sync_to_async(stream.keep_frame)(streams.pack_frame(frame))
 
     communicator = await viewer(f"/ws/jobs/{job.pk}/", alice)
     await communicator.connect()
@@ -203,11 +203,11 @@ async def test_a_viewer_who_reconnects_gets_the_newest_frame_at_once(alice):
 
 async def test_the_publisher_sends_the_newest_frame_and_never_blocks_the_simulation(alice):
     job = await sync_to_async(queued_job)(alice)
-    group = live.training_group(job.pk)
+    group = streams.training_group(job.pk)
     communicator = await watching(job, alice)
     delivering, released = threading.Event(), threading.Event()
 
-    class StuckPublisher(live.FramePublisher):
+    class StuckPublisher(streams.FramePublisher):
         """Its deliveries wait until the test releases them: a channel layer that is slow."""
 
         def _deliver(self, loop, layer, frame):
@@ -217,10 +217,10 @@ async def test_the_publisher_sends_the_newest_frame_and_never_blocks_the_simulat
 
     def simulate() -> int:
         with StuckPublisher(redis_client(), group) as publisher:
-            publisher.offer(live.frame_event(0, "spectator", JPEG))
+            publisher.offer(streams.frame_event(0, "spectator", JPEG))
             assert delivering.wait(timeout=30)
             for _ in range(999):  # none of these offers waits for the stuck delivery
-                publisher.offer(live.frame_event(0, "spectator", JPEG))
+                publisher.offer(streams.frame_event(0, "spectator", JPEG))
             waiting = len(publisher._mailbox)
             released.set()
         return waiting
@@ -251,8 +251,8 @@ async def test_status_and_iterations_from_the_trainer_reach_the_page(alice):
             training_points=[[10.0, 30.0], [15.0, 50.0]],
             evaluation_points=[45.0],
         )
-        live.announce_training(job.pk)
-        live.announce_iteration(job.pk, 1)
+        streams.announce_training(job.pk)
+        streams.announce_iteration(job.pk, 1)
 
     await sync_to_async(trainer_side)()
     status = await communicator.receive_json_from(timeout=5)
@@ -275,7 +275,7 @@ async def test_an_update_announced_while_the_viewer_connects_is_not_lost(alice, 
     def state_then_the_worker_moves_on(consumer, user, pk):
         state = read_state(consumer, user, pk)
         TrainingJob.objects.filter(pk=pk).update(status=TrainingJob.Status.IN_PROGRESS)
-        live.announce_training(pk)
+        streams.announce_training(pk)
         return state
 
     monkeypatch.setattr(TrainingConsumer, "snapshot_for", state_then_the_worker_moves_on)

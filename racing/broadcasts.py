@@ -17,7 +17,7 @@ from accounts.selectors import racer_name
 from common.formatting import laptime
 from racing import scoring
 from racing.models import Event, LiveEntry, LiveSession, PhysicalRun, Submission
-from training import live
+from training import streams
 from training.models import scaled_speeds, top_speed
 
 
@@ -29,7 +29,7 @@ def announce_leaderboard(event: Event, **details) -> None:
     """The event's rankings changed: after the change is committed, every page that shows them
     hears it."""
     message = {"type": "leaderboard", "event": event.pk, **details}
-    transaction.on_commit(lambda: live.send(event_group(event.pk), _update(message)))
+    transaction.on_commit(lambda: streams.send(event_group(event.pk), _update(message)))
 
 
 def announce_submission(submission: Submission, *, ranked: bool = False) -> None:
@@ -45,7 +45,7 @@ def announce_submission(submission: Submission, *, ranked: bool = False) -> None
         "qualified": submission.qualified,
         "ranked": ranked,
     }
-    transaction.on_commit(lambda: live.send(event_group(submission.event_id), _update(message)))
+    transaction.on_commit(lambda: streams.send(event_group(submission.event_id), _update(message)))
 
 
 def timing_state(run: PhysicalRun | None) -> dict:
@@ -118,7 +118,7 @@ def announce_timing(run: PhysicalRun) -> None:
     def send() -> None:
         run.refresh_from_db()
         run.submission.refresh_from_db()
-        live.send(event_group(event_id), _update(timing_state(run)))
+        streams.send(event_group(event_id), _update(timing_state(run)))
 
     transaction.on_commit(send)
 
@@ -182,7 +182,7 @@ def announce_queue(session: LiveSession) -> None:
 
     def send() -> None:
         current = LiveSession.objects.filter(pk=session.pk).first()
-        live.send(event_group(event_id), _update(queue_state(current)))
+        streams.send(event_group(event_id), _update(queue_state(current)))
 
     transaction.on_commit(send)
 
@@ -190,7 +190,7 @@ def announce_queue(session: LiveSession) -> None:
 def announce_winner(event: Event, ranking: dict | None) -> None:
     """The organiser shows the winner on the broadcast: ``ranking`` is the leader (None: none)."""
     message = {"type": "winner", "event": event.pk, "winner": ranking}
-    transaction.on_commit(lambda: live.send(event_group(event.pk), _update(message)))
+    transaction.on_commit(lambda: streams.send(event_group(event.pk), _update(message)))
 
 
 def _now_ms() -> int:
