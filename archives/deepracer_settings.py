@@ -62,6 +62,7 @@ def archive_settings(
         )
     given = member_json(members, member_place(members, "hyperparameters.json")) or {}
     settings: configuration.Draft = {
+        **configuration.archived_draft(ours),  # a Pitlane export's; what it left out: defaults
         "name": name or ours.get("name") or _model_name(params),
         "description": str(ours.get("description") or "Imported."),
         "sensors": _sensors(metadata, notes),
@@ -69,20 +70,10 @@ def archive_settings(
         "action_space": metadata.get("action_space"),
         "algorithm": algorithm,
         "hyperparameters": _hyperparameters(algorithm, given, notes),
-        "max_minutes": ours.get("max_minutes", 60),
-        "extra_tracks": ours.get("extra_tracks", []),
-        "seed": ours.get("seed", 0),
-        "best_checkpoint_by": ours.get("best_checkpoint_by"),  # None before it was written
         "reward_function": reward,
     }
     _metadata_left_out(metadata, notes)
     if ours.get("track"):  # a Pitlane export: its settings; training_params.yaml repeats them
-        for key in ("track", "direction", "race_type", "boxes", "bots", "shell_colour"):
-            settings[key] = ours.get(key)
-        settings["camera_lens"] = ours.get("camera_lens")  # None before it was written: the default
-        settings["domain_randomisation"] = ours.get("domain_randomisation", False)
-        settings["world_name"] = ours.get("world_name", "")
-        settings["workers"] = ours.get("workers", 1)
         return settings
     on_track: list[str] = []
     settings["track"], settings["direction"], settings["world_name"] = deepracer_track(

@@ -48,7 +48,7 @@ from archives import history, logs_archive
 from common.refusals import Refused
 from common.transactions import outside_transaction
 from rl import hyperparameters
-from training import artifacts, selectors
+from training import artifacts, configuration, selectors
 from training.models import RLModel
 
 CAR_GRAPH = "agent/model.pb"  # where simapp puts it (tensorflow_model.py:355-371, 01f5f01)
@@ -200,23 +200,7 @@ def pitlane_settings(model: RLModel) -> dict:
     """What ``model_metadata.json`` and the others leave out, for an import that trains on."""
     return {
         "format": FORMAT,
-        "name": model.name,
-        "description": model.description,
-        "track": model.track.name,
-        "direction": model.direction,
-        "world_name": model.world_name,
-        "race_type": model.race_type,
-        "boxes": model.boxes,
-        "bots": model.bots,
-        "max_minutes": model.max_minutes,
-        "workers": model.workers,
-        "extra_tracks": list(model.extra_tracks),
-        "seed": model.seed,
-        "network_layout": model.network_layout,
-        "shell_colour": model.shell_colour,
-        "camera_lens": model.camera_lens,
-        "domain_randomisation": model.domain_randomisation,
-        "best_checkpoint_by": model.best_checkpoint_by,
+        **configuration.archived_of(model),
         "training_seconds": round(model.jobs.aggregate(s=Sum("training_seconds"))["s"] or 0, 1),
     }
 

@@ -209,24 +209,25 @@ class Trainer:
         (``_stop_clock``)."""
         job = self.job
         self.session_started = time.monotonic()
-        started = leases.clock_write(
-            job,
-            self.base_seconds,
-            to=TrainingJob.Status.IN_PROGRESS,
-            message=self.training_message,
-        )
+        # the log says training started as the status does, never after a page saw the status
+        with transaction.atomic():
+            started = leases.clock_write(
+                job,
+                self.base_seconds,
+                to=TrainingJob.Status.IN_PROGRESS,
+                message=self.training_message,
+            )
+            if started and self.first_run:
+                self.first_run = False  # said once, not each time the clock starts again
+                device = "the GPU" if self.learner.device.startswith("cuda") else "the CPU"
+                leases.log(
+                    job,
+                    f"Training started: {self.model.get_algorithm_display()}, "
+                    f"{_workers(len(self.slots))}, learning on {device}.",
+                )
         streams.announce_training(job.pk)
         if not started:  # the racer stopped it while it waited
             self.ending = "stop"
-            return
-        if self.first_run:
-            self.first_run = False  # said once, not each time the clock starts again
-            device = "the GPU" if self.learner.device.startswith("cuda") else "the CPU"
-            leases.log(
-                job,
-                f"Training started: {self.model.get_algorithm_display()}, "
-                f"{_workers(len(self.slots))}, learning on {device}.",
-            )
 
     def _stop_clock(self, why: str) -> None:
         """Stop the job's clock while no car drives (its rollout workers all stopped answering

@@ -10,10 +10,13 @@ it depends on, so that no page or command can save one unchecked.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import re
 from collections.abc import Mapping
-from typing import TypedDict
+from typing import Any
+
+from django.db.models import TextChoices
 
 from common.numbers import finite
 from common.refusals import Refused
@@ -47,74 +50,90 @@ class Invalid(Refused):
     """Settings with problems: ``errors`` maps each setting to what is wrong with it."""
 
 
-class Draft(TypedDict, total=False):
-    """A model's settings as a racer gives them, unchecked: from the create-model page
-    (``ModelCreateForm.settings``), ``manage.py createmodel``'s JSON or an imported archive's
-    model_metadata.json. ``check`` makes them ``ModelSettings``; what is left out takes
-    DeepRacer's default."""
+Draft = dict[str, Any]
+"""A model's settings as a racer gives them, unchecked: from the create-model page
+(``ModelCreateForm.settings``), ``manage.py createmodel``'s JSON or an imported archive's files,
+under ``ModelSettings``' names (the track by its name; the action space a list, a mapping or
+"unreadable": a discrete table that is not JSON). ``check`` makes them ``ModelSettings``; what is
+left out takes DeepRacer's default."""
 
-    name: str
-    description: str
-    track: str
-    direction: str
-    world_name: str  # one of the track's DeepRacer route files (an import's); a clone's source's
-    race_type: str
-    boxes: dict | None
-    bots: dict | None
-    vehicle: Vehicle | None
-    shell_colour: str
-    camera_lens: str
-    domain_randomisation: bool
-    sensors: list[str]
-    network: str
-    action_space: list | dict | str  # "unreadable": a discrete table that is not JSON
-    algorithm: str
-    hyperparameters: dict
-    max_minutes: int | float | str
-    workers: int | float | str
-    extra_tracks: list[str]
-    seed: int | str
-    best_checkpoint_by: str
-    cloned_checkpoint: str  # a clone's start: its source's "best" or "last" checkpoint
-    reward_function: str
-    cloned_from: RLModel | None
+
+def setting(
+    default: Any = dataclasses.MISSING,
+    *,
+    default_factory: Any = dataclasses.MISSING,
+    archived: bool = False,
+    drafted: bool = True,
+    environment: str = "",
+    choices: type[TextChoices] | None = None,
+    refusal: str = "",
+) -> Any:
+    """One of a model's settings, declared once in ``ModelSettings`` with what is derived from it:
+    ``archived``, written to an export's pitlane.json and read back by an import (the settings
+    DeepRacer's own files do not carry); ``drafted``, given back to ``check`` by ``draft``;
+    ``environment``, the simulator's argument it becomes (``environment_of``); ``choices`` and
+    ``refusal``, what ``check`` accepts (left out: ``default``) and what it says otherwise."""
+    metadata = {
+        "archived": archived,
+        "drafted": drafted,
+        "environment": environment,
+        "choices": choices,
+        "refusal": refusal,
+    }
+    return dataclasses.field(default=default, default_factory=default_factory, metadata=metadata)
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class ModelSettings:
-    """A model's settings, checked and complete: what ``check`` returns, ``model_create`` saves
-    (``row``), and the clone page shows again (``of`` a saved model). Sensors and action space
-    are in the vocabulary of DeepRacer's model_metadata.json, hyperparameters under the names of
-    its hyperparameters.json."""
+    """A model's settings, checked and complete: the one list of them. ``check`` returns them,
+    ``model_create`` saves them (``row``: ``RLModel``'s columns of the same names), the clone page
+    shows them again (``of`` a saved model), an export writes and an import reads the
+    ``archived`` ones (``archived_of``), and the simulator is made from the ``environment`` ones
+    (``environment_of``). Sensors and action space are in the vocabulary of DeepRacer's
+    model_metadata.json, hyperparameters under the names of its hyperparameters.json."""
 
-    name: str
-    description: str
-    track: Track
-    direction: str
-    race_type: str
-    boxes: dict | None
-    bots: dict | None
-    vehicle: Vehicle | None
-    shell_colour: str
-    sensors: list[str]
-    network: str
-    action_space_type: str
-    action_space: list[dict] | dict
-    algorithm: str
-    hyperparameters: dict
-    max_minutes: int
-    workers: int
-    extra_tracks: list[str]
-    seed: int
-    reward_function: str
-    cloned_from: RLModel | None = None
-    cloned_checkpoint: str = ""
-    best_checkpoint_by: str = BestCheckpointBy.PROGRESS
-    camera_lens: str = CameraLens.SIMULATOR
-    domain_randomisation: bool = False
-    world_name: str = ""  # blank: the route file the console drives the direction
+    name: str = setting(archived=True)
+    description: str = setting(archived=True)
+    track: Track = setting(archived=True, environment="track")
+    direction: str = setting(archived=True, environment="direction")
+    race_type: str = setting(archived=True, environment="race_type")
+    boxes: dict | None = setting(archived=True, environment="objects")
+    bots: dict | None = setting(archived=True, environment="bots")
+    vehicle: Vehicle | None = setting()
+    shell_colour: str = setting(archived=True, environment="car_colour")
+    sensors: list[str] = setting(environment="sensors")  # model_metadata.json's
+    network: str = setting(
+        Network.SHALLOW, choices=Network, refusal="The network is the 3-layer or the 5-layer CNN."
+    )
+    action_space_type: str = setting(drafted=False)  # the action space's kind
+    action_space: list[dict] | dict = setting(environment="action_space")
+    algorithm: str = setting()
+    hyperparameters: dict = setting()  # hyperparameters.json's
+    max_minutes: int = setting(60, archived=True)  # DeepRacer's console's
+    workers: int = setting(1, archived=True)
+    extra_tracks: list[str] = setting(default_factory=list, archived=True)
+    seed: int = setting(0, archived=True)
+    reward_function: str = setting()  # reward_function.py
+    cloned_from: RLModel | None = setting(None)
+    cloned_checkpoint: str = setting("")
+    best_checkpoint_by: str = setting(
+        BestCheckpointBy.PROGRESS,
+        archived=True,
+        choices=BestCheckpointBy,
+        refusal="Pick the best checkpoint by progress, reward or lap time.",
+    )
+    camera_lens: str = setting(
+        CameraLens.SIMULATOR,
+        archived=True,
+        environment="camera_lens",
+        choices=CameraLens,
+        refusal="Choose DeepRacer's simulated camera or the car's wide lens.",
+    )
+    domain_randomisation: bool = setting(False, archived=True, environment="randomise")
+    # blank: the route file the console drives the direction
+    world_name: str = setting("", archived=True)
     # a clone's weights are for its source's network, whatever this console's layout now is
-    network_layout: int = hp.NETWORK_LAYOUT
+    network_layout: int = setting(hp.NETWORK_LAYOUT, archived=True, drafted=False)
 
     @classmethod
     def of(cls, model: RLModel) -> ModelSettings:
@@ -127,36 +146,67 @@ class ModelSettings:
 
     def draft(self) -> Draft:
         """The settings as a racer would give them: ``check`` of these gives them back."""
-        return Draft(
-            name=self.name,
-            description=self.description,
-            track=self.track.name,
-            direction=self.direction,
-            race_type=self.race_type,
-            boxes=self.boxes,
-            bots=self.bots,
-            vehicle=self.vehicle,
-            shell_colour=self.shell_colour,
-            camera_lens=self.camera_lens,
-            sensors=list(self.sensors),
-            network=self.network,
-            action_space=self.action_space,
-            algorithm=self.algorithm,
-            hyperparameters=dict(self.hyperparameters),
-            max_minutes=self.max_minutes,
-            workers=self.workers,
-            extra_tracks=list(self.extra_tracks),
-            seed=self.seed,
-            domain_randomisation=self.domain_randomisation,
-            world_name=self.world_name,
-            reward_function=self.reward_function,
-            cloned_from=self.cloned_from,
-            best_checkpoint_by=self.best_checkpoint_by,
-            cloned_checkpoint=self.cloned_checkpoint,
-        )
+        return {
+            field.name: _given(getattr(self, field.name))
+            for field in dataclasses.fields(self)
+            if field.metadata["drafted"]
+        }
 
     def replace(self, **changes) -> ModelSettings:
         return dataclasses.replace(self, **changes)
+
+
+SETTINGS = {field.name: field for field in dataclasses.fields(ModelSettings)}
+ARCHIVED = [name for name, field in SETTINGS.items() if field.metadata["archived"]]
+
+
+def archived_of(model: RLModel) -> dict:
+    """The settings an export's pitlane.json holds (``ARCHIVED``), as an import reads them."""
+    return {name: _given(getattr(model, name)) for name in ARCHIVED}
+
+
+def archived_draft(ours: dict) -> Draft:
+    """The settings an export's pitlane.json (``ours``) gives, for ``check``; one it leaves out (an
+    older export's, written before the setting existed, or another console's) is the setting's
+    default where it has one."""
+    draft = {}
+    for name in ARCHIVED:
+        declared = SETTINGS[name]
+        if not declared.metadata["drafted"]:
+            continue
+        if name in ours:
+            draft[name] = ours[name]
+        elif (default := default_of(name)) is not dataclasses.MISSING:
+            draft[name] = default
+    return draft
+
+
+def default_of(name: str) -> Any:
+    """A setting's default (``dataclasses.MISSING`` for one a racer must give)."""
+    declared = SETTINGS[name]
+    if declared.default_factory is not dataclasses.MISSING:
+        return declared.default_factory()
+    return declared.default
+
+
+def environment_of(model: RLModel) -> dict:
+    """The simulator's arguments from a model's settings (``RLModel.environment_settings``)."""
+    made = {
+        field.metadata["environment"]: _given(getattr(model, name))
+        for name, field in SETTINGS.items()
+        if field.metadata["environment"]
+    }
+    made["car_colour"] = ShellColour.bgr(made["car_colour"])
+    return made
+
+
+def _given(value):
+    """A setting's value as a racer gives it: a track by its name, lists copied."""
+    if isinstance(value, Track):
+        return value.name
+    if isinstance(value, list | dict):
+        return copy.deepcopy(value)
+    return value
 
 
 def name_problem(name: str, *, owner) -> str | None:
@@ -190,6 +240,9 @@ def check(
     _check_car(settings, clean, errors, owner)
     _check_algorithm(settings, clean, errors)
     _check_schedule(settings, clean, errors)
+    for name, declared in SETTINGS.items():
+        if declared.metadata["choices"]:
+            _check_choice(settings, clean, errors, name)
     source = settings.get("reward_function") or ""
     if not source.strip():
         if reward_required:
@@ -237,13 +290,13 @@ def _check_algorithm(settings: dict, clean: dict, errors: dict) -> None:
 
 def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
     """How long and on how many simulations (and extra tracks) the model trains, and its seed."""
-    minutes = _integer(settings.get("max_minutes", 60))
+    minutes = _integer(settings.get("max_minutes", default_of("max_minutes")))
     if minutes is None or not MINUTES[0] <= minutes <= MINUTES[1]:
         errors["max_minutes"] = (
             f"The maximum training time is {MINUTES[0]} to {MINUTES[1]} minutes."
         )
     clean["max_minutes"] = minutes
-    workers = _integer(settings.get("workers", 1))
+    workers = _integer(settings.get("workers", default_of("workers")))
     if workers is None or not 1 <= workers <= MAX_WORKERS:
         errors["workers"] = f"A model trains in 1 to {MAX_WORKERS} simulations at once."
     clean["workers"] = workers
@@ -257,12 +310,9 @@ def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
     # An imported model's seed (its pitlane.json): one the trainer cannot take fails its training
     # at once, and one the database cannot hold failed the import with a 500.
     given = settings.get("seed")
-    clean["seed"] = 0 if given is None else _integer(given)
+    clean["seed"] = default_of("seed") if given is None else _integer(given)
     if clean["seed"] is None or not 0 <= clean["seed"] < SEEDS:
         errors["seed"] = SEED_RANGE
-    clean["best_checkpoint_by"] = settings.get("best_checkpoint_by") or BestCheckpointBy.PROGRESS
-    if clean["best_checkpoint_by"] not in BestCheckpointBy.values:
-        errors["best_checkpoint_by"] = "Pick the best checkpoint by progress, reward or lap time."
     clean["domain_randomisation"] = _switch(settings, "domain_randomisation", errors)
 
 
@@ -427,9 +477,6 @@ def _check_car(settings: dict, clean: dict, errors: dict, owner) -> None:
     )
     if clean["shell_colour"] not in ShellColour.values:
         errors["shell_colour"] = "Choose one of the garage's colours."
-    clean["camera_lens"] = settings.get("camera_lens") or CameraLens.SIMULATOR
-    if clean["camera_lens"] not in CameraLens.values:
-        errors["camera_lens"] = "Choose DeepRacer's simulated camera or the car's wide lens."
     sensors = settings.get("sensors") or ["FRONT_FACING_CAMERA"]
     try:
         camera, lidar = sim.sensors(sensors)
@@ -437,10 +484,6 @@ def _check_car(settings: dict, clean: dict, errors: dict, owner) -> None:
     except sim.ConfigError as error:
         errors["sensors"] = str(error)
         clean["sensors"] = []
-    network = settings.get("network") or Network.SHALLOW
-    if network not in Network.values:
-        errors["network"] = "The network is the 3-layer or the 5-layer CNN."
-    clean["network"] = network
     space = settings.get("action_space")
     try:
         actions = sim.action_space(space)
@@ -459,6 +502,14 @@ def _check_car(settings: dict, clean: dict, errors: dict, owner) -> None:
 
 def _directions(track: Track) -> list[str]:
     return [name for name in ("counterclockwise", "clockwise") if getattr(track, name)]
+
+
+def _check_choice(settings: dict, clean: dict, errors: dict, name: str) -> None:
+    """A setting with ``choices`` (``ModelSettings``): its default when left out."""
+    declared = SETTINGS[name]
+    clean[name] = settings.get(name) or declared.default
+    if clean[name] not in declared.metadata["choices"].values:
+        errors[name] = declared.metadata["refusal"]
 
 
 def _switch(settings: dict, name: str, errors: dict) -> bool:

@@ -443,28 +443,23 @@ class ModelCreateForm(TrackAndRaceFields):
 
     @staticmethod
     def initial_from(model: configuration.ModelSettings) -> dict:
-        """The page filled in with a model's settings: what Clone starts from."""
+        """The page filled in with a model's settings: what Clone starts from. The settings the
+        page takes as they are saved are shown as they are (``configuration.SETTINGS``); a
+        clone's own start is chosen anew."""
+        draft = model.draft()
         initial = {
-            "name": f"{model.name}-clone"[:64],
-            "description": model.description,
-            "track": model.track.name,
-            "direction": model.direction,
-            "race_type": model.race_type,
-            "camera": next((s for s in model.sensors if s in Vehicle.Camera.values), ""),
-            "lidar": next((s for s in model.sensors if s in ("LIDAR", "SECTOR_LIDAR")), ""),
-            "vehicle": model.vehicle.pk if model.vehicle else None,
-            "camera_lens": model.camera_lens,
-            "network": model.network,
-            "action_space_type": model.action_space_type,
-            "algorithm": model.algorithm,
-            "max_minutes": model.max_minutes,
-            "workers": model.workers,
-            "extra_tracks": list(model.extra_tracks),
-            "reward_function": model.reward_function,
-            "domain_randomisation": model.domain_randomisation,
-            "best_checkpoint_by": model.best_checkpoint_by,
-            **RaceConditionFields.conditions_shown(model.boxes, model.bots),
+            name: value
+            for name, value in draft.items()
+            if name in ModelCreateForm.base_fields and name != "cloned_checkpoint"
         }
+        initial.update(
+            name=f"{model.name}-clone"[:64],
+            vehicle=model.vehicle.pk if model.vehicle else None,
+            camera=next((s for s in model.sensors if s in Vehicle.Camera.values), ""),
+            lidar=next((s for s in model.sensors if s in ("LIDAR", "SECTOR_LIDAR")), ""),
+            action_space_type=model.action_space_type,
+            **RaceConditionFields.conditions_shown(model.boxes, model.bots),
+        )
         if model.action_space_type == "discrete":
             initial["actions"] = json.dumps(model.action_space)
         else:
@@ -508,15 +503,11 @@ class ModelCreateForm(TrackAndRaceFields):
                 action_space = "unreadable"
         algorithm = data["algorithm"]
         draft: configuration.Draft = {
-            "name": data["name"],
-            "description": data.get("description", ""),
+            # the settings the page takes as they are saved (blank: check's default)
+            **{name: data.get(name) for name in configuration.SETTINGS if name in data},
             **self.race_settings(),
             "sensors": sensors,
-            "vehicle": vehicle,
-            "camera_lens": data.get("camera_lens") or CameraLens.SIMULATOR,
-            "network": data["network"],
             "action_space": action_space,
-            "algorithm": algorithm,
             "hyperparameters": {
                 # DeepRacer's keys this console keeps without using: a clone keeps its source's
                 **self._kept_hyperparameters(algorithm),
@@ -526,13 +517,9 @@ class ModelCreateForm(TrackAndRaceFields):
                     if data.get(f"{algorithm}__{s.name}") not in (None, "")
                 },
             },
-            "max_minutes": data["max_minutes"],
-            "workers": data["workers"],
             "extra_tracks": [track.name for track in data.get("extra_tracks") or []],
-            "reward_function": data["reward_function"],
-            "domain_randomisation": bool(data.get("domain_randomisation")),
-            "best_checkpoint_by": data.get("best_checkpoint_by"),  # blank: check's default
         }
+        draft.pop("cloned_checkpoint", None)
         if self.source is not None:
             draft["cloned_checkpoint"] = data.get("cloned_checkpoint")  # blank: the best
         return draft

@@ -362,19 +362,14 @@ class RLModel(RaceConditions):
 
     def environment_settings(self, track: str | None = None) -> dict:
         """The keyword arguments of ``gymnasium.make("Pitlane/DeepRacer-v0", ...)``; on another
-        ``track`` than its own, that track's route for the direction (``route_on``)."""
+        ``track`` than its own, that track's route for the direction (``route_on``). Each
+        setting's argument is declared with the setting (``training.configuration``)."""
+        from training.configuration import environment_of  # which imports these models
+
         return {
+            **environment_of(self),
             "track": track or self.track.name,
-            "direction": self.direction,
             "route": self.route_on(track),
-            "sensors": list(self.sensors),
-            "action_space": self.action_space,
-            "race_type": self.race_type,
-            "objects": self.boxes,
-            "bots": self.bots,
-            "car_colour": ShellColour.bgr(self.shell_colour),
-            "camera_lens": self.camera_lens,
-            "randomise": self.domain_randomisation,
         }
 
     @property

@@ -30,7 +30,7 @@ from tests.helpers.archives import (
     virtual_archive,
 )
 from tests.helpers.models import ready_model
-from training import artifacts, selectors
+from training import artifacts, configuration, selectors
 from training.configuration import ModelSettings, check
 from training.models import RLModel, ShellColour, Track, TrainingJob
 from training.rewards import EXAMPLES
@@ -693,9 +693,19 @@ def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(
         "discount_factor": 0.99,
     }
     stored.pop("stack_size")  # a model from before the kept keys: the export fills them in
-    RLModel.objects.filter(pk=original.pk).update(
-        hyperparameters=stored, best_checkpoint_by="reward"
-    )
+    # every setting pitlane.json carries (the declared list's), away from its default
+    carried = {
+        "description": "Round trip.",
+        "race_type": "OBJECT_AVOIDANCE",
+        "boxes": {"count": 4, "randomize": True},
+        "shell_colour": ShellColour.ORANGE,
+        "max_minutes": 30,
+        "seed": 7,
+        "best_checkpoint_by": "reward",
+        "camera_lens": "wide",
+        "domain_randomisation": True,
+    }
+    RLModel.objects.filter(pk=original.pk).update(hyperparameters=stored, **carried)
     original.refresh_from_db()
     members = {}
     with tarfile.open(fileobj=io.BytesIO(virtual_archive(original)), mode="r:gz") as tar:
@@ -708,7 +718,9 @@ def test_our_own_export_round_trips_every_hyperparameter_in_deepracers_spelling(
     assert list(json.loads(written)) == sorted(expected)  # as simapp writes it: sorted keys
     imported = imports.import_model(owner=bob, archive=io.BytesIO(virtual_archive(original)))
     assert imported.model.hyperparameters == expected
-    assert imported.model.best_checkpoint_by == "reward"  # pitlane.json carries it
+    for name in configuration.ARCHIVED:  # pitlane.json carries them
+        assert getattr(imported.model, name) == getattr(original, name), name
+    assert imported.model.boxes == carried["boxes"] and imported.model.camera_lens == "wide"
     assert not [note for note in imported.notes if "carried over" in note]
 
 

@@ -198,7 +198,7 @@ def test_the_evaluate_page_shows_only_the_chosen_race_types_settings(page: Page,
     page.get_by_label("Head-to-bot").check()
     expect(boxes).to_be_hidden()
     expect(bots).to_be_visible()
-    expect(page.get_by_label("Bot speed [m/s]")).to_have_attribute("max", "6")
+    expect(page.get_by_label("Bot car speed [m/s]")).to_have_attribute("max", "6.0")
 
 
 def test_a_refused_model_names_the_sections_to_fix_and_links_to_each(page: Page, alice, tracks):

@@ -49,7 +49,7 @@ def visible_text(html: str) -> str:
 def evaluated(monkeypatch):
     """Run an evaluation of a model through the path every evaluation and race takes, up to
     the weights it drives with; the driving itself is another test's business."""
-    monkeypatch.setattr(evaluation, "_drive", lambda *args: None)
+    monkeypatch.setattr(evaluation.Race, "_drive", lambda *args: None)
     monkeypatch.setattr(evaluation.EvaluationCar, "_save", lambda *args: None)
 
     def run(model: RLModel, which: str) -> EvaluationJob:

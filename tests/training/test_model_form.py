@@ -1,6 +1,7 @@
 """The create-model form: every error from its one real cause, at the field or the action-table
 cell it concerns; every number's range and default on the page; what a clone keeps, locked."""
 
+import inspect
 import json
 import re
 
@@ -8,6 +9,7 @@ import pytest
 from django.urls import reverse
 
 from simulator import config as sim
+from simulator.env import DeepRacerEnv
 from tests.helpers.models import STRAIGHT_AHEAD, ready_model
 from tests.helpers.training import field_html, form_data, post
 from tests.helpers.training import settings as training_settings
@@ -276,3 +278,14 @@ def test_the_evaluate_page_shows_only_the_chosen_race_types_settings(
         "HEAD_TO_BOT": race_type == "HEAD_TO_BOT",
     }
     assert "training/evaluation_create.js" in page
+
+
+def test_each_setting_is_declared_once_a_column_of_the_model_and_an_argument_of_the_simulator():
+    """configuration.ModelSettings is the one list: the row, the archive and the environment are
+    derived from it, so each declared setting must be the model's column of the same name and
+    each of its environment arguments one the simulator takes."""
+    columns = {field.name for field in RLModel._meta.get_fields()}
+    assert set(configuration.SETTINGS) <= columns
+    arguments = inspect.signature(DeepRacerEnv).parameters
+    made = {f.metadata["environment"] for f in configuration.SETTINGS.values()}
+    assert made - {""} <= set(arguments)
