@@ -19,11 +19,16 @@ run: $(VENV)/.run-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	$(BIN)/python manage.py runconsole
 
+# The suite in TEST_PROCESSES processes (pytest-xdist), those sharing a session's service together
+# (tests/conftest.py); TEST_PROCESSES=0 runs it in one.
+TEST_PROCESSES ?= 2
+PARALLEL = $(if $(filter 0,$(TEST_PROCESSES)),,-n $(TEST_PROCESSES) --dist loadgroup --no-loadscopereorder)
+
 test: lint
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	@scripts/ensure-system-package.sh chromium command -v chromium
 	@scripts/ensure-system-package.sh postgresql sh -c 'command -v initdb || ls /usr/lib/postgresql/*/bin/initdb'
-	$(BIN)/python -m pytest $(PYTEST_ARGS)
+	$(BIN)/python -m pytest $(PARALLEL) $(PYTEST_ARGS)
 
 # Not the browser (Chromium), cluster (several machines), TensorFlow nor slow tests (marked: each
 # takes seconds, a real worker or a training run): run `make test` before a commit; this is for
@@ -32,7 +37,7 @@ test-quick: $(VENV)/.test-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
 	@scripts/ensure-system-package.sh postgresql sh -c 'command -v initdb || ls /usr/lib/postgresql/*/bin/initdb'
 	$(BIN)/python -m pytest -m "not browser and not cluster and not tensorflow and not slow" \
-		$(PYTEST_ARGS)
+		$(PARALLEL) $(PYTEST_ARGS)
 
 cluster: $(VENV)/.test-installed
 	@scripts/ensure-system-package.sh redis-server command -v redis-server

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -33,16 +34,45 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Browser tests are marked, and run last: the slowest, and the ones that need everything.
     Tests that take the ``tensorflow`` fixture are marked too, and those that need the suite's
     Celery worker are slow (``make test-quick`` leaves them out: TensorFlow takes seconds to
-    load, the worker to start, and its tasks drive the simulator)."""
+    load, the worker to start, and its tasks drive the simulator).
+
+    Where the suite runs in several processes (``make test``: pytest-xdist's ``-n 2 --dist
+    loadgroup``), the tests that share a costly session's service run in one process, so that it
+    is started once: the cluster's own machines first (the longest test, beside everything
+    else), then those of the suite's Celery workers, then the browser's; the others spread."""
     for item in items:
+        fixtures = getattr(item, "fixturenames", ())
         if item.path.is_relative_to(BROWSER_TESTS):
             item.add_marker(pytest.mark.browser)
-        fixtures = getattr(item, "fixturenames", ())
         if "tensorflow" in fixtures:
             item.add_marker(pytest.mark.tensorflow)
         if "celery_worker_process" in fixtures:
             item.add_marker(pytest.mark.slow)
-    items.sort(key=lambda item: item.path.is_relative_to(BROWSER_TESTS))
+        group = _process_group(item, fixtures)
+        if group:
+            item.add_marker(pytest.mark.xdist_group(group))
+    items.sort(key=_order)
+
+
+GROUPS = ("cluster", "celery", "browser")  # in the order they start
+
+
+def _process_group(item: pytest.Item, fixtures) -> str:
+    if item.get_closest_marker("cluster"):
+        return "cluster"
+    if item.path.is_relative_to(BROWSER_TESTS):
+        return "browser"
+    if "celery_worker_process" in fixtures:
+        return "celery"
+    return ""
+
+
+def _order(item: pytest.Item) -> int:
+    """Browser tests last when the suite runs in one process; in several, the groups first."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # a worker's collection: the scheduler's order
+        group = _process_group(item, getattr(item, "fixturenames", ()))
+        return GROUPS.index(group) if group else len(GROUPS)
+    return 1 if item.path.is_relative_to(BROWSER_TESTS) else 0
 
 
 @pytest.fixture(scope="session")
