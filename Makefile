@@ -22,7 +22,7 @@ run: $(VENV)/.run-installed
 # The suite in TEST_PROCESSES processes (pytest-xdist), those sharing a session's service together
 # (tests/conftest.py); TEST_PROCESSES=0 runs it in one.
 TEST_PROCESSES ?= 2
-PARALLEL = $(if $(filter 0,$(TEST_PROCESSES)),,-n $(TEST_PROCESSES) --dist loadgroup --no-loadscopereorder)
+PARALLEL = $(if $(filter 0,$(TEST_PROCESSES)),,-n $(TEST_PROCESSES) --dist loadgroup --no-loadscope-reorder)
 
 test: lint
 	@scripts/ensure-system-package.sh redis-server command -v redis-server
