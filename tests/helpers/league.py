@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import importlib
 import itertools
 from datetime import timedelta
 
+from django.contrib.auth.models import Group, Permission
 from django.utils import timezone
 
 from racing import services
@@ -72,3 +74,18 @@ def race_evaluation(model, event: Event, *, checkpoint: str = "best", **fields) 
     return EvaluationJob.objects.create(
         model=model, **services.race_rules(event, checkpoint=checkpoint), **fields
     )
+
+
+def race_staff_group() -> Group:
+    """The "Race staff" group with the rights its migrations give it (racing's 0003 and 0009):
+    a transactional test's flush removes what migrations wrote, and the suite's processes run
+    tests in no fixed order, so a test that needs the group cannot count on it being there."""
+    rights = [
+        *importlib.import_module("racing.migrations.0003_race_staff").MODELS,
+        *importlib.import_module("racing.migrations.0009_race_staff_live_and_physical").MODELS,
+    ]
+    group, _ = Group.objects.get_or_create(name="Race staff")
+    group.permissions.add(
+        *Permission.objects.filter(content_type__app_label="racing", content_type__model__in=rights)
+    )
+    return group

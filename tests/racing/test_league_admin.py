@@ -5,7 +5,7 @@ import importlib
 
 import pytest
 from django.apps import apps as django_apps
-from django.contrib.auth.models import Group, User
+from django.contrib.auth.models import User
 from django.templatetags.static import static
 from django.urls import reverse
 
@@ -14,7 +14,7 @@ from accounts.selectors import racer_name
 from notifications.models import Notification
 from racing.models import Event, Racer, Ranking, Submission
 from tests.helpers.accounts import PASSWORD, racer
-from tests.helpers.league import DAY, event, scored
+from tests.helpers.league import DAY, event, race_staff_group, scored
 
 pytestmark = pytest.mark.usefixtures("tracks")
 
@@ -22,7 +22,7 @@ pytestmark = pytest.mark.usefixtures("tracks")
 @pytest.fixture
 def race_staff(db) -> User:
     user = User.objects.create_user("rita", password=PASSWORD, is_staff=True)
-    user.groups.add(Group.objects.get(name="Race staff"))
+    user.groups.add(race_staff_group())
     return user
 
 

@@ -2,6 +2,7 @@ from datetime import date, timedelta
 from zoneinfo import ZoneInfo
 
 import pytest
+from django.core.files.storage import default_storage
 from django.core.management import call_command
 from django.db import connection
 from django.test.utils import CaptureQueriesContext
@@ -14,6 +15,7 @@ from racing.models import Event, Season
 from racing.services import demo_season_load
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
+from training import artifacts
 from training.models import RLModel
 from training.selectors import UNTRAINED
 
@@ -173,6 +175,9 @@ def test_the_submit_forms_model_list_costs_the_same_queries_however_many_models(
         job = untrained.jobs.get()
         untrained.pk, untrained.name = None, f"copy-{n}"
         untrained.save()
+        # a rolled-back test's model of the same id may have left a clone's weights, which
+        # would make its iteration 0 trained: the stored files outlive the database's rows
+        default_storage.delete(artifacts.path(untrained, artifacts.CLONED_WEIGHTS))
         job.pk, job.model = None, untrained
         job.last_checkpoint = f"{untrained.pk}/checkpoints/iteration-{iteration}.safetensors"
         job.save()

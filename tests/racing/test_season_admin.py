@@ -1,11 +1,12 @@
 """League staff add a season with its events in one admin form."""
 
 import pytest
-from django.contrib.auth.models import Group, User
+from django.contrib.auth.models import User
 from django.urls import reverse
 
 from racing.models import Event, Season
 from tests.helpers.accounts import PASSWORD
+from tests.helpers.league import race_staff_group
 from training.models import Track
 
 pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
@@ -14,7 +15,7 @@ pytestmark = [pytest.mark.django_db, pytest.mark.usefixtures("tracks")]
 @pytest.fixture
 def race_staff(db) -> User:
     user = User.objects.create_user("rita", password=PASSWORD, is_staff=True)
-    user.groups.add(Group.objects.get(name="Race staff"))
+    user.groups.add(race_staff_group())
     return user
 
 
