@@ -26,6 +26,7 @@ def asked(owner, source: Source, times: int = 1) -> list[Rescoring]:
     ]
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_a_racers_three_rescorings_hold_anothers_for_one_only(alice, bob):
     """Issue 55: bob's one re-scoring waited behind all three of alice's (each task ran the
     re-scoring that queued it); now the second task a worker runs is bob's."""

@@ -46,6 +46,7 @@ EPISODE_KEYS = {
 }
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 @pytest.mark.django_db
 def test_deepracer_utils_reads_the_training_logs_as_the_job_recorded_them(alice, tracks):
     model = new_model(alice, "paper-trained")
@@ -108,6 +109,7 @@ def test_training_traces_are_named_from_iteration_zero_as_deepracers():
     assert artifacts.status_label("off_track") == "Off track"
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 @pytest.mark.django_db
 def test_the_logs_archive_is_a_deepracer_model_folder(alice, tracks, client):
     model = new_model(alice, "paper-trained")

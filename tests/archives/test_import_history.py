@@ -221,6 +221,7 @@ def test_traces_over_the_limit_are_the_newest_iterations_whatever_the_archives_o
     assert Source.of_job(model.jobs.get()).iterations() == [2, 3]
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_the_traces_are_written_after_the_import_commits_the_model(alice, bob, tracks, monkeypatch):
     archive = virtual_archive(trained_three_iterations(alice))
     outside, depths = len(connection.atomic_blocks), []
@@ -236,6 +237,7 @@ def test_the_traces_are_written_after_the_import_commits_the_model(alice, bob, t
     assert depths == [outside] * 4  # the metrics and three traces, the quota row unlocked
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_traces_that_storage_fails_to_keep_are_a_note_and_the_model_stays(
     alice, bob, tracks, monkeypatch
 ):

@@ -134,6 +134,7 @@ def test_a_training_time_over_the_racers_minutes_is_theirs_to_change(alice, trac
     assert not RLModel.objects.exists()
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_an_archive_with_weights_is_still_imported_at_once(alice, bob, tracks):
     imported = imports.import_start(owner=bob, archive=io.BytesIO(car_archive(alice)))
     assert isinstance(imported, imports.Imported)

@@ -27,6 +27,7 @@ def argument_checks(monkeypatch):
     )
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 @pytest.mark.usefixtures("argument_checks")
 def test_a_graphed_update_learns_what_the_eager_update_learns():
     spaces = gymnasium.make(simulator.ENV_ID, track="pitlane-oval")  # DeepRacer's discrete actions

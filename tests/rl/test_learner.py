@@ -125,6 +125,7 @@ def test_building_and_training_a_learner_writes_nothing_outside_the_job(env, tmp
     assert [path.name for path in tmp_path.iterdir() if path.name != compile_cache] == []
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_minibatches_cut_on_the_device_make_the_same_update_as_sb3s_buffer(monkeypatch):
     spaces = gymnasium.make(simulator.ENV_ID, track="pitlane-oval")  # DeepRacer's discrete actions
     learner = learner_for(spaces, num_epochs=2, batch_size=16)
@@ -251,6 +252,7 @@ def test_bf16_features_move_the_log_probabilities_far_less_than_ppos_clip(env):
     assert torch.equal(log_probs(None), full)  # and acting is float32 again after the update
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_a_learner_computes_its_updates_features_in_the_precision_it_is_given(env):
     seen = []
     learner = Learner(

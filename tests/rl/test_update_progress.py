@@ -8,6 +8,7 @@ from rl.learner import Interrupted, Learner
 from tests.helpers.learning import driven, learner_for, steps_taken, synthetic_episode
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_a_ppo_update_tells_its_minibatches_done_of_all_its_epochs(env):
     learner = learner_for(env, num_epochs=3, batch_size=16)
     told, taken = [], steps_taken(learner)
@@ -17,6 +18,7 @@ def test_a_ppo_update_tells_its_minibatches_done_of_all_its_epochs(env):
     assert len(taken) == 9
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_a_ppo_update_that_a_target_kl_ends_early_still_ends_at_its_total(env):
     learner = learner_for(env, num_epochs=3, batch_size=16, lr=0.003)
     learner.model.target_kl = 1e-6

@@ -72,6 +72,7 @@ def test_anything_but_on_or_off_is_refused_in_words(alice, tracks):
     }
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_a_clone_and_our_own_export_keep_it(alice, bob, tracks):
     original = trained_model(alice, "shifty", domain_randomisation=True)
     clone_page = ModelCreateForm.initial_from(configuration.ModelSettings.of(original))

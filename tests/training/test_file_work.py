@@ -142,6 +142,7 @@ def test_a_clones_trainer_stays_unsent_however_long_its_weights_take_and_never_s
     assert artifacts.read(copy) == artifacts.read(source.jobs.get().best_checkpoint)
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_a_trainer_that_cannot_make_its_clones_missing_copy_fails_it_in_words(
     alice, tracks, monkeypatch
 ):
@@ -225,6 +226,7 @@ def test_an_import_whose_files_cannot_be_stored_leaves_no_model_and_no_files(
     assert not stored_objects() - before  # (an earlier test's files under its id went too)
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_a_trainer_saves_each_iterations_checkpoint_outside_its_transaction(
     alice, tracks, storage_writes, monkeypatch
 ):

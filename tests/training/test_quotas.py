@@ -26,6 +26,7 @@ def test_new_racers_get_the_defaults_staff_set(alice, bob):
     assert Quota.of(bob).max_models == 50
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_the_wizard_says_what_is_left_and_refuses_more_time(client, alice, tracks):
     Quota.objects.create(racer=alice, max_models=5, max_minutes_per_month=100)
     model = ready_model(alice)
