@@ -56,6 +56,7 @@ def test_deepracer_utils_reads_the_training_logs_as_the_job_recorded_them(alice,
     assert_training_logs_read_as_recorded(model)
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 @pytest.mark.django_db
 def test_the_training_metrics_are_deepracers_and_read_back_as_a_history(alice, tracks):
     model = new_model(alice, "paper-trained")
@@ -154,6 +155,7 @@ def test_only_the_models_owner_downloads_its_logs(alice, bob, tracks, client):
     assert response.status_code == 302 and "login" in response["Location"]
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 @pytest.mark.django_db
 def test_a_model_with_no_logs_yet_says_so(alice, tracks, client, tmp_path):
     model = new_model(alice, "untrained")

@@ -181,6 +181,7 @@ def test_a_damaged_record_falls_back_to_the_metrics_and_traces_past_the_limit_st
     assert Source.of_job(model.jobs.get()).iterations() == [2, 3]  # the newest come first
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_the_archive_fills_its_trace_budget_with_the_newest_training_traces_first(
     alice, tracks, monkeypatch
 ):

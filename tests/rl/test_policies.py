@@ -40,6 +40,7 @@ def test_driving_chooses_the_deterministic_action_without_the_critic(algorithm, 
         assert critic_ran == []
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_the_value_of_an_episodes_last_observation_is_the_critics_as_in_a_step():
     environment = {"track": "rookie-loop", "action_space": DISCRETE}
     env = gymnasium.make(simulator.ENV_ID, **environment)

@@ -29,6 +29,7 @@ def test_a_ppo_update_that_a_target_kl_ends_early_still_ends_at_its_total(env):
     assert 2 <= len(told) < 10 and told[-1] == (9, 9)
 
 
+@pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
 def test_a_sac_update_tells_its_gradient_steps_done_chunk_by_chunk(env, monkeypatch):
     monkeypatch.setattr(learner_module, "SAC_CHUNK", 2)  # few steps, cheap ones, several chunks
     learner = Learner(
