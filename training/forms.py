@@ -519,9 +519,8 @@ class ModelCreateForm(TrackAndRaceFields):
             },
             "extra_tracks": [track.name for track in data.get("extra_tracks") or []],
         }
-        draft.pop("cloned_checkpoint", None)
-        if self.source is not None:
-            draft["cloned_checkpoint"] = data.get("cloned_checkpoint")  # blank: the best
+        if self.source is None:  # only a clone starts from a checkpoint (blank: the best)
+            draft.pop("cloned_checkpoint", None)
         return draft
 
     def _kept_hyperparameters(self, algorithm: str) -> dict:
