@@ -40,6 +40,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     loadgroup``), the tests that share a costly session's service run in one process, so that it
     is started once: the cluster's own machines first (the longest test, beside everything
     else), then those of the suite's Celery workers, then the browser's; the others spread."""
+    rank: dict[str, int] = {}
     for item in items:
         fixtures = getattr(item, "fixturenames", ())
         if item.path.is_relative_to(BROWSER_TESTS):
@@ -51,7 +52,8 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         group = _process_group(item, fixtures)
         if group:
             item.add_marker(pytest.mark.xdist_group(group))
-    items.sort(key=_order)
+        rank[item.nodeid] = _rank(item, group)
+    items.sort(key=lambda item: rank[item.nodeid])
 
 
 GROUPS = ("cluster", "celery", "browser")  # in the order they start
@@ -67,10 +69,9 @@ def _process_group(item: pytest.Item, fixtures) -> str:
     return ""
 
 
-def _order(item: pytest.Item) -> int:
+def _rank(item: pytest.Item, group: str) -> int:
     """Browser tests last when the suite runs in one process; in several, the groups first."""
     if os.environ.get("PYTEST_XDIST_WORKER"):  # a worker's collection: the scheduler's order
-        group = _process_group(item, getattr(item, "fixturenames", ()))
         return GROUPS.index(group) if group else len(GROUPS)
     return 1 if item.path.is_relative_to(BROWSER_TESTS) else 0
 
