@@ -76,6 +76,19 @@ def _rank(item: pytest.Item, group: str) -> int:
     return 1 if item.path.is_relative_to(BROWSER_TESTS) else 0
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _torch_threads_shared_by_the_processes() -> None:
+    """In several test processes, each one's own PyTorch work (updates, policies, exports) takes
+    its share of the cores: two processes each running a thread a core wait at each other's
+    barriers (a SAC update test took 17 s in one run of ``make test-quick``, 3 s in another). The
+    workers started by the tests size their own threads."""
+    processes = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if processes > 1:
+        import torch
+
+        torch.set_num_threads(max(1, (os.cpu_count() or 1) // processes))
+
+
 @pytest.fixture(scope="session")
 def tensorflow():
     """TensorFlow, loaded once: the car's graph is run in it, as the car runs it."""
