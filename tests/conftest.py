@@ -122,6 +122,22 @@ def _fresh_rate_limits() -> Iterator[None]:
 
 
 @pytest.fixture
+def own_storage(settings, tmp_path) -> Path:
+    """Storage of the test's own, for a test that counts every stored file: the suite's Celery
+    workers share the process's storage, and a job a Celery test left training writes its files
+    there while later tests run (CI, 2026-11-29: a model's four files appeared during an import
+    test that counted them). Its folder."""
+    location = tmp_path / "storage"
+    default = settings.STORAGES["default"]
+    settings.STORAGES = {
+        **settings.STORAGES,
+        "default": {**default, "OPTIONS": {**default.get("OPTIONS", {}), "location": location}},
+    }
+    settings.MEDIA_ROOT = location
+    return location
+
+
+@pytest.fixture
 def alice(db) -> User:
     return racer("alice")
 

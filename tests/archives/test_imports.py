@@ -10,7 +10,6 @@ import tarfile
 import pytest
 import torch
 import yaml
-from django.conf import settings
 from django.core.files.uploadedfile import SimpleUploadedFile
 from django.core.management import CommandError, call_command
 from django.urls import reverse
@@ -29,7 +28,7 @@ from tests.helpers.archives import (
     trained_with_history,
     virtual_archive,
 )
-from tests.helpers.models import ready_model
+from tests.helpers.models import ready_model, stored_objects
 from training import artifacts, configuration, selectors
 from training.configuration import ModelSettings, check
 from training.models import RLModel, ShellColour, Track, TrainingJob
@@ -46,11 +45,6 @@ UNFIT_WEIGHTS = {
     "model/8_Step-7040.ckpt.data-00000-of-00001": b"\x00" * 32,
     "model/checkpoint": b'model_checkpoint_path: "8_Step-7040.ckpt"\n',
 }
-
-
-def stored_objects() -> set[str]:
-    root = settings.MEDIA_ROOT / "models"
-    return {str(path.relative_to(root)) for path in root.rglob("*") if path.is_file()}
 
 
 @pytest.mark.slow
@@ -211,7 +205,9 @@ HOSTILE = {
 @pytest.mark.slow
 @pytest.mark.parametrize("case", HOSTILE)
 @CHECKED_IMPORT
-def test_a_bad_archive_is_refused_with_its_reason_and_leaves_nothing(case, alice, tracks, client):
+def test_a_bad_archive_is_refused_with_its_reason_and_leaves_nothing(
+    case, alice, tracks, client, own_storage
+):
     data, reason = HOSTILE[case]
     before = stored_objects()
     client.force_login(alice)

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import gymnasium
 import numpy as np
 import torch
+from django.core.files.storage import default_storage
 
 import simulator
 from rl import hyperparameters
@@ -119,3 +122,10 @@ def with_a_later_checkpoint(model: RLModel, number: int = 2) -> RLModel:
         iterations=number, weights_version=number, last_checkpoint=name
     )
     return model
+
+
+def stored_objects() -> set[str]:
+    """Every file in the storage the code writes to (a test that counts them asks for the
+    ``own_storage`` fixture, so that no other test's files come and go meanwhile)."""
+    root = Path(default_storage.location)
+    return {str(path.relative_to(root)) for path in root.rglob("*") if path.is_file()}

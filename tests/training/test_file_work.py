@@ -6,7 +6,6 @@ import whose files failed leaves nothing)."""
 import io
 import time
 from datetime import timedelta
-from pathlib import Path
 
 import pytest
 from django.core.files.storage import FileSystemStorage, default_storage
@@ -20,7 +19,7 @@ from jobs import trainer
 from rl.learner import Update
 from rl.stopwatch import Stopwatch
 from tests.helpers.archives import virtual_archive
-from tests.helpers.models import STRAIGHT_AHEAD, ready_model
+from tests.helpers.models import STRAIGHT_AHEAD, ready_model, stored_objects
 from tests.helpers.training import settings as training_settings
 from training import artifacts, configuration, leases, services
 from training.models import RLModel, TrainingJob
@@ -45,12 +44,6 @@ def storage_writes(monkeypatch) -> list[tuple[str, bool]]:
     monkeypatch.setattr(FileSystemStorage, "_save", saved)
     monkeypatch.setattr(FileSystemStorage, "delete", deleted)
     return seen
-
-
-def stored_objects() -> set[str]:
-    """Every file in the storage the code writes to (a changed ``MEDIA_ROOT`` does not move it)."""
-    root = Path(default_storage.location)
-    return {str(path.relative_to(root)) for path in root.rglob("*") if path.is_file()}
 
 
 def clone_of(source: RLModel) -> RLModel:
@@ -208,7 +201,7 @@ def test_an_import_stores_its_files_outside_any_transaction(alice, bob, tracks, 
 
 @pytest.mark.slow
 def test_an_import_whose_files_cannot_be_stored_leaves_no_model_and_no_files(
-    alice, bob, tracks, monkeypatch
+    alice, bob, tracks, monkeypatch, own_storage
 ):
     archive = archive_of_a_ready_model(alice)
     before = stored_objects()
@@ -223,7 +216,7 @@ def test_an_import_whose_files_cannot_be_stored_leaves_no_model_and_no_files(
     with pytest.raises(OSError):
         imports.import_model(owner=bob, archive=io.BytesIO(archive))
     assert not RLModel.objects.filter(owner=bob).exists()
-    assert not stored_objects() - before  # (an earlier test's files under its id went too)
+    assert stored_objects() == before
 
 
 @pytest.mark.slow  # 2 s or more (make test-quick leaves it out)
