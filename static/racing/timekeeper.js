@@ -47,6 +47,11 @@ function lapRow(lap) {
 function showResult(state) {
   const result = root.querySelector("[data-last-result]");
   if (!state.submission) return;
+  const shownFor = `${state.submission} ${state.verdict}`;
+  // The same result comes twice (the signal's answer, then the event's websocket): the link a
+  // timekeeper may have focused stays.
+  if (result.dataset.shownFor === shownFor) return;
+  result.dataset.shownFor = shownFor;
   const link = document.createElement("a");
   link.href = runUrl(state.submission);
   link.textContent = "Edit this run's laps";

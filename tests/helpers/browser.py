@@ -31,8 +31,12 @@ def sign_up_here(page: Page, username: str) -> None:
     page.get_by_role("button", name="Sign up").click()
 
 
-# What is drawn at the element's centre, when that is not the element or inside it ("" if it is).
+# What is drawn at the element's centre, when that is not the element or inside it ("" if it
+# is); _DETACHED when the page replaced the element between its lookup and this check (its box is
+# then all zeros, and the point it names is the window's corner: the site header).
+_DETACHED = "detached"
 _COVER = """element => {
+  if (!element.isConnected) return "detached";
   const box = element.getBoundingClientRect();
   const top = document.elementFromPoint(box.left + box.width / 2, box.top + box.height / 2);
   if (top && (top === element || element.contains(top))) return "";
@@ -42,8 +46,12 @@ _COVER = """element => {
 
 def expect_seen(locator: Locator) -> None:
     """A person sees it: visible, in the window, and not covered by another layer at its
-    centre (Playwright's visibility alone passes an element under an opaque overlay)."""
+    centre (Playwright's visibility alone passes an element under an opaque overlay). An
+    element the page replaced meanwhile is looked up again, as Playwright's own checks do."""
     expect(locator).to_be_visible()
     expect(locator).to_be_in_viewport()
-    covered = locator.evaluate(_COVER)
+    for _ in range(50):
+        covered = locator.evaluate(_COVER)
+        if covered != _DETACHED:
+            break
     assert not covered, f"{locator} is covered by {covered}"
