@@ -18,8 +18,8 @@ STORAGES["default"]["OPTIONS"]["location"] = MEDIA_ROOT  # noqa: F405
 # Dead rollout workers are given up on sooner, so that the tests that kill them stay short.
 PITLANE_ROLLOUT_SILENCE = 20
 PITLANE_ROLLOUT_STARTUP = 60
-# Watched evaluations and races (the browser tests watch them) run at five times real time.
-PITLANE_WATCHED_SPEEDUP = 5
+# Watched evaluations and races (the browser tests watch them) run at 20 times real time.
+PITLANE_WATCHED_SPEEDUP = 20
 # Slow work (a sandbox run, a route file's check) run inside a transaction fails the test that
 # ran it (common.transactions.outside_transaction), where production only logs it.
 PITLANE_TRANSACTION_GUARD = True
