@@ -132,7 +132,7 @@ def test_a_new_racer_goes_from_sign_up_to_the_leaderboard_and_the_car(
     page.get_by_role("link", name="Evaluate").click()
     page.get_by_label("Off-track penalty [s]").fill("0")
     # A model of one iteration may circle its way round for minutes: its trials end where it
-    # first leaves the track, so their number, not the car's luck, bounds how long the evaluation drives.
+    # first leaves the track, so their number, not the car's luck, bounds how long it drives.
     page.get_by_label("Resets allowed").fill("0")
     album.shoot("evaluate")
     page.get_by_role("button", name="Start the evaluation").click()
