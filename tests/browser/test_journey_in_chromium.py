@@ -19,7 +19,7 @@ from tests.helpers.browser import FRAME_BYTES, sign_up
 from tests.helpers.league import event
 from training.models import RLModel
 
-pytestmark = pytest.mark.django_db(transaction=True)
+pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.late]
 
 SCREENSHOTS = ARTIFACTS.parent / "journey"
 TYPO = """def reward_function(params):
