@@ -5,7 +5,8 @@ from django.http import HttpRequest
 
 from accounts.countries import COUNTRIES
 from accounts.email_changes import ADDRESS_TAKEN, EMAIL_LINK_DAYS, address_taken
-from accounts.models import RACER_NAME_RULE, AvatarColour, Profile
+from accounts.models import RACER_NAME_RULE, AvatarColour, Profile, TokenScope
+from accounts.tokens import EXPIRY_DAYS
 from common import ratelimits
 from common.forms import RacerWords
 
@@ -134,3 +135,37 @@ def email_help() -> str:
         f"{listed[0].upper()}{listed[1:]} go here; never shown to other racers. A new address "
         f"takes over once you follow the link we email to it (within {EMAIL_LINK_DAYS} days)."
     )
+
+
+class AccessTokenForm(RacerWords, forms.Form):
+    """A new personal access token on the profile page: a name, what it may do, how long."""
+
+    name = forms.CharField(
+        max_length=60,
+        label="Token name",
+        help_text="What it is for, such as 'laptop notebook' or 'club scripts'.",
+        error_messages={"required": "Give the token a name, to tell it from your others."},
+    )
+    scopes = forms.MultipleChoiceField(
+        choices=TokenScope.choices,
+        widget=forms.CheckboxSelectMultiple,
+        label="It may",
+        error_messages={
+            "required": "Choose what the token may do: read, train, race or admin.",
+            "invalid_choice": "Choose what the token may do from the list.",
+        },
+    )
+    days = forms.TypedChoiceField(
+        choices=[(days, f"{days} days") for days in EXPIRY_DAYS],
+        coerce=int,
+        initial=30,
+        label="It expires after",
+        error_messages={"invalid_choice": "Choose how long the token lasts from the list."},
+    )
+
+    def __init__(self, *args, staff: bool = False, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        if not staff:  # admin is for league staff
+            self.fields["scopes"].choices = [
+                choice for choice in TokenScope.choices if choice[0] != TokenScope.ADMIN
+            ]

@@ -87,3 +87,49 @@ class Profile(models.Model):
     @property
     def country_name(self) -> str:
         return country_name(self.country)
+
+
+class TokenScope(models.TextChoices):
+    """What a personal access token may do in the API (/api/v1/), a racer's pages' rules kept."""
+
+    READ = "read", "Read: your models, their training and evaluations, and the league"
+    TRAIN = "train", "Train: create, clone, stop, delete, import and evaluate your models"
+    RACE = "race", "Race: submit your models to events and join live races"
+    ADMIN = "admin", "Admin: the league staff's actions (staff only)"
+
+
+class AccessToken(models.Model):
+    """A racer's personal access token for the API: made on the profile page with a name, its
+    scopes and an expiry, shown once, kept only as the SHA-256 of its secret (a leaked
+    database gives no token), listed with its last use, and revocable."""
+
+    owner = models.ForeignKey(
+        settings.AUTH_USER_MODEL, on_delete=models.CASCADE, related_name="access_tokens"
+    )
+    name = models.CharField(max_length=60)
+    scopes = models.CharField(max_length=40, help_text="TokenScope values, space-separated.")
+    prefix = models.CharField(max_length=12, help_text="The secret's start, to tell tokens apart.")
+    digest = models.CharField(max_length=64, unique=True, help_text="SHA-256 of the secret.")
+    created_at = models.DateTimeField(auto_now_add=True)
+    expires_at = models.DateTimeField()
+    last_used_at = models.DateTimeField(null=True, blank=True)
+    revoked_at = models.DateTimeField(null=True, blank=True)
+
+    class Meta:
+        ordering = ["-created_at", "-pk"]
+        constraints = [
+            models.UniqueConstraint(
+                "owner",
+                "name",
+                condition=models.Q(revoked_at__isnull=True),
+                name="accounts_accesstoken_live_name_unique",
+                violation_error_message="You already have a token of that name.",
+            )
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.name} ({self.prefix}…)"
+
+    @property
+    def scope_set(self) -> frozenset[str]:
+        return frozenset(self.scopes.split())

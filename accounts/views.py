@@ -3,7 +3,9 @@ from django.contrib import messages
 from django.contrib.auth.decorators import login_required
 from django.http import HttpRequest, HttpResponse
 from django.shortcuts import redirect, render
+from django.utils import timezone
 from django.views.decorators.cache import never_cache
+from django.views.decorators.http import require_POST
 
 from accounts.email_changes import (
     ADDRESS_TAKEN,
@@ -14,9 +16,10 @@ from accounts.email_changes import (
     email_change_confirm,
     pending_email_for_link,
 )
-from accounts.forms import ProfileForm
+from accounts.forms import AccessTokenForm, ProfileForm
 from accounts.models import Profile
 from accounts.services import RacerNameTaken, profile_ensure, profile_update
+from accounts.tokens import TokenRefused, token_create, token_revoke, tokens_live
 
 # What profile_update saves; the password is only the form's to check.
 PROFILE_CHOICES = ("racer_name", "country", "avatar_colour", "email")
@@ -44,16 +47,67 @@ def profile(request: HttpRequest) -> HttpResponse:
         else:
             messages.success(request, _saved_words(change, current))
             return redirect("accounts:profile")
+    return _profile_page(
+        request,
+        form=form,
+        status=form.limited.status if form.limited else 400 if form.errors else 200,
+    )
+
+
+def _profile_page(
+    request: HttpRequest,
+    *,
+    form: ProfileForm | None = None,
+    token_form: AccessTokenForm | None = None,
+    secret: str = "",
+    status: int = 200,
+) -> HttpResponse:
+    if form is None:
+        current = profile_ensure(user=request.user)
+        initial = {"email": request.user.email}
+        form = ProfileForm(instance=current, initial=initial, request=request)
     return render(
         request,
         "accounts/profile.html",
         {
             "form": form,
+            "token_form": token_form or AccessTokenForm(staff=request.user.is_staff),
+            "tokens": tokens_live(owner=request.user),
+            "secret": secret,
+            "now": timezone.now(),
             "reset_by_email": settings.PITLANE_PASSWORD_RESET_BY_EMAIL,
             "link_days": EMAIL_LINK_DAYS,
         },
-        status=form.limited.status if form.limited else 400 if form.errors else 200,
+        status=status,
     )
+
+
+@never_cache
+@login_required
+@require_POST
+def token_new(request: HttpRequest) -> HttpResponse:
+    """A new personal access token: the profile page again, its secret shown this once."""
+    form = AccessTokenForm(request.POST, staff=request.user.is_staff)
+    if form.is_valid():
+        try:
+            token, secret = token_create(owner=request.user, **form.cleaned_data)
+        except TokenRefused as refused:
+            form.add_error(None, str(refused))
+        else:
+            messages.success(request, f"Made the token {token.name}.")
+            return _profile_page(request, secret=secret, status=201)
+    return _profile_page(request, token_form=form, status=400)
+
+
+@login_required
+@require_POST
+def token_revoked(request: HttpRequest, token_id: int) -> HttpResponse:
+    token = token_revoke(owner=request.user, token_id=token_id)
+    if token is None:
+        messages.warning(request, "That token was already revoked, or is not yours.")
+    else:
+        messages.success(request, f"Revoked {token.name}: it no longer works.")
+    return redirect("accounts:profile")  # its message at the top, where it is seen
 
 
 def _saved_words(change: EmailChange, profile: Profile) -> str:

@@ -48,6 +48,7 @@ WHAT = {
     "rescore": "re-scorings",
     "password-reset": "password reset requests from your address",
     "password-reset-email": "password reset requests for that email address",
+    "api": "API requests with this token",
 }
 
 
@@ -84,12 +85,14 @@ class Unavailable(Limited):
         self.action, self.wait = action, UNAVAILABLE_RETRY
 
 
-def over(request: HttpRequest, action: str, key: str | None = None) -> Limited | None:
-    """For a POST: count it as an attempt at ``action``, by ``key`` (the signed-in racer where
-    None); the ``Limited`` when that is over the rate (or ``Unavailable``), else None (and for
-    anything else)."""
+def over(
+    request: HttpRequest, action: str, key: str | None = None, *, every_method: bool = False
+) -> Limited | None:
+    """For a POST (any request with ``every_method``: the API's): count it as an attempt at
+    ``action``, by ``key`` (the signed-in racer where None); the ``Limited`` when that is over
+    the rate (or ``Unavailable``), else None (and for anything else)."""
     try:
-        usage = _counted(request, action, key)
+        usage = _counted(request, action, key, every_method=every_method)
     except Unavailable as unavailable:
         return _refusing(request, unavailable)
     if usage is not None and usage["should_limit"]:
@@ -161,9 +164,12 @@ def _cache_key(action: str, key: str) -> str:
     )
 
 
-def _counted(request: HttpRequest, action: str, key: str | None) -> dict | None:
-    """Count a POST as an attempt at ``action`` by ``key``; django-ratelimit's usage after it."""
-    if request.method != "POST":
+def _counted(
+    request: HttpRequest, action: str, key: str | None, *, every_method: bool = False
+) -> dict | None:
+    """Count a POST (any request, ``every_method``) as an attempt at ``action`` by ``key``;
+    django-ratelimit's usage after it."""
+    if request.method != "POST" and not every_method:
         return None
     if key is None:
         key = f"racer:{request.user.pk}"

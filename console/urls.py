@@ -45,6 +45,7 @@ urlpatterns = [
         name="password_reset_complete",
     ),
     path("accounts/", include("accounts.urls")),
+    path("api/", include("api.urls")),
     path("", include("training.urls")),
     path("", include("archives.urls")),
     path("", include("racing.urls")),

@@ -4,6 +4,9 @@ Everything that differs between machines is read through ``console.env.env``; th
 one machine (SQLite, a local Redis started by ``make run``, files under ``var/``). See
 docs/operating.md, "Running on several machines", for the variables that switch to PostgreSQL,
 S3 and a shared Redis.
+
+Long because every setting the console reads is declared here once, with the reason for its
+default beside it, so that docs/operating.md has one place to agree with.
 """
 
 import sys
@@ -51,6 +54,8 @@ INSTALLED_APPS = [
     "analysis",
     "notifications",
     "accounts",
+    "ninja",  # its Swagger UI's static files, served as ours
+    "api",
 ]
 
 MIDDLEWARE = [
@@ -213,6 +218,7 @@ PITLANE_RATES = {
         "rescore": "20/h",
         "password-reset": "5/h",
         "password-reset-email": "3/h",
+        "api": "600/10m",  # per token, every request (docs/api.md)
     }.items()
 }
 RATELIMIT_USE_CACHE = "default"

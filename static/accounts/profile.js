@@ -1,4 +1,7 @@
-// The racer profile page: its preview shows the racer as leaderboards will, while they type.
+// The racer profile page: its preview shows the racer as leaderboards will, while they type; a
+// new access token, shown once, is copied with one press.
+import { copyOnPress } from "../console/copy.js";
+
 const root = document.querySelector("[data-profile]");
 const preview = root.querySelector("[data-profile-preview]");
 const nameInput = root.querySelector("[data-racer-name]");
@@ -27,3 +30,7 @@ function update() {
 
 root.addEventListener("input", update);
 root.addEventListener("change", update);
+
+copyOnPress(document.querySelector("[data-copy-secret]"), document.querySelector("[data-secret]"),
+  document.querySelector("[data-copy-status]"),
+  { copied: "Copied: keep it where only your scripts read it." });

@@ -1,5 +1,7 @@
 // Managing a community race: copy its invitation link, and ask in a dialog before closing the
 // race, taking a racer out or replacing the link.
+import { copyOnPress } from "../console/copy.js";
+
 const dialog = document.querySelector("[data-confirm-dialog]");
 const yes = dialog.querySelector("[data-confirm-yes]");
 let pending = null;
@@ -20,32 +22,12 @@ yes.addEventListener("click", () => {
 });
 dialog.querySelector("[data-confirm-no]").addEventListener("click", () => dialog.close());
 
-const link = document.querySelector("[data-invite-link]");
 const copy = document.querySelector("[data-copy-invite]");
-const status = document.querySelector("[data-copy-status]");
-const COPIED = "Copied: paste it in a message to the racers you invite.";
-
-function copied() {
-  status.textContent = COPIED;
-  copy.textContent = "Copied";
-  setTimeout(() => { copy.textContent = "Copy the link"; }, 2000);
-}
-
-if (link && copy) {
-  link.addEventListener("focus", () => link.select());
-  copy.addEventListener("click", async () => {
-    try {
-      await navigator.clipboard.writeText(link.value);
-      copied();
-    } catch {
-      // No Clipboard API (a page not served over HTTPS, an older browser): select the link, and
-      // copy it the old way where the browser still allows that.
-      link.focus();
-      link.select();
-      let done = false;
-      try { done = document.execCommand("copy"); } catch { done = false; }
-      if (done) copied();
-      else status.textContent = "Press Ctrl+C (⌘C on a Mac) to copy the selected link.";
-    }
+copyOnPress(copy, document.querySelector("[data-invite-link]"),
+  document.querySelector("[data-copy-status]"), {
+    copied: "Copied: paste it in a message to the racers you invite.",
+    done: () => {
+      copy.textContent = "Copied";
+      setTimeout(() => { copy.textContent = "Copy the link"; }, 2000);
+    },
   });
-}

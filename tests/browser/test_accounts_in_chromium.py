@@ -8,7 +8,7 @@ from accounts.models import Profile
 from racing.services import demo_season_load
 from tests.browser.checks import page_problems
 from tests.helpers.accounts import PASSWORD
-from tests.helpers.browser import log_in, sign_up
+from tests.helpers.browser import expect_seen, log_in, sign_up
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -97,3 +97,42 @@ def test_on_a_phone_a_racer_who_forgot_their_password_is_told_whom_to_ask_and_ed
         "orange",
     )
     assert page_problems(page) == []
+
+
+def test_a_racer_makes_a_token_copies_it_once_and_revokes_it(page: Page, alice):
+    log_in(page, "alice", PASSWORD)
+    page.goto("/accounts/profile/#tokens")
+    tokens = page.locator("[data-tokens]")
+    expect_seen(tokens.get_by_text("You have no tokens."))
+    tokens.get_by_label("Token name").fill("notebook")
+    tokens.get_by_label("Read: your models, their training and evaluations, and the league").check()
+    expect(tokens.get_by_label("Admin: the league staff's actions (staff only)")).to_have_count(0)
+    tokens.get_by_role("button", name="Make the token").click()
+
+    secret = page.locator("[data-secret]")
+    expect_seen(secret)
+    warning = page.locator("[data-token-secret] p").first
+    expect(warning).to_contain_text("Copy your new token now: it is not shown again.")
+    expect_seen(warning)
+    value = secret.input_value()
+    page.context.grant_permissions(["clipboard-read", "clipboard-write"])
+    page.get_by_role("button", name="Copy the token").click()
+    expect(page.locator("[data-copy-status]")).to_contain_text("Copied")
+    assert page.evaluate("navigator.clipboard.readText()") == value
+    row = page.locator("[data-token-list] tbody tr")
+    expect(row).to_have_count(1)
+    expect(row.first).to_contain_text("notebook")
+    expect(row.first).to_contain_text(value[:12] + "…")
+    expect(row.first.locator("td").nth(4)).to_have_text("never")
+
+    api = page.request.get("/api/v1/me", headers={"Authorization": f"Bearer {value}"})
+    assert api.status == 200 and api.json()["token"]["name"] == "notebook"
+    page.goto("/accounts/profile/#tokens")  # the page again: its secret is gone
+    expect(page.locator("[data-secret]")).to_have_count(0)
+    expect(row.first.locator("td").nth(4)).to_have_text(re.compile(" ago$"))
+
+    row.first.get_by_role("button", name="Revoke notebook").click()
+    expect_seen(page.get_by_text("Revoked notebook: it no longer works."))
+    expect(page.locator("[data-token-list]")).to_have_count(0)
+    refused = page.request.get("/api/v1/me", headers={"Authorization": f"Bearer {value}"})
+    assert refused.status == 401 and refused.json()["code"] == "unauthenticated"

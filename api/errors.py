@@ -1,0 +1,90 @@
+"""The API's errors: JSON with a machine code and the words a page would show.
+
+``{"code": "not_found", "message": "No model of yours has the id 7."}``, with the status that
+fits (docs/api.md): 400 for input the console cannot take, 401 without a working token or
+session, 403 for what the token's scopes or the racer's rights do not allow, 404 for what is not
+there or not theirs (never 403: another racer's ids are not confirmed), 409 for what the
+resource's state refuses, 413, 429 with ``Retry-After``. Never a traceback.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from django.http import Http404, HttpRequest, HttpResponse
+from ninja import NinjaAPI
+from ninja.errors import AuthenticationError, HttpError, ValidationError
+
+logger = logging.getLogger(__name__)
+
+
+class ApiError(Exception):
+    """A refusal: its status, machine code, words and headers (Retry-After)."""
+
+    def __init__(
+        self, status: int, code: str, message: str, headers: dict[str, str] | None = None
+    ) -> None:
+        super().__init__(message)
+        self.status, self.code, self.message = status, code, message
+        self.headers = headers or {}
+
+
+def answer(api: NinjaAPI, request: HttpRequest, error: ApiError) -> HttpResponse:
+    response = api.create_response(
+        request, {"code": error.code, "message": error.message}, status=error.status
+    )
+    for name, value in error.headers.items():
+        response[name] = value
+    return response
+
+
+def _invalid_words(errors: list[dict]) -> str:
+    """The first of pydantic's errors as a sentence: where, and what is wrong."""
+    first = errors[0]
+    where = ".".join(str(part) for part in first.get("loc", ()) if part not in ("body", "query"))
+    return f"{where}: {first.get('msg', 'not valid')}." if where else f"{first.get('msg')}."
+
+
+def install(api: NinjaAPI) -> None:
+    """Every error the API answers takes the one shape."""
+
+    @api.exception_handler(ApiError)
+    def refused(request, error: ApiError):
+        return answer(api, request, error)
+
+    @api.exception_handler(ValidationError)
+    def invalid(request, error: ValidationError):
+        response = answer(api, request, ApiError(400, "invalid", _invalid_words(error.errors)))
+        return response
+
+    @api.exception_handler(AuthenticationError)
+    def unauthenticated(request, error):
+        return answer(
+            api,
+            request,
+            ApiError(
+                401,
+                "unauthenticated",
+                "Send a working token as 'Authorization: Bearer plt_…' (make one on your "
+                "profile page), or sign in to the console.",
+            ),
+        )
+
+    @api.exception_handler(Http404)
+    def not_found(request, error):
+        return answer(api, request, ApiError(404, "not_found", str(error) or "Not found."))
+
+    @api.exception_handler(HttpError)
+    def http_error(request, error: HttpError):
+        return answer(api, request, ApiError(error.status_code, "refused", str(error)))
+
+    @api.exception_handler(Exception)
+    def internal(request, error):
+        logger.exception("API request %s %s failed", request.method, request.path)
+        return answer(
+            api,
+            request,
+            ApiError(
+                500, "internal", "The console failed to answer this: try again, or tell staff."
+            ),
+        )
