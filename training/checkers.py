@@ -33,14 +33,18 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable, Hashable
 from concurrent.futures import Future, ThreadPoolExecutor
+from functools import partial
 from typing import Any, TypeVar
 
+from asgiref.sync import sync_to_async
 from django.conf import settings
 from django.db import close_old_connections
 from django.http import HttpResponse
 
 from common import turns
 from sandbox import SandboxFailure, SandboxUnavailable
+from simulator import tracks as simulator_tracks
+from training import rewards
 
 T = TypeVar("T")
 
@@ -194,6 +198,22 @@ async def run(work: Callable[[], T], *, racer: Hashable) -> T:
 
 # A check that could not run: every checker busy, or the sandbox unable to start or to run it
 FAILURES = (Busy, SandboxUnavailable, SandboxFailure)
+
+
+async def reward_checked(
+    source: str, track: str, *, racer: Hashable, direction: str = "counterclockwise"
+) -> rewards.Validation | Exception:
+    """``source`` validated on ``track`` (its name; an added track's route is read first) by a
+    checker, in ``racer``'s turn; or why it could not be (one of ``FAILURES``), for the page or
+    the API to say."""
+    where = await sync_to_async(simulator_tracks.inline)(track)
+    try:
+        return await run(
+            partial(rewards.reward_validate, source=source, track=where, direction=direction),
+            racer=racer,
+        )
+    except FAILURES as error:
+        return error
 
 
 def failure_words(error: Exception) -> str:

@@ -7,7 +7,6 @@ Django apps keep them; each view is short.
 
 import json
 from copy import copy
-from functools import partial
 
 from asgiref.sync import sync_to_async
 from django.contrib import messages
@@ -149,7 +148,9 @@ async def reward_editor(request: HttpRequest, pk: int | None = None) -> HttpResp
     elif request.method == "POST" and await sync_to_async(form.is_valid)():
         source = services.reward_source(form.cleaned_data["source"])
         if source.strip():  # else the service says what is missing
-            checked = await _checked_reward(request, source, form.cleaned_data["track"].name)
+            checked = await checkers.reward_checked(
+                source, form.cleaned_data["track"].name, racer=(await request.auser()).pk
+            )
     return await sync_to_async(_reward_editor_page)(request, function, form, checked)
 
 
@@ -225,22 +226,6 @@ def _reward_editor_page(
     return response
 
 
-async def _checked_reward(
-    request: HttpRequest, source: str, track: str, direction: str = "counterclockwise"
-) -> rewards.Validation | Exception:
-    """``source`` validated on ``track`` by a checker, in the racer's turn; or why it could
-    not be: ``checkers.Busy``, ``SandboxUnavailable`` or ``SandboxFailure``, for the page to
-    show."""
-    where = await sync_to_async(simulator_tracks.inline)(track)  # an added track: its route
-    try:
-        return await checkers.run(
-            partial(rewards.reward_validate, source=source, track=where, direction=direction),
-            racer=(await request.auser()).pk,
-        )
-    except checkers.FAILURES as error:
-        return error
-
-
 @login_required
 def reward_function_delete(request: HttpRequest, pk: int) -> HttpResponse:
     """Asks first (GET); takes the function out of the racer's library (POST)."""
@@ -262,8 +247,10 @@ async def reward_validation(request: HttpRequest) -> JsonResponse:
     form = RewardValidationForm(request.POST)
     if not await sync_to_async(form.is_valid)():
         return JsonResponse({"message": form.first_error()}, status=400)
-    checked = await _checked_reward(
-        request, form.cleaned_data["source"], form.cleaned_data["track"].name
+    checked = await checkers.reward_checked(
+        form.cleaned_data["source"],
+        form.cleaned_data["track"].name,
+        racer=(await request.auser()).pk,
     )
     if isinstance(checked, SandboxFailure):
         message = f"Validation could not run: {checked}"
@@ -293,8 +280,12 @@ async def model_create(request: HttpRequest) -> HttpResponse:
     (``training.checkers``), then the model is saved."""
     page = await sync_to_async(_ModelCreatePage)(request)
     if page.reward_where is not None:
-        page.checked = await _checked_reward(
-            request, page.settings["reward_function"], *page.reward_where
+        track, direction = page.reward_where
+        page.checked = await checkers.reward_checked(
+            page.settings["reward_function"],
+            track,
+            racer=(await request.auser()).pk,
+            direction=direction,
         )
     return await sync_to_async(page.respond)()
 

@@ -1,0 +1,111 @@
+"""The API's doors to a racer's models and reward functions: the same rules and words as the
+pages (their services), refusals as JSON with a code."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from accounts.tokens import token_create
+from tests.helpers.training import settings as training_settings
+from training import configuration, services
+from training.models import Iteration, RLModel, TrainingJob
+from training.rewards import EXAMPLES
+
+MODELS, VALIDATE = "/api/v1/models", "/api/v1/reward-functions/validate"
+
+
+def a_model(owner, name: str = "mine", status=RLModel.Status.READY) -> RLModel:
+    checked = configuration.check(training_settings(name=name), owner=owner, validate_reward=False)
+    return services.model_insert(owner=owner, settings=checked, status=status)
+
+
+NAMES = itertools.count()
+
+
+def bearer(owner, *scopes: str) -> dict[str, str]:
+    name = f"token {next(NAMES)}"
+    secret = token_create(owner=owner, name=name, scopes=list(scopes), days=7)[1]
+    return {"HTTP_AUTHORIZATION": f"Bearer {secret}"}
+
+
+def test_a_queued_training_is_canceled_and_a_model_not_training_is_refused(alice, tracks, client):
+    model = a_model(alice, status=RLModel.Status.QUEUED)
+    job = TrainingJob.objects.create(model=model)
+    token = bearer(alice, "read", "train")
+    stopped = client.post(f"{MODELS}/{model.pk}/stop", **token)
+    assert stopped.status_code == 200 and stopped.json()["status"] == "CANCELED"
+    job.refresh_from_db()
+    assert job.status == TrainingJob.Status.CANCELED
+    again = client.post(f"{MODELS}/{model.pk}/stop", **token)
+    assert again.status_code == 409 and again.json() == {
+        "code": "not_training",
+        "message": "This model is not training.",
+    }
+    reader = client.post(f"{MODELS}/{model.pk}/stop", **bearer(alice, "read"))
+    assert reader.status_code == 403 and reader.json()["code"] == "scope"
+
+
+def test_a_model_is_deleted_once_nothing_runs_on_it_and_never_anothers(alice, bob, tracks, client):
+    busy = a_model(alice, "busy", status=RLModel.Status.TRAINING)
+    done = a_model(alice, "done")
+    refused = client.delete(f"{MODELS}/{busy.pk}", **bearer(alice, "train"))
+    assert refused.status_code == 409 and refused.json()["code"] == "busy"
+    assert "stop its training first" in refused.json()["message"]
+    assert client.delete(f"{MODELS}/{done.pk}", **bearer(bob, "train")).status_code == 404
+    deleted = client.delete(f"{MODELS}/{done.pk}", **bearer(alice, "train"))
+    assert deleted.status_code == 200 and "files_removed" in deleted.json()
+    assert list(RLModel.objects.values_list("name", flat=True)) == ["busy"]
+
+
+def test_a_models_iterations_are_the_training_graphs_points(alice, tracks, client):
+    model = a_model(alice)
+    assert client.get(f"{MODELS}/{model.pk}/iterations", **bearer(alice, "read")).json() == []
+    job = TrainingJob.objects.create(model=model, status=TrainingJob.Status.COMPLETED)
+    for number, reward in ((1, 10.0), (2, 25.5)):
+        Iteration.objects.create(
+            job=job,
+            number=number,
+            reward=reward,
+            completion=40.0 * number,
+            episodes=20,
+            steps=900 * number,
+            wall_seconds=60.0,
+        )
+    points = client.get(f"{MODELS}/{model.pk}/iterations", **bearer(alice, "read")).json()
+    assert [(p["number"], p["reward"], p["completion"]) for p in points] == [
+        (1, 10.0, 40.0),
+        (2, 25.5, 80.0),
+    ]
+
+
+@pytest.mark.slow  # the sandbox runs the code
+def test_validate_answers_as_the_editors_button_does(alice, tracks, client):
+    token = bearer(alice, "train")
+    good = client.post(
+        VALIDATE,
+        {"source": EXAMPLES[0].source, "track": "pitlane-oval"},
+        content_type="application/json",
+        **token,
+    )
+    assert good.status_code == 200 and good.json()["valid"] is True
+    assert good.json()["samples"] and all(s["reward"] is not None for s in good.json()["samples"])
+    broken = client.post(
+        VALIDATE,
+        {"source": "def reward_function(params)\n    return 1.0\n"},
+        content_type="application/json",
+        **token,
+    )
+    assert broken.status_code == 200 and broken.json()["valid"] is False
+    assert broken.json()["errors"][0]["line"] == 1
+    unknown = client.post(
+        VALIDATE, {"source": "x", "track": "the-moon"}, content_type="application/json", **token
+    )
+    assert unknown.status_code == 400 and unknown.json()["message"] == "Choose a listed track."
+    missing = client.post(VALIDATE, {}, content_type="application/json", **token)
+    assert missing.status_code == 400 and missing.json()["code"] == "invalid"
+    reader = client.post(
+        VALIDATE, {"source": "x"}, content_type="application/json", **bearer(alice, "read")
+    )
+    assert reader.status_code == 403
