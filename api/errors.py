@@ -15,6 +15,8 @@ from django.http import Http404, HttpRequest, HttpResponse
 from ninja import NinjaAPI
 from ninja.errors import AuthenticationError, HttpError, ValidationError
 
+from common.refusals import Refused
+
 logger = logging.getLogger(__name__)
 
 
@@ -51,6 +53,16 @@ def install(api: NinjaAPI) -> None:
     @api.exception_handler(ApiError)
     def refused(request, error: ApiError):
         return answer(api, request, error)
+
+    @api.exception_handler(Refused)
+    def refused_by_a_service(request, refusal: Refused):
+        """A service's refusal (``common.refusals``): its words, and each input at fault."""
+        response = api.create_response(
+            request,
+            {"code": "invalid", "message": str(refusal), "errors": refusal.errors},
+            status=400,
+        )
+        return response
 
     @api.exception_handler(ValidationError)
     def invalid(request, error: ValidationError):

@@ -1,4 +1,5 @@
-"""A racer's models in the API: list, one with its checkpoints, its iterations, stop, delete.
+"""A racer's models in the API: create from DeepRacer's files, list, one with its checkpoints,
+its iterations, stop, delete.
 
 The same rules as the model's pages, through the same selectors and services: another racer's
 model answers 404, as a missing one does; a model that cannot be stopped or deleted now answers
@@ -7,16 +8,21 @@ model answers 404, as a missing one does; a model that cannot be stopped or dele
 
 from __future__ import annotations
 
+import math
 from datetime import datetime
 
+from asgiref.sync import sync_to_async
 from django.db.models import Q
-from ninja import Query, Router, Schema
+from ninja import Query, Router, Schema, Status
 
 from accounts.models import TokenScope
 from api.auth import need
 from api.errors import ApiError
 from api.schemas import REFUSED
-from training import selectors, services
+from archives.deepracer_settings import archive_settings
+from archives.members import Members, member_json
+from common import ratelimits
+from training import checkers, configuration, selectors, services
 from training.models import Iteration, RLModel, TrainingJob
 
 router = Router()
@@ -176,3 +182,64 @@ def model_delete(request, model_id: int):
         return {"files_removed": services.model_delete(model=model)}
     except services.ModelBusy as busy:
         raise ApiError(409, "busy", str(busy)) from None
+
+
+class CreateIn(Schema):
+    """A model as DeepRacer for Cloud's folder describes it: its files' texts by name."""
+
+    files: dict[str, str]
+    name: str | None = None
+    description: str = "Created through the API."
+    max_minutes: int | None = None
+
+
+class Created(ModelDetail):
+    notes: list[str]
+
+
+@router.post("", response={201: Created, **REFUSED})
+async def model_create(request, body: CreateIn):
+    """Create a model and queue its training from DeepRacer's files, as a DeepRacer for Cloud
+    folder holds them: ``model_metadata.json`` (sensors, network, action space, algorithm),
+    ``reward_function.py``, and where given ``hyperparameters.json`` and
+    ``training_params.yaml`` (the track, race type, workers). What this console reads
+    differently or leaves out is listed in ``notes``. The reward function is validated first,
+    as the create page does; the racer's quotas and create limit hold."""
+    need(request, TokenScope.TRAIN)
+    if limited := await sync_to_async(ratelimits.over)(request, "create"):
+        raise ApiError(
+            429, "rate_limited", str(limited), {"Retry-After": str(max(1, math.ceil(limited.wait)))}
+        )
+    notes: list[str] = []
+    draft = await sync_to_async(_draft_from_files)(body, notes)
+    checked = await checkers.reward_checked(
+        draft["reward_function"],
+        draft["track"],
+        racer=request.user.pk,
+        direction=draft["direction"],
+    )
+    if isinstance(checked, Exception):
+        raise ApiError(503, "unavailable", checkers.failure_words(checked))
+    if not checked.valid:
+        first = checked.errors[0]
+        where = f" (line {first.line})" if first.line else ""
+        raise ApiError(400, "reward_invalid", f"reward_function.py{where}: {first.message}")
+    model = await sync_to_async(services.model_create)(
+        owner=request.user, settings=draft, validation=checked
+    )
+    return Status(201, {**await sync_to_async(model_detail)(request, model.pk), "notes": notes})
+
+
+def _draft_from_files(body: CreateIn, notes: list[str]) -> configuration.Draft:
+    members = Members({name: text.encode() for name, text in body.files.items()})
+    metadata = member_json(members, "model_metadata.json")
+    reward = body.files.get("reward_function.py")
+    if metadata is None or reward is None:
+        raise ApiError(
+            400, "invalid", "files must hold model_metadata.json and reward_function.py."
+        )
+    draft = archive_settings(metadata, {}, members, reward, body.name or "", notes)
+    draft["description"] = body.description
+    if body.max_minutes is not None:
+        draft["max_minutes"] = body.max_minutes
+    return draft

@@ -8,6 +8,7 @@ from ninja import Schema
 class Error(Schema):
     code: str
     message: str
+    errors: dict[str, str] | None = None  # each input at fault, where a service said which
 
 
 # The refusals an operation may answer with, for its documented responses.

@@ -4,10 +4,13 @@ pages (their services), refusals as JSON with a code."""
 from __future__ import annotations
 
 import itertools
+import json
 
 import pytest
+import yaml
 
 from accounts.tokens import token_create
+from tests.helpers.archives import DEEPRACER_HYPERPARAMETERS, DEEPRACER_METADATA, DEEPRACER_PARAMS
 from tests.helpers.training import settings as training_settings
 from training import configuration, services
 from training.models import Iteration, RLModel, TrainingJob
@@ -109,3 +112,52 @@ def test_validate_answers_as_the_editors_button_does(alice, tracks, client):
         VALIDATE, {"source": "x"}, content_type="application/json", **bearer(alice, "read")
     )
     assert reader.status_code == 403
+
+
+def drfc_files(**changes) -> dict[str, str]:
+    """A DeepRacer for Cloud model folder's files, as `pitlane train FOLDER` sends them."""
+    return {
+        "model_metadata.json": json.dumps(DEEPRACER_METADATA),
+        "hyperparameters.json": json.dumps(DEEPRACER_HYPERPARAMETERS),
+        "training_params.yaml": yaml.safe_dump({**DEEPRACER_PARAMS, "WORLD_NAME": "Oval_track"}),
+        "reward_function.py": EXAMPLES[0].source,
+        **changes,
+    }
+
+
+@pytest.mark.slow  # the sandbox validates the reward function
+def test_a_model_is_created_from_a_deepracer_for_cloud_folders_files(alice, tracks, client):
+    token = bearer(alice, "read", "train")
+    body = {"files": drfc_files(), "name": "from-drfc", "max_minutes": 15}
+    created = client.post(MODELS, body, content_type="application/json", **token)
+    assert created.status_code == 201, created.json()
+    answer = created.json()
+    model = RLModel.objects.get(owner=alice)
+    assert answer["id"] == model.pk and answer["name"] == "from-drfc"
+    assert answer["status"] == "QUEUED" and model.max_minutes == 15
+    assert (
+        model.track.name == "Oval_track" and model.network == DEEPRACER_METADATA["neural_network"]
+    )
+    assert [a["speed"] for a in model.action_space] == [0.6, 1.2, 0.6]
+    assert model.hyperparameters["num_episodes_between_training"] == 20
+    assert model.latest_job.status == TrainingJob.Status.QUEUED
+
+    broken = drfc_files(**{"reward_function.py": "def reward_function(params)\n    return 1\n"})
+    refused = client.post(
+        MODELS, {"files": broken, "name": "b"}, content_type="application/json", **token
+    )
+    assert refused.status_code == 400 and refused.json()["code"] == "reward_invalid"
+    assert refused.json()["message"].startswith("reward_function.py (line 1):")
+    unknown = drfc_files(**{"model_metadata.json": json.dumps({"training_algorithm": "dqn"})})
+    refused = client.post(
+        MODELS, {"files": unknown, "name": "c"}, content_type="application/json", **token
+    )
+    assert refused.status_code == 400 and "clipped_ppo" in refused.json()["message"]
+    no_metadata = {"reward_function.py": EXAMPLES[0].source}
+    refused = client.post(MODELS, {"files": no_metadata}, content_type="application/json", **token)
+    assert refused.json()["message"] == (
+        "files must hold model_metadata.json and reward_function.py."
+    )
+    taken = client.post(MODELS, body, content_type="application/json", **token)
+    assert taken.status_code == 400 and "name" in taken.json()["errors"]
+    assert RLModel.objects.count() == 1
