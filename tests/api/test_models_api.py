@@ -11,6 +11,7 @@ import yaml
 
 from accounts.tokens import token_create
 from tests.helpers.archives import DEEPRACER_HYPERPARAMETERS, DEEPRACER_METADATA, DEEPRACER_PARAMS
+from tests.helpers.models import ready_model
 from tests.helpers.training import settings as training_settings
 from training import configuration, services
 from training.models import Iteration, RLModel, TrainingJob
@@ -161,3 +162,36 @@ def test_a_model_is_created_from_a_deepracer_for_cloud_folders_files(alice, trac
     taken = client.post(MODELS, body, content_type="application/json", **token)
     assert taken.status_code == 400 and "name" in taken.json()["errors"]
     assert RLModel.objects.count() == 1
+
+
+def test_an_evaluation_starts_is_listed_read_and_stopped_under_the_pages_rules(
+    alice, bob, tracks, client
+):
+    model = ready_model(alice)
+    token = bearer(alice, "read", "train")
+    url = f"{MODELS}/{model.pk}/evaluations"
+    bad = client.post(url, {"trials": 9}, content_type="application/json", **token)
+    assert bad.status_code == 400 and bad.json()["errors"] == {
+        "trials": "An evaluation has 3 to 5 trials."
+    }
+    started = client.post(
+        url, {"trials": 4, "max_resets": 0, "seed": 7}, content_type="application/json", **token
+    )
+    assert started.status_code == 201
+    evaluation = started.json()
+    assert (evaluation["status"], evaluation["trials"], evaluation["seed"]) == ("QUEUED", 4, 7)
+    assert evaluation["track"] == model.track.name and evaluation["results"] == []
+    model.refresh_from_db()
+    assert model.status == RLModel.Status.EVALUATING
+    busy = client.post(url, {}, content_type="application/json", **token)
+    assert busy.status_code == 409 and "evaluating" in busy.json()["message"]
+
+    listed = client.get(url, **token).json()
+    assert [e["id"] for e in listed] == [evaluation["id"]]
+    assert client.get(url, **bearer(bob, "read")).status_code == 404
+    one = f"{url}/{evaluation['id']}"
+    assert client.get(one, **token).json()["id"] == evaluation["id"]
+    stopped = client.post(f"{one}/stop", **token)
+    assert stopped.status_code == 200 and stopped.json()["status"] == "CANCELED"
+    model.refresh_from_db()
+    assert model.status == RLModel.Status.READY
