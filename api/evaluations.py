@@ -16,9 +16,10 @@ from ninja import Router, Schema, Status
 from accounts.models import TokenScope
 from api.auth import need
 from api.errors import ApiError
+from api.owned import own_model
 from api.schemas import REFUSED
 from common import ratelimits
-from training import selectors, services
+from training import services
 from training.models import EvaluationJob, EvaluationTrial
 
 router = Router()
@@ -88,17 +89,10 @@ def _out(evaluation: EvaluationJob) -> dict:
     }
 
 
-def _own_model(request, model_id: int):
-    model = selectors.models_for_racer(racer=request.user).filter(pk=model_id).first()
-    if model is None:
-        raise ApiError(404, "not_found", f"No model of yours has the id {model_id}.")
-    return model
-
-
 def _own(request, model_id: int, evaluation_id: int) -> EvaluationJob:
     evaluation = (
         EvaluationJob.objects.select_related("track")
-        .filter(pk=evaluation_id, model=_own_model(request, model_id))
+        .filter(pk=evaluation_id, model=own_model(request, model_id))
         .first()
     )
     if evaluation is None:
@@ -118,7 +112,7 @@ def evaluation_create(request, model_id: int, body: EvaluationIn):
     than its own; ``seed`` drives an earlier evaluation's trials again. The model is busy until
     it ends (409 meanwhile for another)."""
     need(request, TokenScope.TRAIN)
-    model = _own_model(request, model_id)
+    model = own_model(request, model_id)
     if limited := ratelimits.over(request, "evaluate"):
         raise ApiError(
             429, "rate_limited", str(limited), {"Retry-After": str(max(1, math.ceil(limited.wait)))}
@@ -136,9 +130,7 @@ def evaluation_create(request, model_id: int, body: EvaluationIn):
 def evaluations_list(request, model_id: int):
     """The model's evaluations, newest first (its races' included)."""
     need(request, TokenScope.READ)
-    found = EvaluationJob.objects.select_related("track").filter(
-        model=_own_model(request, model_id)
-    )
+    found = EvaluationJob.objects.select_related("track").filter(model=own_model(request, model_id))
     return [_out(evaluation) for evaluation in found.order_by("-created_at", "-pk")]
 
 

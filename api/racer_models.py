@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from datetime import datetime
+from typing import Literal
 
 from asgiref.sync import sync_to_async
 from django.db.models import Q
@@ -18,6 +19,7 @@ from ninja import Query, Router, Schema, Status
 from accounts.models import TokenScope
 from api.auth import need
 from api.errors import ApiError
+from api.owned import own_model
 from api.schemas import REFUSED
 from archives.deepracer_settings import archive_settings
 from archives.members import Members, member_json
@@ -88,13 +90,6 @@ class Deleted(Schema):
     files_removed: int
 
 
-def _own(request, model_id: int) -> RLModel:
-    model = selectors.models_for_racer(racer=request.user).filter(pk=model_id).first()
-    if model is None:
-        raise ApiError(404, "not_found", f"No model of yours has the id {model_id}.")
-    return model
-
-
 def _model_out(model: RLModel) -> dict:
     return {
         "id": model.pk,
@@ -130,7 +125,7 @@ def models_list(request, filters: Query[ModelFilters]):
 def model_detail(request, model_id: int):
     """One of your models, with its settings and the checkpoints of its latest training."""
     need(request, TokenScope.READ)
-    model = _own(request, model_id)
+    model = own_model(request, model_id)
     job = model.latest_job
     return {
         **_model_out(model),
@@ -154,7 +149,7 @@ def model_iterations(request, model_id: int):
     and progress, its evaluation's progress, its best lap, episodes and steps (the training
     graph's points)."""
     need(request, TokenScope.READ)
-    job = _own(request, model_id).latest_job
+    job = own_model(request, model_id).latest_job
     if job is None:
         return []
     return list(Iteration.objects.filter(job=job).order_by("number"))
@@ -165,7 +160,7 @@ def model_stop(request, model_id: int):
     """Stop the model's training, as its page's Stop training does: a job in the queue is
     canceled; a running one saves the model of its last finished iteration, billed up to now."""
     need(request, TokenScope.TRAIN)
-    job = _own(request, model_id).latest_job
+    job = own_model(request, model_id).latest_job
     if job is None or not job.is_active:
         raise ApiError(409, "not_training", "This model is not training.")
     job = services.training_stop(job=job)
@@ -177,7 +172,7 @@ def model_delete(request, model_id: int):
     """Delete the model and every file of it, as its page's Delete does: a model that trains,
     evaluates or races is refused (409) with what to wait for."""
     need(request, TokenScope.TRAIN)
-    model = _own(request, model_id)
+    model = own_model(request, model_id)
     try:
         return {"files_removed": services.model_delete(model=model)}
     except services.ModelBusy as busy:
@@ -197,6 +192,22 @@ class Created(ModelDetail):
     notes: list[str]
 
 
+class CloneIn(Schema):
+    """A clone, as the Clone page makes one: its new name, the source's checkpoint it starts
+    from, and what it may change (the weights fix the sensors, network, algorithm and number of
+    actions)."""
+
+    name: str
+    checkpoint: Literal["best", "last"] = "best"
+    description: str | None = None
+    track: str | None = None
+    direction: str | None = None
+    reward_function: str | None = None
+    hyperparameters: dict | None = None
+    action_space: list | dict | None = None
+    max_minutes: int | None = None
+
+
 @router.post("", response={201: Created, **REFUSED})
 async def model_create(request, body: CreateIn):
     """Create a model and queue its training from DeepRacer's files, as a DeepRacer for Cloud
@@ -206,12 +217,47 @@ async def model_create(request, body: CreateIn):
     differently or leaves out is listed in ``notes``. The reward function is validated first,
     as the create page does; the racer's quotas and create limit hold."""
     need(request, TokenScope.TRAIN)
+    notes: list[str] = []
+    draft = await sync_to_async(_draft_from_files)(body, notes)
+    return await _created(request, draft, notes)
+
+
+@router.post("/{model_id}/clone", response={201: Created, **REFUSED})
+async def model_clone(request, model_id: int, body: CloneIn):
+    """Clone one of your trained models, as its Clone button does: the new model starts training
+    from the source's ``best`` or ``last`` checkpoint, with the source's settings but for those
+    given (its track, reward function, hyperparameters, the actions' angles and speeds, time)."""
+    need(request, TokenScope.TRAIN)
+    draft = await sync_to_async(_clone_draft)(request, model_id, body)
+    return await _created(request, draft, [])
+
+
+def _clone_draft(request, model_id: int, body: CloneIn) -> configuration.Draft:
+    source = own_model(request, model_id)
+    if not source.trainable:
+        raise ApiError(
+            409,
+            "refused",
+            f"{source.name} cannot be cloned: it came from a car archive, with its policy alone "
+            "(no reward function, no critics) to train on.",
+        )
+    changes = body.dict(exclude_none=True, exclude={"checkpoint"})
+    return {
+        **configuration.ModelSettings.of(source).draft(),
+        "description": f"Cloned from {source.name}.",
+        **changes,
+        "cloned_from": source,
+        "cloned_checkpoint": body.checkpoint,
+    }
+
+
+async def _created(request, draft: configuration.Draft, notes: list[str]) -> Status:
+    """The model ``draft`` describes, made as the create page makes it: the racer's create
+    limit, the reward function validated by a checker, the settings checked, training queued."""
     if limited := await sync_to_async(ratelimits.over)(request, "create"):
         raise ApiError(
             429, "rate_limited", str(limited), {"Retry-After": str(max(1, math.ceil(limited.wait)))}
         )
-    notes: list[str] = []
-    draft = await sync_to_async(_draft_from_files)(body, notes)
     checked = await checkers.reward_checked(
         draft["reward_function"],
         draft["track"],

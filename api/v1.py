@@ -12,7 +12,7 @@ from datetime import datetime
 from ninja import NinjaAPI, Schema
 
 from accounts.selectors import racer_name
-from api import errors, evaluations, racer_models, reward_functions
+from api import downloads, errors, evaluations, league, racer_models, reward_functions
 from api.auth import AUTH, scopes
 from api.schemas import REFUSED
 
@@ -28,7 +28,9 @@ api = NinjaAPI(
 errors.install(api)
 api.add_router("/models", racer_models.router, tags=["models"])
 api.add_router("/models", evaluations.router, tags=["evaluations"])
+api.add_router("/models", downloads.router, tags=["downloads"])
 api.add_router("/reward-functions", reward_functions.router, tags=["reward functions"])
+api.add_router("", league.router, tags=["league"])
 
 
 class TokenOut(Schema):

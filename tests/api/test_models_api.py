@@ -3,13 +3,16 @@ pages (their services), refusals as JSON with a code."""
 
 from __future__ import annotations
 
+import io
 import itertools
 import json
+import tarfile
 
 import pytest
 import yaml
 
 from accounts.tokens import token_create
+from archives import logs_archive
 from tests.helpers.archives import DEEPRACER_HYPERPARAMETERS, DEEPRACER_METADATA, DEEPRACER_PARAMS
 from tests.helpers.models import ready_model
 from tests.helpers.training import settings as training_settings
@@ -195,3 +198,56 @@ def test_an_evaluation_starts_is_listed_read_and_stopped_under_the_pages_rules(
     assert stopped.status_code == 200 and stopped.json()["status"] == "CANCELED"
     model.refresh_from_db()
     assert model.status == RLModel.Status.READY
+
+
+@pytest.mark.slow  # the sandbox validates the clone's reward function
+def test_a_clone_starts_from_its_sources_checkpoint_with_the_changes_given(
+    alice, bob, tracks, client
+):
+    source = ready_model(alice)
+    token = bearer(alice, "read", "train")
+    body = {"name": "faster", "checkpoint": "last", "max_minutes": 12, "track": "rookie-loop"}
+    cloned = client.post(
+        f"{MODELS}/{source.pk}/clone", body, content_type="application/json", **token
+    )
+    assert cloned.status_code == 201, cloned.json()
+    clone = RLModel.objects.get(name="faster")
+    assert cloned.json()["cloned_from"] == source.pk and clone.cloned_from == source
+    assert clone.cloned_checkpoint == "last" and clone.max_minutes == 12
+    assert clone.track.name == "rookie-loop" and clone.action_space == source.action_space
+    assert clone.network == source.network and clone.sensors == source.sensors
+    others = client.post(
+        f"{MODELS}/{source.pk}/clone",
+        {"name": "x"},
+        content_type="application/json",
+        **bearer(bob, "train"),
+    )
+    assert others.status_code == 404
+    fewer = client.post(
+        f"{MODELS}/{source.pk}/clone",
+        {"name": "fewer", "action_space": source.action_space[:1]},
+        content_type="application/json",
+        **token,
+    )
+    assert fewer.status_code == 400 and "action_space" in fewer.json()["errors"]
+
+
+@pytest.mark.slow  # builds the car's graph
+def test_the_downloads_are_the_pages_archives_and_refusals_are_words(alice, bob, tracks, client):
+    model = ready_model(alice)
+    token = bearer(alice, "read")
+    physical = client.get(f"{MODELS}/{model.pk}/download/physical", **token)
+    assert physical.status_code == 200 and physical["Content-Type"] == "application/gzip"
+    with tarfile.open(fileobj=io.BytesIO(b"".join(physical.streaming_content))) as archive:
+        assert sorted(archive.getnames()) == ["agent/model.pb", "model_metadata.json"]
+    assert f"physicalmodel-{model.name}.tar.gz" in physical["Content-Disposition"]
+    logs = client.get(f"{MODELS}/{model.pk}/download/logs", **token)  # made, not trained
+    assert logs.status_code == 409 and logs.json()["message"] == logs_archive.NO_LOGS
+    assert (
+        client.get(f"{MODELS}/{model.pk}/download/physical", **bearer(bob, "read")).status_code
+        == 404
+    )
+    assert client.get(f"{MODELS}/{model.pk}/download/floppy", **token).status_code == 400
+    untrained = a_model(alice, "untrained")
+    refused = client.get(f"{MODELS}/{untrained.pk}/download/physical", **token)
+    assert refused.status_code == 409 and refused.json()["code"] == "refused"

@@ -1,0 +1,71 @@
+"""The league in the API: events as the pages show them to each racer, leaderboards by racer
+name, a submission under the submit page's rules, and a racer's own runs."""
+
+from __future__ import annotations
+
+from accounts.models import Profile
+from accounts.tokens import token_create
+from racing.models import Submission
+from tests.helpers.league import event, scored
+from tests.helpers.models import ready_model
+from training.models import RLModel
+
+
+def bearer(owner, *scopes: str, name: str = "t") -> dict[str, str]:
+    secret = token_create(owner=owner, name=name, scopes=list(scopes), days=7)[1]
+    return {"HTTP_AUTHORIZATION": f"Bearer {secret}"}
+
+
+def test_a_leaderboard_ranks_by_racer_name_and_a_private_race_is_its_racers_alone(
+    alice, bob, stella, tracks, client
+):
+    Profile.objects.filter(user=alice).update(racer_name="FastAlice")  # not her login name
+    race = event("Time trial", laps_required=1)
+    scored(race, alice, 9_000, model_name="quick")
+    scored(race, bob, 7_500, model_name="quicker")
+    private = event("Club night", public=False, organiser=alice)
+    token = bearer(bob, "read")
+    slugs = [e["slug"] for e in client.get("/api/v1/events", **token).json()]
+    assert slugs == ["time-trial"]
+    assert client.get(f"/api/v1/events/{private.slug}", **token).status_code == 404
+    assert private.slug in [
+        e["slug"] for e in client.get("/api/v1/events", **bearer(alice, "read")).json()
+    ]
+
+    board = client.get(f"/api/v1/events/{race.slug}/leaderboard", **token).json()
+    assert board["count"] == 2 and board["pages"] == 1
+    places = [(r["position"], r["racer"], r["model_name"], r["gap_ms"]) for r in board["items"]]
+    assert places == [(1, "bob", "quicker", 0), (2, "FastAlice", "quick", 1_500)]
+
+
+def test_a_submission_is_raced_under_the_submit_pages_rules(alice, bob, tracks, client):
+    race = event("Time trial", laps_required=1)
+    model = ready_model(alice)
+    racing = bearer(alice, "read", "race", name="racing")
+    url = f"/api/v1/events/{race.slug}/submissions"
+    reader = client.post(
+        url, {"model": model.pk}, content_type="application/json", **bearer(alice, "read")
+    )
+    assert reader.status_code == 403
+    others = client.post(
+        url, {"model": model.pk}, content_type="application/json", **bearer(bob, "race")
+    )
+    assert others.status_code == 404  # not bob's model
+
+    entered = client.post(url, {"model": model.pk}, content_type="application/json", **racing)
+    assert entered.status_code == 201
+    run = entered.json()
+    assert (run["event"], run["model"], run["status"]) == (race.slug, model.pk, "QUEUED")
+    model.refresh_from_db()
+    assert model.status == RLModel.Status.SUBMITTING
+    again = client.post(url, {"model": model.pk}, content_type="application/json", **racing)
+    assert again.status_code == 409 and again.json()["code"] == "refused"
+    assert Submission.objects.count() == 1
+
+    mine = client.get("/api/v1/submissions", **racing).json()
+    assert [r["id"] for r in mine] == [run["id"]]
+    assert client.get(f"/api/v1/submissions/{run['id']}", **racing).json()["laps"] == []
+    assert (
+        client.get(f"/api/v1/submissions/{run['id']}", **bearer(bob, "read", name="b")).status_code
+        == 404
+    )
