@@ -77,8 +77,9 @@ $(VENV)/.run-installed: requirements/run.txt | $(VENV)/bin/python
 	$(BIN)/python -m pip install --quiet -r requirements/run.txt
 	@touch $@
 
-$(VENV)/.test-installed: requirements/test.txt | $(VENV)/bin/python
+$(VENV)/.test-installed: requirements/test.txt client/pyproject.toml | $(VENV)/bin/python
 	$(BIN)/python -m pip install --quiet -r requirements/test.txt
+	$(BIN)/python -m pip install --quiet --no-deps -e client
 	@touch $@ $(VENV)/.run-installed
 
 clean:

@@ -1,0 +1,296 @@
+"""``pitlane``: the console's API from a shell, with DeepRacer for Cloud's verbs.
+
+    pitlane login --url URL --token TOKEN
+    pitlane models list|show ID|stop ID|delete ID|clone ID NAME
+    pitlane train FOLDER [--name NAME] [--minutes N] [--wait]
+    pitlane download ID [--physical|--onnx|--virtual|--logs] [--checkpoint best|last]
+    pitlane evaluate ID [--trials N] [--checkpoint best|last] [--wait]
+    pitlane submit ID EVENT    pitlane leaderboard EVENT    pitlane runs
+
+Lists are tables; ``--json`` prints what the API answered, for scripts. The URL and token come
+from ``pitlane login`` (kept in ~/.config/pitlane/config.json, for its owner alone), or from
+PITLANE_URL and PITLANE_TOKEN. A refusal prints the console's words and exits 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+from pitlane_client import ApiError, Client, folder_files
+
+WHOLE = "__all__"  # a refusal of the request as a whole, not of one input (the console's name)
+WAIT_EVERY = 2.0  # [s] between looks while --wait waits
+MODEL_COLUMNS = ("id", "name", "status", "track", "algorithm")
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return args.run(args) or 0
+    except ApiError as refusal:
+        for line in _refusal_lines(refusal):
+            print(f"pitlane: {line}", file=sys.stderr)
+        return 1
+    except (OSError, ValueError) as error:
+        print(f"pitlane: {error}", file=sys.stderr)
+        return 1
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="pitlane", description="Pitlane's console from a shell.")
+    parser.add_argument("--json", action="store_true", help="print the API's answer as JSON")
+    verbs = parser.add_subparsers(required=True, metavar="VERB")
+
+    login = verbs.add_parser("login", help="keep the console's URL and your token")
+    login.add_argument("--url", required=True)
+    login.add_argument("--token", required=True, help="made on your profile page")
+    login.set_defaults(run=_login)
+
+    models = verbs.add_parser("models", help="your models").add_subparsers(required=True)
+    listed = models.add_parser("list")
+    listed.add_argument("--status")
+    listed.add_argument("--track")
+    listed.set_defaults(run=_models_list)
+    for verb, run in (("show", _model_show), ("stop", _model_stop), ("delete", _model_delete)):
+        one = models.add_parser(verb)
+        one.add_argument("model", type=int)
+        one.set_defaults(run=run)
+    clone = models.add_parser("clone")
+    clone.add_argument("model", type=int)
+    clone.add_argument("name")
+    clone.add_argument("--checkpoint", choices=("best", "last"), default="best")
+    clone.add_argument("--minutes", type=int)
+    clone.set_defaults(run=_model_clone)
+
+    train = verbs.add_parser("train", help="create a model from a DeepRacer for Cloud folder")
+    train.add_argument("folder", type=Path)
+    train.add_argument("--name")
+    train.add_argument("--minutes", type=int)
+    train.add_argument("--wait", action="store_true", help="until its first iteration")
+    train.set_defaults(run=_train)
+
+    download = verbs.add_parser("download", help="a model's archive")
+    download.add_argument("model", type=int)
+    kinds = download.add_mutually_exclusive_group()
+    for kind in ("physical", "onnx", "virtual", "logs"):
+        kinds.add_argument(f"--{kind}", dest="kind", action="store_const", const=kind)
+    download.add_argument("--checkpoint", choices=("best", "last"), default="best")
+    download.add_argument("--into", type=Path, default=Path.cwd())
+    download.set_defaults(run=_download, kind="physical")
+
+    evaluate = verbs.add_parser("evaluate", help="evaluate a model")
+    evaluate.add_argument("model", type=int)
+    evaluate.add_argument("--trials", type=int)
+    evaluate.add_argument("--checkpoint", choices=("best", "last"))
+    evaluate.add_argument("--wait", action="store_true", help="until it ends")
+    evaluate.set_defaults(run=_evaluate)
+
+    submit = verbs.add_parser("submit", help="race a model in an event")
+    submit.add_argument("model", type=int)
+    submit.add_argument("event", help="the event's slug, as its address has it")
+    submit.add_argument("--checkpoint", choices=("best", "last"), default="best")
+    submit.set_defaults(run=_submit)
+
+    board = verbs.add_parser("leaderboard", help="an event's leaderboard")
+    board.add_argument("event")
+    board.add_argument("--page", type=int, default=1)
+    board.set_defaults(run=_leaderboard)
+
+    verbs.add_parser("runs", help="your race runs").set_defaults(run=_runs)
+    return parser
+
+
+# The verbs
+
+
+def _config() -> Path:
+    home = Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config")
+    return home / "pitlane" / "config.json"
+
+
+def _login(args) -> int:
+    client = Client(args.url, args.token)
+    me = client.me()  # the token works before it is kept
+    config = _config()
+    config.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+    config.touch(mode=0o600)
+    config.write_text(json.dumps({"url": client.url, "token": args.token}))
+    _say(args, me, f"Logged in to {client.url} as {me['racer_name']} ({', '.join(me['scopes'])}).")
+    return 0
+
+
+def _models_list(args) -> int:
+    page = _client().models(status=args.status, track=args.track, limit=100)
+    if args.json:
+        return _print_json(page)
+    _table(page["items"], MODEL_COLUMNS)
+    return 0
+
+
+def _model_show(args) -> int:
+    model = _client().model(args.model)
+    if args.json:
+        return _print_json(model)
+    for key in (*MODEL_COLUMNS, "network", "max_minutes", "cloned_from"):
+        print(f"{key:>14}  {model[key]}")
+    for key, value in model["checkpoints"].items():
+        print(f"{key:>14}  {value}")
+    return 0
+
+
+def _model_stop(args) -> int:
+    stopped = _client().stop(args.model)
+    return _say(args, stopped, f"{stopped['status'].capitalize()}: {stopped['message']}")
+
+
+def _model_delete(args) -> int:
+    deleted = _client().delete(args.model)
+    return _say(args, deleted, f"Deleted model {args.model} ({deleted['files_removed']} files).")
+
+
+def _model_clone(args) -> int:
+    changes = {"checkpoint": args.checkpoint}
+    if args.minutes:
+        changes["max_minutes"] = args.minutes
+    clone = _client().clone(args.model, args.name, **changes)
+    return _say(args, clone, f"Created {clone['name']} (#{clone['id']}); its training is queued.")
+
+
+def _train(args) -> int:
+    files = folder_files(args.folder)
+    fields = {"name": args.name, "max_minutes": args.minutes}
+    client = _client()
+    model = client.create(files, **{k: v for k, v in fields.items() if v is not None})
+    if not args.json:
+        print(f"Created {model['name']} (#{model['id']}); its training is queued.")
+        for note in model["notes"]:
+            print(f"  note: {note}")
+    if args.wait:
+        model["iterations"] = _wait(
+            "the first iteration", lambda: client.iterations(model["id"]), bool
+        )
+    return _print_json(model) if args.json else 0
+
+
+def _download(args) -> int:
+    bar = None if args.json else _bar(f"{args.kind} archive")
+    path = _client().download(args.model, args.kind, args.into, args.checkpoint, progress=bar)
+    if not args.json:
+        print()
+    return _say(args, {"path": str(path)}, f"Saved {path}")
+
+
+def _evaluate(args) -> int:
+    settings = {k: v for k, v in (("trials", args.trials), ("checkpoint", args.checkpoint)) if v}
+    client = _client()
+    evaluation = client.evaluate(args.model, **settings)
+    if args.wait:
+        evaluation = _wait(
+            "the evaluation",
+            lambda: client.evaluation(args.model, evaluation["id"]),
+            lambda got: got["status"] in ("COMPLETED", "FAILED", "CANCELED"),
+        )
+    if args.json:
+        return _print_json(evaluation)
+    print(f"Evaluation #{evaluation['id']}: {evaluation['status']}")
+    _table(evaluation["results"], ("number", "time_ms", "progress", "status", "off_tracks"))
+    return 0
+
+
+def _submit(args) -> int:
+    run = _client().submit(args.model, args.event, args.checkpoint)
+    return _say(
+        args, run, f"{run['model_name']} is on the grid for {args.event} (run #{run['id']})."
+    )
+
+
+def _leaderboard(args) -> int:
+    board = _client().leaderboard(args.event, args.page)
+    if args.json:
+        return _print_json(board)
+    _table(board["items"], ("position", "racer", "model_name", "score_ms", "gap_ms"))
+    print(f"page {board['page']} of {board['pages']}, {board['count']} ranked")
+    return 0
+
+
+def _runs(args) -> int:
+    runs = _client().runs()
+    if args.json:
+        return _print_json(runs)
+    _table(runs, ("id", "event", "model_name", "status", "score_ms", "laps_completed"))
+    return 0
+
+
+# Helpers
+
+
+def _refusal_lines(refusal: ApiError) -> list[str]:
+    """The console's words: one line for each input at fault where it named them."""
+    if not refusal.errors:
+        return [str(refusal)]
+    return [m if n == WHOLE else f"{n}: {m}" for n, m in refusal.errors.items()]
+
+
+def _client() -> Client:
+    url, token = os.environ.get("PITLANE_URL"), os.environ.get("PITLANE_TOKEN")
+    if not (url and token) and _config().is_file():
+        kept = json.loads(_config().read_text())
+        url, token = url or kept.get("url"), token or kept.get("token")
+    if not (url and token):
+        raise ValueError("not logged in: run `pitlane login --url URL --token TOKEN` first")
+    return Client(url, token)
+
+
+def _say(args, answer, words: str) -> int:
+    if args.json:
+        return _print_json(answer)
+    print(words)
+    return 0
+
+
+def _print_json(answer) -> int:
+    print(json.dumps(answer, indent=2))
+    return 0
+
+
+def _table(rows: list[dict], columns: tuple[str, ...]) -> None:
+    cells = [[str(row.get(column, "")) for column in columns] for row in rows]
+    widths = [max([len(c), *(len(r[i]) for r in cells)]) for i, c in enumerate(columns)]
+    for line in (list(columns), *cells):
+        print("  ".join(cell.ljust(width) for cell, width in zip(line, widths, strict=True)))
+
+
+def _bar(what: str):
+    """A progress bar on standard error, for a download of ``what``."""
+
+    def shown(done: int, total: int | None) -> None:
+        if total:
+            filled = round(30 * done / total)
+            line = f"[{'#' * filled}{'.' * (30 - filled)}] {done * 100 // total}%"
+        else:
+            line = f"{done / 2**20:.1f} MiB"
+        print(f"\r{what}: {line}", end="", file=sys.stderr, flush=True)
+
+    return shown
+
+
+def _wait(what: str, look, done) -> object:
+    """``look()`` every few seconds until ``done`` of what it gives, with a spinner on standard
+    error; what it gave last."""
+    started = time.monotonic()
+    while True:
+        got = look()
+        if done(got):
+            print(file=sys.stderr)
+            return got
+        print(f"\rwaiting for {what}: {time.monotonic() - started:.0f} s", end="", file=sys.stderr)
+        time.sleep(WAIT_EVERY)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,107 @@
+"""The `pitlane` command line against a running console (Daphne, a real token): a racer's
+verbs as DeepRacer for Cloud's user types them, its tables, its --json and its refusals."""
+
+from __future__ import annotations
+
+import io
+import json
+import tarfile
+from contextlib import redirect_stderr, redirect_stdout
+
+import pytest
+import yaml
+from pitlane_client import cli
+
+from accounts.tokens import token_create
+from tests.helpers.archives import DEEPRACER_HYPERPARAMETERS, DEEPRACER_METADATA, DEEPRACER_PARAMS
+from tests.helpers.league import event, scored
+from tests.helpers.models import ready_model
+from training.models import RLModel
+from training.rewards import EXAMPLES
+
+pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.slow]
+
+
+def pitlane(*argv: str) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        code = cli.main(list(argv))
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.fixture
+def logged_in(alice, daphne_server, tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "config"))
+    monkeypatch.delenv("PITLANE_URL", raising=False)
+    monkeypatch.delenv("PITLANE_TOKEN", raising=False)
+    secret = token_create(owner=alice, name="cli", scopes=["read", "train", "race"], days=7)[1]
+    code, out, _ = pitlane("login", "--url", daphne_server, "--token", secret)
+    assert code == 0 and out.startswith(f"Logged in to {daphne_server} as alice (race, read")
+    kept = tmp_path / "config" / "pitlane" / "config.json"
+    assert kept.stat().st_mode & 0o777 == 0o600
+    return secret
+
+
+def test_a_racer_lists_shows_downloads_and_reads_a_leaderboard(
+    alice, bob, tracks, logged_in, tmp_path
+):
+    model = ready_model(alice)
+    code, out, _ = pitlane("models", "list")
+    lines = out.splitlines()
+    assert code == 0 and lines[0].split() == ["id", "name", "status", "track", "algorithm"]
+    assert lines[1].split()[:3] == [str(model.pk), model.name, "READY"]
+    code, out, _ = pitlane("--json", "models", "show", str(model.pk))
+    assert code == 0 and json.loads(out)["name"] == model.name
+
+    code, out, err = pitlane("download", str(model.pk), "--physical", "--into", str(tmp_path))
+    saved = tmp_path / f"physicalmodel-{model.name}.tar.gz"
+    assert code == 0 and out.strip() == f"Saved {saved}" and "100%" in err
+    with tarfile.open(saved) as archive:
+        assert sorted(archive.getnames()) == ["agent/model.pb", "model_metadata.json"]
+
+    race = event("Time trial", laps_required=1)
+    scored(race, bob, 7_500, model_name="quicker")
+    code, out, _ = pitlane("leaderboard", race.slug)
+    assert code == 0 and out.splitlines()[1].split()[:3] == ["1", "bob", "quicker"]
+    assert out.splitlines()[-1] == "page 1 of 1, 1 ranked"
+
+
+def test_train_makes_a_model_from_a_deepracer_for_cloud_folder_and_refusals_are_words(
+    alice, tracks, logged_in, tmp_path
+):
+    folder = tmp_path / "my-model"
+    folder.mkdir()
+    (folder / "model_metadata.json").write_text(json.dumps(DEEPRACER_METADATA))
+    (folder / "hyperparameters.json").write_text(json.dumps(DEEPRACER_HYPERPARAMETERS))
+    params = {**DEEPRACER_PARAMS, "WORLD_NAME": "Oval_track"}
+    (folder / "training_params_1.yaml").write_text(yaml.safe_dump(params))
+    (folder / "reward_function.py").write_text(EXAMPLES[0].source)
+    code, _, err = pitlane("train", str(folder), "--name", "from-cli", "--minutes", "5")
+    assert code == 1
+    assert err == "pitlane: max_minutes: The maximum training time is 10 to 1440 minutes.\n"
+    code, out, err = pitlane("train", str(folder), "--name", "from-cli", "--minutes", "10")
+    assert code == 0, err
+    model = RLModel.objects.get(name="from-cli")
+    assert out.startswith(f"Created from-cli (#{model.pk}); its training is queued.")
+    assert model.track.name == "Oval_track" and model.max_minutes == 10
+
+    code, _, err = pitlane("models", "delete", str(model.pk))  # it trains or waits to
+    assert code == 1 and err.startswith("pitlane: The model is")
+    code, out, _ = pitlane("models", "stop", str(model.pk))
+    assert code == 0 and out.split(":")[0] in ("Canceled", "Stopping")
+
+    code, _, err = pitlane("models", "show", "999999")
+    assert code == 1 and err.strip() == "pitlane: No model of yours has the id 999999."
+    code, _, err = pitlane("--json", "models", "list")
+    assert code == 0
+
+
+def test_a_token_that_does_not_work_is_told_plainly(daphne_server, tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path))
+    code, _, err = pitlane("login", "--url", daphne_server, "--token", "plt_" + "x" * 40)
+    assert code == 1 and err.startswith("pitlane: Send a working token")
+    assert not (tmp_path / "pitlane" / "config.json").exists()
+    monkeypatch.delenv("PITLANE_URL", raising=False)
+    monkeypatch.delenv("PITLANE_TOKEN", raising=False)
+    code, _, err = pitlane("models", "list")
+    assert code == 1 and "not logged in" in err
