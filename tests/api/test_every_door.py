@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import re
 
+import pytest
+
 from accounts.tokens import token_create
 from api.v1 import api
 from racing.models import Submission
@@ -35,6 +37,7 @@ def operations():
             yield method, path
 
 
+@pytest.mark.slow  # every operation, twice
 def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
     alice, bob, tracks, client
 ):

@@ -14,6 +14,7 @@ from django.utils import timezone
 
 from accounts.models import AccessToken, TokenScope
 from accounts.tokens import token_create
+from tests.helpers.accounts import racer
 from tests.helpers.training import settings as training_settings
 from training import configuration, services
 from training.models import RLModel
@@ -165,3 +166,24 @@ def test_the_openapi_document_and_its_reference_are_served_from_our_own_files(cl
 
 def test_the_scopes_on_the_page_are_the_tokens_scopes():
     assert set(TokenScope.values) == {"read", "train", "race", "admin"}
+
+
+def test_an_administrator_sees_racers_tokens_without_their_secrets_and_revokes_one(
+    alice, stella, client
+):
+    secret = secret_of(alice, "read", name="leaked")
+    client.force_login(stella)  # league staff, without the right to racers' accounts
+    assert client.get("/admin/accounts/accesstoken/").status_code == 403
+    client.force_login(racer("root", is_staff=True, is_superuser=True))
+    listing = client.get("/admin/accounts/accesstoken/")
+    assert listing.status_code == 200 and "leaked" in listing.text and secret not in listing.text
+    token = AccessToken.objects.get(name="leaked")
+    client.post(
+        "/admin/accounts/accesstoken/",
+        {"action": "revoke", "_selected_action": [token.pk]},
+    )
+    token.refresh_from_db()
+    assert token.revoked_at is not None
+    client.logout()
+    assert client.get(ME, **bearer(secret)).status_code == 401
+    assert client.get("/admin/accounts/accesstoken/add/").status_code == 302  # to the login
