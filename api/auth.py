@@ -8,16 +8,13 @@ the rate with 429 and ``Retry-After``, as the pages' limits are.
 
 from __future__ import annotations
 
-import math
-
 from django.http import HttpRequest
 from ninja.errors import AuthenticationError
 from ninja.security import HttpBearer, SessionAuth
 
 from accounts import tokens
 from accounts.models import TokenScope
-from api.errors import ApiError
-from common import ratelimits
+from api.errors import ApiError, counted
 
 # What each scope lets a token do, for the refusal's words.
 DOES = {
@@ -35,14 +32,7 @@ class TokenAuth(HttpBearer):
         found = tokens.token_for(token)
         if found is None:
             raise AuthenticationError()
-        limited = ratelimits.over(request, "api", key=f"token:{found.pk}", every_method=True)
-        if limited is not None:
-            raise ApiError(
-                limited.status,
-                "rate_limited",
-                str(limited),
-                {"Retry-After": str(max(1, math.ceil(limited.wait)))},
-            )
+        counted(request, "api", key=f"token:{found.pk}", every_method=True)
         request.access_token = found
         request.user = found.owner
         return found.owner

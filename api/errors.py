@@ -10,11 +10,13 @@ resource's state refuses, 413, 429 with ``Retry-After``. Never a traceback.
 from __future__ import annotations
 
 import logging
+import math
 
 from django.http import Http404, HttpRequest, HttpResponse
 from ninja import NinjaAPI
 from ninja.errors import AuthenticationError, HttpError, ValidationError
 
+from common import ratelimits
 from common.refusals import Refused
 
 logger = logging.getLogger(__name__)
@@ -29,6 +31,16 @@ class ApiError(Exception):
         super().__init__(message)
         self.status, self.code, self.message = status, code, message
         self.headers = headers or {}
+
+
+def counted(request: HttpRequest, action: str, **how) -> None:
+    """Count the request against the console's limit ``action`` (``common.ratelimits.over``,
+    as the pages count theirs); refuse it (429, or 503 where the count failed closed) with
+    ``Retry-After`` past the rate."""
+    limited = ratelimits.over(request, action, **how)
+    if limited is not None:
+        wait = str(max(1, math.ceil(limited.wait)))
+        raise ApiError(limited.status, "rate_limited", str(limited), {"Retry-After": wait})
 
 
 def answer(api: NinjaAPI, request: HttpRequest, error: ApiError) -> HttpResponse:

@@ -8,17 +8,15 @@ model must be ready and trained. Its video, trace and metrics are the evaluation
 
 from __future__ import annotations
 
-import math
 from datetime import datetime
 
 from ninja import Router, Schema, Status
 
 from accounts.models import TokenScope
 from api.auth import need
-from api.errors import ApiError
+from api.errors import ApiError, counted
 from api.owned import own_model
 from api.schemas import REFUSED
-from common import ratelimits
 from training import services
 from training.models import EvaluationJob, EvaluationTrial
 
@@ -113,10 +111,7 @@ def evaluation_create(request, model_id: int, body: EvaluationIn):
     it ends (409 meanwhile for another)."""
     need(request, TokenScope.TRAIN)
     model = own_model(request, model_id)
-    if limited := ratelimits.over(request, "evaluate"):
-        raise ApiError(
-            429, "rate_limited", str(limited), {"Retry-After": str(max(1, math.ceil(limited.wait)))}
-        )
+    counted(request, "evaluate")
     settings = body.dict(exclude_none=True)
     seed = settings.pop("seed", None)
     try:

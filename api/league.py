@@ -9,7 +9,6 @@ invitation, the limit per racer) and counted against the racer's ``evaluate`` li
 
 from __future__ import annotations
 
-import math
 from datetime import datetime
 
 from django.db.models import Q
@@ -18,10 +17,9 @@ from ninja import Router, Schema, Status
 from accounts.models import TokenScope
 from accounts.selectors import racer_name
 from api.auth import need
-from api.errors import ApiError
+from api.errors import ApiError, counted
 from api.owned import own_model
 from api.schemas import REFUSED
-from common import ratelimits
 from racing import selectors, services
 from racing.models import Event, Submission
 
@@ -187,10 +185,7 @@ def submission_create(request, slug: str, body: SubmitIn):
     need(request, TokenScope.RACE)
     event = _event(request, slug)
     model = own_model(request, body.model)
-    if limited := ratelimits.over(request, "evaluate"):
-        raise ApiError(
-            429, "rate_limited", str(limited), {"Retry-After": str(max(1, math.ceil(limited.wait)))}
-        )
+    counted(request, "evaluate")
     try:
         submission = services.submission_create(
             racer=request.user, event=event, model=model, checkpoint=body.checkpoint

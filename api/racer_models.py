@@ -8,7 +8,6 @@ model answers 404, as a missing one does; a model that cannot be stopped or dele
 
 from __future__ import annotations
 
-import math
 from datetime import datetime
 from typing import Literal
 
@@ -18,12 +17,11 @@ from ninja import Query, Router, Schema, Status
 
 from accounts.models import TokenScope
 from api.auth import need
-from api.errors import ApiError
+from api.errors import ApiError, counted
 from api.owned import own_model
 from api.schemas import REFUSED
 from archives.deepracer_settings import archive_settings
 from archives.members import Members, member_json
-from common import ratelimits
 from training import checkers, configuration, selectors, services
 from training.models import Iteration, RLModel, TrainingJob
 
@@ -254,10 +252,7 @@ def _clone_draft(request, model_id: int, body: CloneIn) -> configuration.Draft:
 async def _created(request, draft: configuration.Draft, notes: list[str]) -> Status:
     """The model ``draft`` describes, made as the create page makes it: the racer's create
     limit, the reward function validated by a checker, the settings checked, training queued."""
-    if limited := await sync_to_async(ratelimits.over)(request, "create"):
-        raise ApiError(
-            429, "rate_limited", str(limited), {"Retry-After": str(max(1, math.ceil(limited.wait)))}
-        )
+    await sync_to_async(counted)(request, "create")
     checked = await checkers.reward_checked(
         draft["reward_function"],
         draft["track"],

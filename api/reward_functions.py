@@ -7,7 +7,6 @@ racer's ``validate`` limit as the editor's presses are.
 
 from __future__ import annotations
 
-import math
 from typing import Literal
 
 from asgiref.sync import sync_to_async
@@ -15,9 +14,8 @@ from ninja import Router, Schema
 
 from accounts.models import TokenScope
 from api.auth import need
-from api.errors import ApiError
+from api.errors import ApiError, counted
 from api.schemas import REFUSED
-from common import ratelimits
 from training import checkers
 from training.forms import RewardValidationForm
 
@@ -58,10 +56,7 @@ async def reward_validate(request, body: ValidateIn):
     problems by line and what it printed. ``valid`` is false for code with errors (still 200:
     the check ran); 503 with ``Retry-After`` when every checker is busy."""
     need(request, TokenScope.TRAIN)
-    if limited := await sync_to_async(ratelimits.over)(request, "validate"):
-        raise ApiError(
-            429, "rate_limited", str(limited), {"Retry-After": str(max(1, math.ceil(limited.wait)))}
-        )
+    await sync_to_async(counted)(request, "validate")
     form = RewardValidationForm({"source": body.source, "track": body.track})
     if not await sync_to_async(form.is_valid)():
         raise ApiError(400, "invalid", form.first_error())
