@@ -4,7 +4,6 @@ virtual model's and the logs laid out as DeepRacer's (``archives.exports``, ``lo
 
 from __future__ import annotations
 
-import tempfile
 from typing import Literal
 
 from ninja import Router
@@ -15,9 +14,7 @@ from api.errors import ApiError
 from api.owned import own_model
 from api.schemas import REFUSED
 from archives import exports, logs_archive
-from common.downloads import file_response
 from training import artifacts
-from training.models import RLModel
 
 router = Router()
 
@@ -44,7 +41,7 @@ def model_download(
     model = own_model(request, model_id)
     try:
         if kind == "logs":
-            return _logs_download(request, model)
+            return logs_archive.download(request, model)
         if kind == "virtual":
             export = exports.virtual(model)
         else:
@@ -53,21 +50,4 @@ def model_download(
         raise ApiError(409, "refused", str(refused)) from None
     return artifacts.download(
         request, export.name, export.filename, content_type="application/gzip"
-    )
-
-
-def _logs_download(request, model: RLModel):
-    archive = tempfile.TemporaryFile()  # noqa: SIM115 (the response closes it once sent)
-    try:
-        logs_archive.write(model, archive)
-    except BaseException:
-        archive.close()
-        raise
-    return file_response(
-        request,
-        archive,
-        filename=logs_archive.filename(model),
-        attachment=True,
-        content_type="application/gzip",
-        ranges=False,  # built for this request: another's bytes differ
     )

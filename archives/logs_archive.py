@@ -23,11 +23,14 @@ from __future__ import annotations
 import io
 import re
 import tarfile
+import tempfile
 import time
 from typing import BinaryIO
 
 from django.core.files.storage import default_storage
+from django.http import HttpRequest, HttpResponse
 
+from common.downloads import file_response
 from common.refusals import Refused
 from training import artifacts, selectors
 from training.models import EvaluationJob, RLModel
@@ -52,6 +55,26 @@ def filename(model: RLModel) -> str:
 def has_logs(model: RLModel) -> bool:
     """Whether the model has a training iteration's files or a finished evaluation to archive."""
     return bool(_stored_files(model))
+
+
+def download(request: HttpRequest, model: RLModel) -> HttpResponse:
+    """The archive as a download, built for this request (its traces grow while the model
+    trains, so another request's bytes differ: no ranges); ``LogsRefused`` where there is
+    nothing to put in it."""
+    archive = tempfile.TemporaryFile()  # noqa: SIM115 (the response closes it once sent)
+    try:
+        write(model, archive)
+    except BaseException:
+        archive.close()
+        raise
+    return file_response(
+        request,
+        archive,
+        filename=filename(model),
+        attachment=True,
+        content_type="application/gzip",
+        ranges=False,
+    )
 
 
 def write(model: RLModel, target: BinaryIO) -> None:

@@ -7,7 +7,6 @@ render.
 
 from __future__ import annotations
 
-import tempfile
 from contextlib import nullcontext
 
 from asgiref.sync import sync_to_async
@@ -21,7 +20,6 @@ from archives import exports, imports, kept_uploads, logs_archive
 from archives.forms import ModelImportConfirmForm, ModelImportForm
 from archives.models import KEPT_FOR, KeptUpload
 from common import ratelimits
-from common.downloads import file_response
 from common.refusals import Refused
 from training import artifacts, checkers, configuration, selectors
 from training.forms import training_settings_shown
@@ -61,21 +59,11 @@ def model_logs(request: HttpRequest, pk: int) -> HttpResponse:
     """The model's logs, laid out as a DeepRacer model folder (``archives.logs_archive``), built
     for this request: its traces grow while it trains."""
     model = _get_model_for_user(request, pk)
-    archive = tempfile.TemporaryFile()  # noqa: SIM115 (the response closes it once sent)
     try:
-        logs_archive.write(model, archive)
+        return logs_archive.download(request, model)
     except logs_archive.LogsRefused as refused:
-        archive.close()
         messages.error(request, str(refused))
         return redirect("training:model-detail", pk=model.pk)
-    return file_response(
-        request,
-        archive,
-        filename=logs_archive.filename(model),
-        attachment=True,
-        content_type="application/gzip",
-        ranges=False,  # built for this request: another's bytes differ
-    )
 
 
 @login_required
