@@ -18,6 +18,7 @@ from ninja.errors import AuthenticationError, HttpError, ValidationError
 
 from common import ratelimits
 from common.refusals import Refused
+from training import checkers
 
 logger = logging.getLogger(__name__)
 
@@ -41,6 +42,15 @@ def counted(request: HttpRequest, action: str, **how) -> None:
     if limited is not None:
         wait = str(max(1, math.ceil(limited.wait)))
         raise ApiError(limited.status, "rate_limited", str(limited), {"Retry-After": wait})
+
+
+def check_failed(error: Exception) -> ApiError:
+    """A reward check that could not run (``training.checkers.FAILURES``): 503, the racer's
+    input not at fault, and when every checker was busy, when to try again (as the pages'
+    ``checkers.failure_response``)."""
+    busy = isinstance(error, checkers.Busy)
+    headers = {"Retry-After": str(checkers.RETRY_AFTER)} if busy else {}
+    return ApiError(503, "unavailable", checkers.failure_words(error), headers)
 
 
 def answer(api: NinjaAPI, request: HttpRequest, error: ApiError) -> HttpResponse:
@@ -78,8 +88,7 @@ def install(api: NinjaAPI) -> None:
 
     @api.exception_handler(ValidationError)
     def invalid(request, error: ValidationError):
-        response = answer(api, request, ApiError(400, "invalid", _invalid_words(error.errors)))
-        return response
+        return answer(api, request, ApiError(400, "invalid", _invalid_words(error.errors)))
 
     @api.exception_handler(AuthenticationError)
     def unauthenticated(request, error):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from datetime import datetime
 
-from django.db.models import Q
 from ninja import Router, Schema, Status
 
 from accounts.models import TokenScope
@@ -111,16 +110,8 @@ def _event_out(event: Event) -> dict:
     }
 
 
-def _visible_events(request):
-    events = Event.objects.select_related("season", "track")
-    if request.user.is_staff:
-        return events
-    mine = Q(public=True) | Q(organiser=request.user) | Q(participants=request.user)
-    return events.filter(mine).distinct()
-
-
 def _event(request, slug: str) -> Event:
-    event = _visible_events(request).filter(slug=slug).first()
+    event = selectors.events_visible_to(user=request.user).filter(slug=slug).first()
     if event is None:
         raise ApiError(404, "not_found", f"No event you may see is called {slug!r}.")
     return event
@@ -139,7 +130,10 @@ def events_list(request):
     """The events you may see, newest first: the league's, and the community races you organise
     or joined."""
     need(request, TokenScope.READ)
-    return [_event_out(event) for event in _visible_events(request).order_by("-opens_at")]
+    return [
+        _event_out(event)
+        for event in selectors.events_visible_to(user=request.user).order_by("-opens_at")
+    ]
 
 
 @router.get("/events/{slug}", response={200: EventOut, **REFUSED})

@@ -17,7 +17,7 @@ from ninja import Query, Router, Schema, Status
 
 from accounts.models import TokenScope
 from api.auth import need
-from api.errors import ApiError, counted
+from api.errors import ApiError, check_failed, counted
 from api.owned import own_model
 from api.schemas import REFUSED
 from archives.deepracer_settings import archive_settings
@@ -260,7 +260,7 @@ async def _created(request, draft: configuration.Draft, notes: list[str]) -> Sta
         direction=draft["direction"],
     )
     if isinstance(checked, Exception):
-        raise ApiError(503, "unavailable", checkers.failure_words(checked))
+        raise check_failed(checked)
     if not checked.valid:
         first = checked.errors[0]
         where = f" (line {first.line})" if first.line else ""

@@ -14,7 +14,7 @@ from ninja import Router, Schema
 
 from accounts.models import TokenScope
 from api.auth import need
-from api.errors import ApiError, counted
+from api.errors import ApiError, check_failed, counted
 from api.schemas import REFUSED
 from training import checkers
 from training.forms import RewardValidationForm
@@ -67,7 +67,5 @@ async def reward_validate(request, body: ValidateIn):
         direction=body.direction,
     )
     if isinstance(checked, Exception):
-        busy = isinstance(checked, checkers.Busy)
-        headers = {"Retry-After": str(checkers.RETRY_AFTER)} if busy else {}
-        raise ApiError(503, "unavailable", checkers.failure_words(checked), headers)
+        raise check_failed(checked)
     return checked.as_dict()

@@ -51,6 +51,16 @@ def events_not_closed() -> QuerySet[Event]:
     return events_with_leaders().filter(closes_at__gt=timezone.now())
 
 
+def events_visible_to(*, user: AbstractBaseUser) -> QuerySet[Event]:
+    """The events ``user`` may see (``event_visible_to``'s rule, as a query): the public ones,
+    and the community races they organise or joined; league staff see every one."""
+    events = Event.objects.select_related("season", "track")
+    if user.is_staff:
+        return events
+    mine = Q(public=True) | Q(organiser=user) | Q(participants=user)
+    return events.filter(mine).distinct()
+
+
 def event_visible_to(*, event: Event, user: AbstractBaseUser) -> bool:
     """Public events are for everyone; a community race for its organiser, its participants
     and league staff."""

@@ -9,9 +9,9 @@ import re
 
 import pytest
 
-from accounts.tokens import token_create
 from api.v1 import api
 from racing.models import Submission
+from tests.helpers.accounts import api_token
 from tests.helpers.league import event
 from tests.helpers.models import ready_model
 from training.models import EvaluationJob
@@ -24,11 +24,6 @@ BODIES = {  # a well-formed body for each operation that takes one
     "/api/v1/events/{slug}/submissions": {"model": 0},
     "/api/v1/reward-functions/validate": {"source": ""},
 }
-
-
-def bearer(owner) -> dict[str, str]:
-    secret = token_create(owner=owner, name="all", scopes=ALL_SCOPES, days=7)[1]
-    return {"HTTP_AUTHORIZATION": f"Bearer {secret}"}
 
 
 def operations():
@@ -52,7 +47,7 @@ def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
         "slug": race.slug,
         "kind": "physical",
     }
-    hers = bearer(bob)
+    hers = api_token(bob, *ALL_SCOPES)
     tried = 0
     for method, path in operations():
         url = re.sub(r"{(\w+)}", lambda m: str(ids[m.group(1)]), path)

@@ -4,16 +4,11 @@ name, a submission under the submit page's rules, and a racer's own runs."""
 from __future__ import annotations
 
 from accounts.models import Profile
-from accounts.tokens import token_create
 from racing.models import Submission
+from tests.helpers.accounts import api_token
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
 from training.models import RLModel
-
-
-def bearer(owner, *scopes: str, name: str = "t") -> dict[str, str]:
-    secret = token_create(owner=owner, name=name, scopes=list(scopes), days=7)[1]
-    return {"HTTP_AUTHORIZATION": f"Bearer {secret}"}
 
 
 def test_a_leaderboard_ranks_by_racer_name_and_a_private_race_is_its_racers_alone(
@@ -24,12 +19,12 @@ def test_a_leaderboard_ranks_by_racer_name_and_a_private_race_is_its_racers_alon
     scored(race, alice, 9_000, model_name="quick")
     scored(race, bob, 7_500, model_name="quicker")
     private = event("Club night", public=False, organiser=alice)
-    token = bearer(bob, "read")
+    token = api_token(bob, "read")
     slugs = [e["slug"] for e in client.get("/api/v1/events", **token).json()]
     assert slugs == ["time-trial"]
     assert client.get(f"/api/v1/events/{private.slug}", **token).status_code == 404
     assert private.slug in [
-        e["slug"] for e in client.get("/api/v1/events", **bearer(alice, "read")).json()
+        e["slug"] for e in client.get("/api/v1/events", **api_token(alice, "read")).json()
     ]
 
     board = client.get(f"/api/v1/events/{race.slug}/leaderboard", **token).json()
@@ -41,14 +36,14 @@ def test_a_leaderboard_ranks_by_racer_name_and_a_private_race_is_its_racers_alon
 def test_a_submission_is_raced_under_the_submit_pages_rules(alice, bob, tracks, client):
     race = event("Time trial", laps_required=1)
     model = ready_model(alice)
-    racing = bearer(alice, "read", "race", name="racing")
+    racing = api_token(alice, "read", "race")
     url = f"/api/v1/events/{race.slug}/submissions"
     reader = client.post(
-        url, {"model": model.pk}, content_type="application/json", **bearer(alice, "read")
+        url, {"model": model.pk}, content_type="application/json", **api_token(alice, "read")
     )
     assert reader.status_code == 403
     others = client.post(
-        url, {"model": model.pk}, content_type="application/json", **bearer(bob, "race")
+        url, {"model": model.pk}, content_type="application/json", **api_token(bob, "race")
     )
     assert others.status_code == 404  # not bob's model
 
@@ -66,6 +61,5 @@ def test_a_submission_is_raced_under_the_submit_pages_rules(alice, bob, tracks, 
     assert [r["id"] for r in mine] == [run["id"]]
     assert client.get(f"/api/v1/submissions/{run['id']}", **racing).json()["laps"] == []
     assert (
-        client.get(f"/api/v1/submissions/{run['id']}", **bearer(bob, "read", name="b")).status_code
-        == 404
+        client.get(f"/api/v1/submissions/{run['id']}", **api_token(bob, "read")).status_code == 404
     )

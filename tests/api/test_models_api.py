@@ -4,15 +4,14 @@ pages (their services), refusals as JSON with a code."""
 from __future__ import annotations
 
 import io
-import itertools
 import json
 import tarfile
 
 import pytest
 import yaml
 
-from accounts.tokens import token_create
 from archives import logs_archive
+from tests.helpers.accounts import api_token
 from tests.helpers.archives import DEEPRACER_HYPERPARAMETERS, DEEPRACER_METADATA, DEEPRACER_PARAMS
 from tests.helpers.models import ready_model
 from tests.helpers.training import settings as training_settings
@@ -28,19 +27,10 @@ def a_model(owner, name: str = "mine", status=RLModel.Status.READY) -> RLModel:
     return services.model_insert(owner=owner, settings=checked, status=status)
 
 
-NAMES = itertools.count()
-
-
-def bearer(owner, *scopes: str) -> dict[str, str]:
-    name = f"token {next(NAMES)}"
-    secret = token_create(owner=owner, name=name, scopes=list(scopes), days=7)[1]
-    return {"HTTP_AUTHORIZATION": f"Bearer {secret}"}
-
-
 def test_a_queued_training_is_canceled_and_a_model_not_training_is_refused(alice, tracks, client):
     model = a_model(alice, status=RLModel.Status.QUEUED)
     job = TrainingJob.objects.create(model=model)
-    token = bearer(alice, "read", "train")
+    token = api_token(alice, "read", "train")
     stopped = client.post(f"{MODELS}/{model.pk}/stop", **token)
     assert stopped.status_code == 200 and stopped.json()["status"] == "CANCELED"
     job.refresh_from_db()
@@ -50,25 +40,25 @@ def test_a_queued_training_is_canceled_and_a_model_not_training_is_refused(alice
         "code": "not_training",
         "message": "This model is not training.",
     }
-    reader = client.post(f"{MODELS}/{model.pk}/stop", **bearer(alice, "read"))
+    reader = client.post(f"{MODELS}/{model.pk}/stop", **api_token(alice, "read"))
     assert reader.status_code == 403 and reader.json()["code"] == "scope"
 
 
 def test_a_model_is_deleted_once_nothing_runs_on_it_and_never_anothers(alice, bob, tracks, client):
     busy = a_model(alice, "busy", status=RLModel.Status.TRAINING)
     done = a_model(alice, "done")
-    refused = client.delete(f"{MODELS}/{busy.pk}", **bearer(alice, "train"))
+    refused = client.delete(f"{MODELS}/{busy.pk}", **api_token(alice, "train"))
     assert refused.status_code == 409 and refused.json()["code"] == "busy"
     assert "stop its training first" in refused.json()["message"]
-    assert client.delete(f"{MODELS}/{done.pk}", **bearer(bob, "train")).status_code == 404
-    deleted = client.delete(f"{MODELS}/{done.pk}", **bearer(alice, "train"))
+    assert client.delete(f"{MODELS}/{done.pk}", **api_token(bob, "train")).status_code == 404
+    deleted = client.delete(f"{MODELS}/{done.pk}", **api_token(alice, "train"))
     assert deleted.status_code == 200 and "files_removed" in deleted.json()
     assert list(RLModel.objects.values_list("name", flat=True)) == ["busy"]
 
 
 def test_a_models_iterations_are_the_training_graphs_points(alice, tracks, client):
     model = a_model(alice)
-    assert client.get(f"{MODELS}/{model.pk}/iterations", **bearer(alice, "read")).json() == []
+    assert client.get(f"{MODELS}/{model.pk}/iterations", **api_token(alice, "read")).json() == []
     job = TrainingJob.objects.create(model=model, status=TrainingJob.Status.COMPLETED)
     for number, reward in ((1, 10.0), (2, 25.5)):
         Iteration.objects.create(
@@ -80,7 +70,7 @@ def test_a_models_iterations_are_the_training_graphs_points(alice, tracks, clien
             steps=900 * number,
             wall_seconds=60.0,
         )
-    points = client.get(f"{MODELS}/{model.pk}/iterations", **bearer(alice, "read")).json()
+    points = client.get(f"{MODELS}/{model.pk}/iterations", **api_token(alice, "read")).json()
     assert [(p["number"], p["reward"], p["completion"]) for p in points] == [
         (1, 10.0, 40.0),
         (2, 25.5, 80.0),
@@ -89,7 +79,7 @@ def test_a_models_iterations_are_the_training_graphs_points(alice, tracks, clien
 
 @pytest.mark.slow  # the sandbox runs the code
 def test_validate_answers_as_the_editors_button_does(alice, tracks, client):
-    token = bearer(alice, "train")
+    token = api_token(alice, "train")
     good = client.post(
         VALIDATE,
         {"source": EXAMPLES[0].source, "track": "pitlane-oval"},
@@ -113,7 +103,7 @@ def test_validate_answers_as_the_editors_button_does(alice, tracks, client):
     missing = client.post(VALIDATE, {}, content_type="application/json", **token)
     assert missing.status_code == 400 and missing.json()["code"] == "invalid"
     reader = client.post(
-        VALIDATE, {"source": "x"}, content_type="application/json", **bearer(alice, "read")
+        VALIDATE, {"source": "x"}, content_type="application/json", **api_token(alice, "read")
     )
     assert reader.status_code == 403
 
@@ -131,7 +121,7 @@ def drfc_files(**changes) -> dict[str, str]:
 
 @pytest.mark.slow  # the sandbox validates the reward function
 def test_a_model_is_created_from_a_deepracer_for_cloud_folders_files(alice, tracks, client):
-    token = bearer(alice, "read", "train")
+    token = api_token(alice, "read", "train")
     body = {"files": drfc_files(), "name": "from-drfc", "max_minutes": 15}
     created = client.post(MODELS, body, content_type="application/json", **token)
     assert created.status_code == 201, created.json()
@@ -171,7 +161,7 @@ def test_an_evaluation_starts_is_listed_read_and_stopped_under_the_pages_rules(
     alice, bob, tracks, client
 ):
     model = ready_model(alice)
-    token = bearer(alice, "read", "train")
+    token = api_token(alice, "read", "train")
     url = f"{MODELS}/{model.pk}/evaluations"
     bad = client.post(url, {"trials": 9}, content_type="application/json", **token)
     assert bad.status_code == 400 and bad.json()["errors"] == {
@@ -191,7 +181,7 @@ def test_an_evaluation_starts_is_listed_read_and_stopped_under_the_pages_rules(
 
     listed = client.get(url, **token).json()
     assert [e["id"] for e in listed] == [evaluation["id"]]
-    assert client.get(url, **bearer(bob, "read")).status_code == 404
+    assert client.get(url, **api_token(bob, "read")).status_code == 404
     one = f"{url}/{evaluation['id']}"
     assert client.get(one, **token).json()["id"] == evaluation["id"]
     stopped = client.post(f"{one}/stop", **token)
@@ -205,7 +195,7 @@ def test_a_clone_starts_from_its_sources_checkpoint_with_the_changes_given(
     alice, bob, tracks, client
 ):
     source = ready_model(alice)
-    token = bearer(alice, "read", "train")
+    token = api_token(alice, "read", "train")
     body = {"name": "faster", "checkpoint": "last", "max_minutes": 12, "track": "rookie-loop"}
     cloned = client.post(
         f"{MODELS}/{source.pk}/clone", body, content_type="application/json", **token
@@ -220,7 +210,7 @@ def test_a_clone_starts_from_its_sources_checkpoint_with_the_changes_given(
         f"{MODELS}/{source.pk}/clone",
         {"name": "x"},
         content_type="application/json",
-        **bearer(bob, "train"),
+        **api_token(bob, "train"),
     )
     assert others.status_code == 404
     fewer = client.post(
@@ -235,7 +225,7 @@ def test_a_clone_starts_from_its_sources_checkpoint_with_the_changes_given(
 @pytest.mark.slow  # builds the car's graph
 def test_the_downloads_are_the_pages_archives_and_refusals_are_words(alice, bob, tracks, client):
     model = ready_model(alice)
-    token = bearer(alice, "read")
+    token = api_token(alice, "read")
     physical = client.get(f"{MODELS}/{model.pk}/download/physical", **token)
     assert physical.status_code == 200 and physical["Content-Type"] == "application/gzip"
     with tarfile.open(fileobj=io.BytesIO(b"".join(physical.streaming_content))) as archive:
@@ -244,7 +234,7 @@ def test_the_downloads_are_the_pages_archives_and_refusals_are_words(alice, bob,
     logs = client.get(f"{MODELS}/{model.pk}/download/logs", **token)  # made, not trained
     assert logs.status_code == 409 and logs.json()["message"] == logs_archive.NO_LOGS
     assert (
-        client.get(f"{MODELS}/{model.pk}/download/physical", **bearer(bob, "read")).status_code
+        client.get(f"{MODELS}/{model.pk}/download/physical", **api_token(bob, "read")).status_code
         == 404
     )
     assert client.get(f"{MODELS}/{model.pk}/download/floppy", **token).status_code == 400
