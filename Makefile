@@ -73,8 +73,10 @@ $(VENV)/bin/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-$(VENV)/.run-installed: requirements/run.txt | $(VENV)/bin/python
+# The console reads DeepRacer for Cloud's bucket with its own client's layout (pitlane_client.drfc).
+$(VENV)/.run-installed: requirements/run.txt client/pyproject.toml | $(VENV)/bin/python
 	$(BIN)/python -m pip install --quiet -r requirements/run.txt
+	$(BIN)/python -m pip install --quiet --no-deps -e client
 	@touch $@
 
 $(VENV)/.test-installed: requirements/test.txt client/pyproject.toml | $(VENV)/bin/python

@@ -24,14 +24,21 @@ logger = logging.getLogger(__name__)
 
 
 class ApiError(Exception):
-    """A refusal: its status, machine code, words and headers (Retry-After)."""
+    """A refusal: its status, machine code, words, each input at fault (``errors``, where
+    there are some) and headers (Retry-After)."""
 
     def __init__(
-        self, status: int, code: str, message: str, headers: dict[str, str] | None = None
+        self,
+        status: int,
+        code: str,
+        message: str,
+        headers: dict[str, str] | None = None,
+        errors: dict[str, str] | None = None,
     ) -> None:
         super().__init__(message)
         self.status, self.code, self.message = status, code, message
         self.headers = headers or {}
+        self.errors = errors
 
 
 def counted(request: HttpRequest, action: str, **how) -> None:
@@ -54,9 +61,10 @@ def check_failed(error: Exception) -> ApiError:
 
 
 def answer(api: NinjaAPI, request: HttpRequest, error: ApiError) -> HttpResponse:
-    response = api.create_response(
-        request, {"code": error.code, "message": error.message}, status=error.status
-    )
+    body = {"code": error.code, "message": error.message}
+    if error.errors:
+        body["errors"] = error.errors
+    response = api.create_response(request, body, status=error.status)
     for name, value in error.headers.items():
         response[name] = value
     return response

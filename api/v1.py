@@ -12,7 +12,7 @@ from datetime import datetime
 from ninja import NinjaAPI, Schema
 
 from accounts.selectors import racer_name
-from api import downloads, errors, evaluations, league, racer_models, reward_functions
+from api import downloads, errors, evaluations, imports, league, racer_models, reward_functions
 from api.auth import AUTH, scopes
 from api.schemas import REFUSED
 
@@ -26,6 +26,7 @@ api = NinjaAPI(
     auth=AUTH,
 )
 errors.install(api)
+api.add_router("/models", imports.router, tags=["imports"])
 api.add_router("/models", racer_models.router, tags=["models"])
 api.add_router("/models", evaluations.router, tags=["evaluations"])
 api.add_router("/models", downloads.router, tags=["downloads"])

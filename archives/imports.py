@@ -40,8 +40,9 @@ from google.protobuf.message import DecodeError
 from safetensors import SafetensorError
 
 from archives import exports, history
+from common import ratelimits
 from rl import hyperparameters, tfcheckpoint, tfgraph
-from training import artifacts, configuration, leases, lifecycle, rewards, services
+from training import artifacts, checkers, configuration, leases, lifecycle, rewards, services
 from training.models import (
     CameraLens,
     Network,
@@ -252,6 +253,19 @@ def import_start(
         return ImportPreview(settings, notes, problems)
     model = services.model_create(owner=owner, settings=settings, validation=validation)
     return _noted(Imported(model, notes))
+
+
+def attempt_counted(held: ratelimits.Held, outcome: object) -> None:
+    """Count a posted import, held against both of the racer's import limits, against one: one
+    that arrived against "import"; any other attempt (refused, or a preview to confirm) against
+    the looser "import-refused", so that correcting an archive does not use up the hour's
+    imports; a check that could not run counts against neither."""
+    if isinstance(outcome, Imported):
+        held.give_back("import-refused")
+    elif isinstance(outcome, checkers.FAILURES):
+        held.give_back("import", "import-refused")
+    else:
+        held.give_back("import")
 
 
 def _plan(archive: IO[bytes], name: str) -> _Plan:

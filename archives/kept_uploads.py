@@ -34,6 +34,13 @@ logger = logging.getLogger(__name__)
 
 KEPT_FOLDER = "imports/kept"  # in storage
 
+# A confirmation whose archive is gone: the page's and the API's words.
+KEPT_GONE = (
+    f"The archive you uploaded is no longer kept (it is kept for "
+    f"{KEPT_FOR.total_seconds() / 3600:g} hour after you upload it, until you import it, "
+    "cancel or log out): choose it again."
+)
+
 
 class UploadNotKept(Exception):
     """The upload cannot be kept, in words for the racer; ``retry_after`` [s] when it is the

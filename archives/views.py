@@ -18,7 +18,7 @@ from django.views.decorators.http import require_POST, require_safe
 
 from archives import exports, imports, kept_uploads, logs_archive
 from archives.forms import ModelImportConfirmForm, ModelImportForm
-from archives.models import KEPT_FOR, KeptUpload
+from archives.models import KeptUpload
 from common import ratelimits
 from common.refusals import Refused
 from training import artifacts, checkers, configuration, selectors
@@ -122,13 +122,13 @@ class _ModelImportAttempt:
         if self.confirm is not None:
             self.form.is_valid()  # for the page to go back to: the kept archive, or a choice
         # Counted at once against both, so that parallel posts count each other; given back to
-        # the one its outcome does not count against (_import_counted).
+        # the one its outcome does not count against (imports.attempt_counted).
         self.held = ratelimits.hold(request, "import", "import-refused")
         self.limited = self.held.limited
         if self.limited:
             ratelimits.refuse(self.form, self.limited)
         elif self.confirm is not None and self.kept is None:
-            self.form.add_error(None, KEPT_GONE)
+            self.form.add_error(None, kept_uploads.KEPT_GONE)
         elif self.confirm is not None:
             confirmed = self.confirm.is_valid()  # else the preview again, with what to correct
             self.work = self._work(None, "", changes=self.confirm.changes(), confirmed=confirmed)
@@ -150,7 +150,7 @@ class _ModelImportAttempt:
         if self.limited:
             form.keep(self.kept)  # the racer tries again later with the archive they chose
             return render(request, "archives/model_import.html", {"form": form}, status=429)
-        _import_counted(self.held, outcome)
+        imports.attempt_counted(self.held, outcome)
         refused = False
         if isinstance(outcome, imports.Imported):
             kept_uploads.upload_discard(racer=request.user)
@@ -237,13 +237,6 @@ class _ModelImportAttempt:
         return response
 
 
-KEPT_GONE = (
-    f"The archive you uploaded is no longer kept (it is kept for "
-    f"{KEPT_FOR.total_seconds() / 3600:g} hour after you upload it, until you import it, "
-    "cancel or log out): choose it again."
-)
-
-
 def _imported_message(model: RLModel) -> str:
     """What the import created, said as the model page says it."""
     if model.status != RLModel.Status.READY:
@@ -258,19 +251,6 @@ def _imported_message(model: RLModel) -> str:
         "race and download. It came from a car archive, with no reward function: it cannot "
         "train or be cloned."
     )
-
-
-def _import_counted(held: ratelimits.Held, outcome: object) -> None:
-    """Count a posted import, held against both of the racer's import limits, against one: one
-    that arrived against "import"; any other attempt (refused, or a preview to confirm) against
-    the looser "import-refused", so that correcting an archive does not use up the hour's
-    imports; a check that could not run counts against neither."""
-    if isinstance(outcome, imports.Imported):
-        held.give_back("import-refused")
-    elif isinstance(outcome, checkers.FAILURES):
-        held.give_back("import", "import-refused")
-    else:
-        held.give_back("import")
 
 
 def _import_errors(form: ModelImportForm, errors: dict[str, str]) -> None:

@@ -21,6 +21,7 @@ from tests.services import (
     RedisServer,
     ServiceProcess,
     daphne_started,
+    free_port,
     python_module,
     service_env,
     wait_for,
@@ -99,6 +100,20 @@ def tensorflow():
     import tensorflow
 
     return tensorflow
+
+
+@pytest.fixture(scope="module")
+def s3_server() -> Iterator[str]:
+    """moto's S3 API on a free local port; its endpoint URL (any keys are taken)."""
+    from moto.server import ThreadedMotoServer
+
+    port = free_port()
+    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
+    server.start()
+    try:
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        server.stop()
 
 
 @pytest.fixture(autouse=True)

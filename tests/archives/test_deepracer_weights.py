@@ -6,11 +6,12 @@ Q's too when the model trains on; a car archive imports as a model to evaluate a
 import io
 import json
 
+import boto3
 import gymnasium
 import numpy as np
 import pytest
 import torch
-from django.core.management import call_command
+from django.core.management import CommandError, call_command
 from django.urls import reverse
 
 import simulator
@@ -22,7 +23,7 @@ from tests.archives.deepracer_tf import build, checkpoints_json
 from tests.helpers.archives import DEEPRACER_METADATA, deepracer_export, drfc_layout, tar_gz
 from tests.helpers.models import ready_model, sensor_frames
 from training import artifacts, services
-from training.models import RLModel
+from training.models import EvaluationJob, RLModel
 
 pytestmark = pytest.mark.django_db
 
@@ -113,9 +114,24 @@ def checkpoint_files(deepracer, tmp_path, name: str) -> dict[str, bytes]:
     }
 
 
-def test_a_ppo_model_comes_in_with_its_best_and_last_checkpoints(
-    alice, tracks, tensorflow, tmp_path
+@pytest.fixture
+def drfc_bucket(s3_server, settings, monkeypatch):
+    """DeepRacer for Cloud's bucket (its MinIO, here moto's S3 API), with the console's keys for
+    it; a boto3 client to fill it as DeepRacer's training does."""
+    keys = {"aws_access_key_id": "minio", "aws_secret_access_key": "miniostorage"}
+    settings.PITLANE_DRFC_S3 = {"endpoint_url": s3_server, "region_name": "us-east-1", **keys}
+    s3 = boto3.client("s3", **settings.PITLANE_DRFC_S3)
+    s3.create_bucket(Bucket="bucket")
+    return s3
+
+
+def test_a_ppo_model_comes_in_from_deepracer_for_clouds_bucket_with_its_best_and_last_checkpoints(
+    alice, tracks, tensorflow, tmp_path, drfc_bucket, capsys
 ):
+    """`manage.py importmodel s3://bucket/prefix` reads a model's prefix as DeepRacer for Cloud
+    and its training leave it (pitlane_client.drfc cites where each file comes from): the best
+    and the last checkpoint by deepracer_checkpoints.json's names, not the others kept; the
+    first worker's training_params; nothing of the bucket's other models. The model evaluates."""
     sensors = ["FRONT_FACING_CAMERA"]
     deepracer = deepracer_model(tensorflow, "clipped_ppo", DISCRETE, sensors, seed=1)
     frames = sensor_frames(environment(DISCRETE, sensors), count=4)
@@ -125,19 +141,42 @@ def test_a_ppo_model_comes_in_with_its_best_and_last_checkpoints(
         for variable in deepracer.tf.compat.v1.trainable_variables():
             deepracer.session.run(variable.assign(variable * 0.8))
     files |= checkpoint_files(deepracer, tmp_path, "5_Step-3900.ckpt")
-    files |= {
+    files |= {  # a checkpoint neither best nor last, which is not read
+        "model/4_Step-3100.ckpt.index": b"not read",
+        "model/4_Step-3100.ckpt.data-00000-of-00001": b"not read",
+        "model/5_Step-3900.ckpt.meta": b"not read: TensorFlow's graph, not its weights",
         "model/deepracer_checkpoints.json": checkpoints_json(
             best="3_Step-2200.ckpt", last="5_Step-3900.ckpt"
         ),
         "model/.coach_checkpoint": b"5_Step-3900.ckpt",
         "model/model_5.pb": deepracer.frozen_graph(),
+        "training-simtrace/0-iteration.csv": b"episode,steps\n",
+        "metrics/TrainingMetrics_1.json": b"{}",
     }
-    archive = tmp_path / "deepracer.tar.gz"
-    archive.write_bytes(drfc_archive(files, metadata("clipped_ppo", DISCRETE, sensors)))
-    out = io.StringIO()
-    call_command("importmodel", str(archive), "--owner", "alice", stdout=out)
-    said = out.getvalue()
+    members = drfc_layout(
+        deepracer_export(
+            **{
+                "model_metadata.json": json.dumps(
+                    metadata("clipped_ppo", DISCRETE, sensors)
+                ).encode()
+            }
+        )
+    )
+    params = members.pop("training_params.yaml")
+    members |= {
+        "training_params_1.yaml": params,
+        "training_params_2.yaml": b"WORLD_NAME: Oval_track",
+    }
+    for path, data in {**members, **files}.items():
+        drfc_bucket.put_object(Bucket="bucket", Key=f"rl-deepracer-sagemaker/{path}", Body=data)
+    drfc_bucket.put_object(
+        Bucket="bucket", Key="rl-deepracer-sagemaker-2/reward_function.py", Body=b"x"
+    )
+
+    call_command("importmodel", "s3://bucket/rl-deepracer-sagemaker", "--owner", "alice")
+    said = capsys.readouterr().out
     assert "ready" in said and "model/3_Step-2200.ckpt, model/5_Step-3900.ckpt" in said
+    assert "training_params_1.yaml gave the track and race" in said
 
     model = RLModel.objects.get(owner=alice)
     assert model.status == RLModel.Status.READY and model.trainable
@@ -148,6 +187,14 @@ def test_a_ppo_model_comes_in_with_its_best_and_last_checkpoints(
                 ours(policy, part, observation), best[part][index], atol=1e-4
             )
     assert_same(deepracer, imported_policy(model, "last_checkpoint"), frames, ["policy", "value"])
+
+    call_command("evaluate", model.name, "--track", "pitlane-oval", "--max-resets", "0")
+    evaluated = EvaluationJob.objects.get(model=model)
+    assert evaluated.status == EvaluationJob.Status.COMPLETED and evaluated.trial_rows.count() == 3
+    with pytest.raises(CommandError, match="Nothing is stored under s3://bucket/nope"):
+        call_command("importmodel", "s3://bucket/nope", "--owner", "alice")
+    with pytest.raises(CommandError, match="NoSuchBucket"):
+        call_command("importmodel", "s3://elsewhere/rl-deepracer-sagemaker", "--owner", "alice")
 
 
 CASES = {

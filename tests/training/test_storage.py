@@ -5,35 +5,20 @@ nothing behind."""
 from __future__ import annotations
 
 import urllib.request
-from collections.abc import Iterator
 from urllib.parse import parse_qs, urlsplit
 
 import boto3
 import pytest
 from django.core.files.storage import default_storage
 from django.urls import reverse
-from moto.server import ThreadedMotoServer
 
 from tests.helpers.models import trained_model
-from tests.services import free_port
 from training import artifacts, services
 from training.models import EvaluationJob, RLModel, TrainingJob
 
 pytestmark = pytest.mark.django_db
 
 BUCKET = "pitlane-test-artifacts"
-
-
-@pytest.fixture(scope="module")
-def s3_server() -> Iterator[str]:
-    """moto's S3 API on a free local port; its endpoint URL."""
-    port = free_port()
-    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
-    server.start()
-    try:
-        yield f"http://127.0.0.1:{port}"
-    finally:
-        server.stop()
 
 
 @pytest.fixture

@@ -13,6 +13,7 @@ import json
 import urllib.error
 import urllib.parse
 import urllib.request
+import uuid
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -131,6 +132,40 @@ class Client:
                         progress(done, int(total) if total else None)
         return target
 
+    def import_archive(
+        self,
+        archive: Path,
+        name: str = "",
+        progress: Callable[[int, int | None], None] | None = None,
+    ) -> dict:
+        """Send a model's archive to the import (``progress(done, total)`` as it goes): the
+        model when it came with its weights (``"id"`` in the answer), else the preview of the
+        model that would train (``"kept"``: pass it to ``import_confirm``)."""
+        boundary = f"pitlane-{uuid.uuid4().hex}"
+        head = (
+            f'--{boundary}\r\nContent-Disposition: form-data; name="name"\r\n\r\n{name}\r\n'
+            f'--{boundary}\r\nContent-Disposition: form-data; name="archive"; '
+            f'filename="{archive.name}"\r\nContent-Type: application/gzip\r\n\r\n'
+        ).encode()
+        tail = f"\r\n--{boundary}--\r\n".encode()
+        with archive.open("rb") as file:
+            body = _Upload([head, file, tail], archive.stat().st_size, progress)
+            with self._open(
+                "POST",
+                "/models/import",
+                body=body,
+                content_type=f"multipart/form-data; boundary={boundary}",
+            ) as response:
+                return json.load(response)
+
+    def import_confirm(self, kept: str, **changes: Any) -> dict:
+        """Create the previewed model (``name``, ``track``, ``direction``, ``max_minutes`` may
+        change), its training queued."""
+        return self._json("POST", "/models/import/confirm", body={"kept": kept, **changes})
+
+    def import_cancel(self) -> dict:
+        return self._json("DELETE", "/models/import")
+
     # The league
 
     def events(self) -> list[dict]:
@@ -152,16 +187,19 @@ class Client:
         with self._open(method, path, query=query, body=body) as response:
             return json.load(response)
 
-    def _open(self, method: str, path: str, *, query=None, body=None):
+    def _open(self, method: str, path: str, *, query=None, body=None, content_type=None):
+        """The console's answer; ``body`` is JSON, or with ``content_type`` an ``_Upload``."""
         url = f"{self.url}/api/v1{path}"
         if query:
             url += "?" + urllib.parse.urlencode({k: v for k, v in query.items() if v is not None})
-        data = None if body is None else json.dumps(body).encode()
+        data = body if content_type or body is None else json.dumps(body).encode()
         request = urllib.request.Request(url, data=data, method=method)  # noqa: S310 (http[s])
         request.add_header("Authorization", f"Bearer {self.token}")
         request.add_header("Accept", "application/json")
+        if isinstance(data, _Upload):
+            request.add_header("Content-Length", str(data.length))
         if data is not None:
-            request.add_header("Content-Type", "application/json")
+            request.add_header("Content-Type", content_type or "application/json")
         try:
             return urllib.request.urlopen(request, timeout=self.timeout)  # noqa: S310 (our URL)
         except urllib.error.HTTPError as error:
@@ -170,6 +208,27 @@ class Client:
             raise ApiError(
                 0, "unreachable", f"No console answers at {self.url}: {error.reason}"
             ) from None
+
+
+class _Upload:
+    """A request body sent as it is read: its ``parts`` (bytes, or a file read in chunks), with
+    ``progress(done, total)`` [bytes of the file] after each chunk."""
+
+    def __init__(self, parts: list, size: int, progress=None) -> None:
+        self.parts, self.size, self.progress = parts, size, progress
+        self.length = sum(len(p) if isinstance(p, bytes) else size for p in parts)
+
+    def __iter__(self):
+        done = 0
+        for part in self.parts:
+            if isinstance(part, bytes):
+                yield part
+                continue
+            for chunk in iter(lambda part=part: part.read(CHUNK), b""):
+                done += len(chunk)
+                yield chunk
+                if self.progress:
+                    self.progress(done, self.size)
 
 
 def _refusal(error: urllib.error.HTTPError) -> ApiError:

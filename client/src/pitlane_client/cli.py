@@ -3,6 +3,7 @@
     pitlane login --url URL --token TOKEN
     pitlane models list|show ID|stop ID|delete ID|clone ID NAME
     pitlane train FOLDER [--name NAME] [--minutes N] [--wait]
+    pitlane import s3://BUCKET/PREFIX|FOLDER|ARCHIVE [--endpoint-url URL] [--yes]   (or upload)
     pitlane download ID [--physical|--onnx|--virtual|--logs] [--checkpoint best|last]
     pitlane evaluate ID [--trials N] [--checkpoint best|last] [--wait]
     pitlane submit ID EVENT    pitlane leaderboard EVENT    pitlane runs
@@ -18,10 +19,12 @@ import argparse
 import json
 import os
 import sys
+import tarfile
+import tempfile
 import time
 from pathlib import Path
 
-from pitlane_client import ApiError, Client, folder_files
+from pitlane_client import ApiError, Client, drfc, folder_files
 
 WHOLE = "__all__"  # a refusal of the request as a whole, not of one input (the console's name)
 WAIT_EVERY = 2.0  # [s] between looks while --wait waits
@@ -73,6 +76,18 @@ def _parser() -> argparse.ArgumentParser:
     train.add_argument("--minutes", type=int)
     train.add_argument("--wait", action="store_true", help="until its first iteration")
     train.set_defaults(run=_train)
+
+    for verb in ("import", "upload"):
+        imported = verbs.add_parser(
+            verb, help="import a model: s3://bucket/prefix (DeepRacer for Cloud), a folder or a tar"
+        )
+        imported.add_argument("source", help="s3://bucket/prefix, a model folder, or an archive")
+        imported.add_argument("--name")
+        imported.add_argument("--endpoint-url", help="the S3 API's, for MinIO (DRfC's default)")
+        imported.add_argument("--profile", help="the AWS profile whose credentials read S3")
+        imported.add_argument("--yes", action="store_true", help="confirm a preview's training")
+        imported.add_argument("--minutes", type=int, help="a previewed model's training time")
+        imported.set_defaults(run=_import)
 
     download = verbs.add_parser("download", help="a model's archive")
     download.add_argument("model", type=int)
@@ -175,6 +190,88 @@ def _train(args) -> int:
             "the first iteration", lambda: client.iterations(model["id"]), bool
         )
     return _print_json(model) if args.json else 0
+
+
+def _import(args) -> int:
+    """A model into the console from DeepRacer for Cloud's S3 prefix, a model folder or an
+    archive: at once when it brings its weights, else after its preview is confirmed."""
+    client = _client()
+    with tempfile.TemporaryDirectory(prefix="pitlane-") as work:
+        archive = _archive_of(args, Path(work))
+        bar = None if args.json else _bar(f"uploading {archive.name}")
+        answer = client.import_archive(archive, args.name or "", progress=bar)
+    if not args.json:
+        print(file=sys.stderr)
+    if "kept" in answer:
+        answer = _confirmed(args, client, answer)
+        if answer is None:
+            return 1
+    if args.json:
+        return _print_json(answer)
+    print(f"Imported {answer['name']} (#{answer['id']}): {answer['status'].lower()}.")
+    for note in answer["notes"]:
+        print(f"  note: {note}")
+    return 0
+
+
+def _archive_of(args, work: Path) -> Path:
+    """The archive to send: ``args.source`` itself, a folder packed, or an S3 prefix read."""
+    source = args.source
+    if source.startswith("s3://"):
+        return _from_s3(args, work / "drfc-model.tar")
+    path = Path(source)
+    if path.is_dir():
+        packed = work / f"{path.resolve().name or 'model'}.tar.gz"
+        with tarfile.open(packed, "w:gz") as tar:
+            for file in sorted(p for p in path.rglob("*") if p.is_file()):
+                tar.add(file, arcname=file.relative_to(path).as_posix())
+        return packed
+    if not path.is_file():
+        raise ValueError(f"{source}: no such folder or archive")
+    return path
+
+
+def _from_s3(args, into: Path) -> Path:
+    try:
+        import boto3
+        from botocore.exceptions import BotoCoreError, ClientError
+    except ImportError:
+        raise ValueError(
+            "reading S3 needs boto3: pip install 'pitlane-client[s3]' (or boto3)"
+        ) from None
+    session = boto3.Session(profile_name=args.profile)
+    s3 = session.client("s3", endpoint_url=args.endpoint_url)
+    bar = None if args.json else _bar(f"reading {args.source}")
+    try:
+        with into.open("wb") as out:
+            packed = drfc.pack(s3, args.source, out, progress=bar)
+    except (BotoCoreError, ClientError) as error:
+        raise ValueError(f"{args.source}: S3 answered: {error}") from None
+    if not args.json:
+        print(file=sys.stderr)
+        for note in packed.notes:
+            print(f"  note: {note}")
+    return into
+
+
+def _confirmed(args, client: Client, preview: dict) -> dict | None:
+    """The previewed model created once confirmed (``--yes``, or the racer's answer)."""
+    settings = preview["settings"]
+    if not args.json:
+        print(
+            f"{settings['name']} would train on {settings['track']} ({settings['direction']}), "
+            f"up to {args.minutes or settings['max_minutes']} min of your training time."
+        )
+        for note in preview["notes"]:
+            print(f"  note: {note}")
+        for setting, problem in preview["problems"].items():
+            print(f"  to fix: {setting}: {problem}")
+    if not args.yes and not (sys.stdin.isatty() and input("Train it? [y/N] ").lower() == "y"):
+        client.import_cancel()
+        print("Not imported: nothing was created.", file=sys.stderr)
+        return None
+    changes = {"max_minutes": args.minutes} if args.minutes else {}
+    return client.import_confirm(preview["kept"], **changes)
 
 
 def _download(args) -> int:
