@@ -369,8 +369,7 @@ else:
 # console's import page, `manage.py importmodel s3://...`, the API): its S3 API (DRfC's MinIO by
 # default) and keys; boto3's own chain where the keys are not given.
 PITLANE_DRFC_S3 = {
-    "endpoint_url": env.url("PITLANE_DRFC_S3_ENDPOINT_URL", "", schemes=("http", "https"))
-    or None,
+    "endpoint_url": env.url("PITLANE_DRFC_S3_ENDPOINT_URL", "", schemes=("http", "https")) or None,
     "region_name": env.str("PITLANE_DRFC_S3_REGION", "") or None,
     "aws_access_key_id": env.str("PITLANE_DRFC_S3_ACCESS_KEY_ID", "") or None,
     "aws_secret_access_key": env.str("PITLANE_DRFC_S3_SECRET_ACCESS_KEY", "") or None,
