@@ -78,8 +78,9 @@ async def model_import(request, archive: File[UploadedFile], name: Form[str] = "
 
 @router.post("/import/confirm", response={201: Created, **REFUSED})
 async def model_import_confirm(request, body: ConfirmIn):
-    """Create the previewed model, with the changes given (the rest as previewed), and queue its
-    training; 400 with the preview's problems left, 409 when the kept archive is gone."""
+    """Create the previewed model, with the changes given, and queue its training: what is not
+    given is the archive's (its name too: send the preview's again where you chose one); 400
+    with the problems left, 409 when the kept archive is gone."""
     need(request, TokenScope.TRAIN)
     owner = request.user
     kept = await sync_to_async(kept_uploads.upload_kept)(racer=owner, token=body.kept)

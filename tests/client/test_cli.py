@@ -8,12 +8,19 @@ import json
 import tarfile
 from contextlib import redirect_stderr, redirect_stdout
 
+import boto3
 import pytest
 import yaml
 from pitlane_client import cli
 
 from accounts.tokens import token_create
-from tests.helpers.archives import DEEPRACER_HYPERPARAMETERS, DEEPRACER_METADATA, DEEPRACER_PARAMS
+from tests.helpers.archives import (
+    DEEPRACER_HYPERPARAMETERS,
+    DEEPRACER_METADATA,
+    DEEPRACER_PARAMS,
+    deepracer_export,
+    drfc_layout,
+)
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
 from training.models import RLModel
@@ -105,3 +112,39 @@ def test_a_token_that_does_not_work_is_told_plainly(daphne_server, tmp_path, mon
     monkeypatch.delenv("PITLANE_TOKEN", raising=False)
     code, _, err = pitlane("models", "list")
     assert code == 1 and "not logged in" in err
+
+
+def test_import_brings_a_model_from_a_deepracer_for_cloud_bucket_and_upload_a_folder(
+    alice, tracks, logged_in, tmp_path, s3_server, monkeypatch
+):
+    """`pitlane import s3://bucket/prefix` reads the racer's own DeepRacer for Cloud bucket (its
+    MinIO: --endpoint-url) with their keys, and the console previews the model it would train;
+    --yes confirms it. `pitlane upload FOLDER` packs a folder; without --yes nothing is made."""
+    for name, value in (("AWS_ACCESS_KEY_ID", "minio"), ("AWS_SECRET_ACCESS_KEY", "minio123")):
+        monkeypatch.setenv(name, value)
+    monkeypatch.setenv("AWS_DEFAULT_REGION", "us-east-1")
+    s3 = boto3.client("s3", endpoint_url=s3_server)
+    s3.create_bucket(Bucket="drfc")
+    files = drfc_layout(deepracer_export())
+    files["training_params.yaml"] = yaml.safe_dump({**DEEPRACER_PARAMS, "WORLD_NAME": "Oval_track"})
+    for path, data in files.items():
+        s3.put_object(Bucket="drfc", Key=f"rl-deepracer-sagemaker/{path}", Body=data)
+
+    source = "s3://drfc/rl-deepracer-sagemaker"
+    code, out, err = pitlane(
+        "import", source, "--endpoint-url", s3_server, "--name", "from-bucket", "--yes"
+    )
+    assert code == 0, err
+    model = RLModel.objects.get(name="from-bucket")
+    assert "would train on Oval_track (counterclockwise)" in out
+    assert f"Imported from-bucket (#{model.pk})" in out and "100%" in err
+    code, _, err = pitlane("import", "s3://drfc/missing", "--endpoint-url", s3_server)
+    assert code == 1 and err.startswith("pitlane: Nothing is stored under s3://drfc/missing")
+
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    for name, data in deepracer_export().items():
+        (folder / name).write_bytes(data if isinstance(data, bytes) else data.encode())
+    code, out, err = pitlane("upload", str(folder), "--name", "from-folder")
+    assert code == 1 and "Not imported: nothing was created." in err
+    assert not RLModel.objects.filter(name="from-folder").exists()

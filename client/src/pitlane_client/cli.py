@@ -271,7 +271,7 @@ def _confirmed(args, client: Client, preview: dict) -> dict | None:
         print("Not imported: nothing was created.", file=sys.stderr)
         return None
     changes = {"max_minutes": args.minutes} if args.minutes else {}
-    return client.import_confirm(preview["kept"], **changes)
+    return client.import_confirm(preview["kept"], name=settings["name"], **changes)
 
 
 def _download(args) -> int:
