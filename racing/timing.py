@@ -2,7 +2,7 @@
 
 A timekeeper (staff, or a community race's organiser) starts a run for a racer's car; each time
 the car crosses the line the timekeeper presses a key on the event's timekeeper page, or a timing
-device posts a crossing (``device_signal``). The first crossing starts the clock, each later one
+device posts a crossing (``racing.timing_views.device``, read by ``racing.timing_signals``). The first crossing starts the clock, each later one
 ends a lap: its time is the difference of two readings of the same clock (the page's or the
 device's), plus the event's off-track penalty for each off-track marked during it. A lap counts
 when it has no more off-tracks than the event allows. Finishing the run scores its laps by the
@@ -34,7 +34,6 @@ from __future__ import annotations
 import hashlib
 import hmac
 import secrets
-from dataclasses import dataclass
 from datetime import datetime, timedelta
 
 from django.contrib.auth import get_user_model
@@ -50,47 +49,15 @@ from notifications import services as notifications
 from racing import broadcasts, scoring, selectors
 from racing.models import Event, Lap, PhysicalRun, Submission
 from racing.services import SUBMISSION, ranking_offer, ranking_recompute
+from racing.timing_signals import MAX_CLOCK_MS, SIGNALS, Signal
 
-SIGNALS = ("crossing", "off_track", "reset", "undo", "finish")
 MAX_LAP_MS = 3 * 3600 * 1000  # no lap of a race night takes longer: a longer one is a clock's slip
-MAX_CLOCK_MS = 2**53  # a clock's reading [ms]: what JSON and a browser's numbers hold exactly
 MAX_OFF_TRACKS = 999  # off-tracks in one lap
 RACERS_SHOWN = 10  # the racer search's answers, at most
 
 
 class TimingRefused(Refused):
     """The signal cannot be taken; the message says why, in the timekeeper's words."""
-
-
-class SignalUnreadable(ValueError):
-    """A signal's body that cannot be read (the device endpoint's 400); the message says why."""
-
-
-@dataclass(frozen=True)
-class Signal:
-    kind: str
-    at_ms: int | None = None  # the clock's reading, for a crossing
-
-
-SIGNAL_FORMAT = (  # what a device sends, in words, for any body that is not a signal
-    'Send JSON: {"signal": "crossing", "at_ms": <whole milliseconds>}, or a signal of '
-    "off_track, reset, undo or finish."
-)
-
-
-def signal_read(data: object) -> Signal:
-    """The signal in a device's (or the page's) JSON body; ``SignalUnreadable`` says what is
-    wrong with it: not an object, an unknown signal, a crossing without its clock reading."""
-    if not isinstance(data, dict) or not isinstance(data.get("signal"), str):
-        raise SignalUnreadable(SIGNAL_FORMAT)
-    kind, at_ms = data["signal"], data.get("at_ms")
-    if kind not in SIGNALS:
-        raise SignalUnreadable(f"Unknown signal {kind!r}: send one of {', '.join(SIGNALS)}.")
-    if kind == "crossing" and (type(at_ms) is not int or not 0 <= at_ms < MAX_CLOCK_MS):
-        raise SignalUnreadable(
-            "A crossing needs the clock's reading, at_ms: whole milliseconds from 0 to 2^53."
-        )
-    return Signal(kind, at_ms if kind == "crossing" else None)
 
 
 def timing_token_renew(*, event: Event) -> str:

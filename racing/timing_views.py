@@ -3,7 +3,8 @@ broadcast page for a projector or a stream, and the endpoint a timing device pos
 
 The device endpoint, ``POST /api/timing/<event slug>/``, takes JSON ``{"signal": "crossing",
 "at_ms": 123456}`` (the device's own clock, in whole milliseconds: only differences of its
-readings matter) or ``{"signal": "off_track" | "reset" | "undo" | "finish"}``, with the header
+readings matter) or ``{"signal": "off_track" | "reset" | "undo" | "finish"}``, or DREM's lap
+timer's events as it sends them (``timing_signals.DREM_EVENTS``), with the header
 ``Authorization: Bearer <token>``, the event's device token (made on its timekeeper page, shown
 once). It answers 200 with the timing state; 400 for a body it cannot read (not JSON, an
 unknown signal, a crossing without its whole-millisecond ``at_ms``); 401 for a missing or wrong
@@ -28,7 +29,7 @@ from django.shortcuts import redirect, render
 from django.views.decorators.csrf import csrf_exempt
 from django.views.decorators.http import require_POST
 
-from racing import broadcasts, lap_edits, live_races, selectors, services, timing
+from racing import broadcasts, lap_edits, live_races, selectors, services, timing, timing_signals
 from racing.forms import LapEditForm, TimedRunForm
 from racing.models import Event, LiveSession, Submission
 from racing.views import _get_event_for_user, _get_event_run_by
@@ -236,13 +237,15 @@ def device(request: HttpRequest, slug: str) -> JsonResponse:
 
 def _signal(event: Event, body: bytes) -> JsonResponse:
     try:
-        signal = timing.signal_read(json.loads(body or b"{}"))
+        signal = timing_signals.signal_read(json.loads(body or b"{}"))
     except (ValueError, RecursionError) as unreadable:  # not JSON, not a signal, too deep
-        readable = isinstance(unreadable, timing.SignalUnreadable)
+        readable = isinstance(unreadable, timing_signals.SignalUnreadable)
         return JsonResponse(
-            {"error": str(unreadable) if readable else timing.SIGNAL_FORMAT}, status=400
+            {"error": str(unreadable) if readable else timing_signals.SIGNAL_FORMAT}, status=400
         )
     run = timing.running_run(event=event)
+    if signal.kind == timing_signals.HELLO:  # a lap timer that connected: nothing to do yet
+        return JsonResponse(broadcasts.timing_state(run))
     if run is None:
         return JsonResponse({"error": "No car is on the track: start a run first."}, status=409)
     try:

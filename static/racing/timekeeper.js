@@ -1,7 +1,9 @@
 // The timekeeper's page: one key per signal (racing.timing), the car on the track kept current
 // from the answers and from the event's websocket (a timing device may signal too); each lap
 // struck out or restored from its row (racing.lap_edits); racers searched by racer name as the
-// timekeeper types, never by login name; the device token copied with one press.
+// timekeeper types, never by login name; the device token copied with one press; DREM's lap
+// timer listened to (lap_timer.js).
+import { relayLapTimer } from "./lap_timer.js";
 import { LapClock, RaceClock, laptime, listen } from "./timing.js";
 
 const root = document.querySelector("[data-timekeeper]");
@@ -87,15 +89,21 @@ async function answered(response) {
   if (response.ok) show(answer);
 }
 
+// A signal's JSON, a key's or a lap timer's as it came (racing.timing_signals reads DREM's events).
+async function post(body) {
+  await answered(await fetch(root.dataset.signalUrl, {
+    method: "POST",
+    headers: { "Content-Type": "application/json", "X-CSRFToken": csrf },
+    body,
+  }));
+}
+relayLapTimer(document.querySelector("[data-lap-timer]"), post);
+
 async function send(signal) {
   if (signal === "finish" && !confirm("Finish this run and score its laps?")) return;
   const body = { signal };
   if (signal === "crossing") body.at_ms = Math.round(performance.timeOrigin + performance.now());
-  await answered(await fetch(root.dataset.signalUrl, {
-    method: "POST",
-    headers: { "Content-Type": "application/json", "X-CSRFToken": csrf },
-    body: JSON.stringify(body),
-  }));
+  await post(JSON.stringify(body));
 }
 
 async function editLap(action, number) {

@@ -3,10 +3,13 @@ type, records a real car's laps by keyboard, undoes a mistaken crossing, strikes
 restores it, finishes the run; the broadcast page follows it live and ranks it, and the open
 leaderboard takes the run at once, marked as a real car's."""
 
+import json
 import re
+import threading
 
 import pytest
 from playwright.sync_api import Page, expect
+from websockets.sync.server import serve
 
 from accounts.selectors import racer_name
 from common.formatting import laptime
@@ -124,3 +127,62 @@ def test_the_timekeeper_times_a_real_car_by_keyboard_and_the_broadcast_follows(
     board.goto(submission.get_absolute_url())  # the racer's own page: the same laps
     for number, time in enumerate(shown, start=1):
         expect(board.locator(f"tr[data-lap='{number}'] [data-lap-time]")).to_have_text(time)
+
+
+class LapTimer:
+    """DREM's Raspberry Pi lap timer as the page meets it: a websocket server that greets each
+    client, then sends each crossing its gates see (leaderboard-timer/timer.js:99-117, 232-241)."""
+
+    def __init__(self) -> None:
+        self.clients: list = []
+        self.server = serve(self._greet, "127.0.0.1", 0)
+        self.url = f"ws://127.0.0.1:{self.server.socket.getsockname()[1]}"
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+
+    def _greet(self, client) -> None:
+        client.send(json.dumps({"event": "connected", "timestamp": 0, "serverInfo": {}}))
+        self.clients.append(client)
+        for _ in client:  # DREM's timer reads nothing; held open until the page goes
+            pass
+
+    def lap(self, at_ms: int) -> None:
+        for client in self.clients:
+            client.send(json.dumps({"event": "lap", "timestamp": at_ms, "gpio": 17}))
+
+
+def test_the_timekeeper_page_listens_to_drems_lap_timer_and_its_laps_count(
+    page: Page, alice, stella, tracks
+):
+    race = event("Club night", physical=True, laps_to_drive=3, min_lap_s=1.0)
+    timer = LapTimer()
+    try:
+        log_in(page, "stella", PASSWORD)
+        page.goto(f"/events/{race.slug}/timekeeper/")
+        page.get_by_label("Racer").fill(racer_name(racer=alice))
+        page.get_by_label("Model").fill("sim2real-v3")
+        page.get_by_label("Car number").fill("3")
+        page.get_by_role("button", name="Put the car on the track").click()
+        expect(page.locator("[data-on-track]")).to_be_visible()
+        page.get_by_label("Timer address").fill(timer.url)
+        page.get_by_role("button", name="Listen to the timer").click()
+        status = page.locator("[data-lap-timer-status]")
+        expect(status).to_have_text(
+            f"Listening to the lap timer at {timer.url}: each lap it sees is a crossing."
+        )
+        status.scroll_into_view_if_needed()  # under the button pressed, at the page's foot
+        expect_seen(status)
+
+        timer.lap(1_795_900_010_000)  # the car crosses the line: the clock starts
+        expect(page.locator("[data-waiting]")).to_be_hidden()
+        timer.lap(1_795_900_018_123)
+        keeper = page.locator("[data-timekeeper]")
+        expect(keeper).to_have_attribute("data-laps", "1")
+        lap = page.locator("tbody[data-laps] tr td").nth(1)
+        expect(lap).to_have_text(laptime(8_123))
+        lap.scroll_into_view_if_needed()  # back up to the laps, from the timer's panel
+        expect_seen(lap)
+        timer.lap(1_795_900_018_400)  # the second gate, 0.3 s later: a double, refused in words
+        expect(page.locator("[data-error]")).to_contain_text("shortest lap")
+        assert Submission.objects.get(event=race).laps.count() == 1
+    finally:
+        timer.server.shutdown()

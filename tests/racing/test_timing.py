@@ -11,13 +11,13 @@ from django.urls import reverse
 from django.utils import timezone
 
 from accounts.selectors import racer_name
-from racing import broadcasts, timing
+from racing import broadcasts, timing, timing_signals
 from racing.models import PhysicalRun, Ranking, RankingMethod, Submission
 from tests.helpers.league import DAY, event
 
 pytestmark = pytest.mark.django_db
 
-CROSSING = timing.Signal("crossing")
+CROSSING = timing_signals.Signal("crossing")
 
 
 def a_run(physical_event, racer, staff):
@@ -30,7 +30,9 @@ def drive(run, *signals):
     """Send signals in order: a number is a crossing at that clock reading [ms]."""
     for signal in signals:
         kind = (
-            timing.Signal("crossing", signal) if isinstance(signal, int) else timing.Signal(signal)
+            timing_signals.Signal("crossing", signal)
+            if isinstance(signal, int)
+            else timing_signals.Signal(signal)
         )
         run = timing.run_signal(run=run, signal=kind)
     return run
@@ -72,7 +74,7 @@ def test_a_physical_run_is_scored_by_each_ranking_method_into_the_leaderboard(
     ]
     assert (laps[2].off_tracks, laps[2].resets) == (2, 1)
 
-    timing.run_signal(run=run, signal=timing.Signal("finish"))
+    timing.run_signal(run=run, signal=timing_signals.Signal("finish"))
     submission = Submission.objects.get(pk=run.submission_id)
     assert submission.status == Submission.Status.COMPLETED and submission.physical
     assert submission.score_ms == score_ms and submission.qualified
@@ -157,6 +159,29 @@ def test_a_timing_device_needs_the_events_token(client, tracks, alice, stella):
     assert device_post(client, race, crossing, token)[0] == 401
     virtual = event("Virtual")
     assert device_post(client, virtual, crossing, token)[0] == 404
+
+
+def test_drems_lap_timer_events_are_crossings_at_their_timestamp(client, tracks, alice, stella):
+    """The JSON DREM's Raspberry Pi timer sends (leaderboard-timer/timer.js:99-105, 232-241):
+    its greeting changes nothing, each lap is a crossing at the Pi's clock, a second gate's
+    lap 0.4 s later is refused as a double (the event's shortest lap)."""
+    race = event(physical=True, min_lap_s=1.0)
+    token = timing.timing_token_renew(event=race)
+    hello = {"event": "connected", "timestamp": 1_795_900_000_000, "serverInfo": {}}
+    status, state = device_post(client, race, json.dumps(hello), token)
+    assert status == 200 and state["on_track"] is False  # nobody on the track: nothing to do
+    a_run(race, alice, stella)
+
+    def lap(at: int, gpio: int = 17) -> str:
+        return json.dumps({"event": "lap", "timestamp": at, "gpio": gpio, "lapNumber": 1})
+
+    assert device_post(client, race, lap(1_795_900_010_000), token)[0] == 200
+    status, state = device_post(client, race, lap(1_795_900_018_123), token)
+    assert status == 200 and [lap["time_ms"] for lap in state["laps"]] == [8_123]
+    assert device_post(client, race, lap(1_795_900_018_523, gpio=27), token)[0] == 409
+    status, said = device_post(client, race, json.dumps({"event": "start"}), token)
+    assert status == 400 and "DREM's timer sends lap and connected" in said["error"]
+    assert device_post(client, race, json.dumps({"event": "lap"}), token)[0] == 400
 
 
 def test_only_staff_and_the_organiser_keep_time_and_racers_cannot_submit_models(
