@@ -196,7 +196,7 @@ class CloneIn(Schema):
     actions)."""
 
     name: str
-    checkpoint: Literal["best", "last"] = "best"
+    checkpoint: Literal["best", "last"] | int = "best"  # or the number of an iteration
     description: str | None = None
     track: str | None = None
     direction: str | None = None
@@ -223,8 +223,9 @@ async def model_create(request, body: CreateIn):
 @router.post("/{model_id}/clone", response={201: Created, **REFUSED})
 async def model_clone(request, model_id: int, body: CloneIn):
     """Clone one of your trained models, as its Clone button does: the new model starts training
-    from the source's ``best`` or ``last`` checkpoint, with the source's settings but for those
-    given (its track, reward function, hyperparameters, the actions' angles and speeds, time)."""
+    from the source's ``best`` or ``last`` checkpoint, or that of the iteration numbered, with the
+    source's settings but for those given (its track, reward function, hyperparameters, the
+    actions' angles and speeds, time)."""
     need(request, TokenScope.TRAIN)
     draft = await sync_to_async(_clone_draft)(request, model_id, body)
     return await _created(request, draft, [])
@@ -245,7 +246,7 @@ def _clone_draft(request, model_id: int, body: CloneIn) -> configuration.Draft:
         "description": f"Cloned from {source.name}.",
         **changes,
         "cloned_from": source,
-        "cloned_checkpoint": body.checkpoint,
+        "cloned_checkpoint": str(body.checkpoint),
     }
 
 

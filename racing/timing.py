@@ -1,13 +1,14 @@
 """Physical events: real cars timed at the track, scored into the same leaderboards.
 
-A timekeeper (staff, or a community race's organiser) starts a run for a racer's car; each time
-the car crosses the line the timekeeper presses a key on the event's timekeeper page, or a timing
-device posts a crossing (``racing.timing_views.device``, read by ``racing.timing_signals``). The
-first crossing starts the clock, each later one ends a lap: its time is the difference of two readings of the same clock (the page's or the
-device's), plus the event's off-track penalty for each off-track marked during it. A lap counts
-when it has no more off-tracks than the event allows. Finishing the run scores its laps by the
-event's ranking method (best lap, first N consecutive, best average of N, total time:
-``racing.scoring``) and offers the score to the racer's ranking, as a simulated race's is.
+A timekeeper (staff, or a community race's organiser) starts a run for a racer's car; each time the
+car crosses the line the timekeeper presses a key on the event's timekeeper page, or a timing device
+posts a crossing (``racing.timing_views.device``, read by ``racing.timing_signals``). The first
+crossing starts the clock, each later one ends a lap: its time is the difference of two readings of
+the same clock (the page's or the device's), plus the event's off-track penalty for each off-track
+marked during it. A lap counts when it has no more off-tracks than the event allows. Finishing the
+run scores its laps by the event's ranking method (best lap, first N consecutive, best average of N,
+total time: ``racing.scoring``) and offers the score to the racer's ranking, as a simulated race's
+is.
 
 Signals, from the page's keys or the device's ``signal``:
 

@@ -256,9 +256,12 @@ def check(
     if isinstance(source_model, RLModel):
         errors.update(_clone_errors(source_model, clean))
         clean["cloned_from"] = source_model
-        clean["cloned_checkpoint"] = settings.get("cloned_checkpoint") or Checkpoint.BEST
-        if clean["cloned_checkpoint"] not in Checkpoint.values:
-            errors["cloned_checkpoint"] = "Start the clone from the best or the last checkpoint."
+        which = str(settings.get("cloned_checkpoint") or Checkpoint.BEST)
+        clean["cloned_checkpoint"] = which
+        if which not in Checkpoint.values and not (which.isdigit() and 0 < int(which) < 10**7):
+            errors["cloned_checkpoint"] = (
+                "Start the clone from the best or the last checkpoint, or an iteration's number."
+            )
     if errors:
         raise Invalid(errors)
     return ModelSettings(**clean)

@@ -286,9 +286,9 @@ class RLModel(RaceConditions):
     )
     cloned_checkpoint = models.CharField(
         max_length=8,
-        choices=Checkpoint.choices,
         blank=True,
-        help_text="A clone's start: its source's best or last checkpoint.",
+        help_text="A clone's start: its source's best or last checkpoint (a Checkpoint), or the "
+        "number of the iteration whose checkpoint it is.",
     )
     vehicle = models.ForeignKey(
         "Vehicle", null=True, blank=True, on_delete=models.SET_NULL, related_name="rl_models"
@@ -359,6 +359,16 @@ class RLModel(RaceConditions):
         reads this, so that its steps lie on the route they were driven on."""
         name = track or self.track.name
         return sim_tracks.driven(name, direction or self.direction, self.route_on(name))
+
+    @property
+    def cloned_checkpoint_words(self) -> str:
+        """Which of its source's checkpoints this clone started from, in words."""
+        which = self.cloned_checkpoint
+        return (
+            f"the checkpoint of its iteration {which}"
+            if which.isdigit()
+            else f"its {which} checkpoint"
+        )
 
     def environment_settings(self, track: str | None = None) -> dict:
         """The keyword arguments of ``gymnasium.make("Pitlane/DeepRacer-v0", ...)``; on another

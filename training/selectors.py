@@ -385,8 +385,16 @@ def checkpoint_trained(*, model: RLModel, name: str) -> bool:
 
 
 def model_trained_checkpoint(*, model: RLModel, which: str = "best") -> str | None:
-    """The model's ``which`` checkpoint (as ``model_checkpoint``) when it holds trained weights
-    (``checkpoint_trained``); None when the model has none."""
+    """The model's ``which`` checkpoint (as ``model_checkpoint``; or, ``which`` a number, the
+    checkpoint of that iteration of its newest training, as DeepRacer for Cloud's
+    ``dr-upload-model -c N`` takes one) when it holds trained weights (``checkpoint_trained``);
+    None when the model has none."""
+    if which.isdigit():
+        job = _newest_trained_job(model)
+        name = artifacts.path(model, artifacts.checkpoint(int(which)))
+        if job is None or not 0 < int(which) <= job.iterations or not default_storage.exists(name):
+            return None
+        return name
     name = model_checkpoint(model=model, which=which)
     return name if name and checkpoint_trained(model=model, name=name) else None
 

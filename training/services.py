@@ -490,6 +490,15 @@ def _model_save(
         if source is not None
         else None
     )
+    if source is not None and weights is None and settings.cloned_checkpoint.isdigit():
+        raise configuration.Invalid(
+            {
+                "cloned_checkpoint": (
+                    f"{source.name} has no checkpoint of iteration {settings.cloned_checkpoint}: "
+                    "choose one of the iterations its latest training ran, or best or last."
+                )
+            }
+        )
     if source is not None and weights is None:
         raise configuration.Invalid(
             {

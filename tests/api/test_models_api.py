@@ -13,9 +13,9 @@ import yaml
 from archives import logs_archive
 from tests.helpers.accounts import api_token
 from tests.helpers.archives import DEEPRACER_HYPERPARAMETERS, DEEPRACER_METADATA, DEEPRACER_PARAMS
-from tests.helpers.models import ready_model
+from tests.helpers.models import ready_model, with_a_later_checkpoint
 from tests.helpers.training import settings as training_settings
-from training import configuration, services
+from training import artifacts, configuration, services
 from training.models import Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
 
@@ -220,6 +220,33 @@ def test_a_clone_starts_from_its_sources_checkpoint_with_the_changes_given(
         **token,
     )
     assert fewer.status_code == 400 and "action_space" in fewer.json()["errors"]
+
+    with_a_later_checkpoint(source, 3)  # iterations 1 and 3 kept: clone from the third's
+    third = client.post(
+        f"{MODELS}/{source.pk}/clone",
+        {"name": "third", "checkpoint": 3},
+        content_type="application/json",
+        **token,
+    )
+    assert third.status_code == 201, third.json()
+    clone = RLModel.objects.get(name="third")
+    assert clone.cloned_checkpoint == "3"
+    started = artifacts.read(artifacts.path(clone, artifacts.CLONED_WEIGHTS))
+    assert started == artifacts.read(artifacts.path(source, artifacts.checkpoint(3)))
+    client.force_login(alice)
+    assert "the checkpoint of its iteration 3" in client.get(f"/models/{clone.pk}/").text
+    client.logout()
+    for missing in (2, 9):
+        refused = client.post(
+            f"{MODELS}/{source.pk}/clone",
+            {"name": f"iteration-{missing}", "checkpoint": missing},
+            content_type="application/json",
+            **token,
+        )
+        assert refused.status_code == 400
+        assert (
+            f"no checkpoint of iteration {missing}" in refused.json()["errors"]["cloned_checkpoint"]
+        )
 
 
 @pytest.mark.slow  # builds the car's graph

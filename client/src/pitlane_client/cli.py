@@ -66,7 +66,7 @@ def _parser() -> argparse.ArgumentParser:
     clone = models.add_parser("clone")
     clone.add_argument("model", type=int)
     clone.add_argument("name")
-    clone.add_argument("--checkpoint", choices=("best", "last"), default="best")
+    clone.add_argument("--checkpoint", type=_checkpoint, default="best", help="best, last or N")
     clone.add_argument("--minutes", type=int)
     clone.set_defaults(run=_model_clone)
 
@@ -118,6 +118,15 @@ def _parser() -> argparse.ArgumentParser:
 
     verbs.add_parser("runs", help="your race runs").set_defaults(run=_runs)
     return parser
+
+
+def _checkpoint(given: str) -> str | int:
+    """best, last, or an iteration's number (DeepRacer for Cloud's ``dr-upload-model -c N``)."""
+    if given in ("best", "last"):
+        return given
+    if given.isdigit():
+        return int(given)
+    raise argparse.ArgumentTypeError("give best, last or an iteration's number")
 
 
 # The verbs
