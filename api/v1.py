@@ -12,7 +12,16 @@ from datetime import datetime
 from ninja import NinjaAPI, Schema
 
 from accounts.selectors import racer_name
-from api import downloads, errors, evaluations, imports, league, racer_models, reward_functions
+from api import (
+    downloads,
+    errors,
+    evaluations,
+    imports,
+    league,
+    racer_models,
+    reward_functions,
+    training_live,
+)
 from api.auth import AUTH, scopes
 from api.schemas import REFUSED
 
@@ -28,6 +37,7 @@ api = NinjaAPI(
 errors.install(api)
 api.add_router("/models", imports.router, tags=["imports"])
 api.add_router("/models", racer_models.router, tags=["models"])
+api.add_router("/models", training_live.router, tags=["training"])
 api.add_router("/models", evaluations.router, tags=["evaluations"])
 api.add_router("/models", downloads.router, tags=["downloads"])
 api.add_router("/reward-functions", reward_functions.router, tags=["reward functions"])

@@ -23,7 +23,7 @@ from tests.helpers.archives import (
 )
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
-from training.models import RLModel
+from training.models import JobLogLine, RLModel
 from training.rewards import EXAMPLES
 
 pytestmark = [pytest.mark.django_db(transaction=True), pytest.mark.slow]
@@ -65,6 +65,10 @@ def test_a_racer_lists_shows_downloads_and_reads_a_leaderboard(
     assert code == 0 and out.strip() == f"Saved {saved}" and "100%" in err
     with tarfile.open(saved) as archive:
         assert sorted(archive.getnames()) == ["agent/model.pb", "model_metadata.json"]
+
+    JobLogLine.objects.create(job=model.jobs.get(), text="Iteration 1: reward 12.5")
+    code, out, _ = pitlane("logs", str(model.pk), "--follow")  # the training ended: no wait
+    assert code == 0 and out.strip().endswith("[trainer] Iteration 1: reward 12.5")
 
     race = event("Time trial", laps_required=1)
     scored(race, bob, 7_500, model_name="quicker")

@@ -14,7 +14,7 @@ import urllib.error
 import urllib.parse
 import urllib.request
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -94,6 +94,26 @@ class Client:
 
     def iterations(self, model_id: int) -> list[dict]:
         return self._json("GET", f"/models/{model_id}/iterations")
+
+    def log(self, model_id: int, after: int = 0, limit: int = 500) -> dict:
+        """The lines of the model's training log after the line ``after``: ``lines``, ``next``
+        (the ``after`` of the next page) and ``active`` (whether more may come)."""
+        return self._json("GET", f"/models/{model_id}/log", query={"after": after, "limit": limit})
+
+    def training_events(self, model_id: int) -> Iterator[tuple[str, dict]]:
+        """The model's training as it happens: (kind, message) for each server-sent event
+        (``state`` first, then ``iteration`` and ``status``), until the training ends."""
+        with self._open("GET", f"/models/{model_id}/training/events", timeout=None) as stream:
+            kind, data = "message", []
+            for raw in stream:
+                line = raw.decode().rstrip("\r\n")
+                if line.startswith("event:"):
+                    kind = line[6:].strip()
+                elif line.startswith("data:"):
+                    data.append(line[5:].strip())
+                elif not line and data:
+                    yield kind, json.loads("\n".join(data))
+                    kind, data = "message", []
 
     def validate(self, source: str, track: str = "rookie-loop") -> dict:
         return self._json(
@@ -187,7 +207,9 @@ class Client:
         with self._open(method, path, query=query, body=body) as response:
             return json.load(response)
 
-    def _open(self, method: str, path: str, *, query=None, body=None, content_type=None):
+    def _open(
+        self, method: str, path: str, *, query=None, body=None, content_type=None, timeout=0.0
+    ):
         """The console's answer; ``body`` is JSON, or with ``content_type`` an ``_Upload``."""
         url = f"{self.url}/api/v1{path}"
         if query:
@@ -201,7 +223,8 @@ class Client:
         if data is not None:
             request.add_header("Content-Type", content_type or "application/json")
         try:
-            return urllib.request.urlopen(request, timeout=self.timeout)  # noqa: S310 (our URL)
+            wait = self.timeout if timeout == 0.0 else timeout  # None: a stream, held open
+            return urllib.request.urlopen(request, timeout=wait)  # noqa: S310 (our URL)
         except urllib.error.HTTPError as error:
             raise _refusal(error) from None
         except urllib.error.URLError as error:

@@ -4,6 +4,7 @@
     pitlane models list|show ID|stop ID|delete ID|clone ID NAME
     pitlane train FOLDER [--name NAME] [--minutes N] [--wait]
     pitlane import s3://BUCKET/PREFIX|FOLDER|ARCHIVE [--endpoint-url URL] [--yes]   (or upload)
+    pitlane logs ID [--follow]
     pitlane download ID [--physical|--onnx|--virtual|--logs] [--checkpoint best|last]
     pitlane evaluate ID [--trials N] [--checkpoint best|last] [--wait]
     pitlane submit ID EVENT    pitlane leaderboard EVENT    pitlane runs
@@ -88,6 +89,11 @@ def _parser() -> argparse.ArgumentParser:
         imported.add_argument("--yes", action="store_true", help="confirm a preview's training")
         imported.add_argument("--minutes", type=int, help="a previewed model's training time")
         imported.set_defaults(run=_import)
+
+    logs = verbs.add_parser("logs", help="a model's training log")
+    logs.add_argument("model", type=int)
+    logs.add_argument("--follow", "-f", action="store_true", help="until its training ends")
+    logs.set_defaults(run=_logs)
 
     download = verbs.add_parser("download", help="a model's archive")
     download.add_argument("model", type=int)
@@ -281,6 +287,29 @@ def _confirmed(args, client: Client, preview: dict) -> dict | None:
         return None
     changes = {"max_minutes": args.minutes} if args.minutes else {}
     return client.import_confirm(preview["kept"], name=settings["name"], **changes)
+
+
+def _logs(args) -> int:
+    """The model's training log, as dr-logs-sagemaker shows the trainer's; ``--follow`` asks for
+    new lines every few seconds until the training ends."""
+    client = _client()
+    after = 0
+    while True:
+        page = client.log(args.model, after=after, limit=1000)
+        for line in page["lines"]:
+            if args.json:
+                print(json.dumps(line))
+            else:
+                level = "" if line["level"] == "info" else f" {line['level'].upper()}:"
+                print(
+                    f"{line['at'][:19].replace('T', ' ')}  [{line['source']}]{level} {line['text']}"
+                )
+        after = page["next"]
+        if page["lines"] and len(page["lines"]) == 1000:
+            continue  # more already written
+        if not (args.follow and page["active"]):
+            return 0
+        time.sleep(WAIT_EVERY)
 
 
 def _download(args) -> int:
