@@ -14,7 +14,7 @@ from racing.models import Submission
 from tests.helpers.accounts import api_token
 from tests.helpers.league import event
 from tests.helpers.models import ready_model
-from training.models import EvaluationJob
+from training.models import EvaluationJob, RewardFunction
 
 ALL_SCOPES = ["read", "train", "race"]
 BODIES = {  # a well-formed body for each operation that takes one
@@ -23,6 +23,9 @@ BODIES = {  # a well-formed body for each operation that takes one
     "/api/v1/models/{model_id}/evaluations": {},
     "/api/v1/events/{slug}/submissions": {"model": 0},
     "/api/v1/reward-functions/validate": {"source": ""},
+    "/api/v1/reward-functions": {"name": "mine", "source": ""},
+    "/api/v1/reward-functions/{function_id}": {"name": "mine", "source": ""},
+    "/api/v1/models/import/confirm": {"kept": "x"},
 }
 
 
@@ -40,12 +43,14 @@ def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
     race = event("Time trial", laps_required=1)
     evaluation = EvaluationJob.objects.create(model=model, track=model.track)
     submission = Submission.objects.create(event=race, racer=alice, model=model, model_name="m")
+    function = RewardFunction.objects.create(owner=alice, name="hers", source="x")
     ids = {
         "model_id": model.pk,
         "evaluation_id": evaluation.pk,
         "submission_id": submission.pk,
         "slug": race.slug,
         "kind": "physical",
+        "function_id": function.pk,
     }
     hers = api_token(bob, *ALL_SCOPES)
     tried = 0
@@ -58,10 +63,11 @@ def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
         assert anonymous.json()["code"] == "unauthenticated"
         answer = getattr(client, method)(url, **kwargs, **hers)
         assert answer.status_code < 500, (method, path, answer.content[:200])
-        if any(name in path for name in ("{model_id}", "{submission_id}")):
+        if any(name in path for name in ("{model_id}", "{submission_id}", "{function_id}")):
             assert answer.status_code == 404, (method, path, answer.status_code)
         tried += 1
     assert tried >= 20
     model.refresh_from_db()
     assert model.status == model.Status.READY  # nothing of alice's moved
     assert EvaluationJob.objects.filter(model=model).count() == 1
+    assert RewardFunction.objects.get(pk=function.pk).source == "x"

@@ -108,6 +108,46 @@ def test_validate_answers_as_the_editors_button_does(alice, tracks, client):
     assert reader.status_code == 403
 
 
+@pytest.mark.slow  # the sandbox runs the code
+def test_the_reward_function_library_is_kept_as_the_editor_keeps_it(alice, bob, tracks, client):
+    token, library = api_token(alice, "read", "train"), "/api/v1/reward-functions"
+    saved = client.post(
+        library, {"name": "centre", "source": EXAMPLES[0].source}, "application/json", **token
+    )
+    assert saved.status_code == 201, saved.json()
+    function = saved.json()
+    assert client.get(library, **token).json() == [function]
+    broken = client.put(
+        f"{library}/{function['id']}",
+        {"name": "centre", "source": "def reward_function(params)\n    return 1.0\n"},
+        "application/json",
+        **token,
+    )
+    assert broken.status_code == 400
+    assert broken.json()["errors"]["source"].startswith("It was not saved: the code has 1 error")
+    assert "Line 1:" in broken.json()["errors"]["source"]
+    taken = client.post(
+        library, {"name": "CENTRE", "source": EXAMPLES[0].source}, "application/json", **token
+    )
+    assert (
+        taken.status_code == 400
+        and "already have a reward function" in taken.json()["errors"]["name"]
+    )
+    renamed = client.put(
+        f"{library}/{function['id']}",
+        {"name": "follow the line", "source": EXAMPLES[1].source},
+        "application/json",
+        **token,
+    )
+    assert renamed.status_code == 200 and renamed.json()["source"] == EXAMPLES[1].source
+    assert client.get(f"{library}/{function['id']}", **api_token(bob, "read")).status_code == 404
+    assert (
+        client.delete(f"{library}/{function['id']}", **api_token(bob, "train")).status_code == 404
+    )
+    assert client.delete(f"{library}/{function['id']}", **token).status_code == 204
+    assert client.get(library, **token).json() == []
+
+
 def drfc_files(**changes) -> dict[str, str]:
     """A DeepRacer for Cloud model folder's files, as `pitlane train FOLDER` sends them."""
     return {
