@@ -110,7 +110,7 @@ def _event_out(event: Event) -> dict:
     }
 
 
-def _event(request, slug: str) -> Event:
+def event_of(request, slug: str) -> Event:
     event = selectors.events_visible_to(user=request.user).filter(slug=slug).first()
     if event is None:
         raise ApiError(404, "not_found", f"No event you may see is called {slug!r}.")
@@ -140,7 +140,7 @@ def events_list(request):
 def event_detail(request, slug: str):
     """One event and its rules."""
     need(request, TokenScope.READ)
-    return _event_out(_event(request, slug))
+    return _event_out(event_of(request, slug))
 
 
 @router.get("/events/{slug}/leaderboard", response={200: Leaderboard, **REFUSED})
@@ -148,7 +148,7 @@ def event_leaderboard(request, slug: str, page: int = 1):
     """The event's leaderboard, as its page ranks it: each place's racer name (never a login
     name), model, score [ms] and gap to first; 50 places a page."""
     need(request, TokenScope.READ)
-    event = _event(request, slug)
+    event = event_of(request, slug)
     current = selectors.leaderboard_page(event=event, page=max(1, page))
     return {
         "event": event.slug,
@@ -177,7 +177,7 @@ def submission_create(request, slug: str, body: SubmitIn):
     queued under the event's rules with the ``best`` or ``last`` checkpoint; what the page
     would refuse answers 409 with its words."""
     need(request, TokenScope.RACE)
-    event = _event(request, slug)
+    event = event_of(request, slug)
     model = own_model(request, body.model)
     counted(request, "evaluate")
     try:

@@ -18,6 +18,7 @@ from api import (
     evaluations,
     imports,
     league,
+    race_day,
     racer_models,
     reward_functions,
     training_live,
@@ -42,6 +43,7 @@ api.add_router("/models", evaluations.router, tags=["evaluations"])
 api.add_router("/models", downloads.router, tags=["downloads"])
 api.add_router("/reward-functions", reward_functions.router, tags=["reward functions"])
 api.add_router("", league.router, tags=["league"])
+api.add_router("/events", race_day.router, tags=["race day"])
 
 
 class TokenOut(Schema):

@@ -10,7 +10,8 @@ import re
 import pytest
 
 from api.v1 import api
-from racing.models import Submission
+from racing import live_races
+from racing.models import LiveEntry, Submission
 from tests.helpers.accounts import api_token
 from tests.helpers.league import event
 from tests.helpers.models import ready_model
@@ -26,6 +27,9 @@ BODIES = {  # a well-formed body for each operation that takes one
     "/api/v1/reward-functions": {"name": "mine", "source": ""},
     "/api/v1/reward-functions/{function_id}": {"name": "mine", "source": ""},
     "/api/v1/models/import/confirm": {"kept": "x"},
+    "/api/v1/events/{slug}/live": {},
+    "/api/v1/events/{slug}/live/queue": {"model": 0},
+    "/api/v1/events/{slug}/winner": {},
 }
 
 
@@ -44,6 +48,8 @@ def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
     evaluation = EvaluationJob.objects.create(model=model, track=model.track)
     submission = Submission.objects.create(event=race, racer=alice, model=model, model_name="m")
     function = RewardFunction.objects.create(owner=alice, name="hers", source="x")
+    session = live_races.live_session_open(event=race, facilitator=alice)
+    entry = live_races.live_entry_join(session=session, racer=alice, model=model)
     ids = {
         "model_id": model.pk,
         "evaluation_id": evaluation.pk,
@@ -51,6 +57,8 @@ def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
         "slug": race.slug,
         "kind": "physical",
         "function_id": function.pk,
+        "entry_id": entry.pk,
+        "action": "up",
     }
     hers = api_token(bob, *ALL_SCOPES)
     tried = 0
@@ -63,7 +71,10 @@ def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
         assert anonymous.json()["code"] == "unauthenticated"
         answer = getattr(client, method)(url, **kwargs, **hers)
         assert answer.status_code < 500, (method, path, answer.content[:200])
-        if any(name in path for name in ("{model_id}", "{submission_id}", "{function_id}")):
+        if any(
+            name in path
+            for name in ("{model_id}", "{submission_id}", "{function_id}", "{entry_id}")
+        ):
             assert answer.status_code == 404, (method, path, answer.status_code)
         tried += 1
     assert tried >= 20
@@ -71,3 +82,4 @@ def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
     assert model.status == model.Status.READY  # nothing of alice's moved
     assert EvaluationJob.objects.filter(model=model).count() == 1
     assert RewardFunction.objects.get(pk=function.pk).source == "x"
+    assert LiveEntry.objects.get(pk=entry.pk).status == LiveEntry.Status.WAITING
