@@ -9,7 +9,7 @@ invitation, the limit per racer) and counted against the racer's ``evaluate`` li
 
 from __future__ import annotations
 
-from datetime import datetime
+from datetime import date, datetime
 
 from ninja import Router, Schema, Status
 
@@ -20,7 +20,7 @@ from api.errors import ApiError, counted
 from api.owned import own_model
 from api.schemas import REFUSED
 from racing import selectors, services
-from racing.models import Event, Submission
+from racing.models import Division, Event, Season, Submission
 
 router = Router()
 
@@ -99,6 +99,66 @@ class SubmissionDetail(SubmissionOut):
 class SubmitIn(Schema):
     model: int
     checkpoint: str = "best"
+
+
+class SeasonOut(Schema):
+    name: str
+    year: int
+    starts_on: date
+    ends_on: date
+    events: list[str]  # the slugs of its public events
+
+
+class StandingOut(Schema):
+    position: int
+    racer: str
+    points: int
+    finishes: list[int]  # its places in the events counted, best first
+
+
+class Standings(Schema):
+    season: str
+    division: str
+    events: list[str]
+    standings: list[StandingOut]
+
+
+@router.get("/seasons", response={200: list[SeasonOut], **REFUSED})
+def seasons_list(request):
+    """The league's seasons, newest first, with their public events."""
+    need(request, TokenScope.READ)
+    return [
+        {
+            **{f: getattr(s, f) for f in ("name", "year", "starts_on", "ends_on")},
+            "events": [event.slug for event in s.events.all()],
+        }
+        for s in selectors.seasons_with_events()
+    ]
+
+
+@router.get("/seasons/{name}/standings", response={200: Standings, **REFUSED})
+def season_standings(request, name: str, division: Division = Division.OPEN):
+    """A season's standings in a division, as its page ranks them: each event's first ten
+    places score Formula 1's points; ties are broken by countback."""
+    need(request, TokenScope.READ)
+    season = Season.objects.filter(name=name).first()
+    if season is None:
+        raise ApiError(404, "not_found", f"No season is called {name!r}.")
+    standings, events = selectors.season_standings(season=season, division=division)
+    return {
+        "season": season.name,
+        "division": division,
+        "events": [event.slug for event in events],
+        "standings": [
+            {
+                "position": s.position,
+                "racer": racer_name(racer=s.racer),
+                "points": s.points,
+                "finishes": s.finishes,
+            }
+            for s in standings
+        ],
+    }
 
 
 def _event_out(event: Event) -> dict:

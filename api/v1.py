@@ -21,6 +21,7 @@ from api import (
     race_day,
     racer_models,
     reward_functions,
+    system,
     training_live,
 )
 from api.auth import AUTH, scopes
@@ -44,6 +45,7 @@ api.add_router("/models", downloads.router, tags=["downloads"])
 api.add_router("/reward-functions", reward_functions.router, tags=["reward functions"])
 api.add_router("", league.router, tags=["league"])
 api.add_router("/events", race_day.router, tags=["race day"])
+api.add_router("/system", system.router, tags=["staff"])
 
 
 class TokenOut(Schema):

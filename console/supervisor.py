@@ -39,11 +39,11 @@ import redis
 from django.conf import settings
 from django.core.management import call_command
 
+from common.health import live_workers
 from common.redis_client import redis_client
 from console.env import _redact, env
 from console.private_files import data_dir_private, files_private, private_dir
 from console.sizing import Sizing
-from console.workers import live_workers
 
 STOP_GRACE = 15.0  # [s] between SIGTERM and SIGKILL
 START_TIMEOUT = 60.0  # [s] for Redis and the web server to answer

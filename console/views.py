@@ -16,9 +16,9 @@ from django.views.decorators.http import require_safe
 
 from accounts import tasks as accounts_tasks
 from common import ratelimits
+from common.health import system_health
 from console import guidance
 from console.forms import PasswordResetRequestForm, SignInForm, SignUpForm
-from console.health import system_health
 from racing.models import RankingMethod
 from racing.selectors import events_not_closed
 from training.rewards import PARAMS

@@ -18,23 +18,17 @@ from pathlib import Path
 import redis
 from celery import signals
 
+from common.health import KEY_PREFIX
 from common.redis_client import redis_client
 from console.private_files import files_private, temporary_uploads_sweep
 
 logger = logging.getLogger(__name__)
 
-KEY_PREFIX = "pitlane:worker:"
 HEARTBEAT_INTERVAL = 5.0  # [s]
 HEARTBEAT_TTL = 15  # [s] a worker silent this long is gone
 RESUME_EVERY = 10.0  # [s] between looks for training jobs whose trainer died
 
 _stop = threading.Event()
-
-
-def live_workers(client: redis.Redis) -> list[dict]:
-    """The workers whose heartbeat has not expired: hostname, pid, queues, started_at."""
-    keys = sorted(client.scan_iter(match=f"{KEY_PREFIX}*", count=100))
-    return [json.loads(value) for value in client.mget(keys) if value] if keys else []
 
 
 @signals.celeryd_init.connect

@@ -12,9 +12,9 @@ from channels.layers import channel_layers
 from django.conf import settings
 from django.contrib.auth.models import User
 
+from common.health import live_workers
 from common.redis_client import redis_client
 from console.supervisor import worker_pools
-from console.workers import live_workers
 from tests.helpers.accounts import racer
 from tests.services import (
     SUITE_REDIS,

@@ -59,6 +59,7 @@ def test_no_operation_reaches_another_racers_rows_or_answers_without_a_token(
         "function_id": function.pk,
         "entry_id": entry.pk,
         "action": "up",
+        "name": "Test season",
     }
     hers = api_token(bob, *ALL_SCOPES)
     tried = 0

@@ -3,8 +3,8 @@ import json
 import pytest
 from django.urls import reverse
 
+from common.health import KEY_PREFIX
 from common.redis_client import redis_client
-from console.workers import KEY_PREFIX
 from tests.services import RedisServer, wait_for
 
 pytestmark = pytest.mark.django_db

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 import redis
 
-from console.workers import live_workers
+from common.health import live_workers
 from tests.helpers.private_files import an_install_from_before, read_as_another_user
 from tests.services import ROOT, free_port, parent_of, wait_for
 

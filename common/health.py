@@ -1,7 +1,10 @@
-"""Reachability of what the console depends on: the database, Redis and the Celery workers."""
+"""Reachability of what the console depends on: the database, Redis and the Celery workers
+(which announce themselves in Redis: ``console.workers`` writes the heartbeats, ``live_workers``
+reads them), for /healthz, the System page and the API's."""
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable
 from typing import Any
@@ -11,7 +14,14 @@ from django.conf import settings
 from django.db import DatabaseError, connection
 
 from common.redis_client import redis_client
-from console.workers import live_workers
+
+KEY_PREFIX = "pitlane:worker:"  # a worker's heartbeat, by its hostname
+
+
+def live_workers(client: redis.Redis) -> list[dict]:
+    """The workers whose heartbeat has not expired: hostname, pid, queues, started_at."""
+    keys = sorted(client.scan_iter(match=f"{KEY_PREFIX}*", count=100))
+    return [json.loads(value) for value in client.mget(keys) if value] if keys else []
 
 
 class Down(Exception):
