@@ -12,7 +12,9 @@ from __future__ import annotations
 import logging
 import math
 
+from django.core.exceptions import RequestDataTooBig
 from django.http import Http404, HttpRequest, HttpResponse
+from django.http.multipartparser import MultiPartParserError
 from ninja import NinjaAPI
 from ninja.errors import AuthenticationError, HttpError, ValidationError
 
@@ -118,6 +120,18 @@ def install(api: NinjaAPI) -> None:
     @api.exception_handler(HttpError)
     def http_error(request, error: HttpError):
         return answer(api, request, ApiError(error.status_code, "refused", str(error)))
+
+    @api.exception_handler(MultiPartParserError)
+    def unreadable_form(request, error):
+        return answer(
+            api,
+            request,
+            ApiError(400, "invalid", f"The request's multipart body cannot be read: {error}."),
+        )
+
+    @api.exception_handler(RequestDataTooBig)
+    def too_big(request, error):
+        return answer(api, request, ApiError(413, "too_large", "The request's body is too large."))
 
     @api.exception_handler(Exception)
     def internal(request, error):

@@ -16,11 +16,12 @@ from accounts.models import TokenScope
 from api.auth import need
 from api.errors import ApiError, counted
 from api.owned import own_model
-from api.schemas import REFUSED
+from api.schemas import REFUSED, named_choices
 from training import services
 from training.models import EvaluationJob, EvaluationTrial
 
 router = Router()
+EvaluationStatus = named_choices(EvaluationJob.Status, "EvaluationStatus")
 
 
 class EvaluationIn(Schema):
@@ -53,7 +54,7 @@ class TrialOut(Schema):
 class EvaluationOut(Schema):
     id: int
     model: int
-    status: EvaluationJob.Status
+    status: EvaluationStatus
     track: str
     trials: int
     checkpoint: str

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from datetime import date, datetime
 
-from ninja import Router, Schema, Status
+from ninja import Query, Router, Schema, Status
 
 from accounts.models import TokenScope
 from accounts.selectors import racer_name
@@ -204,12 +204,12 @@ def event_detail(request, slug: str):
 
 
 @router.get("/events/{slug}/leaderboard", response={200: Leaderboard, **REFUSED})
-def event_leaderboard(request, slug: str, page: int = 1):
+def event_leaderboard(request, slug: str, page: int = Query(1, ge=1, le=10**6)):
     """The event's leaderboard, as its page ranks it: each place's racer name (never a login
     name), model, score [ms] and gap to first; 50 places a page."""
     need(request, TokenScope.READ)
     event = event_of(request, slug)
-    current = selectors.leaderboard_page(event=event, page=max(1, page))
+    current = selectors.leaderboard_page(event=event, page=page)
     return {
         "event": event.slug,
         "page": current.number,

@@ -18,11 +18,12 @@ from api.auth import need
 from api.errors import ApiError
 from api.league import event_of
 from api.owned import own_model
-from api.schemas import REFUSED
+from api.schemas import REFUSED, named_choices
 from racing import broadcasts, live_races, services, timing
 from racing.models import Event, LiveEntry, LiveSession
 
 router = Router()
+QueueStatus = named_choices(LiveEntry.Status, "QueueStatus")
 ACTIONS = {"up": -1, "down": 1}
 
 
@@ -31,7 +32,7 @@ class QueueEntry(Schema):
     racer: str
     model_name: str
     speed: float
-    status: LiveEntry.Status
+    status: QueueStatus
     place: int | None = None
     score_ms: int | None = None
 

@@ -13,26 +13,28 @@ from typing import Literal
 
 from asgiref.sync import sync_to_async
 from django.db.models import Q
-from ninja import Query, Router, Schema, Status
+from ninja import Field, Query, Router, Schema, Status
 
 from accounts.models import TokenScope
 from api.auth import need
 from api.errors import ApiError, check_failed, counted
 from api.owned import own_model
-from api.schemas import REFUSED
+from api.schemas import REFUSED, named_choices
 from archives.deepracer_settings import archive_settings
 from archives.members import Members, member_json
 from training import checkers, configuration, selectors, services
 from training.models import Iteration, RLModel, TrainingJob
 
 router = Router()
+ModelStatus = named_choices(RLModel.Status, "ModelStatus")
+TrainingStatus = named_choices(TrainingJob.Status, "TrainingStatus")
 PAGE_MAX = 100
 
 
 class ModelOut(Schema):
     id: int
     name: str
-    status: RLModel.Status
+    status: ModelStatus
     track: str
     algorithm: str
     sensors: list[str]
@@ -62,11 +64,11 @@ class ModelPage(Schema):
 
 
 class ModelFilters(Schema):
-    status: RLModel.Status | None = None
+    status: ModelStatus | None = None
     track: str | None = None
     q: str | None = None
-    limit: int = 50
-    offset: int = 0
+    limit: int = Field(50, ge=1, le=PAGE_MAX)
+    offset: int = Field(0, ge=0, le=10**9)
 
 
 class IterationOut(Schema):
@@ -80,7 +82,7 @@ class IterationOut(Schema):
 
 
 class Stopped(Schema):
-    status: TrainingJob.Status
+    status: TrainingStatus
     message: str
 
 
@@ -106,11 +108,9 @@ def models_list(request, filters: Query[ModelFilters]):
     """Your models, newest first: ``status`` and ``track`` (its name) narrow them, ``q`` finds
     names and descriptions; ``limit`` (1 to 100) and ``offset`` page them."""
     need(request, TokenScope.READ)
-    if not 1 <= filters.limit <= PAGE_MAX or filters.offset < 0:
-        raise ApiError(400, "invalid", f"limit is 1 to {PAGE_MAX}, and offset 0 or more.")
     found = selectors.models_for_racer(racer=request.user).order_by("-created_at", "-pk")
     if filters.status:
-        found = found.filter(status=filters.status)
+        found = found.filter(status=filters.status.value)
     if filters.track:
         found = found.filter(track__name=filters.track)
     if filters.q:

@@ -12,6 +12,7 @@ from ninja import Router, Schema
 from accounts.models import TokenScope
 from accounts.selectors import racer_name
 from api.auth import need
+from api.racer_models import TrainingStatus
 from api.schemas import REFUSED
 from common.health import system_health
 from training import leases, selectors
@@ -30,7 +31,7 @@ class QueuedJob(Schema):
     model: int
     model_name: str
     racer: str
-    status: TrainingJob.Status
+    status: TrainingStatus
     queue_position: int | None
     queue_words: str
     workers: int

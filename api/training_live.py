@@ -13,17 +13,18 @@ from datetime import datetime
 from asgiref.sync import sync_to_async
 from channels.layers import get_channel_layer
 from django.http import StreamingHttpResponse
-from ninja import Query, Router, Schema
+from ninja import Field, Query, Router, Schema
 
 from accounts.models import TokenScope
 from api.auth import need
 from api.errors import ApiError
 from api.owned import own_model
-from api.schemas import REFUSED
+from api.schemas import REFUSED, named_choices
 from training import selectors, streams
 from training.models import JobLogLine, TrainingJob
 
 router = Router()
+LogSource = named_choices(JobLogLine.Source, "LogSource")
 LOG_PAGE_MAX = 1000
 REFRESH = 15.0  # [s] between fresh statuses when nothing else is said: the queue moves on
 
@@ -31,7 +32,7 @@ REFRESH = 15.0  # [s] between fresh statuses when nothing else is said: the queu
 class LogLine(Schema):
     id: int
     at: datetime
-    source: JobLogLine.Source
+    source: LogSource
     level: str
     text: str
 
@@ -43,8 +44,8 @@ class LogPage(Schema):
 
 
 class LogQuery(Schema):
-    after: int = 0
-    limit: int = 500
+    after: int = Field(0, ge=0, le=2**62)  # a line's id: what every database's key holds
+    limit: int = Field(500, ge=1, le=LOG_PAGE_MAX)
 
 
 @router.get("/{model_id}/log", response={200: LogPage, **REFUSED})
@@ -53,8 +54,6 @@ def model_log(request, model_id: int, page: Query[LogQuery]):
     first, at most ``limit`` (1 to 1,000); ``next`` is the ``after`` of the next page, and
     ``active`` says whether to ask again."""
     need(request, TokenScope.READ)
-    if not 1 <= page.limit <= LOG_PAGE_MAX or page.after < 0:
-        raise ApiError(400, "invalid", f"limit is 1 to {LOG_PAGE_MAX}, and after 0 or more.")
     model = own_model(request, model_id)
     lines = list(
         JobLogLine.objects.filter(job__model=model, pk__gt=page.after).order_by("pk")[: page.limit]
