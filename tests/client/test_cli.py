@@ -11,7 +11,7 @@ from contextlib import redirect_stderr, redirect_stdout
 import boto3
 import pytest
 import yaml
-from pitlane_client import cli
+from pitlane_client import Client, cli
 
 from accounts.tokens import token_create
 from tests.helpers.archives import (
@@ -23,6 +23,7 @@ from tests.helpers.archives import (
 )
 from tests.helpers.league import event, scored
 from tests.helpers.models import ready_model
+from tests.services import wait_for
 from training.models import JobLogLine, RLModel
 from training.rewards import EXAMPLES
 
@@ -152,3 +153,56 @@ def test_import_brings_a_model_from_a_deepracer_for_cloud_bucket_and_upload_a_fo
     code, out, err = pitlane("upload", str(folder), "--name", "from-folder")
     assert code == 1 and "Not imported: nothing was created." in err
     assert not RLModel.objects.filter(name="from-folder").exists()
+
+
+def test_a_racers_whole_day_through_the_command_line(
+    alice, tracks, logged_in, tmp_path, celery_worker_process, daphne_server
+):
+    """Validate, train a tiny model from a DeepRacer for Cloud folder and wait for its first
+    iteration, stop it, evaluate it, download the car's archive, race it and read the board:
+    every step a verb, against a running console and its workers."""
+    assert Client(daphne_server, logged_in).validate(EXAMPLES[0].source)["valid"] is True
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    # Straight ahead whatever it learns, at 3.5 or 4 m/s: off at each bend and put back, so its
+    # evaluation and race finish their laps in a few seconds, as a young model's would not.
+    straight = [
+        {"steering_angle": 0.0, "speed": speed, "index": n} for n, speed in enumerate((3.5, 4.0))
+    ]
+    (folder / "model_metadata.json").write_text(
+        json.dumps({**DEEPRACER_METADATA, "action_space": straight})
+    )
+    tiny = {**DEEPRACER_HYPERPARAMETERS, "batch_size": 32, "num_epochs": 3}
+    (folder / "hyperparameters.json").write_text(
+        json.dumps({**tiny, "num_episodes_between_training": 5})
+    )
+    params = {**DEEPRACER_PARAMS, "WORLD_NAME": "Oval_track"}
+    (folder / "training_params.yaml").write_text(yaml.safe_dump(params))
+    (folder / "reward_function.py").write_text(EXAMPLES[0].source)
+    code, out, err = pitlane("train", str(folder), "--name", "day-one", "--minutes", "10", "--wait")
+    assert code == 0, err
+    assert "waiting for the first iteration" in err  # the wait, shown as it goes
+    model = RLModel.objects.get(name="day-one")
+    assert model.jobs.get().iterations >= 1
+
+    assert pitlane("models", "stop", str(model.pk))[0] == 0
+    wait_for(lambda: RLModel.objects.get(pk=model.pk).status == "READY", "the model saved", 120)
+    code, out, err = pitlane("evaluate", str(model.pk), "--wait")
+    assert code == 0 and "COMPLETED" in out.splitlines()[0], (out, err)
+
+    code, out, _ = pitlane("download", str(model.pk), "--physical", "--into", str(tmp_path))
+    with tarfile.open(tmp_path / "physicalmodel-day-one.tar.gz") as archive:
+        assert sorted(archive.getnames()) == ["agent/model.pb", "model_metadata.json"]
+
+    race = event("Day race", laps_required=1, laps_to_drive=1)
+    code, out, err = pitlane("submit", str(model.pk), race.slug)
+    assert code == 0 and "is on the grid for day-race" in out, err
+    wait_for(
+        lambda: race.submissions.filter(status__in=("COMPLETED", "FAILED")).exists(),
+        "the race to be scored",
+        180,
+    )
+    code, out, _ = pitlane("runs")
+    assert code == 0 and "day-one" in out
+    code, out, _ = pitlane("leaderboard", race.slug)
+    assert code == 0 and out.splitlines()[-1].startswith("page 1 of")
