@@ -50,7 +50,7 @@ class Cancelled(Schema):
     cancelled: str | None  # the archive's file name, None when none was kept
 
 
-@router.post("/import", response={201: Created, 200: Preview, **TOO_LARGE})
+@router.post("/import", response={201: Created, 200: Preview, **TOO_LARGE}, url_name="model-import")
 async def model_import(request, archive: File[UploadedFile], name: Form[str] = ""):
     """Import a model from an archive (a Pitlane virtual model, a model downloaded from
     DeepRacer's console, or DeepRacer for Cloud's model folder packed as a tar): 201 with the

@@ -1,24 +1,27 @@
 """A limit on the size of request bodies, applied before Django reads them.
 
-Django reads a request's whole body (to a temporary file past a few megabytes) before any view
-or middleware can look at it, and Daphne sets no limit, so a client could otherwise make the
-server take gigabytes. ``BodyLimit`` wraps the HTTP application: a body whose Content-Length is
-over the limit is refused at once, and one sent in chunks as soon as the chunks pass it, with
-413 and a sentence saying the limit. Every page takes ``PITLANE_MAX_BODY``; the model import,
-the one large upload, takes ``PITLANE_MAX_IMPORT_BODY``. Under Daphne, ``console.daphne_body``
-refuses such a body earlier still, as it arrives, before Twisted keeps any more of it; this stays
-for any other server.
+Django reads a request's whole body (to a temporary file past a few megabytes) before any view or
+middleware can look at it, and Daphne sets no limit, so a client could otherwise make the server
+take gigabytes. ``BodyLimit`` wraps the HTTP application: a body whose Content-Length is over the
+limit is refused at once, and one sent in chunks as soon as the chunks pass it, with 413 and a
+sentence saying the limit. Every page takes ``PITLANE_MAX_BODY``; the model import (its page's and
+the API's), the one large upload, takes ``PITLANE_MAX_IMPORT_BODY``. Under Daphne,
+``console.daphne_body`` refuses such a body earlier still, as it arrives, before Twisted keeps any
+more of it; this stays for any other server.
 """
 
 from __future__ import annotations
 
+import json
 from functools import cache
 from html import escape
 
 from django.conf import settings
 from django.urls import reverse
 
-LARGE_UPLOADS = ("archives:model-import",)  # the pages whose forms upload a model archive
+# The pages whose forms upload a model archive, and the API's import.
+LARGE_UPLOADS = ("archives:model-import", "api-v1:model-import")
+API_PATHS = "/api/v1/"  # whose refusals are JSON, as the API's are
 
 
 class BodyTooLarge(Exception):
@@ -48,7 +51,7 @@ class BodyLimit:
         limit = limit_for(scope["path"])
         declared = dict(scope.get("headers") or ()).get(b"content-length", b"")
         if declared.isdigit() and int(declared) > limit:
-            await _refuse(send, limit)
+            await _refuse(send, limit, scope["path"])
             return
         received = 0
 
@@ -64,27 +67,32 @@ class BodyLimit:
         try:
             await self.app(scope, limited_receive, send)
         except BodyTooLarge:  # Django reads the whole body before it answers anything
-            await _refuse(send, limit)
+            await _refuse(send, limit, scope["path"])
 
 
-def refusal_page(limit: int) -> bytes:
-    """The page a 413 answers with: the limit, in words (Daphne's refusal says the same)."""
+def refusal(limit: int, path: str) -> tuple[str, bytes]:
+    """What a 413 answers with (Daphne's refusal says the same): its content type and body, the
+    limit in words; in the API's JSON shape under ``/api/v1/``, else a page."""
     size = f"{limit / 2**20:g} MiB" if limit >= 2**20 else f"{limit:,} bytes"
-    return (
+    if path.startswith(API_PATHS):
+        words = f"The console takes at most {size} in one request here: send something smaller."
+        return "application/json", json.dumps({"code": "too_large", "message": words}).encode()
+    page = (
         "<!doctype html><title>Too large</title><h1>That is too large to send</h1>"
         f"<p>The console takes at most {escape(size)} in one request here. Nothing was saved: "
         "go back and send something smaller.</p>"
-    ).encode()
+    )
+    return "text/html; charset=utf-8", page.encode()
 
 
-async def _refuse(send, limit: int) -> None:
-    body = refusal_page(limit)
+async def _refuse(send, limit: int, path: str) -> None:
+    content_type, body = refusal(limit, path)
     await send(
         {
             "type": "http.response.start",
             "status": 413,
             "headers": [
-                (b"content-type", b"text/html; charset=utf-8"),
+                (b"content-type", content_type.encode()),
                 (b"content-length", str(len(body)).encode()),
                 (b"connection", b"close"),
             ],

@@ -46,7 +46,7 @@ from urllib.parse import unquote
 from daphne import http_protocol
 from django.conf import settings
 
-from console.bodylimit import limit_for, refusal_page
+from console.bodylimit import limit_for, refusal
 
 EXTENSION = "pitlane.body_file"  # scope["extensions"][EXTENSION] = {"file": the body}
 PIECE = 1 << 20  # [bytes] of the body in one http.request message
@@ -85,7 +85,8 @@ class BoundedBodyRequest(http_protocol.WebRequest):
     def gotLength(self, length: int | None) -> None:
         # The target of the request line; HTTPChannel.lineReceived keeps it before the headers.
         target = getattr(self.channel, "_path", b"").split(b"?", 1)[0]
-        self._limit = limit_for(unquote(target.decode("ascii", "replace")))
+        self._target = unquote(target.decode("ascii", "replace"))
+        self._limit = limit_for(self._target)
         self.content = io.BytesIO()  # to a file once past IN_MEMORY (handleContentChunk)
         if length is not None and length > self._limit:
             self._refuse_too_large()
@@ -166,7 +167,8 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         return body
 
     def _refuse_too_large(self) -> None:
-        self._refuse(413, "Content Too Large", refusal_page(self._limit))
+        content_type, page = refusal(self._limit, self._target)
+        self._refuse(413, "Content Too Large", page, content_type=content_type)
 
     def _refuse_busy(self) -> None:
         self._refuse(503, "Service Unavailable", BUSY_PAGE, f"Retry-After: {RETRY_AFTER}\r\n")
@@ -177,7 +179,14 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         if not self._refused:
             self._refuse(408, "Request Timeout", SLOW_PAGE)
 
-    def _refuse(self, status: int, reason: str, page: bytes, extra: str = "") -> None:
+    def _refuse(
+        self,
+        status: int,
+        reason: str,
+        page: bytes,
+        extra: str = "",
+        content_type: str = "text/html; charset=utf-8",
+    ) -> None:
         """Answer at once; read the rest only to drop it, so that the client can read the
         answer (a socket closed on unread data resets, and may take the answer with it)."""
         self._refused = True
@@ -189,7 +198,7 @@ class BoundedBodyRequest(http_protocol.WebRequest):
         self.requestHeaders.removeHeader(b"expect")
         head = (
             f"HTTP/1.1 {status} {reason}\r\n{extra}"
-            "Content-Type: text/html; charset=utf-8\r\n"
+            f"Content-Type: {content_type}\r\n"
             f"Content-Length: {len(page)}\r\nConnection: close\r\n\r\n"
         )
         channel, transport = self.channel, self.channel.transport

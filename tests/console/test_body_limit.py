@@ -1,5 +1,7 @@
 """Request bodies over their limit are refused before Django reads them, in words, with 413."""
 
+import json
+
 import pytest
 from django.urls import reverse
 
@@ -36,13 +38,24 @@ async def test_a_body_sent_in_chunks_is_refused_once_it_passes_the_limit(limits)
     assert b"at most 1,000 bytes" in body
 
 
-async def test_the_model_import_takes_its_own_larger_limit(limits):
-    path = reverse("archives:model-import")
+@pytest.mark.parametrize("name", ["archives:model-import", "api-v1:model-import"])
+async def test_the_model_import_takes_its_own_larger_limit(limits, name):
+    path = reverse(name)
     status, _ = await post(path, [b"x" * 2000], declared=2000)
     assert status != 413  # read by Django (which asks for a sign-in)
     status, body = await post(path, [b"x" * 6000], declared=6000)
     assert status == 413
     assert b"at most 5,000 bytes" in body
+
+
+async def test_the_apis_refusal_is_json_in_its_shape(limits):
+    status, body = await post(reverse("api-v1:models_list"), [b""], declared=2000)
+    assert status == 413
+    assert json.loads(body) == {
+        "code": "too_large",
+        "message": "The console takes at most 1,000 bytes in one request here: send something "
+        "smaller.",
+    }
 
 
 async def test_a_body_under_the_limit_reaches_django(limits):
