@@ -254,11 +254,11 @@ async def _created(request, draft: configuration.Draft, notes: list[str]) -> Sta
     """The model ``draft`` describes, made as the create page makes it: the racer's create
     limit, the reward function validated by a checker, the settings checked, training queued."""
     await sync_to_async(counted)(request, "create")
+    # The settings first, then the check where they drive (the fuzzed document sent a clone
+    # with direction "", which the check passed on to the sandbox's child, which crashed).
+    track, direction = await sync_to_async(_checked_where)(request, draft)
     checked = await checkers.reward_checked(
-        draft["reward_function"],
-        draft["track"],
-        racer=request.user.pk,
-        direction=draft["direction"],
+        draft["reward_function"], track, racer=request.user.pk, direction=direction
     )
     if isinstance(checked, Exception):
         raise check_failed(checked)
@@ -270,6 +270,13 @@ async def _created(request, draft: configuration.Draft, notes: list[str]) -> Sta
         owner=request.user, settings=draft, validation=checked
     )
     return Status(201, {**await sync_to_async(model_detail)(request, model.pk), "notes": notes})
+
+
+def _checked_where(request, draft: configuration.Draft) -> tuple[str, str]:
+    """Where ``draft``'s reward function is checked (track, direction), once its settings are
+    checked (``configuration.Invalid`` for those at fault)."""
+    configuration.check(draft, owner=request.user, validate_reward=False)
+    return configuration.reward_sample_track(draft)
 
 
 def _draft_from_files(body: CreateIn, notes: list[str]) -> configuration.Draft:

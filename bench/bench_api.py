@@ -38,30 +38,41 @@ REPEATS = 3  # of each transfer
 LIFTED = {"PITLANE_RATE_API": "1000000/10m", "PITLANE_RATE_IMPORT": "1000/h"}
 
 
-def racer_with_models(count: int):
-    """A racer with ``count`` READY models (rows only) and a token; (racer, token, model ids)."""
+def racer(name: str):
+    """A racer and a token of theirs with every racer's scope."""
     from django.contrib.auth import get_user_model
 
     from accounts.tokens import token_create
+
+    user = get_user_model().objects.create_user(name, password="!")  # noqa: S106
+    scopes = ["read", "train", "race"]
+    return user, token_create(owner=user, name="bench", scopes=scopes, days=7)[1]
+
+
+def racer_with_models(count: int):
+    """A racer with ``count`` READY models (rows only) and a token; (racer, token, model ids)."""
     from rl import hyperparameters
     from training import configuration
     from training.models import RLModel
     from training.rewards import EXAMPLES
 
-    racer = get_user_model().objects.create_user("bench-racer", password="!")  # noqa: S106
+    racer_made, secret = racer("bench-racer")
     settings = {
         "track": "rookie-loop",
         "hyperparameters": hyperparameters.defaults("clipped_ppo"),
         "reward_function": EXAMPLES[0].source,
     }
-    row = configuration.check({**settings, "name": "m"}, owner=racer, validate_reward=False).row()
+    checked = configuration.check(
+        {**settings, "name": "m"}, owner=racer_made, validate_reward=False
+    )
+    ready = RLModel.Status.READY
     rows = [
-        RLModel(**{**row, "name": f"model-{n:04d}"}, owner=racer, status=RLModel.Status.READY)
+        RLModel(**{**checked.row(), "name": f"model-{n:04d}"}, owner=racer_made, status=ready)
         for n in range(count)
     ]
     RLModel.objects.bulk_create(rows, batch_size=500)
-    secret = token_create(owner=racer, name="bench", scopes=["read", "train", "race"], days=7)[1]
-    return racer, secret, list(RLModel.objects.filter(owner=racer).values_list("pk", flat=True))
+    ids = list(RLModel.objects.filter(owner=racer_made).values_list("pk", flat=True))
+    return secret, ids
 
 
 def timed(url: str, token: str) -> tuple[float, float]:
@@ -112,42 +123,40 @@ def trained_model(racer):
     return model
 
 
-def transfers(base: str, racer, token: str, work: Path) -> list[tuple[str, float]]:
-    """MB/s of the virtual archive's download and import, by the client and by the pages."""
+def transfers(base: str, work: Path) -> None:
+    """MB/s of the virtual archive's download and import, by the client and by the pages, for
+    a racer of their own (the other has a quota's worth of models)."""
     from django.conf import settings
     from pitlane_client import Client
 
     from training.models import RLModel
 
-    model = trained_model(racer)
+    mover, token = racer("bench-mover")
+    model = trained_model(mover)
     client = Client(base, token, timeout=600)
-    browser = Browser(base, racer)
-    rows = []
+    browser = Browser(base, mover)
     archive = client.download(model.pk, "virtual", work)
     size = archive.stat().st_size / 1e6
     print(f"The virtual archive: {size:.1f} MB (a camera model's best and last checkpoints)")
 
-    def rate(run) -> float:
+    def rate(label: str, run) -> None:
+        """The best of ``REPEATS`` runs, printed."""
         best = []
         for attempt in range(REPEATS):
             started = time.perf_counter()
             run(attempt)
             best.append(size / (time.perf_counter() - started))
-        return max(best)
+        print(f"{label:<44}{max(best):>10.1f} MB/s", flush=True)
 
-    rows.append(
-        ("download, pitlane_client", rate(lambda _: client.download(model.pk, "virtual", work)))
-    )
+    rate("download, pitlane_client", lambda _: client.download(model.pk, "virtual", work))
 
     def page_download(_):
         got = browser.session.get(f"{base}/models/{model.pk}/download/virtual/", timeout=600)
         got.raise_for_status()
         assert len(got.content) > 0
 
-    rows.append(("download, the model page", rate(page_download)))
-    rows.append(
-        ("import, pitlane_client", rate(lambda n: client.import_archive(archive, f"by-api-{n}")))
-    )
+    rate("download, the model page", page_download)
+    rate("import, pitlane_client", lambda n: client.import_archive(archive, f"by-api-{n}"))
 
     def form_import(n):
         with archive.open("rb") as file:
@@ -162,8 +171,7 @@ def transfers(base: str, racer, token: str, work: Path) -> list[tuple[str, float
             answer.status_code
         )
 
-    rows.append(("import, the import page", rate(form_import)))
-    return rows
+    rate("import, the import page", form_import)
 
 
 def fuzz(base: str, token: str, examples: int) -> tuple[int, bool]:
@@ -181,8 +189,10 @@ def fuzz(base: str, token: str, examples: int) -> tuple[int, bool]:
         "--no-color",
     ]
     run = subprocess.run(command, capture_output=True, text=True, timeout=3600, check=False)
+    found = run.stdout.find("FAILURES")
     summary = run.stdout[run.stdout.rfind("SUMMARY") :] if "SUMMARY" in run.stdout else run.stdout
-    print(summary.strip()[-3000:])
+    shown = run.stdout[found:] if found >= 0 else summary  # each failure, with its curl
+    print(shown.strip()[-12000:])
     cases = re.search(r"Test cases:\s*([\d,]+) generated", summary)
     count = int(cases[1].replace(",", "")) if cases else 0
     return count, run.returncode == 0
@@ -199,7 +209,7 @@ def main() -> None:
 
         django.setup()
         base = console["url"]
-        racer, token, ids = racer_with_models(arguments.models)
+        token, ids = racer_with_models(arguments.models)
         print(f"{arguments.models} models of one racer; {REQUESTS} requests each:")
         print(f"{'endpoint':<44}{'p50 [ms]':>10}{'p95 [ms]':>10}")
         for label, path in (
@@ -211,8 +221,7 @@ def main() -> None:
         ):
             p50, p95 = timed(base + path, token)
             print(f"{label:<44}{p50:>10.1f}{p95:>10.1f}", flush=True)
-        for label, mbps in transfers(base, racer, token, Path(work)):
-            print(f"{label:<44}{mbps:>10.1f} MB/s", flush=True)
+        transfers(base, Path(work))
         count, passed = fuzz(base, token, arguments.examples)
         verdict = "PASS" if passed and count >= 2000 else "FAIL"
         said = "none" if passed else "some"

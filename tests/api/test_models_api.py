@@ -260,6 +260,13 @@ def test_a_clone_starts_from_its_sources_checkpoint_with_the_changes_given(
         **token,
     )
     assert fewer.status_code == 400 and "action_space" in fewer.json()["errors"]
+    nowhere = client.post(  # checked before the reward function runs (the fuzz's 503)
+        f"{MODELS}/{source.pk}/clone",
+        {"name": "x", "direction": "sideways"},
+        "application/json",
+        **token,
+    )
+    assert nowhere.status_code == 400 and "direction" in nowhere.json()["errors"]
 
     with_a_later_checkpoint(source, 3)  # iterations 1 and 3 kept: clone from the third's
     third = client.post(
