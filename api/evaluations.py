@@ -17,7 +17,7 @@ from api.auth import need
 from api.errors import ApiError, counted
 from api.owned import own_model
 from api.schemas import REFUSED, named_choices
-from training import services
+from training import artifacts, services
 from training.models import EvaluationJob, EvaluationTrial
 
 router = Router()
@@ -150,3 +150,20 @@ def evaluation_stop(request, model_id: int, evaluation_id: int):
     except services.EvaluationRefused as refused:
         raise ApiError(409, "refused", str(refused)) from None
     return _detail(evaluation)
+
+
+@router.get(
+    "/{model_id}/evaluations/{evaluation_id}/files/{path:name}", response={200: None, **REFUSED}
+)
+def evaluation_file(request, model_id: int, evaluation_id: int, name: str):
+    """The evaluation's ``video.webm``, its trace (``evaluation-simtrace/0-iteration.csv``) or
+    its metrics (``metrics/evaluation_metrics.json``), as its page offers them; 404 until
+    written."""
+    need(request, TokenScope.READ)
+    evaluation = _own(request, model_id, evaluation_id)
+    try:
+        return artifacts.evaluation_download(request, evaluation, name)
+    except FileNotFoundError:
+        raise ApiError(
+            404, "not_found", f"Evaluation {evaluation_id} has no file {name!r} (yet)."
+        ) from None

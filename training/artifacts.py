@@ -124,6 +124,27 @@ def download(
     return HttpResponseRedirect(default_storage.url(name, parameters=parameters))
 
 
+# An evaluation's files, as its page lists them and the API serves them.
+EVALUATION_FILES = {
+    EVALUATION_VIDEO: "Video (WebM)",
+    EVALUATION_TRACE: "Simulation trace (CSV)",
+    EVALUATION_METRICS: "Evaluation metrics (JSON)",
+}
+
+
+def evaluation_download(request: HttpRequest, evaluation: EvaluationJob, name: str) -> HttpResponse:
+    """The evaluation's file ``name`` (one of ``EVALUATION_FILES``) for a racer whose right to it
+    the caller has checked: the video to play where it is opened, the others as attachments;
+    ``FileNotFoundError`` for a name that is not one, or a file not written (yet)."""
+    stored = path(evaluation.model, evaluation_prefix(evaluation) + name)
+    if name not in EVALUATION_FILES or not default_storage.exists(stored):
+        raise FileNotFoundError(name)
+    video = name == EVALUATION_VIDEO
+    filename = f"{evaluation.model.name}-evaluation-{evaluation.pk}-{name.replace('/', '-')}"
+    content_type = "video/webm" if video else None
+    return download(request, stored, filename, attachment=not video, content_type=content_type)
+
+
 def delete_all(model: RLModel) -> int:
     """Delete every stored object under the model's prefix; how many there were. Never inside a
     transaction (a bucket's listing and deletes are requests)."""

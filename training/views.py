@@ -580,13 +580,6 @@ def _get_evaluation_for_user(request: HttpRequest, pk: int, evaluation: int) -> 
     )
 
 
-EVALUATION_FILES = {
-    artifacts.EVALUATION_VIDEO: "Video (WebM)",
-    artifacts.EVALUATION_TRACE: "Simulation trace (CSV)",
-    artifacts.EVALUATION_METRICS: "Evaluation metrics (JSON)",
-}
-
-
 @login_required
 def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpResponse:
     job = _get_evaluation_for_user(request, pk, evaluation)
@@ -594,7 +587,7 @@ def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpRes
     ended = (EvaluationJob.Status.COMPLETED, EvaluationJob.Status.CANCELED)
     files = [
         (name, label)
-        for name, label in EVALUATION_FILES.items()
+        for name, label in artifacts.EVALUATION_FILES.items()
         if job.status in ended and default_storage.exists(prefix + name)
     ]
     stoppable = job.status in (
@@ -644,14 +637,7 @@ def evaluation_file(request: HttpRequest, pk: int, evaluation: int, name: str) -
     """The evaluation's video (played in the page), trace or metrics, after the ownership
     check."""
     job = _get_evaluation_for_user(request, pk, evaluation)
-    if name not in EVALUATION_FILES:
-        raise Http404("No such file")
-    stored = artifacts.path(job.model, artifacts.evaluation_prefix(job) + name)
-    if not default_storage.exists(stored):
-        raise Http404("No such file")
-    video = name == artifacts.EVALUATION_VIDEO
-    filename = f"{job.model.name}-evaluation-{job.pk}-{name.replace('/', '-')}"
-    content_type = "video/webm" if video else None
-    return artifacts.download(
-        request, stored, filename, attachment=not video, content_type=content_type
-    )
+    try:
+        return artifacts.evaluation_download(request, job, name)
+    except FileNotFoundError:
+        raise Http404("No such file") from None

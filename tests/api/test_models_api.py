@@ -16,7 +16,7 @@ from tests.helpers.archives import DEEPRACER_HYPERPARAMETERS, DEEPRACER_METADATA
 from tests.helpers.models import ready_model, with_a_later_checkpoint
 from tests.helpers.training import settings as training_settings
 from training import artifacts, configuration, services
-from training.models import Iteration, RLModel, TrainingJob
+from training.models import EvaluationJob, Iteration, RLModel, TrainingJob
 from training.rewards import EXAMPLES
 
 MODELS, VALIDATE = "/api/v1/models", "/api/v1/reward-functions/validate"
@@ -228,6 +228,15 @@ def test_an_evaluation_starts_is_listed_read_and_stopped_under_the_pages_rules(
     assert stopped.status_code == 200 and stopped.json()["status"] == "CANCELED"
     model.refresh_from_db()
     assert model.status == RLModel.Status.READY
+
+    job = EvaluationJob.objects.get(pk=evaluation["id"])  # its video, as a finished one has it
+    artifacts.save(model, artifacts.evaluation_prefix(job) + artifacts.EVALUATION_VIDEO, b"webm")
+    video = client.get(f"{one}/files/video.webm", **token)
+    assert video.status_code == 200 and video["Content-Type"] == "video/webm"
+    assert b"".join(video.streaming_content) == b"webm"
+    trace = client.get(f"{one}/files/evaluation-simtrace/0-iteration.csv", **token)
+    assert trace.status_code == 404 and trace.json()["code"] == "not_found"  # not written
+    assert client.get(f"{one}/files/video.webm", **api_token(bob, "read")).status_code == 404
 
 
 @pytest.mark.slow  # the sandbox validates the clone's reward function
