@@ -1,6 +1,8 @@
 """The import's forms: the archive and the name, then the preview's changes to confirm."""
 
 from django import forms
+from django.contrib.auth import get_user_model
+from pitlane_client import drfc
 
 from archives import imports
 from archives.models import KeptUpload
@@ -106,3 +108,56 @@ class ModelImportConfirmForm(RacerWords, forms.Form):
         self.is_valid()
         for setting, message in problems.items():
             self.add_error(setting if setting in self.fields else None, message)
+
+
+class BucketImportForm(RacerWords, forms.Form):
+    """Staff's import from DeepRacer for Cloud's bucket (``archives.drfc_bucket``): the model's
+    place, its name here, and the racer it is for."""
+
+    url = forms.CharField(
+        label="Model's place in S3",
+        max_length=1024,
+        widget=forms.TextInput(attrs={"placeholder": "s3://bucket/rl-deepracer-sagemaker"}),
+        help_text="s3://&lt;DR_LOCAL_S3_BUCKET&gt;/&lt;DR_LOCAL_S3_MODEL_PREFIX&gt;, read with the "
+        "console's keys for DeepRacer for Cloud's bucket (PITLANE_DRFC_S3_*).",
+    )
+    name = forms.CharField(
+        max_length=64,
+        required=False,
+        help_text="Leave empty to keep DeepRacer's name. Letters, digits and hyphens.",
+    )
+    racer = forms.CharField(
+        label="For the racer",
+        max_length=150,
+        required=False,
+        help_text="Their login name; leave empty to import it as yours.",
+    )
+
+    def __init__(self, *args, staff, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.staff = staff
+
+    def clean_url(self) -> str:
+        url = self.cleaned_data["url"].strip()
+        try:
+            drfc.parse_url(url)
+        except drfc.DrfcUnreadable as unreadable:
+            raise forms.ValidationError(str(unreadable)) from None
+        return url
+
+    def clean_racer(self):
+        given = self.cleaned_data["racer"].strip()
+        if not given:
+            return self.staff
+        racer = get_user_model().objects.filter(username=given, is_active=True).first()
+        if racer is None:
+            raise forms.ValidationError(f"No racer logs in as {given!r}.")
+        return racer
+
+    def clean(self) -> dict:
+        data = super().clean()
+        name, racer = (data.get("name") or "").strip(), data.get("racer")
+        if name and racer and (problem := configuration.name_problem(name, owner=racer)):
+            self.add_error("name", problem)
+        data["name"] = name
+        return data

@@ -11,13 +11,14 @@ from contextlib import nullcontext
 
 from asgiref.sync import sync_to_async
 from django.contrib import messages
+from django.contrib.admin.views.decorators import staff_member_required
 from django.contrib.auth.decorators import login_required
 from django.http import HttpRequest, HttpResponse
 from django.shortcuts import redirect, render
 from django.views.decorators.http import require_POST, require_safe
 
-from archives import exports, imports, kept_uploads, logs_archive
-from archives.forms import ModelImportConfirmForm, ModelImportForm
+from archives import drfc_bucket, exports, imports, kept_uploads, logs_archive
+from archives.forms import BucketImportForm, ModelImportConfirmForm, ModelImportForm
 from archives.models import KeptUpload
 from common import ratelimits
 from common.refusals import Refused
@@ -91,6 +92,48 @@ def _model_import_blank(request: HttpRequest) -> HttpResponse:
     initial = {"kept": kept.token} if kept else {}
     form = ModelImportForm(owner=request.user, kept=kept, initial=initial)
     return render(request, "archives/model_import.html", {"form": form})
+
+
+@staff_member_required
+async def model_import_bucket(request: HttpRequest) -> HttpResponse:
+    """Staff import a model from DeepRacer for Cloud's bucket (``archives.drfc_bucket``), for
+    themselves or a racer: read and imported by a checker, as an uploaded archive is."""
+    staff = await request.auser()
+    form = BucketImportForm(request.POST or None, staff=staff)
+    if request.method == "POST" and await sync_to_async(form.is_valid)():
+        data = form.cleaned_data
+
+        def work() -> imports.Imported:
+            return drfc_bucket.import_from_bucket(
+                owner=data["racer"], url=data["url"], name=data["name"]
+            )
+
+        try:
+            imported = await checkers.run(work, racer=staff.pk)
+        except (Refused, *checkers.FAILURES) as error:
+            await sync_to_async(_bucket_refused)(form, error)
+        else:
+            model = imported.model
+            whose = "" if model.owner_id == staff.pk else f" for {data['racer'].get_username()}"
+            await sync_to_async(messages.success)(
+                request, f"{_imported_message(model)} (from {data['url']}{whose})"
+            )
+            if model.owner_id == staff.pk:
+                return redirect("training:model-detail", pk=model.pk)
+            return redirect("archives:model-import-bucket")
+    status = 400 if form.is_bound else 200
+    return await sync_to_async(render)(
+        request, "archives/model_import_bucket.html", {"form": form}, status=status
+    )
+
+
+def _bucket_refused(form: BucketImportForm, error: Exception) -> None:
+    if isinstance(error, configuration.Invalid):
+        _import_errors(form, error.errors)
+    elif isinstance(error, Refused):
+        form.add_error("url", str(error))
+    else:
+        form.add_error(None, checkers.failure_words(error))
 
 
 @login_required
@@ -253,7 +296,7 @@ def _imported_message(model: RLModel) -> str:
     )
 
 
-def _import_errors(form: ModelImportForm, errors: dict[str, str]) -> None:
+def _import_errors(form: ModelImportForm | BucketImportForm, errors: dict[str, str]) -> None:
     """The settings an archive brought that cannot be used, each where the racer can act."""
     for setting, message in errors.items():
         if setting == "name":
