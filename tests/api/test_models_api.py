@@ -198,7 +198,7 @@ def test_a_model_is_created_from_a_deepracer_for_cloud_folders_files(alice, trac
 
 
 def test_an_evaluation_starts_is_listed_read_and_stopped_under_the_pages_rules(
-    alice, bob, tracks, client
+    alice, bob, tracks, client, own_storage
 ):
     model = ready_model(alice)
     token = api_token(alice, "read", "train")
@@ -229,7 +229,9 @@ def test_an_evaluation_starts_is_listed_read_and_stopped_under_the_pages_rules(
     model.refresh_from_db()
     assert model.status == RLModel.Status.READY
 
-    job = EvaluationJob.objects.get(pk=evaluation["id"])  # its video, as a finished one has it
+    # Its video, as a finished one has it, in storage of the test's own: the suite's worker may
+    # have begun the evaluation before the stop, and written its trace in the suite's storage.
+    job = EvaluationJob.objects.get(pk=evaluation["id"])
     artifacts.save(model, artifacts.evaluation_prefix(job) + artifacts.EVALUATION_VIDEO, b"webm")
     video = client.get(f"{one}/files/video.webm", **token)
     assert video.status_code == 200 and video["Content-Type"] == "video/webm"

@@ -91,7 +91,9 @@ def test_train_makes_a_model_from_a_deepracer_for_cloud_folder_and_refusals_are_
     code, _, err = pitlane("train", str(folder), "--name", "from-cli", "--minutes", "5")
     assert code == 1
     assert err == "pitlane: max_minutes: The maximum training time is 10 to 1440 minutes.\n"
-    code, out, err = pitlane("train", str(folder), "--name", "from-cli", "--minutes", "10")
+    code, out, err = pitlane(
+        "models", "create", str(folder), "--name", "from-cli", "--minutes", "10"
+    )
     assert code == 0, err
     model = RLModel.objects.get(name="from-cli")
     assert out.startswith(f"Created from-cli (#{model.pk}); its training is queued.")
@@ -187,7 +189,7 @@ def test_a_racers_whole_day_through_the_command_line(
 
     assert pitlane("models", "stop", str(model.pk))[0] == 0
     wait_for(lambda: RLModel.objects.get(pk=model.pk).status == "READY", "the model saved", 120)
-    code, out, err = pitlane("evaluate", str(model.pk), "--wait")
+    code, out, err = pitlane("evaluate", str(model.pk), "--max-resets", "0", "--wait")
     assert code == 0 and "COMPLETED" in out.splitlines()[0], (out, err)
 
     code, out, _ = pitlane("download", str(model.pk), "--physical", "--into", str(tmp_path))

@@ -2,7 +2,7 @@
 
     pitlane login --url URL --token TOKEN
     pitlane models list|show ID|stop ID|delete ID|clone ID NAME
-    pitlane train FOLDER [--name NAME] [--minutes N] [--wait]
+    pitlane train FOLDER [--name NAME] [--minutes N] [--wait]     (or: models create FOLDER)
     pitlane import s3://BUCKET/PREFIX|FOLDER|ARCHIVE [--endpoint-url URL] [--yes]   (or upload)
     pitlane logs ID [--follow]
     pitlane download ID [--physical|--onnx|--virtual|--logs] [--checkpoint best|last]
@@ -71,12 +71,15 @@ def _parser() -> argparse.ArgumentParser:
     clone.add_argument("--minutes", type=int)
     clone.set_defaults(run=_model_clone)
 
-    train = verbs.add_parser("train", help="create a model from a DeepRacer for Cloud folder")
-    train.add_argument("folder", type=Path)
-    train.add_argument("--name")
-    train.add_argument("--minutes", type=int)
-    train.add_argument("--wait", action="store_true", help="until its first iteration")
-    train.set_defaults(run=_train)
+    for train in (  # `models create FOLDER` is `train FOLDER`, as DRfC's users reach for both
+        verbs.add_parser("train", help="create a model from a DeepRacer for Cloud folder"),
+        models.add_parser("create", help="create a model from a DeepRacer for Cloud folder"),
+    ):
+        train.add_argument("folder", type=Path)
+        train.add_argument("--name")
+        train.add_argument("--minutes", type=int)
+        train.add_argument("--wait", action="store_true", help="until its first iteration")
+        train.set_defaults(run=_train)
 
     for verb in ("import", "upload"):
         imported = verbs.add_parser(
@@ -108,6 +111,9 @@ def _parser() -> argparse.ArgumentParser:
     evaluate.add_argument("model", type=int)
     evaluate.add_argument("--trials", type=int)
     evaluate.add_argument("--checkpoint", choices=("best", "last"))
+    evaluate.add_argument(
+        "--max-resets", type=int, help="per trial, as DRfC's DR_EVAL_MAX_RESETS (0: ends off track)"
+    )
     evaluate.add_argument("--wait", action="store_true", help="until it ends")
     evaluate.set_defaults(run=_evaluate)
 
@@ -321,7 +327,12 @@ def _download(args) -> int:
 
 
 def _evaluate(args) -> int:
-    settings = {k: v for k, v in (("trials", args.trials), ("checkpoint", args.checkpoint)) if v}
+    given = (
+        ("trials", args.trials),
+        ("checkpoint", args.checkpoint),
+        ("max_resets", args.max_resets),
+    )
+    settings = {key: value for key, value in given if value is not None}
     client = _client()
     evaluation = client.evaluate(args.model, **settings)
     if args.wait:
