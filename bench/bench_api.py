@@ -88,51 +88,17 @@ def timed(url: str, token: str) -> tuple[float, float]:
     return percentile(samples, 0.5), percentile(samples, 0.95)
 
 
-def trained_model(racer):
-    """A model with DeepRacer's default camera network and one trained checkpoint."""
-    import gymnasium
-
-    import simulator
-    from rl import hyperparameters
-    from rl.learner import Learner
-    from training import artifacts, configuration
-    from training.models import RLModel, TrainingJob
-    from training.rewards import EXAMPLES
-
-    settings = {
-        "name": "to-move",
-        "track": "rookie-loop",
-        "hyperparameters": hyperparameters.defaults("clipped_ppo"),
-        "reward_function": EXAMPLES[0].source,
-    }
-    clean = configuration.check(settings, owner=racer, validate_reward=False)
-    model = RLModel.objects.create(owner=racer, status=RLModel.Status.READY, **clean.row())
-    env = gymnasium.make(simulator.ENV_ID, **model.environment_settings())
-    learner = Learner.for_model(model, env, seed=1)
-    env.close()
-    name = artifacts.save(model, artifacts.checkpoint(1), learner.checkpoint())
-    TrainingJob.objects.create(
-        model=model,
-        status=TrainingJob.Status.COMPLETED,
-        iterations=1,
-        weights_version=1,
-        last_checkpoint=name,
-        best_checkpoint=name,
-    )
-    artifacts.write_model_files(model)
-    return model
-
-
 def transfers(base: str, work: Path) -> None:
     """MB/s of the virtual archive's download and import, by the client and by the pages, for
     a racer of their own (the other has a quota's worth of models)."""
     from django.conf import settings
     from pitlane_client import Client
 
+    from tests.helpers.models import trained_model
     from training.models import RLModel
 
     mover, token = racer("bench-mover")
-    model = trained_model(mover)
+    model = trained_model(mover, "to-move", track="rookie-loop")  # DeepRacer's defaults
     client = Client(base, token, timeout=600)
     browser = Browser(base, mover)
     archive = client.download(model.pk, "virtual", work)
