@@ -49,8 +49,13 @@ def counted(request: HttpRequest, action: str, **how) -> None:
     ``Retry-After`` past the rate."""
     limited = ratelimits.over(request, action, **how)
     if limited is not None:
-        wait = str(max(1, math.ceil(limited.wait)))
-        raise ApiError(limited.status, "rate_limited", str(limited), {"Retry-After": wait})
+        raise rate_refusal(limited)
+
+
+def rate_refusal(limited: ratelimits.Limited) -> ApiError:
+    """A limit's refusal: 429 (503 where the count failed closed) with ``Retry-After``."""
+    wait = str(max(1, math.ceil(limited.wait)))
+    return ApiError(limited.status, "rate_limited", str(limited), {"Retry-After": wait})
 
 
 def check_failed(error: Exception) -> ApiError:

@@ -15,7 +15,7 @@ from ninja.files import UploadedFile
 
 from accounts.models import TokenScope
 from api.auth import need
-from api.errors import ApiError, check_failed
+from api.errors import ApiError, check_failed, rate_refusal
 from api.racer_models import Created, model_detail
 from api.schemas import REFUSED, Error
 from archives import imports, kept_uploads
@@ -113,10 +113,7 @@ async def _attempt(request, work):
     counts an attempt: the import, its preview, or its refusal (raised in the API's words)."""
     held = await sync_to_async(ratelimits.hold)(request, "import", "import-refused")
     if held.limited:
-        wait = str(max(1, int(held.limited.wait)))
-        raise ApiError(
-            held.limited.status, "rate_limited", str(held.limited), {"Retry-After": wait}
-        )
+        raise rate_refusal(held.limited)
     try:
         outcome = await checkers.run(work, racer=request.user.pk)
     except (Refused, *checkers.FAILURES) as error:

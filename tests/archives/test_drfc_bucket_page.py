@@ -48,5 +48,7 @@ def test_staff_import_a_racers_model_from_the_bucket(client, alice, stella, trac
         PAGE, {"url": bucket, "name": "from-the-club", "racer": "alice"}, follow=True
     )
     model = RLModel.objects.get(owner=alice)
-    assert model.name == "from-the-club" and model.status == RLModel.Status.QUEUED
+    assert model.name == "from-the-club"
+    # its training queued, or begun already by the suite's worker
+    assert model.status in (RLModel.Status.QUEUED, RLModel.Status.TRAINING)
     assert "(from s3://club/rl-deepracer-sagemaker for alice)" in done.text
