@@ -153,7 +153,8 @@ def _checkpoints_packed(packed: Packed, sizes: dict[str, int], pointers: dict) -
         for path in sizes
         if STEP.fullmatch(path) and f"{path.removesuffix('.index')}{CHECKPOINT_FILES[1]}" in sizes
     }
-    chosen = [name for name in _pointed(pointers) if name in whole]
+    named, latest = _pointed(pointers)
+    chosen = [name for name in named if name in whole] or [n for n in latest if n in whole]
     if not chosen and whole:
         chosen = [max(whole, key=lambda name: int(name.split("_", 1)[0]))]
     for name in dict.fromkeys(chosen):
@@ -168,18 +169,23 @@ def _checkpoints_packed(packed: Packed, sizes: dict[str, int], pointers: dict) -
         packed.files[graphs[-1][1]] = graphs[-1][1]
 
 
-def _pointed(pointers: dict[str, bytes]) -> list[str]:
-    """The checkpoints DeepRacer's pointers name: best and last, else rl_coach's latest."""
+def _pointed(pointers: dict[str, bytes]) -> tuple[list[str], list[str]]:
+    """The checkpoints DeepRacer's pointers name: the best and the last, and rl_coach's latest,
+    the one to take where those are not there (as ``dr-upload-model`` and Pitlane's import read
+    them); a pointer that is not what DeepRacer writes names nothing."""
     try:
         named = json.loads(pointers.get("model/deepracer_checkpoints.json") or b"{}")
     except ValueError:
         named = {}
-    names = [
-        (named.get(key) or {}).get("name") if isinstance(named, dict) else None
-        for key in ("best_checkpoint", "last_checkpoint")
-    ]
+    entries = (
+        [named.get(key) for key in ("best_checkpoint", "last_checkpoint")]
+        if isinstance(named, dict)
+        else []
+    )
+    names = [e.get("name") for e in entries if isinstance(e, dict)]
+    names = [name for name in names if isinstance(name, str) and name]
     coach = pointers.get("model/.coach_checkpoint", b"").decode("utf-8", "replace").strip()
-    return [name for name in (*names, coach) if isinstance(name, str) and name]
+    return names, [coach] if coach else []
 
 
 def _traces_packed(packed: Packed, sizes: dict[str, int]) -> None:
