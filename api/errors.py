@@ -20,7 +20,7 @@ from ninja.errors import AuthenticationError, HttpError, ValidationError
 
 from common import ratelimits
 from common.refusals import Refused
-from training import checkers
+from training import checkers, rewards
 
 logger = logging.getLogger(__name__)
 
@@ -65,6 +65,17 @@ def check_failed(error: Exception) -> ApiError:
     busy = isinstance(error, checkers.Busy)
     headers = {"Retry-After": str(checkers.RETRY_AFTER)} if busy else {}
     return ApiError(503, "unavailable", checkers.failure_words(error), headers)
+
+
+async def reward_checked(
+    source: str, track: str, *, racer: int, direction: str = "counterclockwise"
+) -> rewards.Validation:
+    """``training.checkers.reward_checked``: its validation, or a check that could not run
+    raised as ``check_failed``'s 503."""
+    checked = await checkers.reward_checked(source, track, racer=racer, direction=direction)
+    if isinstance(checked, Exception):
+        raise check_failed(checked)
+    return checked
 
 
 def answer(api: NinjaAPI, request: HttpRequest, error: ApiError) -> HttpResponse:

@@ -67,7 +67,7 @@ class Winner(Schema):
 def live_queue(request, slug: str):
     """The event's live race: the turn on the track and the racers waiting, in order."""
     need(request, TokenScope.READ)
-    return broadcasts.queue_state(_session(request, slug, opened=False))
+    return broadcasts.queue_state(_session(event_of(request, slug), opened=False))
 
 
 @router.post("/{slug}/live", response={200: Queue, **REFUSED})
@@ -85,7 +85,7 @@ def live_open(request, slug: str, body: SessionIn):
 def live_join(request, slug: str, body: JoinIn):
     """Join the queue with one of your ready models at ``speed`` times its speeds."""
     need(request, TokenScope.RACE)
-    session = _session(request, slug)
+    session = _session(event_of(request, slug))
     model = own_model(request, body.model)
     try:
         entry = live_races.live_entry_join(
@@ -100,7 +100,7 @@ def live_join(request, slug: str, body: JoinIn):
 def live_leave(request, slug: str, entry_id: int):
     """Take your own place out of the queue."""
     need(request, TokenScope.RACE)
-    session = _session(request, slug)
+    session = _session(event_of(request, slug))
     entry = session.entries.filter(pk=entry_id, racer=request.user).first()
     if entry is None:
         raise ApiError(404, "not_found", f"No place of yours in this queue has the id {entry_id}.")
@@ -115,8 +115,8 @@ def live_entry_action(
     """Move a waiting racer ``up`` or ``down``, take one out (``remove``), or put one whose turn
     ended back at the head (``restart``): facilitators."""
     event = _facilitated(request, slug)
-    session = _session(request, slug)
-    entry = LiveEntry.objects.filter(pk=entry_id, session__event=event).first()
+    session = _session(event)
+    entry = session.entries.filter(pk=entry_id).first()
     if entry is None:
         raise ApiError(404, "not_found", f"No place in this queue has the id {entry_id}.")
     if action in ACTIONS:
@@ -131,8 +131,7 @@ def live_entry_action(
 @router.post("/{slug}/live/launch", response={200: Queue, **REFUSED})
 def live_launch(request, slug: str):
     """Launch the next turn: the first waiting racer's car on the track (facilitators)."""
-    _facilitated(request, slug)
-    session = _session(request, slug)
+    session = _session(_facilitated(request, slug))
     _refused_as_conflict(live_races.live_turn_launch, session=session)
     return broadcasts.queue_state(session)
 
@@ -157,8 +156,8 @@ def winner_show(request, slug: str, body: WinnerIn):
     return {"shown": body.show, "winner": winner}
 
 
-def _session(request, slug: str, opened: bool = True) -> LiveSession | None:
-    event = event_of(request, slug)
+def _session(event: Event, opened: bool = True) -> LiveSession | None:
+    """The event's live session; 409 unless it is open (``opened``: it must be)."""
     session = LiveSession.objects.filter(event=event).first()
     if session is None and opened:
         raise ApiError(409, "not_open", f"{event.name} has no live session open.")

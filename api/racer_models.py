@@ -17,12 +17,12 @@ from ninja import Field, Query, Router, Schema, Status
 
 from accounts.models import TokenScope
 from api.auth import need
-from api.errors import ApiError, check_failed, counted
+from api.errors import ApiError, counted, reward_checked
 from api.owned import own_model
 from api.schemas import REFUSED, named_choices
 from archives.deepracer_settings import archive_settings
 from archives.members import Members, member_json
-from training import checkers, configuration, selectors, services
+from training import configuration, selectors, services
 from training.models import Iteration, RLModel, TrainingJob
 
 router = Router()
@@ -257,11 +257,9 @@ async def _created(request, draft: configuration.Draft, notes: list[str]) -> Sta
     # The settings first, then the check where they drive (the fuzzed document sent a clone
     # with direction "", which the check passed on to the sandbox's child, which crashed).
     track, direction = await sync_to_async(_checked_where)(request, draft)
-    checked = await checkers.reward_checked(
+    checked = await reward_checked(
         draft["reward_function"], track, racer=request.user.pk, direction=direction
     )
-    if isinstance(checked, Exception):
-        raise check_failed(checked)
     if not checked.valid:
         first = checked.errors[0]
         where = f" (line {first.line})" if first.line else ""

@@ -16,9 +16,9 @@ from ninja import Router, Schema, Status
 
 from accounts.models import TokenScope
 from api.auth import need
-from api.errors import ApiError, check_failed, counted
+from api.errors import ApiError, counted, reward_checked
 from api.schemas import REFUSED
-from training import checkers, selectors, services
+from training import selectors, services
 from training.forms import RewardValidationForm
 from training.models import RewardFunction
 
@@ -59,18 +59,10 @@ async def reward_validate(request, body: ValidateIn):
     problems by line and what it printed. ``valid`` is false for code with errors (still 200:
     the check ran); 503 with ``Retry-After`` when every checker is busy."""
     need(request, TokenScope.TRAIN)
-    await sync_to_async(counted)(request, "validate")
-    form = RewardValidationForm({"source": body.source, "track": body.track})
-    if not await sync_to_async(form.is_valid)():
-        raise ApiError(400, "invalid", form.first_error())
-    checked = await checkers.reward_checked(
-        form.cleaned_data["source"],
-        form.cleaned_data["track"].name,
-        racer=request.user.pk,
-        direction=body.direction,
+    given = await _counted_and_read(request, body.source, body.track)
+    checked = await reward_checked(
+        given["source"], given["track"].name, racer=request.user.pk, direction=body.direction
     )
-    if isinstance(checked, Exception):
-        raise check_failed(checked)
     return checked.as_dict()
 
 
@@ -136,16 +128,9 @@ def _own(request, function_id: int) -> RewardFunction:
 async def _saved(request, function: RewardFunction | None, body: RewardFunctionIn):
     """``body`` saved (as ``function``, when it changes one), the code checked by a checker
     and counted against the racer's ``validate`` limit, as the editor's Save."""
-    await sync_to_async(counted)(request, "validate")
-    form = RewardValidationForm({"source": body.source, "track": body.track})
-    if not await sync_to_async(form.is_valid)():
-        raise ApiError(400, "invalid", form.first_error())
-    source, track = services.reward_source(body.source), form.cleaned_data["track"].name
-    checked = None
-    if source.strip():
-        checked = await checkers.reward_checked(source, track, racer=request.user.pk)
-        if isinstance(checked, Exception):
-            raise check_failed(checked)
+    given = await _counted_and_read(request, body.source, body.track)
+    source, track = services.reward_source(body.source), given["track"].name
+    checked = await reward_checked(source, track, racer=request.user.pk) if source.strip() else None
     try:
         return await sync_to_async(services.reward_function_save)(
             owner=request.user,
@@ -162,3 +147,14 @@ async def _saved(request, function: RewardFunction | None, body: RewardFunctionI
             where = f" Line {problems[0].line}:" if problems[0].line else ""
             errors["source"] += f"{where} {problems[0].message}"
         raise ApiError(400, "invalid", "; ".join(errors.values()), errors=errors) from None
+
+
+async def _counted_and_read(request, source: str, track: str) -> dict:
+    """A check of ``source`` on ``track`` counted against the racer's ``validate`` limit (as
+    the editor's Validate and Save count), and the two read as its form reads them; 400 for
+    what the form refuses."""
+    await sync_to_async(counted)(request, "validate")
+    form = RewardValidationForm({"source": source, "track": track})
+    if not await sync_to_async(form.is_valid)():
+        raise ApiError(400, "invalid", form.first_error())
+    return form.cleaned_data

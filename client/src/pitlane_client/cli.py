@@ -311,7 +311,7 @@ def _logs(args) -> int:
                     f"{line['at'][:19].replace('T', ' ')}  [{line['source']}]{level} {line['text']}"
                 )
         after = page["next"]
-        if page["lines"] and len(page["lines"]) == 1000:
+        if len(page["lines"]) == 1000:
             continue  # more already written
         if not (args.follow and page["active"]):
             return 0
