@@ -30,7 +30,8 @@ def racers_token(alice) -> str:
 
 
 @schema.parametrize()
-@settings(max_examples=4, deadline=None, suppress_health_check=list(HealthCheck))
+# The same examples every run (derandomize): the suite checks what was found, the bench explores.
+@settings(max_examples=4, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 def test_no_generated_request_gets_a_server_error_or_an_undeclared_answer(
     case, racers_token, tracks, daphne_server
 ):
