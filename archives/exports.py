@@ -28,7 +28,10 @@ and the time the model trained, which its page shows). Beside DeepRacer's files,
 are: ``pitlane-history.json``, each iteration's figures exactly as the model's page shows them
 (DeepRacer's metrics round them) and which iterations the best and last checkpoints hold; and the
 simulation traces where DeepRacer keeps them (``training-simtrace/<n>-iteration.csv``,
-``evaluation-<time>/evaluation-simtrace/0-iteration.csv``), up to ``TRACES_LIMIT``.
+``evaluation-<time>/evaluation-simtrace/0-iteration.csv``), up to ``TRACES_LIMIT``. For DeepRacer
+on AWS's import (a folder: the archive unpacked), it also holds simapp's ``model/`` folder, the
+same checkpoints as TensorFlow's (``simapp_model_folder``), and the metrics where DeepRacer on
+AWS looks for them (``DOA_METRICS``); an import here reads the safetensors.
 """
 
 from __future__ import annotations
@@ -54,6 +57,13 @@ from training.models import RLModel
 CAR_GRAPH = "agent/model.pb"  # where simapp puts it (tensorflow_model.py:355-371, 01f5f01)
 PITLANE_SETTINGS = "pitlane.json"
 HYPERPARAMETERS = "ip/hyperparameters.json"  # simapp bundle/markov/boto/s3/constants.py:43
+MODEL_FOLDER = "model/"  # simapp's checkpoints and pointers (constants.py:50, 294-300)
+# Where DeepRacer on AWS's import finds a model's training metrics: the first object under
+# metrics/training/ whose key holds "training-" (deepracer-on-aws 61af778 ImportHelper.ts:84-91).
+DOA_METRICS = "metrics/training/training-{name}.json"
+# What a virtual archive holds beyond its hashed members (a new layout is a new export): 2 added
+# simapp's model/ folder and DeepRacer on AWS's metrics.
+VIRTUAL_LAYOUT = 2
 FORMAT = 2  # of pitlane.json; 2 added network_layout
 MiB = 1024 * 1024
 # [bytes] of simulation traces a virtual model's archive carries, and an import keeps: a long
@@ -134,7 +144,7 @@ def virtual(model: RLModel) -> Export:
         members[artifacts.TRAINING_METRICS] = metrics
     members.update(_exact_history(model))
     traces = chosen_traces(model)
-    content = hashlib.sha256()
+    content = hashlib.sha256(f"layout {VIRTUAL_LAYOUT}".encode())
     for name, data in sorted(members.items()):
         content.update(name.encode() + b"\0" + hashlib.sha256(data).digest())
     for trace in sorted(traces):
@@ -144,9 +154,75 @@ def virtual(model: RLModel) -> Export:
         f"virtualmodel-{model.name}.tar.gz",
     )
     if not default_storage.exists(export.name):
+        if model.network_layout == hyperparameters.NETWORK_LAYOUT:
+            members.update(simapp_model_folder(model, members))
+        if metrics is not None:
+            members[DOA_METRICS.format(name=model.name)] = metrics
         members.update({trace.relative: artifacts.read(trace.stored) for trace in traces})
         _store(export.name, members)
     return export
+
+
+def simapp_model_folder(model: RLModel, members: dict[str, bytes]) -> dict[str, bytes]:
+    """The ``model/`` folder as simapp's training leaves it and DeepRacer on AWS's import
+    validates it (simapp validation_worker.py:60-105, 141-144): ``model_metadata.json``; the best
+    and the last checkpoints (``members``' safetensors) as TensorFlow's, ``<N>_Step-<steps>
+    .ckpt``, under rl_coach's names (``rl.tfweights.tensors``), which ``deepracer_checkpoints.json``
+    names (deepracer_checkpoint_json.py:83-131; ``avg_eval_metric`` null where not measured,
+    s3_metrics.py:259-263) and ``.coach_checkpoint`` points to, the last (rl_coach_checkpoint.py:
+    159-179). Not simapp's frozen graphs (``model_<N>.pb``, tensorflow_model.py:290-327): neither
+    DeepRacer on AWS's import nor the validator reads them, and the car's is the physical
+    download; they would add half the checkpoints' size again."""
+    from rl import tfcheckpoint, tfweights  # torch: loaded by a process's first export
+
+    folder = {f"{MODEL_FOLDER}model_metadata.json": _json(model.metadata())}
+    pointers: dict[str, dict] = {}
+    names = {
+        which: selectors.model_checkpoint(model=model, which=which) for which in ("best", "last")
+    }
+    for which, exported in artifacts.EXPORTED_CHECKPOINTS.items():
+        stored = names[which]
+        number = artifacts.checkpoint_iteration(stored)
+        if number is None:  # weights an import or a clone brought: numbered in their order
+            number = 2 if which == "last" and names["best"] != stored else 1
+        row = _iteration_row(model, number)
+        checkpoint = f"{number}_Step-{_steps_to(model, number)}.ckpt"
+        policy = _policy(model, members[exported])
+        index, data = tfcheckpoint.write(tfweights.tensors(policy))
+        folder[f"{MODEL_FOLDER}{checkpoint}{tfcheckpoint.SUFFIX_INDEX}"] = index
+        folder[f"{MODEL_FOLDER}{checkpoint}{tfcheckpoint.SUFFIX_DATA}"] = data
+        measured = _BEST_MEASURE.get(str(model.best_checkpoint_by), "")
+        pointers[f"{which}_checkpoint"] = {
+            "name": checkpoint,
+            "time_stamp": default_storage.get_modified_time(stored).timestamp(),
+            "avg_eval_metric": getattr(row, measured, None) if row else None,
+        }
+    folder[f"{MODEL_FOLDER}deepracer_checkpoints.json"] = _json(pointers)
+    folder[f"{MODEL_FOLDER}.coach_checkpoint"] = pointers["last_checkpoint"]["name"].encode()
+    return folder
+
+
+# The iteration's figure simapp names a best checkpoint by (s3_metrics.py:410-436), by the
+# model's BEST_MODEL_METRIC.
+_BEST_MEASURE = {
+    "progress": "evaluation_completion",
+    "reward": "evaluation_reward",
+    "laptime": "evaluation_lap_ms",
+}
+
+
+def _iteration_row(model: RLModel, number: int):
+    job = model.latest_job
+    return job.iteration_rows.filter(number=number).first() if job else None
+
+
+def _steps_to(model: RLModel, number: int) -> int:
+    """The steps the model's newest training had driven by the end of iteration ``number``."""
+    job = model.latest_job
+    if job is None:
+        return 0
+    rows = job.iteration_rows.filter(number__lte=number)
+    return rows.aggregate(steps=Sum("steps"))["steps"] or 0
 
 
 def _exact_history(model: RLModel) -> dict[str, bytes]:

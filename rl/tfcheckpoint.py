@@ -10,14 +10,20 @@ its bytes lie in the data file (shard, offset, size); the empty key holds the
 
 Both files come from a racer's upload: every length and offset is checked against the bytes there
 are, and anything that does not add up is ``Unreadable``, never an exception of another kind.
+
+``write`` makes one, as TensorFlow's ``BundleWriter`` does (tensor_bundle.cc): the header under the
+empty key, then each tensor under its name in ascending order, its bytes in the data file with
+their masked CRC32C (TensorFlow's reader refuses a tensor whose sum does not match, and a block
+whose trailer's does not: format.cc ReadBlock), in one data block of LevelDB's table.
 """
 
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
+import google_crc32c
 import numpy as np
 from google.protobuf.message import DecodeError
 
@@ -26,6 +32,8 @@ from rl import tfgraph
 MAGIC = 0xDB4775248B80FB57  # LevelDB's table magic (format.h kTableMagicNumber)
 FOOTER = 48  # two block handles padded to 40 bytes, then the magic
 NO_COMPRESSION = 0  # a block's trailer type; TensorFlow writes bundle indexes uncompressed
+RESTART_INTERVAL = 16  # keys between a data block's restart points (LevelDB's options.h)
+CRC_MASK = 0xA282EAD8  # lib/hash/crc32c.h Mask: a sum stored beside the bytes it sums
 SUFFIX_INDEX = ".index"
 SUFFIX_DATA = ".data-00000-of-00001"  # one shard: what a single saver writes
 
@@ -99,6 +107,69 @@ def read(
             raise Unreadable(f"the data file ends before {name}")
         tensors[name] = np.frombuffer(raw, entry.dtype).reshape(entry.shape).astype(np.float32)
     return tensors
+
+
+def write(tensors: Mapping[str, np.ndarray]) -> tuple[bytes, bytes]:
+    """The ``.index`` and ``.data-00000-of-00001`` bytes of a checkpoint holding ``tensors``, each
+    as float32."""
+    header = tfgraph.BundleHeaderProto(num_shards=1, endianness=0)
+    header.version.producer = 1  # tensor_bundle.h kTensorBundleVersion
+    records, data = [(b"", header.SerializeToString())], bytearray()
+    for key in sorted(name.encode() for name in tensors):
+        raw = np.ascontiguousarray(tensors[key.decode()], dtype="<f4").tobytes()
+        entry = tfgraph.BundleEntryProto(dtype=1, offset=len(data), size=len(raw))
+        entry.crc32c = _masked(raw)
+        for size in np.shape(tensors[key.decode()]):
+            entry.shape.dim.add(size=int(size))
+        records.append((key, entry.SerializeToString()))
+        data += raw
+    index = bytearray()
+
+    def placed(block: bytes) -> bytes:
+        """``block`` with its trailer appended to the index; its handle."""
+        handle = _encoded(len(index)) + _encoded(len(block))
+        index.extend(block + bytes([NO_COMPRESSION]))
+        index.extend(struct.pack("<I", _masked(block + bytes([NO_COMPRESSION]))))
+        return handle
+
+    top = placed(_block_of(records, RESTART_INTERVAL))
+    metaindex = placed(_block_of([], 1))
+    # The index block names each data block by a key at least its last one's.
+    handles = placed(_block_of([(records[-1][0], top)], 1))
+    footer = (metaindex + handles).ljust(FOOTER - 8, b"\0") + struct.pack("<Q", MAGIC)
+    return bytes(index + footer), bytes(data)
+
+
+def _masked(data: bytes) -> int:
+    crc = google_crc32c.value(data)
+    return ((((crc >> 15) | (crc << 17)) & 0xFFFFFFFF) + CRC_MASK) & 0xFFFFFFFF
+
+
+def _encoded(value: int) -> bytes:
+    """``value`` as a varint."""
+    out = bytearray()
+    while value >= 0x80:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    return bytes([*out, value])
+
+
+def _block_of(records: list[tuple[bytes, bytes]], interval: int) -> bytes:
+    """A table block of ``records`` (ascending keys): each key shares its prefix with the one
+    before, except at a restart point every ``interval`` records."""
+    out, restarts, last = bytearray(), [], b""
+    for number, (key, value) in enumerate(records):
+        shared = 0
+        if number % interval:
+            while shared < min(len(key), len(last)) and key[shared] == last[shared]:
+                shared += 1
+        else:
+            restarts.append(len(out))
+        out += _encoded(shared) + _encoded(len(key) - shared) + _encoded(len(value))
+        out += key[shared:] + value
+        last = key
+    restarts = restarts or [0]
+    return bytes(out) + struct.pack(f"<{len(restarts) + 1}I", *restarts, len(restarts))
 
 
 def _varint(buffer, at: int) -> tuple[int, int]:

@@ -110,7 +110,7 @@ def _declare():
             ("versions", 4, ".tensorflow.VersionDef", False),
         ],
     )
-    # tensor_bundle.proto: a checkpoint's index entries (read by rl.tfcheckpoint)
+    # tensor_bundle.proto: a checkpoint's index entries (read and written by rl.tfcheckpoint)
     _message(file, "BundleEntryProto", [
         ("dtype", 1, "int32", False), ("shape", 2, ".tensorflow.TensorShapeProto", False),
         ("shard_id", 3, "int32", False), ("offset", 4, "int64", False),
@@ -122,6 +122,7 @@ def _declare():
         [
             ("num_shards", 1, "int32", False),
             ("endianness", 2, "int32", False),
+            ("version", 3, ".tensorflow.VersionDef", False),
         ],
     )
     pool = descriptor_pool.DescriptorPool()

@@ -36,6 +36,7 @@ networks start as copies of the Q networks).
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -75,111 +76,162 @@ def load(policy: Policy, tensors: Mapping[str, np.ndarray], *, complete: bool) -
     (the policy with its spread, and the value (PPO) or Q (SAC) networks), else a frozen graph's,
     which keeps only what the policy's output needs: its mean. ``Unfit`` when one is missing or
     misshapen; nothing is changed unless everything fits."""
+    found = [(slot, slot.value(tensors)) for slot in _slots(policy, complete, _Found(tensors))]
+    network = policy.network
+    with torch.no_grad():
+        for slot, value in found:
+            slot.parameter.copy_(torch.from_numpy(value))
+        if not policy.ppo and complete:
+            network.critic_target.load_state_dict(network.critic.state_dict())
+
+
+def tensors(policy: Policy) -> dict[str, np.ndarray]:
+    """``policy``'s weights by DeepRacer's names, laid out as TensorFlow lays them: what
+    ``load`` reads from a checkpoint, and all rl_coach's saver restores (its trainable variables;
+    simapp's rl_coach tensorflow_components/savers.py:34-41, 01f5f01). The layers rl_coach leaves
+    unnamed are named as TensorFlow 1's layers name them in their head: ``dense``, ``dense_1``."""
+    return {slot.name: slot.deepracer() for slot in _slots(policy, True, _Named())}
+
+
+@dataclass(frozen=True)
+class _Slot:
+    """One tensor of DeepRacer's network: its ``name``, the ``parameter`` it is, TensorFlow's
+    ``shape`` of it and its ``layout``: ``dense`` ([in, out]), ``pixel`` (a camera's per-pixel
+    dense layer, our 1x1 convolution), ``conv`` ([height, width, in, out]) or ``plain``."""
+
+    name: str
+    parameter: torch.Tensor
+    shape: tuple[int, ...]
+    layout: str = "plain"
+
+    def value(self, tensors: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The parameter's value from ``tensors``, as PyTorch lays it out."""
+        if self.name not in tensors:
+            raise Unfit(f"it has no {self.name}")
+        value = np.asarray(tensors[self.name], dtype=np.float32)
+        if tuple(value.shape) != self.shape:
+            raise Unfit(
+                f"its {self.name} has the shape {list(value.shape)}, where the network of "
+                f"model_metadata.json has {list(self.shape)}"
+            )
+        if self.layout == "dense":
+            value = value.T
+        elif self.layout == "pixel":
+            value = value.T[:, :, None, None]
+        elif self.layout == "conv":
+            value = value.transpose(3, 2, 0, 1)
+        return np.ascontiguousarray(value.reshape(self.parameter.shape))
+
+    def deepracer(self) -> np.ndarray:
+        """The parameter as TensorFlow lays it out."""
+        value = self.parameter.detach().cpu().numpy().astype(np.float32)
+        if self.layout == "dense":
+            value = value.T
+        elif self.layout == "pixel":
+            value = value[:, :, 0, 0].T
+        elif self.layout == "conv":
+            value = value.transpose(2, 3, 1, 0)
+        return np.ascontiguousarray(value.reshape(self.shape))
+
+
+class _Found:
+    """Names as a checkpoint has them: the camera's scope as the model's simapp named it, an
+    unnamed layer by its shape among its head's."""
+
+    def __init__(self, tensors: Mapping[str, np.ndarray]) -> None:
+        self.tensors = tensors
+
+    def sensor(self, scope: str, sensor: str, first: str) -> str:
+        names = SENSOR_NAMES.get(sensor, (sensor,))
+        return next((n for n in names if f"{scope}/{n}/{first}/kernel" in self.tensors), names[0])
+
+    def unnamed(self, head: str, layer: nn.Linear, taken: set[str]) -> str:
+        """The unnamed dense layer directly in ``head`` whose kernel fits ``layer``; it is
+        taken, so that no other layer gets it."""
+        shape = (layer.in_features, layer.out_features)
+        for name in sorted(self.tensors):
+            inside = name.startswith(f"{head}/") and name.count("/") == head.count("/") + 2
+            kernel = inside and name.endswith("/kernel") and name not in taken
+            if kernel and tuple(np.shape(self.tensors[name])) == shape:
+                taken.add(name)
+                return name.removesuffix("/kernel")
+        raise Unfit(f"it has no dense layer of {shape[0]} by {shape[1]} in {head}")
+
+
+class _Named:
+    """Names as today's simapp gives them: the camera's own, unnamed layers in their order."""
+
+    def sensor(self, scope: str, sensor: str, first: str) -> str:
+        return SENSOR_NAMES.get(sensor, (sensor,))[0]
+
+    def unnamed(self, head: str, layer: nn.Linear, taken: set[str]) -> str:
+        count = sum(name.startswith(f"{head}/dense") for name in taken)
+        name = f"{head}/dense" + (f"_{count}" if count else "")
+        taken.add(f"{name}/kernel")
+        return name
+
+
+def _slots(policy: Policy, complete: bool, names: _Found | _Named) -> list[_Slot]:
+    """``policy``'s tensors in DeepRacer's network (see the module's table)."""
     ppo, network = policy.ppo, policy.network
-    found: list[tuple[str, torch.Tensor, np.ndarray]] = []
+    found: list[_Slot] = []
     if ppo:
         scope = cargraph.policy_scope(ppo)
-        found += _extractor(tensors, scope, network.pi_features_extractor)
+        found += _extractor(names, scope, network.pi_features_extractor)
         head = f"{scope}/ppo_head_0"
         if hasattr(network, "log_std"):  # a continuous action space
-            found += _layer(tensors, f"{head}/policy_mean", network.action_net)
+            found += _layer(f"{head}/policy_mean", network.action_net)
             if complete:
                 spread = (1, *network.log_std.shape)
-                found.append(_fit(tensors, f"{head}/policy_log_std", network.log_std, spread))
+                found.append(_Slot(f"{head}/policy_log_std", network.log_std, spread))
         else:
-            found += _layer(tensors, f"{head}/policy_fc", network.action_net)
+            found += _layer(f"{head}/policy_fc", network.action_net)
         if complete:
-            found += _extractor(tensors, PPO_VALUE_SCOPE, network.vf_features_extractor)
-            found += _layer(tensors, f"{PPO_VALUE_SCOPE}/v_values_head_0/output", network.value_net)
+            found += _extractor(names, PPO_VALUE_SCOPE, network.vf_features_extractor)
+            found += _layer(f"{PPO_VALUE_SCOPE}/v_values_head_0/output", network.value_net)
     else:
         actor, scope = network.actor, cargraph.policy_scope(ppo)
-        found += _extractor(tensors, scope, actor.features_extractor)
+        found += _extractor(names, scope, actor.features_extractor)
         head = f"{scope}/sac_policy_head_0"
         (hidden,) = _linears(actor.latent_pi)
-        found += _layer(tensors, f"{head}/policy_mean", actor.mu)
+        found += _layer(f"{head}/policy_mean", actor.mu)
         taken = {f"{head}/policy_mean/kernel"}
-        found += _layer(tensors, _unnamed(tensors, head, hidden, taken), hidden)
+        found += _layer(names.unnamed(head, hidden, taken), hidden)
         if complete:
-            log_std = _unnamed(tensors, head, actor.log_std, taken)
-            found += _layer(tensors, log_std, actor.log_std)
+            found += _layer(names.unnamed(head, actor.log_std, taken), actor.log_std)
             critic = network.critic
-            found += _extractor(tensors, SAC_Q_SCOPE, critic.features_extractor)
+            found += _extractor(names, SAC_Q_SCOPE, critic.features_extractor)
             for number, q in enumerate(critic.q_networks, start=1):
                 q_head = f"{SAC_Q_SCOPE}/q_values_head_0/q{number}_head"
                 *inner, output = _linears(q)
                 taken = {f"{q_head}/q{number}_output/kernel"}
-                found += _layer(tensors, f"{q_head}/q{number}_output", output)
+                found += _layer(f"{q_head}/q{number}_output", output)
                 for layer in inner:
-                    found += _layer(tensors, _unnamed(tensors, q_head, layer, taken), layer)
-    with torch.no_grad():
-        for _, parameter, value in found:
-            parameter.copy_(torch.from_numpy(value))
-        if not ppo and complete:
-            network.critic_target.load_state_dict(network.critic.state_dict())
+                    found += _layer(names.unnamed(q_head, layer, taken), layer)
+    return found
 
 
-def _extractor(tensors, scope: str, extractor: DeepRacerFeatures) -> list:
+def _extractor(names: _Found | _Named, scope: str, extractor: DeepRacerFeatures) -> list[_Slot]:
     found = []
     for sensor in extractor.sensors:
         embedder = extractor.embedders[sensor]
-        names = SENSOR_NAMES.get(sensor, (sensor,))
-        first = embedder.tf_names[0]
-        named = next((n for n in names if f"{scope}/{n}/{first}/kernel" in tensors), names[0])
+        named = names.sensor(scope, sensor, embedder.tf_names[0])
         for layer, name in zip(embedder.layers, embedder.tf_names, strict=True):
-            found += _layer(tensors, f"{scope}/{named}/{name}", layer)
-    return found + _layer(tensors, f"{scope}/{MIDDLEWARE}", extractor.middleware)
+            found += _layer(f"{scope}/{named}/{name}", layer)
+    return found + _layer(f"{scope}/{MIDDLEWARE}", extractor.middleware)
 
 
-def _layer(tensors, name: str, layer: nn.Module) -> list:
-    """A layer's kernel and bias, each as PyTorch lays it out."""
+def _layer(name: str, layer: nn.Module) -> list[_Slot]:
+    """A layer's kernel and bias."""
     out, into, *window = layer.weight.shape
-    if not window:  # dense: TensorFlow's [in, out]
-        return [
-            _fit(tensors, f"{name}/kernel", layer.weight, (into, out), lambda k: k.T),
-            _fit(tensors, f"{name}/bias", layer.bias, (out,)),
-        ]
-    if window == [1, 1]:  # a camera's per-pixel dense layer: TensorFlow's [in, out]
-        kernel = _fit(
-            tensors, f"{name}/kernel", layer.weight, (into, out), lambda k: k.T[:, :, None, None]
-        )
-    else:  # TensorFlow's [height, width, in, out]
-        kernel = _fit(
-            tensors,
-            f"{name}/kernel",
-            layer.weight,
-            (*window, into, out),
-            lambda k: k.transpose(3, 2, 0, 1),
-        )
-    return [kernel, _fit(tensors, f"{name}/bias", layer.bias, (out,))]
-
-
-def _fit(tensors, name: str, parameter: torch.Tensor, shape: tuple, layout=None) -> tuple:
-    """``parameter``'s value: the tensor ``name``, of TensorFlow's ``shape``, laid out as
-    PyTorch's by ``layout``."""
-    if name not in tensors:
-        raise Unfit(f"it has no {name}")
-    value = np.asarray(tensors[name], dtype=np.float32)
-    if tuple(value.shape) != tuple(int(size) for size in shape):
-        raise Unfit(
-            f"its {name} has the shape {list(value.shape)}, where the network of "
-            f"model_metadata.json has {[int(size) for size in shape]}"
-        )
-    value = layout(value) if layout else value.reshape(parameter.shape)
-    return name, parameter, np.ascontiguousarray(value)
+    if not window:
+        kernel = _Slot(f"{name}/kernel", layer.weight, (into, out), "dense")
+    elif window == [1, 1]:
+        kernel = _Slot(f"{name}/kernel", layer.weight, (into, out), "pixel")
+    else:
+        kernel = _Slot(f"{name}/kernel", layer.weight, (*window, into, out), "conv")
+    return [kernel, _Slot(f"{name}/bias", layer.bias, (out,))]
 
 
 def _linears(module: nn.Module) -> list[nn.Linear]:
     return [layer for layer in module.modules() if isinstance(layer, nn.Linear)]
-
-
-def _unnamed(tensors, head: str, layer: nn.Linear, taken: set[str]) -> str:
-    """The name of the unnamed dense layer directly in ``head`` whose kernel fits ``layer``;
-    it is taken, so that no other layer gets it."""
-    shape = (layer.in_features, layer.out_features)
-    for name in sorted(tensors):
-        inside = name.startswith(f"{head}/") and name.count("/") == head.count("/") + 2
-        kernel = inside and name.endswith("/kernel") and name not in taken
-        if kernel and tuple(np.shape(tensors[name])) == shape:
-            taken.add(name)
-            return name.removesuffix("/kernel")
-    raise Unfit(f"it has no dense layer of {shape[0]} by {shape[1]} in {head}")

@@ -20,7 +20,8 @@ PYTHON=${PYTHON:-.venv/bin/python}
 # /usr/share/zoneinfo) is the one not there. No Daphne: the bench runs without the web tier.
 PACKAGES="Django asgiref sqlparse celery kombu billiard vine amqp click-didyoumean click-plugins
 click-repl prompt_toolkit wcwidth tzlocal channels channels_redis redis dj-database-url
-whitenoise django-ratelimit gymnasium Farama-Notifications stable_baselines3 pyseccomp shapely"
+whitenoise django-ratelimit gymnasium Farama-Notifications stable_baselines3 pyseccomp shapely
+google-crc32c"
 # and for the GPU-only tests, the versions requirements/test.txt pins (the image's pytest may be
 # older than pytest-asyncio takes; scripts/device-run.sh puts these first on the tests' path)
 TEST_PACKAGES="pytest pytest-django pytest-asyncio pytest-timeout pluggy iniconfig deepracer-utils boto3

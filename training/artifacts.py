@@ -189,9 +189,15 @@ def training_params(model: RLModel) -> dict:
         reverse = held.direction != model.direction
     else:
         world_name, reverse = sim_tracks.deepracer_world(model.track.name, model.direction)
-    params = {
-        "WORLD_NAME": world_name,
-        "REVERSE_DIR": reverse,
+    params = {"WORLD_NAME": world_name, "REVERSE_DIR": reverse}
+    suffix = {"clockwise": "_cw", "counterclockwise": "_ccw"}[model.direction]
+    if not reverse and world_name.endswith(suffix) and not model.world_name:
+        # The direction's own route file, named as DeepRacer on AWS names it: the bare track and
+        # TRACK_DIRECTION_CLOCKWISE (SimulationEnvironmentHelper.ts:53-56, 61af778), from which
+        # simapp adds the suffix back (yaml_file.py:228-246, 01f5f01).
+        params["WORLD_NAME"] = world_name.removesuffix(suffix)
+        params["TRACK_DIRECTION_CLOCKWISE"] = model.direction == "clockwise"
+    params |= {
         "RACE_TYPE": model.race_type,
         "ALTERNATE_DRIVING_DIRECTION": False,
         "CHANGE_START_POSITION": True,

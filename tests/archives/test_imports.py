@@ -738,8 +738,10 @@ def test_an_exported_track_names_deepracers_world_and_imports_back_onto_itself(
         world_name=world_name,
     )
     params = artifacts.training_params(model)
-    if track == "2022_april_open":  # the file DeepRacer drives clockwise, not the base reversed
-        assert (params["WORLD_NAME"], params["REVERSE_DIR"]) == ("2022_april_open_cw", False)
+    if track == "2022_april_open":  # the file DeepRacer drives clockwise, not the base reversed,
+        # named as DeepRacer on AWS names it (SimulationEnvironmentHelper.ts:53-56)
+        said = (params["WORLD_NAME"], params["REVERSE_DIR"], params["TRACK_DIRECTION_CLOCKWISE"])
+        assert said == ("2022_april_open", False, True)
     if world_name:  # its own file, backwards where it runs the other way
         reverse = world_name.endswith("_ccw")
         assert (params["WORLD_NAME"], params["REVERSE_DIR"]) == (world_name, reverse)
