@@ -22,16 +22,18 @@ The virtual model, ``virtualmodel-<name>.tar.gz``, holds what another Pitlane (o
 toolchain) needs to go on training: ``model_metadata.json``, ``reward_function.py``,
 ``training_params.yaml``, ``hyperparameters.json`` (DeepRacer's names and spellings, also at
 ``ip/hyperparameters.json`` where DeepRacer keeps it), the best and the last
-checkpoints as safetensors under ``checkpoints/``, the metrics, and ``pitlane.json`` (the settings
+checkpoints, the metrics, and ``pitlane.json`` (the settings
 DeepRacer's files do not carry: track, direction, race type, network seed and layout, workers;
 and the time the model trained, which its page shows). Beside DeepRacer's files, left as they
 are: ``pitlane-history.json``, each iteration's figures exactly as the model's page shows them
 (DeepRacer's metrics round them) and which iterations the best and last checkpoints hold; and the
 simulation traces where DeepRacer keeps them (``training-simtrace/<n>-iteration.csv``,
-``evaluation-<time>/evaluation-simtrace/0-iteration.csv``), up to ``TRACES_LIMIT``. For DeepRacer
-on AWS's import (a folder: the archive unpacked), it also holds simapp's ``model/`` folder, the
-same checkpoints as TensorFlow's (``simapp_model_folder``), and the metrics where DeepRacer on
-AWS looks for them (``DOA_METRICS``); an import here reads the safetensors.
+``evaluation-<time>/evaluation-simtrace/0-iteration.csv``), up to ``TRACES_LIMIT``. Unpacked, it is
+a folder DeepRacer on AWS imports: the best and the last checkpoints are simapp's ``model/``
+folder (``simapp_model_folder``: TensorFlow checkpoints, which the import here reads back to the
+bit), and the metrics are also where DeepRacer on AWS looks for them (``DOA_METRICS``). Only a
+model of Pitlane's first networks, which DeepRacer's names do not fit, keeps its checkpoints as
+safetensors under ``checkpoints/``.
 """
 
 from __future__ import annotations
@@ -64,6 +66,9 @@ DOA_METRICS = "metrics/training/training-{name}.json"
 # What a virtual archive holds beyond its hashed members (a new layout is a new export): 2 added
 # simapp's model/ folder and DeepRacer on AWS's metrics.
 VIRTUAL_LAYOUT = 2
+# The best and last checkpoints, ours, where a virtual archive of Pitlane's first networks keeps
+# them (a DeepRacer network's are in MODEL_FOLDER instead).
+EXPORTED = artifacts.EXPORTED_CHECKPOINTS
 FORMAT = 2  # of pitlane.json; 2 added network_layout
 MiB = 1024 * 1024
 # [bytes] of simulation traces a virtual model's archive carries, and an import keeps: a long
@@ -134,10 +139,7 @@ def virtual(model: RLModel) -> Export:
     members.update(
         {
             PITLANE_SETTINGS: _json(pitlane_settings(model)),
-            **{
-                name: _checkpoint(model, kept)
-                for kept, name in artifacts.EXPORTED_CHECKPOINTS.items()
-            },
+            **{name: _checkpoint(model, kept) for kept, name in EXPORTED.items()},
         }
     )
     if metrics is not None:
@@ -155,7 +157,9 @@ def virtual(model: RLModel) -> Export:
     )
     if not default_storage.exists(export.name):
         if model.network_layout == hyperparameters.NETWORK_LAYOUT:
-            members.update(simapp_model_folder(model, members))
+            # DeepRacer's networks: their weights once, as simapp keeps them
+            weights = {kept: members.pop(name) for kept, name in EXPORTED.items()}
+            members.update(simapp_model_folder(model, weights))
         if metrics is not None:
             members[DOA_METRICS.format(name=model.name)] = metrics
         members.update({trace.relative: artifacts.read(trace.stored) for trace in traces})
@@ -163,11 +167,13 @@ def virtual(model: RLModel) -> Export:
     return export
 
 
-def simapp_model_folder(model: RLModel, members: dict[str, bytes]) -> dict[str, bytes]:
+def simapp_model_folder(model: RLModel, weights: dict[str, bytes]) -> dict[str, bytes]:
     """The ``model/`` folder as simapp's training leaves it and DeepRacer on AWS's import
     validates it (simapp validation_worker.py:60-105, 141-144): ``model_metadata.json``; the best
-    and the last checkpoints (``members``' safetensors) as TensorFlow's, ``<N>_Step-<steps>
-    .ckpt``, under rl_coach's names (``rl.tfweights.tensors``), which ``deepracer_checkpoints.json``
+    and the last checkpoints (``weights``, ours, by ``EXPORTED``'s keys) as TensorFlow's,
+    ``<N>_Step-<steps>.ckpt``, under rl_coach's names (``rl.tfweights.tensors``: every weight of a
+    PPO model; a SAC model's target Q networks start again as copies of its Q networks, as
+    rl_coach restores them, savers.py:36-38), which ``deepracer_checkpoints.json``
     names (deepracer_checkpoint_json.py:83-131; ``avg_eval_metric`` null where not measured,
     s3_metrics.py:259-263) and ``.coach_checkpoint`` points to, the last (rl_coach_checkpoint.py:
     159-179). Not simapp's frozen graphs (``model_<N>.pb``, tensorflow_model.py:290-327): neither
@@ -180,14 +186,14 @@ def simapp_model_folder(model: RLModel, members: dict[str, bytes]) -> dict[str, 
     names = {
         which: selectors.model_checkpoint(model=model, which=which) for which in ("best", "last")
     }
-    for which, exported in artifacts.EXPORTED_CHECKPOINTS.items():
+    for which in EXPORTED:
         stored = names[which]
         number = artifacts.checkpoint_iteration(stored)
         if number is None:  # weights an import or a clone brought: numbered in their order
             number = 2 if which == "last" and names["best"] != stored else 1
         row = _iteration_row(model, number)
         checkpoint = f"{number}_Step-{_steps_to(model, number)}.ckpt"
-        policy = _policy(model, members[exported])
+        policy = _policy(model, weights[which])
         index, data = tfcheckpoint.write(tfweights.tensors(policy))
         folder[f"{MODEL_FOLDER}{checkpoint}{tfcheckpoint.SUFFIX_INDEX}"] = index
         folder[f"{MODEL_FOLDER}{checkpoint}{tfcheckpoint.SUFFIX_DATA}"] = data

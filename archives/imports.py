@@ -314,15 +314,16 @@ def _import_ready(owner: AbstractBaseUser, archive: IO[bytes], plan: _Plan) -> I
             layout=layout,
             checkpoints=lambda _: plan.weights,
         )
-    else:
+    else:  # DeepRacer's checkpoints, or a frozen graph: also our own export's, since layout 2
         tensorflow = plan.tensorflow
+        told = [] if plan.ours else notes  # where they came from, unless from a Pitlane
         imported = _import_trained(
             owner,
             plan.settings,
             plan.members,
             plan.ours,
             layout=hyperparameters.NETWORK_LAYOUT,
-            checkpoints=lambda policy: tensorflow.load(archive, plan.members, policy, notes),
+            checkpoints=lambda policy: tensorflow.load(archive, plan.members, policy, told),
         )
     imported.notes = notes + imported.notes
     if not plan.reward.strip():

@@ -243,8 +243,8 @@ def test_an_evaluation_starts_is_listed_read_and_stopped_under_the_pages_rules(
 
 @pytest.mark.slow  # the sandbox validates the clone's reward function
 def test_a_clone_starts_from_its_sources_checkpoint_with_the_changes_given(
-    alice, bob, tracks, client
-):
+    alice, bob, tracks, client, own_storage
+):  # own storage: it asks for a checkpoint no iteration saved, which another test's job may
     source = ready_model(alice)
     token = api_token(alice, "read", "train")
     body = {"name": "faster", "checkpoint": "last", "max_minutes": 12, "track": "rookie-loop"}
@@ -308,7 +308,9 @@ def test_a_clone_starts_from_its_sources_checkpoint_with_the_changes_given(
 
 
 @pytest.mark.slow  # builds the car's graph
-def test_the_downloads_are_the_pages_archives_and_refusals_are_words(alice, bob, tracks, client):
+def test_the_downloads_are_the_pages_archives_and_refusals_are_words(
+    alice, bob, tracks, client, own_storage
+):  # own storage: a model without traces, where another test's job may leave some
     model = ready_model(alice)
     token = api_token(alice, "read")
     physical = client.get(f"{MODELS}/{model.pk}/download/physical", **token)

@@ -16,7 +16,7 @@ import yaml
 from django.core.files.storage import default_storage
 
 import simulator
-from archives import exports, imports
+from archives import exports, history, imports
 from rl import tfcheckpoint
 from rl.networks import SHALLOW
 from rl.policies import Policy
@@ -24,7 +24,7 @@ from tests.archives.deepracer_tf import build
 from tests.archives.test_deepracer_weights import CONTINUOUS, DISCRETE, assert_same
 from tests.archives.test_exports import decisive, torch_policy
 from tests.helpers.models import sensor_frames, trained_model
-from training import artifacts
+from training import artifacts, selectors
 from training.models import Iteration, RLModel
 
 pytestmark = pytest.mark.django_db
@@ -110,11 +110,12 @@ def test_the_virtual_archive_unpacked_is_what_deepracer_on_aws_imports(
             name = pointer["name"] + suffix
             (tmp_path / name).write_bytes(files[f"model/{name}"])
         restored(tensorflow, deepracer, str(tmp_path / pointer["name"]))
-        policy = policy_of(model, files[artifacts.EXPORTED_CHECKPOINTS[which]])
+        policy = policy_of(model, stored_weights(model, which))
         assert_same(deepracer, policy, frames, ["policy", "log_std", "q1", "q2"])
     # Two checkpoints, their pointers and metadata: nothing else of simapp's (its frozen graphs
-    # are the car's, the physical download).
+    # are the car's, the physical download), and the weights once (no safetensors).
     assert len([name for name in files if name.startswith("model/")]) == 7
+    assert not [name for name in files if name.endswith(".safetensors")]
 
 
 def policy_of(model: RLModel, weights: bytes) -> Policy:
@@ -134,29 +135,33 @@ def observation_space(model: RLModel):
 
 
 def test_deepracers_files_alone_import_back_with_the_same_weights(alice, bob, tracks):
-    """What DeepRacer on AWS keeps of the archive (simapp's files, not Pitlane's own: no
-    safetensors, no pitlane.json) imports here as the same model: the model/ folder's TensorFlow
-    checkpoints hold every weight of the policy and its value network."""
+    """What DeepRacer's tools keep of the archive (simapp's files, not Pitlane's own records:
+    no pitlane.json, no pitlane-history.json) imports here as the same model: the model/
+    folder's TensorFlow checkpoints hold every weight of the policy and its value network, and
+    training_params.yaml the track and its direction."""
     model = two_checkpoints(alice, "clipped_ppo", DISCRETE)
     files = unpacked(model)
-    theirs = {
-        name: data
-        for name, data in files.items()
-        if not name.startswith("checkpoints/") and name not in (exports.PITLANE_SETTINGS,)
-    }
+    ours = (exports.PITLANE_SETTINGS, history.EXACT)
     archive = io.BytesIO()
     with tarfile.open(fileobj=archive, mode="w") as tar:  # as unpacked: no need to pack it
-        for name, data in theirs.items():
-            info = tarfile.TarInfo(name)
-            info.size = len(data)
-            tar.addfile(info, io.BytesIO(data))
-    imported = imports.import_model(owner=bob, archive=io.BytesIO(archive.getvalue())).model
-    assert (imported.track.name, imported.direction) == ("2022_april_open", "clockwise")
-    job = imported.jobs.get()
+        for name, data in files.items():
+            if name not in ours:
+                info = tarfile.TarInfo(name)
+                info.size = len(data)
+                tar.addfile(info, io.BytesIO(data))
+    imported = imports.import_model(owner=bob, archive=io.BytesIO(archive.getvalue()))
+    assert (imported.model.track.name, imported.model.direction) == ("2022_april_open", "clockwise")
+    assert "The weights are DeepRacer's, from model/1_Step-500.ckpt, model/2_Step-1200.ckpt." in (
+        imported.notes
+    )
+    job = imported.model.jobs.get()
     for which, stored in (("best", job.best_checkpoint), ("last", job.last_checkpoint)):
-        expected = policy_of(model, files[artifacts.EXPORTED_CHECKPOINTS[which]])
-        got = policy_of(imported, artifacts.read(stored))
-        mine, theirs_ = expected.network.state_dict(), got.network.state_dict()
-        assert mine.keys() == theirs_.keys()
-        for key in mine:
-            torch.testing.assert_close(theirs_[key], mine[key], rtol=0, atol=0, msg=key)
+        expected = policy_of(model, stored_weights(model, which)).network.state_dict()
+        got = policy_of(imported.model, artifacts.read(stored)).network.state_dict()
+        assert expected.keys() == got.keys()
+        for key in expected:
+            torch.testing.assert_close(got[key], expected[key], rtol=0, atol=0, msg=key)
+
+
+def stored_weights(model: RLModel, which: str) -> bytes:
+    return artifacts.read(selectors.model_checkpoint(model=model, which=which))
