@@ -4,6 +4,7 @@ racer's changes, checked as the page checks them, or cancelled."""
 
 from __future__ import annotations
 
+import pytest
 from django.core.files.uploadedfile import SimpleUploadedFile
 
 from archives.models import KeptUpload
@@ -52,6 +53,7 @@ def test_an_archive_to_train_is_previewed_then_confirmed_with_the_racers_changes
     assert again.status_code == 409 and "choose it again" in again.json()["message"]
 
 
+@pytest.mark.slow  # exports and imports the weights
 def test_an_archive_with_weights_arrives_at_once_and_a_bad_one_is_refused_in_words(
     alice, tracks, client
 ):

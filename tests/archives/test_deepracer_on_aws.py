@@ -30,12 +30,19 @@ from training.models import Iteration, RLModel
 pytestmark = pytest.mark.django_db
 
 
-def two_checkpoints(owner, algorithm: str, space) -> RLModel:
-    """A model trained two iterations on a track DeepRacer drives both ways: its best checkpoint
-    the first, its last the second (other weights), with their steps and metrics."""
+def on_a_two_way_track(owner, algorithm: str, space) -> RLModel:
+    """A model trained an iteration on a track DeepRacer drives both ways, with its metrics."""
     settings = {"algorithm": algorithm, "action_space": space, "weights": decisive}
     where = {"track": "2022_april_open", "direction": "clockwise"}
     model = trained_model(owner, "to-aws", **settings, **where)
+    artifacts.save(model, artifacts.TRAINING_METRICS, b'{"metrics": [], "version": "2"}')
+    return model
+
+
+def two_checkpoints(owner, algorithm: str, space) -> RLModel:
+    """``on_a_two_way_track``'s model trained two iterations: its best checkpoint the first, its
+    last the second (other weights), with their steps and evaluations."""
+    model = on_a_two_way_track(owner, algorithm, space)
     policy = torch_policy(model)
     with torch.no_grad():  # other weights: the last checkpoint is not the best
         for parameter in policy.network.parameters():
@@ -49,7 +56,6 @@ def two_checkpoints(owner, algorithm: str, space) -> RLModel:
             job=job, number=number, reward=1.0, completion=completion, episodes=20,
             steps=steps, wall_seconds=60.0, evaluation_completion=completion,
         )  # fmt: skip
-    artifacts.save(model, artifacts.TRAINING_METRICS, b'{"metrics": [], "version": "2"}')
     return model
 
 
@@ -78,11 +84,10 @@ def restored(tensorflow, deepracer, prefix: str) -> None:
 def test_the_virtual_archive_unpacked_is_what_deepracer_on_aws_imports(
     alice, tracks, tensorflow, tmp_path
 ):
-    """SAC's networks, whose layers rl_coach partly leaves unnamed: a PPO model's names are read
-    back below by the importer, which test_deepracer_weights holds to TensorFlow's."""
-    algorithm, space = "sac", CONTINUOUS
-    model = two_checkpoints(alice, algorithm, space)
-    files = unpacked(model)
+    """SAC's networks, whose layers rl_coach partly leaves unnamed (a PPO model's names are read
+    back below by the importer, which test_deepracer_weights holds to TensorFlow's); one
+    checkpoint, both best and last."""
+    model = on_a_two_way_track(alice, "sac", CONTINUOUS)
     files = unpacked(model)
     # The browser's check, by name in any folder (ImportModel/constants.ts:6-11), and the server's
     # reads (ImportHelper.ts:38, 54, 69, 139).
@@ -96,25 +101,21 @@ def test_the_virtual_archive_unpacked_is_what_deepracer_on_aws_imports(
     assert [files[k] for k in metrics] == [files[artifacts.TRAINING_METRICS]]  # ts:84-91
 
     # simapp's validator: model/model_metadata.json, then the last and the best checkpoints by
-    # deepracer_checkpoints.json, rl_coach's pointer to the last.
+    # deepracer_checkpoints.json (here the same), rl_coach's pointer to the last.
     assert files["model/model_metadata.json"] == files["model_metadata.json"]
     pointers = json.loads(files["model/deepracer_checkpoints.json"])
-    best, last = (pointers[f"{which}_checkpoint"] for which in ("best", "last"))
-    assert (best["name"], last["name"]) == ("1_Step-500.ckpt", "2_Step-1200.ckpt")
-    assert best["avg_eval_metric"] == 61.5  # progress, the model's best-checkpoint measure
-    assert files["model/.coach_checkpoint"].decode() == last["name"]
-    deepracer = build(tensorflow, algorithm, SHALLOW, observation_space(model), 2, False)
+    names = {pointers[f"{which}_checkpoint"]["name"] for which in ("best", "last")}
+    assert names == {"1_Step-0.ckpt"} == {files["model/.coach_checkpoint"].decode()}
+    for suffix in (tfcheckpoint.SUFFIX_INDEX, tfcheckpoint.SUFFIX_DATA):
+        (tmp_path / f"1_Step-0.ckpt{suffix}").write_bytes(files[f"model/1_Step-0.ckpt{suffix}"])
+    deepracer = build(tensorflow, "sac", SHALLOW, observation_space(model), 2, False)
+    restored(tensorflow, deepracer, str(tmp_path / "1_Step-0.ckpt"))
     frames = sensor_frames(model.environment_settings(), count=4)
-    for which, pointer in (("best", best), ("last", last)):
-        for suffix in (tfcheckpoint.SUFFIX_INDEX, tfcheckpoint.SUFFIX_DATA):
-            name = pointer["name"] + suffix
-            (tmp_path / name).write_bytes(files[f"model/{name}"])
-        restored(tensorflow, deepracer, str(tmp_path / pointer["name"]))
-        policy = policy_of(model, stored_weights(model, which))
-        assert_same(deepracer, policy, frames, ["policy", "log_std", "q1", "q2"])
-    # Two checkpoints, their pointers and metadata: nothing else of simapp's (its frozen graphs
-    # are the car's, the physical download), and the weights once (no safetensors).
-    assert len([name for name in files if name.startswith("model/")]) == 7
+    policy = policy_of(model, stored_weights(model, "last"))
+    assert_same(deepracer, policy, frames, ["policy", "log_std", "q1", "q2"])
+    # The checkpoint, its pointers and metadata: nothing else of simapp's (its frozen graphs are
+    # the car's, the physical download), and the weights once (no safetensors).
+    assert len([name for name in files if name.startswith("model/")]) == 5
     assert not [name for name in files if name.endswith(".safetensors")]
 
 
@@ -134,13 +135,20 @@ def observation_space(model: RLModel):
         env.close()
 
 
+@pytest.mark.slow
 def test_deepracers_files_alone_import_back_with_the_same_weights(alice, bob, tracks):
     """What DeepRacer's tools keep of the archive (simapp's files, not Pitlane's own records:
-    no pitlane.json, no pitlane-history.json) imports here as the same model: the model/
-    folder's TensorFlow checkpoints hold every weight of the policy and its value network, and
-    training_params.yaml the track and its direction."""
+    no pitlane.json, no pitlane-history.json) imports here as the same model: the pointers name
+    the best and the last checkpoints by iteration and steps, whose TensorFlow checkpoints hold
+    every weight of the policy and its value network, and training_params.yaml the track and its
+    direction."""
     model = two_checkpoints(alice, "clipped_ppo", DISCRETE)
     files = unpacked(model)
+    pointers = json.loads(files["model/deepracer_checkpoints.json"])
+    best, last = (pointers[f"{which}_checkpoint"] for which in ("best", "last"))
+    assert (best["name"], last["name"]) == ("1_Step-500.ckpt", "2_Step-1200.ckpt")
+    assert best["avg_eval_metric"] == 61.5  # progress, the model's best-checkpoint measure
+    assert files["model/.coach_checkpoint"].decode() == last["name"]
     ours = (exports.PITLANE_SETTINGS, history.EXACT)
     archive = io.BytesIO()
     with tarfile.open(fileobj=archive, mode="w") as tar:  # as unpacked: no need to pack it
