@@ -186,18 +186,23 @@ def simapp_model_folder(model: RLModel, weights: dict[str, bytes]) -> dict[str, 
     names = {
         which: selectors.model_checkpoint(model=model, which=which) for which in ("best", "last")
     }
+    job = model.latest_job
+    measured = _BEST_MEASURE.get(str(model.best_checkpoint_by), "")
     for which in EXPORTED:
         stored = names[which]
         number = artifacts.checkpoint_iteration(stored)
         if number is None:  # weights an import or a clone brought: numbered in their order
             number = 2 if which == "last" and names["best"] != stored else 1
-        row = _iteration_row(model, number)
-        checkpoint = f"{number}_Step-{_steps_to(model, number)}.ckpt"
-        policy = _policy(model, weights[which])
-        index, data = tfcheckpoint.write(tfweights.tensors(policy))
-        folder[f"{MODEL_FOLDER}{checkpoint}{tfcheckpoint.SUFFIX_INDEX}"] = index
-        folder[f"{MODEL_FOLDER}{checkpoint}{tfcheckpoint.SUFFIX_DATA}"] = data
-        measured = _BEST_MEASURE.get(str(model.best_checkpoint_by), "")
+        rows = job.iteration_rows.filter(number__lte=number) if job else None
+        steps = (rows.aggregate(steps=Sum("steps"))["steps"] or 0) if rows is not None else 0
+        row = rows.filter(number=number).first() if rows is not None else None
+        checkpoint = f"{number}_Step-{steps}.ckpt"
+        index = f"{MODEL_FOLDER}{checkpoint}{tfcheckpoint.SUFFIX_INDEX}"
+        if index not in folder:  # best and last may be one checkpoint: written once
+            policy = _policy(model, weights[which])
+            folder[index], folder[f"{MODEL_FOLDER}{checkpoint}{tfcheckpoint.SUFFIX_DATA}"] = (
+                tfcheckpoint.write(tfweights.tensors(policy))
+            )
         pointers[f"{which}_checkpoint"] = {
             "name": checkpoint,
             "time_stamp": default_storage.get_modified_time(stored).timestamp(),
@@ -215,20 +220,6 @@ _BEST_MEASURE = {
     "reward": "evaluation_reward",
     "laptime": "evaluation_lap_ms",
 }
-
-
-def _iteration_row(model: RLModel, number: int):
-    job = model.latest_job
-    return job.iteration_rows.filter(number=number).first() if job else None
-
-
-def _steps_to(model: RLModel, number: int) -> int:
-    """The steps the model's newest training had driven by the end of iteration ``number``."""
-    job = model.latest_job
-    if job is None:
-        return 0
-    rows = job.iteration_rows.filter(number__lte=number)
-    return rows.aggregate(steps=Sum("steps"))["steps"] or 0
 
 
 def _exact_history(model: RLModel) -> dict[str, bytes]:
