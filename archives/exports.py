@@ -283,7 +283,7 @@ def _policy(model: RLModel, weights: bytes):
     from rl.policies import Policy  # torch: loaded by a process's first export
 
     policy = Policy.for_environment(
-        model.algorithm, model.architecture, model.environment_settings()
+        model.algorithm, model.architecture, model.environment_settings(), loading=True
     )
     policy.load_checkpoint(weights)
     return policy

@@ -32,12 +32,13 @@ import redis
 
 import simulator
 from rl import episode
-from rl.experience import JobChannel, encode_arrays
+from rl.experience import JobChannel
 from rl.hyperparameters import PPO
 from rl.learner import weights_bytes
 from rl.networks import SHALLOW
 from rl.policies import Policy
 from rl.weights_cache import WeightsCache
+from rl.wire import encode_arrays
 from tests.services import RedisServer
 
 JOB = 1

@@ -349,6 +349,7 @@ class EvaluationCar:
             self.model.architecture,
             self.env.observation_space,
             self.env.action_space,
+            loading=True,
         )
         try:
             self.policy.load_checkpoint(self._weights)

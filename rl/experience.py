@@ -17,17 +17,15 @@ and writes of them, and the checks of what a sandbox sent, are read together.
 from __future__ import annotations
 
 import json
-import math
 import secrets
 import time
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
 import redis
 
 from rl.weights_cache import Published, WeightsCache, weights_digest
-from rl.wire import ProtocolError, decode
+from rl.wire import decode, decode_array
 from simulator.rewards import MAX_REWARD
 
 EXPIRE_AFTER = 3600  # [s] the keys live after the job ends
@@ -320,47 +318,6 @@ class JobChannel:
 
 
 # Episodes
-
-
-def encode_arrays(arrays: dict[str, np.ndarray], *, compress: bool = True) -> dict:
-    """Each of ``arrays`` as a message carries it: dtype, shape and bytes, compressed (zlib,
-    level 1) for Redis unless ``compress`` is False (a pipe gains nothing: ``sandbox.served``)."""
-    contiguous = {name: np.ascontiguousarray(array) for name, array in arrays.items()}
-    return {
-        name: {
-            "dtype": str(a.dtype),
-            "shape": list(a.shape),
-            "data": zlib.compress(a.tobytes(), 1) if compress else a.tobytes(),
-        }
-        for name, a in contiguous.items()
-    }
-
-
-def decode_array(
-    encoded, dtype: str, shape: tuple[int | None, ...], *, compressed: bool = True
-) -> np.ndarray:
-    """The array ``encode_arrays`` made (``compressed`` as it was): of ``dtype`` and ``shape``
-    (None: any length), each size a whole number under 2**31, with exactly its shape's bytes;
-    else ``ProtocolError`` (a ValueError). Uncompressed, a writable copy (for torch)."""
-    if not isinstance(encoded, dict) or encoded.get("dtype") != dtype:
-        raise ProtocolError(f"expected {dtype} data")
-    declared = encoded.get("shape")
-    if (
-        not isinstance(declared, list)
-        or len(declared) != len(shape)
-        or not all(type(size) is int and 0 <= size < 2**31 for size in declared)
-        or any(want is not None and want != got for want, got in zip(shape, declared, strict=True))
-    ):
-        raise ProtocolError(f"expected shape {shape}, got {declared}")
-    size, data = math.prod(declared) * np.dtype(dtype).itemsize, encoded.get("data")
-    try:  # never inflated more than a byte past the shape's
-        if isinstance(data, bytes) and compressed:
-            data = zlib.decompressobj().decompress(data, min(size + 1, 1 << 62))
-    except zlib.error as error:
-        raise ProtocolError(f"an array's bytes that do not inflate ({error})") from None
-    if not isinstance(data, bytes) or len(data) != size:
-        raise ProtocolError("an array whose bytes do not match its shape")
-    return np.frombuffer(data if compressed else bytearray(data), dtype=dtype).reshape(declared)
 
 
 @dataclass

@@ -37,14 +37,20 @@ class Policy:
         observation_space,
         action_space,
         device: str = "cpu",
+        *,
+        loading: bool = False,
     ) -> Policy:
         """``architecture``: the model's network as ``networks.architecture`` names it;
-        ``device``: where it runs (torch's name: "cpu", "cuda")."""
+        ``device``: where it runs (torch's name: "cpu", "cuda"); ``loading``: every weight is
+        loaded next (``load_weights`` refuses a file that lacks one), so PPO's orthogonal
+        initialisation, a QR decomposition of each extractor's dense layer (about 0.1 s each
+        for DeepRacer's networks, thrown away at once), is skipped."""
         kwargs = policy_kwargs(algorithm, architecture)
         spaces = (observation_space, action_space)
         if algorithm == PPO:
             from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 
+            kwargs = {**kwargs, "ortho_init": not loading}
             policy = MultiInputActorCriticPolicy(*spaces, lambda _: 0.0, **kwargs)
             module = policy
         else:
@@ -58,14 +64,20 @@ class Policy:
 
     @classmethod
     def for_environment(
-        cls, algorithm: str, architecture: str, environment: dict, device: str = "cpu"
+        cls,
+        algorithm: str,
+        architecture: str,
+        environment: dict,
+        device: str = "cpu",
+        *,
+        loading: bool = False,
     ) -> Policy:
         """The policy for the environment that ``environment`` (``gymnasium.make``'s keyword
-        arguments) describes, built from its spaces, on ``device``."""
+        arguments) describes, built from its spaces, on ``device`` (``loading``: as ``build``)."""
         env = gymnasium.make(simulator.ENV_ID, **environment)
         try:
             spaces = (env.observation_space, env.action_space)
-            return cls.build(algorithm, architecture, *spaces, device)
+            return cls.build(algorithm, architecture, *spaces, device, loading=loading)
         finally:
             env.close()
 

@@ -212,7 +212,7 @@ class Server:
             key = self._key(child, hashlib.sha256(data).hexdigest())
             if key not in self.policies:
                 built = (child.algorithm, child.architecture, *child.spaces, self.device)
-                policy = Policy.build(*built)
+                policy = Policy.build(*built, loading=True)
                 policy.load_published(data)
                 self.policies[key] = Shared(policy)
             self._drive_with(child, key)

@@ -29,8 +29,8 @@ import cv2
 import msgpack
 
 from rl import episode
-from rl.experience import encode_arrays
 from rl.slots import SlotsFailed
+from rl.wire import encode_arrays
 from sandbox import seal, served
 from sandbox.protocol import pack, read_frame
 from sandbox.reward import RewardFailure, RewardProcess

@@ -6,7 +6,7 @@ import textwrap
 import msgpack
 import numpy as np
 
-from rl.experience import decode_array
+from rl.wire import decode_array
 from sandbox import MiB, Sandbox, SandboxFailure
 
 POLICY = {"algorithm": "clipped_ppo", "architecture": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"}

@@ -11,7 +11,7 @@ import msgpack
 import pytest
 
 import sandbox as sandbox_package
-from rl.experience import decode_array
+from rl.wire import decode_array
 from sandbox import CHILD_ENVIRONMENT, MiB, Sandbox, SandboxFailure, self_test
 from tests.helpers.sandbox import PARAMS, POLICY, assert_stopped, driving, outcome, reward
 
