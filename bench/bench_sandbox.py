@@ -14,12 +14,19 @@ forward pass for all): steps/s of all the cars together, on the same one core. W
 ``--served``, each beside the same with the policy served to the child by a machine's policy
 server (``rl.policy_server``, started for the bench on that same core): the cost of the round
 trip a step through shared memory; ``--served cuda``, the server on the GPU.
+
+``--starts N``: what starting costs, the CPU seconds (median of N) of a sandbox child started,
+given a reward function and closed, as a reward check starts one (the child's and its reward
+process's own CPU), and of a policy of DeepRacer's 3-layer PPO built to be driven with weights
+loaded at once (``Policy.build(loading=True)``, as an evaluation, an export and the policy
+server build theirs) against one built with its own first weights.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import tempfile
 import time
@@ -104,6 +111,30 @@ def cars_alone(options: argparse.Namespace) -> None:
         print(f"{cars:<32}" + "".join(f"{rate:>20,.0f}" for rate in rates))
 
 
+def starts(count: int) -> None:
+    def child() -> float:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        with Sandbox(samples={"track": TRACK, "direction": "counterclockwise"}) as sandbox:
+            sandbox.load(EXAMPLES[0].source)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+    def policy(loading: bool) -> float:
+        started = time.process_time()
+        Policy.for_environment(**POLICY, environment={"track": TRACK}, loading=loading)
+        return time.process_time() - started
+
+    policy(False)  # PyTorch loaded and warmed before any is timed
+    figures = {
+        "a sandbox child started, as a reward check starts one": [child() for _ in range(count)],
+        "a policy built with its own first weights": [policy(False) for _ in range(count)],
+        "a policy built for the weights it loads": [policy(True) for _ in range(count)],
+    }
+    print(f"{'start':<56}{'CPU s':>8}")
+    for name, seconds in figures.items():
+        print(f"{name:<56}{statistics.median(seconds):>8.3f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--cars", type=int, nargs="+", help="rollouts alone, with these cars")
@@ -116,7 +147,11 @@ def main() -> None:
         choices=("cpu", "cuda"),
         help="and with the policy served from this device (cpu)",
     )
+    parser.add_argument("--starts", type=int, help="what starting costs, median of so many")
     options = parser.parse_args()
+    if options.starts:
+        starts(options.starts)
+        return
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # the child inherits it
     if options.cars:

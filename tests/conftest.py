@@ -28,9 +28,11 @@ from tests.services import (
 )
 
 TRAINERS = 2  # the suite's training worker's processes (celery_worker_process)
-BROWSER_TESTS = Path(__file__).parent / "browser"
+TESTS = Path(__file__).parent
+BROWSER_TESTS = TESTS / "browser"
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist names each test's group from its marker
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Browser tests are marked, and run last: the slowest, and the ones that need everything.
     Tests that take the ``tensorflow`` fixture are marked too, and those that need the suite's
@@ -40,7 +42,11 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     Where the suite runs in several processes (``make test``: pytest-xdist's ``-n 2 --dist
     loadgroup``), the tests that share a costly session's service run in one process, so that it
     is started once: the cluster's own machines first (the longest test, beside everything
-    else), then those of the suite's Celery workers, then the browser's; the others spread."""
+    else), then the suite's Celery workers' (browser tests among them), then the browser's. The
+    others spread a module at a time, a module's fixtures and caches set up once, and
+    TensorFlow's tests all in one process, which alone loads it. (Until 2026-11-30 the groups
+    were marked after pytest-xdist had read the marks: every test spread on its own, both
+    processes started the Celery workers, and both ``manage.py runconsole`` for its module.)"""
     rank: dict[str, int] = {}
     for item in items:
         fixtures = getattr(item, "fixturenames", ())
@@ -51,8 +57,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         if "celery_worker_process" in fixtures:
             item.add_marker(pytest.mark.slow)
         group = _process_group(item, fixtures)
-        if group:
-            item.add_marker(pytest.mark.xdist_group(group))
+        item.add_marker(pytest.mark.xdist_group(group))
         rank[item.nodeid] = _rank(item, group)
     items.sort(key=lambda item: rank[item.nodeid])
 
@@ -63,11 +68,13 @@ GROUPS = ("cluster", "celery", "browser")  # in the order they start
 def _process_group(item: pytest.Item, fixtures) -> str:
     if item.get_closest_marker("cluster"):
         return "cluster"
-    if item.path.is_relative_to(BROWSER_TESTS):
-        return "browser"
     if "celery_worker_process" in fixtures:
         return "celery"
-    return ""
+    if item.path.is_relative_to(BROWSER_TESTS):
+        return "browser"
+    if "tensorflow" in fixtures:
+        return "tensorflow"
+    return item.path.relative_to(TESTS).with_suffix("").as_posix()  # its module's
 
 
 def _rank(item: pytest.Item, group: str) -> float:
@@ -77,7 +84,7 @@ def _rank(item: pytest.Item, group: str) -> float:
     (which it did, at 82 s, in the suite's run at 54a4eab, against 36 s alone)."""
     late = 0.5 if item.get_closest_marker("late") else 0.0
     if os.environ.get("PYTEST_XDIST_WORKER"):  # a worker's collection: the scheduler's order
-        return (GROUPS.index(group) if group else len(GROUPS)) + late
+        return (GROUPS.index(group) if group in GROUPS else len(GROUPS)) + late
     return (1 if item.path.is_relative_to(BROWSER_TESTS) else 0) + late
 
 
