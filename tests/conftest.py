@@ -223,7 +223,13 @@ def celery_worker_process(test_database, logs_dir) -> Iterator[WorkerPools]:
         [
             ServiceProcess(
                 python_module("celery", *pool.arguments(), "--without-mingle", "--without-gossip"),
-                env={**service_env(test_database), "PITLANE_TRAINERS": str(TRAINERS)},
+                # One PyTorch thread a trainer, as the cluster's machines have: the suite keeps
+                # both cores busy, where a second thread only waits at each update's barriers.
+                env={
+                    **service_env(test_database),
+                    "PITLANE_TRAINERS": str(TRAINERS),
+                    "PITLANE_TRAINER_THREADS": "1",
+                },
                 log=logs_dir / f"celery-{pool.queue}.log",
             )
             for pool in worker_pools(trainers=TRAINERS, simulations=3, prefix="test-")
