@@ -44,9 +44,9 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     is started once: the cluster's own machines first (the longest test, beside everything
     else), then the suite's Celery workers' (browser tests among them), then the browser's. The
     others spread a module at a time, a module's fixtures and caches set up once, and
-    TensorFlow's tests all in one process, which alone loads it. (Until 2026-11-30 the groups
-    were marked after pytest-xdist had read the marks: every test spread on its own, both
-    processes started the Celery workers, and both ``manage.py runconsole`` for its module.)"""
+    TensorFlow's tests all in one process, which alone loads it. (Until 2026-11-30, under pytest
+    9.2, the groups never reached the scheduler, pytest-dev/pytest-xdist#1386: every test spread
+    on its own, both processes started the Celery workers, and both ``manage.py runconsole``.)"""
     rank: dict[str, int] = {}
     for item in items:
         fixtures = getattr(item, "fixturenames", ())
