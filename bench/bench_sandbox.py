@@ -15,18 +15,19 @@ forward pass for all): steps/s of all the cars together, on the same one core. W
 server (``rl.policy_server``, started for the bench on that same core): the cost of the round
 trip a step through shared memory; ``--served cuda``, the server on the GPU.
 
-``--starts N``: what starting costs, the CPU seconds (median of N) of a sandbox child started,
-given a reward function and closed, as a reward check starts one (the child's and its reward
-process's own CPU), and of a policy of DeepRacer's 3-layer PPO built to be driven with weights
-loaded at once (``Policy.build(loading=True)``, as an evaluation, an export and the policy
-server build theirs) against one built with its own first weights.
+``--starts N``: what starting costs, the CPU seconds (median of N) the whole machine spends on
+a sandbox child started, given a reward function and closed, as a reward check starts one (this
+process's side, the child's and its reward process's: the machine's busy time, so run it on an
+idle machine), on a worker process's zygote started (once a process: ``sandbox.zygote``), and on
+a policy of DeepRacer's 3-layer PPO built to be driven with weights loaded at once
+(``Policy.build(loading=True)``, as an evaluation, an export and the policy server build theirs)
+against one built with its own first weights.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import resource
 import statistics
 import tempfile
 import time
@@ -38,7 +39,8 @@ import simulator
 from rl import episode
 from rl.policies import Policy
 from rl.policy_lease import PolicyLease
-from sandbox import MiB, Sandbox
+from sandbox import CHILD_ENVIRONMENT, MiB, Sandbox
+from sandbox.spawner import Zygote
 from training.rewards import EXAMPLES
 
 STEPS = 3000
@@ -111,13 +113,28 @@ def cars_alone(options: argparse.Namespace) -> None:
         print(f"{cars:<32}" + "".join(f"{rate:>20,.0f}" for rate in rates))
 
 
+def machine_cpu() -> float:
+    """[s] of CPU the whole machine has been busy (``/proc/stat``). A sandbox child is its
+    zygote's, not this process's, so only the machine sees all a start costs: this process's
+    side, the child's and its reward process's."""
+    with open("/proc/stat") as stat:
+        ticks = [int(field) for field in stat.readline().split()[1:]]
+    return (sum(ticks) - ticks[3] - ticks[4]) / os.sysconf("SC_CLK_TCK")  # less idle, iowait
+
+
 def starts(count: int) -> None:
     def child() -> float:
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        before = machine_cpu()
         with Sandbox(samples={"track": TRACK, "direction": "counterclockwise"}) as sandbox:
             sandbox.load(EXAMPLES[0].source)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        return machine_cpu() - before
+
+    def zygote() -> float:
+        before = machine_cpu()
+        started = Zygote(CHILD_ENVIRONMENT)
+        started.spawn().stdin.close()  # a child that exits at once
+        started.stop()
+        return machine_cpu() - before
 
     def policy(loading: bool) -> float:
         started = time.process_time()
@@ -125,8 +142,10 @@ def starts(count: int) -> None:
         return time.process_time() - started
 
     policy(False)  # PyTorch loaded and warmed before any is timed
+    child()  # and this process's zygote started
     figures = {
         "a sandbox child started, as a reward check starts one": [child() for _ in range(count)],
+        "a worker process's zygote started (once)": [zygote() for _ in range(count)],
         "a policy built with its own first weights": [policy(False) for _ in range(count)],
         "a policy built for the weights it loads": [policy(True) for _ in range(count)],
     }

@@ -1,16 +1,17 @@
 """Running racers' code: a sandbox child per use, and the worker's self-test of the sandbox.
 
-``Sandbox`` starts ``sandbox.child`` as a fresh interpreter (fork and exec, not a fork of the
-worker) with an empty environment and only its three standard pipes, waits until it has sealed
-itself, then sends it the racer's code and requests. The racer's code runs in a process of its own
-beneath the child (``reward.py``), which times each call from outside and cannot be written to the
-worker by it. Here, every request has a deadline from the moment it is sent (an episode: a step at
-least every ``GRACE`` past its cars' calls' deadlines), every write to the child has one, the
-frames read ahead and the standard error kept are bounded, and a child that breaks the protocol is
-killed; so no reward function can hang, flood or take down a worker. The child dies with the
-worker. Where the machine's policy server serves the child its policy (``policy_lease``,
-``served.py``), the child is handed its slots there and nothing else of the server's, and loads
-no torch. This package imports no Django: the child imports it too.
+``Sandbox`` has ``sandbox.child`` forked by the worker process's zygote (``zygote.py``), a clean
+interpreter (fork and exec, never a fork of the worker) with an empty environment that has imported
+the child's code once; the child gets only its three standard pipes. It waits until the child has
+sealed itself, then sends it the racer's code and requests. The racer's code runs in a process of
+its own beneath the child (``reward.py``), which times each call from outside and cannot be written
+to the worker by it. Here, every request has a deadline from the moment it is sent (an episode: a
+step at least every ``GRACE`` past its cars' calls' deadlines), every write to the child has one,
+the frames read ahead and the standard error kept are bounded, and a child that breaks the protocol
+is killed; so no reward function can hang, flood or take down a worker. The child dies with the
+worker (its zygote ends when the worker does). Where the machine's policy server serves the child
+its policy (``policy_lease``, ``served.py``), the child is handed its slots there and nothing else
+of the server's, and loads no torch. This package imports no Django: the child imports it too.
 
 Long because every bound above lives in the one client class, where a reader checks them all.
 """
@@ -23,7 +24,6 @@ import queue
 import signal
 import socket
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -37,6 +37,7 @@ from typing import Any
 from rl.policy_lease import PolicyLease, PolicyServerFailed
 from sandbox import served
 from sandbox.protocol import Late, ProtocolError, pack, read_frame, write_by
+from sandbox.spawner import Zygote, ZygoteFailed
 from simulator.rewards import RewardError, checked_reward
 
 logger = logging.getLogger(__name__)
@@ -165,20 +166,13 @@ class Sandbox:
                 raise SandboxFailure("policy", str(error)[:500]) from None
             policy = {**policy, "served": self.policy_lease.child_settings(served.CHILD_PATIENCE)}
             handed = self.policy_lease.fds
-        self._process = subprocess.Popen(
-            [sys.executable, "-s", "-m", "sandbox.child"],
-            cwd=ROOT,
-            env=CHILD_ENVIRONMENT,
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            close_fds=True,
-            pass_fds=handed,
-            start_new_session=True,
-        )
-        if self.niceness:  # its whole process group: the reward process too, started or not
-            ours = os.getpriority(os.PRIO_PROCESS, 0)
-            os.setpriority(os.PRIO_PGRP, self._process.pid, min(ours + self.niceness, 19))
+        # The child takes its niceness before it forks its reward process, which inherits it.
+        niceness = min(os.getpriority(os.PRIO_PROCESS, 0) + self.niceness, 19)
+        try:
+            self._process = _zygote().spawn(pass_fds=handed, niceness=niceness)
+        except ZygoteFailed as error:
+            logger.error("No sandbox child could start: %s", error)
+            raise SandboxFailure("crashed", "The simulation's process could not start.") from None
         if self.policy_lease is not None:
             self.policy_lease.handed()  # the server sees the child go when it goes
         os.set_blocking(self._process.stdin.fileno(), False)
@@ -483,6 +477,12 @@ class Sandbox:
                 self.stderr_tail = (self.stderr_tail + chunk)[-STDERR_KEEP:]
         except OSError:
             pass
+
+
+@cache
+def _zygote() -> Zygote:
+    """This process's zygote, which forks its sandbox children (``sandbox.zygote``)."""
+    return Zygote(CHILD_ENVIRONMENT)
 
 
 def _failure_of(frame: dict) -> SandboxFailure:

@@ -1,6 +1,7 @@
 """Reward functions run in the sandbox, and sandboxes that drive: what a reward function's call
 comes to, and the episodes each car of a sandbox of several drives."""
 
+import os
 import textwrap
 
 import msgpack
@@ -75,3 +76,27 @@ def episodes_by_car(sandbox: Sandbox, per_car: int) -> dict[int, list[dict]]:
 def array(payload: dict, name: str) -> np.ndarray:
     """The float32 array ``name`` of an episode's ``payload``."""
     return decode_array(payload["arrays"][name], "float32", (None,))
+
+
+def children_of(pid: int) -> list[int]:
+    """The processes whose parent is ``pid``."""
+    found = []
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                with open(f"/proc/{entry}/stat") as stat:
+                    fields = stat.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid:
+                found.append(int(entry))
+    return found
+
+
+def alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False

@@ -13,6 +13,7 @@ import pytest
 import sandbox as sandbox_package
 from rl.wire import decode_array
 from sandbox import CHILD_ENVIRONMENT, MiB, Sandbox, SandboxFailure, self_test
+from sandbox.spawner import Zygote
 from tests.helpers.sandbox import PARAMS, POLICY, assert_stopped, driving, outcome, reward
 
 
@@ -277,15 +278,16 @@ def test_a_rollout_without_pybullet_says_so_when_its_car_nears_a_box(
     from jobs.rollouts import failure_words
 
     (tmp_path / "pybullet.py").write_text("raise ImportError('not installed')\n")
-    monkeypatch.setattr(
-        sandbox_package, "CHILD_ENVIRONMENT", {**CHILD_ENVIRONMENT, "PYTHONPATH": str(tmp_path)}
-    )
+    # The children of a zygote that imports from there, where PyBullet "is not installed".
+    zygote = Zygote({**CHILD_ENVIRONMENT, "PYTHONPATH": str(tmp_path)})
+    monkeypatch.setattr(sandbox_package, "_zygote", lambda: zygote)
     env = {**BOXES, "sensors": sensors}
     sandbox = Sandbox(env=env, policy=POLICY, memory_allowance=1024 * MiB)
     with pytest.raises(SandboxFailure) as failed, sandbox:  # at the start, or in an episode
         sandbox.load(reward("return 1.0"))
         for _ in range(20):
             sandbox.episode("random")
+    zygote.stop()
     assert failed.value.kind == "simulation"
     assert failure_words(failed.value, 0) == (
         "Simulation worker 1 failed (not your reward function): Object avoidance and "

@@ -18,6 +18,7 @@ import sandbox as sandbox_package
 from sandbox import GRACE, STDERR_KEEP, MiB, Sandbox, SandboxFailure
 from sandbox.protocol import HEADER, Late, pack, read_frame_by, write_by
 from sandbox.reward import KILL_GRACE, RewardFailure, RewardProcess
+from tests.helpers.sandbox import alive, children_of
 from training.rewards import reward_validate, static_problems
 
 PARAMS = {"x": 1.0, "y": 2.0, "track_width": 0.76, "distance_from_center": 0.1}
@@ -263,28 +264,6 @@ time.sleep(600)
 """
 
 
-def children_of(pid: int) -> list[int]:
-    found = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as stat:
-                    fields = stat.read().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[1]) == pid:
-                found.append(int(entry))
-    return found
-
-
-def alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
 def test_nothing_outlives_a_worker_killed_outright():
     worker = subprocess.Popen(
         [sys.executable, "-c", WORKER], stdout=subprocess.PIPE, text=True, cwd=os.getcwd()
@@ -293,13 +272,19 @@ def test_nothing_outlives_a_worker_killed_outright():
         child = int(worker.stdout.readline())
         grandchildren = children_of(child)
         assert len(grandchildren) == 1, "the child has its reward process"
+        (zygote,) = children_of(worker.pid)  # which forked the child (sandbox.zygote)
+        assert child in children_of(zygote)
         worker.send_signal(signal.SIGKILL)
         worker.wait()
         deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and (alive(child) or alive(grandchildren[0])):
+        processes = {
+            "the sandbox child": child,
+            "the reward process": grandchildren[0],
+            "the zygote": zygote,
+        }
+        while time.monotonic() < deadline and any(map(alive, processes.values())):
             time.sleep(0.1)
-        assert not alive(child), "the sandbox child outlived its worker"
-        assert not alive(grandchildren[0]), "the reward process outlived its worker"
+        assert [name for name, pid in processes.items() if alive(pid)] == [], "outlived a worker"
     finally:
         worker.kill()
         worker.wait()
