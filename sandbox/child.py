@@ -1,4 +1,5 @@
-"""The sandbox child: ``python -s -m sandbox.child``, started by ``Sandbox``.
+"""The sandbox child: forked for ``Sandbox`` by its worker process's zygote (``zygote.py``), which
+runs ``main`` as ``python -s -m sandbox.child`` would.
 
 It reads requests on standard input and answers on standard output, in protocol frames. It runs
 only our code: it forks the reward process (``reward.py``), where the racer's code will run

@@ -87,7 +87,7 @@ class Zygote:
         self._process: subprocess.Popen | None = None
         self._socket: socket.socket | None = None
         self._owner = 0  # the pid of the process that started it
-        os.register_at_fork(after_in_child=self._forget)
+        os.register_at_fork(after_in_child=self._after_fork)
         atexit.register(self.stop)
 
     def spawn(self, *, pass_fds: tuple[int, ...] = (), niceness: int = 0) -> Spawned:
@@ -139,15 +139,19 @@ class Zygote:
         self._kill()
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         with theirs:
-            self._process = subprocess.Popen(
-                [sys.executable, "-s", "-m", "sandbox.zygote", str(theirs.fileno())],
-                cwd=ROOT,
-                env=self.environment,
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                pass_fds=(theirs.fileno(),),
-                start_new_session=True,
-            )
+            try:
+                self._process = subprocess.Popen(
+                    [sys.executable, "-s", "-m", "sandbox.zygote", str(theirs.fileno())],
+                    cwd=ROOT,
+                    env=self.environment,
+                    stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL,
+                    pass_fds=(theirs.fileno(),),
+                    start_new_session=True,
+                )
+            except OSError as error:
+                ours.close()
+                raise ZygoteFailed(f"the sandbox's zygote could not be started: {error}") from None
         self._socket, self._owner = ours, os.getpid()
         ours.settimeout(START_TIMEOUT)
         try:
@@ -167,10 +171,13 @@ class Zygote:
             self._socket.close()
         self._forget()
 
+    def _after_fork(self) -> None:
+        self._lock = threading.Lock()  # held, perhaps, by a thread the fork left behind
+        self._forget()
+
     def _forget(self) -> None:
         """Drop the handle. In a forked process the zygote is the parent's: the copy of its
         socket the fork made is closed, so that the zygote still ends when the parent goes."""
         if self._socket is not None and self._owner != os.getpid():
             self._socket.close()
-            self._lock = threading.Lock()  # held, perhaps, by a thread the fork left behind
         self._process, self._socket, self._owner = None, None, 0

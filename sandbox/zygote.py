@@ -61,7 +61,10 @@ def main() -> None:
                     os.close(received)
                 control.send(json.dumps({"error": str(error)[:200]}).encode())
                 continue
-            socket.send_fds(control, [json.dumps({"pid": pid}).encode()], [pidfd])
+            try:
+                socket.send_fds(control, [json.dumps({"pid": pid}).encode()], [pidfd])
+            except OSError:  # the worker went while we forked
+                os._exit(0)
             children[pidfd] = (pid, fds[0])
             ready.register(pidfd, select.POLLIN)
 

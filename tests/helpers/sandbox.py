@@ -1,14 +1,15 @@
 """Reward functions run in the sandbox, and sandboxes that drive: what a reward function's call
 comes to, and the episodes each car of a sandbox of several drives."""
 
-import os
 import textwrap
+from pathlib import Path
 
 import msgpack
 import numpy as np
 
 from rl.wire import decode_array
 from sandbox import MiB, Sandbox, SandboxFailure
+from tests.services import parent_of
 
 POLICY = {"algorithm": "clipped_ppo", "architecture": "DEEP_CONVOLUTIONAL_NETWORK_SHALLOW"}
 
@@ -81,15 +82,12 @@ def array(payload: dict, name: str) -> np.ndarray:
 def children_of(pid: int) -> list[int]:
     """The processes whose parent is ``pid``."""
     found = []
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                with open(f"/proc/{entry}/stat") as stat:
-                    fields = stat.read().rsplit(")", 1)[1].split()
-            except OSError:
-                continue
-            if int(fields[1]) == pid:
-                found.append(int(entry))
+    for entry in Path("/proc").glob("[0-9]*"):
+        try:
+            if parent_of(int(entry.name)) == pid:
+                found.append(int(entry.name))
+        except OSError:  # ended as it was read
+            continue
     return found
 
 

@@ -128,16 +128,17 @@ def trainer_initializing(owner):
 
 
 def sandbox_children() -> dict[int, int]:
-    """The running sandbox children: {pid: parent pid}. Their reward processes, forks of theirs
-    with the same command line, are left out."""
+    """The running sandbox children: {pid: their zygote's pid}. Their reward processes, forks of
+    theirs, are left out."""
     found = {}
     for entry in Path("/proc").glob("[0-9]*"):
         try:
-            if b"sandbox.child" in (entry / "cmdline").read_bytes():
-                found[int(entry.name)] = parent_of(int(entry.name))
-        except OSError:
+            parent = parent_of(int(entry.name))
+            if b"sandbox.zygote" in Path(f"/proc/{parent}/cmdline").read_bytes():
+                found[int(entry.name)] = parent
+        except (OSError, ValueError, IndexError):  # a process that ended as it was read
             continue
-    return {pid: parent for pid, parent in found.items() if parent not in found}
+    return found
 
 
 def training_job(owner, *, seconds: float, ago: float, **fields) -> TrainingJob:

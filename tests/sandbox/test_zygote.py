@@ -117,12 +117,13 @@ def test_a_forked_worker_starts_its_own_zygote_and_its_parents_ends_with_the_par
             os.kill(pid, signal.SIGKILL)
 
 
-def test_a_sandbox_whose_zygote_cannot_start_fails_in_words(monkeypatch):
+@pytest.mark.parametrize("python", ["/bin/false", "/nowhere/python"], ids=["exits", "missing"])
+def test_a_sandbox_whose_zygote_cannot_start_fails_in_words(monkeypatch, python):
     import sandbox as sandbox_package
 
     broken = Zygote(CHILD_ENVIRONMENT)
     monkeypatch.setattr(sandbox_package, "_zygote", lambda: broken)
-    monkeypatch.setattr(sys, "executable", "/bin/false")
+    monkeypatch.setattr(sys, "executable", python)
     with pytest.raises(SandboxFailure) as failed:
         Sandbox().start()
     assert failed.value.kind == "crashed"
