@@ -95,10 +95,16 @@ def pybullet_vehicle():
 CONTINUOUS = {"steering_angle": {"low": -30, "high": 30}, "speed": {"low": 0.1, "high": 4}}
 
 
-def lap(track: str, driver) -> float | None:
-    """[s] the lap time of ``driver(env)`` on ``track``, None unless the lap was clean."""
+def evaluation(track: str, driver, *, direction: str = "counterclockwise", laps: int = 1) -> dict:
+    """The last step's info of an evaluation of ``laps`` laps of ``track`` driven by
+    ``driver(env)``, ended at its first reset."""
     env = gymnasium.make(
-        simulator.ENV_ID, track=track, mode="evaluation", laps=1, action_space=CONTINUOUS
+        simulator.ENV_ID,
+        track=track,
+        direction=direction,
+        mode="evaluation",
+        laps=laps,
+        action_space=CONTINUOUS,
     )
     env.reset(seed=0)
     chosen = driver(env.unwrapped)
@@ -107,6 +113,12 @@ def lap(track: str, driver) -> float | None:
         if terminated or truncated or info["resets"]:
             break
     env.close()
+    return info
+
+
+def lap(track: str, driver) -> float | None:
+    """[s] the lap time of ``driver(env)`` on ``track``, None unless the lap was clean."""
+    info = evaluation(track, driver)
     clean = info["status"] == "lap_complete" and not info["resets"]
     return info["lap_times"][0] if clean else None
 

@@ -10,6 +10,8 @@ import numpy as np
 from simulator.car import GRAVITY
 from simulator.config import ContinuousActions
 from simulator.env import DeepRacerEnv
+from simulator.racing_line import RacingLine
+from simulator.tracks import Track
 
 
 class CentreLineDriver:
@@ -33,22 +35,24 @@ class CentreLineDriver:
         gain: float = 2.0,
         heading_gain: float = 0.5,
         anticipation: float = 0.3,
+        path: Track | None = None,
     ) -> None:
         self.env = env
         self.speed = speed
         self.gain = gain  # [1/s] how fast an offset from the line is steered out
         self.heading_gain = heading_gain  # of the heading error, steered out at once
         self.anticipation = anticipation  # [s] ahead, where the curvature is read
-        self.curvature = curvature(env.track, self.SPACING, self.WINDOW)
+        self.path = path or env.track  # the line followed: the centre line unless given
+        self.curvature = curvature(self.path, self.SPACING, self.WINDOW)
 
     def steering(self) -> float:
         """[deg] the steering command, within ±30°."""
         env, car = self.env, self.env.car
         spec = car.spec
         front = car.point_ahead(spec.wheelbase)
-        where = env.track.project_points([front])
+        where = self.path.project_points([front])
         here = float(where.distance[0])
-        _, _, heading = env.track.point_at(here)
+        _, _, heading = self.path.point_at(here)
         offset = float(where.offset[0]) * (1.0 if where.is_left[0] else -1.0)  # left of the line
         speed = max(car.speed, 0.3)
         ahead = here + speed * self.anticipation
@@ -109,6 +113,26 @@ class BrakingDriver(CentreLineDriver):
         ahead = env.track.project_points([car.position]).distance[0] + car.speed * env.dt
         index = int(ahead / self.SPACING) % len(self.profile)
         return float(self.profile[index])
+
+
+class RacingLineDriver(CentreLineDriver):
+    """The path-following driver on a racing line (``simulator.racing_line``) rather than the
+    centre line, at the line's speeds: it asks for the speed due where the car will be a step
+    on, so it brakes into each bend as the line does."""
+
+    def __init__(self, env: DeepRacerEnv, line: RacingLine, **kw) -> None:
+        path = line.as_track(env.track)
+        super().__init__(env, speed=float(line.speeds.max()), path=path, **kw)
+        self.line = line
+        steps = np.hypot(*(np.roll(line.points, -1, axis=0) - line.points).T)
+        self._along = np.concatenate([[0.0], np.cumsum(steps)])  # [m] to each point, and round
+        self._speeds = np.append(line.speeds, line.speeds[0])
+
+    def target_speed(self) -> float:
+        env, car = self.env, self.env.car
+        ahead = self.path.project_points([car.position]).distance[0] + car.speed * env.dt
+        due = np.interp(ahead % self._along[-1], self._along, self._speeds)
+        return float(np.clip(due / car.spec.wheel_target(1.0), car.spec.min_speed, self.speed))
 
 
 def curvature(track, spacing: float, window: float) -> np.ndarray:
