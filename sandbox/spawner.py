@@ -62,6 +62,13 @@ class Spawned:
                 with contextlib.suppress(ProcessLookupError):
                     signal.pidfd_send_signal(self._pidfd, signal.SIGKILL)
 
+    def __del__(self) -> None:
+        # Never waited for (a worker that stopped holding it): its two descriptors still go.
+        if self.returncode is None:
+            for fd in (self._status, self._pidfd):
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+
     def _ended(self, timeout: float | None) -> int | None:
         """The exit code once the zygote has reaped the child (as Popen gives it: minus the
         signal that killed it); None if it has not within ``timeout`` seconds."""
