@@ -120,9 +120,25 @@ class RacingLineDriver(CentreLineDriver):
     centre line, at the line's speeds: it asks for the speed due where the car will be a step
     on, so it brakes into each bend as the line does."""
 
-    def __init__(self, env: DeepRacerEnv, line: RacingLine, **kw) -> None:
+    def __init__(
+        self,
+        env: DeepRacerEnv,
+        line: RacingLine,
+        heading_gain: float = 0.8,
+        anticipation: float = 0.15,
+        **kw,
+    ) -> None:
+        # Nearer and firmer than on the centre line: the line's bends are tighter and taken at
+        # the grip's limit (at 0.5 and 0.3 s the car left 75 of the 122 built-in lines).
         path = line.as_track(env.track)
-        super().__init__(env, speed=float(line.speeds.max()), path=path, **kw)
+        super().__init__(
+            env,
+            speed=float(line.speeds.max()),
+            path=path,
+            heading_gain=heading_gain,
+            anticipation=anticipation,
+            **kw,
+        )
         self.line = line
         steps = np.hypot(*(np.roll(line.points, -1, axis=0) - line.points).T)
         self._along = np.concatenate([[0.0], np.cumsum(steps)])  # [m] to each point, and round
