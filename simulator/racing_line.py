@@ -37,7 +37,7 @@ from simulator.car import GRAVITY, CarSpec
 from simulator.tracks import DATA_DIR, Track
 
 LINES_DIR = DATA_DIR / "lines"  # the built-in tracks' lines: ``python -m simulator.racing_line``
-METHOD = 4  # raised when the method changes: every stored line is then stale
+METHOD = 4  # raised when the method changes (the constants below are in the key too)
 
 SPACING = 0.1  # [m] between the line's points
 KNOT_SPACING = 0.5  # [m] between the knots of the time refinement's offsets
@@ -268,7 +268,8 @@ def line_key(track: Track, spec: CarSpec, margin: float) -> str:
     digest = hashlib.sha256()
     for array in (track.centre, track.inner, track.outer):
         digest.update(np.ascontiguousarray(array, dtype=np.float64).tobytes())
-    method = (METHOD, SPACING, KNOT_SPACING, GRIP, MIN_CURVATURE, round(margin, 6))
+    method = (METHOD, SPACING, KNOT_SPACING, GRIP, MIN_CURVATURE, EPS, PENALTY, STEERING, RESTARTS)
+    method += (round(margin, 6),)
     digest.update(repr((method, spec)).encode())
     return digest.hexdigest()
 
