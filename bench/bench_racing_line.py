@@ -15,9 +15,9 @@ from __future__ import annotations
 import argparse
 import time
 
-from bench.bench_simulator import braking_lap, evaluation, lap
+from bench.bench_simulator import best_constant, braking_lap, evaluation
 from simulator import tracks
-from simulator.controller import CentreLineDriver, RacingLineDriver
+from simulator.controller import RacingLineDriver
 from simulator.racing_line import line_for
 
 
@@ -28,15 +28,6 @@ def followed(name: str, direction: str, line) -> tuple[float, float] | None:
         return None
     standing, flying = info["lap_times"]
     return standing, flying
-
-
-def best_constant(name: str) -> tuple[float | None, float | None]:
-    """([m/s] the fastest constant speed the centre-line driver laps clean at, its lap [s])."""
-    for tenths in range(40, 4, -1):
-        speed = tenths / 10
-        if time_ := lap(name, lambda env, v=speed: CentreLineDriver(env, speed=v)):
-            return speed, time_
-    return None, None
 
 
 def main() -> None:

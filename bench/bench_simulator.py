@@ -123,6 +123,16 @@ def lap(track: str, driver) -> float | None:
     return info["lap_times"][0] if clean else None
 
 
+def best_constant(track: str) -> tuple[float | None, float | None]:
+    """([m/s] the fastest constant speed the centre-line driver laps ``track`` clean at, in
+    tenths, its lap [s]); (None, None) when none does."""
+    for tenths in range(40, 4, -1):
+        speed = tenths / 10
+        if time_ := lap(track, lambda env, v=speed: CentreLineDriver(env, speed=v)):
+            return speed, time_
+    return None, None
+
+
 GRIP_SHARES = [share / 40 for share in range(20, 41)]  # 0.5 to 1.0 in steps of 0.025
 
 
@@ -143,14 +153,7 @@ def grip_table() -> None:
         f"{'braking lap':>13}{'grip share':>12}{'at 4 m/s':>10}"
     )
     for name in tracks.names(origin="pitlane"):
-        best = next(
-            (
-                (tenths / 10, time)
-                for tenths in range(40, 4, -1)
-                if (time := lap(name, lambda env, v=tenths / 10: CentreLineDriver(env, speed=v)))
-            ),
-            (None, None),
-        )
+        best = best_constant(name)
         fastest, share = braking_lap(name)
         at_four = "clean" if best[0] == 4.0 else "fails"
         print(

@@ -231,9 +231,6 @@ def _quickest(centre, normals, low, high, start, limits: Limits) -> np.ndarray:
         values[-1] = values[0]
         basis[:, k] = CubicSpline(where, values, bc_type="periodic")(at)
 
-    def offsets(change: np.ndarray) -> np.ndarray:
-        return np.clip(start + basis @ change, low, high)
-
     def lap(change: np.ndarray) -> float:
         wanted = start + basis @ change
         return _cost(centre, normals, wanted, np.clip(wanted, low, high), limits)
@@ -246,7 +243,7 @@ def _quickest(centre, normals, low, high, start, limits: Limits) -> np.ndarray:
         if found.fun > best - 1e-4:
             break
         change, best = found.x, found.fun
-    return offsets(change)
+    return np.clip(start + basis @ change, low, high)
 
 
 def _curvature(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
