@@ -294,8 +294,8 @@ def stored_line(track: Track, spec: CarSpec | None = None) -> RacingLine | None:
 
 
 def line_for(track: Track, spec: CarSpec | None = None, margin: float = 0.0) -> RacingLine:
-    """``track``'s racing line: the stored one where it is current, else computed (a second or
-    two: off any request's thread)."""
+    """``track``'s racing line: the stored one where it is current, else computed (1 to 10 s
+    of CPU, the longest tracks the most: off any request's thread)."""
     line = stored_line(track, spec) if margin == 0.0 else None
     return line or racing_line(track, spec, margin)
 
