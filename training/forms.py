@@ -25,6 +25,7 @@ from training.models import (
     Network,
     RaceType,
     Track,
+    TrackLine,
     Vehicle,
 )
 from training.rewards import MAX_SOURCE_SIZE
@@ -132,6 +133,34 @@ RANDOMISATION_HELP = (
     f"Each episode in a scene of its own ({randomisation_ranges.SUMMARY}), as DeepRacer for "
     "Cloud's DR_ENABLE_DOMAIN_RANDOMIZATION: a model that copes with scenes it has not seen."
 )
+
+
+class TrackLineForm(RacerWords, forms.Form):
+    """Which of a track's racing lines the track page shows: its direction and the margin kept
+    inside the borders (read from the query, so a line has its own address)."""
+
+    direction = forms.ChoiceField(
+        error_messages={"invalid_choice": "Choose a direction this track is driven in."}
+    )
+    margin = forms.TypedChoiceField(
+        label="Margin inside the borders",
+        coerce=int,
+        choices=[(cm, f"{cm} cm") for cm in TrackLine.MARGINS_CM],
+        help_text="Beyond half the car's width: room for a model that strays from the line.",
+        error_messages={
+            "invalid_choice": "Choose a margin of "
+            + ", ".join(str(cm) for cm in TrackLine.MARGINS_CM[:-1])
+            + f" or {TrackLine.MARGINS_CM[-1]} cm."
+        },
+    )
+
+    def __init__(self, data, *, track: Track) -> None:
+        data = {"direction": track.default_direction, "margin": "0", **data.dict()}
+        super().__init__(data)
+        self.fields["direction"].choices = [
+            (direction, "Clockwise" if direction == "clockwise" else "Counter-clockwise")
+            for direction in track.direction_values
+        ]
 
 
 class RaceConditionFields(RacerWords, forms.Form):

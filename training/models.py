@@ -189,6 +189,56 @@ class Track(models.Model):
         return self.added_at is None
 
 
+class TrackLine(models.Model):
+    """A track's racing line in one direction, ``margin_cm`` further inside its borders than the
+    car's half width (``simulator.racing_line``): an added track's, or any track's with a margin.
+    A built-in track's line without a margin is stored with the simulator and has no row.
+
+    Computed by a worker (the ``training.racing_line`` task: 1 to 10 s of CPU, never on a
+    request's thread); ``key`` is what it was computed from, and a row whose key no longer
+    matches the track, the car or the method is stale and computed again."""
+
+    # [cm] the margins a racer may ask for: up to a third of the narrowest track's half width
+    # beyond the car's (DeepRacer's tracks are 0.6 to 1.07 m wide, the car 0.2 m).
+    MARGINS_CM = (0, 5, 10, 15, 20)
+
+    class Status(models.TextChoices):
+        COMPUTING = "computing", "Computing"
+        READY = "ready", "Ready"
+        FAILED = "failed", "Failed"
+
+    track = models.ForeignKey(Track, on_delete=models.CASCADE, related_name="lines")
+    direction = models.CharField(max_length=16, choices=Direction.choices)
+    margin_cm = models.PositiveSmallIntegerField(default=0)
+    key = models.CharField(max_length=64, help_text="simulator.racing_line.line_key")
+    status = models.CharField(max_length=16, choices=Status.choices, default=Status.COMPUTING)
+    message = models.CharField(max_length=300, blank=True, help_text="Why it failed, in words.")
+    points = models.BinaryField(
+        default=b"", help_text="float32 rows of x, y [m] and speed [m/s], from the start line."
+    )
+    lap_time = models.FloatField(null=True, blank=True, help_text="[s] a flying lap.")
+    standing_lap_time = models.FloatField(
+        null=True, blank=True, help_text="[s] the first lap, from a standing start."
+    )
+    requested_at = models.DateTimeField()
+    computed_at = models.DateTimeField(null=True, blank=True)
+
+    class Meta:
+        constraints = [
+            models.UniqueConstraint(
+                fields=["track", "direction", "margin_cm"], name="one_line_per_track_direction"
+            )
+        ]
+
+    def __str__(self) -> str:
+        return f"{self.track}, {self.direction}, {self.margin_cm} cm"
+
+    @property
+    def array(self) -> np.ndarray:
+        """(N, 3): x, y [m] and speed [m/s] of each point."""
+        return np.frombuffer(bytes(self.points), dtype=np.float32).reshape(-1, 3)
+
+
 class RaceConditions(models.Model):
     """Where and how a car races, as a model trains, an evaluation drives and an event runs: the
     direction of travel and DeepRacer's race type with its obstacles (boxes) or bot cars."""

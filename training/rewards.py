@@ -68,6 +68,12 @@ EXAMPLES = (
         "threshold, for a smoother drive.",
     ),
     Example(
+        "follow_racing_line",
+        "Follow the racing line",
+        "Rewards the car for driving near a racing line at the line's speed there. It holds "
+        "reInvent2019_track's line: paste your track's over it, from the track's page.",
+    ),
+    Example(
         "avoid_objects",
         "Avoid objects",
         "For object avoidance and head-to-bot races: stay on the track, and keep out of the "

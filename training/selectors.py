@@ -146,6 +146,11 @@ def tracks_listed(*, search: str = "", sort: str = "") -> QuerySet[Track]:
     return tracks.order_by(*TRACK_SORTS.get(sort, TRACK_SORTS[""]))
 
 
+def track_named(*, name: str) -> Track:
+    """The track called ``name``, or 404."""
+    return get_object_or_404(Track, name=name)
+
+
 def track_added_preview(*, name: str) -> bytes | None:
     """The stored preview (PNG) of the track staff added under ``name``, or None where there is
     none (a built-in track's is the simulator's file)."""

@@ -22,7 +22,16 @@ from common import queueing
 from common.refusals import Refused
 from common.transactions import SlowStepInTransaction, outside_transaction
 from simulator import tracks as simulator_tracks
-from training import artifacts, configuration, leases, lifecycle, rewards, selectors, streams
+from training import (
+    artifacts,
+    configuration,
+    leases,
+    lifecycle,
+    rewards,
+    selectors,
+    streams,
+    track_lines,
+)
 from training.models import (
     SEEDS,
     Direction,
@@ -252,7 +261,7 @@ def track_add(
     except ValueError as error:
         raise TrackRefused("route", "The track's preview could not be drawn.") from error
     with transaction.atomic():
-        return _track_row_save(
+        row = _track_row_save(
             name=name,
             display_name=display_name,
             route=route,
@@ -264,6 +273,8 @@ def track_add(
             png=png,
             replace=replace,
         )
+        track_lines.track_lines_request_all(track=row)  # a worker computes them once committed
+    return row
 
 
 def _track_row_save(

@@ -40,5 +40,6 @@ urlpatterns = [
         name="reward-function-delete",
     ),
     path("models/reward-function/validate/", views.reward_validation, name="reward-validation"),
+    path("tracks/<slug:name>/", views.track_detail, name="track-detail"),
     path("tracks/<slug:name>.png", views.track_preview, name="track-preview"),
 ]

@@ -31,12 +31,21 @@ from sandbox import SandboxFailure
 from simulator import config as sim_config
 from simulator import randomisation_ranges
 from simulator import tracks as simulator_tracks
-from training import artifacts, checkers, configuration, rewards, selectors, services
+from training import (
+    artifacts,
+    checkers,
+    configuration,
+    rewards,
+    selectors,
+    services,
+    track_lines,
+)
 from training.forms import (
     EvaluationForm,
     ModelCreateForm,
     RewardFunctionForm,
     RewardValidationForm,
+    TrackLineForm,
     VehicleForm,
     training_settings_shown,
 )
@@ -57,6 +66,30 @@ def model_list(request: HttpRequest) -> HttpResponse:
             "track_search": search,
             "track_sort": sort,
         },
+    )
+
+
+@login_required
+@require_safe
+def track_detail(request: HttpRequest, name: str) -> HttpResponse:
+    """A track: its facts, and its racing line in a direction and margin (the query's), drawn by
+    speed, with its lap times and the literal a reward function pastes."""
+    track = selectors.track_named(name=name)
+    form = TrackLineForm(request.GET, track=track)
+    if form.is_valid():
+        direction, margin = form.cleaned_data["direction"], form.cleaned_data["margin"]
+    else:
+        direction, margin = track.default_direction, 0
+    shown = track_lines.track_line(track=track, direction=direction, margin_cm=margin)
+    context = {
+        "track": track,
+        "form": form,
+        "shown": shown,
+        "drawing": track_lines.line_drawing(shown),
+        "literal": track_lines.reward_literal(shown) if shown.line is not None else "",
+    }
+    return render(
+        request, "training/track_detail.html", context, status=400 if form.errors else 200
     )
 
 
@@ -323,7 +356,10 @@ class _ModelCreatePage:
                         )
                     ).metadata()
                 ),
-                "track": "rookie-loop",
+                # "Train a model on it" from a track's page names the track.
+                "track": request.GET.get("track")
+                if selectors.tracks_available().filter(name=request.GET.get("track", "")).exists()
+                else "rookie-loop",
             }
         self.chosen_reward = None
         if "reward" in request.GET:  # "Create a model" with a function of the racer's library

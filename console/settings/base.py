@@ -313,6 +313,7 @@ CELERY_TASK_ROUTES = {
     "training.train": {"queue": "training"},  # the trainer: a GPU machine, where there is one
     "training.rollout": {"queue": "simulation"},  # rollouts: any CPU machine
     "training.evaluate": {"queue": "simulation"},  # evaluations: no racer code
+    "training.racing_line": {"queue": "simulation"},  # a track's racing line: seconds of CPU
     "racing.race": {"queue": "simulation"},  # a race submission is an evaluation
     "racing.promote": {"queue": "simulation"},
     "analysis.rescore": {"queue": "rescoring"},  # a racer's reward function, in the sandbox

@@ -53,6 +53,7 @@ def racer_pages(alice) -> list[str]:
         f"/models/create/?clone={model.pk}",
         "/models/import/",
         "/models/reward-function/",
+        "/tracks/reInvent2019_track/",
         "/garage/",
         f"/garage/{vehicle.pk}/edit/",
         f"/garage/{vehicle.pk}/delete/",
