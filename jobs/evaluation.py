@@ -52,7 +52,7 @@ from rl.policies import Policy
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, leases, lifecycle, selectors, signals, streams
+from training import artifacts, leases, lifecycle, selectors, signals, streams, track_lines
 from training.models import EvaluationJob, EvaluationTrial, RLModel
 
 logger = logging.getLogger(__name__)
@@ -528,7 +528,9 @@ class EvaluationCar:
                 "trial": trial.number,
             }
         )
-        streams.announce(streams.evaluation_group(evaluation.pk), selectors.trial_row(trial=trial))
+        line = track_lines.line_times(track=evaluation.track, direction=evaluation.direction)
+        row = selectors.trial_row(trial=trial, line=line)
+        streams.announce(streams.evaluation_group(evaluation.pk), row)
         return LapCounts(
             now["off_tracks"],
             now["crashes"],

@@ -4,6 +4,9 @@ Validation is what the console's "Validate" button and ``manage.py validate_rewa
 checks that give feedback with line numbers (size, syntax, imports, the function's signature),
 then the function itself, in the sandbox, on sample situations from the chosen track. The static
 checks are for feedback only; the sandbox is what keeps the code in its box.
+
+Long because the params' table (each name, its type and DeepRacer's words for it) and the examples'
+descriptions are data that the editor and the help page read from here.
 """
 
 from __future__ import annotations

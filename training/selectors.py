@@ -23,7 +23,7 @@ from accounts.selectors import racer_name
 from common.redis_client import redis_client
 from rl.experience import JobChannel
 from rl.stopwatch import PHASES
-from training import artifacts, leases
+from training import artifacts, leases, track_lines
 from training.leases import IMPORTED
 from training.models import (
     BestCheckpointBy,
@@ -497,9 +497,18 @@ def model_checkpoint_choices(*, model: RLModel) -> list[CheckpointChoice]:
     ]
 
 
-def trial_row(*, trial: EvaluationTrial) -> dict:
-    """One trial of an evaluation, for its results table (a ``trial`` message)."""
+def trial_row(*, trial: EvaluationTrial, line: tuple[float, float] | None = None) -> dict:
+    """One trial of an evaluation, for its results table (a ``trial`` message); with ``line``,
+    the racing line's laps (``track_lines.line_times``), its lap against the line's: the time
+    driven, penalties aside, against a lap from a standing start, as a trial starts (a flying
+    one for the laps after the first of continuous laps)."""
+    against = ""
+    if line is not None and trial.completed:
+        flying = trial.evaluation.continuous_laps and trial.number > 1
+        driven = (trial.time_ms - trial.penalty_ms) / 1000
+        against = track_lines.lap_against_line(driven, line[1] if flying else line[0])
     return {
+        "against_line": against,
         "type": "trial",
         "number": trial.number,
         "time_ms": trial.time_ms,
@@ -527,11 +536,17 @@ def evaluation_status(*, evaluation: EvaluationJob) -> dict:
     }
 
 
+def evaluation_trials(*, evaluation: EvaluationJob) -> list[dict]:
+    """Its trials' rows (``trial_row``), each against the racing line where it is computed."""
+    line = track_lines.line_times(track=evaluation.track, direction=evaluation.direction)
+    return [trial_row(trial=trial, line=line) for trial in evaluation.trial_rows.all()]
+
+
 def evaluation_snapshot(*, evaluation: EvaluationJob) -> dict:
     return {
         **evaluation_status(evaluation=evaluation),
         "type": "state",
-        "history": [trial_row(trial=trial) for trial in evaluation.trial_rows.all()],
+        "history": evaluation_trials(evaluation=evaluation),
     }
 
 

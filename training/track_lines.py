@@ -73,6 +73,26 @@ def track_line(*, track: Track, direction: str, margin_cm: int = 0) -> LineShown
     return LineShown(track, geometry, direction, margin_cm, TrackLine.Status.READY, line)
 
 
+def line_times(*, track: Track, direction: str) -> tuple[float, float] | None:
+    """(from a standing start, flying) [s]: the laps of ``track``'s line driven ``direction``
+    without a margin, where it is computed and current; None otherwise. Reads only."""
+    geometry = simulator_tracks.load(track.name).with_direction(direction)
+    if track.builtin:
+        line = racing_line.stored_line(geometry)
+        if line is not None:
+            return line.standing_lap_time, line.lap_time
+    key = racing_line.line_key(geometry, CarSpec(), 0.0)
+    found = TrackLine.objects.filter(
+        track=track, direction=direction, margin_cm=0, key=key, status=TrackLine.Status.READY
+    )
+    return found.values_list("standing_lap_time", "lap_time").first()
+
+
+def lap_against_line(seconds: float, line_seconds: float) -> str:
+    """A lap against the line's, in words for a results table: "+1.25 s (118%)"."""
+    return f"{seconds - line_seconds:+.2f} s ({seconds / line_seconds:.0%})"
+
+
 def track_line_request(*, track: Track, direction: str, margin_cm: int, key: str) -> None:
     """Have a worker compute ``track``'s line (its row marked computing, the task sent once the
     row is committed)."""

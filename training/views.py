@@ -637,7 +637,8 @@ def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpRes
         {
             "model": job.model,
             "evaluation": job,
-            "trials": list(job.trial_rows.all()),
+            "trials": selectors.evaluation_trials(evaluation=job),
+            "line": track_lines.line_times(track=job.track, direction=job.direction),
             "files": files,
             "cars": selectors.race_cars(evaluation=job),
             "can_stop": stoppable and not hasattr(job, "submission") and not job.rival,

@@ -360,11 +360,12 @@ function addTrial(row) {
   }
   const cells = [
     row.number, laptime(row.time_ms), `${row.progress.toFixed(1)}%`, row.status_display,
-    row.off_tracks, row.crashes, laptime(row.penalty_ms), row.resets,
+    row.off_tracks, row.crashes, laptime(row.penalty_ms), row.resets, row.against_line,
   ];
   line.replaceChildren(...cells.map((value, index) => Object.assign(document.createElement("td"), {
     className: index === 3 ? "" : "num", textContent: value,
   })));
+  line.lastElementChild.dataset.againstLine = "";
   const empty = find("no-trials");
   if (empty) empty.hidden = true;
 }

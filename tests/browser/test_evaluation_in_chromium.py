@@ -7,7 +7,7 @@ from jobs import evaluation
 from tests.helpers.accounts import PASSWORD
 from tests.helpers.browser import log_in
 from tests.helpers.models import ready_model
-from training import services
+from training import services, track_lines
 
 pytestmark = pytest.mark.django_db(transaction=True)
 
@@ -30,6 +30,18 @@ def test_a_racer_reads_the_results_and_plays_the_recorded_video(page: Page, alic
     expect(page.locator("[data-live-trials] tbody tr").first).to_contain_text("Lap complete")
     expect(page.locator("[data-live-trials]")).not_to_contain_text("lap_complete")
     expect(page.locator("[data-live-status]")).to_have_text("Completed")
+    # Each completed lap against the racing line's: the first from a standing start, the next
+    # ones flying (continuous laps), as stored.
+    standing, flying = track_lines.line_times(track=job.track, direction=job.direction)
+    expect(page.locator("[data-line-times]")).to_contain_text(f"{standing:.2f} s")
+    for trial, cell in zip(
+        job.trial_rows.order_by("number"), page.locator("[data-against-line]").all(), strict=True
+    ):
+        line = standing if trial.number == 1 else flying
+        driven = (trial.time_ms - trial.penalty_ms) / 1000
+        wanted = track_lines.lap_against_line(driven, line) if trial.completed else ""
+        expect(cell).to_have_text(wanted)
+    assert job.trial_rows.filter(status="lap_complete").exists()
 
     video = page.locator("[data-evaluation-video]")
     page.wait_for_function(

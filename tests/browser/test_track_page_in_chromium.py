@@ -19,9 +19,7 @@ from training.models import Track, TrackLine
 pytestmark = pytest.mark.django_db(transaction=True)
 
 
-def test_a_racer_reads_a_tracks_racing_line_and_copies_it(
-    page: Page, alice, tracks, daphne_server
-):
+def test_a_racer_reads_a_tracks_racing_line_and_copies_it(page: Page, alice, tracks, daphne_server):
     page.context.grant_permissions(["clipboard-read", "clipboard-write"], origin=daphne_server)
     track = Track.objects.get(name="reInvent2019_track")
     stored = racing_line.stored_line(simulator_tracks.load(track.name))
