@@ -1,5 +1,6 @@
 """What the analysis pages read: a source's summaries combined over the iterations and outcomes a
-racer picks, and single episodes read back from their trace."""
+racer picks, single episodes read back from their trace, and the track's racing line with a
+lap's sectors against it (``analysis.sectors``)."""
 
 from __future__ import annotations
 
@@ -11,11 +12,16 @@ import numpy as np
 from django.db.models import Max
 from django.utils import timezone
 
-from analysis import summaries, traces
+from analysis import sectors, summaries, traces
 from analysis.models import Rescoring
 from analysis.records import Source
 from common import turns
 from simulator import params as reward_params
+from simulator import tracks as simulator_tracks
+from simulator.car import CarSpec
+from simulator.racing_line import Limits
+from training import track_lines
+from training.models import TrackLine
 
 EPISODE_COLUMNS = (
     "iteration",
@@ -29,6 +35,11 @@ EPISODE_COLUMNS = (
 )
 MAP_POINTS = 60_000  # the most steps one map draws: evenly spread over what was picked
 ROUND = 3  # decimals of a metre sent to the browser: a millimetre
+LINE_STRIDE = 2  # every second point of the racing line (0.2 m apart) on the map
+LINE_COMPUTING = "The racing line is being computed… Reload the page in a minute to see it."
+LINE_FAILED = "The racing line could not be computed for this track."
+NOT_A_LAP = "This episode did not complete a lap: only a lap is compared with the racing line."
+ACCELERATING = Limits.of(CarSpec()).accelerating  # [m/s²] the line's car's
 # [s] how long a racer's last re-scoring's start counts against them: one who asks again within
 # it waits behind a racer who has not had one since (common.turns).
 SERVED_MEMORY = 3600
@@ -85,6 +96,35 @@ def overview(source: Source) -> dict:
         "steer_bins": _centres(summaries.STEER_EDGES),
         "speed_bins": _centres(summaries.SPEED_EDGES),
         "point_columns": [*summaries.POINT_COLUMNS, "iteration"],
+        "racing_line": _line_drawn(racing_line(source)),
+    }
+
+
+def racing_line(source: Source) -> track_lines.LineShown | None:
+    """The racing line of the track ``source`` drove, its way, without a margin (requested
+    from a worker where there is none yet); None where the track's file cannot be read."""
+    where = source.evaluation or source.model  # an evaluation drives its own track, its way
+    try:
+        return track_lines.track_line(track=where.track, direction=where.direction, margin_cm=0)
+    except simulator_tracks.TrackError:
+        return None
+
+
+def _line_drawn(shown: track_lines.LineShown | None) -> dict:
+    """The line as the map draws it, [x, y, speed] rows, and its laps; or why there is none."""
+    if shown is None or shown.line is None:
+        status = shown.status if shown is not None else TrackLine.Status.FAILED
+        if status == TrackLine.Status.COMPUTING:
+            return {"status": status, "message": LINE_COMPUTING}
+        return {"status": status, "message": (shown and shown.message) or LINE_FAILED}
+    line = shown.line
+    rows = np.column_stack([line.points, line.speeds])[::LINE_STRIDE]
+    return {
+        "status": shown.status,
+        "message": "",
+        "points": np.round(rows, ROUND).tolist(),
+        "lap_time": round(line.lap_time, ROUND),
+        "standing_lap_time": round(line.standing_lap_time, ROUND),
     }
 
 
@@ -190,6 +230,7 @@ def episode(source: Source, iteration: int, number: int) -> dict | None:
         "is_crashed",
     )
     params = [{name: p[name] for name in shown} for p in reward_params.replayed(track, recorded)]
+    table, note = lap_sectors(source, steps, chosen)
     return {
         "iteration": iteration,
         "episode": number,
@@ -202,7 +243,32 @@ def episode(source: Source, iteration: int, number: int) -> dict | None:
         "actions": steps.action[rows].tolist(),
         "statuses": steps.status[rows].tolist(),
         "params": params,
+        "sectors": table,
+        "sectors_note": note,
     }
+
+
+def lap_sectors(
+    source: Source, steps: traces.Steps, chosen: traces.Episode
+) -> tuple[dict | None, str]:
+    """``chosen``'s lap against the racing line, sector by sector (``analysis.sectors``), with
+    ``standing``: whether the line's starts from rest, as the episode did; or None and why not,
+    in words."""
+    if chosen.status != "lap_complete" or chosen.last <= chosen.first:
+        return None, NOT_A_LAP
+    shown = racing_line(source)
+    if shown is None or shown.line is None:
+        return None, _line_drawn(shown)["message"]
+    track, first, rows = source.track, chosen.first, slice(chosen.first, chosen.last + 1)
+    start = track.project_points([steps.x[first], steps.y[first]]).distance[0] / track.length
+    standing = bool(steps.status[first] == "prepare")  # the prepare row: the car held at rest
+    line = sectors.line_lap(
+        shown.line, track, start=start, standing=standing, accelerating=ACCELERATING
+    )
+    lap = sectors.recorded_lap(
+        progress=steps.progress[rows], tstamp=steps.tstamp[rows], x=steps.x[rows], y=steps.y[rows]
+    )
+    return {**sectors.sector_table(line, lap, track), "standing": standing}, ""
 
 
 def rescorings_in_turn() -> list[int]:

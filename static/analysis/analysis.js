@@ -12,6 +12,8 @@ const OUTCOME_NAMES = overview ? overview.outcomes.map(([value]) => value) : [];
 const OUTCOME_LABELS = overview ? Object.fromEntries(overview.outcomes) : {};
 const PAGE = 50; // episodes a table page shows
 const MARKS = { off_track: "#d1242f", crashed: "#8250df" };
+const LINE_COLOUR = "#ff2e93"; // the racing line: apart from the palettes, the white lap and the marks
+const LINE = overview && overview.racing_line.status === "ready" ? overview.racing_line : null;
 
 const state = {
   points: null, // { n, column(name) }
@@ -176,10 +178,24 @@ function drawMap() {
   });
   drawMarks(context);
   if (state.fastest) drawPath(context, state.fastest.path, "#ffffff", 2.5);
+  const line = drawRacingLine(context);
   legend(scale);
   const shown = `${points.n.toLocaleString()} steps`;
   const marks = state.picked ? state.picked.marks.length : 0;
-  setText("map-caption", `${shown}${points.n >= 60000 ? " (evenly sampled)" : ""}; ✕ where a car left the track (${marks})${state.fastest ? "; white: the fastest lap" : ""}.`);
+  setText("map-caption", `${shown}${points.n >= 60000 ? " (evenly sampled)" : ""}; ✕ where a car left the track (${marks})${state.fastest ? "; white: the fastest lap" : ""}${line}.`);
+}
+
+// The racing line, thin, over the steps; thick where the lap compared with it loses most time.
+// What it adds to the map's caption.
+function drawRacingLine(context) {
+  if (!LINE || !find("racing-line")?.checked) return "";
+  drawPath(context, [...LINE.points, LINE.points[0]], LINE_COLOUR, 1.5);
+  const { table } = comparedLap();
+  if (!table || table.worst === null) return "; pink: the racing line";
+  context.globalAlpha = 0.6;
+  drawPath(context, table.worst_path, LINE_COLOUR, 7);
+  context.globalAlpha = 1;
+  return `; pink: the racing line, thick in sector ${table.worst + 1}, where the lap loses most time`;
 }
 
 function drawMarks(context) {
@@ -237,6 +253,7 @@ async function openEpisode(iteration, number) {
   viewer.hidden = false;
   const name = overview.evaluation ? `Trial ${number + 1}` : `Iteration ${iteration}, episode ${number}`;
   setText("episode-title", `${name}: ${OUTCOME_LABELS[data.outcome] || data.status}, ${data.seconds.toFixed(2)} s, reward ${data.reward.toFixed(2)}`);
+  drawSectors();
   showStep();
   viewer.scrollIntoView({ block: "nearest" });
 }
@@ -269,6 +286,7 @@ function drawEpisode(context) {
     context.lineTo(view.x(episode.path[i][0]), view.y(episode.path[i][1]));
     context.stroke();
   }
+  const line = drawRacingLine(context);
   const [x, y] = episode.path[index];
   const heading = (episode.params[index].heading * Math.PI) / 180;
   const size = 9 * view.ratio;
@@ -286,7 +304,7 @@ function drawEpisode(context) {
   context.stroke();
   context.restore();
   legend(scale);
-  setText("map-caption", "The episode's path, coloured by reward; the arrow is the car at the chosen step.");
+  setText("map-caption", `The episode's path, coloured by reward; the arrow is the car at the chosen step${line}.`);
 }
 
 // What the racer picked
@@ -311,6 +329,7 @@ async function load() {
   if (!parameters.get("outcomes")) {
     state.points = { n: 0, column: () => new Float32Array(0) };
     state.picked = { episodes: [], marks: [], actions: { steer: [], speed: [], actions: [] }, fastest: null };
+    state.fastest = null;
     render();
     return;
   }
@@ -342,12 +361,78 @@ function render() {
   drawMap();
   drawActions();
   drawEpisodes();
+  drawSectors();
   const fastest = find("fastest");
   if (fastest) {
     fastest.textContent = state.fastest
       ? `Fastest picked: iteration ${state.fastest.iteration}, episode ${state.fastest.episode}, ${state.fastest.seconds.toFixed(2)} s (drawn on the map).`
       : "";
   }
+}
+
+// A complete lap against the racing line, sector by sector: the episode followed when it is a
+// lap, else the fastest picked. The server times both (analysis/sectors.py); this only shows them.
+
+function episodeName(episode) {
+  return overview.evaluation ? `trial ${episode.episode + 1}` : `iteration ${episode.iteration}, episode ${episode.episode}`;
+}
+
+function comparedLap() {
+  const followed = state.episode;
+  if (followed?.sectors) return { table: followed.sectors, title: `The followed lap (${episodeName(followed)}, ${followed.seconds.toFixed(2)} s)` };
+  const before = followed ? "The episode followed did not complete a lap, so the fastest picked is compared. " : "";
+  if (state.fastest?.sectors) {
+    return { table: state.fastest.sectors, title: `${before}The fastest picked lap (${episodeName(state.fastest)}, ${state.fastest.seconds.toFixed(2)} s)` };
+  }
+  if (state.fastest) return { note: state.fastest.sectors_note };
+  return { note: `${before}No lap was completed in the episodes picked: a complete lap is compared with the racing line.` };
+}
+
+const seconds = (value) => `${value.toFixed(2)} s`;
+const signed = (value) => `${value > 0.005 ? "+" : value < -0.005 ? "−" : "±"}${Math.abs(value).toFixed(2)} s`;
+const speed = (value) => (value === null ? "—" : value.toFixed(2));
+
+function drawSectors() {
+  const panel = find("sectors");
+  if (!panel || !LINE) return; // the panel says why there is no line
+  const { table, title, note } = comparedLap();
+  const element = find("sector-table");
+  element.hidden = !table;
+  if (!table) {
+    setText("sectors-caption", note);
+    return;
+  }
+  const start = table.standing ? "The line's times start from rest, as the episode did" : "The line's times are a flying lap's, as the episode did not start from rest";
+  const drawn = find("racing-line")?.checked ? ": the thick pink stretch on the map" : "";
+  const worst = table.worst === null ? "It loses no time to the line in any sector." : `It loses most time in sector ${table.worst + 1}${drawn}.`;
+  setText("sectors-caption", `${title} against the racing line, in tenths of the lap from where it started. ${start}. ${worst}`);
+  element.tBodies[0].replaceChildren(...table.rows.map((row, index) => {
+    const line = document.createElement("tr");
+    if (index === table.worst) line.className = "sector-worst";
+    const cells = [`${row.sector} (${row.from}–${row.to}%)`, seconds(row.line), seconds(row.lap), signed(row.gap), `${speed(row.lap_speed)} / ${speed(row.line_speed)} m/s`];
+    cells.forEach((text, column) => {
+      const cell = document.createElement("td");
+      cell.textContent = text;
+      if (column) cell.className = "num";
+      line.append(cell);
+    });
+    if (index === table.worst) {
+      const flag = document.createElement("strong");
+      flag.className = "sector-flag";
+      flag.textContent = "where speed is lost";
+      line.cells[0].append(" ", flag);
+    }
+    return line;
+  }));
+  const total = document.createElement("tr");
+  [["Lap", ""], [seconds(table.line_total), "sector-total-line"], [seconds(table.lap_total), "sector-total-lap"], [signed(table.gap_total), ""], ["", ""]].forEach(([text, name], column) => {
+    const cell = document.createElement(column ? "td" : "th");
+    cell.textContent = text;
+    if (column) cell.className = "num";
+    if (name) cell.setAttribute(`data-${name}`, "");
+    total.append(cell);
+  });
+  element.tFoot.replaceChildren(total);
 }
 
 // Per iteration
@@ -582,7 +667,8 @@ if (root) {
     timer = setTimeout(load, 250);
   };
   find("analysis-filters").addEventListener("change", (event) => {
-    if (event.target.matches("[data-colour]")) drawMap();
+    if (event.target.matches("[data-racing-line]")) drawSectors(); // its caption names the map's stretch
+    if (event.target.matches("[data-colour], [data-racing-line]")) drawMap();
     else later();
   });
   find("analysis-filters").addEventListener("submit", (event) => event.preventDefault());
@@ -590,6 +676,7 @@ if (root) {
   find("episode-close").addEventListener("click", () => {
     state.episode = null;
     find("episode-viewer").hidden = true;
+    drawSectors();
     drawMap();
   });
   find("episode-table").addEventListener("click", (event) => {

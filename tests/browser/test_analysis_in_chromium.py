@@ -1,11 +1,14 @@
 """The Analysis tab in Chromium: a trained model's driving on the track, coloured and filtered,
-one episode followed step by step, and another reward function scored by a real worker."""
+with the racing line and the fastest lap against it sector by sector, one episode followed step
+by step, and another reward function scored by a real worker."""
 
 from __future__ import annotations
 
 import pytest
 from playwright.sync_api import Page, expect
 
+from simulator import racing_line as simulator_racing_line
+from simulator import tracks as simulator_tracks
 from tests.browser.conftest import ARTIFACTS
 from tests.helpers.accounts import PASSWORD
 from tests.helpers.analysis import SPEED_AND_OFF_TRACK, untrained
@@ -14,6 +17,16 @@ from tests.helpers.training_logs import train_on_paper
 from training.models import RewardFunction
 
 pytestmark = pytest.mark.django_db(transaction=True)
+
+# How many of the map's pixels are the racing line's pink (#ff2e93), give or take blending.
+PINK = """canvas => {
+  const data = canvas.getContext("2d").getImageData(0, 0, canvas.width, canvas.height).data;
+  let found = 0;
+  for (let i = 0; i < data.length; i += 4) {
+    if (data[i] > 220 && data[i + 1] < 110 && data[i + 2] > 110 && data[i + 2] < 190) found += 1;
+  }
+  return found;
+}"""
 
 # How many different colours the map's canvas holds: a drawn track and coloured steps give many.
 COLOURS = """canvas => {
@@ -45,6 +58,39 @@ def test_a_racer_reads_their_models_driving_and_tries_another_reward_function(
     canvas = page.locator("[data-map]")
     assert canvas.evaluate(COLOURS) > 8
     expect(page.locator("[data-episode-count]")).to_contain_text("8 episodes")
+
+    # The racing line on the map, and the fastest lap against it sector by sector: the line's
+    # sectors add up to its lap from a standing start, as the page states it and as stored.
+    racing_line = page.get_by_label("Racing line")
+    expect(racing_line).to_be_visible()
+    expect(racing_line).to_be_checked()
+    assert canvas.evaluate(PINK) > 50
+    stated = page.locator("[data-racing-line-status]")
+    expect(stated).to_be_visible()
+    stored = simulator_racing_line.stored_line(simulator_tracks.load("pitlane-oval"))
+    standing = float(stated.locator("[data-line-standing-lap]").inner_text())
+    assert standing == pytest.approx(stored.standing_lap_time, abs=0.005)
+    sectors = page.locator("[data-sector-table]")
+    expect(sectors).to_be_visible()
+    expect(sectors.locator("tbody tr")).to_have_count(10)
+    expect(page.locator("[data-sectors-caption]")).to_contain_text("The fastest picked lap")
+    total = sectors.locator("[data-sector-total-line]").inner_text()
+    assert float(total.removesuffix(" s")) == pytest.approx(standing, abs=0.01)
+    expect(sectors.locator(".sector-worst")).to_have_count(1)
+    expect(sectors.locator(".sector-worst")).to_contain_text("where speed is lost")
+    page.locator("[data-sectors]").screenshot(path=ARTIFACTS / "analysis-sectors.png")
+    canvas.screenshot(path=ARTIFACTS / "analysis-racing-line.png")
+    racing_line.uncheck()
+    expect(page.locator("[data-map-caption]")).not_to_contain_text("pink")
+    assert canvas.evaluate(PINK) == 0
+    racing_line.check()
+    # A lap followed on the map is the one compared.
+    laps = page.locator("[data-episode-table] tbody tr", has_text="Lap complete")
+    laps.first.get_by_role("button", name="Show").click()
+    expect(page.locator("[data-sectors-caption]")).to_contain_text("The followed lap")
+    expect(sectors.locator("tbody tr")).to_have_count(10)
+    page.get_by_role("button", name="Back to all steps").click()
+    expect(page.locator("[data-sectors-caption]")).to_contain_text("The fastest picked lap")
     with page.expect_download() as saved:
         page.locator('[data-download="map"]').click()
     assert saved.value.suggested_filename.endswith("-map.png")
@@ -64,6 +110,8 @@ def test_a_racer_reads_their_models_driving_and_tries_another_reward_function(
     rows = page.locator("[data-episode-table] tbody tr")
     expect(rows).to_have_count(2)
     assert set(rows.evaluate_all("rows => rows.map((r) => r.dataset.iteration)")) == {"2"}
+    expect(sectors).to_be_hidden()  # no lap picked: nothing to compare with the line
+    expect(page.locator("[data-sectors-caption]")).to_contain_text("No lap was completed")
 
     # One episode, step by step: its params at each.
     rows.first.get_by_role("button", name="Show").click()
