@@ -47,29 +47,40 @@ class CentreLineDriver:
 
     def steering(self) -> float:
         """[deg] the steering command, within ±30°."""
-        env, car = self.env, self.env.car
-        spec = car.spec
-        front = car.point_ahead(spec.wheelbase)
-        where = self.path.project_points([front])
-        here = float(where.distance[0])
-        _, _, heading = self.path.point_at(here)
-        offset = float(where.offset[0]) * (1.0 if where.is_left[0] else -1.0)  # left of the line
-        speed = max(car.speed, 0.3)
-        ahead = here + speed * self.anticipation
-        bend = float(self.curvature[int(ahead / self.SPACING) % len(self.curvature)])
-        error = math.atan2(math.sin(float(heading) - car.yaw), math.cos(float(heading) - car.yaw))
+        spec = self.env.car.spec
+        here, error, offset, speed = self._errors()
         wanted = (
-            math.atan(spec.wheelbase * bend)
+            math.atan(spec.wheelbase * self._bend_ahead(here, speed))
             + self.heading_gain * error
             + math.atan2(-self.gain * offset, speed)
         )
         # Beyond the angle whose turn the grip can hold, the front tyres only slide.
         grip = math.atan(spec.wheelbase * spec.friction * GRAVITY / speed**2)
-        wanted = max(-grip, min(grip, wanted))
-        # The command that turns the wheels to that angle by the end of the step: the steering
-        # loop kicks the hinge at each change and closes the rest slowly (``Hinge``).
-        limit = math.radians(spec.max_steering)
-        return math.degrees(car.hinge.command_for(wanted, car.periods(env.dt), limit))
+        return self._command(max(-grip, min(grip, wanted)))
+
+    def _errors(self) -> tuple[float, float, float, float]:
+        """Where the front axle is on the path ([m] along it), the car's heading error from the
+        path's there [rad, left positive], the axle's offset [m, left of the path positive], and
+        the speed [m/s] the control law divides by (at least 0.3 m/s)."""
+        car = self.env.car
+        where = self.path.project_points([car.point_ahead(car.spec.wheelbase)])
+        here = float(where.distance[0])
+        _, _, heading = self.path.point_at(here)
+        offset = float(where.offset[0]) * (1.0 if where.is_left[0] else -1.0)
+        error = math.atan2(math.sin(float(heading) - car.yaw), math.cos(float(heading) - car.yaw))
+        return here, error, offset, max(car.speed, 0.3)
+
+    def _bend_ahead(self, here: float, speed: float) -> float:
+        """[1/m] the path's curvature where the car will be ``anticipation`` seconds on."""
+        ahead = here + speed * self.anticipation
+        return float(self.curvature[int(ahead / self.SPACING) % len(self.curvature)])
+
+    def _command(self, angle: float) -> float:
+        """[deg] the command that turns the wheels to ``angle`` [rad] by the end of the step: the
+        steering loop kicks the hinge at each change and closes the rest slowly (``Hinge``)."""
+        car = self.env.car
+        limit = math.radians(car.spec.max_steering)
+        return math.degrees(car.hinge.command_for(angle, car.periods(self.env.dt), limit))
 
     def target_speed(self) -> float:
         """[m/s] the speed to command now."""
@@ -117,8 +128,37 @@ class BrakingDriver(CentreLineDriver):
 
 class RacingLineDriver(CentreLineDriver):
     """The path-following driver on a racing line (``simulator.racing_line``) rather than the
-    centre line, at the line's speeds: it asks for the speed due where the car will be a step
-    on, so it brakes into each bend as the line does."""
+    centre line, at the line's speeds, which ask for 0.8 of the grip in the bends.
+
+    Steering: the centre-line driver's law (Stanley's at the front axle, the curvature
+    ``anticipation`` seconds ahead fed forward), nearer and firmer, with four changes that
+    keep the car on a line taken at the grip's limit (with the centre-line driver's law it
+    left 28 of the 122 built-in lines, in the long tracks' hairpins):
+
+    - The bend is fed forward as the angle that takes the front axle round it, which the
+      tracked point is, not the rear axle: asin rather than atan of wheelbase * curvature.
+    - The heading gain falls with speed, to ``HEADING_RATE / speed``: a step turns the car by
+      about speed * dt / wheelbase times the wheels' angle, so a fixed 0.8 turns out all of a
+      heading error within a step at 3 m/s, and more above, and with the hinge's lag sets the
+      car weaving from side to side, each swing taking grip; so it turns out 0.6 of it.
+    - The offset's correction divides by the speed no lower than ``OFFSET_SPEED``: from a
+      standing start on the centre line, off the racing line, a low speed would turn it to
+      full lock and swing the car across.
+    - The wheels are held within the grip's angle of the way the rear axle travels, not of the
+      car's heading: when the rear steps out, the driver counter-steers.
+
+    Speed: the line's speed due a step on, but no faster than the curvature the steering asks
+    for (relative to the rear axle's travel, the lesser of this step's and the last) lets
+    ``DEMAND_GRIP`` of mu * g hold, and never below ``LOWEST_CAP`` for it: a car that has run
+    wide of the line brakes until it can steer back, where at the line's speed it had only a
+    fifth of the grip to do it with and ran on off the track. The share is above 1 because the
+    heading's and the offset's corrections last a step or two and the car rides them out; at
+    1.0 it braked for them too often and lapped up to 5% slower than the line."""
+
+    HEADING_RATE = 1.5  # [m/s] above 1.9 m/s the heading gain is this over the speed
+    OFFSET_SPEED = 1.5  # [m/s] the least speed the offset's correction divides by
+    DEMAND_GRIP = 1.2  # of mu * g, that the curvature the steering asks for may need
+    LOWEST_CAP = 1.5  # [m/s] commanded, below which the steering's demand never slows the car
 
     def __init__(
         self,
@@ -129,7 +169,8 @@ class RacingLineDriver(CentreLineDriver):
         **kw,
     ) -> None:
         # Nearer and firmer than on the centre line: the line's bends are tighter and taken at
-        # the grip's limit (at 0.5 and 0.3 s the car left 75 of the 122 built-in lines).
+        # the grip's limit (at 0.5 and 0.3 s the centre-line driver's law left 75 of the 122
+        # built-in lines).
         path = line.as_track(env.track)
         super().__init__(
             env,
@@ -143,12 +184,37 @@ class RacingLineDriver(CentreLineDriver):
         steps = np.hypot(*(np.roll(line.points, -1, axis=0) - line.points).T)
         self._along = np.concatenate([[0.0], np.cumsum(steps)])  # [m] to each point, and round
         self._speeds = np.append(line.speeds, line.speeds[0])
+        self._demands = [0.0, 0.0]  # [1/m] the curvature asked for at the last step and this
+
+    def steering(self) -> float:
+        car = self.env.car
+        spec = car.spec
+        here, error, offset, speed = self._errors()
+        # [rad] the way the rear axle travels, from the heading: its sideslip
+        rear = math.atan2(car.lateral_speed - car.yaw_rate * spec.rear_to_centre, speed)
+        # The wheels' angle that takes the front axle round the bend (the rear axle runs inside
+        # it): sin(angle) = wheelbase / radius. The line's hairpins are as tight as 0.41 m, where
+        # the rear axle's tan(angle) = wheelbase / radius is 2° short and the car ran wide.
+        reach = spec.wheelbase * self._bend_ahead(here, speed)
+        wanted = (
+            math.asin(max(-1.0, min(1.0, reach)))
+            + min(self.heading_gain, self.HEADING_RATE / speed) * error
+            + math.atan2(-self.gain * offset, max(speed, self.OFFSET_SPEED))
+        )
+        turn = max(-1.4, min(1.4, wanted - rear))  # [rad] short of a right angle
+        self._demands = [self._demands[1], math.tan(turn) / spec.wheelbase]
+        grip = math.atan(spec.wheelbase * spec.friction * GRAVITY / speed**2)
+        return self._command(max(rear - grip, min(rear + grip, wanted)))
 
     def target_speed(self) -> float:
         env, car = self.env, self.env.car
+        spec = car.spec
         ahead = self.path.project_points([car.position]).distance[0] + car.speed * env.dt
         due = np.interp(ahead % self._along[-1], self._along, self._speeds)
-        return float(np.clip(due / car.spec.wheel_target(1.0), car.spec.min_speed, self.speed))
+        demand = min(abs(self._demands[0]), abs(self._demands[1]))
+        held = math.sqrt(self.DEMAND_GRIP * spec.friction * GRAVITY / max(demand, 1e-6))
+        cap = max(held / spec.wheel_target(1.0), self.LOWEST_CAP)
+        return float(np.clip(min(due / spec.wheel_target(1.0), cap), spec.min_speed, self.speed))
 
 
 def curvature(track, spacing: float, window: float) -> np.ndarray:
