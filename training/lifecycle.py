@@ -12,7 +12,7 @@ writes nothing; a trainer that prepares a job the racer has just stopped finds i
 from __future__ import annotations
 
 from common.lifecycle import Lifecycle
-from training.models import EvaluationJob, RLModel, TrainingJob
+from training.models import EvaluationJob, RLModel, TrackLine, TrainingJob
 
 _M = RLModel.Status
 MODEL = Lifecycle(
@@ -76,4 +76,18 @@ EVALUATION = Lifecycle(
         _E.CANCELED: frozenset(),
     },
     born=frozenset({_E.QUEUED}),
+)
+
+_L = TrackLine.Status
+TRACK_LINE = Lifecycle(
+    TrackLine,
+    {
+        # A worker computes it, or finds the route gives no line; a look that finds it lost
+        # with its worker asks again.
+        _L.COMPUTING: frozenset({_L.READY, _L.FAILED}),
+        # A changed track, car or method makes it stale: it is computed again.
+        _L.READY: frozenset({_L.COMPUTING}),
+        _L.FAILED: frozenset({_L.COMPUTING}),
+    },
+    born=frozenset({_L.COMPUTING}),
 )

@@ -273,7 +273,8 @@ def track_add(
             png=png,
             replace=replace,
         )
-        track_lines.track_lines_request_all(track=row)  # a worker computes them once committed
+        # A worker computes its lines once committed.
+        track_lines.track_lines_request_all(track=row, geometry=track)
     return row
 
 

@@ -14,13 +14,14 @@ from dataclasses import dataclass
 from datetime import timedelta
 
 import numpy as np
-from django.db import IntegrityError, transaction
+from django.db import transaction
 from django.utils import timezone
 
 from common import queueing
 from simulator import racing_line
 from simulator import tracks as simulator_tracks
 from simulator.car import CarSpec
+from training import lifecycle
 from training.models import Track, TrackLine
 
 log = logging.getLogger(__name__)
@@ -94,25 +95,25 @@ def lap_against_line(seconds: float, line_seconds: float) -> str:
 
 
 def track_line_request(*, track: Track, direction: str, margin_cm: int, key: str) -> None:
-    """Have a worker compute ``track``'s line (its row marked computing, the task sent once the
-    row is committed)."""
-    fields = {"key": key, "status": TrackLine.Status.COMPUTING, "message": ""}
-    fields["requested_at"] = timezone.now()
-    try:
-        with transaction.atomic():
-            row, _ = TrackLine.objects.update_or_create(
-                track=track, direction=direction, margin_cm=margin_cm, defaults=fields
-            )
-    except IntegrityError:  # another request made the row at the same moment: it sends the task
-        return
+    """Have a worker compute ``track``'s line (its row made or moved back to computing, the
+    task sent once that is committed)."""
+    fields = {"key": key, "message": "", "requested_at": timezone.now()}
+    row, made = TrackLine.objects.get_or_create(
+        track=track,
+        direction=direction,
+        margin_cm=margin_cm,
+        defaults={**fields, "status": TrackLine.Status.COMPUTING},
+    )
+    if not made:
+        lifecycle.TRACK_LINE.move(row, TrackLine.Status.COMPUTING, **fields)
     transaction.on_commit(lambda: queueing.enqueue(COMPUTE, row.pk), robust=True)
 
 
-def track_lines_request_all(*, track: Track) -> None:
-    """Request the line of an added ``track`` in each of its directions, without a margin."""
+def track_lines_request_all(*, track: Track, geometry: simulator_tracks.Track) -> None:
+    """Request the line of an added ``track`` (the simulator's ``geometry`` of it, already
+    read: its route is not checked again) in each of its directions, without a margin."""
     for direction in track.direction_values:
-        geometry = simulator_tracks.load(track.name).with_direction(direction)
-        key = racing_line.line_key(geometry, CarSpec(), 0.0)
+        key = racing_line.line_key(geometry.with_direction(direction), CarSpec(), 0.0)
         track_line_request(track=track, direction=direction, margin_cm=0, key=key)
 
 
@@ -128,16 +129,18 @@ def track_line_compute(*, line_id: int) -> None:
         line = racing_line.racing_line(geometry, margin=row.margin_cm / 100)
     except (simulator_tracks.TrackError, ValueError, ArithmeticError) as error:
         log.warning("The racing line of %s could not be computed: %s", row, error)
-        TrackLine.objects.filter(pk=row.pk).update(
-            status=TrackLine.Status.FAILED,
+        lifecycle.TRACK_LINE.move(
+            row.pk,
+            TrackLine.Status.FAILED,
             message="The racing line could not be computed for this track's route.",
             computed_at=timezone.now(),
         )
         return
     array = np.column_stack([line.points, line.speeds]).astype(np.float32)
-    TrackLine.objects.filter(pk=row.pk).update(
+    lifecycle.TRACK_LINE.move(
+        row.pk,
+        TrackLine.Status.READY,
         key=key,
-        status=TrackLine.Status.READY,
         message="",
         points=array.tobytes(),
         lap_time=line.lap_time,
