@@ -76,8 +76,12 @@ def track_line(*, track: Track, direction: str, margin_cm: int = 0) -> LineShown
 
 def line_times(*, track: Track, direction: str) -> tuple[float, float] | None:
     """(from a standing start, flying) [s]: the laps of ``track``'s line driven ``direction``
-    without a margin, where it is computed and current; None otherwise. Reads only."""
-    geometry = simulator_tracks.load(track.name).with_direction(direction)
+    without a margin, where it is computed and current; None otherwise (and where the track's
+    route cannot be read). Reads only."""
+    try:
+        geometry = simulator_tracks.load(track.name).with_direction(direction)
+    except simulator_tracks.TrackError:
+        return None
     if track.builtin:
         line = racing_line.stored_line(geometry)
         if line is not None:

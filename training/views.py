@@ -80,7 +80,10 @@ def track_detail(request: HttpRequest, name: str) -> HttpResponse:
         direction, margin = form.cleaned_data["direction"], form.cleaned_data["margin"]
     else:
         direction, margin = track.default_direction, 0
-    shown = track_lines.track_line(track=track, direction=direction, margin_cm=margin)
+    try:
+        shown = track_lines.track_line(track=track, direction=direction, margin_cm=margin)
+    except simulator_tracks.TrackError:  # a track that has left the simulator's catalogue
+        raise Http404(f"{track.display_name} can no longer be driven here.") from None
     context = {
         "track": track,
         "form": form,

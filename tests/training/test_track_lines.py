@@ -181,3 +181,15 @@ def test_the_reward_editors_example_holds_the_stored_line_it_names(tracks):
     track = Track.objects.get(name="reInvent2019_track")
     shown = track_lines.track_line(track=track, direction="counterclockwise")
     assert track_lines.reward_literal(shown) in example  # regenerate the example when it differs
+
+
+def test_a_track_gone_from_the_catalogue_is_a_404_not_a_500(client, alice, tracks):
+    Track.objects.create(
+        name="retired", display_name="Retired", difficulty="beginner", length_m=20, width_m=1
+    )
+    client.force_login(alice)
+    assert page(client, "retired").status_code == 404
+    assert (
+        track_lines.line_times(track=Track.objects.get(name="retired"), direction="clockwise")
+        is None
+    )
