@@ -155,8 +155,11 @@ def track_line_compute(*, line_id: int) -> None:
 
 def reward_literal(shown: LineShown) -> str:
     """The line as a Python literal a reward function reads, in the track's own coordinates
-    (``params["x"]``, ``params["y"]``: DeepRacer's, for its tracks), with what it is in
-    comments."""
+    (``params["x"]``, ``params["y"]``), with what it is in comments. For DeepRacer's tracks they
+    are DeepRacer's too: simapp reads the waypoints from the route file ``routes/WORLD_NAME.npy``
+    (deepracer-simapp 01f5f01, bundle/markov/track_geom/track_data.py:194-204) and gives the
+    reward function those waypoints and the car's position in the same world frame
+    (bundle/markov/agent_ctrl/utils.py:112-118), as our route files and params do."""
     line = shown.line
     assert line is not None, "only a computed line is copied"
     direction = "clockwise" if shown.direction == "clockwise" else "counter-clockwise"
