@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from simulator.racing_line import RacingLine
+from simulator.racing_line import RacingLine, from_rest
 from simulator.tracks import Track
 
 SECTORS = 10
@@ -72,7 +72,7 @@ def line_lap(
     distances = np.concatenate([[0.0], np.cumsum(steps)])
     speeds = np.append(line.speeds[order], line.speeds[order[0]])
     if standing:
-        speeds[:-1] = np.minimum(speeds[:-1], np.sqrt(2 * accelerating * distances[:-1]))
+        speeds[:-1] = from_rest(speeds[:-1], distances[:-1], accelerating)
     times = np.concatenate([[0.0], np.cumsum(steps / ((speeds[:-1] + speeds[1:]) / 2))])
     return Lap(np.minimum(fractions, 1.0), times, distances, points)
 

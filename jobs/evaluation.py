@@ -52,7 +52,7 @@ from rl.policies import Policy
 from simulator.config import CONTROL_HZ
 from simulator.spectator import FRAME_INTERVAL, SIZE, jpeg, view_image
 from simulator.trace import SimTraceRow, to_csv
-from training import artifacts, leases, lifecycle, selectors, signals, streams, track_lines
+from training import artifacts, leases, lifecycle, selectors, signals, streams
 from training.models import EvaluationJob, EvaluationTrial, RLModel
 
 logger = logging.getLogger(__name__)
@@ -327,6 +327,7 @@ class EvaluationCar:
         self.stop_looks = Every(leases.EVALUATION_STOP_LOOK, at_once=False)
         self._last_live = 0.0  # when it last offered live frames
         self._weights = b""
+        self.line: tuple[float, float] | None = None  # the racing line's laps, once loaded
 
     def load(self) -> None:
         """Read the model's weights (``EvaluationFailed`` says why it cannot)."""
@@ -334,6 +335,9 @@ class EvaluationCar:
         if checkpoint is None:
             raise EvaluationFailed(f"The model {self.model.name} has no trained weights.")
         self._weights = artifacts.read(checkpoint)
+        self.line = selectors.evaluation_line(
+            evaluation=self.evaluation
+        )  # what laps are set against
         _update(
             self.evaluation,
             checkpoint_name=checkpoint,
@@ -528,8 +532,7 @@ class EvaluationCar:
                 "trial": trial.number,
             }
         )
-        line = track_lines.line_times(track=evaluation.track, direction=evaluation.direction)
-        row = selectors.trial_row(trial=trial, line=line)
+        row = selectors.trial_row(trial=trial, line=self.line)
         streams.announce(streams.evaluation_group(evaluation.pk), row)
         return LapCounts(
             now["off_tracks"],

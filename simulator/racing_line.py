@@ -119,10 +119,16 @@ def racing_line(
     # From rest at the start line: v² = 2 a s until the flying lap's speed is reached.
     steps = _curvature(points)[1]
     along = np.concatenate([[0.0], np.cumsum(steps)])[:-1]
-    standing = np.minimum(speeds, np.sqrt(2 * limits.accelerating * along))
+    standing = from_rest(speeds, along, limits.accelerating)
     arriving = np.append(standing[1:], speeds[0])  # the lap ends at the flying lap's speed
     standing_time = float((steps / ((standing + arriving) / 2)).sum())
     return RacingLine(points, speeds, lap_time, standing_time, margin)
+
+
+def from_rest(speeds: np.ndarray, along: np.ndarray, accelerating: float) -> np.ndarray:
+    """[m/s] ``speeds`` as a car that starts from rest at ``along`` 0 [m] reaches them, gaining
+    at most ``accelerating`` [m/s²]: v² = 2 a s until each is reached."""
+    return np.minimum(speeds, np.sqrt(2 * accelerating * along))
 
 
 def speed_profile(points: np.ndarray, limits: Limits) -> tuple[np.ndarray, float]:

@@ -536,9 +536,14 @@ def evaluation_status(*, evaluation: EvaluationJob) -> dict:
     }
 
 
-def evaluation_trials(*, evaluation: EvaluationJob) -> list[dict]:
-    """Its trials' rows (``trial_row``), each against the racing line where it is computed."""
-    line = track_lines.line_times(track=evaluation.track, direction=evaluation.direction)
+def evaluation_line(*, evaluation: EvaluationJob) -> tuple[float, float] | None:
+    """The laps of the racing line of the track ``evaluation`` drives, its way
+    (``track_lines.line_times``): what its trials are set against."""
+    return track_lines.line_times(track=evaluation.track, direction=evaluation.direction)
+
+
+def evaluation_trials(*, evaluation: EvaluationJob, line: tuple[float, float] | None) -> list[dict]:
+    """Its trials' rows (``trial_row``), each against ``line`` (``evaluation_line``)."""
     return [trial_row(trial=trial, line=line) for trial in evaluation.trial_rows.all()]
 
 
@@ -546,7 +551,9 @@ def evaluation_snapshot(*, evaluation: EvaluationJob) -> dict:
     return {
         **evaluation_status(evaluation=evaluation),
         "type": "state",
-        "history": evaluation_trials(evaluation=evaluation),
+        "history": evaluation_trials(
+            evaluation=evaluation, line=evaluation_line(evaluation=evaluation)
+        ),
     }
 
 

@@ -50,12 +50,11 @@ class LineShown:
 def track_line(*, track: Track, direction: str, margin_cm: int = 0) -> LineShown:
     """``track``'s racing line driven ``direction`` ``margin_cm`` inside the borders: the stored
     one, or its row; requested (and "computing") where there is none or it is stale."""
-    geometry = simulator_tracks.load(track.name).with_direction(direction)
-    if track.builtin and margin_cm == 0:
-        line = racing_line.stored_line(geometry)
-        if line is not None:
-            return LineShown(track, geometry, direction, 0, TrackLine.Status.READY, line)
-    key = racing_line.line_key(geometry, CarSpec(), margin_cm / 100)
+    geometry = _geometry(track, direction)
+    line = _stored(track, geometry, margin_cm)
+    if line is not None:
+        return LineShown(track, geometry, direction, 0, TrackLine.Status.READY, line)
+    key = _key(geometry, margin_cm)
     row = TrackLine.objects.filter(track=track, direction=direction, margin_cm=margin_cm).first()
     lost = timezone.now() - LOST_AFTER
     if (
@@ -79,18 +78,40 @@ def line_times(*, track: Track, direction: str) -> tuple[float, float] | None:
     without a margin, where it is computed and current; None otherwise (and where the track's
     route cannot be read). Reads only."""
     try:
-        geometry = simulator_tracks.load(track.name).with_direction(direction)
+        geometry = _geometry(track, direction)
     except simulator_tracks.TrackError:
         return None
-    if track.builtin:
-        line = racing_line.stored_line(geometry)
-        if line is not None:
-            return line.standing_lap_time, line.lap_time
-    key = racing_line.line_key(geometry, CarSpec(), 0.0)
+    line = _stored(track, geometry, 0)
+    if line is not None:
+        return line.standing_lap_time, line.lap_time
     found = TrackLine.objects.filter(
-        track=track, direction=direction, margin_cm=0, key=key, status=TrackLine.Status.READY
+        track=track,
+        direction=direction,
+        margin_cm=0,
+        key=_key(geometry, 0),
+        status=TrackLine.Status.READY,
     )
     return found.values_list("standing_lap_time", "lap_time").first()
+
+
+def _geometry(track: Track, direction: str) -> simulator_tracks.Track:
+    """The simulator's ``track`` driven ``direction`` (``TrackError`` where it cannot be)."""
+    return simulator_tracks.load(track.name).with_direction(direction)
+
+
+def _stored(
+    track: Track, geometry: simulator_tracks.Track, margin_cm: int
+) -> racing_line.RacingLine | None:
+    """A built-in track's line stored with the simulator, where it is current and no margin is
+    asked for; None otherwise (the line is then a ``TrackLine`` row's)."""
+    if track.builtin and margin_cm == 0:
+        return racing_line.stored_line(geometry)
+    return None
+
+
+def _key(geometry: simulator_tracks.Track, margin_cm: int) -> str:
+    """What a ``TrackLine`` row of ``geometry``'s line, ``margin_cm`` in, is computed from."""
+    return racing_line.line_key(geometry, CarSpec(), margin_cm / 100)
 
 
 def lap_against_line(seconds: float, line_seconds: float) -> str:
@@ -117,7 +138,7 @@ def track_lines_request_all(*, track: Track, geometry: simulator_tracks.Track) -
     """Request the line of an added ``track`` (the simulator's ``geometry`` of it, already
     read: its route is not checked again) in each of its directions, without a margin."""
     for direction in track.direction_values:
-        key = racing_line.line_key(geometry.with_direction(direction), CarSpec(), 0.0)
+        key = _key(geometry.with_direction(direction), 0)
         track_line_request(track=track, direction=direction, margin_cm=0, key=key)
 
 
@@ -128,8 +149,8 @@ def track_line_compute(*, line_id: int) -> None:
         log.info("Racing line %s is gone; nothing to compute.", line_id)
         return
     try:
-        geometry = simulator_tracks.load(row.track.name).with_direction(row.direction)
-        key = racing_line.line_key(geometry, CarSpec(), row.margin_cm / 100)
+        geometry = _geometry(row.track, row.direction)
+        key = _key(geometry, row.margin_cm)
         line = racing_line.racing_line(geometry, margin=row.margin_cm / 100)
     except (simulator_tracks.TrackError, ValueError, ArithmeticError) as error:
         log.warning("The racing line of %s could not be computed: %s", row, error)

@@ -634,14 +634,15 @@ def evaluation_detail(request: HttpRequest, pk: int, evaluation: int) -> HttpRes
         EvaluationJob.Status.INITIALIZING,
         EvaluationJob.Status.IN_PROGRESS,
     )
+    line = selectors.evaluation_line(evaluation=job)
     return render(
         request,
         "training/evaluation_detail.html",
         {
             "model": job.model,
             "evaluation": job,
-            "trials": selectors.evaluation_trials(evaluation=job),
-            "line": track_lines.line_times(track=job.track, direction=job.direction),
+            "trials": selectors.evaluation_trials(evaluation=job, line=line),
+            "line": line,
             "files": files,
             "cars": selectors.race_cars(evaluation=job),
             "can_stop": stoppable and not hasattr(job, "submission") and not job.rival,
