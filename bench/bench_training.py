@@ -110,62 +110,30 @@ def reward_function(params):
     return _steady(params) * max(1.0 - (off / 30.0) ** 2, 0.0) + 1e-3
 """
 )
-# The racing line's reward: the track page's literal (RACING_LINE, "Copy for a reward function")
-# pasted above a reward that pays for the distance from the line, for the line's speed there and
-# for a heading along it, with the steady hands above. The line's 3.6 m/s is the wheels' limit,
-# which a command of 3.5 m/s and more reaches (simulator.car: wheel_target), so any command from
-# there on is its speed; below it the command is the tread's speed over 1.029.
-LINE_REWARD = """\
-import math
-
-{literal}
-
-_POINTS = len(RACING_LINE)
-
-
-def reward_function(params):
-    # Stay on the line at its speed and heading: the nearest point says where the line is, how
-    # fast it is driven there and which way it goes (to the next point).
-    if params["is_offtrack"] or not params["all_wheels_on_track"]:
-        return 1e-3
-    x, y = params["x"], params["y"]
-    index = min(
-        range(_POINTS), key=lambda k: (RACING_LINE[k][0] - x) ** 2 + (RACING_LINE[k][1] - y) ** 2
-    )
-    px, py, line_speed = RACING_LINE[index]
-    nx, ny, _ = RACING_LINE[(index + 1) % _POINTS]
-    length = math.hypot(nx - px, ny - py) or 1e-9
-    # from the line through this point and the next, not from the point alone
-    distance = abs((nx - px) * (py - y) - (px - x) * (ny - py)) / length
-    on_line = max(1.0 - (distance / (0.3 * params["track_width"])) ** 2, 0.0)
-    target = 4.0 if line_speed >= 3.55 else line_speed / 1.029
-    speed = params["speed"]
-    pace = (speed / target) ** 2 if speed <= target else max(1.0 - (speed - target) ** 2, 0.0)
-    off = abs((math.degrees(math.atan2(ny - py, nx - px)) - params["heading"] + 180) % 360 - 180)
-    heading = max(1.0 - (off / 30.0) ** 2, 0.0)
-    return on_line * pace * heading + 1e-3
-"""
 REWARDS = {
     "road-ahead": FAST_REWARD,
     "steady": STEADY_REWARD,
     "aligned": ALIGNED_REWARD,
-    "line": LINE_REWARD + STEADY_PART,
 }
+# The reward editor's example "Follow the racing line", with the bench track's line pasted in.
+LINE = "line"
 
 
 def reward_source(reward: str, track: str) -> str:
-    """The reward function ``reward`` names, for ``track``: the racing line's is that track's
-    stored line (counter-clockwise), pasted as the track page copies it."""
-    source = REWARDS[reward]
-    if reward != "line":
-        return source
+    """The reward function ``reward`` names (``REWARDS`` or ``LINE``), for ``track``: with
+    ``LINE``, the reward editor's example with ``track``'s stored line (counter-clockwise) pasted
+    over the one it holds, as a racer pastes the track page's copy."""
+    if reward != LINE:
+        return REWARDS[reward]
     from training.models import Track
-    from training.track_lines import reward_literal, track_line
+    from training.rewards import EXAMPLES
+    from training.track_lines import track_line, with_racing_line
 
+    (example,) = (example for example in EXAMPLES if example.slug == "follow_racing_line")
     shown = track_line(track=Track.objects.get(name=track), direction="counterclockwise")
     if shown.line is None:
         raise SystemExit(f"{track} has no current racing line: python -m simulator.racing_line")
-    return source.replace("{literal}", reward_literal(shown).rstrip("\n"))
+    return with_racing_line(example.source, shown)
 
 
 def bench_racer(name: str = "bench"):
@@ -735,10 +703,11 @@ def main() -> None:
     )
     parser.add_argument(
         "--reward",
-        choices=tuple(REWARDS),
+        choices=(*REWARDS, LINE),
         default="road-ahead",
         help="with --fast, the reward function: the road ahead's speed, that with steady hands, "
-        "or that with a steady heading too",
+        "that with a steady heading too, or (line) the reward editor's 'Follow the racing line' "
+        "with the track's line",
     )
     parser.add_argument(
         "--under",

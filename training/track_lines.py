@@ -202,6 +202,15 @@ def reward_literal(shown: LineShown) -> str:
     )
 
 
+def with_racing_line(source: str, shown: LineShown) -> str:
+    """``source``, a reward function holding a racing line as ``reward_literal`` writes it (the
+    reward editor's example), with ``shown``'s pasted over it, as a racer pastes the track page's
+    copy."""
+    start = source.index("# The racing line of ")
+    end = source.index("\n]\n", start) + len("\n]\n")
+    return source[:start] + reward_literal(shown) + source[end:]
+
+
 # The Analysis tab's speed palette (static/analysis/analysis.js: VIRIDIS), slowest first.
 SPEED_COLOURS = (
     "#440154", "#482878", "#3e4989", "#31688e", "#26828e",

@@ -183,6 +183,44 @@ def test_the_reward_editors_example_holds_the_stored_line_it_names(tracks):
     assert track_lines.reward_literal(shown) in example  # regenerate the example when it differs
 
 
+def test_the_example_with_a_tracks_line_pasted_pays_for_its_place_speed_heading_and_steady_hands(
+    tracks,
+):
+    track = Track.objects.get(name="rookie-loop")
+    shown = track_lines.track_line(track=track, direction="counterclockwise")
+    example = next(e for e in rewards.EXAMPLES if e.slug == "follow_racing_line").source
+    source = track_lines.with_racing_line(example, shown)
+    assert track_lines.reward_literal(shown) in source and "reInvent2019" not in source
+    assert reward_validate(source=source, track="rookie-loop").errors == []
+
+    namespace = {}
+    exec(compile(source, "follow_racing_line.py", "exec"), namespace)  # noqa: S102 (ours)
+    stride = track_lines.LITERAL_STRIDE  # the points the literal holds
+    line, speeds = shown.line.points[::stride], shown.line.speeds[::stride]
+    k = int(np.argmin(speeds))  # the slowest point, in the tightest bend
+    (x, y), (nx, ny) = line[k], line[k + 1]
+    heading = np.degrees(np.arctan2(ny - y, nx - x))
+    normal = np.array([y - ny, nx - x]) / np.hypot(nx - x, ny - y)
+    width = 0.76  # [m] params["track_width"] as DeepRacer's tracks give it
+    on_line = {
+        "x": x, "y": y, "heading": heading, "speed": speeds[k] / 1.029, "track_width": width,
+        "steering_angle": 0.0, "is_offtrack": False, "all_wheels_on_track": True,
+    }  # fmt: skip
+
+    def reward(steps: int, **changed) -> float:
+        return namespace["reward_function"]({**on_line, "steps": steps, **changed})
+
+    assert reward(1) == pytest.approx(1.0, abs=0.01)
+    assert reward(2, speed=on_line["speed"] / 2) == pytest.approx(0.25, abs=0.01)
+    assert reward(3, speed=on_line["speed"] + 1.0) < 0.01  # too fast into the bend
+    aside = np.array([x, y]) + normal * 0.3 * width
+    assert reward(4, x=aside[0], y=aside[1]) < 0.05
+    assert reward(5, heading=heading + 30) < 0.01
+    assert reward(6, steering_angle=15.0) == pytest.approx(0.75, abs=0.01)  # hands shaken
+    assert reward(8, steering_angle=15.0) == pytest.approx(1.0, abs=0.01)  # a new episode
+    assert reward(9, is_offtrack=True) < 0.01
+
+
 def test_a_track_gone_from_the_catalogue_is_a_404_not_a_500(client, alice, tracks):
     Track.objects.create(
         name="retired", display_name="Retired", difficulty="beginner", length_m=20, width_m=1

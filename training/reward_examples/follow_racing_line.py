@@ -123,20 +123,49 @@ RACING_LINE = [
     [-3.7772, 0.0674, 1.83],
 ]
 
+_POINTS = len(RACING_LINE)
 
-def reward_function(params):
-    """Follow the racing line at its speeds. RACING_LINE above is reInvent2019_track's,
-    counter-clockwise: paste your own track's over it, from the track's page ("Copy for a
-    reward function")."""
+# The last step's steering command. DeepRacer loads this module once for a whole training, so it
+# remembers: a command that changed since the last step costs reward (steady hands).
+_last = {"steps": None, "steering": 0.0}
+
+
+def on_the_line(params):
+    """The line at the nearest point says where to be, how fast and which way (to the next
+    point): each earns from 0 to 1, and the three are multiplied."""
     if params["is_offtrack"] or not params["all_wheels_on_track"]:
         return 1e-3
     x, y = params["x"], params["y"]
-    nearest = min(RACING_LINE, key=lambda point: (point[0] - x) ** 2 + (point[1] - y) ** 2)
-    distance = math.hypot(nearest[0] - x, nearest[1] - y)
+    index = min(
+        range(_POINTS), key=lambda k: (RACING_LINE[k][0] - x) ** 2 + (RACING_LINE[k][1] - y) ** 2
+    )
+    px, py, line_speed = RACING_LINE[index]
+    nx, ny, _ = RACING_LINE[(index + 1) % _POINTS]
+    length = math.hypot(nx - px, ny - py) or 1e-9
 
-    # On the line earns 1; a quarter of the track's width from it, nothing.
-    on_line = max(0.0, 1.0 - distance / (0.25 * params["track_width"]))
-    # The line's speed there earns 1; 1 m/s slower or faster, nothing.
-    at_speed = max(0.0, 1.0 - abs(params["speed"] - nearest[2]))
+    # Where: the distance from the line through this point and the next; 30% of the track's
+    # width from it earns nothing.
+    distance = abs((nx - px) * (py - y) - (px - x) * (ny - py)) / length
+    on_line = max(1.0 - (distance / (0.3 * params["track_width"])) ** 2, 0.0)
 
-    return float(1e-3 + on_line * (0.5 + 0.5 * at_speed))
+    # How fast: the car rolls 1.029 times the commanded speed (params["speed"]), up to 3.6 m/s,
+    # where the wheels stop (any command from 3.5 m/s on). Slower than the line earns less as
+    # the speed squared; faster falls away quickly.
+    target = 4.0 if line_speed >= 3.55 else line_speed / 1.029
+    speed = params["speed"]
+    pace = (speed / target) ** 2 if speed <= target else max(1.0 - (speed - target) ** 2, 0.0)
+
+    # Which way: 30 degrees off the line's heading earns nothing.
+    off = abs((math.degrees(math.atan2(ny - py, nx - px)) - params["heading"] + 180) % 360 - 180)
+    heading = max(1.0 - (off / 30.0) ** 2, 0.0)
+    return on_line * pace * heading + 1e-3
+
+
+def reward_function(params):
+    """Follow the racing line at its speed and heading, with steady hands. RACING_LINE above is
+    a track's page's "Copy for a reward function": paste your own track's over it. Give the
+    action space the line's speeds (1-4 m/s)."""
+    steps, steering = params["steps"], params["steering_angle"]
+    change = abs(steering - _last["steering"]) if _last["steps"] == steps - 1 else 0.0
+    _last.update(steps=steps, steering=steering)
+    return on_the_line(params) * max(1.0 - (change / 30.0) ** 2, 0.0) + 1e-3
