@@ -97,6 +97,7 @@ def overview(source: Source) -> dict:
         "speed_bins": _centres(summaries.SPEED_EDGES),
         "point_columns": [*summaries.POINT_COLUMNS, "iteration"],
         "racing_line": _line_drawn(racing_line(source)),
+        "speed_colours": list(track_lines.SPEED_COLOURS),
     }
 
 

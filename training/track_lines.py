@@ -211,7 +211,8 @@ def with_racing_line(source: str, shown: LineShown) -> str:
     return source[:start] + reward_literal(shown) + source[end:]
 
 
-# The Analysis tab's speed palette (static/analysis/analysis.js: VIRIDIS), slowest first.
+# The speed palette (viridis), slowest first: the track page's map and the Analysis tab's
+# (analysis.selectors.overview hands it to static/analysis/analysis.js).
 SPEED_COLOURS = (
     "#440154", "#482878", "#3e4989", "#31688e", "#26828e",
     "#1f9e89", "#35b779", "#6ece58", "#b5de2b", "#fde725",
