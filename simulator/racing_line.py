@@ -168,10 +168,9 @@ def _corridor(track: Track, inset: float):
     tangent /= np.hypot(tangent[:, 0], tangent[:, 1])[:, None]
     normals = np.column_stack([-tangent[:, 1], tangent[:, 0]])
     where = track.project_points(centre)
-    cumulative = track._segments[3]
-    left, right = track._half_widths
-    high = np.interp(where.distance, cumulative, left) - inset
-    low = -(np.interp(where.distance, cumulative, right) - inset)
+    left, right = track.half_widths
+    high = np.interp(where.distance, track.along, left) - inset
+    low = -(np.interp(where.distance, track.along, right) - inset)
     middle = (low + high) / 2  # a stretch narrower than the car: its middle, no room either way
     return centre, normals, np.minimum(low, middle), np.maximum(high, middle)
 

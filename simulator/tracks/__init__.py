@@ -95,7 +95,7 @@ class Track:
         return starts, vectors, lengths_sq, cumulative
 
     @cached_property
-    def _half_widths(self) -> tuple[np.ndarray, np.ndarray]:
+    def half_widths(self) -> tuple[np.ndarray, np.ndarray]:
         """Centre-to-border distances on the left and on the right of travel, per waypoint."""
         tangent = np.gradient(self.centre, axis=0)
         to_inner = self.inner - self.centre
@@ -105,14 +105,19 @@ class Track:
         return np.where(inner_is_left, inner, outer), np.where(inner_is_left, outer, inner)
 
     @property
+    def along(self) -> np.ndarray:
+        """[m] each waypoint's distance along the centre line from the first."""
+        return self._segments[3]
+
+    @property
     def length(self) -> float:
         """Length of the centre line [m]."""
-        return float(self._segments[3][-1])
+        return float(self.along[-1])
 
     @property
     def widths(self) -> np.ndarray:
         """Inner-to-outer border distance at each waypoint [m]."""
-        left, right = self._half_widths
+        left, right = self.half_widths
         return left + right
 
     @property
@@ -139,7 +144,7 @@ class Track:
         d = vectors[segment]
         r = relative[rows, segment]
         is_left = d[:, 0] * r[:, 1] - d[:, 1] * r[:, 0] > 0
-        left, right = self._half_widths
+        left, right = self.half_widths
         left_here = left[segment] + t * (left[segment + 1] - left[segment])
         right_here = right[segment] + t * (right[segment + 1] - right[segment])
         distance = cumulative[segment] + t * np.sqrt(lengths_sq[segment])
