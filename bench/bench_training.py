@@ -556,10 +556,11 @@ def time_to_qualify(
     reward: str = "road-ahead",
     workers: int = 1,
     track: str = "rookie-loop",
-) -> tuple[float | None, float | None, float | None]:
+) -> tuple[float | None, float | None, float | None, tuple[float, int] | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
-    after ``lap_after`` minutes and that of the model then, its best checkpoint; a lap only where
-    3 were clean); a fast model trains on to ``lap_after`` once it qualifies.
+    after ``lap_after`` minutes and that of the model then, its best checkpoint, and the fastest
+    lap of any checkpoint before with its iteration; a lap only where 3 were clean); a fast model
+    trains on to ``lap_after`` once it qualifies.
     With ``under``, qualifying takes 3 clean laps each under that many seconds; ``workers``: the
     model's rollout workers."""
     from training.services import training_stop
@@ -578,7 +579,7 @@ def time_to_qualify(
         track=track,
     )
     tried = set()
-    qualified = None
+    qualified = fastest = None
     while True:
         job = job_of(model)
         minutes = job.training_seconds / 60
@@ -599,9 +600,11 @@ def time_to_qualify(
             )
             if ok and qualified is None:
                 qualified = minutes
+            if ok and (fastest is None or min(laps) < fastest[0]):
+                fastest = (min(laps), job.iterations)
             if qualified is not None and (not fast or under is not None):
                 training_stop(job=job)  # the time to qualify (or to the lap time) is known
-                return qualified, (min(laps) if fast else None), None
+                return qualified, (min(laps) if fast else None), None, fastest
             if fast and minutes >= lap_after:
                 training_stop(job=job)
                 model_ok, model_laps, iteration = racers_model(model)
@@ -614,13 +617,13 @@ def time_to_qualify(
                     min(laps) if ok else None,
                     min(model_laps) if model_ok else None,
                 )
-                return qualified, best_lap, model_lap
+                return qualified, best_lap, model_lap, fastest
         # With --fast the lap is the first checkpoint's after lap_after, which may land a whole
         # iteration after it: wait for it (up to LATE_CHECKPOINT more minutes).
         lapping = fast and under is None
         if minutes > (max(limit, lap_after + LATE_CHECKPOINT) if lapping else limit):
             training_stop(job=job)
-            return qualified, None, None
+            return qualified, None, None, fastest
         time.sleep(5)
 
 
@@ -787,7 +790,7 @@ def main() -> None:
                     f"{line[0]:.2f} s from a standing start, {line[1]:.2f} s flying"
                 )
             for seed in arguments.seeds:
-                minutes, best, model_best = time_to_qualify(
+                minutes, best, model_best, fastest = time_to_qualify(
                     owner,
                     seed,
                     arguments.limit,
@@ -812,6 +815,11 @@ def main() -> None:
                     )
                     if model_best:  # its fastest of 3 laps, a flying one but where the first
                         shown += f", {model_best / line[1]:.3f} times the line's flying lap"
+                    if fastest:  # what the newest checkpoint with the best progress is not
+                        shown += (
+                            f"; the fastest checkpoint's (iteration {fastest[1]}): "
+                            f"{fastest[0]:.2f} s, {fastest[0] / line[1]:.3f} times the line's"
+                        )
                 print(f"seed {seed}: {shown}", flush=True)
         else:
             print("Training throughput, DeepRacer's defaults (PPO, camera, Rookie Loop):")
