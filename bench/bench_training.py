@@ -80,7 +80,9 @@ def reward_function(params):
 # the last step. Each new command kicks the steering hinge and the rest of it closes over half a
 # second, so a shaken command throws the car off the line a little late for the road-ahead reward
 # to say which command did it; this factor says so at once.
-STEADY_PART = """
+STEADY_REWARD = (
+    FAST_REWARD
+    + """
 
 _last = {"steps": None, "steering": 0.0}
 _road_ahead = reward_function
@@ -92,7 +94,7 @@ def reward_function(params):
     _last.update(steps=steps, steering=steering)
     return _road_ahead(params) * max(1.0 - (change / 30.0) ** 2, 0.0) + 1e-3
 """
-STEADY_REWARD = FAST_REWARD + STEADY_PART
+)
 # Steady hands and a steady heading: the car's heading against the track's direction at the
 # closest waypoints (DeepRacer's own example reward 3 reads the same params) also lowers the
 # reward, so weaving costs at once what it costs later in distance from the centre.
@@ -110,11 +112,7 @@ def reward_function(params):
     return _steady(params) * max(1.0 - (off / 30.0) ** 2, 0.0) + 1e-3
 """
 )
-REWARDS = {
-    "road-ahead": FAST_REWARD,
-    "steady": STEADY_REWARD,
-    "aligned": ALIGNED_REWARD,
-}
+REWARDS = {"road-ahead": FAST_REWARD, "steady": STEADY_REWARD, "aligned": ALIGNED_REWARD}
 # The reward editor's example "Follow the racing line", with the bench track's line pasted in.
 LINE = "line"
 
