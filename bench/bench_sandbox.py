@@ -41,7 +41,7 @@ from rl.policies import Policy
 from rl.policy_lease import PolicyLease
 from sandbox import CHILD_ENVIRONMENT, MiB, Sandbox
 from sandbox.spawner import Zygote
-from training.rewards import EXAMPLES
+from training.rewards import EXAMPLES, example_source
 
 STEPS = 3000
 ROUNDS = 3
@@ -51,7 +51,7 @@ SOCKET = str(Path(tempfile.mkdtemp(prefix="bench-")) / "policy.sock")  # the ben
 
 
 def reward_source() -> str:
-    return next(example for example in EXAMPLES if example.slug == "prevent_zig_zag").source
+    return example_source("prevent_zig_zag")
 
 
 def in_process() -> float:

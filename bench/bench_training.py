@@ -124,14 +124,13 @@ def reward_source(reward: str, track: str) -> str:
     if reward != LINE:
         return REWARDS[reward]
     from training.models import Track
-    from training.rewards import EXAMPLES
+    from training.rewards import example_source
     from training.track_lines import track_line, with_racing_line
 
-    (example,) = (example for example in EXAMPLES if example.slug == "follow_racing_line")
     shown = track_line(track=Track.objects.get(name=track), direction="counterclockwise")
     if shown.line is None:
         raise SystemExit(f"{track} has no current racing line: python -m simulator.racing_line")
-    return with_racing_line(example.source, shown)
+    return with_racing_line(example_source("follow_racing_line"), shown)
 
 
 def bench_racer(name: str = "bench"):

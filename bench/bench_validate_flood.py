@@ -64,7 +64,7 @@ def bystander(checks: int, pause: float) -> tuple[list[float], int]:
     at once and the time runs on) and how many refusals they met."""
     from training import checkers, rewards
 
-    source = next(e for e in rewards.EXAMPLES if e.slug == "follow_centre_line").source
+    source = rewards.example_source("follow_centre_line")
     answers, refused = [], 0
     for _ in range(checks):
         started = time.monotonic()

@@ -84,6 +84,12 @@ EXAMPLES = (
     ),
 )
 
+
+def example_source(slug: str) -> str:
+    """The code of the example ``slug`` names (``EXAMPLES``)."""
+    return next(example for example in EXAMPLES if example.slug == slug).source
+
+
 # The input parameters, as DeepRacer documents them.
 PARAMS = (
     ("all_wheels_on_track", "bool", "All four wheels are inside the track borders."),

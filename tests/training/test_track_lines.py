@@ -188,8 +188,7 @@ def test_the_example_with_a_tracks_line_pasted_pays_for_its_place_speed_heading_
 ):
     track = Track.objects.get(name="rookie-loop")
     shown = track_lines.track_line(track=track, direction="counterclockwise")
-    example = next(e for e in rewards.EXAMPLES if e.slug == "follow_racing_line").source
-    source = track_lines.with_racing_line(example, shown)
+    source = track_lines.with_racing_line(rewards.example_source("follow_racing_line"), shown)
     assert track_lines.reward_literal(shown) in source and "reInvent2019" not in source
     assert reward_validate(source=source, track="rookie-loop").errors == []
 
