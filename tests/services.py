@@ -84,7 +84,9 @@ class RedisServer:
     def save(self) -> None:
         """Write the data to the directory's dump, which the next start loads: a restart after
         it keeps the data, as a Redis with persistence does."""
-        with socket.create_connection(("127.0.0.1", self.port), timeout=10) as connection:
+        # SAVE answers once the whole dump is written: on a loaded 2-core box (the whole suite
+        # beside it) that took more than 10 s once.
+        with socket.create_connection(("127.0.0.1", self.port), timeout=60) as connection:
             connection.sendall(b"SAVE\r\n")
             if not connection.recv(16).startswith(b"+OK"):
                 raise RuntimeError(f"Redis on port {self.port} did not save its data")
