@@ -13,6 +13,7 @@ import gymnasium
 import numpy as np
 import torch
 from stable_baselines3.common.distributions import SquashedDiagGaussianDistribution
+from stable_baselines3.common.policies import BaseModel
 
 import simulator
 from rl.hyperparameters import PPO
@@ -117,26 +118,66 @@ class Policy:
         """Sampled actions for several cars in one forward pass, each car's drawn from its own
         generator (None: torch's global one): (actions, values, log-probabilities), the last
         two only for PPO, one row per car."""
-        batch = {name: np.stack([seen[name] for seen in observations]) for name in observations[0]}
+        actions, values, log_probs, _ = self.act(observations, generators)
+        return actions, values, log_probs
+
+    def act(
+        self,
+        observations: list[dict],
+        generators: list[torch.Generator | None],
+        driven: list[dict] = (),
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray]:
+        """``explore``'s answer for ``observations`` and, in the same pass, ``drive``'s for the
+        cars that evaluate (``driven``): (sampled actions, values, log-probabilities, driven
+        actions). Their rows share the actor's pass, whose weights are read once for all: on a
+        CPU the dense layer's 23 MB are most of a small pass, and an evaluating car alone pays
+        them again for one row. The critic runs on the sampled rows only."""
+        seen = [*observations, *driven]
+        batch = {name: np.stack([each[name] for each in seen]) for name in seen[0]}
         tensor, _ = self.network.obs_to_tensor(batch)
+        sampled = len(observations)
+        actions = values = log_probs = deterministic = None
         with torch.no_grad():
+            # SB3 keeps a pass's distribution on the policy's module: the sampled rows' is used
+            # up before the driven rows' takes its place
             if not self.ppo:
                 actor = self.network.actor
                 mean, log_std, kwargs = actor.get_action_dist_params(tensor)
-                distribution = actor.action_dist.proba_distribution(mean, log_std, **kwargs)
-                return _sample(distribution, generators).cpu().numpy(), None, None
-            network = self.network  # SB3's ActorCriticPolicy.forward, its sampling apart
-            features = network.extract_features(tensor)
-            if network.share_features_extractor:
-                latent_pi, latent_vf = network.mlp_extractor(features)
+                distribution = actor.action_dist.proba_distribution
+                if sampled:
+                    actions = _sample(
+                        distribution(mean[:sampled], log_std[:sampled], **kwargs), generators
+                    )
+                if driven:
+                    deterministic = distribution(mean[sampled:], log_std[sampled:], **kwargs).mode()
             else:
-                latent_pi = network.mlp_extractor.forward_actor(features[0])
-                latent_vf = network.mlp_extractor.forward_critic(features[1])
-            values = network.value_net(latent_vf).flatten()
-            distribution = network._get_action_dist_from_latent(latent_pi)
-            actions = _sample(distribution, generators)
-            log_probs = distribution.log_prob(actions)
-        return actions.cpu().numpy(), values.cpu().numpy(), log_probs.cpu().numpy()
+                network = self.network  # SB3's ActorCriticPolicy.forward, its sampling apart
+                latent_pi, latent_vf = self._latents(tensor, sampled)
+                if sampled:
+                    values = network.value_net(latent_vf).flatten().cpu().numpy()
+                    distribution = network._get_action_dist_from_latent(latent_pi[:sampled])
+                    actions = _sample(distribution, generators)
+                    log_probs = distribution.log_prob(actions).cpu().numpy()
+                if driven:
+                    distribution = network._get_action_dist_from_latent(latent_pi[sampled:])
+                    deterministic = distribution.mode()
+        actions = (deterministic[:0] if actions is None else actions).cpu().numpy()
+        deterministic = actions[:0] if deterministic is None else deterministic.cpu().numpy()
+        return actions, values, log_probs, deterministic
+
+    def _latents(self, tensor: dict, sampled: int) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """PPO's actor latents of every row, and its critic's of the first ``sampled``."""
+        network = self.network
+        if network.share_features_extractor:
+            latent_pi, latent_vf = network.mlp_extractor(network.extract_features(tensor))
+            return latent_pi, latent_vf[:sampled]
+        features = BaseModel.extract_features(network, tensor, network.pi_features_extractor)
+        latent_pi = network.mlp_extractor.forward_actor(features)
+        if not sampled:
+            return latent_pi, None
+        critic_rows = {name: rows[:sampled] for name, rows in tensor.items()}
+        features = BaseModel.extract_features(network, critic_rows, network.vf_features_extractor)
+        return latent_pi, network.mlp_extractor.forward_critic(features)
 
     def drive(self, observation: dict) -> np.ndarray:
         """The deterministic action alone, as evaluations drive: PPO's critic, a network of its

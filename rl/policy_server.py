@@ -15,6 +15,8 @@ the machine has. Policies are shared by every child of the same job, algorithm, 
 spaces and weights, and forgotten when the last of those children goes. Every policy that has
 children waiting is served once a round, the policies taking turns at going first, and a round
 waits a moment for the children of the last: each job's cars get an equal share of the server.
+A checkpoint's evaluation, which drives beside its job's next iteration with the same weights,
+rides in the pass of that iteration's cars rather than pay one of its own for each of its steps.
 On a CPU, a round's passes of several policies run at once on lanes of one thread each; on a
 GPU, one after another.
 
@@ -56,6 +58,9 @@ logger = logging.getLogger("pitlane.policy_server")
 IDLE = 300.0  # [s] without a worker's connection before the server ends itself
 LOOK = 1.0  # [s] between looks at the idle clock while nothing happens
 GATHER = 0.002  # [s] a round waits at most for the children of the last to ring again
+# [s] an evaluating car waits at most this long after its job's exploring cars last asked for
+# them to ask again, to ride in their pass: about ten of their steps on the 2-core box
+RIDE = 0.05
 
 
 @dataclass
@@ -83,6 +88,7 @@ class Child:
     generators: dict = field(default_factory=dict)
     key: tuple | None = None  # of the policy it drives with
     rang: bool = False
+    explored: float = 0.0  # [s] monotonic: when its cars last asked to explore
 
 
 class Server:
@@ -98,6 +104,7 @@ class Server:
         self.quiet_since = time.monotonic()
         self.rounds = 0
         self.last_round: list[Child] = []  # the children answered in the last round
+        self.riding: float | None = None  # [s] monotonic: when an evaluating car waits until
         self.stats = {"passes": 0, "rows": 0, "most_rows": 0, "pid": os.getpid()}
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         with contextlib.suppress(FileNotFoundError):
@@ -113,7 +120,7 @@ class Server:
         one and the socket's path is gone (its machine's console stopped, or another server
         took the path over): the children it serves are served to their end."""
         while self.children or time.monotonic() - self.quiet_since < self.idle:
-            self._handle(LOOK)
+            self._handle(LOOK if self.riding is None else max(self.riding - time.monotonic(), 0))
             self._gather()
             self._guarded(self._answer_rings)
             if not self.children and not self._still_listening():
@@ -311,7 +318,8 @@ class Server:
 
     def _answer_rings(self) -> None:
         """Every child that rang, answered: one batched forward pass per policy of those that
-        explore, each evaluating or valuing child on its own."""
+        explore or evaluate (an evaluation's car drives with the weights the training cars of
+        its job do, so it rides in their pass), each valuing child on its own."""
         together: dict[tuple, list] = defaultdict(list)
         self.last_round = [c for c in self.children.values() if c is not None and c.rang]
         for child in self.last_round:
@@ -321,14 +329,17 @@ class Server:
             except ProtocolError as error:
                 self._refuse(child, str(error))
                 continue
-            if how == "explore":
-                together[child.key].append((child, observations, seeds))
+            if how in ("explore", "drive"):
+                together[child.key].append((child, how, observations, seeds))
+                if how == "explore":
+                    child.explored = time.monotonic()
             else:
                 try:
-                    self._answer_one(child, how, observations[0])
+                    self._value(child, observations[0])
                 except Exception as error:  # the device's own
                     logger.exception("The policy server failed a pass")
                     self._refuse(child, f"its policy failed on {self.device} ({error})"[:300])
+        self._wait_to_ride(together)
         # Who is answered first rings again first, in time for the next round: the policies
         # take turns at going first, or the first would be answered twice as often.
         self.rounds += 1
@@ -345,6 +356,25 @@ class Server:
         for done in concurrent.futures.as_completed(running):
             self._answer_pass(running[done], done.result)
 
+    def _wait_to_ride(self, together: dict[tuple, list]) -> None:
+        """Hold back the evaluating cars whose job's exploring cars drive but have not asked
+        this round: they ask again within a few milliseconds, and the evaluating cars ride in
+        their pass rather than pay a pass of their own for one row each (a checkpoint's
+        evaluation drives beside its job's next iteration: ``jobs.rollouts``). Once those have
+        not asked for ``RIDE``, the evaluating cars go on alone."""
+        self.riding = None
+        now = time.monotonic()
+        for key, asked in list(together.items()):
+            if any(how == "explore" for _, how, _, _ in asked):
+                continue
+            explored = max((c.explored for c in self.rings.values() if c.key == key), default=0)
+            if now - explored < RIDE:
+                del together[key]
+                for child, *_ in asked:
+                    child.rang = True  # its request stands in its slots
+                until = explored + RIDE
+                self.riding = until if self.riding is None else min(self.riding, until)
+
     def _answer_pass(self, asked: list, run, *arguments) -> None:
         """Answer the children of one pass (``run(*arguments)``), or refuse them in words
         where it failed."""
@@ -352,13 +382,13 @@ class Server:
             rows = run(*arguments)
         except Exception as error:  # the device's own: out of memory, its driver
             logger.exception("The policy server failed a pass")
-            for child, _, _ in asked:
+            for child, *_ in asked:
                 self._refuse(child, f"its policy failed on {self.device} ({error})"[:300])
             return
         self.stats["passes"] += 1
         self.stats["rows"] += rows
         self.stats["most_rows"] = max(self.stats["most_rows"], rows)
-        for child, _, _ in asked:
+        for child, *_ in asked:
             self._answered(child)
 
     def _read(self, child: Child) -> tuple[str, list[dict], list[int]]:
@@ -392,25 +422,29 @@ class Server:
         """One batched pass of ``policy`` for the children ``asked``, their answers written into
         their slots (on a lane's thread where there are several: it touches nothing else); the
         rows it ran."""
-        observations = [seen for _, rows, _ in asked for seen in rows]
-        generators = [child.generators[seed] for child, _, seeds in asked for seed in seeds]
-        actions, values, log_probs = policy.explore(observations, generators)
+        exploring = [each for each in asked if each[1] == "explore"]
+        driving = [each for each in asked if each[1] == "drive"]
+        observations = [seen for _, _, rows, _ in exploring for seen in rows]
+        generators = [child.generators[seed] for child, _, _, seeds in exploring for seed in seeds]
+        driven = [seen for _, _, rows, _ in driving for seen in rows]
+        actions, values, log_probs, deterministic = policy.act(observations, generators, driven)
         start = 0
-        for child, rows, _ in asked:
+        for child, _, rows, _ in exploring:
             end = start + len(rows)
             child.views["actions"][: len(rows)] = actions[start:end]
             if values is not None:
                 child.views["values"][: len(rows)] = values[start:end]
                 child.views["log_probs"][: len(rows)] = log_probs[start:end]
             start = end
-        return len(observations)
+        for row, (child, _, _, _) in enumerate(driving):  # one row each: ``_read``'s check
+            child.views["actions"][0] = deterministic[row]
+        return len(observations) + len(driven)
 
-    def _answer_one(self, child: Child, how: str, observation: dict) -> None:
+    def _value(self, child: Child, observation: dict) -> None:
+        """A valuing child's answer (an episode's last observation, where time cut it short):
+        the critic alone, on its own."""
         policy = self.policies[child.key].policy
-        if how == "drive":
-            child.views["actions"][0] = policy.drive(observation)
-        else:
-            child.views["values"][0] = policy.value(observation)
+        child.views["values"][0] = policy.value(observation)
         self._answered(child)
 
     def _answered(self, child: Child) -> None:

@@ -178,6 +178,10 @@ class Child:
         observations = [{"FRONT_FACING_CAMERA": frame} for frame in frames]
         return self.slots.act("explore", observations, [SEED + car for car in range(len(frames))])
 
+    def drive(self, frame: np.ndarray) -> np.ndarray:
+        """The deterministic action, as a checkpoint's evaluation asks for one car's."""
+        return self.slots.act("drive", [{"FRONT_FACING_CAMERA": frame}], None)["actions"][0]
+
     def close(self) -> None:
         with contextlib.suppress(OSError):
             os.close(self.ring)
@@ -238,6 +242,69 @@ def test_two_jobs_children_are_answered_in_one_pass_each_and_never_with_the_othe
         assert np.allclose(answers[name]["values"], values, rtol=1e-5, atol=1e-6), name
         assert np.allclose(answers[name]["log_probs"], log_probs, rtol=1e-5, atol=1e-6), name
     assert not np.array_equal(answers["first"]["values"], answers["other"]["values"])
+
+
+@pytest.mark.slow
+def test_an_evaluating_car_rides_in_its_jobs_exploring_pass_and_drives_as_its_policy_alone_would(
+    policy, weights, socket_path
+):
+    explorer, evaluator = Child(socket_path, weights), Child(socket_path, weights)
+    server = explorer.lease.server_pid
+    try:
+        # Both ask while the server is stopped: one pass of 3 rows answers them.
+        os.kill(server, signal.SIGSTOP)
+        answers: dict[str, object] = {}
+        asks = {
+            "explored": (explorer.explore, frames(2, 10)),
+            "driven": (evaluator.drive, frames(1, 90)[0]),
+        }
+        threads = [
+            threading.Thread(target=lambda n=n, ask=ask, f=f: answers.update({n: ask(f)}))
+            for n, (ask, f) in asks.items()
+        ]
+        for thread in threads:
+            thread.start()
+        time.sleep(0.5)
+        os.kill(server, signal.SIGCONT)
+        for thread in threads:
+            thread.join()
+        together = explorer.lease.stats()
+
+        # The evaluator asks without pause while the explorer's cars take 10 ms a step: it is
+        # answered in the explorer's passes, once a step, not in passes of its own between them.
+        steps, exploring, driven = 20, threading.Event(), [0]
+
+        def evaluate() -> None:
+            while exploring.is_set():
+                evaluator.drive(frames(1, 90)[0])
+                driven[0] += 1
+
+        exploring.set()
+        riding = threading.Thread(target=evaluate)
+        riding.start()
+        for _ in range(steps):
+            explorer.explore(frames(2, 10))
+            time.sleep(0.01)
+        exploring.clear()
+        riding.join(5)  # its last ask: answered alone once the explorer has stopped asking
+        after = explorer.lease.stats()
+    finally:
+        os.kill(server, signal.SIGCONT)
+        explorer.close()
+        evaluator.close()
+    assert (together["passes"], together["rows"]) == (1, 3)
+    actions, values, _ = expected(policy, weights, frames(2, 10))
+    assert np.array_equal(answers["explored"]["actions"], actions)
+    assert np.allclose(answers["explored"]["values"], values, rtol=1e-5, atol=1e-6)
+    policy.load_published(weights)
+    assert answers["driven"] == policy.drive({"FRONT_FACING_CAMERA": frames(1, 90)[0]})
+    assert not riding.is_alive()
+    passes = after["passes"] - together["passes"]
+    # one a step, and one for the evaluator's last ask; a stall of the machine past
+    # policy_server.RIDE (50 ms) lets an ask go alone, hence the margin. Without riding, the
+    # evaluator is answered some five times a step (about 100 passes)
+    assert steps <= driven[0] <= passes <= steps + 3, (driven[0], passes)
+    assert after["rows"] - together["rows"] == 2 * steps + driven[0]
 
 
 @pytest.mark.slow
