@@ -29,7 +29,8 @@ defaults, the default discrete action space, the camera) and lets them train.
   best checkpoint: what DeepRacer races and downloads), beside the braking driver's lap on the
   same track, and each checkpoint's exploration spread. ``--under`` asks for 3 clean laps each
   under a time: the time to a lap time. ``--workers N`` trains with N rollout workers (1 unless
-  said), as a racer's model may.
+  said), as a racer's model may. ``--policy child`` keeps each rollout's policy in its sandbox
+  child rather than the machine's policy server (``PITLANE_ROLLOUT_DEVICE``).
 """
 
 from __future__ import annotations
@@ -680,6 +681,12 @@ def main() -> None:
         "--qualify, the model's (one count, default 1)",
     )
     parser.add_argument(
+        "--policy",
+        default="auto",
+        choices=("auto", "cpu", "cuda", "child"),
+        help="where the cars' policy runs (PITLANE_ROLLOUT_DEVICE): the machine's server, or child",
+    )
+    parser.add_argument(
         "--fast",
         action="store_true",
         help="a continuous action space to 4 m/s and a speed-aware reward",
@@ -761,7 +768,10 @@ def main() -> None:
         return
     if arguments.cars is not None and not 1 <= arguments.cars <= 64:
         parser.error("--cars takes 1 to 64 (PITLANE_CARS_PER_WORKER's range)")
-    console_settings = {"PITLANE_TRAINER_PRECISION": arguments.precision}
+    console_settings = {
+        "PITLANE_TRAINER_PRECISION": arguments.precision,
+        "PITLANE_ROLLOUT_DEVICE": arguments.policy,
+    }
     if arguments.cars is not None:
         console_settings["PITLANE_CARS_PER_WORKER"] = str(arguments.cars)
     with running_console(concurrency=3, settings=console_settings) as console:
@@ -773,7 +783,8 @@ def main() -> None:
 
         owner = bench_racer()
         cars = arguments.cars or dj_settings.PITLANE_CARS_PER_WORKER
-        print(f"Trainer precision {arguments.precision}; {cars} car(s) a rollout worker")
+        where = "" if arguments.policy == "auto" else f"; PITLANE_ROLLOUT_DEVICE={arguments.policy}"
+        print(f"Trainer precision {arguments.precision}; {cars} car(s) a rollout worker{where}")
         if arguments.qualify:
             under = f", each under {arguments.under:g} s" if arguments.under else ""
             print(f"Time to qualify (3 clean consecutive laps{under}), training minutes:")
