@@ -27,6 +27,7 @@ against one built with its own first weights.
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import statistics
 import tempfile
@@ -74,6 +75,15 @@ def in_process() -> float:
     return steps / elapsed
 
 
+@functools.cache
+def weights() -> bytes:
+    """One policy's first weights, which both places drive with."""
+    from rl.learner import weights_bytes
+
+    policy = Policy.for_environment(**POLICY, environment={"track": TRACK})
+    return weights_bytes(policy.weights_module.state_dict())
+
+
 def in_sandbox(cars: int = 1, steps_wanted: int = STEPS, device: str | None = None) -> float:
     """Steps/s of all the cars together, from the steps the child says it has driven as it
     drives (its progress messages): every step driven in the timed window counts, of episodes
@@ -92,6 +102,7 @@ def in_sandbox(cars: int = 1, steps_wanted: int = STEPS, device: str | None = No
         car_memory=384 * MiB,
     ) as sandbox:
         sandbox.load(reward_source())
+        sandbox.set_weights(1, weights())  # a served child's server has none until given
         driving = sandbox.episode(start=cars)["driving"]  # warm-up
         seen.clear()
         while not seen or seen[-1][0] - seen[0][0] < steps_wanted:
