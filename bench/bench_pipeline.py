@@ -50,7 +50,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench.stack import private_redis, sigterm_exits, started
+from bench.stack import add_policy_option, private_redis, sigterm_exits, started
 
 EPISODES = 20  # DeepRacer's episodes between policy updates (num_episodes_between_training)
 MAX_CARS = 8  # PITLANE_CARS_PER_WORKER's default
@@ -195,12 +195,7 @@ def arguments() -> argparse.Namespace:
     parser.add_argument("--workers", type=int, default=None, help="rollout workers per job")
     parser.add_argument("--cars", type=int, default=None, help="cars per rollout worker")
     parser.add_argument("--redis-server", default=None, help="Redis's executable")
-    parser.add_argument(
-        "--policy",
-        default="auto",
-        choices=("auto", "cpu", "cuda", "child"),
-        help="where the cars' policy runs (PITLANE_ROLLOUT_DEVICE): the machine's server, or child",
-    )
+    add_policy_option(parser)
     parser.add_argument(
         "--update",
         default="real",

@@ -39,7 +39,7 @@ import argparse
 import os
 import time
 
-from bench.stack import running_console
+from bench.stack import add_policy_option, running_console
 from rl.hyperparameters import PPO, SAC
 
 THROUGHPUT_MINUTES = 20.0
@@ -680,12 +680,7 @@ def main() -> None:
         help="rollout workers: for throughput, each count in turn (default 1 and 2); with "
         "--qualify, the model's (one count, default 1)",
     )
-    parser.add_argument(
-        "--policy",
-        default="auto",
-        choices=("auto", "cpu", "cuda", "child"),
-        help="where the cars' policy runs (PITLANE_ROLLOUT_DEVICE): the machine's server, or child",
-    )
+    add_policy_option(parser)
     parser.add_argument(
         "--fast",
         action="store_true",

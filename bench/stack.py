@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
 import shutil
@@ -31,6 +32,16 @@ def sigterm_exits() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def add_policy_option(parser: argparse.ArgumentParser) -> None:
+    """``--policy``: where the cars' policy runs (``PITLANE_ROLLOUT_DEVICE``)."""
+    parser.add_argument(
+        "--policy",
+        default="auto",
+        choices=("auto", "cpu", "cuda", "child"),
+        help="where the cars' policy runs (PITLANE_ROLLOUT_DEVICE): the machine's server, or child",
+    )
 
 
 def free_port() -> int:
