@@ -181,14 +181,9 @@ class Policy:
 
     def drive(self, observation: dict) -> np.ndarray:
         """The deterministic action alone, as evaluations drive: PPO's critic, a network of its
-        own, is not run (it would double the time of a step)."""
-        tensor, _ = self.network.obs_to_tensor(observation)
-        with torch.inference_mode():
-            if self.ppo:
-                action = self.network.get_distribution(tensor).get_actions(deterministic=True)
-            else:
-                action = self.network.actor(tensor, deterministic=True)
-        return action[0].cpu().numpy()
+        own, is not run (it would double the time of a step). ``act``'s driven row: the same
+        pass as an evaluating car's served beside the training cars."""
+        return self.act([], [], [observation])[3][0]
 
     @staticmethod
     def command(action: np.ndarray, discrete: bool):
