@@ -270,7 +270,7 @@ def test_an_evaluating_car_rides_in_its_jobs_exploring_pass_and_drives_as_its_po
             thread.join()
         together = explorer.lease.stats()
 
-        # The evaluator asks without pause while the explorer's cars take 10 ms a step: it is
+        # The evaluator asks without pause while the explorer's cars take 20 ms a step: it is
         # answered in the explorer's passes, once a step, not in passes of its own between them.
         steps, exploring, driven = 20, threading.Event(), [0]
 
@@ -284,7 +284,7 @@ def test_an_evaluating_car_rides_in_its_jobs_exploring_pass_and_drives_as_its_po
         riding.start()
         for _ in range(steps):
             explorer.explore(frames(2, 10))
-            time.sleep(0.01)
+            time.sleep(0.02)
         exploring.clear()
         riding.join(5)  # its last ask: answered alone once the explorer has stopped asking
         after = explorer.lease.stats()
@@ -301,9 +301,10 @@ def test_an_evaluating_car_rides_in_its_jobs_exploring_pass_and_drives_as_its_po
     assert not riding.is_alive()
     passes = after["passes"] - together["passes"]
     # one a step, and one for the evaluator's last ask; a stall of the machine past
-    # policy_server.RIDE (50 ms) lets an ask go alone, hence the margin. Without riding, the
-    # evaluator is answered some five times a step (about 100 passes)
-    assert steps <= driven[0] <= passes <= steps + 3, (driven[0], passes)
+    # policy_server.RIDE (50 ms) lets an ask go alone (24 passes for 20 steps under the whole
+    # suite), hence the margin. Without riding, the evaluator is answered in passes of its own
+    # between the explorer's, some five a step (99 passes with RIDE = 0)
+    assert steps <= driven[0] <= passes <= steps + steps // 2, (driven[0], passes)
     assert after["rows"] - together["rows"] == 2 * steps + driven[0]
 
 
