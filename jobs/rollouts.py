@@ -29,7 +29,7 @@ from django.conf import settings
 from common.redis_client import redis_client
 from jobs.shares import rollout_niceness
 from rl import hyperparameters as hp
-from rl.experience import JobChannel, LogEntry
+from rl.experience import EVALUATION_EPISODES, JobChannel, LogEntry
 from rl.policy_lease import PolicyLease
 from rl.weights_cache import WeightsCache
 from sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
@@ -99,7 +99,10 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             if worker == 0:  # DeepRacer's first worker evaluates (simapp
                 # bundle/markov/rollout_worker.py:327-329, 01f5f01)
                 evaluator = CheckpointEvaluator(
-                    stack.enter_context(sandbox(1)), channel, token, Printed(label)
+                    stack.enter_context(sandbox(EVALUATION_EPISODES, in_turn=True)),
+                    channel,
+                    token,
+                    Printed(label),
                 )
                 evaluator.sandbox.load(model.reward_function)
                 stack.callback(evaluator.close)
@@ -131,7 +134,7 @@ def cars_for(algorithm: str) -> int:
 
 def _sandboxes(
     model, job_id: int, worker: int, track: str, niceness: int = 0
-) -> Callable[[int], Sandbox]:
+) -> Callable[..., Sandbox]:
     """The worker's sandboxes, of so many cars, each driving with ``model``'s policy: served by
     the machine's policy server, unless ``PITLANE_ROLLOUT_DEVICE`` keeps it in the child."""
     policy = {
@@ -142,11 +145,12 @@ def _sandboxes(
     }
     device = settings.PITLANE_ROLLOUT_DEVICE
 
-    def sandbox(cars: int) -> Sandbox:
+    def sandbox(cars: int, in_turn: bool = False) -> Sandbox:
         served = device != "child"
         return Sandbox(
             env=model.environment_settings(track),
             cars=cars,
+            in_turn=in_turn,
             policy=policy,
             policy_lease=PolicyLease(settings.PITLANE_POLICY_SOCKET, device) if served else None,
             call_timeout=REWARD_CALL_LIMIT,
@@ -223,9 +227,12 @@ class CheckpointEvaluator:
     rather than in turn with them (DeepRacer's first worker drives them after its share of an
     iteration's episodes, while the trainer learns: simapp bundle/markov/rollout_worker.py:
     327-329, 01f5f01), and the trainer marks the best checkpoint when their results come. The
-    newest checkpoint is evaluated: one that a newer replaced while an evaluation ran is not. A
-    failure of the racer's code here fails the job as it would in training: ``check`` raises it
-    on the worker's own thread."""
+    episodes drive together, a car each, from the starts one car would take in turn
+    (``Sandbox.in_turn``): their steps share the policy's passes (beside the training cars' where
+    the policy is served), so the evaluation ends within the iteration's driving rather than
+    running on into the update, whose CPU it would take. The newest checkpoint is evaluated: one
+    that a newer replaced while an evaluation ran is not. A failure of the racer's code here
+    fails the job as it would in training: ``check`` raises it on the worker's own thread."""
 
     def __init__(self, sandbox: Sandbox, channel: JobChannel, run: str, printed: Printed):
         self.sandbox, self.channel, self.printed = sandbox, channel, printed
@@ -263,14 +270,21 @@ class CheckpointEvaluator:
             self.thread.join()
 
     def _evaluate(self, version: int, weights: bytes, episodes: int) -> None:
+        """Drive ``episodes`` with ``version``'s weights, a car each while there are cars, and
+        push each result as its car ends, with the wall-clock ``seconds`` since the last (the
+        results' sum is the evaluation's time)."""
         try:
             self.sandbox.set_weights(version, weights)
+            waiting, driving = episodes, 0
+            last = time.monotonic()
             for _ in range(episodes):
-                started = time.monotonic()
-                summary = self.sandbox.episode("evaluate", 0, self._beat)["summary"]
-                seconds = round(time.monotonic() - started, 3)
+                start = min(self.sandbox.cars - driving, waiting)
+                reply = self.sandbox.episode("evaluate", 0, self._beat, start=start)
+                waiting, driving = waiting - start, reply["driving"]
+                now = time.monotonic()
+                seconds, last = round(now - last, 3), now
                 self.channel.push_evaluation(
-                    msgpack.packb({**summary, "version": version, "seconds": seconds})
+                    msgpack.packb({**reply["summary"], "version": version, "seconds": seconds})
                 )
                 self.channel.push_log(self.printed.take(self.sandbox, version + 1))
             self.channel.push_log(self.printed.close())

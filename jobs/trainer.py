@@ -35,7 +35,7 @@ from jobs import checkpoints
 from jobs.shares import share_cores
 from notifications import services as notifications
 from rl import hyperparameters as hp
-from rl.experience import Episode, JobChannel, decode_episode
+from rl.experience import EVALUATION_EPISODES, Episode, JobChannel, decode_episode
 from rl.learner import Interrupted, Learner, Progress
 from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stopwatch
 from sandbox.protocol import unpack
@@ -47,7 +47,6 @@ from training.models import Iteration, JobLogLine, RLModel, Track, TrainingJob
 
 logger = logging.getLogger(__name__)
 
-EVALUATION_EPISODES = 5
 CHECK_EVERY = 3.0  # [s] between lease renewals, clock writes and worker checks
 STOP_CHECK = 1.0  # [s] between looks for the racer's stop request, even in the middle of an update
 UPDATE_SAID_EVERY = 1.5  # [s] at least between two words of how far the update has gone

@@ -207,11 +207,16 @@ class Fleet:
                     0.0 if values is None else float(values[row]),
                     0.0 if log_probs is None else float(log_probs[row]),
                 )
+        evaluating: dict[int, list[Car]] = {}  # by the policy they drive with
         for car in cars:
             if car.mode == "random":
                 chosen[car.index] = (car.env.action_space.sample(), 0.0, 0.0)
             elif car.mode == "evaluate":
-                chosen[car.index] = (self._policy(car).drive(car.observation), 0.0, 0.0)
+                evaluating.setdefault(id(self._policy(car)), []).append(car)
+        for together in evaluating.values():  # one pass for the cars of a policy
+            driven = self._policy(together[0]).drive_rows([car.observation for car in together])
+            for row, car in enumerate(together):
+                chosen[car.index] = (driven[row], 0.0, 0.0)
         return [chosen[car.index] for car in cars]
 
     def _command(self, car: Car, action):

@@ -183,7 +183,11 @@ class Policy:
         """The deterministic action alone, as evaluations drive: PPO's critic, a network of its
         own, is not run (it would double the time of a step). ``act``'s driven row: the same
         pass as an evaluating car's served beside the training cars."""
-        return self.act([], [], [observation])[3][0]
+        return self.drive_rows([observation])[0]
+
+    def drive_rows(self, observations: list[dict]) -> np.ndarray:
+        """``drive``'s actions for several evaluating cars, one row each, in one pass."""
+        return self.act([], [], observations)[3]
 
     @staticmethod
     def command(action: np.ndarray, discrete: bool):

@@ -92,8 +92,10 @@ class Child:
 
 
 class Server:
-    def __init__(self, path: str, device: str, idle: float = IDLE, lanes: int = 1) -> None:
-        self.path, self.device, self.idle = path, device, idle
+    def __init__(
+        self, path: str, device: str, idle: float = IDLE, lanes: int = 1, ride: float = RIDE
+    ) -> None:
+        self.path, self.device, self.idle, self.ride = path, device, idle, ride
         # Passes of several policies run at once on so many threads (each pass on one)
         self.lanes = concurrent.futures.ThreadPoolExecutor(lanes) if lanes > 1 else None
         self.selector = selectors.DefaultSelector()
@@ -361,18 +363,18 @@ class Server:
         this round: they ask again within a few milliseconds, and the evaluating cars ride in
         their pass rather than pay a pass of their own for one row each (a checkpoint's
         evaluation drives beside its job's next iteration: ``jobs.rollouts``). Once those have
-        not asked for ``RIDE``, the evaluating cars go on alone."""
+        not asked for ``ride`` (``RIDE``), the evaluating cars go on alone."""
         self.riding = None
         now = time.monotonic()
         for key, asked in list(together.items()):
             if any(how == "explore" for _, how, _, _ in asked):
                 continue
             explored = max((c.explored for c in self.rings.values() if c.key == key), default=0)
-            if now - explored < RIDE:
+            if now - explored < self.ride:
                 del together[key]
                 for child, *_ in asked:
                     child.rang = True  # its request stands in its slots
-                until = explored + RIDE
+                until = explored + self.ride
                 self.riding = until if self.riding is None else min(self.riding, until)
 
     def _answer_pass(self, asked: list, run, *arguments) -> None:
@@ -401,7 +403,7 @@ class Server:
         if not 0 <= how < len(HOW):
             raise ProtocolError("it asked for something the policy does not do")
         how_words = HOW[how]
-        most = child.layout.cars if how_words == "explore" else 1
+        most = 1 if how_words == "value" else child.layout.cars
         if not 1 <= rows <= most:
             raise ProtocolError(f"it asked for {rows} rows of a policy serving {most}")
         seeds = [int(seed) for seed in header[HEADER_FIELDS : HEADER_FIELDS + rows]]
@@ -436,8 +438,11 @@ class Server:
                 child.views["values"][: len(rows)] = values[start:end]
                 child.views["log_probs"][: len(rows)] = log_probs[start:end]
             start = end
-        for row, (child, _, _, _) in enumerate(driving):  # one row each: ``_read``'s check
-            child.views["actions"][0] = deterministic[row]
+        start = 0
+        for child, _, rows, _ in driving:
+            end = start + len(rows)
+            child.views["actions"][: len(rows)] = deterministic[start:end]
+            start = end
         return len(observations) + len(driven)
 
     def _value(self, child: Child, observation: dict) -> None:
@@ -496,6 +501,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"))
     parser.add_argument("--idle", type=float, default=IDLE, help="[s] idle before it ends")
     parser.add_argument("--lanes", type=int, default=0, help="passes at once (0: chosen)")
+    parser.add_argument(
+        "--ride", type=float, default=RIDE, help="[s] an evaluating car waits to ride at most"
+    )
     arguments = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
     try:
@@ -505,7 +513,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     torch.set_num_threads(1)
     lanes = arguments.lanes or server_lanes(device)
-    server = Server(arguments.socket, device, arguments.idle, lanes)
+    server = Server(arguments.socket, device, arguments.idle, lanes, arguments.ride)
     logger.info("The policy server listens on %s, its policies on %s", arguments.socket, device)
     server.serve()
     return 0

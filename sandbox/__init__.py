@@ -112,6 +112,8 @@ class Sandbox:
 
     env: dict | None = None
     cars: int = 1
+    in_turn: bool = False  # the cars start where one car driving their episodes in turn would
+    # (a checkpoint's evaluation: each drives one of its episodes), not k / cars of the lap apart
     policy: dict | None = None  # {"algorithm", "architecture", "seed", "job"}: a policy to act with
     policy_lease: PolicyLease | None = None  # the child's slots in the machine's policy server,
     # where it serves the policy (``sandbox.served``); None: the child holds it
@@ -185,6 +187,7 @@ class Sandbox:
                 "car_memory": self.car_memory,
                 "env": env,
                 "cars": self.cars,
+                "in_turn": self.in_turn,
                 "policy": policy,
                 "samples": portable_env(self.samples),
                 "op": "start",

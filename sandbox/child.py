@@ -89,7 +89,7 @@ class Child:
         cars = int(init.get("cars", 1))
         try:
             if init.get("env") is not None:
-                self.envs = self._build_envs(init["env"], cars)
+                self.envs = self._build_envs(init["env"], cars, bool(init.get("in_turn")))
                 self.env = self.envs[0]
             if init.get("policy") is not None:
                 self._build_policy(init["policy"])
@@ -123,11 +123,14 @@ class Child:
                 self.send({"type": "error", "kind": "policy", "message": str(error)}, log=True)
                 os._exit(75)
 
-    def _build_envs(self, settings: dict, cars: int) -> list:
+    def _build_envs(self, settings: dict, cars: int, in_turn: bool = False) -> list:
         """An environment per car. Car ``k`` of ``cars`` starts its training episodes
         ``k / cars`` of the lap further on, then advances its start per episode as one car
         does: the cars of a worker share an iteration's episodes, and between them cover the
-        lap as one car driving them all would, rather than all drive the same stretch."""
+        lap as one car driving them all would, rather than all drive the same stretch.
+        ``in_turn``: cars that each drive one of a set of episodes (a checkpoint's evaluation)
+        start where one car driving the set in turn would start each, its ``n``-th episode
+        ``n`` advances on: car ``k``'s ``j``-th episode is the ``(j - 1) * cars + k + 1``-th."""
         import gymnasium
 
         import simulator
@@ -138,7 +141,13 @@ class Child:
             # No reward_fn: the fleet scores every car's step, all of a step's in one request
             # (RewardProcess.calls, each car's call its own copy of the function), and no
             # environment here is stepped with env.step.
-            envs.append(gymnasium.make(simulator.ENV_ID, **placed))
+            env = gymnasium.make(simulator.ENV_ID, **placed)
+            if in_turn and cars > 1:  # the first reset with a seed is episode 0, unplaced
+                config = env.unwrapped.config
+                advance = config["start_advance"]
+                env.unwrapped.start = (first + (car + 1 - cars) * advance) % 1.0
+                config["start_advance"] = advance * cars
+            envs.append(env)
         for env in envs:  # PyBullet, where boxes or bots need it, connected before sealing
             with contextlib.suppress(WorldUnavailable):  # said when a car comes near one
                 env.unwrapped.connect_world()

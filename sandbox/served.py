@@ -66,7 +66,11 @@ class ServedPolicy:
         return arrays["actions"], arrays["values"], arrays["log_probs"]
 
     def drive(self, observation: dict) -> np.ndarray:
-        return self.slots.act("drive", [observation], None)["actions"][0]
+        return self.drive_rows([observation])[0]
+
+    def drive_rows(self, observations: list[dict]) -> np.ndarray:
+        """``Policy.drive_rows``'s answer: the evaluating cars' actions, from the server."""
+        return self.slots.act("drive", observations, None)["actions"]
 
     def value(self, observation: dict) -> float:
         return float(self.slots.act("value", [observation], None)["values"][0])

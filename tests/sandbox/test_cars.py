@@ -35,14 +35,26 @@ EPISODES = 2  # per car
 
 
 @contextlib.contextmanager
-def child(weights: bytes, *, cars: int, seed: int, start: float = 0.0) -> Iterator[Sandbox]:
-    """A rollout's child of ``cars`` cars, ready to drive: its reward function loaded, and
-    acting with ``weights``."""
+def child(
+    weights: bytes,
+    *,
+    cars: int,
+    seed: int,
+    start: float = 0.0,
+    in_turn: bool = False,
+    source: str = REWARD,
+) -> Iterator[Sandbox]:
+    """A rollout's child of ``cars`` cars, ready to drive: its reward function (``source``)
+    loaded, and acting with ``weights``."""
     env = {**ENV, "start": start} if start else ENV
     with Sandbox(
-        env=env, cars=cars, policy={**POLICY, "seed": seed}, memory_allowance=1024 * MiB
+        env=env,
+        cars=cars,
+        in_turn=in_turn,
+        policy={**POLICY, "seed": seed},
+        memory_allowance=1024 * MiB,
     ) as sandbox:
-        sandbox.load(REWARD)
+        sandbox.load(source)
         sandbox.set_weights(1, weights)
         yield sandbox
 
@@ -72,6 +84,36 @@ def test_each_of_several_cars_drives_the_episodes_a_child_of_one_car_would(weigh
                 assert np.allclose(array(got, name), array(want, name), rtol=1e-5, atol=1e-6)
     starts = [episodes[0]["trace"][0][2:4] for episodes in driven.values()]
     assert starts[0] != starts[1]  # the cars drove from places of their own
+
+
+def evaluated(sandbox: Sandbox, rounds: int) -> list[dict]:
+    """The summaries of ``rounds`` evaluations of a car each, as a checkpoint's are driven
+    (``jobs.rollouts.CheckpointEvaluator``): every car starts one, and the results come as they
+    end; in the order of the cars, round by round."""
+    summaries = []
+    for _ in range(rounds):
+        ended = {}
+        for place in range(sandbox.cars):
+            reply = sandbox.episode("evaluate", start=sandbox.cars if place == 0 else 0)
+            ended[reply["car"]] = {k: v for k, v in reply["summary"].items() if k != "car"}
+        summaries += [ended[car] for car in range(sandbox.cars)]
+    return summaries
+
+
+@pytest.mark.slow
+def test_cars_evaluating_in_turn_drive_the_episodes_one_car_drives_one_after_another(weights):
+    # Car k's j-th episode starts where one car's ((j - 1) * cars + k + 1)-th does: 5% of the
+    # lap apart, in order, over two evaluations. Without ``in_turn``, a third of the lap apart.
+    # REWARD without its count of calls, which one car's copy would carry from one to the next.
+    source = reward("return params['progress'] + params['speed'] + abs(params['heading']) / 100")
+    with child(weights, cars=3, seed=SEED, in_turn=True, source=source) as together:
+        driven = evaluated(together, rounds=2)
+    with child(weights, cars=1, seed=SEED, source=source) as alone:
+        expected = evaluated(alone, rounds=6)
+    # the same places but for the last bits: a start of (k + 1 - cars) * 5% plus cars * 5% an
+    # episode, not 5% an episode
+    assert driven == [pytest.approx(each, rel=1e-9) for each in expected]
+    assert len({(each["steps"], each["progress"]) for each in expected}) > 1  # starts differ
 
 
 STATUS = FIELDS.index("episode_status")  # a trace row's

@@ -9,6 +9,8 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -27,6 +29,7 @@ from rl.policy_server import server_device
 from rl.slots import ASK, REFUSED, SlotClient
 from sandbox import MiB, Sandbox, SandboxFailure, served
 from tests.helpers.sandbox import ENV, POLICY, REWARD, SEED, array, episodes_by_car
+from tests.services import wait_for
 
 CARS = 2
 EPISODES = 2  # per car
@@ -178,9 +181,10 @@ class Child:
         observations = [{"FRONT_FACING_CAMERA": frame} for frame in frames]
         return self.slots.act("explore", observations, [SEED + car for car in range(len(frames))])
 
-    def drive(self, frame: np.ndarray) -> np.ndarray:
-        """The deterministic action, as a checkpoint's evaluation asks for one car's."""
-        return self.slots.act("drive", [{"FRONT_FACING_CAMERA": frame}], None)["actions"][0]
+    def drive(self, frames: list[np.ndarray]) -> np.ndarray:
+        """The deterministic actions, as a checkpoint's evaluation asks for its cars'."""
+        observations = [{"FRONT_FACING_CAMERA": frame} for frame in frames]
+        return self.slots.act("drive", observations, None)["actions"]
 
     def close(self) -> None:
         with contextlib.suppress(OSError):
@@ -245,18 +249,26 @@ def test_two_jobs_children_are_answered_in_one_pass_each_and_never_with_the_othe
 
 
 @pytest.mark.slow
-def test_an_evaluating_car_rides_in_its_jobs_exploring_pass_and_drives_as_its_policy_alone_would(
+def test_an_evaluations_cars_ride_in_their_jobs_exploring_pass_and_drive_as_their_policy_would(
     policy, weights, socket_path
 ):
+    # The server waits up to 1 s for the explorer to ask again (RIDE is 50 ms): under the whole
+    # suite on 2 cores, the explorer's 20 ms between steps stretched past 50 ms for half its steps
+    command = ["--socket", socket_path, "--device", "cpu", "--ride", "1", "--idle", "60"]
+    listening = subprocess.Popen(
+        [sys.executable, "-m", "rl.policy_server", *command], start_new_session=True
+    )
+    wait_for(lambda: os.path.exists(socket_path), "the policy server to listen", 60)
     explorer, evaluator = Child(socket_path, weights), Child(socket_path, weights)
     server = explorer.lease.server_pid
+    assert server == listening.pid
     try:
-        # Both ask while the server is stopped: one pass of 3 rows answers them.
+        # Both ask while the server is stopped: one pass of 4 rows answers them.
         os.kill(server, signal.SIGSTOP)
         answers: dict[str, object] = {}
         asks = {
             "explored": (explorer.explore, frames(2, 10)),
-            "driven": (evaluator.drive, frames(1, 90)[0]),
+            "driven": (evaluator.drive, frames(2, 90)),
         }
         threads = [
             threading.Thread(target=lambda n=n, ask=ask, f=f: answers.update({n: ask(f)}))
@@ -276,7 +288,7 @@ def test_an_evaluating_car_rides_in_its_jobs_exploring_pass_and_drives_as_its_po
 
         def evaluate() -> None:
             while exploring.is_set():
-                evaluator.drive(frames(1, 90)[0])
+                evaluator.drive(frames(2, 90))
                 driven[0] += 1
 
         exploring.set()
@@ -292,20 +304,22 @@ def test_an_evaluating_car_rides_in_its_jobs_exploring_pass_and_drives_as_its_po
         os.kill(server, signal.SIGCONT)
         explorer.close()
         evaluator.close()
-    assert (together["passes"], together["rows"]) == (1, 3)
+        listening.terminate()
+        listening.wait(10)
+    assert (together["passes"], together["rows"]) == (1, 4)
     actions, values, _ = expected(policy, weights, frames(2, 10))
     assert np.array_equal(answers["explored"]["actions"], actions)
     assert np.allclose(answers["explored"]["values"], values, rtol=1e-5, atol=1e-6)
     policy.load_published(weights)
-    assert answers["driven"] == policy.drive({"FRONT_FACING_CAMERA": frames(1, 90)[0]})
+    driven_alone = policy.drive_rows([{"FRONT_FACING_CAMERA": f} for f in frames(2, 90)])
+    assert np.array_equal(answers["driven"], driven_alone)
     assert not riding.is_alive()
     passes = after["passes"] - together["passes"]
-    # one a step, and one for the evaluator's last ask; a stall of the machine past
-    # policy_server.RIDE (50 ms) lets an ask go alone (24 passes for 20 steps under the whole
-    # suite), hence the margin. Without riding, the evaluator is answered in passes of its own
-    # between the explorer's, some five a step (99 passes with RIDE = 0)
+    # one a step, and one for the evaluator's last ask; a stall of the machine past the 1 s
+    # would let an ask go alone, hence the margin. Without riding, the evaluator is answered in
+    # passes of its own between the explorer's, some five a step (99 passes with --ride 0)
     assert steps <= driven[0] <= passes <= steps + steps // 2, (driven[0], passes)
-    assert after["rows"] - together["rows"] == 2 * steps + driven[0]
+    assert after["rows"] - together["rows"] == 2 * steps + 2 * driven[0]
 
 
 @pytest.mark.slow

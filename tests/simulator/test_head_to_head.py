@@ -62,8 +62,8 @@ class Driver:
     def __init__(self, env: DeepRacerEnv, speed: float) -> None:
         self.driver = CentreLineDriver(env, speed=speed)
 
-    def drive(self, observation):
-        return self.driver.act()
+    def drive_rows(self, observations):
+        return [self.driver.act() for _ in observations]
 
     def command(self, action, discrete: bool):
         return action
