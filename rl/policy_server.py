@@ -430,19 +430,15 @@ class Server:
         generators = [child.generators[seed] for child, _, _, seeds in exploring for seed in seeds]
         driven = [seen for _, _, rows, _ in driving for seen in rows]
         actions, values, log_probs, deterministic = policy.act(observations, generators, driven)
-        start = 0
-        for child, _, rows, _ in exploring:
-            end = start + len(rows)
-            child.views["actions"][: len(rows)] = actions[start:end]
-            if values is not None:
-                child.views["values"][: len(rows)] = values[start:end]
-                child.views["log_probs"][: len(rows)] = log_probs[start:end]
-            start = end
-        start = 0
-        for child, _, rows, _ in driving:
-            end = start + len(rows)
-            child.views["actions"][: len(rows)] = deterministic[start:end]
-            start = end
+        explored = {"actions": actions, "values": values, "log_probs": log_probs}
+        for children, answers in ((exploring, explored), (driving, {"actions": deterministic})):
+            start = 0
+            for child, _, rows, _ in children:  # each child's rows, in the order they were run
+                end = start + len(rows)
+                for name, answer in answers.items():
+                    if answer is not None:  # SAC has no values nor log-probabilities
+                        child.views[name][: len(rows)] = answer[start:end]
+                start = end
         return len(observations) + len(driven)
 
     def _value(self, child: Child, observation: dict) -> None:
