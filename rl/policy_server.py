@@ -361,7 +361,7 @@ class Server:
     def _wait_to_ride(self, together: dict[tuple, list]) -> None:
         """Hold back the evaluating cars whose job's exploring cars drive but have not asked
         this round: they ask again within a few milliseconds, and the evaluating cars ride in
-        their pass rather than pay a pass of their own for one row each (a checkpoint's
+        their pass rather than pay a pass of their own for their few rows (a checkpoint's
         evaluation drives beside its job's next iteration: ``jobs.rollouts``). Once those have
         not asked for ``ride`` (``RIDE``), the evaluating cars go on alone."""
         self.riding = None

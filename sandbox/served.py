@@ -65,9 +65,6 @@ class ServedPolicy:
             return arrays["actions"], None, None
         return arrays["actions"], arrays["values"], arrays["log_probs"]
 
-    def drive(self, observation: dict) -> np.ndarray:
-        return self.drive_rows([observation])[0]
-
     def drive_rows(self, observations: list[dict]) -> np.ndarray:
         """``Policy.drive_rows``'s answer: the evaluating cars' actions, from the server."""
         return self.slots.act("drive", observations, None)["actions"]
