@@ -159,11 +159,13 @@ def default_model(
     reward: str = "road-ahead",
     randomise: bool = False,
     track: str = "rookie-loop",
+    best_by: str = "progress",
 ):
     """A model with DeepRacer's defaults on ``track`` (the Rookie Loop); ``hyperparameters``: the
     racer's own values of some (DeepRacer's names), over the algorithm's defaults; with ``fast``,
     ``reward`` names the reward function (``REWARDS``); ``randomise``: trained with domain
-    randomisation."""
+    randomisation; ``best_by``: how its training picks the best checkpoint (DeepRacer's
+    BEST_MODEL_METRIC)."""
     from rl.hyperparameters import defaults
     from training.rewards import EXAMPLES
     from training.services import model_create
@@ -176,6 +178,7 @@ def default_model(
         "seed": seed,
         "max_minutes": 1440,
         "domain_randomisation": randomise,
+        "best_checkpoint_by": best_by,
     }
     if fast:
         actions = {
@@ -528,6 +531,22 @@ def racers_model(model) -> tuple[bool, list[float], int | None]:
     return ok, laps, artifacts.checkpoint_iteration(job.best_checkpoint)
 
 
+def other_best_words(job, best_by: str, driven: dict[int, tuple[bool, list[float]]]) -> str:
+    """Which checkpoint the other of progress and lap time (``best_by``'s) would have made
+    ``job``'s best, and its 3 laps as ``driven`` has them (they are driven alike every time)."""
+    from jobs.checkpoints import best_iteration
+    from training.models import BestCheckpointBy, Iteration
+
+    other = BestCheckpointBy.PROGRESS if best_by != BestCheckpointBy.PROGRESS else "laptime"
+    row = best_iteration(rows=Iteration.objects.filter(job=job), metric=other)
+    if row is None:
+        return f"by {other}: no checkpoint evaluated"
+    ok, laps = driven.get(row.number, (False, []))
+    laps = laps_words(laps) if row.number in driven else "not driven"
+    clean = "3" if ok else "not 3"
+    return f"by {other} the best would be iteration {row.number}: {clean} clean laps: {laps}"
+
+
 def spread(policy) -> str:
     """A continuous policy's exploration: each action's standard deviation, as a share of half
     its range (1 at the start); empty for a discrete one, and for SAC's (its spread depends on
@@ -554,13 +573,16 @@ def time_to_qualify(
     reward: str = "road-ahead",
     workers: int = 1,
     track: str = "rookie-loop",
+    best_by: str = "progress",
 ) -> tuple[float | None, float | None, float | None, tuple[float, int] | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
     after ``lap_after`` minutes and that of the model then, its best checkpoint, and the fastest
     lap of any checkpoint before with its iteration; a lap only where 3 were clean); a fast model
-    trains on to ``lap_after`` once it qualifies.
+    trains on to ``lap_after`` once it qualifies, and also shows the checkpoint the other of
+    progress and lap time would have made its best.
     With ``under``, qualifying takes 3 clean laps each under that many seconds; ``workers``: the
-    model's rollout workers."""
+    model's rollout workers; ``best_by``: the model's BEST_MODEL_METRIC."""
+    from training import artifacts
     from training.services import training_stop
 
     model = default_model(
@@ -575,8 +597,10 @@ def time_to_qualify(
         reward=reward,
         workers=workers,
         track=track,
+        best_by=best_by,
     )
     tried = set()
+    driven = {}  # iteration: (3 clean laps, the lap times) of each checkpoint driven
     qualified = fastest = None
     while True:
         job = job_of(model)
@@ -584,6 +608,7 @@ def time_to_qualify(
         if job.last_checkpoint and job.last_checkpoint not in tried and job.iterations > 0:
             tried.add(job.last_checkpoint)
             ok, laps, spread_words = qualifies(model, job.last_checkpoint)
+            driven[artifacts.checkpoint_iteration(job.last_checkpoint)] = ok, laps
             ok = ok and (under is None or max(laps) < under)
             print(
                 f"  seed {seed}: iteration {job.iterations} after {minutes:.1f} min: "
@@ -607,10 +632,12 @@ def time_to_qualify(
                 training_stop(job=job)
                 model_ok, model_laps, iteration = racers_model(model)
                 print(
-                    f"  seed {seed}: the model, its best checkpoint (iteration {iteration}): "
-                    f"{'3' if model_ok else 'not 3'} clean laps: {laps_words(model_laps)}",
+                    f"  seed {seed}: the model, its best checkpoint by {best_by} (iteration "
+                    f"{iteration}): {'3' if model_ok else 'not 3'} clean laps: "
+                    f"{laps_words(model_laps)}",
                     flush=True,
                 )
+                print(f"  seed {seed}: {other_best_words(job_of(model), best_by, driven)}")
                 best_lap, model_lap = (
                     min(laps) if ok else None,
                     min(model_laps) if model_ok else None,
@@ -712,6 +739,13 @@ def main() -> None:
         "with the track's line",
     )
     parser.add_argument(
+        "--best-by",
+        choices=("progress", "reward", "laptime"),
+        default="progress",
+        help="with --qualify, how the model's training picks its best checkpoint (DeepRacer's "
+        "BEST_MODEL_METRIC, DeepRacer for Cloud's DR_TRAIN_BEST_MODEL_METRIC)",
+    )
+    parser.add_argument(
         "--under",
         type=float,
         default=None,
@@ -807,6 +841,7 @@ def main() -> None:
                     hyperparameters=dict(arguments.hyperparameter),
                     reward=arguments.reward,
                     track=arguments.track,
+                    best_by=arguments.best_by,
                 )
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
                 if arguments.fast and arguments.under:
