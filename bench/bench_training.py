@@ -116,21 +116,33 @@ def reward_function(params):
 REWARDS = {"road-ahead": FAST_REWARD, "steady": STEADY_REWARD, "aligned": ALIGNED_REWARD}
 # The reward editor's example "Follow the racing line", with the bench track's line pasted in.
 LINE = "line"
+LINE_WAIT = 300  # [s] for a worker to compute a line with a margin
 
 
-def reward_source(reward: str, track: str) -> str:
+def reward_source(reward: str, track: str, margin_cm: int = 0) -> str:
     """The reward function ``reward`` names (``REWARDS`` or ``LINE``), for ``track``: with
-    ``LINE``, the reward editor's example with ``track``'s stored line (counter-clockwise) pasted
-    over the one it holds, as a racer pastes the track page's copy."""
+    ``LINE``, the reward editor's example with ``track``'s line (counter-clockwise, ``margin_cm``
+    inside the borders: the track page's choice) pasted over the one it holds, as a racer pastes
+    the track page's copy. A line with a margin is computed by a worker, as for the page."""
     if reward != LINE:
         return REWARDS[reward]
-    from training.models import Track
+    from training.models import Track, TrackLine
     from training.rewards import example_source
     from training.track_lines import track_line, with_racing_line
 
-    shown = track_line(track=Track.objects.get(name=track), direction="counterclockwise")
+    track_row = Track.objects.get(name=track)
+    deadline = time.monotonic() + LINE_WAIT
+    while True:
+        shown = track_line(track=track_row, direction="counterclockwise", margin_cm=margin_cm)
+        if shown.status != TrackLine.Status.COMPUTING or time.monotonic() > deadline:
+            break
+        time.sleep(1)
     if shown.line is None:
-        raise SystemExit(f"{track} has no current racing line: python -m simulator.racing_line")
+        raise SystemExit(
+            f"{track}'s racing line {margin_cm} cm in is not ready ({shown.status}"
+            f"{': ' + shown.message if shown.message else ''}); without a margin: "
+            "python -m simulator.racing_line"
+        )
     return with_racing_line(example_source("follow_racing_line"), shown)
 
 
@@ -160,12 +172,13 @@ def default_model(
     randomise: bool = False,
     track: str = "rookie-loop",
     best_by: str = "progress",
+    line_margin: int = 0,
 ):
     """A model with DeepRacer's defaults on ``track`` (the Rookie Loop); ``hyperparameters``: the
     racer's own values of some (DeepRacer's names), over the algorithm's defaults; with ``fast``,
     ``reward`` names the reward function (``REWARDS``); ``randomise``: trained with domain
     randomisation; ``best_by``: how its training picks the best checkpoint (DeepRacer's
-    BEST_MODEL_METRIC)."""
+    BEST_MODEL_METRIC); ``line_margin``: [cm] with ``LINE``, the pasted line's margin."""
     from rl.hyperparameters import defaults
     from training.rewards import EXAMPLES
     from training.services import model_create
@@ -186,7 +199,9 @@ def default_model(
             "speed": {"low": speed[0], "high": speed[1]},
         }
         settings.update(
-            action_space=actions, reward_function=reward_source(reward, track), algorithm=algorithm
+            action_space=actions,
+            reward_function=reward_source(reward, track, line_margin),
+            algorithm=algorithm,
         )
     if hyperparameters:
         settings["hyperparameters"] = {**defaults(algorithm if fast else PPO), **hyperparameters}
@@ -574,6 +589,7 @@ def time_to_qualify(
     workers: int = 1,
     track: str = "rookie-loop",
     best_by: str = "progress",
+    line_margin: int = 0,
 ) -> tuple[float | None, float | None, float | None, tuple[float, int] | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
     after ``lap_after`` minutes and that of the model then, its best checkpoint, and the fastest
@@ -581,7 +597,8 @@ def time_to_qualify(
     trains on to ``lap_after`` once it qualifies, and also shows the checkpoint the other of
     progress and lap time would have made its best.
     With ``under``, qualifying takes 3 clean laps each under that many seconds; ``workers``: the
-    model's rollout workers; ``best_by``: the model's BEST_MODEL_METRIC."""
+    model's rollout workers; ``best_by``: the model's BEST_MODEL_METRIC; ``line_margin``: [cm]
+    the pasted racing line's margin."""
     from training import artifacts
     from training.services import training_stop
 
@@ -598,6 +615,7 @@ def time_to_qualify(
         workers=workers,
         track=track,
         best_by=best_by,
+        line_margin=line_margin,
     )
     tried = set()
     driven = {}  # iteration: (3 clean laps, the lap times) of each checkpoint driven
@@ -746,6 +764,15 @@ def main() -> None:
         "BEST_MODEL_METRIC, DeepRacer for Cloud's DR_TRAIN_BEST_MODEL_METRIC)",
     )
     parser.add_argument(
+        "--line-margin",
+        type=int,
+        choices=range(21),
+        default=0,
+        metavar="CM",
+        help="with --reward line, the pasted line kept this many cm (0-20) further inside the "
+        "borders, as the track page offers; the laps are still set against the line without one",
+    )
+    parser.add_argument(
         "--under",
         type=float,
         default=None,
@@ -842,6 +869,7 @@ def main() -> None:
                     reward=arguments.reward,
                     track=arguments.track,
                     best_by=arguments.best_by,
+                    line_margin=arguments.line_margin,
                 )
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"
                 if arguments.fast and arguments.under:
