@@ -552,7 +552,11 @@ def other_best_words(job, best_by: str, driven: dict[int, tuple[bool, list[float
     from jobs.checkpoints import best_iteration
     from training.models import BestCheckpointBy, Iteration
 
-    other = BestCheckpointBy.PROGRESS if best_by != BestCheckpointBy.PROGRESS else "laptime"
+    other = (
+        BestCheckpointBy.PROGRESS
+        if best_by != BestCheckpointBy.PROGRESS
+        else BestCheckpointBy.LAPTIME
+    )
     row = best_iteration(rows=Iteration.objects.filter(job=job), metric=other)
     if row is None:
         return f"by {other}: no checkpoint evaluated"
