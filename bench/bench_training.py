@@ -621,16 +621,15 @@ def time_to_qualify(
         best_by=best_by,
         line_margin=line_margin,
     )
-    tried = set()
     driven = {}  # iteration: (3 clean laps, the lap times) of each checkpoint driven
     qualified = fastest = None
     while True:
         job = job_of(model)
         minutes = job.training_seconds / 60
-        if job.last_checkpoint and job.last_checkpoint not in tried and job.iterations > 0:
-            tried.add(job.last_checkpoint)
+        number = artifacts.checkpoint_iteration(job.last_checkpoint or "")
+        if number is not None and number not in driven and job.iterations > 0:
             ok, laps, spread_words = qualifies(model, job.last_checkpoint)
-            driven[artifacts.checkpoint_iteration(job.last_checkpoint)] = ok, laps
+            driven[number] = ok, laps
             ok = ok and (under is None or max(laps) < under)
             print(
                 f"  seed {seed}: iteration {job.iterations} after {minutes:.1f} min: "
