@@ -19,6 +19,8 @@ from simulator import config as sim
 from simulator import tracks as sim_tracks
 from training import configuration
 from training.models import (
+    EVALUATION_TRIALS,
+    EVALUATION_TRIALS_RANGE,
     Algorithm,
     BestCheckpointBy,
     Network,
@@ -87,6 +89,7 @@ def archive_settings(
     settings["shell_colour"] = _deepracer_colour(params, notes)
     settings["domain_randomisation"] = _deepracer_randomisation(params, notes)
     settings["best_checkpoint_by"] = _deepracer_best_metric(params, notes)
+    settings["evaluation_trials"] = _deepracer_evaluation_trials(params, notes)
     _params_left_out(params, notes)
     return settings
 
@@ -412,6 +415,29 @@ def _deepracer_best_metric(params: dict, notes: list[str]) -> str:
     return BestCheckpointBy.PROGRESS
 
 
+def _deepracer_evaluation_trials(params: dict, notes: list[str]) -> int:
+    """``MIN_EVAL_TRIALS`` (DR_TRAIN_MIN_EVAL_TRIALS, which DeepRacer for Cloud writes as text,
+    prepare-config.py:55, 2eb1a1f; simapp reads it with int(), rollout_worker.py:501-504,
+    01f5f01): the evaluation episodes a checkpoint drives. One this console cannot take is
+    brought within its range, with a note."""
+    given = params.get("MIN_EVAL_TRIALS")
+    if given is None or str(given).strip() == "":
+        return EVALUATION_TRIALS
+    low, high = EVALUATION_TRIALS_RANGE
+    try:
+        trials = int(str(given).strip())
+    except ValueError:
+        trials = None
+    if trials is not None and low <= trials <= high:
+        return trials
+    chosen = EVALUATION_TRIALS if trials is None else min(max(trials, low), high)
+    notes.append(
+        f"Not carried over from training_params.yaml: MIN_EVAL_TRIALS {shown(given)}. Each "
+        f"checkpoint drives {low} to {high} evaluation episodes here; this one drives {chosen}."
+    )
+    return chosen
+
+
 # training_params.yaml's keys the settings above take.
 PARAMS_TAKEN = {
     "WORLD_NAME",
@@ -423,6 +449,7 @@ PARAMS_TAKEN = {
     "CAR_COLOR",
     "ENABLE_DOMAIN_RANDOMIZATION",
     "BEST_MODEL_METRIC",
+    "MIN_EVAL_TRIALS",
     *RACE_KEYS["OBJECT_AVOIDANCE"],
     *RACE_KEYS["HEAD_TO_BOT"],
 }

@@ -172,13 +172,15 @@ def default_model(
     randomise: bool = False,
     track: str = "rookie-loop",
     best_by: str = "progress",
+    evaluation_trials: int = 5,
     line_margin: int = 0,
 ):
     """A model with DeepRacer's defaults on ``track`` (the Rookie Loop); ``hyperparameters``: the
     racer's own values of some (DeepRacer's names), over the algorithm's defaults; with ``fast``,
     ``reward`` names the reward function (``REWARDS``); ``randomise``: trained with domain
     randomisation; ``best_by``: how its training picks the best checkpoint (DeepRacer's
-    BEST_MODEL_METRIC); ``line_margin``: [cm] with ``LINE``, the pasted line's margin."""
+    BEST_MODEL_METRIC) over ``evaluation_trials`` episodes a checkpoint (its MIN_EVAL_TRIALS);
+    ``line_margin``: [cm] with ``LINE``, the pasted line's margin."""
     from rl.hyperparameters import defaults
     from training.rewards import EXAMPLES
     from training.services import model_create
@@ -192,6 +194,7 @@ def default_model(
         "max_minutes": 1440,
         "domain_randomisation": randomise,
         "best_checkpoint_by": best_by,
+        "evaluation_trials": evaluation_trials,
     }
     if fast:
         actions = {
@@ -593,6 +596,7 @@ def time_to_qualify(
     workers: int = 1,
     track: str = "rookie-loop",
     best_by: str = "progress",
+    evaluation_trials: int = 5,
     line_margin: int = 0,
 ) -> tuple[float | None, float | None, float | None, tuple[float, int] | None]:
     """(training minutes to qualify or None, with --fast the best lap of the first checkpoint
@@ -601,7 +605,8 @@ def time_to_qualify(
     trains on to ``lap_after`` once it qualifies, and also shows the checkpoint the other of
     progress and lap time would have made its best.
     With ``under``, qualifying takes 3 clean laps each under that many seconds; ``workers``: the
-    model's rollout workers; ``best_by``: the model's BEST_MODEL_METRIC; ``line_margin``: [cm]
+    model's rollout workers; ``best_by``: the model's BEST_MODEL_METRIC over
+    ``evaluation_trials`` episodes a checkpoint; ``line_margin``: [cm]
     the pasted racing line's margin."""
     from training import artifacts
     from training.services import training_stop
@@ -619,6 +624,7 @@ def time_to_qualify(
         workers=workers,
         track=track,
         best_by=best_by,
+        evaluation_trials=evaluation_trials,
         line_margin=line_margin,
     )
     driven = {}  # iteration: (3 clean laps, the lap times) of each checkpoint driven
@@ -767,6 +773,15 @@ def main() -> None:
         "BEST_MODEL_METRIC, DeepRacer for Cloud's DR_TRAIN_BEST_MODEL_METRIC)",
     )
     parser.add_argument(
+        "--evaluation-trials",
+        type=int,
+        choices=range(1, 21),
+        default=5,
+        metavar="N",
+        help="with --qualify, the evaluation episodes (1-20) each checkpoint drives to pick the "
+        "best (DeepRacer's MIN_EVAL_TRIALS, 5; DeepRacer for Cloud's DR_TRAIN_MIN_EVAL_TRIALS)",
+    )
+    parser.add_argument(
         "--line-margin",
         type=int,
         choices=range(21),
@@ -872,6 +887,7 @@ def main() -> None:
                     reward=arguments.reward,
                     track=arguments.track,
                     best_by=arguments.best_by,
+                    evaluation_trials=arguments.evaluation_trials,
                     line_margin=arguments.line_margin,
                 )
                 shown = f"{minutes:.1f}" if minutes is not None else f"> {arguments.limit:g}"

@@ -29,7 +29,7 @@ from django.conf import settings
 from common.redis_client import redis_client
 from jobs.shares import rollout_niceness
 from rl import hyperparameters as hp
-from rl.experience import EVALUATION_EPISODES, JobChannel, LogEntry
+from rl.experience import JobChannel, LogEntry
 from rl.policy_lease import PolicyLease
 from rl.weights_cache import WeightsCache
 from sandbox import MiB, Sandbox, SandboxFailure, SandboxUnavailable, verified
@@ -99,7 +99,7 @@ def run(job_id: int, worker: int, attempt: int, track: str) -> None:
             if worker == 0:  # DeepRacer's first worker evaluates (simapp
                 # bundle/markov/rollout_worker.py:327-329, 01f5f01)
                 evaluator = CheckpointEvaluator(
-                    stack.enter_context(sandbox(EVALUATION_EPISODES, in_turn=True)),
+                    stack.enter_context(sandbox(model.evaluation_trials, in_turn=True)),
                     channel,
                     token,
                     Printed(label),

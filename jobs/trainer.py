@@ -35,7 +35,7 @@ from jobs import checkpoints
 from jobs.shares import share_cores
 from notifications import services as notifications
 from rl import hyperparameters as hp
-from rl.experience import EVALUATION_EPISODES, Episode, JobChannel, decode_episode
+from rl.experience import Episode, JobChannel, decode_episode
 from rl.learner import Interrupted, Learner, Progress
 from rl.stopwatch import CHECKS, DRIVING, PHASES, SAVING, TRANSFER, UPDATE, Stopwatch
 from sandbox.protocol import unpack
@@ -423,7 +423,7 @@ class Trainer:
             return False
         self.stopwatch.charge(UPDATE)
         self.version = number
-        self._publish(evaluate=EVALUATION_EPISODES)
+        self._publish(evaluate=self.model.evaluation_trials)
         self.stopwatch.charge(TRANSFER)
         checkpoint = self._checkpoint(number)  # file work: before the transaction, not in it
         with transaction.atomic():
@@ -548,7 +548,7 @@ class Trainer:
         for version, results in by_version.items():
             pending = self.evaluations.setdefault(version, [])
             pending += results
-            if len(pending) >= EVALUATION_EPISODES:
+            if len(pending) >= self.model.evaluation_trials:
                 self._record_evaluation(version, self.evaluations.pop(version))
 
     def _record_evaluation(self, version: int, results: list[dict]) -> None:

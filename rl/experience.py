@@ -30,7 +30,6 @@ from simulator.rewards import MAX_REWARD
 
 EXPIRE_AFTER = 3600  # [s] the keys live after the job ends
 MAX_QUEUED_EPISODES = 2000  # the buffer is trimmed beyond this, oldest first
-EVALUATION_EPISODES = 5  # a checkpoint's, driven by the first worker (simapp's min_eval_trials)
 MAX_LOG_LINES = 500  # log lines waiting for the trainer to file them
 MAX_LOG_TEXT = 500  # [characters] of one log line
 LOG_SOURCES = ("worker", "reward")  # JobLogLine.Source values a rollout worker may send

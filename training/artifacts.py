@@ -211,6 +211,7 @@ def training_params(model: RLModel) -> dict:
         # (bundle/markov/metrics/constants.py:163-167, 01f5f01) are our BestCheckpointBy's.
         "ENABLE_DOMAIN_RANDOMIZATION": model.domain_randomisation,
         "BEST_MODEL_METRIC": str(model.best_checkpoint_by),  # an enum until read back
+        "MIN_EVAL_TRIALS": model.evaluation_trials,  # prepare-config.py:55 (2eb1a1f)
     }
     if model.boxes:
         params["NUMBER_OF_OBSTACLES"] = model.boxes.get("count", 3)

@@ -24,6 +24,8 @@ from rl import hyperparameters as hp
 from simulator import config as sim
 from simulator import tracks as sim_tracks
 from training.models import (
+    EVALUATION_TRIALS,
+    EVALUATION_TRIALS_RANGE,
     SEEDS,
     Algorithm,
     BestCheckpointBy,
@@ -122,6 +124,7 @@ class ModelSettings:
         choices=BestCheckpointBy,
         refusal="Pick the best checkpoint by progress, reward or lap time.",
     )
+    evaluation_trials: int = setting(EVALUATION_TRIALS, archived=True)
     camera_lens: str = setting(
         CameraLens.SIMULATOR,
         archived=True,
@@ -292,7 +295,8 @@ def _check_algorithm(settings: dict, clean: dict, errors: dict) -> None:
 
 
 def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
-    """How long and on how many simulations (and extra tracks) the model trains, and its seed."""
+    """How long and on how many simulations (and extra tracks) the model trains, its seed, and
+    how many evaluation episodes each checkpoint drives."""
     minutes = _integer(settings.get("max_minutes", default_of("max_minutes")))
     if minutes is None or not MINUTES[0] <= minutes <= MINUTES[1]:
         errors["max_minutes"] = (
@@ -316,6 +320,15 @@ def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
     clean["seed"] = default_of("seed") if given is None else _integer(given)
     if clean["seed"] is None or not 0 <= clean["seed"] < SEEDS:
         errors["seed"] = SEED_RANGE
+    given = settings.get("evaluation_trials")
+    trials = EVALUATION_TRIALS if given in (None, "") else _integer(given)
+    low, high = EVALUATION_TRIALS_RANGE
+    if trials is None or not low <= trials <= high:
+        errors["evaluation_trials"] = (
+            f"Each checkpoint drives {low} to {high} evaluation episodes (DeepRacer's "
+            f"{EVALUATION_TRIALS})."
+        )
+    clean["evaluation_trials"] = trials
     clean["domain_randomisation"] = _switch(settings, "domain_randomisation", errors)
 
 

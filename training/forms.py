@@ -18,6 +18,8 @@ from simulator import config as sim
 from simulator import randomisation_ranges
 from training import configuration, selectors
 from training.models import (
+    EVALUATION_TRIALS,
+    EVALUATION_TRIALS_RANGE,
     Algorithm,
     BestCheckpointBy,
     CameraLens,
@@ -362,6 +364,18 @@ class ModelCreateForm(TrackAndRaceFields):
         "most reward, or lapped fastest (an unfinished lap counts 999.999 s). DeepRacer for "
         "Cloud's DR_TRAIN_BEST_MODEL_METRIC.",
     )
+    evaluation_trials = forms.IntegerField(
+        label="Evaluation episodes a checkpoint",
+        initial=EVALUATION_TRIALS,
+        required=False,
+        help_text="Each new checkpoint drives this many episodes from starts spread round the "
+        "track, to pick the best; more make a surer pick, at more of the machine's time. "
+        + range_help(
+            *EVALUATION_TRIALS_RANGE,
+            EVALUATION_TRIALS,
+            note=" DeepRacer for Cloud's DR_TRAIN_MIN_EVAL_TRIALS.",
+        ),
+    )
     cloned_checkpoint = forms.ChoiceField(
         label="Start from",
         choices=EvaluationJob.Checkpoint.choices,
@@ -412,6 +426,7 @@ class ModelCreateForm(TrackAndRaceFields):
             limit(self.fields[name], *sim.SPEED_RANGE, 0.1)
         self._limit_time(selectors.allowance_for(racer=owner).minutes_left)
         limit(self.fields["workers"], 1, configuration.MAX_WORKERS, 1)
+        limit(self.fields["evaluation_trials"], *EVALUATION_TRIALS_RANGE, 1)
         if source is not None:
             self._lock_what_a_clone_keeps()
             if checkpoints := selectors.model_checkpoint_choices(model=source):
@@ -650,7 +665,7 @@ SECTIONS = (
     Section(
         "section-stop",
         "Stop condition and workers",
-        ("max_minutes", "workers", "extra_tracks", "best_checkpoint_by"),
+        ("max_minutes", "workers", "extra_tracks", "best_checkpoint_by", "evaluation_trials"),
     ),
     Section("section-reward-function", "Reward function", ("reward_function",)),
 )

@@ -59,6 +59,14 @@ class BestCheckpointBy(models.TextChoices):
     LAPTIME = "laptime", "Lap time"
 
 
+# The evaluation episodes each checkpoint drives after its update, to pick the best: simapp's
+# MIN_EVAL_TRIALS (bundle/markov/rollout_worker.py:94, 328-329, 501-504, 01f5f01), DeepRacer for
+# Cloud's DR_TRAIN_MIN_EVAL_TRIALS (defaults/template-run.env:32, prepare-config.py:55, 2eb1a1f).
+# Ours drive beside the next iteration's training, so many more would take the update's CPU.
+EVALUATION_TRIALS = 5
+EVALUATION_TRIALS_RANGE = (1, 20)
+
+
 class Checkpoint(models.TextChoices):
     """Which of a model's checkpoints an evaluation, a race entry, a download or a clone uses."""
 
@@ -323,6 +331,11 @@ class RLModel(RaceConditions):
         choices=BestCheckpointBy.choices,
         default=BestCheckpointBy.PROGRESS,
         help_text="How training picks the best checkpoint (DR_TRAIN_BEST_MODEL_METRIC).",
+    )
+    evaluation_trials = models.PositiveSmallIntegerField(
+        default=EVALUATION_TRIALS,
+        help_text="The evaluation episodes each checkpoint drives to pick the best "
+        "(DR_TRAIN_MIN_EVAL_TRIALS).",
     )
     world_name = models.CharField(
         max_length=64,

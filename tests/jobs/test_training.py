@@ -52,7 +52,9 @@ def iterations(job, count: int) -> None:
 def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
     alice, tracks, celery_worker_process
 ):
-    model = model_create(owner=alice, settings=settings())
+    # fewer evaluation episodes than DeepRacer's 5 (DR_TRAIN_MIN_EVAL_TRIALS): the trainer asks
+    # for them, the first worker drives them and the iteration records them
+    model = model_create(owner=alice, settings=settings(evaluation_trials=3))
     job = model.jobs.get()
     assert job.status == TrainingJob.Status.QUEUED
 
@@ -69,7 +71,7 @@ def test_a_short_training_job_runs_end_to_end_and_stop_yields_a_model(
         timeout=120,
     )
     evaluated = Iteration.objects.filter(job=job, evaluation_completion__isnull=False).first()
-    assert evaluated.evaluation_seconds > 0 and len(evaluated.evaluation_points) == 5
+    assert evaluated.evaluation_seconds > 0 and len(evaluated.evaluation_points) == 3
 
     training_stop(job=job)
     job = wait_for_job(job, lambda j: j.status == TrainingJob.Status.COMPLETED, "the stop", 120)

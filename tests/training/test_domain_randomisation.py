@@ -104,20 +104,50 @@ def test_a_deepracer_archive_brings_its_enable_domain_randomization(given, expec
 def test_training_params_carry_it_and_the_best_metric_through_a_deepracer_archive(
     alice, bob, tracks
 ):
-    """Without our pitlane.json, training_params.yaml alone brings both back, spelt as DeepRacer
-    for Cloud writes them (ENABLE_DOMAIN_RANDOMIZATION, BEST_MODEL_METRIC)."""
+    """Without our pitlane.json, training_params.yaml alone brings them back, spelt as DeepRacer
+    for Cloud writes them (ENABLE_DOMAIN_RANDOMIZATION, BEST_MODEL_METRIC, MIN_EVAL_TRIALS)."""
     original = trained_model(
-        alice, "shifty", domain_randomisation=True, best_checkpoint_by="laptime"
+        alice,
+        "shifty",
+        domain_randomisation=True,
+        best_checkpoint_by="laptime",
+        evaluation_trials=12,
     )
     params = artifacts.training_params(original)
-    assert (params["ENABLE_DOMAIN_RANDOMIZATION"], params["BEST_MODEL_METRIC"]) == (True, "laptime")
+    written = ("ENABLE_DOMAIN_RANDOMIZATION", "BEST_MODEL_METRIC", "MIN_EVAL_TRIALS")
+    assert [params[key] for key in written] == [True, "laptime", 12]
+    params["MIN_EVAL_TRIALS"] = "12"  # as DeepRacer for Cloud writes it: prepare-config.py:55
     archive = deepracer_export(**{"training_params.yaml": yaml.safe_dump(params).encode()})
     imported = imports.import_model(owner=bob, archive=io.BytesIO(tar_gz(archive)))
-    assert (imported.model.domain_randomisation, imported.model.best_checkpoint_by) == (
+    model = imported.model
+    assert (model.domain_randomisation, model.best_checkpoint_by, model.evaluation_trials) == (
         True,
         "laptime",
+        12,
     )
     assert not [note for note in imported.notes if "BEST_MODEL_METRIC" in note]
+    assert not [note for note in imported.notes if "MIN_EVAL_TRIALS" in note]
+
+
+@pytest.mark.parametrize(
+    ("given", "kept"), [(None, 5), ("0", 1), ("50", 20), ("lots", 5), (7.5, 5)]
+)
+def test_evaluation_trials_this_console_cannot_take_are_brought_within_its_range_with_a_note(
+    alice, tracks, given, kept
+):
+    params = {**DEEPRACER_PARAMS, "MIN_EVAL_TRIALS": given}
+    archive = deepracer_export(**{"training_params.yaml": yaml.safe_dump(params).encode()})
+    imported = imports.import_model(owner=alice, archive=io.BytesIO(tar_gz(archive)))
+    assert imported.model.evaluation_trials == kept
+    notes = [note for note in imported.notes if "MIN_EVAL_TRIALS" in note]
+    assert notes == (
+        []
+        if given is None
+        else [
+            f"Not carried over from training_params.yaml: MIN_EVAL_TRIALS {given}. Each "
+            f"checkpoint drives 1 to 20 evaluation episodes here; this one drives {kept}."
+        ]
+    )
 
 
 def test_a_best_model_metric_deepracer_does_not_know_is_noted_and_progress_kept(alice, tracks):

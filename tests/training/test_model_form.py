@@ -129,6 +129,7 @@ def test_a_saved_models_settings_check_back_to_themselves(alice, tracks):
             workers=2,
             extra_tracks=["rookie-loop"],
             seed=7,
+            evaluation_trials=12,
         ),
         owner=alice,
         validate_reward=False,
@@ -159,6 +160,8 @@ def test_a_saved_models_settings_check_back_to_themselves(alice, tracks):
         ("box_count", ('min="1"', 'max="6"'), "Range 1-6, default 3"),
         ("bot_speed", ('min="0.2"', 'max="6.0"'), "Range 0.2-6, default 0.2"),
         ("workers", ('min="1"', 'max="4"'), "Range 1-4, default 1"),
+        ("evaluation_trials", ('min="1"', 'max="20"', 'step="1"'), "Range 1-20, default 5 "
+         "(DeepRacer's default). DeepRacer for Cloud's DR_TRAIN_MIN_EVAL_TRIALS."),
         ("max_minutes", ('min="10"', 'max="600"'),  # a racer's monthly quota is 600 minutes
          "Range 10-1440, default 60 (DeepRacer's default). You have 600 training minutes"),
     ],
@@ -172,6 +175,23 @@ def test_every_number_on_the_create_page_states_its_range_and_default(
         assert attribute in field_html(page, name), field_html(page, name)
     assert help_text in page
     assert "One of 32, 64, 128, 256, 512; default 64" in page
+
+
+def test_the_evaluation_episodes_a_checkpoint_drives_are_checked_kept_and_shown(
+    client, alice, tracks
+):
+    refused = post(client, alice, evaluation_trials=0)
+    assert refused.status_code == 400 and not RLModel.objects.exists()
+    assert refused.context["form"].errors == {
+        "evaluation_trials": ["Each checkpoint drives 1 to 20 evaluation episodes (DeepRacer's 5)."]
+    }
+    post(client, alice, evaluation_trials=12)
+    model = RLModel.objects.get()
+    assert model.evaluation_trials == 12
+    page = client.get(reverse("training:model-detail", args=[model.pk])).text
+    assert "Progress (DeepRacer&#x27;s), over 12 evaluation episodes a checkpoint" in page
+    clone = client.get(reverse("training:model-create") + f"?clone={model.pk}").text
+    assert 'value="12"' in field_html(clone, "evaluation_trials")
 
 
 def test_the_time_limit_stops_at_the_racers_remaining_minutes(client, alice, tracks):
