@@ -321,7 +321,7 @@ def _check_schedule(settings: dict, clean: dict, errors: dict) -> None:
     if clean["seed"] is None or not 0 <= clean["seed"] < SEEDS:
         errors["seed"] = SEED_RANGE
     given = settings.get("evaluation_trials")
-    trials = EVALUATION_TRIALS if given in (None, "") else _integer(given)
+    trials = default_of("evaluation_trials") if given in (None, "") else _integer(given)
     low, high = EVALUATION_TRIALS_RANGE
     if trials is None or not low <= trials <= high:
         errors["evaluation_trials"] = (
