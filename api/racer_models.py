@@ -22,12 +22,15 @@ from api.owned import own_model
 from api.schemas import REFUSED, named_choices
 from archives.deepracer_settings import archive_settings
 from archives.members import Members, member_json
-from training import configuration, selectors, services
+from training import configuration, models, selectors, services
 from training.models import Iteration, RLModel, TrainingJob
 
 router = Router()
 ModelStatus = named_choices(RLModel.Status, "ModelStatus")
 TrainingStatus = named_choices(TrainingJob.Status, "TrainingStatus")
+Direction = named_choices(models.Direction, "Direction")
+RaceType = named_choices(models.RaceType, "RaceType")
+BestCheckpointBy = named_choices(models.BestCheckpointBy, "BestCheckpointBy")
 PAGE_MAX = 100
 
 
@@ -50,10 +53,17 @@ class Checkpoints(Schema):
 
 class ModelDetail(ModelOut):
     description: str
+    direction: Direction
+    race_type: RaceType
     network: str
     action_space: list | dict
     hyperparameters: dict
     max_minutes: int
+    workers: int
+    seed: int
+    domain_randomisation: bool
+    best_checkpoint_by: BestCheckpointBy
+    evaluation_trials: int
     cloned_from: int | None
     checkpoints: Checkpoints
 
@@ -128,10 +138,17 @@ def model_detail(request, model_id: int):
     return {
         **_model_out(model),
         "description": model.description,
+        "direction": model.direction,
+        "race_type": model.race_type,
         "network": model.network,
         "action_space": model.action_space,
         "hyperparameters": model.hyperparameters,
         "max_minutes": model.max_minutes,
+        "workers": model.workers,
+        "seed": model.seed,
+        "domain_randomisation": model.domain_randomisation,
+        "best_checkpoint_by": model.best_checkpoint_by,
+        "evaluation_trials": model.evaluation_trials,
         "cloned_from": model.cloned_from_id,
         "checkpoints": {
             "best": (job.best_checkpoint or None) if job else None,

@@ -162,7 +162,16 @@ def drfc_files(**changes) -> dict[str, str]:
 @pytest.mark.slow  # the sandbox validates the reward function
 def test_a_model_is_created_from_a_deepracer_for_cloud_folders_files(alice, tracks, client):
     token = api_token(alice, "read", "train")
-    body = {"files": drfc_files(), "name": "from-drfc", "max_minutes": 15}
+    # DeepRacer for Cloud writes these as text (scripts/training/prepare-config.py:54-58, 2eb1a1f)
+    params = {
+        **DEEPRACER_PARAMS,
+        "WORLD_NAME": "Oval_track",
+        "NUM_WORKERS": 2,
+        "BEST_MODEL_METRIC": "laptime",
+        "MIN_EVAL_TRIALS": "12",
+    }
+    files = drfc_files(**{"training_params.yaml": yaml.safe_dump(params)})
+    body = {"files": files, "name": "from-drfc", "max_minutes": 15}
     created = client.post(MODELS, body, content_type="application/json", **token)
     assert created.status_code == 201, created.json()
     answer = created.json()
@@ -175,6 +184,11 @@ def test_a_model_is_created_from_a_deepracer_for_cloud_folders_files(alice, trac
     assert [a["speed"] for a in model.action_space] == [0.6, 1.2, 0.6]
     assert model.hyperparameters["num_episodes_between_training"] == 20
     assert model.latest_job.status == TrainingJob.Status.QUEUED
+    detail = client.get(f"{MODELS}/{model.pk}", **token).json()
+    shown = {"direction": model.direction, "race_type": "TIME_TRIAL", "workers": 2,
+             "best_checkpoint_by": "laptime", "evaluation_trials": 12, "seed": model.seed,
+             "domain_randomisation": False}  # fmt: skip
+    assert {key: detail[key] for key in shown} == shown
 
     broken = drfc_files(**{"reward_function.py": "def reward_function(params)\n    return 1\n"})
     refused = client.post(

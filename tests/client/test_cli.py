@@ -60,6 +60,11 @@ def test_a_racer_lists_shows_downloads_and_reads_a_leaderboard(
     assert lines[1].split()[:3] == [str(model.pk), model.name, "READY"]
     code, out, _ = pitlane("--json", "models", "show", str(model.pk))
     assert code == 0 and json.loads(out)["name"] == model.name
+    code, out, _ = pitlane("models", "show", str(model.pk))
+    shown = dict(line.split(None, 1) for line in out.splitlines())
+    assert shown["best_checkpoint_by"] == model.best_checkpoint_by
+    assert shown["evaluation_trials"] == str(model.evaluation_trials)
+    assert shown["direction"] == model.direction and shown["iterations"] == "1"
 
     code, out, err = pitlane("download", str(model.pk), "--physical", "--into", str(tmp_path))
     saved = tmp_path / f"physicalmodel-{model.name}.tar.gz"

@@ -30,6 +30,9 @@ from pitlane_client import ApiError, Client, drfc, folder_files
 WHOLE = "__all__"  # a refusal of the request as a whole, not of one input (the console's name)
 WAIT_EVERY = 2.0  # [s] between looks while --wait waits
 MODEL_COLUMNS = ("id", "name", "status", "track", "algorithm")
+MODEL_SETTINGS = ("direction", "race_type", "network", "max_minutes", "workers", "seed",
+                  "domain_randomisation", "best_checkpoint_by", "evaluation_trials",
+                  "cloned_from")  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -172,10 +175,11 @@ def _model_show(args) -> int:
     model = _client().model(args.model)
     if args.json:
         return _print_json(model)
-    for key in (*MODEL_COLUMNS, "network", "max_minutes", "cloned_from"):
-        print(f"{key:>14}  {model[key]}")
+    for key in (*MODEL_COLUMNS, *MODEL_SETTINGS):
+        if key in model:  # a console older than this client gives fewer
+            print(f"{key:>20}  {model[key]}")
     for key, value in model["checkpoints"].items():
-        print(f"{key:>14}  {value}")
+        print(f"{key:>20}  {value}")
     return 0
 
 
