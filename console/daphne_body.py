@@ -135,6 +135,8 @@ class BoundedBodyRequest(http_protocol.WebRequest):
             spool.write(self.content.getvalue())
             self.content = spool
         self.content.write(data)
+        if not isinstance(self.content, io.BytesIO):
+            self.content.flush()  # every byte received is on disk, none held in a write buffer
 
     def requestReceived(self, command: bytes, path: bytes, version: bytes) -> None:
         if self._deadline is not None and self._deadline.active():
